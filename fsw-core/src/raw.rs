@@ -1,0 +1,133 @@
+//! # Raw sensor data as the OBC sees it, once per cycle
+//!
+//! These are the hardware words the flight software reads each cycle and the contents of the
+//! raw-sensor telemetry packet (`docs/icd.md`, APID 0x010). Everything is integer counts and
+//! flags; conversion to engineering units happens in [`crate::fhst`], [`crate::fss`] and
+//! [`crate::iru`], never here.
+//!
+//! Sensor geometry shared by FHST and FSS (tangent-plane form, `docs/conventions.md`): a
+//! sensor-frame unit vector `s` has focal-plane angles `H = atan2(s_x, s_z)`,
+//! `V = atan2(s_y, s_z)` and back `s = normalize([tan H, tan V, 1])`.
+
+use serde::{Deserialize, Serialize};
+
+/// Number of DRIRU II channels.
+pub const IRU_CHANNELS: usize = 6;
+/// Channel order used everywhere (arrays, telemetry): X1, X2, Y1, Y2, Z1, Z2.
+pub const IRU_CHANNEL_NAMES: [&str; IRU_CHANNELS] = ["X1", "X2", "Y1", "Y2", "Z1", "Z2"];
+/// Number of temperature sensors in the raw frame: FHST1, FHST2, FSS1, FSS2, IRU baseplate.
+pub const TEMPERATURE_SENSORS: usize = 5;
+
+/// Spacecraft time: CCSDS unsegmented time code (CUC), 4 octets of seconds and 2 of
+/// fraction (units of 2⁻¹⁶ s), epoch 1958-01-01T00:00:00 TAI (CCSDS level-1 epoch).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct TimeTag {
+    /// Whole seconds since 1958-01-01 TAI.
+    pub coarse_s: u32,
+    /// Fraction of a second in units of 2⁻¹⁶ s.
+    pub fine: u16,
+}
+
+/// Seconds from the CCSDS epoch (1958-01-01 TAI) to J2000.0 (2000-01-01T12:00:00 TT):
+/// 15 340 days + 12 h − 32.184 s (TT − TAI).
+pub const TAI1958_S_AT_J2000_TT: f64 = 15_340.0 * 86_400.0 + 43_200.0 - 32.184;
+
+impl TimeTag {
+    /// Seconds since 1958-01-01 TAI as `f64` (exact to 2⁻¹⁶ s for the next century).
+    #[must_use]
+    pub fn seconds(&self) -> f64 {
+        f64::from(self.coarse_s) + f64::from(self.fine) / 65_536.0
+    }
+
+    /// The time tag nearest to `seconds` since 1958-01-01 TAI; `None` if out of range or not finite.
+    #[must_use]
+    pub fn from_seconds(seconds: f64) -> Option<Self> {
+        if !(seconds.is_finite() && seconds >= 0.0 && seconds < 4_294_967_295.0) {
+            return None;
+        }
+        let ticks = libm::round(seconds * 65_536.0);
+        let coarse = libm::floor(ticks / 65_536.0);
+        let fine = ticks - coarse * 65_536.0;
+        // Both are in range by the check above; `as` saturates anyway.
+        #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
+        Some(Self {
+            coarse_s: coarse as u32,
+            fine: fine as u16,
+        })
+    }
+
+    /// Seconds since J2000.0 TT (the argument of the onboard Sun ephemeris).
+    #[must_use]
+    pub fn seconds_since_j2000_tt(&self) -> f64 {
+        self.seconds() - TAI1958_S_AT_J2000_TT
+    }
+}
+
+/// One DRIRU II sample: the six accumulated pulse counters, read at the cycle boundary.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct IruSample {
+    /// Accumulated pulse counters (16-bit, wrapping), channel order X1, X2, Y1, Y2, Z1, Z2.
+    pub counts: [u16; IRU_CHANNELS],
+    /// Built-in-test failure bits, bit `i` = channel `i` reports a failure.
+    pub channel_failed: u8,
+    /// Rate mode in effect during the interval that *ended* at this sample:
+    /// `true` = high rate (0.8 arcsec/pulse), `false` = low rate (0.05 arcsec/pulse).
+    pub high_rate: bool,
+}
+
+/// FHST status flag: the data words hold a valid star measurement.
+pub const FHST_FLAG_VALID: u8 = 0x01;
+/// FHST status flag: the tracker is in track (not searching).
+pub const FHST_FLAG_TRACKING: u8 = 0x02;
+/// FHST status flag: the star tracked now is a different star from the previous sample
+/// (a new acquisition).
+pub const FHST_FLAG_NEW_STAR: u8 = 0x04;
+
+/// One fixed-head star tracker sample (one star at a time).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct FhstSample {
+    /// Horizontal focal-plane coordinate, 7.78 arcsec per count, 0 at the boresight.
+    pub h_counts: i16,
+    /// Vertical focal-plane coordinate, 7.78 arcsec per count, 0 at the boresight.
+    pub v_counts: i16,
+    /// Instrument magnitude in units of 0.01 mag.
+    pub magnitude_centimag: i16,
+    /// Status bits `FHST_FLAG_*`.
+    pub flags: u8,
+}
+
+/// FSS status flag: Sun presence on the α head.
+pub const FSS_FLAG_SUN_ALPHA: u8 = 0x01;
+/// FSS status flag: Sun presence on the β head.
+pub const FSS_FLAG_SUN_BETA: u8 = 0x02;
+
+/// One fine Sun sensor sample: two orthogonal single-axis heads.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct FssSample {
+    /// α head angle, 0.004° per count, 0 at the boresight: α = atan2(s_x, s_z).
+    pub alpha_counts: i16,
+    /// β head angle, 0.004° per count, 0 at the boresight: β = atan2(s_y, s_z).
+    pub beta_counts: i16,
+    /// Status bits `FSS_FLAG_*`.
+    pub flags: u8,
+}
+
+/// Everything the OBC reads from its sensors in one cycle.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct RawSensorFrame {
+    /// Time at which all sensors were sampled.
+    pub time: TimeTag,
+    /// Gyro counters.
+    pub iru: IruSample,
+    /// FHST1, FHST2.
+    pub fhst: [FhstSample; 2],
+    /// FSS1, FSS2.
+    pub fss: [FssSample; 2],
+    /// Temperatures in 0.01 °C: FHST1, FHST2, FSS1, FSS2, IRU baseplate.
+    pub temperatures_centi_c: [i16; TEMPERATURE_SENSORS],
+}
