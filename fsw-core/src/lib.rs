@@ -6,4 +6,5 @@
 
 pub mod attitude;
 pub mod raw;
+pub mod tables;
 pub mod units;

@@ -1,0 +1,339 @@
+//! # Binary table images: header + postcard payload + CRC-32
+//!
+//! One definition of the uplink format, used by the OBC to load and by the ground tool to
+//! write (byte layout in `docs/tables.md`):
+//!
+//! | offset | size | field | notes |
+//! |---|---|---|---|
+//! | 0 | 4 | magic | `0x4752_4F54` ("GROT"), big-endian |
+//! | 4 | 1 | table id | [`TableId`] |
+//! | 5 | 1 | format version | [`FORMAT_VERSION`] |
+//! | 6 | 2 | reserved | zero |
+//! | 8 | 4 | payload length | bytes, big-endian |
+//! | 12 | 6 | creation time | CUC: 4 octets seconds + 2 octets 2⁻¹⁶ s since 1958 TAI |
+//! | 18 | 2 | reserved | zero |
+//! | 20 | n | payload | postcard encoding of the table struct |
+//! | 20+n | 4 | CRC-32 | ISO-HDLC (zlib) over bytes 0..20+n, big-endian |
+
+use crate::raw::TimeTag;
+use serde::{de::DeserializeOwned, Serialize};
+
+/// Image magic, "GROT".
+pub const MAGIC: u32 = 0x4752_4F54;
+/// Current image format version.
+pub const FORMAT_VERSION: u8 = 1;
+/// Header length in bytes.
+pub const HEADER_LEN: usize = 20;
+/// CRC trailer length in bytes.
+pub const CRC_LEN: usize = 4;
+/// The CRC used for images: CRC-32/ISO-HDLC (the zlib/PNG CRC).
+pub const IMAGE_CRC: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
+
+/// Which table an image holds. Discriminants are the on-wire ids.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, serde::Serialize, serde::Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[repr(u8)]
+pub enum TableId {
+    /// Sensor alignments M_AS (FHST1, FHST2, FSS1, FSS2) and sensor corrections.
+    Alignment = 1,
+    /// DRIRU II alignment/scale factors G, k and pulse weights.
+    Iru = 2,
+    /// Kalman filter, star identification and control settings.
+    Filter = 3,
+    /// The onboard star catalog.
+    StarCatalog = 4,
+}
+
+impl TableId {
+    /// All table ids, in id order.
+    pub const ALL: [TableId; 4] = [
+        TableId::Alignment,
+        TableId::Iru,
+        TableId::Filter,
+        TableId::StarCatalog,
+    ];
+
+    /// From the on-wire id.
+    #[must_use]
+    pub fn from_u8(id: u8) -> Option<Self> {
+        match id {
+            1 => Some(Self::Alignment),
+            2 => Some(Self::Iru),
+            3 => Some(Self::Filter),
+            4 => Some(Self::StarCatalog),
+            _ => None,
+        }
+    }
+
+    /// Index 0..4 for per-table arrays.
+    #[must_use]
+    pub fn index(self) -> usize {
+        match self {
+            Self::Alignment => 0,
+            Self::Iru => 1,
+            Self::Filter => 2,
+            Self::StarCatalog => 3,
+        }
+    }
+
+    /// Human name.
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Alignment => "alignment",
+            Self::Iru => "iru",
+            Self::Filter => "filter",
+            Self::StarCatalog => "star_catalog",
+        }
+    }
+}
+
+/// Why an image or a table was refused. Every variant carries the evidence an operator needs.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum TableError {
+    /// Fewer bytes than a header and a CRC.
+    TooShort {
+        /// Bytes received.
+        len: usize,
+    },
+    /// Image larger than the load buffer.
+    TooLong {
+        /// Bytes received.
+        len: usize,
+        /// Capacity.
+        max: usize,
+    },
+    /// The magic word is wrong.
+    BadMagic {
+        /// Magic found.
+        found: u32,
+    },
+    /// Unknown table id byte.
+    UnknownTableId {
+        /// Id found.
+        found: u8,
+    },
+    /// The image is for another table than the one expected.
+    WrongTableId {
+        /// Id expected.
+        expected: TableId,
+        /// Id found.
+        found: TableId,
+    },
+    /// Unsupported format version.
+    UnsupportedVersion {
+        /// Version found.
+        found: u8,
+    },
+    /// Reserved header bytes not zero.
+    ReservedNotZero,
+    /// Declared payload length disagrees with the image length.
+    LengthMismatch {
+        /// Payload length in the header.
+        declared: u32,
+        /// Payload bytes actually present.
+        actual: usize,
+    },
+    /// CRC-32 check failed.
+    CrcMismatch {
+        /// CRC computed over the image.
+        computed: u32,
+        /// CRC stored in the image.
+        stored: u32,
+    },
+    /// The payload does not decode as the table (or has trailing bytes).
+    PayloadDecode,
+    /// The payload does not fit the output buffer when encoding.
+    BufferTooSmall,
+    /// A value is NaN or infinite.
+    NotFinite {
+        /// Field index (table-specific, see `docs/tables.md`).
+        field: u8,
+    },
+    /// An alignment matrix is not a proper rotation (orthonormal to 1e-6, det +1).
+    NotRotation {
+        /// Sensor index: 0 FHST1, 1 FHST2, 2 FSS1, 3 FSS2.
+        sensor: u8,
+    },
+    /// A value is outside its documented range.
+    OutOfRange {
+        /// Field index (table-specific, see `docs/tables.md`).
+        field: u8,
+    },
+    /// The change from the active table exceeds the FilterTable bound.
+    ChangeTooLarge {
+        /// Field index (table-specific).
+        field: u8,
+        /// The change (arcsec for rotations, ppm for G elements).
+        change: f32,
+        /// The allowed change, same unit.
+        limit: f32,
+    },
+}
+
+impl TableError {
+    /// Stable numeric reason code for events and telemetry (`docs/tables.md`).
+    #[must_use]
+    pub fn code(&self) -> u8 {
+        match self {
+            Self::TooShort { .. } => 1,
+            Self::TooLong { .. } => 2,
+            Self::BadMagic { .. } => 3,
+            Self::UnknownTableId { .. } => 4,
+            Self::WrongTableId { .. } => 5,
+            Self::UnsupportedVersion { .. } => 6,
+            Self::ReservedNotZero => 7,
+            Self::LengthMismatch { .. } => 8,
+            Self::CrcMismatch { .. } => 9,
+            Self::PayloadDecode => 10,
+            Self::BufferTooSmall => 11,
+            Self::NotFinite { .. } => 12,
+            Self::NotRotation { .. } => 13,
+            Self::OutOfRange { .. } => 14,
+            Self::ChangeTooLarge { .. } => 15,
+        }
+    }
+}
+
+/// The parsed, CRC-checked header of an image.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ImageHeader {
+    /// Which table.
+    pub table_id: TableId,
+    /// Format version.
+    pub format_version: u8,
+    /// Payload length in bytes.
+    pub payload_len: u32,
+    /// Creation time tag.
+    pub created: TimeTag,
+}
+
+fn be_u32(bytes: &[u8], at: usize) -> Option<u32> {
+    let end = at.checked_add(4)?;
+    let s = bytes.get(at..end)?;
+    let arr: [u8; 4] = s.try_into().ok()?;
+    Some(u32::from_be_bytes(arr))
+}
+
+fn be_u16(bytes: &[u8], at: usize) -> Option<u16> {
+    let end = at.checked_add(2)?;
+    let s = bytes.get(at..end)?;
+    let arr: [u8; 2] = s.try_into().ok()?;
+    Some(u16::from_be_bytes(arr))
+}
+
+/// Check magic, id, version, reserved bytes, length and CRC; return the header and the payload.
+///
+/// # Errors
+/// The first check that fails, as a [`TableError`].
+pub fn parse_image(bytes: &[u8]) -> Result<(ImageHeader, &[u8]), TableError> {
+    let len = bytes.len();
+    let min = HEADER_LEN.saturating_add(CRC_LEN);
+    if len < min {
+        return Err(TableError::TooShort { len });
+    }
+    let magic = be_u32(bytes, 0).ok_or(TableError::TooShort { len })?;
+    if magic != MAGIC {
+        return Err(TableError::BadMagic { found: magic });
+    }
+    let id_byte = *bytes.get(4).ok_or(TableError::TooShort { len })?;
+    let table_id = TableId::from_u8(id_byte).ok_or(TableError::UnknownTableId { found: id_byte })?;
+    let format_version = *bytes.get(5).ok_or(TableError::TooShort { len })?;
+    if format_version != FORMAT_VERSION {
+        return Err(TableError::UnsupportedVersion {
+            found: format_version,
+        });
+    }
+    let reserved_a = be_u16(bytes, 6).ok_or(TableError::TooShort { len })?;
+    let reserved_b = be_u16(bytes, 18).ok_or(TableError::TooShort { len })?;
+    if reserved_a != 0 || reserved_b != 0 {
+        return Err(TableError::ReservedNotZero);
+    }
+    let payload_len = be_u32(bytes, 8).ok_or(TableError::TooShort { len })?;
+    let actual = len.saturating_sub(min);
+    if usize::try_from(payload_len).ok() != Some(actual) {
+        return Err(TableError::LengthMismatch {
+            declared: payload_len,
+            actual,
+        });
+    }
+    let crc_at = len.saturating_sub(CRC_LEN);
+    let stored = be_u32(bytes, crc_at).ok_or(TableError::TooShort { len })?;
+    let covered = bytes.get(..crc_at).ok_or(TableError::TooShort { len })?;
+    let computed = IMAGE_CRC.checksum(covered);
+    if computed != stored {
+        return Err(TableError::CrcMismatch { computed, stored });
+    }
+    let coarse_s = be_u32(bytes, 12).ok_or(TableError::TooShort { len })?;
+    let fine = be_u16(bytes, 16).ok_or(TableError::TooShort { len })?;
+    let payload = bytes
+        .get(HEADER_LEN..crc_at)
+        .ok_or(TableError::TooShort { len })?;
+    Ok((
+        ImageHeader {
+            table_id,
+            format_version,
+            payload_len,
+            created: TimeTag { coarse_s, fine },
+        },
+        payload,
+    ))
+}
+
+/// Decode a postcard payload completely (trailing bytes are an error).
+///
+/// # Errors
+/// [`TableError::PayloadDecode`].
+pub fn decode_payload<T: DeserializeOwned>(payload: &[u8]) -> Result<T, TableError> {
+    match postcard::take_from_bytes::<T>(payload) {
+        Ok((value, rest)) if rest.is_empty() => Ok(value),
+        _ => Err(TableError::PayloadDecode),
+    }
+}
+
+/// Write header + postcard payload + CRC into `out`; returns the image length.
+///
+/// # Errors
+/// [`TableError::BufferTooSmall`] when `out` cannot hold the image.
+pub fn encode_image<T: Serialize>(
+    table_id: TableId,
+    created: TimeTag,
+    table: &T,
+    out: &mut [u8],
+) -> Result<usize, TableError> {
+    let (header, rest) = out
+        .split_at_mut_checked(HEADER_LEN)
+        .ok_or(TableError::BufferTooSmall)?;
+    let payload_len = postcard::to_slice(table, rest)
+        .map_err(|_| TableError::BufferTooSmall)?
+        .len();
+    let payload_len_u32 = u32::try_from(payload_len).map_err(|_| TableError::BufferTooSmall)?;
+    header.copy_from_slice(&[0; HEADER_LEN]);
+    let fields: [(usize, &[u8]); 5] = [
+        (0, &MAGIC.to_be_bytes()),
+        (4, &[table_id as u8, FORMAT_VERSION]),
+        (8, &payload_len_u32.to_be_bytes()),
+        (12, &created.coarse_s.to_be_bytes()),
+        (16, &created.fine.to_be_bytes()),
+    ];
+    for (at, value) in fields {
+        let end = at.saturating_add(value.len());
+        header
+            .get_mut(at..end)
+            .ok_or(TableError::BufferTooSmall)?
+            .copy_from_slice(value);
+    }
+    let crc_at = HEADER_LEN
+        .checked_add(payload_len)
+        .ok_or(TableError::BufferTooSmall)?;
+    let total = crc_at
+        .checked_add(CRC_LEN)
+        .ok_or(TableError::BufferTooSmall)?;
+    let crc = IMAGE_CRC.checksum(out.get(..crc_at).ok_or(TableError::BufferTooSmall)?);
+    out.get_mut(crc_at..total)
+        .ok_or(TableError::BufferTooSmall)?
+        .copy_from_slice(&crc.to_be_bytes());
+    Ok(total)
+}

@@ -1,0 +1,389 @@
+//! # Table services: load → validate → activate, like cFE Table Services
+//!
+//! Each table has an *active* copy (what the flight code uses) and an *inactive* buffer.
+//! `load` parses, CRC-checks, decodes and validates an image into the inactive buffer (a
+//! failure leaves the inactive buffer empty and the active table untouched); `activate`
+//! swaps it in — the executive calls it only at a cycle boundary, on command; `abort`
+//! clears the inactive buffer. Validation at load and again at activation checks the change
+//! from the active table against the FilterTable bound, so loading several tables in any
+//! order before activating gives the same result.
+//!
+//! Requirements verified by tests: TBL-001 a rejected image never changes the active table;
+//! TBL-002 a dump of the active table round-trips bit for bit; TBL-003 activation only of a
+//! validated inactive buffer.
+
+use super::image::{decode_payload, encode_image, parse_image, TableError, TableId};
+use super::types::{
+    check_alignment_change, check_iru_change, AlignmentTable, FilterTable, IruTable,
+    StarCatalogTable,
+};
+use crate::raw::TimeTag;
+
+/// State of a table's inactive buffer.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum BufferState {
+    /// Nothing loaded.
+    Empty,
+    /// A validated table waits for activation.
+    Validated,
+}
+
+/// Status of one table for telemetry.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct TableStatus {
+    /// CRC-32 of the active table's image (0 for a boot table never loaded).
+    pub active_crc: u32,
+    /// Creation time of the active table's image (zero for the boot table).
+    pub active_created: TimeTag,
+    /// Whether a validated table waits in the inactive buffer.
+    pub pending: bool,
+    /// Number of successful activations since boot.
+    pub activations: u16,
+    /// Number of rejected loads since boot.
+    pub rejections: u16,
+}
+
+/// An active table with the header data needed to dump it bit for bit.
+#[derive(Clone, Debug, PartialEq)]
+struct Slot<T> {
+    active: T,
+    active_created: TimeTag,
+    active_crc: u32,
+    inactive: Option<(T, TimeTag, u32)>,
+    activations: u16,
+    rejections: u16,
+}
+
+impl<T: Clone> Slot<T> {
+    fn new(active: T) -> Self {
+        Self {
+            active,
+            active_created: TimeTag::default(),
+            active_crc: 0,
+            inactive: None,
+            activations: 0,
+            rejections: 0,
+        }
+    }
+
+    fn status(&self) -> TableStatus {
+        TableStatus {
+            active_crc: self.active_crc,
+            active_created: self.active_created,
+            pending: self.inactive.is_some(),
+            activations: self.activations,
+            rejections: self.rejections,
+        }
+    }
+
+    fn activate(&mut self) -> bool {
+        match self.inactive.take() {
+            Some((table, created, crc)) => {
+                self.active = table;
+                self.active_created = created;
+                self.active_crc = crc;
+                self.activations = self.activations.saturating_add(1);
+                true
+            }
+            None => false,
+        }
+    }
+}
+
+/// The four tables with their double buffers.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TableSet {
+    alignment: Slot<AlignmentTable>,
+    iru: Slot<IruTable>,
+    filter: Slot<FilterTable>,
+    catalog: Slot<StarCatalogTable>,
+}
+
+impl Default for TableSet {
+    fn default() -> Self {
+        Self::boot()
+    }
+}
+
+fn crc_of(bytes: &[u8]) -> u32 {
+    let n = bytes.len();
+    let start = n.saturating_sub(4);
+    match bytes.get(start..n).and_then(|s| <[u8; 4]>::try_from(s).ok()) {
+        Some(b) => u32::from_be_bytes(b),
+        None => 0,
+    }
+}
+
+impl TableSet {
+    /// Boot tables: the paper's prelaunch alignments (Table 1) and IRU G, default filter
+    /// settings, and an empty star catalog (a catalog must be uplinked before fine mode).
+    #[must_use]
+    pub fn boot() -> Self {
+        Self {
+            alignment: Slot::new(AlignmentTable::prelaunch()),
+            iru: Slot::new(IruTable::prelaunch()),
+            filter: Slot::new(FilterTable::default_boot()),
+            catalog: Slot::new(StarCatalogTable::default()),
+        }
+    }
+
+    /// Active alignment table.
+    #[must_use]
+    pub fn alignment(&self) -> &AlignmentTable {
+        &self.alignment.active
+    }
+    /// Active IRU table.
+    #[must_use]
+    pub fn iru(&self) -> &IruTable {
+        &self.iru.active
+    }
+    /// Active filter table.
+    #[must_use]
+    pub fn filter(&self) -> &FilterTable {
+        &self.filter.active
+    }
+    /// Active star catalog.
+    #[must_use]
+    pub fn catalog(&self) -> &StarCatalogTable {
+        &self.catalog.active
+    }
+
+    /// Status of every table, in [`TableId::ALL`] order.
+    #[must_use]
+    pub fn status(&self) -> [TableStatus; 4] {
+        [
+            self.alignment.status(),
+            self.iru.status(),
+            self.filter.status(),
+            self.catalog.status(),
+        ]
+    }
+
+    /// Load an image into its table's inactive buffer after full validation.
+    ///
+    /// On any error the inactive buffer of the addressed table (when the id is readable) is
+    /// cleared and the active table is unchanged.
+    ///
+    /// # Errors
+    /// Why the image was refused; the id is returned when it could be read.
+    pub fn load(&mut self, image: &[u8]) -> Result<TableId, (Option<TableId>, TableError)> {
+        let (header, payload) = parse_image(image).map_err(|e| {
+            let id = image.get(4).copied().and_then(TableId::from_u8);
+            if let Some(id) = id {
+                self.reject(id);
+            }
+            (id, e)
+        })?;
+        let id = header.table_id;
+        let crc = crc_of(image);
+        let result = self.decode_and_validate(id, payload, header.created, crc);
+        match result {
+            Ok(()) => Ok(id),
+            Err(e) => {
+                self.reject(id);
+                Err((Some(id), e))
+            }
+        }
+    }
+
+    fn reject(&mut self, id: TableId) {
+        match id {
+            TableId::Alignment => {
+                self.alignment.inactive = None;
+                self.alignment.rejections = self.alignment.rejections.saturating_add(1);
+            }
+            TableId::Iru => {
+                self.iru.inactive = None;
+                self.iru.rejections = self.iru.rejections.saturating_add(1);
+            }
+            TableId::Filter => {
+                self.filter.inactive = None;
+                self.filter.rejections = self.filter.rejections.saturating_add(1);
+            }
+            TableId::StarCatalog => {
+                self.catalog.inactive = None;
+                self.catalog.rejections = self.catalog.rejections.saturating_add(1);
+            }
+        }
+    }
+
+    fn decode_and_validate(
+        &mut self,
+        id: TableId,
+        payload: &[u8],
+        created: TimeTag,
+        crc: u32,
+    ) -> Result<(), TableError> {
+        match id {
+            TableId::Alignment => {
+                let t: AlignmentTable = decode_payload(payload)?;
+                t.validate()?;
+                check_alignment_change(&t, &self.alignment.active, &self.filter.active)?;
+                self.alignment.inactive = Some((t, created, crc));
+            }
+            TableId::Iru => {
+                let t: IruTable = decode_payload(payload)?;
+                t.validate()?;
+                check_iru_change(&t, &self.iru.active, &self.filter.active)?;
+                self.iru.inactive = Some((t, created, crc));
+            }
+            TableId::Filter => {
+                let t: FilterTable = decode_payload(payload)?;
+                t.validate()?;
+                self.filter.inactive = Some((t, created, crc));
+            }
+            TableId::StarCatalog => {
+                let t: StarCatalogTable = decode_payload(payload)?;
+                t.validate()?;
+                self.catalog.inactive = Some((t, created, crc));
+            }
+        }
+        Ok(())
+    }
+
+    /// Activate the validated inactive buffer of `id`. The change bound is checked again
+    /// against the table active *now*.
+    ///
+    /// # Errors
+    /// `None` in the inner option means nothing was pending; `Some(e)` a re-check failed (the
+    /// inactive buffer is then cleared).
+    pub fn activate(&mut self, id: TableId) -> Result<(), Option<TableError>> {
+        let recheck = match id {
+            TableId::Alignment => match &self.alignment.inactive {
+                Some((t, _, _)) => {
+                    check_alignment_change(t, &self.alignment.active, &self.filter.active)
+                }
+                None => return Err(None),
+            },
+            TableId::Iru => match &self.iru.inactive {
+                Some((t, _, _)) => check_iru_change(t, &self.iru.active, &self.filter.active),
+                None => return Err(None),
+            },
+            TableId::Filter | TableId::StarCatalog => Ok(()),
+        };
+        if let Err(e) = recheck {
+            self.reject(id);
+            return Err(Some(e));
+        }
+        let done = match id {
+            TableId::Alignment => self.alignment.activate(),
+            TableId::Iru => self.iru.activate(),
+            TableId::Filter => self.filter.activate(),
+            TableId::StarCatalog => self.catalog.activate(),
+        };
+        if done {
+            Ok(())
+        } else {
+            Err(None)
+        }
+    }
+
+    /// Clear the inactive buffer of `id`; returns whether something was pending.
+    pub fn abort(&mut self, id: TableId) -> bool {
+        match id {
+            TableId::Alignment => self.alignment.inactive.take().is_some(),
+            TableId::Iru => self.iru.inactive.take().is_some(),
+            TableId::Filter => self.filter.inactive.take().is_some(),
+            TableId::StarCatalog => self.catalog.inactive.take().is_some(),
+        }
+    }
+
+    /// Encode the active table `id` as an image into `out` (same bytes as the image that
+    /// was activated; boot tables carry a zero creation time).
+    ///
+    /// # Errors
+    /// [`TableError::BufferTooSmall`].
+    pub fn dump(&self, id: TableId, out: &mut [u8]) -> Result<usize, TableError> {
+        match id {
+            TableId::Alignment => encode_image(
+                id,
+                self.alignment.active_created,
+                &self.alignment.active,
+                out,
+            ),
+            TableId::Iru => encode_image(id, self.iru.active_created, &self.iru.active, out),
+            TableId::Filter => {
+                encode_image(id, self.filter.active_created, &self.filter.active, out)
+            }
+            TableId::StarCatalog => {
+                encode_image(id, self.catalog.active_created, &self.catalog.active, out)
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::attitude::rot;
+    use crate::tables::types::{matrix_from_rows, rows_from_matrix};
+    use crate::units::RAD_PER_ARCSEC;
+    use nalgebra::Vector3;
+
+    fn image_of<T: serde::Serialize>(id: TableId, t: &T) -> ([u8; 1024], usize) {
+        let mut buf = [0u8; 1024];
+        let n = encode_image(id, TimeTag { coarse_s: 1_000, fine: 7 }, t, &mut buf).unwrap();
+        (buf, n)
+    }
+
+    fn rotated_alignment(arcsec: f64) -> AlignmentTable {
+        let mut t = AlignmentTable::prelaunch();
+        let m = rot(&Vector3::new(arcsec * RAD_PER_ARCSEC, 0.0, 0.0))
+            * matrix_from_rows(&t.m_acs_from_fss1);
+        t.m_acs_from_fss1 = rows_from_matrix(&m);
+        t
+    }
+
+    #[test]
+    fn load_activate_dump_round_trip() {
+        let mut set = TableSet::boot();
+        let t = rotated_alignment(700.0);
+        let (buf, n) = image_of(TableId::Alignment, &t);
+        assert_eq!(set.load(&buf[..n]), Ok(TableId::Alignment));
+        assert_eq!(set.alignment(), &AlignmentTable::prelaunch());
+        assert_eq!(set.activate(TableId::Alignment), Ok(()));
+        assert_eq!(set.alignment(), &t);
+        let mut out = [0u8; 1024];
+        let m = set.dump(TableId::Alignment, &mut out).unwrap();
+        assert_eq!(&out[..m], &buf[..n]);
+    }
+
+    #[test]
+    fn corrupt_and_out_of_bound_images_leave_active_unchanged() {
+        let mut set = TableSet::boot();
+        let before = set.clone();
+        let (mut buf, n) = image_of(TableId::Alignment, &rotated_alignment(700.0));
+        buf[30] ^= 0x40;
+        assert!(matches!(
+            set.load(&buf[..n]),
+            Err((Some(TableId::Alignment), TableError::CrcMismatch { .. }))
+        ));
+        let (buf, n) = image_of(TableId::Alignment, &rotated_alignment(36_000.0));
+        assert!(matches!(
+            set.load(&buf[..n]),
+            Err((Some(TableId::Alignment), TableError::ChangeTooLarge { .. }))
+        ));
+        assert_eq!(set.alignment(), before.alignment());
+        assert_eq!(set.activate(TableId::Alignment), Err(None));
+    }
+
+    #[test]
+    fn nan_and_truncated_rejected() {
+        let mut set = TableSet::boot();
+        let mut t = AlignmentTable::prelaunch();
+        t.m_acs_from_fhst2[1][1] = f64::NAN;
+        let (buf, n) = image_of(TableId::Alignment, &t);
+        assert!(matches!(
+            set.load(&buf[..n]),
+            Err((_, TableError::NotFinite { field: 1 }))
+        ));
+        let (buf, n) = image_of(TableId::Alignment, &AlignmentTable::prelaunch());
+        assert!(matches!(
+            set.load(&buf[..n - 10]),
+            Err((_, TableError::LengthMismatch { .. }))
+        ));
+        assert_eq!(set.alignment(), &AlignmentTable::prelaunch());
+    }
+}

@@ -1,0 +1,516 @@
+//! # The four uplinkable tables and their validation
+//!
+//! Field lists and units are the contract with the ground tool (`docs/tables.md`). Every table
+//! has a `validate()` that the OBC runs on load and the ground tool runs before writing an
+//! image, so a table the core cannot use is never produced nor accepted.
+//!
+//! Matrices are stored row-major as `[[f64; 3]; 3]` (`m[row][col]`), as in the paper.
+
+use super::image::TableError;
+use crate::attitude::{is_proper_rotation, rotvec_from_rot};
+use crate::units::{ARCSEC_PER_RAD, RAD_PER_DEG};
+use nalgebra::{Matrix3, Vector3};
+use serde::{Deserialize, Serialize};
+
+/// Row-major 3×3 matrix as stored in tables.
+pub type Mat3Rows = [[f64; 3]; 3];
+
+/// Tolerance on orthonormality and determinant of alignment matrices (issue TBL-005).
+pub const ROTATION_TOLERANCE: f64 = 1.0e-6;
+
+/// Convert stored rows to a nalgebra matrix.
+#[must_use]
+pub fn matrix_from_rows(m: &Mat3Rows) -> Matrix3<f64> {
+    let [r0, r1, r2] = m;
+    Matrix3::new(
+        r0[0], r0[1], r0[2], r1[0], r1[1], r1[2], r2[0], r2[1], r2[2],
+    )
+}
+
+/// Convert a nalgebra matrix to stored rows.
+#[must_use]
+pub fn rows_from_matrix(m: &Matrix3<f64>) -> Mat3Rows {
+    [
+        [m.m11, m.m12, m.m13],
+        [m.m21, m.m22, m.m23],
+        [m.m31, m.m32, m.m33],
+    ]
+}
+
+fn all_finite(m: &Mat3Rows) -> bool {
+    m.iter().flatten().all(|x| x.is_finite())
+}
+
+fn check_finite(values: &[f64], field: u8) -> Result<(), TableError> {
+    if values.iter().all(|x| x.is_finite()) {
+        Ok(())
+    } else {
+        Err(TableError::NotFinite { field })
+    }
+}
+
+fn check_range(value: f64, lo: f64, hi: f64, field: u8) -> Result<(), TableError> {
+    if !value.is_finite() {
+        return Err(TableError::NotFinite { field });
+    }
+    if (lo..=hi).contains(&value) {
+        Ok(())
+    } else {
+        Err(TableError::OutOfRange { field })
+    }
+}
+
+// ------------------------------------------------------------------------------------------
+// Alignment table
+// ------------------------------------------------------------------------------------------
+
+/// Corrections for effects beyond a rigid alignment, applied by the OBC when non-zero
+/// (issue 5: effects found on the ground become table data). All default to zero (off).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct SensorCorrections {
+    /// Time-tag offset per sensor (FHST1, FHST2, FSS1, FSS2), s: the measurement refers to
+    /// `frame time − offset`. Range ±2 s.
+    pub time_offset_s: [f64; 4],
+    /// FHST focal-plane distortion per tracker, rad: the true angles are
+    /// `H = H_m − (d0 ρ² H_m + d1 H_m V_m)`, `V = V_m − (d0 ρ² V_m + d2 H_m V_m)` with
+    /// `ρ² = H_m² + V_m²` (angles in rad; d0 in rad⁻², d1 and d2 in rad⁻¹). Range |d| ≤ 1.
+    pub fhst_distortion: [[f64; 3]; 2],
+    /// FSS transfer-function correction per sensor: the true head angles are
+    /// `α = α_m − (c0 α_m + c1 α_m β_m² + c2)`, `β = β_m − (c3 β_m + c4 β_m α_m² + c5)`
+    /// (rad; c0, c3 unitless scale errors, c1, c4 rad⁻², c2, c5 rad offsets). Range |c| ≤ 1.
+    pub fss_transfer: [[f64; 6]; 2],
+}
+
+/// Sensor alignments `M_AS` (paper Table 1 / Table 3), sensor → ACS, columns = sensor axes.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct AlignmentTable {
+    /// `M_AS` of FHST1 (unitless, proper rotation).
+    pub m_acs_from_fhst1: Mat3Rows,
+    /// `M_AS` of FHST2.
+    pub m_acs_from_fhst2: Mat3Rows,
+    /// `M_AS` of FSS1.
+    pub m_acs_from_fss1: Mat3Rows,
+    /// `M_AS` of FSS2.
+    pub m_acs_from_fss2: Mat3Rows,
+    /// Corrections for non-rigid effects (zero = off).
+    pub corrections: SensorCorrections,
+}
+
+impl AlignmentTable {
+    /// The four alignment matrices in sensor order FHST1, FHST2, FSS1, FSS2.
+    #[must_use]
+    pub fn matrices(&self) -> [&Mat3Rows; 4] {
+        [
+            &self.m_acs_from_fhst1,
+            &self.m_acs_from_fhst2,
+            &self.m_acs_from_fss1,
+            &self.m_acs_from_fss2,
+        ]
+    }
+
+    /// The paper's prelaunch alignments (Table 1), the boot table.
+    #[must_use]
+    pub fn prelaunch() -> Self {
+        Self {
+            m_acs_from_fhst1: [
+                [-0.707293868, 0.000641730, -0.706919372],
+                [-0.706919611, -0.000965840, 0.707293212],
+                [-0.000228880, 0.999999344, 0.001136780],
+            ],
+            m_acs_from_fhst2: [
+                [-0.706911922, -0.000668710, -0.707301319],
+                [0.707300782, 0.000884930, -0.706912220],
+                [0.001098630, -0.999999404, -0.000152590],
+            ],
+            m_acs_from_fss1: [
+                [0.003753100, -0.865531862, 0.500839829],
+                [0.999986291, 0.001422380, -0.005035412],
+                [0.003645920, 0.500851870, 0.865525305],
+            ],
+            m_acs_from_fss2: [
+                [0.000871080, 0.034161031, 0.999415934],
+                [0.999991417, -0.004071418, -0.000732420],
+                [0.004044019, 0.999408066, -0.034164291],
+            ],
+            corrections: SensorCorrections::default(),
+        }
+    }
+
+    /// Content checks: finite, proper rotations, corrections in range.
+    ///
+    /// Field numbers: 0–3 the matrices, 4 time offsets, 5 FHST distortion, 6 FSS transfer.
+    ///
+    /// # Errors
+    /// The first failed check.
+    pub fn validate(&self) -> Result<(), TableError> {
+        for (sensor, m) in (0u8..).zip(self.matrices()) {
+            if !all_finite(m) {
+                return Err(TableError::NotFinite { field: sensor });
+            }
+            if !is_proper_rotation(&matrix_from_rows(m), ROTATION_TOLERANCE) {
+                return Err(TableError::NotRotation { sensor });
+            }
+        }
+        let c = &self.corrections;
+        check_finite(&c.time_offset_s, 4)?;
+        for t in c.time_offset_s {
+            check_range(t, -2.0, 2.0, 4)?;
+        }
+        for d in c.fhst_distortion.iter().flatten() {
+            check_range(*d, -1.0, 1.0, 5)?;
+        }
+        for k in c.fss_transfer.iter().flatten() {
+            check_range(*k, -1.0, 1.0, 6)?;
+        }
+        Ok(())
+    }
+
+    /// Largest rotation (arcsec) between this table's alignments and `other`'s, and the
+    /// index of the sensor where it occurs.
+    #[must_use]
+    pub fn max_rotation_from_arcsec(&self, other: &AlignmentTable) -> (f64, u8) {
+        let mut worst = (0.0, 0u8);
+        for (i, (a, b)) in (0u8..).zip(self.matrices().into_iter().zip(other.matrices())) {
+            let r = matrix_from_rows(a) * matrix_from_rows(b).transpose();
+            let angle = rotvec_from_rot(&r).norm() * ARCSEC_PER_RAD;
+            if !(angle <= worst.0) {
+                worst = (angle, i);
+            }
+        }
+        worst
+    }
+}
+
+// ------------------------------------------------------------------------------------------
+// IRU table
+// ------------------------------------------------------------------------------------------
+
+/// DRIRU II calibration (paper eq. 5): `Δθ_acs = G · diag(k) · w · ΔN` for the three selected
+/// channels in X, Y, Z order, `w` the pulse weight of the rate mode.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct IruTable {
+    /// G of the primary configuration (X2, Y1, Z1), unitless, non-orthogonal.
+    pub g_primary: Mat3Rows,
+    /// G of the backup configuration (X1, Y2, Z2).
+    pub g_backup: Mat3Rows,
+    /// Scale factors k of the primary channels (X2, Y1, Z1), unitless, near 1.
+    pub scale_factor_primary: [f64; 3],
+    /// Scale factors k of the backup channels (X1, Y2, Z2).
+    pub scale_factor_backup: [f64; 3],
+    /// Low-rate pulse weight, arcsec per pulse (0.05 on GRO).
+    pub low_rate_arcsec_per_pulse: f64,
+    /// High-rate pulse weight, arcsec per pulse (0.8 on GRO).
+    pub high_rate_arcsec_per_pulse: f64,
+    /// A channel whose count changes by more than this in one cycle is flagged saturated.
+    pub saturation_pulses_per_cycle: u16,
+    /// A channel whose count does not change for this many cycles is flagged stuck.
+    pub stuck_cycles: u16,
+}
+
+impl IruTable {
+    /// The prelaunch G of the paper (used for both configurations: the paper publishes one),
+    /// unit scale factors, GRO pulse weights; the boot table.
+    #[must_use]
+    pub fn prelaunch() -> Self {
+        let g = [
+            [1.00000, 0.00108, 0.00079],
+            [-0.00100, 1.00000, -0.00156],
+            [-0.00056, 0.00128, 1.00000],
+        ];
+        Self {
+            g_primary: g,
+            g_backup: g,
+            scale_factor_primary: [1.0; 3],
+            scale_factor_backup: [1.0; 3],
+            low_rate_arcsec_per_pulse: 0.05,
+            high_rate_arcsec_per_pulse: 0.8,
+            saturation_pulses_per_cycle: 30_000,
+            stuck_cycles: 120,
+        }
+    }
+
+    /// Content checks. Fields: 0 g_primary, 1 g_backup, 2/3 scale factors, 4/5 pulse weights,
+    /// 6 saturation, 7 stuck cycles.
+    ///
+    /// # Errors
+    /// The first failed check.
+    pub fn validate(&self) -> Result<(), TableError> {
+        for (field, g) in [(0u8, &self.g_primary), (1u8, &self.g_backup)] {
+            if !all_finite(g) {
+                return Err(TableError::NotFinite { field });
+            }
+            // Within 5 % of the identity element-wise: a gross error, not a calibration.
+            let m = matrix_from_rows(g) - Matrix3::identity();
+            if m.iter().any(|x| x.abs() > 0.05) {
+                return Err(TableError::OutOfRange { field });
+            }
+        }
+        for (field, k) in [
+            (2u8, &self.scale_factor_primary),
+            (3u8, &self.scale_factor_backup),
+        ] {
+            for v in k {
+                check_range(*v, 0.95, 1.05, field)?;
+            }
+        }
+        check_range(self.low_rate_arcsec_per_pulse, 1e-3, 10.0, 4)?;
+        check_range(self.high_rate_arcsec_per_pulse, 1e-3, 10.0, 5)?;
+        if self.saturation_pulses_per_cycle == 0 || self.saturation_pulses_per_cycle > 32_000 {
+            return Err(TableError::OutOfRange { field: 6 });
+        }
+        if self.stuck_cycles < 2 {
+            return Err(TableError::OutOfRange { field: 7 });
+        }
+        Ok(())
+    }
+
+    /// Largest element change of G (ppm) against another table, both configurations.
+    #[must_use]
+    pub fn max_g_change_ppm(&self, other: &IruTable) -> f64 {
+        let a = matrix_from_rows(&self.g_primary) - matrix_from_rows(&other.g_primary);
+        let b = matrix_from_rows(&self.g_backup) - matrix_from_rows(&other.g_backup);
+        let mut worst = 0.0_f64;
+        for x in a.iter().chain(b.iter()) {
+            worst = worst.max(x.abs() * 1.0e6);
+        }
+        for (x, y) in self
+            .scale_factor_primary
+            .iter()
+            .chain(self.scale_factor_backup.iter())
+            .zip(
+                other
+                    .scale_factor_primary
+                    .iter()
+                    .chain(other.scale_factor_backup.iter()),
+            )
+        {
+            worst = worst.max((x - y).abs() * 1.0e6);
+        }
+        worst
+    }
+}
+
+// ------------------------------------------------------------------------------------------
+// Filter table
+// ------------------------------------------------------------------------------------------
+
+/// Kalman filter, star identification and attitude control settings.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct FilterTable {
+    /// Cycle period of the executive, s (0.125 ..= 2.0).
+    pub cycle_period_s: f64,
+    /// Gyro angle random walk σ_v, rad/s^½ (Farrenkopf).
+    pub arw_rad_per_sqrt_s: f64,
+    /// Gyro rate random walk σ_u, rad/s^3/2 (Farrenkopf).
+    pub rrw_rad_per_s_sqrt_s: f64,
+    /// FHST measurement σ for a magnitude-2.0 star, arcsec per axis.
+    pub fhst_sigma_bright_arcsec: f64,
+    /// FHST measurement σ for a magnitude-5.7 star, arcsec per axis (linear in between).
+    pub fhst_sigma_faint_arcsec: f64,
+    /// FSS measurement σ per axis, arcsec (includes its transfer-function error).
+    pub fss_sigma_arcsec: f64,
+    /// χ² gate on the 2-component innovation (11.83 = 99.73 %).
+    pub gate_chi2: f64,
+    /// Initial attitude σ per axis after an initialisation, rad.
+    pub initial_attitude_sigma_rad: f64,
+    /// Initial bias σ per axis, rad/s.
+    pub initial_bias_sigma_rad_per_s: f64,
+    /// Star identification: catalog match window, arcsec (≥ the 0.5° requirement).
+    pub star_id_window_arcsec: f64,
+    /// Star identification: magnitude tolerance, mag.
+    pub star_id_magnitude_tolerance: f64,
+    /// Apply annual velocity aberration to catalog stars (and the Sun) on board.
+    pub aberration_correction: bool,
+    /// Largest accepted change of any alignment per load, arcsec.
+    pub max_alignment_change_arcsec: f64,
+    /// Largest accepted change of any G element or scale factor per load, ppm.
+    pub max_iru_change_ppm: f64,
+    /// Slew rate limit, rad/s.
+    pub slew_rate_limit_rad_per_s: f64,
+    /// Spacecraft inertia diagonal used by the control law, kg m².
+    pub inertia_kg_m2: [f64; 3],
+    /// Control bandwidth (natural frequency), rad/s.
+    pub control_bandwidth_rad_per_s: f64,
+    /// Control damping ratio.
+    pub control_damping: f64,
+    /// Wheel torque command limit per axis, N m.
+    pub torque_limit_nm: f64,
+    /// Attitude error below which a slew is complete and the IRU returns to low rate, rad.
+    pub slew_complete_rad: f64,
+}
+
+impl FilterTable {
+    /// Boot settings (documented in `docs/tables.md`).
+    #[must_use]
+    pub fn default_boot() -> Self {
+        Self {
+            cycle_period_s: 1.0,
+            arw_rad_per_sqrt_s: 1.5e-7,
+            rrw_rad_per_s_sqrt_s: 1.0e-10,
+            fhst_sigma_bright_arcsec: 8.0,
+            fhst_sigma_faint_arcsec: 24.0,
+            fss_sigma_arcsec: 60.0,
+            gate_chi2: 11.83,
+            initial_attitude_sigma_rad: 1.0 * RAD_PER_DEG,
+            initial_bias_sigma_rad_per_s: 5.0e-6,
+            star_id_window_arcsec: 0.6 * 3600.0,
+            star_id_magnitude_tolerance: 0.6,
+            aberration_correction: false,
+            max_alignment_change_arcsec: 3600.0,
+            max_iru_change_ppm: 20_000.0,
+            slew_rate_limit_rad_per_s: 0.08 * RAD_PER_DEG,
+            inertia_kg_m2: [1.2e5, 1.4e5, 0.9e5],
+            control_bandwidth_rad_per_s: 0.05,
+            control_damping: 0.9,
+            torque_limit_nm: 0.5,
+            slew_complete_rad: 0.05 * RAD_PER_DEG,
+        }
+    }
+
+    /// Content checks; field numbers are the declaration order 0..=19.
+    ///
+    /// # Errors
+    /// The first failed check.
+    pub fn validate(&self) -> Result<(), TableError> {
+        check_range(self.cycle_period_s, 0.125, 2.0, 0)?;
+        check_range(self.arw_rad_per_sqrt_s, 0.0, 1e-3, 1)?;
+        check_range(self.rrw_rad_per_s_sqrt_s, 0.0, 1e-5, 2)?;
+        check_range(self.fhst_sigma_bright_arcsec, 0.1, 3600.0, 3)?;
+        check_range(self.fhst_sigma_faint_arcsec, 0.1, 3600.0, 4)?;
+        check_range(self.fss_sigma_arcsec, 0.1, 36_000.0, 5)?;
+        check_range(self.gate_chi2, 1.0, 1.0e6, 6)?;
+        check_range(self.initial_attitude_sigma_rad, 1e-9, 4.0, 7)?;
+        check_range(self.initial_bias_sigma_rad_per_s, 1e-12, 1e-2, 8)?;
+        check_range(self.star_id_window_arcsec, 1.0, 7200.0, 9)?;
+        check_range(self.star_id_magnitude_tolerance, 0.0, 5.0, 10)?;
+        check_range(self.max_alignment_change_arcsec, 0.0, 36_000.0, 12)?;
+        check_range(self.max_iru_change_ppm, 0.0, 100_000.0, 13)?;
+        check_range(self.slew_rate_limit_rad_per_s, 1e-5, 0.1, 14)?;
+        for i in self.inertia_kg_m2 {
+            check_range(i, 1.0, 1.0e8, 15)?;
+        }
+        check_range(self.control_bandwidth_rad_per_s, 1e-4, 1.0, 16)?;
+        check_range(self.control_damping, 0.1, 5.0, 17)?;
+        check_range(self.torque_limit_nm, 1e-3, 100.0, 18)?;
+        check_range(self.slew_complete_rad, 1e-6, 0.5, 19)?;
+        Ok(())
+    }
+
+    /// FHST σ (rad) for a star of the given magnitude, clamped to the 2.0–5.7 window.
+    #[must_use]
+    pub fn fhst_sigma_rad(&self, magnitude: f64) -> f64 {
+        let t = ((magnitude - 2.0) / 3.7).clamp(0.0, 1.0);
+        let arcsec = self.fhst_sigma_bright_arcsec
+            + t * (self.fhst_sigma_faint_arcsec - self.fhst_sigma_bright_arcsec);
+        arcsec / ARCSEC_PER_RAD
+    }
+}
+
+// ------------------------------------------------------------------------------------------
+// Star catalog table
+// ------------------------------------------------------------------------------------------
+
+/// Capacity of the onboard catalog (all Hipparcos stars of the FHST window fit: 3231 with
+/// 2.0 ≤ Hp ≤ 5.7).
+pub const MAX_CATALOG_STARS: usize = 4096;
+
+/// One onboard catalog star.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct CatalogStar {
+    /// Catalog number (HIP).
+    pub id: u32,
+    /// Unit direction in J2000/ICRS at the catalog epoch of the table (proper motion applied
+    /// on the ground), `f32` (7e-8 rad resolution, 0.015 arcsec).
+    pub dir_eci: [f32; 3],
+    /// Magnitude in the FHST's instrument system, 0.01 mag.
+    pub magnitude_centimag: i16,
+}
+
+impl CatalogStar {
+    /// Direction as an `f64` vector.
+    #[must_use]
+    pub fn dir(&self) -> Vector3<f64> {
+        let [x, y, z] = self.dir_eci;
+        Vector3::new(f64::from(x), f64::from(y), f64::from(z))
+    }
+}
+
+/// The onboard star catalog.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct StarCatalogTable {
+    /// Catalog epoch (proper motion applied to it), years since J2000.0.
+    pub epoch_years_since_j2000: f64,
+    /// Stars, any order.
+    pub stars: heapless::Vec<CatalogStar, MAX_CATALOG_STARS>,
+}
+
+impl StarCatalogTable {
+    /// Content checks: finite epoch within ±100 years, unit directions (±1e-6), magnitudes
+    /// −2..=9. Fields: 0 epoch, 1 direction, 2 magnitude.
+    ///
+    /// # Errors
+    /// The first failed check.
+    pub fn validate(&self) -> Result<(), TableError> {
+        check_range(self.epoch_years_since_j2000, -100.0, 100.0, 0)?;
+        for s in &self.stars {
+            let n = s.dir().norm();
+            if !n.is_finite() {
+                return Err(TableError::NotFinite { field: 1 });
+            }
+            if (n - 1.0).abs() > 1.0e-6 {
+                return Err(TableError::OutOfRange { field: 1 });
+            }
+            if !(-200..=900).contains(&s.magnitude_centimag) {
+                return Err(TableError::OutOfRange { field: 2 });
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Largest rotation bound check used at load and at activation.
+///
+/// # Errors
+/// [`TableError::ChangeTooLarge`] when an alignment moves by more than the bound.
+pub fn check_alignment_change(
+    new: &AlignmentTable,
+    active: &AlignmentTable,
+    filter: &FilterTable,
+) -> Result<(), TableError> {
+    let (change, sensor) = new.max_rotation_from_arcsec(active);
+    if !(change <= filter.max_alignment_change_arcsec) {
+        #[allow(clippy::cast_possible_truncation)]
+        return Err(TableError::ChangeTooLarge {
+            field: sensor,
+            change: change as f32,
+            limit: filter.max_alignment_change_arcsec as f32,
+        });
+    }
+    Ok(())
+}
+
+/// IRU change bound check used at load and at activation.
+///
+/// # Errors
+/// [`TableError::ChangeTooLarge`] when G or k move by more than the bound.
+pub fn check_iru_change(
+    new: &IruTable,
+    active: &IruTable,
+    filter: &FilterTable,
+) -> Result<(), TableError> {
+    let change = new.max_g_change_ppm(active);
+    if !(change <= filter.max_iru_change_ppm) {
+        #[allow(clippy::cast_possible_truncation)]
+        return Err(TableError::ChangeTooLarge {
+            field: 0,
+            change: change as f32,
+            limit: filter.max_iru_change_ppm as f32,
+        });
+    }
+    Ok(())
+}
