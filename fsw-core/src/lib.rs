@@ -5,6 +5,13 @@
 #![cfg_attr(test, allow(clippy::unwrap_used, clippy::expect_used, clippy::indexing_slicing, clippy::arithmetic_side_effects))]
 
 pub mod attitude;
+pub mod control;
+pub mod fhst;
+pub mod fss;
+pub mod iru;
+pub mod mekf;
 pub mod raw;
+pub mod star_id;
+pub mod sun_ephemeris;
 pub mod tables;
 pub mod units;
