@@ -6,6 +6,7 @@
 
 pub mod attitude;
 pub mod control;
+pub mod events;
 pub mod fhst;
 pub mod fss;
 pub mod iru;
@@ -14,4 +15,5 @@ pub mod raw;
 pub mod star_id;
 pub mod sun_ephemeris;
 pub mod tables;
+pub mod telemetry;
 pub mod units;

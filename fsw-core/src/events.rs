@@ -1,0 +1,165 @@
+//! # Events: what happened, with a stable numeric code
+//!
+//! Events are raised on *transitions* (a table rejected, a channel excluded, a mode change),
+//! never every cycle; steady conditions are counted in [`Counters`] instead, so an operator
+//! sees both the moment and the total. Codes are the enum discriminants ([`EventId`]) and are
+//! listed in `docs/icd.md`; a test checks they are unique.
+
+use serde::{Deserialize, Serialize};
+
+/// Maximum events reported by one cycle (further events in the same cycle are counted in
+/// [`Counters::events_dropped`]).
+pub const MAX_EVENTS_PER_CYCLE: usize = 8;
+
+/// Event identifiers. The discriminant is the on-wire code.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[repr(u16)]
+pub enum EventId {
+    /// A table image was loaded and validated into the inactive buffer. p1 = table id.
+    TableLoaded = 0x0101,
+    /// A table image was rejected. p1 = table id (0 if unreadable), p2 = reason code.
+    TableRejected = 0x0102,
+    /// A table was activated. p1 = table id, p2 = CRC of its image.
+    TableActivated = 0x0103,
+    /// Activation refused. p1 = table id, p2 = reason code (0 = nothing pending).
+    TableActivateFailed = 0x0104,
+    /// Inactive buffer cleared by command. p1 = table id, p2 = 1 if something was pending.
+    TableAborted = 0x0105,
+    /// IRU channel excluded. p1 = channel 0..5 (X1..Z2), p2 = reason (1 failed, 2 saturated,
+    /// 3 stuck).
+    IruChannelExcluded = 0x0201,
+    /// IRU configuration switched. p1 = 0 primary, 1 backup; p2 = 1 if automatic.
+    IruConfigSwitched = 0x0202,
+    /// IRU rate mode command changed. p1 = 1 high rate, 0 low rate.
+    IruRateModeChanged = 0x0203,
+    /// IRU data unusable this cycle (attitude propagated without gyro). p1 = channel mask.
+    IruDataUnusable = 0x0204,
+    /// Filter initialised. p1 = 1 by command, 2 from two vectors.
+    FilterInitialized = 0x0301,
+    /// Filter reset by command (attitude kept, covariance reopened).
+    FilterReset = 0x0302,
+    /// Filter mode changed. p1 = new mode ([`crate::executive::FilterMode`] code).
+    FilterModeChanged = 0x0303,
+    /// A star was identified. p1 = tracker 0/1, p2 = catalog id.
+    StarIdentified = 0x0401,
+    /// Star identification failed. p1 = tracker, p2 = 1 no match, 2 ambiguous, 3 no catalog.
+    StarIdFailed = 0x0402,
+    /// A sensor's innovations are being gated out (first of a run). p1 = sensor 0..3.
+    MeasurementGated = 0x0403,
+    /// A sensor sample failed input validation (first of a run). p1 = sensor 0..4 (4 = IRU),
+    /// p2 = reason code.
+    InputRejected = 0x0404,
+    /// Frame time not after the previous one, or a jump. p1 = previous coarse s, p2 = new.
+    TimeTagAnomaly = 0x0501,
+    /// A slew started. p1 = slew number.
+    SlewStarted = 0x0601,
+    /// A slew completed (error below the table threshold). p1 = slew number.
+    SlewCompleted = 0x0602,
+    /// A command was refused. p1 = command code, p2 = reason.
+    CommandRejected = 0x0701,
+}
+
+impl EventId {
+    /// Every event id (for the uniqueness test and the ICD table).
+    pub const ALL: [EventId; 20] = [
+        Self::TableLoaded,
+        Self::TableRejected,
+        Self::TableActivated,
+        Self::TableActivateFailed,
+        Self::TableAborted,
+        Self::IruChannelExcluded,
+        Self::IruConfigSwitched,
+        Self::IruRateModeChanged,
+        Self::IruDataUnusable,
+        Self::FilterInitialized,
+        Self::FilterReset,
+        Self::FilterModeChanged,
+        Self::StarIdentified,
+        Self::StarIdFailed,
+        Self::MeasurementGated,
+        Self::InputRejected,
+        Self::TimeTagAnomaly,
+        Self::SlewStarted,
+        Self::SlewCompleted,
+        Self::CommandRejected,
+    ];
+
+    /// On-wire code.
+    #[must_use]
+    pub fn code(self) -> u16 {
+        self as u16
+    }
+
+    /// From the on-wire code.
+    #[must_use]
+    pub fn from_code(code: u16) -> Option<Self> {
+        Self::ALL.iter().copied().find(|e| e.code() == code)
+    }
+}
+
+/// One event with two parameters.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Event {
+    /// What happened.
+    pub id: EventId,
+    /// First parameter (meaning per [`EventId`]).
+    pub p1: u32,
+    /// Second parameter.
+    pub p2: u32,
+}
+
+/// Cumulative counters since boot (saturating).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Counters {
+    /// Cycles executed.
+    pub cycles: u32,
+    /// Sensor samples refused by input validation (bad flags, range, NaN).
+    pub rejected_inputs: u32,
+    /// Measurements refused by the χ² gate.
+    pub gated_measurements: u32,
+    /// Measurements accepted by the filter.
+    pub accepted_measurements: u32,
+    /// Star identifications that succeeded.
+    pub stars_identified: u32,
+    /// Star identifications that found no candidate.
+    pub star_id_unmatched: u32,
+    /// Star identifications with more than one candidate (rejected).
+    pub star_id_ambiguous: u32,
+    /// Frames whose time tag was not after the previous one.
+    pub time_tag_anomalies: u32,
+    /// Cycles without usable gyro data.
+    pub iru_unusable_cycles: u32,
+    /// Events that did not fit in a cycle's output.
+    pub events_dropped: u32,
+}
+
+/// Push an event into a cycle's list, counting it if the list is full.
+pub fn raise(
+    events: &mut heapless::Vec<Event, MAX_EVENTS_PER_CYCLE>,
+    counters: &mut Counters,
+    id: EventId,
+    p1: u32,
+    p2: u32,
+) {
+    if events.push(Event { id, p1, p2 }).is_err() {
+        counters.events_dropped = counters.events_dropped.saturating_add(1);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn event_codes_are_unique_and_round_trip() {
+        for (i, a) in EventId::ALL.iter().enumerate() {
+            assert_eq!(EventId::from_code(a.code()), Some(*a));
+            for b in &EventId::ALL[i + 1..] {
+                assert_ne!(a.code(), b.code());
+            }
+        }
+    }
+}
