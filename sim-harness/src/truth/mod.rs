@@ -1,0 +1,7 @@
+//! # Truth models: time, orbit, Sun, sky, rigid-body dynamics
+//!
+//! Everything the sensors see is computed here, in J2000/ICRS axes (`eci`), km, km/s, rad.
+pub mod aberration;
+pub mod sun;
+pub mod time;
+mod vsop87_earth;
