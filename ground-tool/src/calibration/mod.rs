@@ -1,0 +1,9 @@
+//! In-flight calibration (paper §4 alignment, §5 IRU; `docs/algorithms.md` §6–§8, §10).
+//!
+//! - [`alignment`]: FFCAL, relative sensor alignments from attitude-independent dot products.
+//! - [`adjust`]: the appendix adjustment that preserves the OBC's FHST attitude.
+//! - [`iru`]: IRUCAL, gyro misalignment/scale and bias; bias from inertial holds; plan study.
+
+pub mod adjust;
+pub mod alignment;
+pub mod iru;
