@@ -27,6 +27,7 @@
 //! - [`calibration::iru`]: IRUCAL, the Davenport/Keat 12-parameter gyro calibration, bias from
 //!   inertial holds, and the covariance study of a maneuver plan.
 //! - [`paper`]: reproduction of the paper's tables and numbers (`ground-tool paper`).
+//! - [`tp`]: TP, telemetry processing of `telemetry.bin` (`docs/icd.md`), robust to damage.
 //! - [`synth`]: deterministic synthetic data (tests, benchmarks).
 
 pub mod attitude;
@@ -34,5 +35,6 @@ pub mod calibration;
 pub mod linalg;
 pub mod paper;
 pub mod synth;
+pub mod tp;
 
 pub use fsw_core::units::{ARCSEC_PER_RAD, DEG_PER_RAD, RAD_PER_ARCSEC, RAD_PER_DEG};
