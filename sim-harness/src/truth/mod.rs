@@ -2,6 +2,8 @@
 //!
 //! Everything the sensors see is computed here, in J2000/ICRS axes (`eci`), km, km/s, rad.
 pub mod aberration;
+pub mod orbit;
+pub mod sky;
 pub mod sun;
 pub mod time;
 mod vsop87_earth;
