@@ -22,7 +22,7 @@
 //! `R = M_AN M_AN'ᵀ` maps the calibrated frame back onto the prelaunch one (`R M_AN' = M_AN`),
 //! and every sensor gets `M_AS'' = R M_AS'`. In the paper's notation `R = Rot(θ_adj)` with
 //! `θ_adj = rotvec(R)` in ACS; the adjusted FHST frame is then identical to the prelaunch one,
-//! and all relative alignments `M_AS''ᵢ M_AS''ⱼᵀ = M_AS'ᵢ M_AS'ⱼᵀ` are kept.
+//! and all relative alignments `M_AS''ᵢᵀ M_AS''ⱼ = M_AS'ᵢᵀ M_AS'ⱼ` are kept.
 
 use nalgebra::{Matrix3, Vector3};
 use serde::Serialize;
@@ -194,8 +194,9 @@ mod tests {
             assert!((after - before).amax() < 1e-12, "{construction:?}: {}", (after - before).amax());
             for i in 0..4 {
                 for j in 0..4 {
-                    let rel_cal = cal[i] * cal[j].transpose();
-                    let rel_adj = adj.m_acs_from_sensor_adjusted[i] * adj.m_acs_from_sensor_adjusted[j].transpose();
+                    // m_i_from_j = M_iᵀ M_j is invariant under a common left rotation
+                    let rel_cal = cal[i].transpose() * cal[j];
+                    let rel_adj = adj.m_acs_from_sensor_adjusted[i].transpose() * adj.m_acs_from_sensor_adjusted[j];
                     assert!((rel_cal - rel_adj).amax() < 1e-12);
                 }
             }
