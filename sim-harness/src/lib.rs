@@ -8,4 +8,6 @@
 //! 4. The per-cycle path does not allocate.
 //! 5. Every error parameter is a serde field with a default; undeclared effects default off.
 pub mod data;
+pub mod paper;
+pub mod sensors;
 pub mod truth;
