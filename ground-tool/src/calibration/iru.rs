@@ -425,10 +425,24 @@ pub struct PlannedManeuver {
     pub angle_rad: f64,
     /// Interval duration (s); the slew is at constant rate over the whole interval.
     pub duration_s: f64,
-    /// 1σ per ACS axis of the start attitude (rad).
-    pub sigma_start_acs_rad: Vector3<f64>,
-    /// 1σ per ACS axis of the end attitude (rad).
-    pub sigma_end_acs_rad: Vector3<f64>,
+    /// Covariance of the start attitude error (ACS at the start, rad²).
+    pub cov_start_acs_rad2: Matrix3<f64>,
+    /// Covariance of the end attitude error (ACS at the end, rad²).
+    pub cov_end_acs_rad2: Matrix3<f64>,
+}
+
+impl PlannedManeuver {
+    /// Maneuver with isotropic end-attitude errors of `sigma_start_rad`, `sigma_end_rad` per axis.
+    #[must_use]
+    pub fn isotropic(axis_acs: Vector3<f64>, angle_rad: f64, duration_s: f64, sigma_start_rad: f64, sigma_end_rad: f64) -> Self {
+        Self {
+            axis_acs,
+            angle_rad,
+            duration_s,
+            cov_start_acs_rad2: Matrix3::identity() * sigma_start_rad * sigma_start_rad,
+            cov_end_acs_rad2: Matrix3::identity() * sigma_end_rad * sigma_end_rad,
+        }
+    }
 }
 
 /// Predicted accuracy of a maneuver plan.
@@ -453,7 +467,8 @@ pub fn slew_steps(axis_acs: &Vector3<f64>, angle_rad: f64, duration_s: f64, step
 
 /// Covariance study of a maneuver plan (no data): the Fisher information of the 12
 /// parameters from the S-recursion along the planned (nominal) motion, `R` from the end
-/// attitude σ and the gyro noise (§7, §10).
+/// attitude covariances and the gyro noise (§7, §10). The result does not depend on the
+/// absolute attitude: each maneuver starts at the identity and its covariances are in ACS.
 ///
 /// # Errors
 /// [`IruError::Unobservable`] when the plan cannot determine all 12 parameters.
@@ -466,11 +481,8 @@ pub fn study_plan(plan: &[PlannedManeuver], noise: &GyroNoise, step_s: f64) -> R
     for (interval, m) in plan.iter().enumerate() {
         let steps = slew_steps(&m.axis_acs, m.angle_rad, m.duration_s, step_s);
         let (a_end, s, t) = propagate_interval(&Matrix3::identity(), &steps, &GyroCalibration::default());
-        let fix = |sig: &Vector3<f64>| AttitudeFix {
-            m_acs_from_eci: Matrix3::identity(),
-            cov_acs_rad2: Matrix3::from_diagonal(&sig.component_mul(sig)),
-        };
-        let r = interval_covariance(&fix(&m.sigma_start_acs_rad), &fix(&m.sigma_end_acs_rad), &Matrix3::identity(), &a_end, t, noise)
+        let fix = |cov: &Matrix3<f64>| AttitudeFix { m_acs_from_eci: Matrix3::identity(), cov_acs_rad2: *cov };
+        let r = interval_covariance(&fix(&m.cov_start_acs_rad2), &fix(&m.cov_end_acs_rad2), &Matrix3::identity(), &a_end, t, noise)
             * (ARCSEC_PER_RAD * ARCSEC_PER_RAD);
         let Some(w) = r.try_inverse() else { return Err(IruError::BadCovariance { interval }) };
         let f = s * d * ARCSEC_PER_RAD;
@@ -676,16 +688,9 @@ mod tests {
 
         // The covariance study of the same plan predicts the same σ (nominal vs actual motion,
         // 2 % tolerance for the ΔM-induced difference of the propagated path).
-        let sigma = Vector3::repeat(sigma_fix);
         let planned: Vec<PlannedManeuver> = plan()
             .iter()
-            .map(|&(ax, ang, dur)| PlannedManeuver {
-                axis_acs: ax,
-                angle_rad: ang * RAD_PER_DEG,
-                duration_s: dur,
-                sigma_start_acs_rad: sigma,
-                sigma_end_acs_rad: sigma,
-            })
+            .map(|&(ax, ang, dur)| PlannedManeuver::isotropic(ax, ang * RAD_PER_DEG, dur, sigma_fix, sigma_fix))
             .collect();
         let study = study_plan(&planned, &noise, 1.0).unwrap();
         for j in 0..3 {
