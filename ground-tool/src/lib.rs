@@ -28,12 +28,15 @@
 //!   inertial holds, and the covariance study of a maneuver plan.
 //! - [`paper`]: reproduction of the paper's tables and numbers (`ground-tool paper`).
 //! - [`tp`]: TP, telemetry processing of `telemetry.bin` (`docs/icd.md`), robust to damage.
+//! - [`bench`]: FFCAL throughput check (`ground-tool bench`).
 //! - [`synth`]: deterministic synthetic data (tests, benchmarks).
 
 pub mod attitude;
+pub mod bench;
 pub mod calibration;
 pub mod linalg;
 pub mod paper;
+pub mod pipeline;
 pub mod synth;
 pub mod tp;
 

@@ -1,0 +1,699 @@
+//! # The whole chain: TP → DA/FADS → FFCAL → adjustment → IRUCAL → tables
+//!
+//! `ground-tool calibrate RUN_DIR --out DIR` runs this. It needs only `telemetry.bin` (and
+//! optionally `metadata.json`) from the run folder, never the simulator's truth.
+//!
+//! Steps (paper §3.3 and §4):
+//! 1. **TP** decodes the telemetry, reporting damage.
+//! 2. **DA/FADS** converts counts with the tables flown (the boot tables unless `--tables`
+//!    says otherwise), identifies stars against the full catalog and computes apparent
+//!    references ([`super::observations`]).
+//! 3. **FFCAL**: every frame with two or more referenced vectors is an epoch of Shuster's
+//!    attitude-independent alignment estimation; the flown alignments are the prior.
+//! 4. **Adjustment** (paper appendix): the common rotation that would move the OBC's
+//!    two-tracker attitude frame `M_AN` is removed, giving the uplinked `M_AS''`.
+//! 5. **IRUCAL**: maneuvers are found in the telemetry as runs of high-rate frames; each end
+//!    attitude is a FHST-only fine attitude centred in a 10-min batch in the holds before and
+//!    after (the paper's recommendation); holds give bias intervals and the bias history.
+//! 6. **Tables**: binary images written with `fsw-core`'s own types.
+
+use super::observations::{
+    build_observations, fine_attitude, AttitudeSensors, DeclaredNoise, FrameObservations,
+    IdentifyOptions,
+};
+use crate::calibration::adjust::{preserve_obc_attitude, BoresightFrame};
+use crate::calibration::alignment::{
+    ffcal, AlignmentData, FfcalConfig, FfcalSolution, SensorObservation, SensorSpec, Weighting,
+};
+use crate::calibration::iru::{
+    bias_history, irucal, AttitudeFix, BiasEstimate, CalibrationInterval, GyroCalibration,
+    GyroNoise, GyroStep, InertialHold, IrucalConfig, IrucalSolution, TimedFix,
+};
+use crate::tp::{self, Telemetry, TpReport};
+use anyhow::{bail, Context};
+use fsw_core::attitude::{rotvec_from_rot, Quat};
+use fsw_core::tables::image::encode_image;
+use fsw_core::tables::types::{matrix_from_rows, rows_from_matrix};
+use fsw_core::tables::{AlignmentTable, IruTable, TableId};
+use fsw_core::units::ARCSEC_PER_RAD;
+use nalgebra::{Matrix3, Vector3};
+use serde::Serialize;
+use sim_harness::truth::sky::{Sky, SkyParams};
+use std::path::{Path, PathBuf};
+
+/// Sensor names in table order.
+pub const SENSOR_NAMES: [&str; 4] = ["FHST1", "FHST2", "FSS1", "FSS2"];
+
+/// Half-length of the fine-attitude batches (s): the paper's 10-min batches.
+const BATCH_HALF_S: f64 = 300.0;
+
+/// Prior 1σ of the flown alignments per axis (arcsec): FHSTs, FSSs. The paper's FSS1 moved by
+/// 733 arcsec, so the FSS prior must not constrain a change of that size.
+const PRIOR_SIGMA_ARCSEC: [f64; 4] = [60.0, 60.0, 1800.0, 1800.0];
+
+/// What the operator declares about a run (`metadata.json`); every field has a default.
+#[derive(Clone, Debug, Default, serde::Deserialize)]
+#[serde(default)]
+pub struct Metadata {
+    /// Scenario name.
+    pub scenario: String,
+    /// Declared noise figures.
+    pub sensors: DeclaredNoise,
+    /// Declared effects the operator knows about.
+    pub declared_effects: Vec<String>,
+}
+
+/// Options of the chain.
+#[derive(Clone, Debug)]
+pub struct CalibrateOptions {
+    /// Tables flown (alignment and IRU); `None` = the boot tables.
+    pub flown_alignment: Option<AlignmentTable>,
+    /// IRU table flown; `None` = boot.
+    pub flown_iru: Option<IruTable>,
+    /// FFCAL weighting.
+    pub weighting: Weighting,
+    /// Identification options (aberration on by default).
+    pub identify: IdentifyOptions,
+}
+
+impl Default for CalibrateOptions {
+    fn default() -> Self {
+        Self {
+            flown_alignment: None,
+            flown_iru: None,
+            weighting: Weighting::Optimal1990,
+            identify: IdentifyOptions::default(),
+        }
+    }
+}
+
+/// One sensor's alignment result for the report.
+#[derive(Clone, Debug, Serialize)]
+pub struct AlignmentReport {
+    /// `M_AS` (row-major).
+    pub m_acs_from_sensor: [[f64; 3]; 3],
+    /// 1σ of the rotation vector per ACS axis, arcsec.
+    pub sigma_arcsec: [f64; 3],
+    /// Rotation vector from the flown alignment, ACS, arcsec.
+    pub theta_acs_arcsec: [f64; 3],
+}
+
+/// IRU results for the report.
+#[derive(Clone, Debug, Serialize)]
+pub struct IruReport {
+    /// δM (row-major, unitless).
+    pub delta_m: [[f64; 3]; 3],
+    /// 1σ of δM.
+    pub delta_m_sigma: [[f64; 3]; 3],
+    /// Bias from the full calibration, ACS, rad/s.
+    pub bias_rad_per_s: [f64; 3],
+    /// 1σ, rad/s.
+    pub bias_sigma_rad_per_s: [f64; 3],
+    /// Number of intervals (maneuvers + holds).
+    pub intervals: usize,
+    /// Interval residuals before and after, arcsec.
+    pub residual_before_arcsec: Vec<f64>,
+    /// After.
+    pub residual_after_arcsec: Vec<f64>,
+    /// Whether the new G was written (δM significant at 3σ somewhere).
+    pub g_updated: bool,
+}
+
+/// A maneuver found in the telemetry.
+#[derive(Clone, Debug, Serialize)]
+pub struct ManeuverReport {
+    /// Start, s since the first frame.
+    pub start_s: f64,
+    /// End, s since the first frame.
+    pub end_s: f64,
+    /// Rotation angle from the gyro, deg.
+    pub angle_deg: f64,
+    /// Used for IRUCAL (ends had attitude solutions).
+    pub used: bool,
+}
+
+/// The whole result.
+#[derive(Clone, Debug, Serialize)]
+pub struct CalibrationReport {
+    /// TP findings.
+    pub telemetry: TpReport,
+    /// Frames, identified stars, Sun observations.
+    pub data: DataSummary,
+    /// Calibrated alignments (before adjustment).
+    pub alignments: std::collections::BTreeMap<String, AlignmentReport>,
+    /// Adjusted alignments (uplinked).
+    pub alignments_adjusted: std::collections::BTreeMap<String, AlignmentReport>,
+    /// The common rotation removed by the adjustment, arcsec.
+    pub adjustment_theta_acs_arcsec: [f64; 3],
+    /// Residual RMS per sensor (dot-product residuals of FFCAL), arcsec.
+    pub residual_rms_arcsec: BeforeAfter,
+    /// FFCAL details.
+    pub ffcal: FfcalSummary,
+    /// IRU calibration (absent when the telemetry has too few maneuvers).
+    pub iru: Option<IruReport>,
+    /// Why the IRU calibration was not done, if so.
+    pub iru_skipped: Option<String>,
+    /// Maneuvers found.
+    pub maneuvers: Vec<ManeuverReport>,
+    /// Bias history from inertial holds.
+    pub bias_history: Vec<BiasHistoryPoint>,
+    /// Table images written.
+    pub tables: std::collections::BTreeMap<String, String>,
+}
+
+/// Data counts.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct DataSummary {
+    /// Raw frames.
+    pub frames: usize,
+    /// FHST samples identified against the catalog, per tracker.
+    pub stars_identified: [usize; 2],
+    /// FHST samples not identified (unique match failed), per tracker.
+    pub stars_unidentified: [usize; 2],
+    /// FSS samples with the Sun, per sensor.
+    pub sun_samples: [usize; 2],
+    /// FFCAL epochs (frames with ≥ 2 referenced vectors).
+    pub ffcal_epochs: usize,
+}
+
+/// Per-sensor before/after.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct BeforeAfter {
+    /// Before calibration.
+    pub before: std::collections::BTreeMap<String, f64>,
+    /// After.
+    pub after: std::collections::BTreeMap<String, f64>,
+}
+
+/// FFCAL summary.
+#[derive(Clone, Debug, Serialize)]
+pub struct FfcalSummary {
+    /// Weighting used.
+    pub weighting: Weighting,
+    /// Gauss–Newton passes.
+    pub iterations: usize,
+    /// Epochs.
+    pub epochs: usize,
+    /// Normal-matrix eigenvalues (ascending), arcsec⁻².
+    pub eigenvalues: Vec<f64>,
+    /// Relative alignment FHST2 w.r.t. FHST1, 1σ per axis, arcsec.
+    pub sigma_fhst2_rel_fhst1_arcsec: [f64; 3],
+}
+
+/// One bias-history point.
+#[derive(Clone, Debug, Serialize)]
+pub struct BiasHistoryPoint {
+    /// Mid time, s since the first frame.
+    pub t_s: f64,
+    /// Bias in ACS, rad/s.
+    pub bias_rad_per_s: [f64; 3],
+    /// 1σ, rad/s.
+    pub sigma_rad_per_s: [f64; 3],
+    /// The OBC filter's bias at the same time, rad/s (from housekeeping).
+    pub obc_bias_rad_per_s: Option<[f64; 3]>,
+}
+
+/// Output of the chain besides the report: the new tables.
+#[derive(Clone, Debug)]
+pub struct CalibrationOutput {
+    /// The report.
+    pub report: CalibrationReport,
+    /// New alignment table (adjusted).
+    pub alignment: AlignmentTable,
+    /// New IRU table (G updated only when significant).
+    pub iru: IruTable,
+    /// The frames (for plots and residual analysis).
+    pub frames: Vec<FrameObservations>,
+    /// FFCAL solution.
+    pub ffcal: FfcalSolution,
+    /// IRUCAL solution.
+    pub irucal: Option<IrucalSolution>,
+}
+
+fn rows(m: &Matrix3<f64>) -> [[f64; 3]; 3] {
+    rows_from_matrix(m)
+}
+
+/// The Hipparcos catalog shipped with the project (provenance in `data/README.md`).
+///
+/// # Errors
+/// Parse errors of the embedded CSV (a build defect).
+pub fn load_catalog() -> anyhow::Result<Sky> {
+    let text = include_str!("../../../data/hipparcos_mag6p5.csv");
+    let table = sim_harness::data::CsvTable::parse(text, "data/hipparcos_mag6p5.csv")?;
+    Sky::from_csv(&table, &SkyParams::default())
+}
+
+/// Read `metadata.json` if present (defaults otherwise).
+///
+/// # Errors
+/// A present but malformed file.
+pub fn read_metadata(run_dir: &Path) -> anyhow::Result<Metadata> {
+    let path = run_dir.join("metadata.json");
+    if !path.exists() {
+        return Ok(Metadata::default());
+    }
+    let text = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
+    serde_json::from_str(&text).with_context(|| format!("{} is not valid metadata (docs/icd.md §5)", path.display()))
+}
+
+/// FFCAL input from the frames.
+fn alignment_data(frames: &[FrameObservations]) -> AlignmentData {
+    let mut data = AlignmentData::with_capacity(frames.len(), 4);
+    let mut obs = Vec::with_capacity(4);
+    for f in frames {
+        obs.clear();
+        for (i, s) in f.stars.iter().enumerate() {
+            if let Some(s) = s {
+                if let Some((_, dir_eci)) = s.identified {
+                    obs.push(SensorObservation {
+                        sensor: i,
+                        dir_sensor: s.meas.dir_sensor,
+                        dir_eci,
+                        sigma_rad: s.sigma_rad,
+                    });
+                }
+            }
+        }
+        for (i, s) in f.suns.iter().enumerate() {
+            if let Some(s) = s {
+                obs.push(SensorObservation {
+                    sensor: i + 2,
+                    dir_sensor: s.meas.dir_sensor,
+                    dir_eci: s.sun_eci,
+                    sigma_rad: s.sigma_rad,
+                });
+            }
+        }
+        if obs.len() >= 2 {
+            // A malformed epoch (zero vector) is simply not used.
+            let _ = data.push_epoch(&obs);
+        }
+    }
+    data
+}
+
+fn frame_index_at(frames: &[FrameObservations], t_s: f64) -> usize {
+    frames
+        .partition_point(|f| f.time.seconds() < t_s)
+        .min(frames.len().saturating_sub(1))
+}
+
+/// A FHST-only fine attitude centred at `t_center_s` from frames within ±`BATCH_HALF_S`
+/// restricted to `[lo_s, hi_s]`.
+fn batch_fix(
+    frames: &[FrameObservations],
+    t_center_s: f64,
+    lo_s: f64,
+    hi_s: f64,
+    bias: &Vector3<f64>,
+    delta_m: &Matrix3<f64>,
+) -> Option<(usize, AttitudeFix)> {
+    let lo = frame_index_at(frames, (t_center_s - BATCH_HALF_S).max(lo_s));
+    let hi = frame_index_at(frames, (t_center_s + BATCH_HALF_S).min(hi_s)) + 1;
+    let center = frame_index_at(frames, t_center_s);
+    if hi <= lo + 10 || center < lo || center >= hi {
+        return None;
+    }
+    let sol = fine_attitude(frames, lo..hi, center, bias, delta_m, AttitudeSensors::FhstOnly).ok()?;
+    Some((
+        center,
+        AttitudeFix {
+            m_acs_from_eci: sol.m_acs_from_eci,
+            cov_acs_rad2: sol.cov_acs_rad2,
+        },
+    ))
+}
+
+fn steps_between(frames: &[FrameObservations], a: usize, b: usize) -> Vec<GyroStep> {
+    frames[a + 1..=b]
+        .iter()
+        .map(|f| {
+            f.gyro.unwrap_or(GyroStep {
+                dtheta_acs_rad: Vector3::zeros(),
+                dt_s: 0.0,
+            })
+        })
+        .collect()
+}
+
+/// Maneuvers as runs of high-rate frames: (first index, last index).
+fn find_maneuvers(frames: &[FrameObservations]) -> Vec<(usize, usize)> {
+    let mut out = Vec::new();
+    let mut start: Option<usize> = None;
+    for (i, f) in frames.iter().enumerate() {
+        match (f.high_rate, start) {
+            (true, None) => start = Some(i),
+            (false, Some(s)) => {
+                out.push((s, i - 1));
+                start = None;
+            }
+            _ => {}
+        }
+    }
+    if let Some(s) = start {
+        out.push((s, frames.len() - 1));
+    }
+    out
+}
+
+/// Run the chain on decoded telemetry.
+///
+/// # Errors
+/// Too little data for FFCAL (with what is missing), or an internal numerical failure.
+pub fn calibrate_telemetry(
+    tm: &Telemetry,
+    metadata: &Metadata,
+    options: &CalibrateOptions,
+) -> anyhow::Result<CalibrationOutput> {
+    if tm.raw.len() < 10 {
+        bail!(
+            "only {} raw sensor frames (APID 0x010) in the telemetry: calibration needs hours of data with both FHSTs tracking and the Sun in an FSS (docs/icd.md)",
+            tm.raw.len()
+        );
+    }
+    let flown_alignment = options.flown_alignment.unwrap_or_else(AlignmentTable::prelaunch);
+    let flown_iru = options.flown_iru.unwrap_or_else(IruTable::prelaunch);
+    let sky = load_catalog()?;
+    let frames = build_observations(tm, &flown_alignment, &flown_iru, &metadata.sensors, &sky, &options.identify);
+    let mut summary = DataSummary {
+        frames: frames.len(),
+        ..DataSummary::default()
+    };
+    for f in &frames {
+        for (i, s) in f.stars.iter().enumerate() {
+            if let Some(s) = s {
+                if s.identified.is_some() {
+                    summary.stars_identified[i] += 1;
+                } else {
+                    summary.stars_unidentified[i] += 1;
+                }
+            }
+        }
+        for (i, s) in f.suns.iter().enumerate() {
+            if s.is_some() {
+                summary.sun_samples[i] += 1;
+            }
+        }
+    }
+    if tm.ephemeris.is_empty() {
+        eprintln!("warning: no ephemeris packets (APID 0x020): orbital aberration and Sun parallax are not corrected");
+    }
+
+    // FFCAL.
+    let data = alignment_data(&frames);
+    summary.ffcal_epochs = data.epoch_count();
+    let flown: Vec<Matrix3<f64>> = flown_alignment.matrices().iter().map(|m| matrix_from_rows(m)).collect();
+    let sensors: Vec<SensorSpec> = SENSOR_NAMES
+        .iter()
+        .zip(flown.iter())
+        .zip(PRIOR_SIGMA_ARCSEC)
+        .map(|((name, m), sigma)| SensorSpec::new(name, *m, sigma))
+        .collect();
+    let cfg = FfcalConfig {
+        weighting: options.weighting,
+        ..FfcalConfig::default()
+    };
+    let solution = ffcal(&sensors, &data, &cfg).with_context(|| {
+        format!(
+            "FFCAL: {} epochs with ≥ 2 referenced vectors (stars identified per FHST: {:?}; Sun samples per FSS: {:?})",
+            summary.ffcal_epochs, summary.stars_identified, summary.sun_samples
+        )
+    })?;
+
+    // Adjustment.
+    let calibrated: Vec<Matrix3<f64>> = solution.sensors.iter().map(|s| s.m_acs_from_sensor_calibrated).collect();
+    let adjustment = preserve_obc_attitude(&flown, &calibrated, 0, 1, BoresightFrame::Bisector)?;
+    let mut alignments = std::collections::BTreeMap::new();
+    let mut alignments_adjusted = std::collections::BTreeMap::new();
+    let mut residual = BeforeAfter::default();
+    for (i, s) in solution.sensors.iter().enumerate() {
+        let sigma = [s.sigma_acs_arcsec.x, s.sigma_acs_arcsec.y, s.sigma_acs_arcsec.z];
+        alignments.insert(
+            s.id.clone(),
+            AlignmentReport {
+                m_acs_from_sensor: rows(&s.m_acs_from_sensor_calibrated),
+                sigma_arcsec: sigma,
+                theta_acs_arcsec: s.theta_acs_arcsec.into(),
+            },
+        );
+        let adj = adjustment.m_acs_from_sensor_adjusted[i];
+        let theta = rotvec_from_rot(&(adj * flown[i].transpose())) * ARCSEC_PER_RAD;
+        alignments_adjusted.insert(
+            s.id.clone(),
+            AlignmentReport {
+                m_acs_from_sensor: rows(&adj),
+                sigma_arcsec: sigma,
+                theta_acs_arcsec: theta.into(),
+            },
+        );
+        residual.before.insert(s.id.clone(), s.residual_rms_before_arcsec);
+        residual.after.insert(s.id.clone(), s.residual_rms_after_arcsec);
+    }
+    let rel = solution.relative_covariance_arcsec2(1, 0);
+    let ffcal_summary = FfcalSummary {
+        weighting: solution.weighting,
+        iterations: solution.iterations,
+        epochs: solution.epochs,
+        eigenvalues: solution.observability.eigenvalues_with_prior_per_arcsec2.clone(),
+        sigma_fhst2_rel_fhst1_arcsec: [rel[(0, 0)].sqrt(), rel[(1, 1)].sqrt(), rel[(2, 2)].sqrt()],
+    };
+    let mut new_alignment = flown_alignment;
+    let ortho = |m: &Matrix3<f64>| rows(&Quat::from_dcm(m).to_dcm());
+    new_alignment.m_acs_from_fhst1 = ortho(&adjustment.m_acs_from_sensor_adjusted[0]);
+    new_alignment.m_acs_from_fhst2 = ortho(&adjustment.m_acs_from_sensor_adjusted[1]);
+    new_alignment.m_acs_from_fss1 = ortho(&adjustment.m_acs_from_sensor_adjusted[2]);
+    new_alignment.m_acs_from_fss2 = ortho(&adjustment.m_acs_from_sensor_adjusted[3]);
+    new_alignment.validate().map_err(|e| anyhow::anyhow!("calibrated alignment table invalid: {e:?}"))?;
+
+    // IRUCAL: re-derive observations with the calibrated alignments so that end attitudes
+    // use the best alignments.
+    let frames_cal = build_observations(tm, &new_alignment, &flown_iru, &metadata.sensors, &sky, &options.identify);
+    let t0 = frames_cal.first().map_or(0.0, |f| f.time.seconds());
+    let noise = GyroNoise {
+        sigma_v_rad_per_sqrt_s: metadata.sensors.iru_arw_rad_per_sqrt_s,
+        sigma_u_rad_per_s_1p5: metadata.sensors.iru_rrw_rad_per_s_sqrt_s,
+    };
+    let maneuvers = find_maneuvers(&frames_cal);
+    let initial_bias = tm
+        .housekeeping
+        .first()
+        .map_or(Vector3::zeros(), |h| Vector3::from(h.bias_acs_rad_per_s));
+    let zero_dm = Matrix3::zeros();
+    let mut intervals = Vec::new();
+    let mut maneuver_reports = Vec::new();
+    let mut holds: Vec<(usize, usize)> = Vec::new();
+    let mut prev_end = 0usize;
+    for &(s, e) in &maneuvers {
+        if s > prev_end {
+            holds.push((prev_end, s - 1));
+        }
+        prev_end = e + 1;
+    }
+    if prev_end + 1 < frames_cal.len() {
+        holds.push((prev_end, frames_cal.len() - 1));
+    }
+    for (k, &(s, e)) in maneuvers.iter().enumerate() {
+        let t_start = frames_cal[s].time.seconds();
+        let t_end = frames_cal[e].time.seconds();
+        let lo_hold = if k == 0 { t0 } else { frames_cal[maneuvers[k - 1].1].time.seconds() };
+        let hi_hold = maneuvers
+            .get(k + 1)
+            .map_or(f64::INFINITY, |m| frames_cal[m.0].time.seconds());
+        let angle: f64 = frames_cal[s..=e]
+            .iter()
+            .filter_map(|f| f.gyro)
+            .map(|g| g.dtheta_acs_rad)
+            .sum::<Vector3<f64>>()
+            .norm();
+        let before = batch_fix(&frames_cal, t_start - BATCH_HALF_S, lo_hold, t_start, &initial_bias, &zero_dm);
+        let after = batch_fix(&frames_cal, t_end + BATCH_HALF_S, t_end, hi_hold, &initial_bias, &zero_dm);
+        let used = match (before, after) {
+            (Some((a, fa)), Some((b, fb))) if b > a => {
+                intervals.push(CalibrationInterval {
+                    start: fa,
+                    end: fb,
+                    steps: steps_between(&frames_cal, a, b),
+                });
+                true
+            }
+            _ => false,
+        };
+        maneuver_reports.push(ManeuverReport {
+            start_s: t_start - t0,
+            end_s: t_end - t0,
+            angle_deg: angle.to_degrees(),
+            used,
+        });
+    }
+    // Holds long enough for two disjoint batches give bias intervals and the bias history.
+    let mut inertial_holds = Vec::new();
+    for &(a, b) in &holds {
+        let ta = frames_cal[a].time.seconds();
+        let tb = frames_cal[b].time.seconds();
+        if tb - ta < 4.0 * BATCH_HALF_S {
+            continue;
+        }
+        let mut fixes = Vec::new();
+        let mut first_idx = None;
+        let mut t = ta + BATCH_HALF_S;
+        while t + BATCH_HALF_S <= tb {
+            if let Some((idx, fix)) = batch_fix(&frames_cal, t, ta, tb, &initial_bias, &zero_dm) {
+                let origin = *first_idx.get_or_insert(idx);
+                let sigma = Vector3::new(
+                    fix.cov_acs_rad2[(0, 0)].sqrt(),
+                    fix.cov_acs_rad2[(1, 1)].sqrt(),
+                    fix.cov_acs_rad2[(2, 2)].sqrt(),
+                );
+                fixes.push((idx, TimedFix {
+                    t_s: frames_cal[idx].time.seconds() - frames_cal[origin].time.seconds(),
+                    m_acs_from_eci: fix.m_acs_from_eci,
+                    sigma_acs_rad: sigma,
+                }));
+            }
+            t += 2.0 * BATCH_HALF_S;
+        }
+        if fixes.len() >= 2 {
+            let (i0, f0) = fixes[0];
+            let (i1, f1) = fixes[fixes.len() - 1];
+            let fix = |f: &TimedFix| AttitudeFix {
+                m_acs_from_eci: f.m_acs_from_eci,
+                cov_acs_rad2: Matrix3::from_diagonal(&f.sigma_acs_rad.component_mul(&f.sigma_acs_rad)),
+            };
+            intervals.push(CalibrationInterval {
+                start: fix(&f0),
+                end: fix(&f1),
+                steps: steps_between(&frames_cal, i0, i1),
+            });
+            inertial_holds.push((
+                frames_cal[i0].time.seconds() - t0,
+                InertialHold {
+                    fixes: fixes.iter().map(|(_, f)| *f).collect(),
+                    steps: steps_between(&frames_cal, i0, i1),
+                },
+            ));
+        }
+    }
+    let initial_cal = GyroCalibration {
+        delta_m: Matrix3::zeros(),
+        bias_acs_rad_per_s: initial_bias,
+    };
+    let mut iru_skipped = None;
+    let irucal_solution = if maneuver_reports.iter().filter(|m| m.used).count() >= 3 {
+        match irucal(&intervals, &initial_cal, &IrucalConfig { noise, ..IrucalConfig::default() }) {
+            Ok(s) => Some(s),
+            Err(e) => {
+                iru_skipped = Some(format!("IRUCAL failed: {e}"));
+                None
+            }
+        }
+    } else {
+        iru_skipped = Some(format!(
+            "IRUCAL needs maneuvers about three non-coplanar axes with FHST attitudes in the holds before and after; found {} maneuvers, {} usable",
+            maneuver_reports.len(),
+            maneuver_reports.iter().filter(|m| m.used).count()
+        ));
+        None
+    };
+    let mut new_iru = flown_iru;
+    let iru_report = irucal_solution.as_ref().map(|s| {
+        let dm = s.calibration.delta_m;
+        let sig = s.sigma_delta_m;
+        let significant = (0..9).any(|k| dm[k].abs() > 3.0 * sig[k]);
+        if significant {
+            let g = (Matrix3::identity() + dm) * matrix_from_rows(&flown_iru.g_primary);
+            new_iru.g_primary = rows(&g);
+        }
+        IruReport {
+            delta_m: rows(&dm),
+            delta_m_sigma: rows(&sig),
+            bias_rad_per_s: s.calibration.bias_acs_rad_per_s.into(),
+            bias_sigma_rad_per_s: s.sigma_bias_acs_rad_per_s.into(),
+            intervals: intervals.len(),
+            residual_before_arcsec: s.residual_before_arcsec.clone(),
+            residual_after_arcsec: s.residual_after_arcsec.clone(),
+            g_updated: significant,
+        }
+    });
+    let cal_for_bias = irucal_solution.as_ref().map_or(initial_cal, |s| s.calibration);
+    let holds_only: Vec<InertialHold> = inertial_holds.iter().map(|(_, h)| h.clone()).collect();
+    let history: Vec<BiasEstimate> = bias_history(&holds_only, &cal_for_bias, &noise).unwrap_or_default();
+    let bias_history_points = history
+        .iter()
+        .zip(inertial_holds.iter())
+        .map(|(b, (t_origin, _))| {
+            let t_s = t_origin + b.t_mid_s;
+            let hk = tm
+                .housekeeping
+                .get(tm.housekeeping.partition_point(|h| h.time.seconds() - t0 < t_s).min(tm.housekeeping.len().saturating_sub(1)));
+            BiasHistoryPoint {
+                t_s,
+                bias_rad_per_s: b.bias_acs_rad_per_s.into(),
+                sigma_rad_per_s: b.sigma_acs_rad_per_s.into(),
+                obc_bias_rad_per_s: hk.map(|h| h.bias_acs_rad_per_s),
+            }
+        })
+        .collect();
+
+    let report = CalibrationReport {
+        telemetry: tm.report.clone(),
+        data: summary,
+        alignments,
+        alignments_adjusted,
+        adjustment_theta_acs_arcsec: adjustment.theta_adjust_acs_arcsec.into(),
+        residual_rms_arcsec: residual,
+        ffcal: ffcal_summary,
+        iru: iru_report,
+        iru_skipped,
+        maneuvers: maneuver_reports,
+        bias_history: bias_history_points,
+        tables: std::collections::BTreeMap::new(),
+    };
+    Ok(CalibrationOutput {
+        report,
+        alignment: new_alignment,
+        iru: new_iru,
+        frames: frames_cal,
+        ffcal: solution,
+        irucal: irucal_solution,
+    })
+}
+
+/// Write a table image to `path`.
+///
+/// # Errors
+/// Encoding or I/O failure.
+pub fn write_table<T: serde::Serialize>(path: &Path, id: TableId, table: &T, created_tai1958_s: f64) -> anyhow::Result<()> {
+    let created = fsw_core::raw::TimeTag::from_seconds(created_tai1958_s).unwrap_or_default();
+    let mut buf = vec![0u8; 256 * 1024];
+    let n = encode_image(id, created, table, &mut buf).map_err(|e| anyhow::anyhow!("encoding {} table: {e:?}", id.name()))?;
+    std::fs::write(path, &buf[..n]).with_context(|| format!("writing {}", path.display()))
+}
+
+/// `ground-tool calibrate RUN_DIR --out DIR`: run the chain and write tables and reports.
+///
+/// # Errors
+/// Unreadable inputs, too little data, I/O.
+pub fn calibrate_run(run_dir: &Path, out_dir: &Path, options: &CalibrateOptions) -> anyhow::Result<CalibrationOutput> {
+    let telemetry_path = run_dir.join("telemetry.bin");
+    if !telemetry_path.exists() {
+        bail!(
+            "{} not found: a run folder needs telemetry.bin (docs/icd.md); run `sim-harness run SCENARIO --out {}` first",
+            telemetry_path.display(),
+            run_dir.display()
+        );
+    }
+    let tm = tp::read_file(&telemetry_path)?;
+    let metadata = read_metadata(run_dir)?;
+    let mut out = calibrate_telemetry(&tm, &metadata, options)?;
+    let tables_dir = out_dir.join("tables");
+    std::fs::create_dir_all(&tables_dir).with_context(|| format!("creating {}", tables_dir.display()))?;
+    let created = tm.raw.last().map_or(0.0, |r| r.time.seconds());
+    let alignment_path: PathBuf = tables_dir.join("alignment.tbl");
+    write_table(&alignment_path, TableId::Alignment, &out.alignment, created)?;
+    out.report.tables.insert("alignment".into(), alignment_path.display().to_string());
+    let iru_path = tables_dir.join("iru.tbl");
+    write_table(&iru_path, TableId::Iru, &out.iru, created)?;
+    out.report.tables.insert("iru".into(), iru_path.display().to_string());
+    Ok(out)
+}

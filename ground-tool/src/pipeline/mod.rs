@@ -1,0 +1,7 @@
+//! # The calibration chain on real telemetry
+//!
+//! [`observations`]: DA and FADS (counts → referenced vectors, fine attitudes);
+//! [`calibrate`]: TP → FADS → FFCAL → adjustment → IRUCAL → tables.
+
+pub mod calibrate;
+pub mod observations;

@@ -1,0 +1,370 @@
+//! # DA and FADS: from decoded telemetry to identified, referenced observations
+//!
+//! **DA** (data adjustment, paper §3.3) applies a set of calibration tables to the raw counts
+//! with the *flight* conversion code (`fsw_core::fhst::measure`, `fsw_core::fss::measure`,
+//! `fsw_core::iru::IruIntegrator`): one definition of every conversion, so the ground and the
+//! OBC can never disagree on a count.
+//!
+//! **FADS** (fine attitude determination) identifies every tracked star against the *full*
+//! Hipparcos catalog (not the onboard subset) from the OBC's own attitude, and computes the
+//! apparent reference directions seen from the spacecraft: proper motion and parallax to the
+//! date, annual + orbital aberration from the definitive orbit (APID 0x020), and the apparent
+//! Sun with parallax, light time and aberration. [`fine_attitude`] solves an attitude at the
+//! centre of a batch with gyro propagation of every vector to the centre, as the paper does to
+//! keep bias error out of the end attitudes of its IRU calibration.
+
+use crate::attitude::quest::{solve_attitude, AttitudeError, AttitudeSolution, VectorPair};
+use crate::calibration::iru::GyroStep;
+use crate::tp::Telemetry;
+use fsw_core::attitude::{rot, Quat};
+use fsw_core::fhst::{self, FhstId, FhstMeasurement};
+use fsw_core::fss::{self, FssId, FssMeasurement};
+use fsw_core::iru::{IruConfiguration, IruIntegrator};
+use fsw_core::raw::TimeTag;
+use fsw_core::tables::{AlignmentTable, IruTable};
+use fsw_core::telemetry::EphemerisRecord;
+use fsw_core::units::{RAD_PER_ARCSEC, RAD_PER_DEG};
+use nalgebra::{Matrix3, Vector3};
+use sim_harness::truth::sky::Sky;
+use sim_harness::truth::sun::SunEphemeris;
+
+/// Declared sensor accuracies (from `metadata.json`, defaults are the paper's figures).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default)]
+pub struct DeclaredNoise {
+    /// FHST 1σ per axis for a magnitude-2.0 and a magnitude-5.7 star, arcsec.
+    pub fhst_sigma_arcsec: [f64; 2],
+    /// FSS 1σ per axis, arcsec (calibrated accuracy, transfer-function residual included).
+    pub fss_sigma_arcsec: f64,
+    /// Gyro angle random walk, rad/√s.
+    pub iru_arw_rad_per_sqrt_s: f64,
+    /// Gyro rate random walk, rad/s^1.5.
+    pub iru_rrw_rad_per_s_sqrt_s: f64,
+}
+
+impl Default for DeclaredNoise {
+    fn default() -> Self {
+        Self {
+            fhst_sigma_arcsec: [8.0, 24.0],
+            fss_sigma_arcsec: 0.02 * 3600.0,
+            iru_arw_rad_per_sqrt_s: 1.5e-7,
+            iru_rrw_rad_per_s_sqrt_s: 1.0e-10,
+        }
+    }
+}
+
+impl DeclaredNoise {
+    /// FHST σ (rad) for a magnitude, linear between the bright and faint figures.
+    #[must_use]
+    pub fn fhst_sigma_rad(&self, magnitude: f64) -> f64 {
+        let t = ((magnitude - 2.0) / 3.7).clamp(0.0, 1.0);
+        let [bright, faint] = self.fhst_sigma_arcsec;
+        (bright + t * (faint - bright)) * RAD_PER_ARCSEC
+    }
+}
+
+/// An FHST observation with its identification.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StarObservation {
+    /// The measurement (through the DA tables).
+    pub meas: FhstMeasurement,
+    /// Identified catalog star (HIP) and its apparent direction from the spacecraft.
+    pub identified: Option<(u32, Vector3<f64>)>,
+    /// Catalog magnitude of the identified star.
+    pub catalog_magnitude: f64,
+    /// 1σ per axis, rad.
+    pub sigma_rad: f64,
+}
+
+/// An FSS observation with its reference.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SunObservation {
+    /// The measurement.
+    pub meas: FssMeasurement,
+    /// Apparent Sun direction from the spacecraft, J2000.
+    pub sun_eci: Vector3<f64>,
+    /// 1σ per axis, rad.
+    pub sigma_rad: f64,
+}
+
+/// Everything known at one frame.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FrameObservations {
+    /// Frame time.
+    pub time: TimeTag,
+    /// Gyro increment over the interval that ended at this frame (ACS, no bias removed).
+    pub gyro: Option<GyroStep>,
+    /// IRU rate mode of that interval.
+    pub high_rate: bool,
+    /// FHST1, FHST2.
+    pub stars: [Option<StarObservation>; 2],
+    /// FSS1, FSS2.
+    pub suns: [Option<SunObservation>; 2],
+    /// Temperatures, °C (FHST1, FHST2, FSS1, FSS2, IRU).
+    pub temperatures_c: [f64; 5],
+    /// OBC attitude estimate at this frame (housekeeping), if downlinked.
+    pub obc_q_acs_from_eci: Option<Quat>,
+    /// Spacecraft position and velocity, J2000, km and km/s (interpolated ephemeris).
+    pub orbit: Option<(Vector3<f64>, Vector3<f64>)>,
+}
+
+/// Interpolate the definitive orbit (cubic Hermite between records ≤ 600 s apart).
+#[must_use]
+pub fn interpolate_orbit(
+    ephemeris: &[EphemerisRecord],
+    t_s: f64,
+) -> Option<(Vector3<f64>, Vector3<f64>)> {
+    let idx = ephemeris.partition_point(|e| e.time.seconds() <= t_s);
+    let (a, b) = match idx {
+        0 => return None,
+        i if i >= ephemeris.len() => {
+            let last = ephemeris.last()?;
+            // Extrapolate at most 60 s past the last record.
+            let dt = t_s - last.time.seconds();
+            if dt > 60.0 {
+                return None;
+            }
+            let p = Vector3::from(last.pos_eci_km) + Vector3::from(last.vel_eci_km_per_s) * dt;
+            return Some((p, Vector3::from(last.vel_eci_km_per_s)));
+        }
+        i => (&ephemeris[i - 1], &ephemeris[i]),
+    };
+    let (ta, tb) = (a.time.seconds(), b.time.seconds());
+    let h = tb - ta;
+    if !(h > 0.0 && h <= 600.0) {
+        return None;
+    }
+    let s = (t_s - ta) / h;
+    let (p0, p1) = (Vector3::from(a.pos_eci_km), Vector3::from(b.pos_eci_km));
+    let (v0, v1) = (
+        Vector3::from(a.vel_eci_km_per_s) * h,
+        Vector3::from(b.vel_eci_km_per_s) * h,
+    );
+    let (s2, s3) = (s * s, s * s * s);
+    let pos = p0 * (2.0 * s3 - 3.0 * s2 + 1.0)
+        + v0 * (s3 - 2.0 * s2 + s)
+        + p1 * (-2.0 * s3 + 3.0 * s2)
+        + v1 * (s3 - s2);
+    let vel = (p0 * (6.0 * s2 - 6.0 * s) + v0 * (3.0 * s2 - 4.0 * s + 1.0)
+        + p1 * (-6.0 * s2 + 6.0 * s)
+        + v1 * (3.0 * s2 - 2.0 * s))
+        / h;
+    Some((pos, vel))
+}
+
+/// Options of the FADS identification.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct IdentifyOptions {
+    /// Match window around the predicted direction, rad.
+    pub window_rad: f64,
+    /// Magnitude tolerance, mag.
+    pub magnitude_tolerance: f64,
+    /// Apply aberration (annual + orbital) to the references. Off only to study the effect.
+    pub aberration: bool,
+}
+
+impl Default for IdentifyOptions {
+    fn default() -> Self {
+        Self {
+            window_rad: 0.3 * RAD_PER_DEG,
+            magnitude_tolerance: 0.8,
+            aberration: true,
+        }
+    }
+}
+
+/// DA + FADS over a whole telemetry set.
+#[must_use]
+pub fn build_observations(
+    tm: &Telemetry,
+    alignment: &AlignmentTable,
+    iru: &IruTable,
+    noise: &DeclaredNoise,
+    sky: &Sky,
+    options: &IdentifyOptions,
+) -> Vec<FrameObservations> {
+    let mut integrator = IruIntegrator::new();
+    let mut hk_index = 0usize;
+    let mut sun_ephemeris: Option<SunEphemeris> = None;
+    let mut previous_time: Option<f64> = None;
+    let mut frames = Vec::with_capacity(tm.raw.len());
+    for raw in &tm.raw {
+        let t_s = raw.time.seconds();
+        let j2000_tt_s = raw.time.seconds_since_j2000_tt();
+        // The OBC's configuration at this time decides which channels are integrated.
+        while hk_index + 1 < tm.housekeeping.len() && tm.housekeeping[hk_index + 1].time <= raw.time
+        {
+            hk_index += 1;
+        }
+        let hk = tm
+            .housekeeping
+            .get(hk_index)
+            .filter(|h| (h.time.seconds() - t_s).abs() < 1e-6);
+        let config = match hk.map(|h| h.iru_config) {
+            Some(1) => IruConfiguration::Backup,
+            _ => IruConfiguration::Primary,
+        };
+        let out = integrator.process(&raw.iru, config, iru);
+        let gyro = match (out.delta_theta_acs_rad, previous_time) {
+            (Some(d), Some(prev)) if t_s > prev => Some(GyroStep {
+                dtheta_acs_rad: d,
+                dt_s: t_s - prev,
+            }),
+            _ => None,
+        };
+        previous_time = Some(t_s);
+        let orbit = interpolate_orbit(&tm.ephemeris, t_s);
+        let eph = sun_ephemeris.get_or_insert_with(|| SunEphemeris::new(j2000_tt_s, 600.0));
+        let sun_state = eph.state(j2000_tt_s);
+        let (pos, vel) = orbit.unwrap_or((Vector3::zeros(), Vector3::zeros()));
+        let observer_bary_km = sun_state.earth_pos_bary_eci_km + pos;
+        let observer_vel = if options.aberration {
+            sun_state.earth_vel_bary_eci_km_per_s + vel
+        } else {
+            Vector3::zeros()
+        };
+        let obc_q = hk.map(|h| h.q_acs_from_eci);
+        let mut stars = [None, None];
+        for id in FhstId::ALL {
+            let Some(sample) = raw.fhst.get(id.index()) else {
+                continue;
+            };
+            let Ok(meas) = fhst::measure(sample, id, alignment) else {
+                continue;
+            };
+            let mut obs = StarObservation {
+                meas,
+                identified: None,
+                catalog_magnitude: f64::NAN,
+                sigma_rad: noise.fhst_sigma_rad(meas.magnitude),
+            };
+            if let Some(q) = obc_q {
+                let r_obs = q.to_dcm().transpose() * meas.dir_acs;
+                let mut found: Option<(u32, Vector3<f64>, f64)> = None;
+                let mut count = 0usize;
+                sky.for_each_in_cone(&r_obs, options.window_rad, |_, star| {
+                    if (star.magnitude - meas.magnitude).abs() > options.magnitude_tolerance {
+                        return;
+                    }
+                    let apparent = if options.aberration {
+                        star.apparent_dir_eci(j2000_tt_s, &observer_bary_km, &observer_vel)
+                    } else {
+                        star.astrometric_dir_eci(j2000_tt_s, &observer_bary_km)
+                    };
+                    if apparent.dot(&r_obs).clamp(-1.0, 1.0).acos() <= options.window_rad {
+                        count += 1;
+                        found = Some((star.hip, apparent, star.magnitude));
+                    }
+                });
+                if count == 1 {
+                    if let Some((hip, dir, mag)) = found {
+                        obs.identified = Some((hip, dir));
+                        obs.catalog_magnitude = mag;
+                    }
+                }
+            }
+            stars[id.index()] = Some(obs);
+        }
+        let mut suns = [None, None];
+        let sun_eci = if options.aberration {
+            sun_state.apparent_dir_from_sc_eci(&pos, &vel)
+        } else {
+            sun_state.astrometric_from_km(&pos).normalize()
+        };
+        for id in FssId::ALL {
+            let Some(sample) = raw.fss.get(id.index()) else {
+                continue;
+            };
+            if let Ok(meas) = fss::measure(sample, id, alignment) {
+                suns[id.index()] = Some(SunObservation {
+                    meas,
+                    sun_eci,
+                    sigma_rad: noise.fss_sigma_arcsec * RAD_PER_ARCSEC,
+                });
+            }
+        }
+        let mut temperatures_c = [0.0; 5];
+        for (t, raw_t) in temperatures_c.iter_mut().zip(raw.temperatures_centi_c) {
+            *t = f64::from(raw_t) * 0.01;
+        }
+        frames.push(FrameObservations {
+            time: raw.time,
+            gyro,
+            high_rate: raw.iru.high_rate,
+            stars,
+            suns,
+            temperatures_c,
+            obc_q_acs_from_eci: obc_q,
+            orbit,
+        });
+    }
+    frames
+}
+
+/// Which sensors a fine attitude may use.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum AttitudeSensors {
+    /// FHSTs only (the paper's recommendation for IRU calibration ends).
+    FhstOnly,
+    /// FHSTs and FSSs.
+    FhstAndFss,
+}
+
+/// Fine attitude at the centre frame `center` from the frames `range` (indices into
+/// `frames`): every vector is carried to the centre time with the gyro increments corrected by
+/// `bias_acs_rad_per_s` and `delta_m`, then the batch is solved with QUEST/SVD.
+///
+/// # Errors
+/// [`AttitudeError`] when the batch has fewer than two non-parallel vectors.
+pub fn fine_attitude(
+    frames: &[FrameObservations],
+    range: core::ops::Range<usize>,
+    center: usize,
+    bias_acs_rad_per_s: &Vector3<f64>,
+    delta_m: &Matrix3<f64>,
+    sensors: AttitudeSensors,
+) -> Result<AttitudeSolution, AttitudeError> {
+    // m_center_from_frame[k]: rotation carrying body vectors of frame k to the centre frame.
+    let lo = range.start.min(center);
+    let hi = range.end.max(center + 1).min(frames.len());
+    let mut to_center = vec![Matrix3::identity(); hi - lo];
+    // Forward from the centre: A(k) = Rot(φ_k) A(k−1) → b_center = A(c) A(k)ᵀ b_k.
+    for k in center + 1..hi {
+        let step = frames[k]
+            .gyro
+            .map(|g| (Matrix3::identity() + delta_m) * g.dtheta_acs_rad - bias_acs_rad_per_s * g.dt_s)
+            .unwrap_or_else(Vector3::zeros);
+        to_center[k - lo] = to_center[k - 1 - lo] * rot(&step).transpose();
+    }
+    for k in (lo..center).rev() {
+        let step = frames[k + 1]
+            .gyro
+            .map(|g| (Matrix3::identity() + delta_m) * g.dtheta_acs_rad - bias_acs_rad_per_s * g.dt_s)
+            .unwrap_or_else(Vector3::zeros);
+        to_center[k - lo] = to_center[k + 1 - lo] * rot(&step);
+    }
+    let mut pairs = Vec::new();
+    for k in range.start.max(lo)..range.end.min(hi) {
+        let f = &frames[k];
+        let m = to_center[k - lo];
+        for s in f.stars.iter().flatten() {
+            if let Some((_, dir_eci)) = s.identified {
+                pairs.push(VectorPair {
+                    dir_acs: m * s.meas.dir_acs,
+                    dir_eci,
+                    sigma_rad: s.sigma_rad,
+                });
+            }
+        }
+        if sensors == AttitudeSensors::FhstAndFss {
+            for s in f.suns.iter().flatten() {
+                pairs.push(VectorPair {
+                    dir_acs: m * s.meas.dir_acs,
+                    dir_eci: s.sun_eci,
+                    sigma_rad: s.sigma_rad,
+                });
+            }
+        }
+    }
+    solve_attitude(&pairs)
+}
