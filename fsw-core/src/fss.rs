@@ -1,1 +1,304 @@
-//! (in progress)
+//! # Fine Sun sensor measurement model (paper §2; algorithms.md §4)
+//!
+//! Each Adcole FSS has two orthogonal single-axis heads sharing a boresight `+z_s`, 64°×64°
+//! field, 0.004°/count ([`FssSample`]).
+//!
+//! ## Equations
+//!
+//! * Counts → measured head angles: `α_m = 0.004° · N_α`, `β_m = 0.004° · N_β`.
+//! * Transfer-function correction ([`SensorCorrections::fss_transfer`], `c = [c0..c5]`, all
+//!   zero = off): `α = α_m − (c0 α_m + c1 α_m β_m² + c2)`,
+//!   `β = β_m − (c3 β_m + c4 β_m α_m² + c5)`. [`apply_transfer`] inverts it (fixed point).
+//! * Head angles are tangent-plane angles, `α = atan2(s_x, s_z)`, `β = atan2(s_y, s_z)`, so
+//!   `s = [tan α, tan β, 1]ᵀ / |·|` (algorithms.md §4 "Unit vector").
+//! * Sensor → ACS: `b = M_AS s`.
+//!
+//! ## Validity checks (in this order)
+//! Sun presence on both heads, finite values, `|α_m|, |β_m| ≤ 32°` (the measured angles
+//! bound the physical field).
+//!
+//! ## Noise
+//! The filter uses the table's isotropic `fss_sigma_arcsec` for the 2 components
+//! perpendicular to the Sun line. A tangent-plane angle error `dα` moves the direction by
+//! `cos²α · dα` across the α head's plane, so near the field edge the isotropic σ is
+//! conservative.
+
+use crate::raw::{FssSample, FSS_FLAG_SUN_ALPHA, FSS_FLAG_SUN_BETA};
+use crate::tables::types::{matrix_from_rows, AlignmentTable, Mat3Rows, SensorCorrections};
+use crate::units::RAD_PER_DEG;
+use nalgebra::{Matrix3, Vector3};
+
+/// FSS resolution, rad per count (0.004°).
+pub const FSS_RAD_PER_COUNT: f64 = 0.004 * RAD_PER_DEG;
+/// Half-width of the field of view per head, rad (32°).
+pub const FSS_HALF_FIELD_RAD: f64 = 32.0 * RAD_PER_DEG;
+/// Fixed-point iterations of [`apply_transfer`].
+const TRANSFER_ITERATIONS: usize = 6;
+
+/// Which Sun sensor.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum FssId {
+    /// FSS1.
+    Fss1,
+    /// FSS2.
+    Fss2,
+}
+
+impl FssId {
+    /// Both sensors, in order.
+    pub const ALL: [FssId; 2] = [FssId::Fss1, FssId::Fss2];
+
+    /// Index 0 or 1 (raw frame, correction arrays).
+    #[must_use]
+    pub const fn index(self) -> usize {
+        match self {
+            Self::Fss1 => 0,
+            Self::Fss2 => 1,
+        }
+    }
+
+    /// Active `M_AS` (sensor → ACS).
+    #[must_use]
+    pub fn m_acs_from_sensor(self, alignment: &AlignmentTable) -> Matrix3<f64> {
+        match self {
+            Self::Fss1 => matrix_from_rows(&alignment.m_acs_from_fss1),
+            Self::Fss2 => matrix_from_rows(&alignment.m_acs_from_fss2),
+        }
+    }
+
+    /// Transfer-function coefficients `[c0..c5]` of this sensor.
+    #[must_use]
+    pub fn transfer(self, corrections: &SensorCorrections) -> [f64; 6] {
+        let [c1, c2] = corrections.fss_transfer;
+        match self {
+            Self::Fss1 => c1,
+            Self::Fss2 => c2,
+        }
+    }
+}
+
+/// A validated, corrected Sun measurement.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FssMeasurement {
+    /// Corrected α head angle, rad.
+    pub alpha_rad: f64,
+    /// Corrected β head angle, rad.
+    pub beta_rad: f64,
+    /// Sun direction in sensor axes (unit).
+    pub dir_sensor: Vector3<f64>,
+    /// Sun direction in ACS axes (unit), through the active alignment.
+    pub dir_acs: Vector3<f64>,
+}
+
+#[cfg(feature = "defmt")]
+impl defmt::Format for FssMeasurement {
+    fn format(&self, f: defmt::Formatter) {
+        defmt::write!(
+            f,
+            "FssMeasurement {{ alpha: {}, beta: {}, acs: {} }}",
+            self.alpha_rad,
+            self.beta_rad,
+            [self.dir_acs.x, self.dir_acs.y, self.dir_acs.z]
+        );
+    }
+}
+
+/// Why a sample was not used.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum FssReject {
+    /// A head reports no Sun.
+    NoSun {
+        /// α head sees the Sun.
+        alpha: bool,
+        /// β head sees the Sun.
+        beta: bool,
+    },
+    /// A computed value is not finite (corrupt corrections).
+    NotFinite,
+    /// Outside the ±32° field.
+    OutOfField,
+}
+
+impl FssReject {
+    /// No Sun on a head (eclipse, Sun outside the field): not an anomaly.
+    #[must_use]
+    pub const fn is_no_data(self) -> bool {
+        matches!(self, Self::NoSun { .. })
+    }
+
+    /// Event/telemetry code: 1 no Sun, 2 not finite, 3 out of field.
+    #[must_use]
+    pub const fn code(self) -> u8 {
+        match self {
+            Self::NoSun { .. } => 1,
+            Self::NotFinite => 2,
+            Self::OutOfField => 3,
+        }
+    }
+}
+
+/// Transfer-function correction: measured head angles → true head angles (rad).
+#[must_use]
+pub fn correct_transfer(alpha_m: f64, beta_m: f64, c: &[f64; 6]) -> (f64, f64) {
+    let [c0, c1, c2, c3, c4, c5] = *c;
+    (
+        alpha_m - (c0 * alpha_m + c1 * alpha_m * beta_m * beta_m + c2),
+        beta_m - (c3 * beta_m + c4 * beta_m * alpha_m * alpha_m + c5),
+    )
+}
+
+/// Inverse of [`correct_transfer`]: true angles → measured angles (rad), fixed-point
+/// iteration (for simulators and ground checks; converges for calibration-sized `c`).
+#[must_use]
+pub fn apply_transfer(alpha: f64, beta: f64, c: &[f64; 6]) -> (f64, f64) {
+    let (mut a_m, mut b_m) = (alpha, beta);
+    for _ in 0..TRANSFER_ITERATIONS {
+        let (ac, bc) = correct_transfer(a_m, b_m, c);
+        a_m += alpha - ac;
+        b_m += beta - bc;
+    }
+    (a_m, b_m)
+}
+
+/// Unit vector in sensor axes from head angles (rad).
+#[must_use]
+pub fn dir_from_angles(alpha_rad: f64, beta_rad: f64) -> Vector3<f64> {
+    Vector3::new(libm::tan(alpha_rad), libm::tan(beta_rad), 1.0).normalize()
+}
+
+/// Head angles (rad) of a sensor-frame direction; `None` unless `s_z > 0` and finite.
+#[must_use]
+pub fn angles_from_dir(s: &Vector3<f64>) -> Option<(f64, f64)> {
+    if !(s.z > 0.0) || !s.iter().all(|x| x.is_finite()) {
+        return None;
+    }
+    Some((libm::atan2(s.x, s.z), libm::atan2(s.y, s.z)))
+}
+
+/// [`measure`] with the sensor's active alignment and transfer function from the table.
+///
+/// # Errors
+/// As [`measure`].
+pub fn measure_sensor(
+    sample: &FssSample,
+    sensor: FssId,
+    alignment: &AlignmentTable,
+) -> Result<FssMeasurement, FssReject> {
+    let m = match sensor {
+        FssId::Fss1 => &alignment.m_acs_from_fss1,
+        FssId::Fss2 => &alignment.m_acs_from_fss2,
+    };
+    measure(sample, m, &sensor.transfer(&alignment.corrections))
+}
+
+/// Convert and validate one Sun sensor sample with the sensor's `M_AS` (table rows) and
+/// transfer coefficients `[c0..c5]`.
+///
+/// # Errors
+/// The first failed check, see [`FssReject`].
+pub fn measure(
+    sample: &FssSample,
+    m_acs_from_sensor: &Mat3Rows,
+    transfer: &[f64; 6],
+) -> Result<FssMeasurement, FssReject> {
+    let alpha_sun = sample.flags & FSS_FLAG_SUN_ALPHA != 0;
+    let beta_sun = sample.flags & FSS_FLAG_SUN_BETA != 0;
+    if !(alpha_sun && beta_sun) {
+        return Err(FssReject::NoSun {
+            alpha: alpha_sun,
+            beta: beta_sun,
+        });
+    }
+    let alpha_m = f64::from(sample.alpha_counts) * FSS_RAD_PER_COUNT;
+    let beta_m = f64::from(sample.beta_counts) * FSS_RAD_PER_COUNT;
+    let (alpha, beta) = correct_transfer(alpha_m, beta_m, transfer);
+    let dir_sensor = dir_from_angles(alpha, beta);
+    let dir_acs = matrix_from_rows(m_acs_from_sensor) * dir_sensor;
+    if !(alpha.is_finite() && beta.is_finite() && dir_acs.iter().all(|x| x.is_finite())) {
+        return Err(FssReject::NotFinite);
+    }
+    if !(alpha_m.abs() <= FSS_HALF_FIELD_RAD && beta_m.abs() <= FSS_HALF_FIELD_RAD) {
+        return Err(FssReject::OutOfField);
+    }
+    Ok(FssMeasurement {
+        alpha_rad: alpha,
+        beta_rad: beta,
+        dir_sensor,
+        dir_acs,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sample(a: i16, b: i16) -> FssSample {
+        FssSample {
+            alpha_counts: a,
+            beta_counts: b,
+            flags: FSS_FLAG_SUN_ALPHA | FSS_FLAG_SUN_BETA,
+        }
+    }
+
+    #[test]
+    fn counts_to_vector() {
+        let al = AlignmentTable::prelaunch();
+        let m = measure_sensor(&sample(2500, -1250), FssId::Fss1, &al).unwrap();
+        assert!((m.alpha_rad - 10.0 * RAD_PER_DEG).abs() < 1e-15);
+        assert!((m.beta_rad + 5.0 * RAD_PER_DEG).abs() < 1e-15);
+        let (a, b) = angles_from_dir(&m.dir_sensor).unwrap();
+        assert!((a - m.alpha_rad).abs() < 1e-15 && (b - m.beta_rad).abs() < 1e-15);
+        let back = FssId::Fss1.m_acs_from_sensor(&al).transpose() * m.dir_acs;
+        // The published M_AS is orthonormal only to ~1e-8.
+        assert!((back - m.dir_sensor).norm() < 1e-7);
+        let z = measure_sensor(&sample(0, 0), FssId::Fss2, &al).unwrap();
+        let col = FssId::Fss2.m_acs_from_sensor(&al).column(2).into_owned();
+        assert!(
+            (z.dir_acs - col).norm() < 1e-15,
+            "{}",
+            (z.dir_acs - col).norm()
+        );
+    }
+
+    #[test]
+    fn transfer_round_trip_and_identity() {
+        let c = [1e-3, 0.02, 2e-4, -5e-4, -0.01, -1e-4];
+        for (a, b) in [(0.5, -0.5), (-0.3, 0.1), (0.0, 0.0)] {
+            let (am, bm) = apply_transfer(a, b, &c);
+            let (ac, bc) = correct_transfer(am, bm, &c);
+            assert!((ac - a).abs() < 1e-12 && (bc - b).abs() < 1e-12);
+        }
+        assert_eq!(correct_transfer(0.2, -0.1, &[0.0; 6]), (0.2, -0.1));
+    }
+
+    #[test]
+    fn checks() {
+        let al = AlignmentTable::prelaunch();
+        let mut s = sample(0, 0);
+        s.flags = FSS_FLAG_SUN_ALPHA;
+        assert_eq!(
+            measure_sensor(&s, FssId::Fss1, &al),
+            Err(FssReject::NoSun {
+                alpha: true,
+                beta: false
+            })
+        );
+        assert!(measure_sensor(&sample(8000, -8000), FssId::Fss1, &al).is_ok());
+        assert_eq!(
+            measure_sensor(&sample(8001, 0), FssId::Fss1, &al),
+            Err(FssReject::OutOfField)
+        );
+        assert_eq!(
+            measure_sensor(&sample(0, -8001), FssId::Fss2, &al),
+            Err(FssReject::OutOfField)
+        );
+        let mut bad = al;
+        bad.corrections.fss_transfer[0][2] = f64::INFINITY;
+        assert_eq!(
+            measure_sensor(&sample(1, 1), FssId::Fss1, &bad),
+            Err(FssReject::NotFinite)
+        );
+    }
+}

@@ -1,1 +1,837 @@
-//! (in progress)
+//! # Multiplicative extended Kalman filter: attitude and gyro bias (algorithms.md §2)
+//!
+//! Reference state: `q̂` (ACS from ECI, [`Quat`]) and `b̂` (rad/s). Error state
+//! `x = [δθ; δb]` with `A_true = Rot(δθ) Â` (left, body-frame; [`crate::attitude`]) and
+//! `b_true = b̂ + δb`. Gyro model (Farrenkopf): `ω_meas = ω + b + η_v`, `ḃ = η_u`, spectral
+//! densities `σ_v²`, `σ_u²` from the [`FilterTable`].
+//!
+//! ## Propagation ([`Mekf::propagate`])
+//! * `φ = Δθ − b̂ Δt` (Δθ from [`crate::iru`]; the ground calibration `(I + ΔM)` is already in
+//!   the table's `G`).
+//! * `q̂ ← δq(φ) ⊗ q̂`, `δq(φ) = [sin(φ/2) φ/|φ|; cos(φ/2)]`: the exact rotation-vector update
+//!   (§5.6). `b̂` is constant.
+//! * With `K = [φ×]`: `Φ₁₁ = Rot(φ) = I − (sin φ/φ) K + ((1 − cos φ)/φ²) K²`,
+//!   `Φ₁₂ = −Δt (I − ((1 − cos φ)/φ²) K + ((φ − sin φ)/φ³) K²)`, `Φ₂₁ = 0`, `Φ₂₂ = I`
+//!   (algorithms.md §2, rewritten in `φ = ω̂Δt`).
+//! * The three coefficients and `δq` come from one `sincos(φ/2)`; for `φ < 0.01 rad`
+//!   (0.57°/cycle, every GRO rate) from their Taylor series to `φ⁶` (error < 1e-17): no trig.
+//! * `P⁻ = Φ P Φᵀ + Q` using the block structure (four 3×3 products, no 6×6 product):
+//!   `A = Φ₁₁P₁₁ + Φ₁₂P₂₁`, `B = Φ₁₁P₁₂ + Φ₁₂P₂₂`, `P₁₁⁻ = AΦ₁₁ᵀ + BΦ₁₂ᵀ`, `P₁₂⁻ = B`,
+//!   `P₂₂⁻ = P₂₂`; `Q₁₁ = (σ_v²Δt + σ_u²Δt³/3) I`, `Q₁₂ = −σ_u²Δt²/2 I`, `Q₂₂ = σ_u²Δt I`.
+//!   Pulse quantization is *not* added to Q (it telescopes; §2).
+//!
+//! ## Measurement updates (2 components, sequential, reset after each)
+//! Every update has the form `ν ≈ [h 0] x + v`, `h` 2×3, `R = σ² I₂`:
+//! * [`Mekf::update_vector`] (FSS, any unit vector): `ẑ = Â r`; with an orthonormal pair
+//!   `e₁, e₂ ⟂ ẑ` (`e₁ × e₂ = ẑ`) the along-`ẑ` component, which carries no information, is
+//!   dropped: `ν = [e₁·z, e₂·z]`, and from `z ≈ ẑ + [ẑ×]δθ`, `h = [−e₂ᵀ; e₁ᵀ]`.
+//! * [`Mekf::update_focal_plane`] (FHST, §3.1): `ŝ = M_ASᵀ Â r`, `ν = (H − Ĥ, V − V̂)`,
+//!   `h = ∂(H,V)/∂s · M_ASᵀ [b̂×]` ([`crate::fhst::hv_jacobian`]).
+//! * `S = h P₁₁ hᵀ + R` (2×2, inverted in closed form only if `det S > 0` and finite),
+//!   `d² = νᵀS⁻¹ν` (NIS), rejected when `d² > gate` (χ²₂: 11.83 = 99.73 %).
+//! * `K = P Hᵀ S⁻¹` (6×2); Joseph form `P⁺ = (I − KH) P (I − KH)ᵀ + K R Kᵀ`, evaluated as
+//!   `T = P − K (HP)`, `P⁺ = T − (T Hᵀ − σ²K) Kᵀ` (exactly the Joseph product, ~180
+//!   multiplications), then symmetrised. An update whose `P⁺` is not finite with a positive
+//!   diagonal is discarded (state unchanged).
+//! * Reset: `q̂ ← normalize(δq(δθ̂) ⊗ q̂)`, `b̂ ← b̂ + δb̂`. The covariance reset
+//!   `T P Tᵀ, T = blkdiag(I − ½[δθ̂×], I)` [Mueller17] is second order and omitted.
+//! * Updates in one cycle are processed one after the other, each re-linearised at the reset
+//!   state ([SMEKF18]), which is more robust than batch processing when the prior error is
+//!   large (1° at initialisation).
+//!
+//! ## Initialisation
+//! [`Mekf::initialize`] from a known attitude, or [`Mekf::initialize_from_two_vectors`]
+//! (TRIAD, the first pair exact) when no attitude is known; `P = diag(σ_θ² I, σ_b² I)` from the
+//! table, `b̂ = 0` unless given.
+//!
+//! ## Robustness
+//! No operation can panic; non-finite inputs are rejected with the state left unchanged; the
+//! only inverses are closed-form 2×2.
+
+use crate::attitude::{skew, Quat};
+use crate::fhst::{hv_from_dir, hv_jacobian};
+use crate::tables::types::FilterTable;
+use nalgebra::{Matrix2, Matrix2x3, Matrix3, Matrix3x2, Matrix6, Matrix6x2, Vector2, Vector3};
+
+/// Below this rotation angle (rad) the propagation uses Taylor series (no trig).
+const SERIES_LIMIT_RAD: f64 = 0.01;
+/// Longest accepted propagation step, s.
+pub const MAX_PROPAGATION_STEP_S: f64 = 10.0;
+/// Largest accepted gyro increment in one step, rad (well above 2¹⁵ high-rate pulses).
+pub const MAX_DELTA_THETA_RAD: f64 = 0.5;
+/// TRIAD: smallest accepted angle between the two vectors of a pair, rad (2°).
+pub const TRIAD_MIN_SEPARATION_RAD: f64 = 2.0 * crate::units::RAD_PER_DEG;
+/// TRIAD: largest accepted difference between the body and reference separations, rad (0.5°).
+pub const TRIAD_CONSISTENCY_RAD: f64 = 0.5 * crate::units::RAD_PER_DEG;
+
+/// Why a filter operation did not change the state.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum MekfError {
+    /// An input is not finite or out of its range.
+    InvalidInput,
+    /// TRIAD: a pair of vectors is (nearly) collinear.
+    Collinear,
+    /// TRIAD: the body and reference separations disagree by more than
+    /// [`TRIAD_CONSISTENCY_RAD`].
+    Inconsistent,
+    /// The covariance became non-finite or lost a positive diagonal (state unchanged).
+    NumericalFault,
+}
+
+/// Why a measurement update was not applied.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum UpdateRejection {
+    /// A measurement, reference, σ or gate is not finite / out of range.
+    InvalidInput,
+    /// The prediction is unusable: behind the sensor, or more than 90° from the measurement.
+    Geometry,
+    /// `νᵀS⁻¹ν` above the gate.
+    Gated,
+    /// `S` not positive definite.
+    Singular,
+    /// The updated covariance failed its checks.
+    NumericalFault,
+}
+
+/// Result of one measurement update.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct UpdateOutcome {
+    /// The update was applied.
+    pub accepted: bool,
+    /// Innovation, rad: the two components perpendicular to the predicted vector
+    /// ([`Mekf::update_vector`]) or `(H − Ĥ, V − V̂)` ([`Mekf::update_focal_plane`]).
+    /// Zero if the input was invalid.
+    pub innovation_rad: [f64; 2],
+    /// Normalised innovation squared `νᵀS⁻¹ν` (NaN if not computed).
+    pub nis: f64,
+    /// Why it was not applied.
+    pub rejection: Option<UpdateRejection>,
+}
+
+impl UpdateOutcome {
+    fn rejected(reason: UpdateRejection, nu: [f64; 2], nis: f64) -> Self {
+        Self {
+            accepted: false,
+            innovation_rad: nu,
+            nis,
+            rejection: Some(reason),
+        }
+    }
+}
+
+/// Update statistics (saturating counters).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct UpdateCounters {
+    /// Updates applied.
+    pub accepted: u32,
+    /// Updates rejected by the χ² gate.
+    pub gated: u32,
+    /// Updates rejected for any other reason.
+    pub other_rejections: u32,
+}
+
+/// The filter state.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Mekf {
+    /// Attitude estimate, ACS from ECI.
+    pub q_acs_from_eci: Quat,
+    /// Gyro bias estimate, ACS, rad/s.
+    pub bias_rad_per_s: Vector3<f64>,
+    /// Error-state covariance, `[δθ (rad); δb (rad/s)]`.
+    pub covariance: Matrix6<f64>,
+    /// Update statistics.
+    pub counters: UpdateCounters,
+}
+
+#[cfg(feature = "defmt")]
+impl defmt::Format for Mekf {
+    fn format(&self, f: defmt::Formatter) {
+        let s = self.attitude_sigma_rad();
+        defmt::write!(
+            f,
+            "Mekf {{ q: {}, b: {}, sigma_att: {}, counters: {} }}",
+            self.q_acs_from_eci,
+            [
+                self.bias_rad_per_s.x,
+                self.bias_rad_per_s.y,
+                self.bias_rad_per_s.z
+            ],
+            [s.x, s.y, s.z],
+            self.counters
+        );
+    }
+}
+
+/// `(sin φ/φ, (1−cos φ)/φ², (φ−sin φ)/φ³, sin(φ/2)/φ, cos(φ/2))` for `φ = |v|`.
+fn rotation_coefficients(angle: f64) -> (f64, f64, f64, f64, f64) {
+    let a2 = angle * angle;
+    if angle < SERIES_LIMIT_RAD {
+        let a4 = a2 * a2;
+        let a6 = a4 * a2;
+        let h2 = 0.25 * a2;
+        let h4 = h2 * h2;
+        let h6 = h4 * h2;
+        (
+            1.0 - a2 / 6.0 + a4 / 120.0 - a6 / 5040.0,
+            0.5 - a2 / 24.0 + a4 / 720.0 - a6 / 40_320.0,
+            1.0 / 6.0 - a2 / 120.0 + a4 / 5040.0 - a6 / 362_880.0,
+            0.5 * (1.0 - h2 / 6.0 + h4 / 120.0 - h6 / 5040.0),
+            1.0 - h2 / 2.0 + h4 / 24.0 - h6 / 720.0 + h4 * h4 / 40_320.0,
+        )
+    } else {
+        let (s, c) = libm::sincos(0.5 * angle);
+        let sin_a = 2.0 * s * c;
+        (
+            sin_a / angle,
+            2.0 * s * s / a2,
+            (angle - sin_a) / (a2 * angle),
+            s / angle,
+            c,
+        )
+    }
+}
+
+/// Quaternion of `Rot(v)` (series for small angles, no trig below 0.01 rad).
+#[must_use]
+pub fn quat_from_small_rotation(v: &Vector3<f64>) -> Quat {
+    let (_, _, _, s, c) = rotation_coefficients(v.norm());
+    Quat::new(v.x * s, v.y * s, v.z * s, c)
+}
+
+/// Normalised copy of a direction, `None` unless finite with norm in (0.5, 2).
+fn unit(v: &Vector3<f64>) -> Option<Vector3<f64>> {
+    let n = v.norm();
+    (n > 0.5 && n < 2.0).then(|| v / n)
+}
+
+/// Closed-form inverse of a symmetric 2×2 matrix that must be positive definite.
+fn inverse_spd2(s: &Matrix2<f64>) -> Option<Matrix2<f64>> {
+    let (a, b, d) = (s.m11, 0.5 * (s.m12 + s.m21), s.m22);
+    let det = a * d - b * b;
+    if !(a > 0.0 && d > 0.0 && det > 0.0 && det.is_finite()) {
+        return None;
+    }
+    let inv = Matrix2::new(d, -b, -b, a) / det;
+    inv.iter().all(|x| x.is_finite()).then_some(inv)
+}
+
+/// TRIAD attitude (ACS from ECI) from two body/reference pairs; the first pair is matched
+/// exactly, the second only fixes the rotation about it.
+///
+/// # Errors
+/// [`MekfError::InvalidInput`] (not finite / zero), [`MekfError::Collinear`] (pair closer than
+/// [`TRIAD_MIN_SEPARATION_RAD`]), [`MekfError::Inconsistent`] (separations differ by more than
+/// [`TRIAD_CONSISTENCY_RAD`]).
+pub fn triad(
+    b1: &Vector3<f64>,
+    r1: &Vector3<f64>,
+    b2: &Vector3<f64>,
+    r2: &Vector3<f64>,
+) -> Result<Quat, MekfError> {
+    let (Some(b1), Some(r1), Some(b2), Some(r2)) = (unit(b1), unit(r1), unit(b2), unit(r2)) else {
+        return Err(MekfError::InvalidInput);
+    };
+    let bc = b1.cross(&b2);
+    let rc = r1.cross(&r2);
+    let (bs, rs) = (bc.norm(), rc.norm());
+    let min_sin = libm::sin(TRIAD_MIN_SEPARATION_RAD);
+    if !(bs >= min_sin && rs >= min_sin) {
+        return Err(MekfError::Collinear);
+    }
+    let sep_b = libm::atan2(bs, b1.dot(&b2));
+    let sep_r = libm::atan2(rs, r1.dot(&r2));
+    if !((sep_b - sep_r).abs() <= TRIAD_CONSISTENCY_RAD) {
+        return Err(MekfError::Inconsistent);
+    }
+    let (b2n, r2n) = (bc / bs, rc / rs);
+    let tb = Matrix3::from_columns(&[b1, b2n, b1.cross(&b2n)]);
+    let tr = Matrix3::from_columns(&[r1, r2n, r1.cross(&r2n)]);
+    let q = Quat::from_dcm(&(tb * tr.transpose()));
+    if q.is_finite() {
+        Ok(q)
+    } else {
+        Err(MekfError::InvalidInput)
+    }
+}
+
+/// Direction measured `offset_s` seconds before the filter time, moved to the filter time
+/// with the body rate: `b(t) = Rot(ω τ) b(t − τ)` (for [`crate::tables::SensorCorrections`]
+/// `time_offset_s`).
+#[must_use]
+pub fn compensate_time_offset(
+    dir_acs: &Vector3<f64>,
+    rate_rad_per_s: &Vector3<f64>,
+    offset_s: f64,
+) -> Vector3<f64> {
+    crate::attitude::rot(&(rate_rad_per_s * offset_s)) * dir_acs
+}
+
+impl Default for Mekf {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// `diag(σ_θ² I, σ_b² I)`.
+fn initial_covariance(attitude_sigma_rad: f64, bias_sigma_rad_per_s: f64) -> Matrix6<f64> {
+    let (a, b) = (
+        attitude_sigma_rad * attitude_sigma_rad,
+        bias_sigma_rad_per_s * bias_sigma_rad_per_s,
+    );
+    Matrix6::from_diagonal(&nalgebra::Vector6::new(a, a, a, b, b, b))
+}
+
+impl Mekf {
+    /// Identity attitude, zero bias, the boot table's initial covariance: a placeholder until
+    /// one of the `initialize*` methods is called.
+    #[must_use]
+    pub fn new() -> Self {
+        let t = FilterTable::default_boot();
+        Self {
+            q_acs_from_eci: Quat::IDENTITY,
+            bias_rad_per_s: Vector3::zeros(),
+            covariance: initial_covariance(
+                t.initial_attitude_sigma_rad,
+                t.initial_bias_sigma_rad_per_s,
+            ),
+            counters: UpdateCounters::default(),
+        }
+    }
+
+    /// Start from a known attitude with zero bias and the table's initial σ.
+    ///
+    /// # Errors
+    /// [`MekfError::InvalidInput`] (state unchanged) for a non-finite or zero quaternion or
+    /// invalid table σ.
+    pub fn initialize(
+        &mut self,
+        q_acs_from_eci: &Quat,
+        table: &FilterTable,
+    ) -> Result<(), MekfError> {
+        self.initialize_with_bias(q_acs_from_eci, &Vector3::zeros(), table)
+    }
+
+    /// Start from a known attitude and bias (e.g. the last good bias before a reset).
+    ///
+    /// # Errors
+    /// [`MekfError::InvalidInput`] (state unchanged) for a non-finite or zero quaternion,
+    /// non-finite bias or invalid table σ.
+    pub fn initialize_with_bias(
+        &mut self,
+        q_acs_from_eci: &Quat,
+        bias_rad_per_s: &Vector3<f64>,
+        table: &FilterTable,
+    ) -> Result<(), MekfError> {
+        let n = q_acs_from_eci.norm();
+        let sa = table.initial_attitude_sigma_rad;
+        let sb = table.initial_bias_sigma_rad_per_s;
+        let ok = (0.5..2.0).contains(&n)
+            && q_acs_from_eci.is_finite()
+            && bias_rad_per_s.iter().all(|x| x.is_finite())
+            && positive_finite(sa)
+            && positive_finite(sb);
+        if !ok {
+            return Err(MekfError::InvalidInput);
+        }
+        *self = Self {
+            q_acs_from_eci: q_acs_from_eci.normalized(),
+            bias_rad_per_s: *bias_rad_per_s,
+            covariance: initial_covariance(sa, sb),
+            counters: self.counters,
+        };
+        Ok(())
+    }
+
+    /// Start with no prior attitude from two simultaneous vector pairs (TRIAD, [`triad`]):
+    /// body (ACS) measurements `b1`, `b2` of reference (ECI) directions `r1`, `r2`. Put the more
+    /// accurate pair first (e.g. a star, then the Sun). The bias is reset to zero.
+    ///
+    /// # Errors
+    /// As [`triad`] and [`Mekf::initialize`] (state unchanged).
+    pub fn initialize_from_two_vectors(
+        &mut self,
+        b1: &Vector3<f64>,
+        r1: &Vector3<f64>,
+        b2: &Vector3<f64>,
+        r2: &Vector3<f64>,
+        table: &FilterTable,
+    ) -> Result<(), MekfError> {
+        let q = triad(b1, r1, b2, r2)?;
+        self.initialize(&q, table)
+    }
+
+    /// Keep the estimate, reopen the covariance to the table's initial values.
+    ///
+    /// # Errors
+    /// [`MekfError::InvalidInput`] (state unchanged) for invalid table σ.
+    pub fn reset_covariance(&mut self, table: &FilterTable) -> Result<(), MekfError> {
+        let sa = table.initial_attitude_sigma_rad;
+        let sb = table.initial_bias_sigma_rad_per_s;
+        if !(positive_finite(sa) && positive_finite(sb)) {
+            return Err(MekfError::InvalidInput);
+        }
+        self.covariance = initial_covariance(sa, sb);
+        Ok(())
+    }
+
+    /// Attitude 1σ per axis, rad.
+    #[must_use]
+    pub fn attitude_sigma_rad(&self) -> Vector3<f64> {
+        let p = &self.covariance;
+        Vector3::new(
+            libm::sqrt(p.m11.max(0.0)),
+            libm::sqrt(p.m22.max(0.0)),
+            libm::sqrt(p.m33.max(0.0)),
+        )
+    }
+
+    /// Bias 1σ per axis, rad/s.
+    #[must_use]
+    pub fn bias_sigma_rad_per_s(&self) -> Vector3<f64> {
+        let p = &self.covariance;
+        Vector3::new(
+            libm::sqrt(p.m44.max(0.0)),
+            libm::sqrt(p.m55.max(0.0)),
+            libm::sqrt(p.m66.max(0.0)),
+        )
+    }
+
+    /// Bias-corrected body rate over a step, `Δθ/Δt − b̂` (rad/s), for the controller;
+    /// `None` for a non-positive or non-finite step.
+    #[must_use]
+    pub fn corrected_rate_rad_per_s(
+        &self,
+        delta_theta_acs_rad: &Vector3<f64>,
+        dt_s: f64,
+    ) -> Option<Vector3<f64>> {
+        if !(dt_s > 0.0 && dt_s.is_finite()) {
+            return None;
+        }
+        let w = delta_theta_acs_rad / dt_s - self.bias_rad_per_s;
+        w.iter().all(|x| x.is_finite()).then_some(w)
+    }
+
+    /// Propagate over one step with the gyro increment `Δθ` (ACS, rad) measured over `dt_s`.
+    ///
+    /// # Errors
+    /// [`MekfError::InvalidInput`] (state unchanged) for non-finite input, `dt_s` outside
+    /// `(0, MAX_PROPAGATION_STEP_S]` or `|Δθ| > MAX_DELTA_THETA_RAD`;
+    /// [`MekfError::NumericalFault`] if the covariance would become non-finite.
+    pub fn propagate(
+        &mut self,
+        delta_theta_acs_rad: &Vector3<f64>,
+        dt_s: f64,
+        table: &FilterTable,
+    ) -> Result<(), MekfError> {
+        let sv2 = table.arw_rad_per_sqrt_s * table.arw_rad_per_sqrt_s;
+        let su2 = table.rrw_rad_per_s_sqrt_s * table.rrw_rad_per_s_sqrt_s;
+        let ok = dt_s > 0.0
+            && dt_s <= MAX_PROPAGATION_STEP_S
+            && delta_theta_acs_rad.iter().all(|x| x.is_finite())
+            && delta_theta_acs_rad.norm() <= MAX_DELTA_THETA_RAD
+            && sv2.is_finite()
+            && su2.is_finite()
+            && sv2 >= 0.0
+            && su2 >= 0.0;
+        if !ok {
+            return Err(MekfError::InvalidInput);
+        }
+        let phi = delta_theta_acs_rad - self.bias_rad_per_s * dt_s;
+        let angle = phi.norm();
+        if !(angle <= MAX_DELTA_THETA_RAD) {
+            return Err(MekfError::InvalidInput);
+        }
+        let (sa, oc, ps, hs, hc) = rotation_coefficients(angle);
+        let k = skew(&phi);
+        let k2 = k * k;
+        let eye = Matrix3::identity();
+        let phi11 = eye - k * sa + k2 * oc;
+        let phi12 = (eye - k * oc + k2 * ps) * (-dt_s);
+
+        let p = &self.covariance;
+        let p11 = p.fixed_view::<3, 3>(0, 0).into_owned();
+        let p12 = p.fixed_view::<3, 3>(0, 3).into_owned();
+        let p22 = p.fixed_view::<3, 3>(3, 3).into_owned();
+        let a = phi11 * p11 + phi12 * p12.transpose();
+        let b = phi11 * p12 + phi12 * p22;
+        let q11 = sv2 * dt_s + su2 * dt_s * dt_s * dt_s / 3.0;
+        let q12 = -0.5 * su2 * dt_s * dt_s;
+        let q22 = su2 * dt_s;
+        let n11 = a * phi11.transpose() + b * phi12.transpose();
+        let n11 = (n11 + n11.transpose()) * 0.5 + eye * q11;
+        let n12 = b + eye * q12;
+        let n22 = (p22 + p22.transpose()) * 0.5 + eye * q22;
+
+        let mut np = Matrix6::zeros();
+        np.fixed_view_mut::<3, 3>(0, 0).copy_from(&n11);
+        np.fixed_view_mut::<3, 3>(0, 3).copy_from(&n12);
+        np.fixed_view_mut::<3, 3>(3, 0).copy_from(&n12.transpose());
+        np.fixed_view_mut::<3, 3>(3, 3).copy_from(&n22);
+        if !covariance_ok(&np) {
+            return Err(MekfError::NumericalFault);
+        }
+        let dq = Quat::new(phi.x * hs, phi.y * hs, phi.z * hs, hc);
+        self.q_acs_from_eci = dq.compose(&self.q_acs_from_eci).normalized();
+        self.covariance = np;
+        Ok(())
+    }
+
+    /// Unit-vector update (drops the along-vector component): measured direction in ACS,
+    /// reference direction in ECI, σ per perpendicular axis (rad), χ² gate.
+    pub fn update_vector(
+        &mut self,
+        meas_dir_acs: &Vector3<f64>,
+        ref_dir_eci: &Vector3<f64>,
+        sigma_rad: f64,
+        gate_chi2: f64,
+    ) -> UpdateOutcome {
+        let (Some(z), Some(r)) = (unit(meas_dir_acs), unit(ref_dir_eci)) else {
+            return self.reject(UpdateRejection::InvalidInput, [0.0; 2], f64::NAN);
+        };
+        let zhat = self.q_acs_from_eci.to_dcm() * r;
+        if !(z.dot(&zhat) > 0.0) {
+            return self.reject(UpdateRejection::Geometry, [0.0; 2], f64::NAN);
+        }
+        // e1 ⟂ ẑ from the axis least aligned with ẑ; e2 = ẑ × e1 (e1 × e2 = ẑ).
+        let (ax, ay, az) = (zhat.x.abs(), zhat.y.abs(), zhat.z.abs());
+        let axis = if ax <= ay && ax <= az {
+            Vector3::x()
+        } else if ay <= az {
+            Vector3::y()
+        } else {
+            Vector3::z()
+        };
+        let e1 = zhat.cross(&axis).normalize();
+        let e2 = zhat.cross(&e1);
+        let nu = Vector2::new(e1.dot(&z), e2.dot(&z));
+        let h = Matrix2x3::new(-e2.x, -e2.y, -e2.z, e1.x, e1.y, e1.z);
+        self.apply_update(&nu, &h, sigma_rad, gate_chi2)
+    }
+
+    /// FHST focal-plane update: corrected measured angles `(H, V)` (rad), reference star
+    /// direction (ECI), the tracker's `M_AS`, σ per axis (rad), χ² gate.
+    pub fn update_focal_plane(
+        &mut self,
+        h_rad: f64,
+        v_rad: f64,
+        ref_dir_eci: &Vector3<f64>,
+        m_acs_from_sensor: &Matrix3<f64>,
+        sigma_rad: f64,
+        gate_chi2: f64,
+    ) -> UpdateOutcome {
+        let Some(r) = unit(ref_dir_eci) else {
+            return self.reject(UpdateRejection::InvalidInput, [0.0; 2], f64::NAN);
+        };
+        let ok = h_rad.is_finite()
+            && v_rad.is_finite()
+            && m_acs_from_sensor.iter().all(|x| x.is_finite());
+        if !ok {
+            return self.reject(UpdateRejection::InvalidInput, [0.0; 2], f64::NAN);
+        }
+        let b_hat = self.q_acs_from_eci.to_dcm() * r;
+        let mt = m_acs_from_sensor.transpose();
+        let s_hat = mt * b_hat;
+        let Some((h_pred, v_pred)) = hv_from_dir(&s_hat) else {
+            return self.reject(UpdateRejection::Geometry, [0.0; 2], f64::NAN);
+        };
+        let nu = Vector2::new(h_rad - h_pred, v_rad - v_pred);
+        let h = hv_jacobian(&s_hat) * mt * skew(&b_hat);
+        self.apply_update(&nu, &h, sigma_rad, gate_chi2)
+    }
+
+    fn reject(&mut self, reason: UpdateRejection, nu: [f64; 2], nis: f64) -> UpdateOutcome {
+        if reason == UpdateRejection::Gated {
+            self.counters.gated = self.counters.gated.saturating_add(1);
+        } else {
+            self.counters.other_rejections = self.counters.other_rejections.saturating_add(1);
+        }
+        UpdateOutcome::rejected(reason, nu, nis)
+    }
+
+    /// Generic 2-component update with `H = [h 0]`, `R = σ² I₂`.
+    fn apply_update(
+        &mut self,
+        nu: &Vector2<f64>,
+        h: &Matrix2x3<f64>,
+        sigma_rad: f64,
+        gate_chi2: f64,
+    ) -> UpdateOutcome {
+        let nu_arr = [nu.x, nu.y];
+        let ok = positive_finite(sigma_rad)
+            && positive_finite(gate_chi2)
+            && nu.iter().all(|x| x.is_finite())
+            && h.iter().all(|x| x.is_finite());
+        if !ok {
+            return self.reject(UpdateRejection::InvalidInput, [0.0; 2], f64::NAN);
+        }
+        let r = sigma_rad * sigma_rad;
+        let p = &self.covariance;
+        let p11 = p.fixed_view::<3, 3>(0, 0).into_owned();
+        let p12 = p.fixed_view::<3, 3>(0, 3).into_owned();
+        let ht = h.transpose();
+        // P Hᵀ = [P₁₁ hᵀ; P₂₁ hᵀ]
+        let pht_top: Matrix3x2<f64> = p11 * ht;
+        let pht_bot: Matrix3x2<f64> = p12.transpose() * ht;
+        let s = h * pht_top + Matrix2::identity() * r;
+        let Some(s_inv) = inverse_spd2(&s) else {
+            return self.reject(UpdateRejection::Singular, nu_arr, f64::NAN);
+        };
+        let nis = (nu.transpose() * s_inv * nu).x;
+        if !(nis <= gate_chi2) {
+            return self.reject(UpdateRejection::Gated, nu_arr, nis);
+        }
+        let mut pht = Matrix6x2::zeros();
+        pht.fixed_view_mut::<3, 2>(0, 0).copy_from(&pht_top);
+        pht.fixed_view_mut::<3, 2>(3, 0).copy_from(&pht_bot);
+        let k = pht * s_inv;
+        // Joseph form: T = (I − KH) P = P − K (HP), HP = (PHᵀ)ᵀ for symmetric P;
+        // P⁺ = T (I − KH)ᵀ + K R Kᵀ = T − (T Hᵀ − R K) Kᵀ, T Hᵀ = T[:, 0..3] hᵀ.
+        let t = p - k * pht.transpose();
+        let tht = t.fixed_view::<6, 3>(0, 0) * ht;
+        let np = t - (tht - k * r) * k.transpose();
+        let np = (np + np.transpose()) * 0.5;
+        if !covariance_ok(&np) {
+            return self.reject(UpdateRejection::NumericalFault, nu_arr, nis);
+        }
+        let dx = k * nu;
+        let dtheta = Vector3::new(dx.x, dx.y, dx.z);
+        let dbias = Vector3::new(dx.w, dx.a, dx.b);
+        let q = quat_from_small_rotation(&dtheta).compose(&self.q_acs_from_eci);
+        if !(q.is_finite() && dbias.iter().all(|x| x.is_finite())) {
+            return self.reject(UpdateRejection::NumericalFault, nu_arr, nis);
+        }
+        self.q_acs_from_eci = q.normalized();
+        self.bias_rad_per_s += dbias;
+        self.covariance = np;
+        self.counters.accepted = self.counters.accepted.saturating_add(1);
+        UpdateOutcome {
+            accepted: true,
+            innovation_rad: nu_arr,
+            nis,
+            rejection: None,
+        }
+    }
+}
+
+/// `x > 0` and finite (false for NaN).
+fn positive_finite(x: f64) -> bool {
+    x > 0.0 && x.is_finite()
+}
+
+/// Finite with a positive diagonal.
+fn covariance_ok(p: &Matrix6<f64>) -> bool {
+    p.iter().all(|x| x.is_finite())
+        && p.m11 > 0.0
+        && p.m22 > 0.0
+        && p.m33 > 0.0
+        && p.m44 > 0.0
+        && p.m55 > 0.0
+        && p.m66 > 0.0
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::attitude::{attitude_error_rad, rot};
+
+    fn table() -> FilterTable {
+        FilterTable::default_boot()
+    }
+
+    #[test]
+    fn coefficients_series_and_trig_agree_at_the_switch() {
+        let below = rotation_coefficients(SERIES_LIMIT_RAD * (1.0 - 1e-12));
+        let x = SERIES_LIMIT_RAD;
+        let exact = (
+            x.sin() / x,
+            2.0 * (x / 2.0).sin().powi(2) / (x * x),
+            (x - x.sin()) / (x * x * x),
+            (x / 2.0).sin() / x,
+            (x / 2.0).cos(),
+        );
+        assert!((below.0 - exact.0).abs() < 1e-15);
+        assert!((below.1 - exact.1).abs() < 1e-15);
+        assert!((below.2 - exact.2).abs() < 1e-9); // exact form itself loses ~1e-10 here
+        assert!((below.3 - exact.3).abs() < 1e-15);
+        assert!((below.4 - exact.4).abs() < 1e-15);
+        let above = rotation_coefficients(x * (1.0 + 1e-12));
+        assert!((above.2 - below.2).abs() < 1e-9);
+    }
+
+    #[test]
+    fn propagation_is_the_exact_rotation_and_phi_matches_finite_differences() {
+        let mut f = Mekf::new();
+        f.initialize(&Quat::IDENTITY, &table()).unwrap();
+        f.bias_rad_per_s = Vector3::new(1e-4, -2e-4, 5e-5);
+        let dt = 1.0;
+        for dth in [
+            Vector3::new(0.003, -0.001, 0.002),
+            Vector3::new(0.05, 0.02, -0.04),
+        ] {
+            let mut g = f;
+            g.propagate(&dth, dt, &table()).unwrap();
+            let phi = dth - f.bias_rad_per_s * dt;
+            let expect = rot(&phi) * f.q_acs_from_eci.to_dcm();
+            assert!((g.q_acs_from_eci.to_dcm() - expect).norm() < 1e-14);
+
+            // Φ by finite differences of the nonlinear error propagation:
+            // δθ⁺ for an initial δθ and δb, with the true increment Δθ − (b̂+δb)Δt.
+            let (sa, oc, ps, _, _) = rotation_coefficients(phi.norm());
+            let k = skew(&phi);
+            let phi11 = Matrix3::identity() - k * sa + k * k * oc;
+            let phi12 = (Matrix3::identity() - k * oc + k * k * ps) * (-dt);
+            let eps = 1e-7;
+            for j in 0..3 {
+                let mut d = Vector3::zeros();
+                d[j] = eps;
+                // attitude column
+                let a_true0 = rot(&d) * f.q_acs_from_eci.to_dcm();
+                let a_true1 = rot(&phi) * a_true0;
+                let e = attitude_error_rad(&Quat::from_dcm(&a_true1), &g.q_acs_from_eci);
+                assert!((e / eps - phi11.column(j)).norm() < 1e-6);
+                // bias column
+                let a_true1 = rot(&(phi - d)) * f.q_acs_from_eci.to_dcm();
+                let e = attitude_error_rad(&Quat::from_dcm(&a_true1), &g.q_acs_from_eci);
+                assert!((e / eps - phi12.column(j)).norm() < 1e-6, "{e:?} {phi12:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn vector_update_moves_toward_the_measurement_and_shrinks_p() {
+        let t = table();
+        let truth = Quat::from_rotation_vector(&Vector3::new(0.3, -0.2, 1.0));
+        let err = Vector3::new(0.004, -0.006, 0.002);
+        let est = Quat::from_rotation_vector(&(-err)).compose(&truth);
+        let mut f = Mekf::new();
+        f.initialize(&est, &t).unwrap();
+        let e0 = attitude_error_rad(&truth, &f.q_acs_from_eci);
+        let r = Vector3::new(0.1, 0.7, -0.3).normalize();
+        let z = truth.to_dcm() * r;
+        let out = f.update_vector(&z, &r, 1e-5, 11.83);
+        assert!(out.accepted, "{out:?}");
+        let e1 = attitude_error_rad(&truth, &f.q_acs_from_eci);
+        // The components perpendicular to z are corrected, the one along z is not.
+        let along = z * z.dot(&e0);
+        assert!((e1 - along).norm() < 0.02 * e0.norm(), "{e0:?} -> {e1:?}");
+        assert!(f.covariance.trace() < Mekf::new().covariance.trace());
+        let p = f.covariance;
+        assert!((p - p.transpose()).norm() == 0.0);
+        assert!(p.cholesky().is_some());
+    }
+
+    #[test]
+    fn focal_plane_update_matches_vector_update_direction() {
+        let t = table();
+        let al = crate::tables::AlignmentTable::prelaunch();
+        let m = crate::fhst::FhstId::Fhst1.m_acs_from_sensor(&al);
+        let truth = Quat::from_rotation_vector(&Vector3::new(-0.5, 0.1, 0.4));
+        let err = Vector3::new(-0.003, 0.002, 0.004);
+        let est = Quat::from_rotation_vector(&(-err)).compose(&truth);
+        // A star 1 deg off the boresight.
+        let s = crate::fhst::dir_from_hv(0.017, -0.01);
+        let r = truth.to_dcm().transpose() * (m * s);
+        let mut f = Mekf::new();
+        f.initialize(&est, &t).unwrap();
+        let out = f.update_focal_plane(0.017, -0.01, &r, &m, 1e-5, 11.83);
+        assert!(out.accepted);
+        let e1 = attitude_error_rad(&truth, &f.q_acs_from_eci);
+        let b = m * s;
+        let e0 = attitude_error_rad(&truth, &est);
+        assert!((e1 - b * b.dot(&e0)).norm() < 0.02 * e0.norm(), "{e1:?}");
+    }
+
+    #[test]
+    fn gating_and_invalid_inputs_are_rejected_without_change() {
+        let t = table();
+        let mut f = Mekf::new();
+        f.initialize(&Quat::IDENTITY, &t).unwrap();
+        f.covariance = Matrix6::identity() * 1e-12;
+        let before = f;
+        let r = Vector3::new(0.0, 0.0, 1.0);
+        // 0.01 rad off with σ = 1e-5: NIS huge.
+        let z = Vector3::new(0.01, 0.0, 1.0);
+        let out = f.update_vector(&z, &r, 1e-5, 11.83);
+        assert_eq!(out.rejection, Some(UpdateRejection::Gated));
+        assert!(out.nis > 1e5);
+        for (z, s, g) in [
+            (Vector3::new(f64::NAN, 0.0, 1.0), 1e-5, 11.83),
+            (Vector3::new(0.0, 0.0, 1.0), f64::NAN, 11.83),
+            (Vector3::new(0.0, 0.0, 1.0), 1e-5, f64::INFINITY),
+            (Vector3::new(0.0, 0.0, 0.0), 1e-5, 11.83),
+            (Vector3::new(0.0, 0.0, 1.0), -1.0, 11.83),
+        ] {
+            let out = f.update_vector(&z, &r, s, g);
+            assert_eq!(out.rejection, Some(UpdateRejection::InvalidInput));
+        }
+        assert_eq!(
+            f.update_vector(&Vector3::new(0.0, 0.0, -1.0), &r, 1e-5, 11.83)
+                .rejection,
+            Some(UpdateRejection::Geometry)
+        );
+        let m = Matrix3::identity();
+        assert_eq!(
+            f.update_focal_plane(0.0, 0.0, &-r, &m, 1e-5, 11.83)
+                .rejection,
+            Some(UpdateRejection::Geometry)
+        );
+        assert_eq!(
+            f.update_focal_plane(f64::NAN, 0.0, &r, &m, 1e-5, 11.83)
+                .rejection,
+            Some(UpdateRejection::InvalidInput)
+        );
+        assert_eq!(f.q_acs_from_eci, before.q_acs_from_eci);
+        assert_eq!(f.covariance, before.covariance);
+        assert_eq!(f.counters.gated, 1);
+        assert_eq!(f.counters.other_rejections, 8);
+        assert!(f
+            .propagate(&Vector3::new(f64::NAN, 0.0, 0.0), 1.0, &t)
+            .is_err());
+        assert!(f.propagate(&Vector3::zeros(), 0.0, &t).is_err());
+        assert!(f.propagate(&Vector3::zeros(), f64::NAN, &t).is_err());
+        assert!(f.propagate(&Vector3::new(1.0, 0.0, 0.0), 1.0, &t).is_err());
+        assert_eq!(f.covariance, before.covariance);
+    }
+
+    #[test]
+    fn triad_recovers_the_attitude_and_checks_geometry() {
+        let q = Quat::from_rotation_vector(&Vector3::new(1.0, -2.0, 0.5));
+        let a = q.to_dcm();
+        let r1 = Vector3::new(0.3, 0.4, 0.5).normalize();
+        let r2 = Vector3::new(-0.7, 0.1, 0.2).normalize();
+        let est = triad(&(a * r1), &r1, &(a * r2), &r2).unwrap();
+        assert!(est.angle_to_rad(&q) < 1e-12);
+        let mut f = Mekf::new();
+        f.initialize_from_two_vectors(&(a * r1), &r1, &(a * r2), &r2, &table())
+            .unwrap();
+        assert!(f.q_acs_from_eci.angle_to_rad(&q) < 1e-12);
+        assert_eq!(triad(&r1, &r1, &r1, &r1), Err(MekfError::Collinear));
+        assert_eq!(
+            triad(
+                &(a * r1),
+                &r1,
+                &(a * r2),
+                &(rot(&Vector3::new(0.0, 0.0, 0.05)) * r2)
+            ),
+            Err(MekfError::Inconsistent)
+        );
+        assert_eq!(
+            triad(&Vector3::zeros(), &r1, &r2, &r2),
+            Err(MekfError::InvalidInput)
+        );
+    }
+
+    #[test]
+    fn time_offset_compensation() {
+        let b = Vector3::new(0.0, 0.0, 1.0);
+        let w = Vector3::new(0.01, 0.0, 0.0);
+        // A(t) = Rot(ωτ) A(t−τ): the body turned +0.5 mrad about x.
+        let c = compensate_time_offset(&b, &w, 0.05);
+        assert!((c - rot(&Vector3::new(5e-4, 0.0, 0.0)) * b).norm() < 1e-15);
+        assert!((c.y - 5e-4).abs() < 1e-9);
+    }
+}

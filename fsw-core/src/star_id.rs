@@ -1,1 +1,259 @@
-//! (in progress)
+//! # Direct-match star identification (algorithms.md §3.2; GLAS ATBD §4.2)
+//!
+//! Run once per **new acquisition** of a tracker (the executive keeps the identified star
+//! while the tracker stays on it). With the gyro-propagated attitude `Â` (ACS from ECI):
+//!
+//! 1. Observed direction in inertial axes: `r_obs = Âᵀ b_meas`, `b_meas` the measured ACS
+//!    direction ([`crate::fhst::FhstMeasurement::dir_acs`]). It is compared with the mean
+//!    catalog directions: aberration (≤ 25″) is negligible against the 0.6° window. The
+//!    *reference* vector given to the filter is the catalog direction aberrated by the caller
+//!    ([`crate::sun_ephemeris::aberrate`]) when the table asks for it.
+//! 2. Candidates: every catalog star with `∠(r_obs, r_c) ≤ ε` (table
+//!    `star_id_window_arcsec`; compared as `r_obs·r_c ≥ cos ε`, one `cos` per call) and
+//!    `|m_obs − m_c| ≤ Δm` (table `star_id_magnitude_tolerance`).
+//! 3. Exactly one candidate → [`StarMatch`]; none → [`StarIdError::NoMatch`]; more →
+//!    [`StarIdError::Ambiguous`] (rejected: a near neighbour inside the window could be the
+//!    tracked star).
+//!
+//! The scan is one bounded linear pass over the table (≤ [`MAX_CATALOG_STARS`], ~10 flops a
+//! star); it never stops early, so its time does not depend on the data.
+//!
+//! **Correctness argument.** If the attitude error plus the measurement error is below ε and
+//! the magnitude error below Δm, the tracked star (if it is in the catalog) is always a
+//! candidate; a unique candidate is then the right star. A wrong identification needs the
+//! tracked star to be *missing* from the catalog (or its magnitude off by more than Δm) while
+//! another star sits inside the window: the catalog must therefore reach Δm-ish beyond the
+//! tracker's faint limit (integration test `est_star_id`).
+
+use crate::attitude::Quat;
+use crate::tables::types::{CatalogStar, FilterTable, StarCatalogTable, MAX_CATALOG_STARS};
+use crate::units::RAD_PER_ARCSEC;
+use nalgebra::Vector3;
+
+/// An identified star.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct StarMatch {
+    /// The catalog entry (mean direction; the caller applies aberration for the reference).
+    pub star: CatalogStar,
+    /// Index in the catalog table.
+    pub catalog_index: u16,
+    /// Angle between the observation (in inertial axes) and the catalog star, rad.
+    pub separation_rad: f64,
+    /// Observed minus catalog magnitude, mag.
+    pub magnitude_difference: f64,
+}
+
+/// Why no star was identified.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum StarIdError {
+    /// The catalog table is empty.
+    NoCatalog,
+    /// Observation, magnitude, attitude or window not finite / not usable.
+    InvalidInput,
+    /// No catalog star in the window.
+    NoMatch,
+    /// More than one candidate.
+    Ambiguous {
+        /// Number of candidates (saturating at 255).
+        candidates: u8,
+    },
+}
+
+impl StarIdError {
+    /// Event/telemetry code: 1 no match, 2 ambiguous, 3 no catalog, 4 invalid input.
+    #[must_use]
+    pub const fn code(self) -> u8 {
+        match self {
+            Self::NoMatch => 1,
+            Self::Ambiguous { .. } => 2,
+            Self::NoCatalog => 3,
+            Self::InvalidInput => 4,
+        }
+    }
+}
+
+/// Window and magnitude tolerance of the identification.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct StarIdWindow {
+    /// Match window ε, rad (0 < ε < 0.5).
+    pub window_rad: f64,
+    /// Magnitude tolerance Δm, mag.
+    pub magnitude_tolerance: f64,
+}
+
+impl StarIdWindow {
+    /// From the filter table.
+    #[must_use]
+    pub fn from_table(filter: &FilterTable) -> Self {
+        Self {
+            window_rad: filter.star_id_window_arcsec * RAD_PER_ARCSEC,
+            magnitude_tolerance: filter.star_id_magnitude_tolerance,
+        }
+    }
+}
+
+/// Identify an observed star with the table's window and magnitude tolerance.
+///
+/// * `obs_dir_acs`: measured direction in ACS (unit or near-unit).
+/// * `obs_magnitude`: instrument magnitude.
+/// * `q_acs_from_eci`: predicted attitude.
+///
+/// # Errors
+/// [`StarIdError`].
+pub fn identify(
+    obs_dir_acs: &Vector3<f64>,
+    obs_magnitude: f64,
+    q_acs_from_eci: &Quat,
+    catalog: &StarCatalogTable,
+    filter: &FilterTable,
+) -> Result<StarMatch, StarIdError> {
+    identify_in_window(
+        obs_dir_acs,
+        obs_magnitude,
+        q_acs_from_eci,
+        catalog,
+        &StarIdWindow::from_table(filter),
+    )
+}
+
+/// [`identify`] with an explicit window.
+///
+/// # Errors
+/// [`StarIdError`].
+pub fn identify_in_window(
+    obs_dir_acs: &Vector3<f64>,
+    obs_magnitude: f64,
+    q_acs_from_eci: &Quat,
+    catalog: &StarCatalogTable,
+    window: &StarIdWindow,
+) -> Result<StarMatch, StarIdError> {
+    if catalog.stars.is_empty() {
+        return Err(StarIdError::NoCatalog);
+    }
+    let n = obs_dir_acs.norm();
+    let qn = q_acs_from_eci.norm();
+    let ok = (0.5..2.0).contains(&n)
+        && obs_magnitude.is_finite()
+        && q_acs_from_eci.is_finite()
+        && (0.5..2.0).contains(&qn)
+        && window.window_rad > 0.0
+        && window.window_rad < 0.5
+        && window.magnitude_tolerance >= 0.0
+        && window.magnitude_tolerance.is_finite();
+    if !ok {
+        return Err(StarIdError::InvalidInput);
+    }
+    let a = q_acs_from_eci.normalized().to_dcm();
+    let r_obs = a.transpose() * (obs_dir_acs / n);
+    let cos_window = libm::cos(window.window_rad);
+
+    let mut count: u32 = 0;
+    let mut found: Option<(usize, CatalogStar, f64, f64)> = None;
+    for (index, star) in catalog.stars.iter().take(MAX_CATALOG_STARS).enumerate() {
+        let dot = r_obs.dot(&star.dir());
+        let dm = obs_magnitude - f64::from(star.magnitude_centimag) * 0.01;
+        if dot >= cos_window && dm.abs() <= window.magnitude_tolerance {
+            count = count.saturating_add(1);
+            found = Some((index, *star, dm, dot));
+        }
+    }
+    match (count, found) {
+        (1, Some((index, star, dm, _))) => {
+            let c = star.dir();
+            let separation_rad = libm::atan2(r_obs.cross(&c).norm(), r_obs.dot(&c));
+            Ok(StarMatch {
+                star,
+                catalog_index: u16::try_from(index).unwrap_or(u16::MAX),
+                separation_rad,
+                magnitude_difference: dm,
+            })
+        }
+        (0, _) => Err(StarIdError::NoMatch),
+        (c, _) => Err(StarIdError::Ambiguous {
+            candidates: u8::try_from(c).unwrap_or(u8::MAX),
+        }),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn star(id: u32, v: Vector3<f64>, mag: f64) -> CatalogStar {
+        let v = v.normalize();
+        CatalogStar {
+            id,
+            dir_eci: [v.x as f32, v.y as f32, v.z as f32],
+            magnitude_centimag: (mag * 100.0).round() as i16,
+        }
+    }
+
+    fn window() -> StarIdWindow {
+        StarIdWindow::from_table(&FilterTable::default_boot())
+    }
+
+    #[test]
+    fn unique_ambiguous_and_none() {
+        let mut cat = StarCatalogTable::default();
+        let d = 0.3_f64.to_radians();
+        cat.stars
+            .push(star(1, Vector3::new(1.0, 0.0, 0.0), 4.0))
+            .unwrap();
+        cat.stars
+            .push(star(2, Vector3::new(1.0, d.tan(), 0.0), 4.2))
+            .unwrap();
+        cat.stars
+            .push(star(3, Vector3::new(0.0, 1.0, 0.0), 3.0))
+            .unwrap();
+        let q = Quat::IDENTITY;
+        let w = window();
+        // Star 3 alone.
+        let m = identify_in_window(&Vector3::new(0.0, 1.0, 0.001), 3.1, &q, &cat, &w).unwrap();
+        assert_eq!((m.star.id, m.catalog_index), (3, 2));
+        assert!((m.separation_rad - 0.001).abs() < 1e-6);
+        // Stars 1 and 2 both within 0.6 deg and 0.6 mag: ambiguous.
+        assert_eq!(
+            identify_in_window(&Vector3::new(1.0, 0.0, 0.0), 4.1, &q, &cat, &w),
+            Err(StarIdError::Ambiguous { candidates: 2 })
+        );
+        // Magnitude separates them.
+        let m = identify_in_window(&Vector3::new(1.0, 0.0, 0.0), 3.5, &q, &cat, &w).unwrap();
+        assert_eq!(m.star.id, 1);
+        // Nothing there.
+        assert_eq!(
+            identify_in_window(&Vector3::new(0.0, 0.0, 1.0), 4.0, &q, &cat, &w),
+            Err(StarIdError::NoMatch)
+        );
+        assert_eq!(
+            identify_in_window(&Vector3::new(f64::NAN, 0.0, 1.0), 4.0, &q, &cat, &w),
+            Err(StarIdError::InvalidInput)
+        );
+    }
+
+    #[test]
+    fn uses_the_attitude() {
+        let mut cat = StarCatalogTable::default();
+        let r = Vector3::new(0.2, -0.5, 0.8).normalize();
+        cat.stars.push(star(7, r, 5.0)).unwrap();
+        cat.stars.push(star(8, -r, 5.0)).unwrap();
+        let q = Quat::from_rotation_vector(&Vector3::new(0.4, 1.0, -2.0));
+        let b = q.to_dcm() * r;
+        let m = identify(&b, 5.1, &q, &cat, &FilterTable::default_boot()).unwrap();
+        assert_eq!(m.star.id, 7);
+        assert!(m.separation_rad < 1e-7, "{}", m.separation_rad);
+        assert!((m.magnitude_difference - 0.1).abs() < 1e-9);
+        assert_eq!(
+            identify(
+                &b,
+                5.1,
+                &q,
+                &StarCatalogTable::default(),
+                &FilterTable::default_boot()
+            ),
+            Err(StarIdError::NoCatalog)
+        );
+    }
+}
