@@ -155,6 +155,7 @@ impl PaperFacts {
 }
 
 #[cfg(test)]
+#[allow(clippy::needless_range_loop)]
 mod tests {
     use super::*;
     use fsw_core::attitude::rot;

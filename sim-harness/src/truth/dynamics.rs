@@ -28,6 +28,10 @@
 //! 4. The IRU truth gets `∫ω dt = h/2 (ω₁ + ω₂)` (Gauss–Legendre, exact for cubic ω),
 //!    what a rate-integrating gyro physically accumulates.
 
+// Wheel quantities are fixed-size parallel arrays indexed by wheel number; indexed loops
+// over `0..wheel_count` read more clearly than zipped iterators here.
+#![allow(clippy::needless_range_loop)]
+
 use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
 
@@ -160,9 +164,7 @@ impl RigidBody {
             }
             None => {
                 // Fewer than three independent axes: allocate by projection (partial control).
-                for k in 0..n {
-                    alloc[k] = wheel_axes[k];
-                }
+                alloc[..n].copy_from_slice(&wheel_axes[..n]);
             }
         }
         let mut wheel_momentum_nms = [0.0; MAX_WHEELS];

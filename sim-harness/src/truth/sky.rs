@@ -34,7 +34,7 @@ use crate::data::CsvTable;
 use fsw_core::units::{RAD_PER_ARCSEC, RAD_PER_DEG};
 
 /// Hipparcos catalogue epoch J1991.25 (TT) as JD.
-pub const HIPPARCOS_EPOCH_JD_TT: f64 = 2_448_349.0625;
+pub const HIPPARCOS_EPOCH_JD_TT: f64 = 2_448_349.062_5;
 /// Radians per milliarcsecond.
 const RAD_PER_MAS: f64 = RAD_PER_ARCSEC * 1.0e-3;
 /// Extra radius for cone queries: covers aberration (26″), parallax (0.8″) and up to ~40 yr
@@ -505,7 +505,7 @@ mod tests {
             Vector3::new(0.0, 0.05, 1.0),
             Vector3::new(0.1, 0.0, -1.0),
             Vector3::new(-0.3, 0.4, 0.86),
-            Vector3::new(-0.7071, -0.7071, 0.0),
+            Vector3::new(-1.0, -1.0, 0.0),
             Vector3::new(0.2, -0.3, -0.93),
         ];
         for c in centers {
