@@ -229,7 +229,7 @@ pub fn build_observations(
             let Some(sample) = raw.fhst.get(id.index()) else {
                 continue;
             };
-            let Ok(meas) = fhst::measure(sample, id, alignment) else {
+            let Ok(meas) = fhst::measure_tracker(sample, id, alignment) else {
                 continue;
             };
             let mut obs = StarObservation {
@@ -275,7 +275,7 @@ pub fn build_observations(
             let Some(sample) = raw.fss.get(id.index()) else {
                 continue;
             };
-            if let Ok(meas) = fss::measure(sample, id, alignment) {
+            if let Ok(meas) = fss::measure_sensor(sample, id, alignment) {
                 suns[id.index()] = Some(SunObservation {
                     meas,
                     sun_eci,
