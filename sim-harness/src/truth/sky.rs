@@ -7,12 +7,14 @@
 //!
 //! # Magnitude system (decision)
 //! The FHST window 2.0–5.7 (gro_paper.toml `[sensors.fhst]`) is applied to an *instrument
-//! magnitude* `m_inst = V + colour_term·(B−V)`, Johnson V by default (`colour_term = 0`).
-//! Reason: the NASA Standard FHST's limits and the GSFC star catalogues of the period were
-//! stated in visual magnitude; the image dissector's S-20 response is bluer than V, which a
-//! non-zero colour term can express. Hp (the Hipparcos broad band) is selectable with
-//! `magnitude_system = "hp"`; Hp − V is −0.05..+0.17 mag for normal stars (data/README.md),
-//! so the choice moves the faint limit by ~0.1 mag. Rows with an empty V fall back to Hp.
+//! magnitude* `m_inst = m + colour_term·(B−V)` with `m` the Hipparcos **Hp** by default
+//! (`colour_term = 0`). Reason: the ICD (docs/icd.md §3.1) defines the FHST magnitude word as
+//! "instrument magnitude ≈ Hipparcos Hp", and the image dissector's S-20 photocathode is a
+//! broad band like Hp rather than Johnson V. `magnitude_system = "v"` selects V instead;
+//! Hp − V is −0.05..+0.17 mag for normal stars (data/README.md), so the choice moves the
+//! faint limit by ~0.1 mag and changes the eligible set by ~10 % (3231 stars in Hp, 3544 in
+//! V). Very red variables and 5 double-star entries have Hp up to 3 mag brighter than V: they
+//! are tracked as bright in Hp, a realistic catalogue hazard. Rows with an empty V use Hp.
 //!
 //! # Index
 //! Declination bands of `cell_deg`, each split into right-ascension cells about `cell_deg`
@@ -45,10 +47,10 @@ pub const INDEX_MARGIN_RAD: f64 = 180.0 * RAD_PER_ARCSEC;
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "snake_case")]
 pub enum MagnitudeSystem {
-    /// Johnson V (default).
-    #[default]
+    /// Johnson V.
     V,
-    /// Hipparcos Hp.
+    /// Hipparcos Hp (default, as the ICD).
+    #[default]
     Hp,
 }
 
@@ -78,7 +80,7 @@ pub struct SkyParams {
 impl Default for SkyParams {
     fn default() -> Self {
         Self {
-            magnitude_system: MagnitudeSystem::V,
+            magnitude_system: MagnitudeSystem::Hp,
             colour_term: 0.0,
             apply_parallax: true,
             proper_motion_scale: 1.0,
@@ -526,10 +528,17 @@ mod tests {
         }
     }
 
-    /// Eligible FHST stars (2.0 ≤ V ≤ 5.7) and their density, for the record.
+    /// Eligible FHST stars (2.0 ≤ m ≤ 5.7) and their density, for the record.
     #[test]
     fn fhst_window_star_count() {
-        let sky = sky();
+        let sky = Sky::load(
+            &data_dir().join("hipparcos_mag6p5.csv"),
+            &SkyParams {
+                magnitude_system: MagnitudeSystem::V,
+                ..SkyParams::default()
+            },
+        )
+        .unwrap();
         let n = sky
             .stars()
             .iter()
@@ -549,10 +558,11 @@ mod tests {
             .filter(|s| (2.0..=5.7).contains(&s.magnitude))
             .count();
         eprintln!(
-            "FHST-eligible stars: {n} in V, {n_hp} in Hp; {:.2} per 8x8 deg FOV",
-            n as f64 * 64.0 / 41_253.0
+            "FHST-eligible stars: {n} in V, {n_hp} in Hp; {:.2} per 8x8 deg FOV (Hp)",
+            n_hp as f64 * 64.0 / 41_253.0
         );
         assert!((3000..4200).contains(&n), "{n}");
+        assert!((3000..4200).contains(&n_hp), "{n_hp}");
     }
 
     #[test]
