@@ -9,5 +9,6 @@
 //! 5. Every error parameter is a serde field with a default; undeclared effects default off.
 pub mod data;
 pub mod paper;
+pub mod scenario;
 pub mod sensors;
 pub mod truth;
