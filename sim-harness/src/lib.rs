@@ -7,6 +7,10 @@
 //! 3. Deterministic: every random draw comes from a seeded `ChaCha8Rng`, one stream per model.
 //! 4. The per-cycle path does not allocate.
 //! 5. Every error parameter is a serde field with a default; undeclared effects default off.
+/// The closed-loop driver needs `fsw_core::executive` (`FlightCore`), which is written but
+/// not yet exported by fsw-core; build it with `--features closed-loop` once it is.
+#[cfg(feature = "closed-loop")]
+pub mod closed_loop;
 pub mod data;
 pub mod paper;
 pub mod scenario;
