@@ -34,7 +34,11 @@ pub struct FfcalTiming {
 ///
 /// # Errors
 /// Any [`AlignmentError`] of the run.
-pub fn ffcal_timing(pairs: usize, weighting: Weighting, seed: u64) -> Result<FfcalTiming, AlignmentError> {
+pub fn ffcal_timing(
+    pairs: usize,
+    weighting: Weighting,
+    seed: u64,
+) -> Result<FfcalTiming, AlignmentError> {
     let per_epoch = match weighting {
         Weighting::Optimal1990 => 5,
         Weighting::Shuster1982 => 6,
@@ -51,8 +55,14 @@ pub fn ffcal_timing(pairs: usize, weighting: Weighting, seed: u64) -> Result<Ffc
     let mut rng = Rng::new(seed);
     let data = alignment_data(&mut rng, &syn, epochs);
     let generate_s = t0.elapsed().as_secs_f64();
-    let specs: Vec<SensorSpec> = syn.iter().map(|s| SensorSpec::new(&s.id, s.m_acs_from_sensor_prelaunch, 3600.0)).collect();
-    let cfg = FfcalConfig { weighting, ..FfcalConfig::default() };
+    let specs: Vec<SensorSpec> = syn
+        .iter()
+        .map(|s| SensorSpec::new(&s.id, s.m_acs_from_sensor_prelaunch, 3600.0))
+        .collect();
+    let cfg = FfcalConfig {
+        weighting,
+        ..FfcalConfig::default()
+    };
     let t1 = Instant::now();
     let sol = ffcal(&specs, &data, &cfg)?;
     let ffcal_s = t1.elapsed().as_secs_f64();

@@ -58,6 +58,7 @@ pub fn sym_pinv(m: &DMatrix<f64>, rel_tol: f64) -> (DMatrix<f64>, usize) {
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 mod tests {
     use super::*;
 

@@ -162,7 +162,7 @@ use serde::Serialize;
 use fsw_core::attitude::rotvec_from_rot;
 
 use crate::calibration::adjust::{m_an_rotation_arcsec, BoresightFrame};
-use crate::calibration::iru::{study_plan, GyroNoise, IruError, PlannedManeuver, PlanStudy};
+use crate::calibration::iru::{study_plan, GyroNoise, IruError, PlanStudy, PlannedManeuver};
 use crate::{ARCSEC_PER_RAD, DEG_PER_RAD, RAD_PER_ARCSEC, RAD_PER_DEG};
 
 /// The four sensors, in the paper's order.
@@ -218,7 +218,8 @@ pub fn orthonormality_error(m: &Matrix3<f64>) -> f64 {
 /// rotations.
 #[must_use]
 pub fn rotation_vector_arcsec(m_pre: &Matrix3<f64>, m_adj: &Matrix3<f64>) -> Vector3<f64> {
-    rotvec_from_rot(&(nearest_rotation(m_adj) * nearest_rotation(m_pre).transpose())) * ARCSEC_PER_RAD
+    rotvec_from_rot(&(nearest_rotation(m_adj) * nearest_rotation(m_pre).transpose()))
+        * ARCSEC_PER_RAD
 }
 
 fn angle_between_rad(a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
@@ -342,12 +343,17 @@ fn uses_fss(sensors: &[String]) -> bool {
     sensors.iter().any(|s| s.starts_with("FSS"))
 }
 
-fn iru_study(p: &PaperData, end_cov_rad2: impl Fn(&[String]) -> Matrix3<f64>) -> Result<PlanStudy, PaperError> {
+fn iru_study(
+    p: &PaperData,
+    end_cov_rad2: impl Fn(&[String]) -> Matrix3<f64>,
+) -> Result<PlanStudy, PaperError> {
     let plan = p
         .iru_calibration_intervals
         .iter()
         .map(|m| {
-            let axis = axis_vector(&m.axis).ok_or_else(|| PaperError::Missing(format!("a valid maneuver axis (got {})", m.axis)))?;
+            let axis = axis_vector(&m.axis).ok_or_else(|| {
+                PaperError::Missing(format!("a valid maneuver axis (got {})", m.axis))
+            })?;
             Ok(PlannedManeuver {
                 axis_acs: axis,
                 angle_rad: m.angle_deg * RAD_PER_DEG,
@@ -357,7 +363,10 @@ fn iru_study(p: &PaperData, end_cov_rad2: impl Fn(&[String]) -> Matrix3<f64>) ->
             })
         })
         .collect::<Result<Vec<_>, PaperError>>()?;
-    let noise = GyroNoise { sigma_v_rad_per_sqrt_s: 0.0, sigma_u_rad_per_s_1p5: PLAN_SIGMA_U_RAD_PER_S_1P5 };
+    let noise = GyroNoise {
+        sigma_v_rad_per_sqrt_s: 0.0,
+        sigma_u_rad_per_s_1p5: PLAN_SIGMA_U_RAD_PER_S_1P5,
+    };
     Ok(study_plan(&plan, &noise, 1.0)?)
 }
 
@@ -384,8 +393,12 @@ pub fn reproduce() -> Result<PaperReproduction, PaperError> {
     let mut sensors = Vec::new();
     let mut table3_max = 0.0_f64;
     for id in SENSORS {
-        let m_pre = p.prelaunch(id).ok_or_else(|| missing(&format!("table1_prelaunch.{id}")))?;
-        let m_ss = p.misalignment(id).ok_or_else(|| missing(&format!("table2_misalignment.{id}")))?;
+        let m_pre = p
+            .prelaunch(id)
+            .ok_or_else(|| missing(&format!("table1_prelaunch.{id}")))?;
+        let m_ss = p
+            .misalignment(id)
+            .ok_or_else(|| missing(&format!("table2_misalignment.{id}")))?;
         let product = m_pre * m_ss;
         let published = p.adjusted_published(id);
         let (diff, at) = match &published {
@@ -408,7 +421,9 @@ pub fn reproduce() -> Result<PaperReproduction, PaperError> {
         let theta = rotation_vector_arcsec(&m_pre, &product);
         let boresight_pre = m_pre.column(2).into_owned().normalize();
         let boresight_adj = product.column(2).into_owned().normalize();
-        let published_vec = p.rotation_vector_published_arcsec(id).ok_or_else(|| missing(&format!("rotation_vectors_published_arcsec.{id}")))?;
+        let published_vec = p
+            .rotation_vector_published_arcsec(id)
+            .ok_or_else(|| missing(&format!("rotation_vectors_published_arcsec.{id}")))?;
         sensors.push(SensorReproduction {
             id: id.to_owned(),
             table3_product: rows(&product),
@@ -418,13 +433,17 @@ pub fn reproduce() -> Result<PaperReproduction, PaperError> {
             rotation_vector_arcsec: theta.into(),
             rotation_magnitude_arcsec: theta.norm(),
             rotation_vector_sensor_arcsec: (nearest_rotation(&m_pre).transpose() * theta).into(),
-            rotation_vector_from_published_table3_arcsec: published.map(|m3| rotation_vector_arcsec(&m_pre, &m3).into()),
+            rotation_vector_from_published_table3_arcsec: published
+                .map(|m3| rotation_vector_arcsec(&m_pre, &m3).into()),
             rotation_vector_published_arcsec: published_vec.into(),
             rotation_magnitude_published_arcsec: p
                 .rotation_magnitude_published_arcsec(id)
-                .ok_or_else(|| missing(&format!("rotation_vectors_published_arcsec.magnitude.{id}")))?,
+                .ok_or_else(|| {
+                    missing(&format!("rotation_vectors_published_arcsec.magnitude.{id}"))
+                })?,
             published_vector_norm_arcsec: published_vec.norm(),
-            boresight_shift_arcsec: angle_between_rad(&boresight_pre, &boresight_adj) * ARCSEC_PER_RAD,
+            boresight_shift_arcsec: angle_between_rad(&boresight_pre, &boresight_adj)
+                * ARCSEC_PER_RAD,
             roll_about_boresight_arcsec: theta.dot(&boresight_pre),
         });
     }
@@ -436,25 +455,38 @@ pub fn reproduce() -> Result<PaperReproduction, PaperError> {
     let sep_adj = angle_between_rad(&bore(&adj1), &bore(&adj2));
     let prod = |i: usize| mat(&sensors[i].table3_product);
     let sep_prod = angle_between_rad(&bore(&prod(0)), &bore(&prod(1)));
-    let m_an = |c| m_an_rotation_arcsec((&pre1, &pre2), (&adj1, &adj2), c).map_err(|e| PaperError::Missing(e.to_string()));
+    let m_an = |c| {
+        m_an_rotation_arcsec((&pre1, &pre2), (&adj1, &adj2), c)
+            .map_err(|e| PaperError::Missing(e.to_string()))
+    };
 
     let fss_sigma_rad = p.fss_inherent_error_deg() * RAD_PER_DEG;
     let fhst_sigma_rad = FHST_ONLY_END_SIGMA_ARCSEC * RAD_PER_ARCSEC;
     let iso = |s: f64| Matrix3::identity() * s * s;
     let fss_ends = iru_study(&p, |_| iso(fss_sigma_rad))?;
-    let as_flown_isotropic = iru_study(&p, |s| iso(if uses_fss(s) { fss_sigma_rad } else { fhst_sigma_rad }))?;
+    let as_flown_isotropic = iru_study(&p, |s| {
+        iso(if uses_fss(s) {
+            fss_sigma_rad
+        } else {
+            fhst_sigma_rad
+        })
+    })?;
     // FSS + FHST: the tracker fixes the two axes across its boresight (10″), the Sun only the
     // roll about that boresight (0.022°).
     let as_flown = iru_study(&p, |s| {
         if !uses_fss(s) {
             return iso(fhst_sigma_rad);
         }
-        let tracker = s.iter().find(|x| x.starts_with("FHST")).and_then(|id| p.prelaunch(id));
+        let tracker = s
+            .iter()
+            .find(|x| x.starts_with("FHST"))
+            .and_then(|id| p.prelaunch(id));
         match tracker {
             Some(m) => {
                 let e = m.column(2).into_owned().normalize();
                 let along = e * e.transpose();
-                (Matrix3::identity() - along) * fhst_sigma_rad * fhst_sigma_rad + along * fss_sigma_rad * fss_sigma_rad
+                (Matrix3::identity() - along) * fhst_sigma_rad * fhst_sigma_rad
+                    + along * fss_sigma_rad * fss_sigma_rad
             }
             None => iso(fss_sigma_rad),
         }
@@ -462,8 +494,19 @@ pub fn reproduce() -> Result<PaperReproduction, PaperError> {
     let fhst_only = iru_study(&p, |_| iso(fhst_sigma_rad))?;
     let published = mat(&p.iru_calibration_published.delta_m_1sigma);
     let ratio = |s: &PlanStudy| rows(&s.sigma_delta_m.component_div(&published));
-    let improvement = median(published.component_div(&fhst_only.sigma_delta_m).iter().copied().collect());
-    let bias_pub = |ch: &str| p.iru_high_rate_bias_deg_per_s.get("primary").and_then(|m| m.get(ch)).map(|v| v[1]);
+    let improvement = median(
+        published
+            .component_div(&fhst_only.sigma_delta_m)
+            .iter()
+            .copied()
+            .collect(),
+    );
+    let bias_pub = |ch: &str| {
+        p.iru_high_rate_bias_deg_per_s
+            .get("primary")
+            .and_then(|m| m.get(ch))
+            .map(|v| v[1])
+    };
     let sigma_bias_published_deg_per_s = [
         bias_pub("X2").ok_or_else(|| missing("iru_high_rate_bias_deg_per_s.primary.X2"))?,
         bias_pub("Y1").ok_or_else(|| missing("iru_high_rate_bias_deg_per_s.primary.Y1"))?,
@@ -476,12 +519,23 @@ pub fn reproduce() -> Result<PaperReproduction, PaperError> {
         fhst_boresight_separation_prelaunch_deg: sep_pre * DEG_PER_RAD,
         fhst_boresight_separation_change_arcsec: (sep_adj - sep_pre) * ARCSEC_PER_RAD,
         fhst_boresight_separation_change_product_arcsec: (sep_prod - sep_pre) * ARCSEC_PER_RAD,
-        fhst_boresight_separation_reduction_published_arcsec: p.alignment_results_published.fhst_boresight_separation_reduction_arcsec,
+        fhst_boresight_separation_reduction_published_arcsec: p
+            .alignment_results_published
+            .fhst_boresight_separation_reduction_arcsec,
         m_an_rotation_bisector_arcsec: m_an(BoresightFrame::Bisector)?,
         m_an_rotation_fhst1_arcsec: m_an(BoresightFrame::Fhst1Boresight)?,
-        fss_rotation_deg: [sensors[2].rotation_magnitude_arcsec / 3600.0, sensors[3].rotation_magnitude_arcsec / 3600.0],
-        fss_boresight_shift_deg: [sensors[2].boresight_shift_arcsec / 3600.0, sensors[3].boresight_shift_arcsec / 3600.0],
-        fss_misalignment_published_deg: [p.alignment_results_published.fss1_misalignment_deg, p.alignment_results_published.fss2_misalignment_deg],
+        fss_rotation_deg: [
+            sensors[2].rotation_magnitude_arcsec / 3600.0,
+            sensors[3].rotation_magnitude_arcsec / 3600.0,
+        ],
+        fss_boresight_shift_deg: [
+            sensors[2].boresight_shift_arcsec / 3600.0,
+            sensors[3].boresight_shift_arcsec / 3600.0,
+        ],
+        fss_misalignment_published_deg: [
+            p.alignment_results_published.fss1_misalignment_deg,
+            p.alignment_results_published.fss2_misalignment_deg,
+        ],
         iru: IruPlanReproduction {
             fss_end_sigma_deg: p.fss_inherent_error_deg(),
             fhst_end_sigma_arcsec: FHST_ONLY_END_SIGMA_ARCSEC,
@@ -494,7 +548,9 @@ pub fn reproduce() -> Result<PaperReproduction, PaperError> {
             sigma_delta_m_as_flown_isotropic: rows(&as_flown_isotropic.sigma_delta_m),
             ratio_as_flown_isotropic_to_published: ratio(&as_flown_isotropic),
             sigma_bias_as_flown_deg_per_s: deg(&as_flown.sigma_bias_acs_rad_per_s),
-            sigma_bias_as_flown_isotropic_deg_per_s: deg(&as_flown_isotropic.sigma_bias_acs_rad_per_s),
+            sigma_bias_as_flown_isotropic_deg_per_s: deg(
+                &as_flown_isotropic.sigma_bias_acs_rad_per_s
+            ),
             fhst_only_improvement_median: improvement,
             sigma_bias_fss_ends_deg_per_s: deg(&fss_ends.sigma_bias_acs_rad_per_s),
             sigma_bias_fhst_only_deg_per_s: deg(&fhst_only.sigma_bias_acs_rad_per_s),
@@ -508,8 +564,11 @@ pub fn reproduce() -> Result<PaperReproduction, PaperError> {
 /// full reproduction under `details`.
 #[must_use]
 pub fn to_json(r: &PaperReproduction) -> serde_json::Value {
-    let mag: serde_json::Map<String, serde_json::Value> =
-        r.sensors.iter().map(|s| (s.id.clone(), serde_json::json!(s.rotation_magnitude_arcsec))).collect();
+    let mag: serde_json::Map<String, serde_json::Value> = r
+        .sensors
+        .iter()
+        .map(|s| (s.id.clone(), serde_json::json!(s.rotation_magnitude_arcsec)))
+        .collect();
     serde_json::json!({
         "table3": {
             "max_abs_diff_fhst": r.table3_max_abs_diff_fhst,
@@ -530,20 +589,29 @@ fn fmt3(v: &[f64; 3], prec: usize) -> String {
 }
 
 fn fmt_rows(m: &Rows3, scale: f64, prec: usize) -> String {
-    m.iter().map(|r| fmt3(&[r[0] * scale, r[1] * scale, r[2] * scale], prec)).collect::<Vec<_>>().join(" ")
+    m.iter()
+        .map(|r| fmt3(&[r[0] * scale, r[1] * scale, r[2] * scale], prec))
+        .collect::<Vec<_>>()
+        .join(" ")
 }
 
 /// Human-readable side-by-side table: quantity, published, ours, explanation.
 #[must_use]
 pub fn render_table(r: &PaperReproduction) -> String {
     let mut rows: Vec<[String; 4]> = Vec::new();
-    let mut push = |q: &str, p: String, o: String, n: &str| rows.push([q.to_owned(), p, o, n.to_owned()]);
+    let mut push =
+        |q: &str, p: String, o: String, n: &str| rows.push([q.to_owned(), p, o, n.to_owned()]);
     for s in r.sensors.iter().filter(|s| s.table3_max_abs_diff.is_some()) {
         let (row, col) = s.table3_max_abs_diff_at.unwrap_or((0, 0));
         push(
             &format!("Table 3 {} = Table 1 × Table 2", s.id),
             "as printed".into(),
-            format!("max |Δ| {:.1e} at ({},{})", s.table3_max_abs_diff.unwrap_or(f64::NAN), row + 1, col + 1),
+            format!(
+                "max |Δ| {:.1e} at ({},{})",
+                s.table3_max_abs_diff.unwrap_or(f64::NAN),
+                row + 1,
+                col + 1
+            ),
             if s.id == "FHST1" {
                 "agrees to the printed 8 digits once the lost minus sign of element (1,1) is restored (the product fixes it)"
             } else {
@@ -569,7 +637,9 @@ pub fn render_table(r: &PaperReproduction) -> String {
             format!("{:.1}", s.rotation_magnitude_arcsec),
             &format!(
                 "boresight moved {:.1}″, roll about boresight {:.1}″; |printed vector| = {:.1}″",
-                s.boresight_shift_arcsec, s.roll_about_boresight_arcsec, s.published_vector_norm_arcsec
+                s.boresight_shift_arcsec,
+                s.roll_about_boresight_arcsec,
+                s.published_vector_norm_arcsec
             ),
         );
     }
@@ -596,7 +666,10 @@ pub fn render_table(r: &PaperReproduction) -> String {
             &format!("FSS{} misalignment (°)", k + 1),
             format!("{:.2}", r.fss_misalignment_published_deg[k]),
             format!("{:.3}", r.fss_rotation_deg[k]),
-            &format!("= rotation angle |θ|; the boresight itself moved only {:.3}°", r.fss_boresight_shift_deg[k]),
+            &format!(
+                "= rotation angle |θ|; the boresight itself moved only {:.3}°",
+                r.fss_boresight_shift_deg[k]
+            ),
         );
     }
     let iru = &r.iru;
@@ -640,17 +713,42 @@ pub fn render_table(r: &PaperReproduction) -> String {
             fmt3(&iru.sigma_bias_fhst_only_deg_per_s.map(|x| x * 1e5), 2)
         ),
     );
-    let widths: [usize; 3] = std::array::from_fn(|k| rows.iter().map(|r| r[k].chars().count()).max().unwrap_or(0).min(60));
+    let widths: [usize; 3] = std::array::from_fn(|k| {
+        rows.iter()
+            .map(|r| r[k].chars().count())
+            .max()
+            .unwrap_or(0)
+            .min(60)
+    });
     let mut out = String::new();
     let header = ["Quantity", "Published", "Ours", "Explanation"];
-    out.push_str(&format!("{:w0$}  {:w1$}  {:w2$}  {}\n", header[0], header[1], header[2], header[3], w0 = widths[0], w1 = widths[1], w2 = widths[2]));
+    out.push_str(&format!(
+        "{:w0$}  {:w1$}  {:w2$}  {}\n",
+        header[0],
+        header[1],
+        header[2],
+        header[3],
+        w0 = widths[0],
+        w1 = widths[1],
+        w2 = widths[2]
+    ));
     for r in &rows {
-        out.push_str(&format!("{:w0$}  {:w1$}  {:w2$}  {}\n", r[0], r[1], r[2], r[3], w0 = widths[0], w1 = widths[1], w2 = widths[2]));
+        out.push_str(&format!(
+            "{:w0$}  {:w1$}  {:w2$}  {}\n",
+            r[0],
+            r[1],
+            r[2],
+            r[3],
+            w0 = widths[0],
+            w1 = widths[1],
+            w2 = widths[2]
+        ));
     }
     out
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 mod tests {
     use super::*;
 
@@ -663,7 +761,11 @@ mod tests {
     #[test]
     fn val_paper_table3_is_table1_times_table2() {
         let r = repro();
-        assert!(r.table3_max_abs_diff_fhst < 2.5e-7, "{}", r.table3_max_abs_diff_fhst);
+        assert!(
+            r.table3_max_abs_diff_fhst < 2.5e-7,
+            "{}",
+            r.table3_max_abs_diff_fhst
+        );
         assert!(r.sensors[0].table3_max_abs_diff.unwrap() < 1e-7);
         // FHST1 (1,1) is negative in the product: the sign fix of the transcription is right
         assert!(r.sensors[0].table3_product[0][0] < -0.7);
@@ -675,16 +777,32 @@ mod tests {
     fn val_paper_rotation_magnitudes() {
         let r = repro();
         for s in &r.sensors {
-            let rel = (s.rotation_magnitude_arcsec - s.rotation_magnitude_published_arcsec) / s.rotation_magnitude_published_arcsec;
-            let tol = if s.id.starts_with("FSS") { 1.0 / s.rotation_magnitude_published_arcsec } else { 0.035 };
-            assert!(rel.abs() < tol, "{}: ours {} published {}", s.id, s.rotation_magnitude_arcsec, s.rotation_magnitude_published_arcsec);
+            let rel = (s.rotation_magnitude_arcsec - s.rotation_magnitude_published_arcsec)
+                / s.rotation_magnitude_published_arcsec;
+            let tol = if s.id.starts_with("FSS") {
+                1.0 / s.rotation_magnitude_published_arcsec
+            } else {
+                0.035
+            };
+            assert!(
+                rel.abs() < tol,
+                "{}: ours {} published {}",
+                s.id,
+                s.rotation_magnitude_arcsec,
+                s.rotation_magnitude_published_arcsec
+            );
             // published magnitude is the norm of the printed vector to the printed precision
-            assert!((s.published_vector_norm_arcsec - s.rotation_magnitude_published_arcsec).abs() < 0.6);
+            assert!(
+                (s.published_vector_norm_arcsec - s.rotation_magnitude_published_arcsec).abs()
+                    < 0.6
+            );
         }
         // FHST boresight-tilt component (ACS z) agrees to 0.1″
         for k in 0..2 {
             let s = &r.sensors[k];
-            assert!((s.rotation_vector_arcsec[2] - s.rotation_vector_published_arcsec[2]).abs() < 0.1);
+            assert!(
+                (s.rotation_vector_arcsec[2] - s.rotation_vector_published_arcsec[2]).abs() < 0.1
+            );
         }
     }
 
@@ -694,7 +812,12 @@ mod tests {
     #[test]
     fn val_paper_alignment_statements() {
         let r = repro();
-        assert!((r.fhst_boresight_separation_change_arcsec + r.fhst_boresight_separation_reduction_published_arcsec).abs() < 0.2);
+        assert!(
+            (r.fhst_boresight_separation_change_arcsec
+                + r.fhst_boresight_separation_reduction_published_arcsec)
+                .abs()
+                < 0.2
+        );
         assert!(r.m_an_rotation_bisector_arcsec < 0.01);
         assert!(r.m_an_rotation_fhst1_arcsec > 10.0);
         for k in 0..2 {
@@ -709,18 +832,30 @@ mod tests {
         let r = repro();
         let ratio = r.iru.ratio_as_flown_isotropic_to_published;
         for row in ratio {
-            assert!((row[0] - 1.0).abs() < 0.15 && (row[2] - 1.0).abs() < 0.15, "{row:?}");
+            assert!(
+                (row[0] - 1.0).abs() < 0.15 && (row[2] - 1.0).abs() < 0.15,
+                "{row:?}"
+            );
             assert!(row[1] > 1.0 && row[1] < 2.0, "{row:?}");
         }
         assert!(r.iru.fhst_only_improvement_median > 2.5);
         let json = to_json(&r);
-        for key in ["fhst_boresight_separation_change_arcsec", "m_an_preserved_arcsec", "iru_fhst_only_improvement"] {
+        for key in [
+            "fhst_boresight_separation_change_arcsec",
+            "m_an_preserved_arcsec",
+            "iru_fhst_only_improvement",
+        ] {
             assert!(json[key].is_number(), "{key}");
         }
         assert!(json["table3"]["max_abs_diff_fhst"].is_number());
         for id in SENSORS {
             assert!(json["rotation_magnitude_arcsec"][id].is_number());
         }
-        assert_eq!(json["iru_plan_sigma_ratio_to_published"].as_array().map(Vec::len), Some(3));
+        assert_eq!(
+            json["iru_plan_sigma_ratio_to_published"]
+                .as_array()
+                .map(Vec::len),
+            Some(3)
+        );
     }
 }

@@ -113,6 +113,7 @@ pub fn dir_in_square_fov(rng: &mut Rng, half_fov_rad: f64) -> Vector3<f64> {
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 mod tests {
     use super::*;
 
@@ -131,7 +132,10 @@ mod tests {
     fn rotations_are_proper() {
         let mut rng = Rng::new(3);
         for _ in 0..20 {
-            assert!(fsw_core::attitude::is_proper_rotation(&rng.rotation(), 1e-12));
+            assert!(fsw_core::attitude::is_proper_rotation(
+                &rng.rotation(),
+                1e-12
+            ));
         }
     }
 }
@@ -172,7 +176,8 @@ pub fn alignment_epoch(
         .enumerate()
         .map(|(sensor, s)| {
             let dir_true_sensor = dir_in_square_fov(rng, s.half_fov_rad);
-            let dir_eci = m_acs_from_eci.transpose() * (s.m_acs_from_sensor_true() * dir_true_sensor);
+            let dir_eci =
+                m_acs_from_eci.transpose() * (s.m_acs_from_sensor_true() * dir_true_sensor);
             let dir_sensor = perturb_unit_vector(rng, &dir_true_sensor, s.sigma_rad);
             crate::calibration::alignment::SensorObservation {
                 sensor,
@@ -191,7 +196,8 @@ pub fn alignment_data(
     sensors: &[SyntheticSensor],
     epochs: usize,
 ) -> crate::calibration::alignment::AlignmentData {
-    let mut data = crate::calibration::alignment::AlignmentData::with_capacity(epochs, sensors.len());
+    let mut data =
+        crate::calibration::alignment::AlignmentData::with_capacity(epochs, sensors.len());
     for _ in 0..epochs {
         let obs = alignment_epoch(rng, sensors);
         // Synthetic epochs are valid by construction (≥ 2 sensors, unit vectors, σ > 0).

@@ -131,6 +131,7 @@ pub fn solve_attitude(pairs: &[VectorPair]) -> Result<AttitudeSolution, Attitude
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 mod tests {
     use super::*;
     use crate::synth::{perturb_unit_vector, Rng};
@@ -146,7 +147,11 @@ mod tests {
             .map(|&sigma_rad| {
                 let dir_eci = rng.unit_vector();
                 let dir_acs = perturb_unit_vector(rng, &(m_acs_from_eci * dir_eci), sigma_rad);
-                VectorPair { dir_acs, dir_eci, sigma_rad }
+                VectorPair {
+                    dir_acs,
+                    dir_eci,
+                    sigma_rad,
+                }
             })
             .collect()
     }
@@ -158,7 +163,10 @@ mod tests {
             let a = rng.rotation();
             let pairs = pairs_for(&mut rng, &a, &[0.0, 0.0, 0.0])
                 .into_iter()
-                .map(|p| VectorPair { sigma_rad: 1e-5, ..p })
+                .map(|p| VectorPair {
+                    sigma_rad: 1e-5,
+                    ..p
+                })
                 .collect::<Vec<_>>();
             let sol = solve_attitude(&pairs).unwrap();
             assert!((sol.m_acs_from_eci - a).norm() < 1e-12);
@@ -185,17 +193,31 @@ mod tests {
             sum += dtheta.dot(&(sol.cov_acs_rad2.try_inverse().unwrap() * dtheta));
         }
         let mean = sum / f64::from(n) / 3.0;
-        assert!((mean - 1.0).abs() < 0.08, "normalised error variance {mean}");
+        assert!(
+            (mean - 1.0).abs() < 0.08,
+            "normalised error variance {mean}"
+        );
     }
 
     #[test]
     fn parallel_vectors_are_unobservable() {
         let v = Vector3::new(0.0, 0.0, 1.0);
         let pairs = [
-            VectorPair { dir_acs: v, dir_eci: v, sigma_rad: 1e-5 },
-            VectorPair { dir_acs: v, dir_eci: v, sigma_rad: 1e-5 },
+            VectorPair {
+                dir_acs: v,
+                dir_eci: v,
+                sigma_rad: 1e-5,
+            },
+            VectorPair {
+                dir_acs: v,
+                dir_eci: v,
+                sigma_rad: 1e-5,
+            },
         ];
-        assert!(matches!(solve_attitude(&pairs), Err(AttitudeError::Unobservable { .. })));
+        assert!(matches!(
+            solve_attitude(&pairs),
+            Err(AttitudeError::Unobservable { .. })
+        ));
         assert!(matches!(
             solve_attitude(&pairs[..1]),
             Err(AttitudeError::TooFewVectors { got: 1 })
@@ -208,8 +230,16 @@ mod tests {
     fn two_vector_closed_form() {
         let sigma = 1e-4;
         let pairs = [
-            VectorPair { dir_acs: Vector3::x(), dir_eci: Vector3::x(), sigma_rad: sigma },
-            VectorPair { dir_acs: Vector3::y(), dir_eci: Vector3::y(), sigma_rad: sigma },
+            VectorPair {
+                dir_acs: Vector3::x(),
+                dir_eci: Vector3::x(),
+                sigma_rad: sigma,
+            },
+            VectorPair {
+                dir_acs: Vector3::y(),
+                dir_eci: Vector3::y(),
+                sigma_rad: sigma,
+            },
         ];
         let sol = solve_attitude(&pairs).unwrap();
         let expect = Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, 0.5)) * sigma * sigma;

@@ -140,7 +140,10 @@ pub fn preserve_obc_attitude(
         construction,
         m_adjust,
         theta_adjust_acs_arcsec: rotvec_from_rot(&m_adjust) * ARCSEC_PER_RAD,
-        m_acs_from_sensor_adjusted: m_acs_from_sensor_calibrated.iter().map(|m| m_adjust * m).collect(),
+        m_acs_from_sensor_adjusted: m_acs_from_sensor_calibrated
+            .iter()
+            .map(|m| m_adjust * m)
+            .collect(),
     })
 }
 
@@ -160,6 +163,7 @@ pub fn m_an_rotation_arcsec(
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 mod tests {
     use super::*;
     use crate::paper::PaperData;
@@ -168,7 +172,10 @@ mod tests {
 
     fn prelaunch() -> Vec<Matrix3<f64>> {
         let p = PaperData::embedded().unwrap();
-        ["FHST1", "FHST2", "FSS1", "FSS2"].iter().map(|id| p.prelaunch(id).unwrap()).collect()
+        ["FHST1", "FHST2", "FSS1", "FSS2"]
+            .iter()
+            .map(|id| p.prelaunch(id).unwrap())
+            .collect()
     }
 
     /// The adjusted FHST frame equals the prelaunch one to 1e-12 (rounding of 3×3 products),
@@ -184,19 +191,31 @@ mod tests {
         ];
         // calibrated = true relative alignments + an arbitrary common rotation (unobservable)
         let common = rot(&(Vector3::new(30.0, -70.0, 20.0) * RAD_PER_ARCSEC));
-        let cal: Vec<Matrix3<f64>> =
-            pre.iter().zip(&thetas).map(|(m, t)| common * rot(&(t * RAD_PER_ARCSEC)) * m).collect();
+        let cal: Vec<Matrix3<f64>> = pre
+            .iter()
+            .zip(&thetas)
+            .map(|(m, t)| common * rot(&(t * RAD_PER_ARCSEC)) * m)
+            .collect();
         for construction in [BoresightFrame::Bisector, BoresightFrame::Fhst1Boresight] {
             let adj = preserve_obc_attitude(&pre, &cal, 0, 1, construction).unwrap();
             let before = m_acs_from_n(&pre[0], &pre[1], construction).unwrap();
-            let after = m_acs_from_n(&adj.m_acs_from_sensor_adjusted[0], &adj.m_acs_from_sensor_adjusted[1], construction)
-                .unwrap();
-            assert!((after - before).amax() < 1e-12, "{construction:?}: {}", (after - before).amax());
+            let after = m_acs_from_n(
+                &adj.m_acs_from_sensor_adjusted[0],
+                &adj.m_acs_from_sensor_adjusted[1],
+                construction,
+            )
+            .unwrap();
+            assert!(
+                (after - before).amax() < 1e-12,
+                "{construction:?}: {}",
+                (after - before).amax()
+            );
             for i in 0..4 {
                 for j in 0..4 {
                     // m_i_from_j = M_iᵀ M_j is invariant under a common left rotation
                     let rel_cal = cal[i].transpose() * cal[j];
-                    let rel_adj = adj.m_acs_from_sensor_adjusted[i].transpose() * adj.m_acs_from_sensor_adjusted[j];
+                    let rel_adj = adj.m_acs_from_sensor_adjusted[i].transpose()
+                        * adj.m_acs_from_sensor_adjusted[j];
                     assert!((rel_cal - rel_adj).amax() < 1e-12);
                 }
             }

@@ -112,7 +112,10 @@ impl AlignmentData {
     pub fn push_epoch(&mut self, observations: &[SensorObservation]) -> Result<(), AlignmentError> {
         let epoch = self.epoch_ends.len();
         if observations.len() < 2 {
-            return Err(AlignmentError::TooFewObservations { epoch, got: observations.len() });
+            return Err(AlignmentError::TooFewObservations {
+                epoch,
+                got: observations.len(),
+            });
         }
         for (index, o) in observations.iter().enumerate() {
             let ns = o.dir_sensor.norm();
@@ -127,11 +130,12 @@ impl AlignmentData {
                 return Err(AlignmentError::InvalidObservation { epoch, index });
             }
         }
-        self.observations.extend(observations.iter().map(|o| SensorObservation {
-            dir_sensor: o.dir_sensor.normalize(),
-            dir_eci: o.dir_eci.normalize(),
-            ..*o
-        }));
+        self.observations
+            .extend(observations.iter().map(|o| SensorObservation {
+                dir_sensor: o.dir_sensor.normalize(),
+                dir_eci: o.dir_eci.normalize(),
+                ..*o
+            }));
         self.epoch_ends.push(self.observations.len());
         Ok(())
     }
@@ -151,7 +155,11 @@ impl AlignmentData {
     /// Observations of epoch `i` (empty if out of range).
     #[must_use]
     pub fn epoch(&self, i: usize) -> &[SensorObservation] {
-        let start = if i == 0 { 0 } else { self.epoch_ends.get(i - 1).copied().unwrap_or(0) };
+        let start = if i == 0 {
+            0
+        } else {
+            self.epoch_ends.get(i - 1).copied().unwrap_or(0)
+        };
         let end = self.epoch_ends.get(i).copied().unwrap_or(start);
         self.observations.get(start..end).unwrap_or(&[])
     }
@@ -216,7 +224,9 @@ pub enum AlignmentError {
         got: usize,
     },
     /// A zero or non-finite vector or σ ≤ 0.
-    #[error("epoch {epoch}, observation {index}: zero/non-finite direction or σ ≤ 0; fix or drop it")]
+    #[error(
+        "epoch {epoch}, observation {index}: zero/non-finite direction or σ ≤ 0; fix or drop it"
+    )]
     InvalidObservation {
         /// Epoch index.
         epoch: usize,
@@ -224,7 +234,9 @@ pub enum AlignmentError {
         index: usize,
     },
     /// Observation refers to a sensor index outside the sensor list.
-    #[error("epoch {epoch} refers to sensor index {sensor} but only {sensors} sensors are defined")]
+    #[error(
+        "epoch {epoch} refers to sensor index {sensor} but only {sensors} sensors are defined"
+    )]
     UnknownSensor {
         /// Epoch index.
         epoch: usize,
@@ -343,7 +355,9 @@ impl FfcalSolution {
     #[must_use]
     pub fn relative_covariance_arcsec2(&self, i: usize, reference: usize) -> Matrix3<f64> {
         let p = &self.covariance_arcsec2;
-        let blk = |a: usize, b: usize| -> Matrix3<f64> { p.fixed_view::<3, 3>(3 * a, 3 * b).into_owned() };
+        let blk = |a: usize, b: usize| -> Matrix3<f64> {
+            p.fixed_view::<3, 3>(3 * a, 3 * b).into_owned()
+        };
         blk(i, i) + blk(reference, reference) - blk(i, reference) - blk(reference, i)
     }
 }
@@ -401,7 +415,11 @@ impl Accumulator {
         for (a, b) in self.rhs.iter_mut().zip(&other.rhs) {
             *a += b;
         }
-        for (a, b) in self.resid_sum_sq_arcsec2.iter_mut().zip(&other.resid_sum_sq_arcsec2) {
+        for (a, b) in self
+            .resid_sum_sq_arcsec2
+            .iter_mut()
+            .zip(&other.resid_sum_sq_arcsec2)
+        {
             *a += b;
         }
         for (a, b) in self.resid_count.iter_mut().zip(&other.resid_count) {
@@ -523,7 +541,8 @@ impl Accumulator {
                 if sin_angle < 1e-3 {
                     continue;
                 }
-                let y = (obs[k].dir_eci.dot(&obs[l].dir_eci) - self.b[k].dot(&self.b[l])) * ARCSEC_PER_RAD;
+                let y = (obs[k].dir_eci.dot(&obs[l].dir_eci) - self.b[k].dot(&self.b[l]))
+                    * ARCSEC_PER_RAD;
                 let angle_resid = y / sin_angle;
                 for s in [obs[k].sensor, obs[l].sensor] {
                     self.resid_sum_sq_arcsec2[s] += angle_resid * angle_resid;
@@ -665,7 +684,12 @@ impl Accumulator {
 const ACCUMULATION_CHUNKS: usize = 64;
 
 /// One pass over the data: per-chunk accumulators in parallel (rayon), summed in chunk order.
-fn accumulate(data: &AlignmentData, m_current: &[Matrix3<f64>], sensors: usize, weighting: Weighting) -> Accumulator {
+fn accumulate(
+    data: &AlignmentData,
+    m_current: &[Matrix3<f64>],
+    sensors: usize,
+    weighting: Weighting,
+) -> Accumulator {
     use rayon::prelude::*;
     let epochs = data.epoch_count();
     let chunk = epochs.div_ceil(ACCUMULATION_CHUNKS).max(1);
@@ -688,7 +712,13 @@ fn accumulate(data: &AlignmentData, m_current: &[Matrix3<f64>], sensors: usize, 
 }
 
 /// In-place inverse of a small SPD matrix (row-major `m × m`) by Cholesky; false if not SPD.
-fn small_spd_inverse(a: &[f64], m: usize, out: &mut [f64], l: &mut Vec<f64>, li: &mut Vec<f64>) -> bool {
+fn small_spd_inverse(
+    a: &[f64],
+    m: usize,
+    out: &mut [f64],
+    l: &mut Vec<f64>,
+    li: &mut Vec<f64>,
+) -> bool {
     l.clear();
     l.resize(m * m, 0.0);
     li.clear();
@@ -733,7 +763,10 @@ fn small_spd_inverse(a: &[f64], m: usize, out: &mut [f64], l: &mut Vec<f64>, li:
     true
 }
 
-fn validate(sensors: &[SensorSpec], data: &AlignmentData) -> Result<Vec<Matrix3<f64>>, AlignmentError> {
+fn validate(
+    sensors: &[SensorSpec],
+    data: &AlignmentData,
+) -> Result<Vec<Matrix3<f64>>, AlignmentError> {
     if sensors.is_empty() {
         return Err(AlignmentError::NoSensors);
     }
@@ -749,7 +782,9 @@ fn validate(sensors: &[SensorSpec], data: &AlignmentData) -> Result<Vec<Matrix3<
             None
         };
         let Some(inv) = inv else {
-            return Err(AlignmentError::InvalidPrior { sensor: s.id.clone() });
+            return Err(AlignmentError::InvalidPrior {
+                sensor: s.id.clone(),
+            });
         };
         prior_info.push(inv);
     }
@@ -757,7 +792,11 @@ fn validate(sensors: &[SensorSpec], data: &AlignmentData) -> Result<Vec<Matrix3<
     for (epoch, obs) in data.epochs().enumerate() {
         for o in obs {
             if o.sensor >= sensors.len() {
-                return Err(AlignmentError::UnknownSensor { epoch, sensor: o.sensor, sensors: sensors.len() });
+                return Err(AlignmentError::UnknownSensor {
+                    epoch,
+                    sensor: o.sensor,
+                    sensors: sensors.len(),
+                });
             }
         }
         for o in obs {
@@ -767,7 +806,9 @@ fn validate(sensors: &[SensorSpec], data: &AlignmentData) -> Result<Vec<Matrix3<
         }
     }
     if let Some(i) = paired.iter().position(|&p| !p) {
-        return Err(AlignmentError::SensorWithoutData { sensor: sensors[i].id.clone() });
+        return Err(AlignmentError::SensorWithoutData {
+            sensor: sensors[i].id.clone(),
+        });
     }
     Ok(prior_info)
 }
@@ -812,7 +853,9 @@ fn observability(
     let (weakest_relative_mode, weakest_relative_eigenvalue_per_arcsec2) = if n > 3 {
         let col = vectors.column(3);
         (
-            (0..sensors).map(|s| [col[3 * s], col[3 * s + 1], col[3 * s + 2]]).collect(),
+            (0..sensors)
+                .map(|s| [col[3 * s], col[3 * s + 1], col[3 * s + 2]])
+                .collect(),
             values[3],
         )
     } else {
@@ -846,7 +889,9 @@ pub fn ffcal(
     let mut m_current = m_prelaunch.clone();
     let mut prior_info_full = DMatrix::zeros(n, n);
     for (s, pi) in prior_info.iter().enumerate() {
-        prior_info_full.fixed_view_mut::<3, 3>(3 * s, 3 * s).copy_from(pi);
+        prior_info_full
+            .fixed_view_mut::<3, 3>(3 * s, 3 * s)
+            .copy_from(pi);
     }
     let mut residual_before: Option<(Vec<f64>, Vec<usize>)> = None;
     let mut last_step = f64::INFINITY;
@@ -861,14 +906,18 @@ pub fn ffcal(
         let converged = iterations > 0 && last_step < cfg.convergence_arcsec;
         if converged || iterations >= cfg.max_iterations {
             if !converged {
-                return Err(AlignmentError::NotConverged { iterations, last_step_arcsec: last_step });
+                return Err(AlignmentError::NotConverged {
+                    iterations,
+                    last_step_arcsec: last_step,
+                });
             }
             let obs_report = observability(&normal, &total, ns);
             if cfg.require_relative_observability && obs_report.unobservable_count > 3 {
                 let (_, vectors) = sym_eigen_ascending(&normal);
                 let col = vectors.column(obs_report.unobservable_count - 1);
-                let mode: Vec<[f64; 3]> =
-                    (0..ns).map(|s| [col[3 * s], col[3 * s + 1], col[3 * s + 2]]).collect();
+                let mode: Vec<[f64; 3]> = (0..ns)
+                    .map(|s| [col[3 * s], col[3 * s + 1], col[3 * s + 2]])
+                    .collect();
                 return Err(AlignmentError::Unobservable {
                     unobservable: obs_report.unobservable_count - 3,
                     threshold: obs_report.threshold,
@@ -885,7 +934,13 @@ pub fn ffcal(
                 }
             };
             let (before_sq, before_n) = residual_before.unwrap_or_default();
-            let rms = |sq: f64, k: usize| if k > 0 { (sq / k as f64).sqrt() } else { f64::NAN };
+            let rms = |sq: f64, k: usize| {
+                if k > 0 {
+                    (sq / k as f64).sqrt()
+                } else {
+                    f64::NAN
+                }
+            };
             let results = sensors
                 .iter()
                 .enumerate()
@@ -895,7 +950,9 @@ pub fn ffcal(
                     m_acs_from_sensor_calibrated: m_current[s],
                     theta_acs_arcsec: rotvec_from_rot(&(m_current[s] * m_prelaunch[s].transpose()))
                         * ARCSEC_PER_RAD,
-                    sigma_acs_arcsec: Vector3::from_fn(|k, _| covariance[(3 * s + k, 3 * s + k)].max(0.0).sqrt()),
+                    sigma_acs_arcsec: Vector3::from_fn(|k, _| {
+                        covariance[(3 * s + k, 3 * s + k)].max(0.0).sqrt()
+                    }),
                     residual_rms_before_arcsec: rms(before_sq[s], before_n[s]),
                     residual_rms_after_arcsec: rms(acc.resid_sum_sq_arcsec2[s], acc.resid_count[s]),
                     residual_pairs: acc.resid_count[s],
@@ -921,12 +978,14 @@ pub fn ffcal(
             x_arcsec.fixed_rows_mut::<3>(3 * s).copy_from(&th);
         }
         let rhs = DVector::from_column_slice(&acc.rhs) - &prior_info_full * &x_arcsec;
-        let chol = ((&total + total.transpose()) * 0.5).cholesky().ok_or(AlignmentError::Singular)?;
+        let chol = ((&total + total.transpose()) * 0.5)
+            .cholesky()
+            .ok_or(AlignmentError::Singular)?;
         let delta = chol.solve(&rhs);
         last_step = delta.amax();
-        for s in 0..ns {
+        for (s, m) in m_current.iter_mut().enumerate() {
             let d: Vector3<f64> = delta.fixed_rows::<3>(3 * s).into_owned() * RAD_PER_ARCSEC;
-            m_current[s] = rot(&d) * m_current[s];
+            *m = rot(&d) * *m;
         }
         iterations += 1;
     }
@@ -962,7 +1021,9 @@ pub fn cramer_rao_information(
             g += qk;
             q.push(qk);
         }
-        let Some(g_inv) = g.try_inverse() else { continue };
+        let Some(g_inv) = g.try_inverse() else {
+            continue;
+        };
         for (k, ok) in obs.iter().enumerate() {
             let mut blk = info.fixed_view_mut::<3, 3>(3 * ok.sensor, 3 * ok.sensor);
             blk += q[k];
@@ -995,6 +1056,7 @@ pub fn cramer_rao_covariance(
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 mod tests {
     use super::*;
     use crate::synth::{alignment_data, gro_sensors, Rng, SyntheticSensor};
@@ -1021,8 +1083,9 @@ mod tests {
             .iter()
             .zip(syn)
             .map(|(r, s)| {
-                rotvec_from_rot(&(r.m_acs_from_sensor_calibrated * s.m_acs_from_sensor_true().transpose()))
-                    * ARCSEC_PER_RAD
+                rotvec_from_rot(
+                    &(r.m_acs_from_sensor_calibrated * s.m_acs_from_sensor_true().transpose()),
+                ) * ARCSEC_PER_RAD
             })
             .collect()
     }
@@ -1036,7 +1099,10 @@ mod tests {
             let mut rng = Rng::new(42);
             let syn = gro_sensors(&truth_arcsec());
             let data = alignment_data(&mut rng, &syn, 300);
-            let cfg = FfcalConfig { weighting, ..FfcalConfig::default() };
+            let cfg = FfcalConfig {
+                weighting,
+                ..FfcalConfig::default()
+            };
             let sol = ffcal(&specs(&syn, 3600.0), &data, &cfg).unwrap();
             let err = errors_arcsec(&sol, &syn);
             for i in 1..4 {
@@ -1044,7 +1110,11 @@ mod tests {
                 let cov = sol.relative_covariance_arcsec2(i, 0);
                 for k in 0..3 {
                     let sigma = cov[(k, k)].sqrt();
-                    assert!(rel[k].abs() < 4.0 * sigma, "{weighting:?} sensor {i} axis {k}: {} vs σ {sigma}", rel[k]);
+                    assert!(
+                        rel[k].abs() < 4.0 * sigma,
+                        "{weighting:?} sensor {i} axis {k}: {} vs σ {sigma}",
+                        rel[k]
+                    );
                     assert!(sigma < 20.0, "σ {sigma} too large for 300 epochs");
                 }
             }
@@ -1054,7 +1124,11 @@ mod tests {
             assert!(sol.iterations <= 5, "iterations {}", sol.iterations);
             if weighting == Weighting::Optimal1990 {
                 let dof = sol.pairs_per_pass as f64;
-                assert!((sol.chi2 / dof - 1.0).abs() < 0.15, "χ²/dof = {}", sol.chi2 / dof);
+                assert!(
+                    (sol.chi2 / dof - 1.0).abs() < 0.15,
+                    "χ²/dof = {}",
+                    sol.chi2 / dof
+                );
                 assert_eq!(sol.pairs_per_pass, 300 * 5);
             } else {
                 assert_eq!(sol.pairs_per_pass, 300 * 6);
@@ -1074,18 +1148,31 @@ mod tests {
             let trials = 60;
             let mut sum = 0.0;
             for _ in 0..trials {
-                let truth: [Vector3<f64>; 4] = std::array::from_fn(|_| rng.normal3() * prior_sigma_arcsec);
+                let truth: [Vector3<f64>; 4] =
+                    std::array::from_fn(|_| rng.normal3() * prior_sigma_arcsec);
                 let syn = gro_sensors(&truth);
                 let data = alignment_data(&mut rng, &syn, 40);
-                let cfg = FfcalConfig { weighting, ..FfcalConfig::default() };
+                let cfg = FfcalConfig {
+                    weighting,
+                    ..FfcalConfig::default()
+                };
                 let sol = ffcal(&specs(&syn, prior_sigma_arcsec), &data, &cfg).unwrap();
-                let est: Vec<Vector3<f64>> = sol.sensors.iter().map(|s| s.theta_acs_arcsec).collect();
-                let e = DVector::from_iterator(12, (0..4).flat_map(|s| (0..3).map(move |k| (s, k))).map(|(s, k)| est[s][k] - truth[s][k]));
+                let est: Vec<Vector3<f64>> =
+                    sol.sensors.iter().map(|s| s.theta_acs_arcsec).collect();
+                let e = DVector::from_iterator(
+                    12,
+                    (0..4)
+                        .flat_map(|s| (0..3).map(move |k| (s, k)))
+                        .map(|(s, k)| est[s][k] - truth[s][k]),
+                );
                 let p_inv = spd_inverse(&sol.covariance_arcsec2).unwrap();
                 sum += e.dot(&(p_inv * &e)) / 12.0;
             }
             let mean = sum / f64::from(trials);
-            assert!((mean - 1.0).abs() < 0.2, "{weighting:?}: mean normalised error variance {mean}");
+            assert!(
+                (mean - 1.0).abs() < 0.2,
+                "{weighting:?}: mean normalised error variance {mean}"
+            );
         }
     }
 
@@ -1103,8 +1190,17 @@ mod tests {
         let sol = ffcal(&specs(&syn, prior), &data, &FfcalConfig::default()).unwrap();
         let obs = &sol.observability;
         assert_eq!(obs.unobservable_count, 3);
-        assert!(obs.weakest_three_in_common_rotation > 0.999, "{}", obs.weakest_three_in_common_rotation);
-        let mean_est: Vector3<f64> = sol.sensors.iter().map(|s| s.theta_acs_arcsec).sum::<Vector3<f64>>() / 4.0;
+        assert!(
+            obs.weakest_three_in_common_rotation > 0.999,
+            "{}",
+            obs.weakest_three_in_common_rotation
+        );
+        let mean_est: Vector3<f64> = sol
+            .sensors
+            .iter()
+            .map(|s| s.theta_acs_arcsec)
+            .sum::<Vector3<f64>>()
+            / 4.0;
         let mean_true: Vector3<f64> = truth.iter().sum::<Vector3<f64>>() / 4.0;
         // the estimated common part is ≈ 0 (prior mean), not the true 100/−50/80 offset
         assert!(mean_est.norm() < 5.0, "estimated common part {mean_est:?}");
@@ -1115,7 +1211,11 @@ mod tests {
             u[3 * s] = 0.25;
         }
         let var = u.dot(&(&sol.covariance_arcsec2 * &u));
-        assert!((var.sqrt() / (prior / 2.0) - 1.0).abs() < 0.01, "σ_common {}", var.sqrt());
+        assert!(
+            (var.sqrt() / (prior / 2.0) - 1.0).abs() < 0.01,
+            "σ_common {}",
+            var.sqrt()
+        );
     }
 
     /// The optimal weighting reaches the Cramér–Rao bound computed independently from the
@@ -1130,17 +1230,28 @@ mod tests {
         let data = alignment_data(&mut rng, &syn, 100);
         let sp = specs(&syn, 1000.0);
         let sol = ffcal(&sp, &data, &FfcalConfig::default()).unwrap();
-        let m_cal: Vec<Matrix3<f64>> = sol.sensors.iter().map(|s| s.m_acs_from_sensor_calibrated).collect();
+        let m_cal: Vec<Matrix3<f64>> = sol
+            .sensors
+            .iter()
+            .map(|s| s.m_acs_from_sensor_calibrated)
+            .collect();
         let j = cramer_rao_information(&sp, &data, &m_cal).unwrap();
         let rel = (&j - &sol.normal_data_per_arcsec2).norm() / j.norm();
         assert!(rel < 1e-6, "relative difference {rel}");
 
-        let cfg = FfcalConfig { weighting: Weighting::Shuster1982, ..FfcalConfig::default() };
+        let cfg = FfcalConfig {
+            weighting: Weighting::Shuster1982,
+            ..FfcalConfig::default()
+        };
         let sol82 = ffcal(&sp, &data, &cfg).unwrap();
         let crb = cramer_rao_covariance(&sp, &data, &m_cal).unwrap();
         let diff = &sol82.covariance_arcsec2 - &crb;
         let (values, _) = sym_eigen_ascending(&diff);
-        assert!(values[0] > -1e-6 * crb.norm(), "sandwich below the CRB: {}", values[0]);
+        assert!(
+            values[0] > -1e-6 * crb.norm(),
+            "sandwich below the CRB: {}",
+            values[0]
+        );
         // and the 1982 formal covariance is not the true one: some relative-alignment σ
         // differs by more than 1 % (ignoring correlations between pairs that share a vector)
         let rel_sigma = |p: &DMatrix<f64>, i: usize, k: usize| {
@@ -1148,7 +1259,12 @@ mod tests {
         };
         let worst = (1..4)
             .flat_map(|i| (0..3).map(move |k| (i, k)))
-            .map(|(i, k)| (rel_sigma(&sol82.formal_covariance_arcsec2, i, k) / rel_sigma(&sol82.covariance_arcsec2, i, k) - 1.0).abs())
+            .map(|(i, k)| {
+                (rel_sigma(&sol82.formal_covariance_arcsec2, i, k)
+                    / rel_sigma(&sol82.covariance_arcsec2, i, k)
+                    - 1.0)
+                    .abs()
+            })
             .fold(0.0_f64, f64::max);
         assert!(worst > 0.01, "formal and sandwich σ agree to {worst}");
     }
@@ -1174,12 +1290,24 @@ mod tests {
             ffcal(&sp, &d2, &FfcalConfig::default()),
             Err(AlignmentError::SensorWithoutData { ref sensor }) if sensor == "FSS2"
         ));
-        assert!(matches!(ffcal(&sp, &AlignmentData::new(), &FfcalConfig::default()), Err(AlignmentError::NoEpochs)));
+        assert!(matches!(
+            ffcal(&sp, &AlignmentData::new(), &FfcalConfig::default()),
+            Err(AlignmentError::NoEpochs)
+        ));
         let obs = crate::synth::alignment_epoch(&mut rng, &syn);
-        assert!(matches!(d2.push_epoch(&obs[..1]), Err(AlignmentError::TooFewObservations { got: 1, .. })));
-        let bad = [SensorSpec::new("X", Matrix3::identity(), 0.0), sp[1].clone()];
+        assert!(matches!(
+            d2.push_epoch(&obs[..1]),
+            Err(AlignmentError::TooFewObservations { got: 1, .. })
+        ));
+        let bad = [
+            SensorSpec::new("X", Matrix3::identity(), 0.0),
+            sp[1].clone(),
+        ];
         let mut d3 = AlignmentData::new();
         d3.push_epoch(&obs[..2]).unwrap();
-        assert!(matches!(ffcal(&bad, &d3, &FfcalConfig::default()), Err(AlignmentError::InvalidPrior { .. })));
+        assert!(matches!(
+            ffcal(&bad, &d3, &FfcalConfig::default()),
+            Err(AlignmentError::InvalidPrior { .. })
+        ));
     }
 }

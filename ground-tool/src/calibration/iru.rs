@@ -42,7 +42,8 @@ pub const PPM: f64 = 1e-6;
 
 /// Names of the 12 parameters, in state order (column-major `vec(δM)`, then `δb`).
 pub const PARAMETER_NAMES: [&str; 12] = [
-    "dM_xx", "dM_yx", "dM_zx", "dM_xy", "dM_yy", "dM_zy", "dM_xz", "dM_yz", "dM_zz", "db_x", "db_y", "db_z",
+    "dM_xx", "dM_yx", "dM_zx", "dM_xy", "dM_yy", "dM_zy", "dM_xz", "dM_yz", "dM_zz", "db_x",
+    "db_y", "db_z",
 ];
 
 /// One gyro sample interval.
@@ -65,7 +66,10 @@ pub struct GyroCalibration {
 
 impl Default for GyroCalibration {
     fn default() -> Self {
-        Self { delta_m: Matrix3::zeros(), bias_acs_rad_per_s: Vector3::zeros() }
+        Self {
+            delta_m: Matrix3::zeros(),
+            bias_acs_rad_per_s: Vector3::zeros(),
+        }
     }
 }
 
@@ -73,7 +77,8 @@ impl GyroCalibration {
     /// Calibrated increment of one step.
     #[must_use]
     pub fn corrected(&self, step: &GyroStep) -> Vector3<f64> {
-        (Matrix3::identity() + self.delta_m) * step.dtheta_acs_rad - self.bias_acs_rad_per_s * step.dt_s
+        (Matrix3::identity() + self.delta_m) * step.dtheta_acs_rad
+            - self.bias_acs_rad_per_s * step.dt_s
     }
 }
 
@@ -242,7 +247,9 @@ fn interval_covariance(
     noise: &GyroNoise,
 ) -> Matrix3<f64> {
     let phi = a_hat_end * a_hat_start.transpose();
-    end.cov_acs_rad2 + phi * start.cov_acs_rad2 * phi.transpose() + Matrix3::identity() * noise.variance_rad2(duration_s)
+    end.cov_acs_rad2
+        + phi * start.cov_acs_rad2 * phi.transpose()
+        + Matrix3::identity() * noise.variance_rad2(duration_s)
 }
 
 fn describe_mode(v: &[f64]) -> String {
@@ -264,7 +271,11 @@ fn check_rank(normal: &DMatrix<f64>) -> Result<(Vec<f64>, usize), IruError> {
     let deficient = values.iter().filter(|&&v| v <= threshold * max).count();
     if deficient > 0 || max <= 0.0 {
         let weakest: Vec<f64> = vectors.column(0).iter().copied().collect();
-        return Err(IruError::Unobservable { rank: 12 - deficient.max(usize::from(max <= 0.0) * 12), threshold, mode: describe_mode(&weakest) });
+        return Err(IruError::Unobservable {
+            rank: 12 - deficient.max(usize::from(max <= 0.0) * 12),
+            threshold,
+            mode: describe_mode(&weakest),
+        });
     }
     Ok((values.iter().copied().collect(), 12))
 }
@@ -314,14 +325,25 @@ pub fn irucal(
     cfg: &IrucalConfig,
 ) -> Result<IrucalSolution, IruError> {
     if intervals.len() < 4 && cfg.prior_sigma_ppm_and_arcsec_per_s.is_none() {
-        return Err(IruError::TooFewIntervals { got: intervals.len() });
+        return Err(IruError::TooFewIntervals {
+            got: intervals.len(),
+        });
     }
     for (interval, iv) in intervals.iter().enumerate() {
         if iv.steps.is_empty() {
-            return Err(IruError::InvalidInterval { interval, reason: "no gyro steps" });
+            return Err(IruError::InvalidInterval {
+                interval,
+                reason: "no gyro steps",
+            });
         }
-        if iv.steps.iter().any(|s| !(s.dt_s.is_finite() && s.dt_s >= 0.0) || s.dtheta_acs_rad.iter().any(|x| !x.is_finite())) {
-            return Err(IruError::InvalidInterval { interval, reason: "non-finite or negative gyro step" });
+        if iv.steps.iter().any(|s| {
+            !(s.dt_s.is_finite() && s.dt_s >= 0.0)
+                || s.dtheta_acs_rad.iter().any(|x| !x.is_finite())
+        }) {
+            return Err(IruError::InvalidInterval {
+                interval,
+                reason: "non-finite or negative gyro step",
+            });
         }
     }
     let d = state_scale();
@@ -344,12 +366,24 @@ pub fn irucal(
         let mut residuals = Vec::with_capacity(intervals.len());
         for (interval, iv) in intervals.iter().enumerate() {
             let (a_end, s, t) = propagate_interval(&iv.start.m_acs_from_eci, &iv.steps, &cal);
-            let z_arcsec = rotvec_from_rot(&(iv.end.m_acs_from_eci * a_end.transpose())) * ARCSEC_PER_RAD;
+            let z_arcsec =
+                rotvec_from_rot(&(iv.end.m_acs_from_eci * a_end.transpose())) * ARCSEC_PER_RAD;
             residuals.push(z_arcsec.norm());
-            let r_rad2 = interval_covariance(&iv.start, &iv.end, &iv.start.m_acs_from_eci, &a_end, t, &cfg.noise);
+            let r_rad2 = interval_covariance(
+                &iv.start,
+                &iv.end,
+                &iv.start.m_acs_from_eci,
+                &a_end,
+                t,
+                &cfg.noise,
+            );
             let r_arcsec2 = r_rad2 * (ARCSEC_PER_RAD * ARCSEC_PER_RAD);
-            let w = r_arcsec2.try_inverse().filter(|w| w.iter().all(|x| x.is_finite()));
-            let Some(w) = w else { return Err(IruError::BadCovariance { interval }) };
+            let w = r_arcsec2
+                .try_inverse()
+                .filter(|w| w.iter().all(|x| x.is_finite()));
+            let Some(w) = w else {
+                return Err(IruError::BadCovariance { interval });
+            };
             let f = s * d * ARCSEC_PER_RAD;
             let ft_w = f.transpose() * w;
             let nf = ft_w * f;
@@ -372,7 +406,10 @@ pub fn irucal(
         let converged = iterations > 0 && last_step < cfg.convergence;
         if converged || iterations >= cfg.max_iterations {
             if !converged {
-                return Err(IruError::NotConverged { iterations, last_step });
+                return Err(IruError::NotConverged {
+                    iterations,
+                    last_step,
+                });
             }
             let cov = spd_inverse(&total).ok_or(IruError::Unobservable {
                 rank: 0,
@@ -396,11 +433,14 @@ pub fn irucal(
             });
         }
         let rhs_total = rhs - &prior_info * &x_total;
-        let chol = ((&total + total.transpose()) * 0.5).cholesky().ok_or(IruError::Unobservable {
-            rank: 0,
-            threshold: 0.0,
-            mode: "singular normal matrix".into(),
-        })?;
+        let chol =
+            ((&total + total.transpose()) * 0.5)
+                .cholesky()
+                .ok_or(IruError::Unobservable {
+                    rank: 0,
+                    threshold: 0.0,
+                    mode: "singular normal matrix".into(),
+                })?;
         let delta = chol.solve(&rhs_total);
         last_step = delta.amax();
         x_total += &delta;
@@ -434,7 +474,13 @@ pub struct PlannedManeuver {
 impl PlannedManeuver {
     /// Maneuver with isotropic end-attitude errors of `sigma_start_rad`, `sigma_end_rad` per axis.
     #[must_use]
-    pub fn isotropic(axis_acs: Vector3<f64>, angle_rad: f64, duration_s: f64, sigma_start_rad: f64, sigma_end_rad: f64) -> Self {
+    pub fn isotropic(
+        axis_acs: Vector3<f64>,
+        angle_rad: f64,
+        duration_s: f64,
+        sigma_start_rad: f64,
+        sigma_end_rad: f64,
+    ) -> Self {
         Self {
             axis_acs,
             angle_rad,
@@ -458,11 +504,22 @@ pub struct PlanStudy {
 
 /// Gyro steps of a constant-rate slew (`step_s` seconds each).
 #[must_use]
-pub fn slew_steps(axis_acs: &Vector3<f64>, angle_rad: f64, duration_s: f64, step_s: f64) -> Vec<GyroStep> {
+pub fn slew_steps(
+    axis_acs: &Vector3<f64>,
+    angle_rad: f64,
+    duration_s: f64,
+    step_s: f64,
+) -> Vec<GyroStep> {
     let n = (duration_s / step_s).ceil().max(1.0) as usize;
     let dt = duration_s / n as f64;
     let d = axis_acs.normalize() * (angle_rad / n as f64);
-    vec![GyroStep { dtheta_acs_rad: d, dt_s: dt }; n]
+    vec![
+        GyroStep {
+            dtheta_acs_rad: d,
+            dt_s: dt
+        };
+        n
+    ]
 }
 
 /// Covariance study of a maneuver plan (no data): the Fisher information of the 12
@@ -472,7 +529,11 @@ pub fn slew_steps(axis_acs: &Vector3<f64>, angle_rad: f64, duration_s: f64, step
 ///
 /// # Errors
 /// [`IruError::Unobservable`] when the plan cannot determine all 12 parameters.
-pub fn study_plan(plan: &[PlannedManeuver], noise: &GyroNoise, step_s: f64) -> Result<PlanStudy, IruError> {
+pub fn study_plan(
+    plan: &[PlannedManeuver],
+    noise: &GyroNoise,
+    step_s: f64,
+) -> Result<PlanStudy, IruError> {
     if plan.len() < 4 {
         return Err(IruError::TooFewIntervals { got: plan.len() });
     }
@@ -480,11 +541,23 @@ pub fn study_plan(plan: &[PlannedManeuver], noise: &GyroNoise, step_s: f64) -> R
     let mut normal = DMatrix::zeros(12, 12);
     for (interval, m) in plan.iter().enumerate() {
         let steps = slew_steps(&m.axis_acs, m.angle_rad, m.duration_s, step_s);
-        let (a_end, s, t) = propagate_interval(&Matrix3::identity(), &steps, &GyroCalibration::default());
-        let fix = |cov: &Matrix3<f64>| AttitudeFix { m_acs_from_eci: Matrix3::identity(), cov_acs_rad2: *cov };
-        let r = interval_covariance(&fix(&m.cov_start_acs_rad2), &fix(&m.cov_end_acs_rad2), &Matrix3::identity(), &a_end, t, noise)
-            * (ARCSEC_PER_RAD * ARCSEC_PER_RAD);
-        let Some(w) = r.try_inverse() else { return Err(IruError::BadCovariance { interval }) };
+        let (a_end, s, t) =
+            propagate_interval(&Matrix3::identity(), &steps, &GyroCalibration::default());
+        let fix = |cov: &Matrix3<f64>| AttitudeFix {
+            m_acs_from_eci: Matrix3::identity(),
+            cov_acs_rad2: *cov,
+        };
+        let r = interval_covariance(
+            &fix(&m.cov_start_acs_rad2),
+            &fix(&m.cov_end_acs_rad2),
+            &Matrix3::identity(),
+            &a_end,
+            t,
+            noise,
+        ) * (ARCSEC_PER_RAD * ARCSEC_PER_RAD);
+        let Some(w) = r.try_inverse() else {
+            return Err(IruError::BadCovariance { interval });
+        };
         let f = s * d * ARCSEC_PER_RAD;
         let nf = f.transpose() * w * f;
         for rr in 0..12 {
@@ -494,9 +567,17 @@ pub fn study_plan(plan: &[PlannedManeuver], noise: &GyroNoise, step_s: f64) -> R
         }
     }
     check_rank(&normal)?;
-    let cov = spd_inverse(&normal).ok_or(IruError::Unobservable { rank: 0, threshold: 0.0, mode: "singular".into() })?;
+    let cov = spd_inverse(&normal).ok_or(IruError::Unobservable {
+        rank: 0,
+        threshold: 0.0,
+        mode: "singular".into(),
+    })?;
     let (sigma_delta_m, sigma_bias) = sigmas_from_cov(&cov);
-    Ok(PlanStudy { sigma_delta_m, sigma_bias_acs_rad_per_s: sigma_bias, covariance_scaled: cov })
+    Ok(PlanStudy {
+        sigma_delta_m,
+        sigma_bias_acs_rad_per_s: sigma_bias,
+        covariance_scaled: cov,
+    })
 }
 
 /// A timed sensor attitude during an inertial hold.
@@ -542,10 +623,20 @@ pub struct BiasEstimate {
 /// # Errors
 /// [`IruError::BadHold`] with fewer than two fixes, zero duration, unsorted fixes or gyro data
 /// that do not reach the last fix.
-pub fn bias_from_hold(hold: &InertialHold, cal: &GyroCalibration, noise: &GyroNoise, index: usize) -> Result<BiasEstimate, IruError> {
-    let bad = |reason: &str| IruError::BadHold { hold: index, reason: reason.to_owned() };
+pub fn bias_from_hold(
+    hold: &InertialHold,
+    cal: &GyroCalibration,
+    noise: &GyroNoise,
+    index: usize,
+) -> Result<BiasEstimate, IruError> {
+    let bad = |reason: &str| IruError::BadHold {
+        hold: index,
+        reason: reason.to_owned(),
+    };
     let (Some(first), Some(last)) = (hold.fixes.first(), hold.fixes.last()) else {
-        return Err(bad("no fixes: need ≥ 2 sensor attitudes spread over the hold"));
+        return Err(bad(
+            "no fixes: need ≥ 2 sensor attitudes spread over the hold",
+        ));
     };
     if hold.fixes.len() < 2 || last.t_s - first.t_s <= 0.0 {
         return Err(bad("need ≥ 2 sensor attitudes at different times"));
@@ -560,7 +651,9 @@ pub fn bias_from_hold(hold: &InertialHold, cal: &GyroCalibration, noise: &GyroNo
     for fix in &hold.fixes {
         while t < fix.t_s - 1e-9 {
             let Some(step) = steps.next() else {
-                return Err(bad("gyro data end before the last fix: supply steps covering the hold"));
+                return Err(bad(
+                    "gyro data end before the last fix: supply steps covering the hold",
+                ));
             };
             a = rot(&cal.corrected(step)) * a;
             t += step.dt_s;
@@ -576,8 +669,16 @@ pub fn bias_from_hold(hold: &InertialHold, cal: &GyroCalibration, noise: &GyroNo
         let sw: f64 = w.iter().sum();
         let t_bar = samples.iter().zip(&w).map(|(s, w)| w * s.0).sum::<f64>() / sw;
         let z_bar = samples.iter().zip(&w).map(|(s, w)| w * s.1[k]).sum::<f64>() / sw;
-        let stt: f64 = samples.iter().zip(&w).map(|(s, w)| w * (s.0 - t_bar).powi(2)).sum();
-        let stz: f64 = samples.iter().zip(&w).map(|(s, w)| w * (s.0 - t_bar) * (s.1[k] - z_bar)).sum();
+        let stt: f64 = samples
+            .iter()
+            .zip(&w)
+            .map(|(s, w)| w * (s.0 - t_bar).powi(2))
+            .sum();
+        let stz: f64 = samples
+            .iter()
+            .zip(&w)
+            .map(|(s, w)| w * (s.0 - t_bar) * (s.1[k] - z_bar))
+            .sum();
         if !(stt > 0.0 && stt.is_finite()) {
             return Err(bad("fix σ must be finite and > 0"));
         }
@@ -598,11 +699,20 @@ pub fn bias_from_hold(hold: &InertialHold, cal: &GyroCalibration, noise: &GyroNo
 ///
 /// # Errors
 /// The first [`IruError::BadHold`] met.
-pub fn bias_history(holds: &[InertialHold], cal: &GyroCalibration, noise: &GyroNoise) -> Result<Vec<BiasEstimate>, IruError> {
-    holds.iter().enumerate().map(|(i, h)| bias_from_hold(h, cal, noise, i)).collect()
+pub fn bias_history(
+    holds: &[InertialHold],
+    cal: &GyroCalibration,
+    noise: &GyroNoise,
+) -> Result<Vec<BiasEstimate>, IruError> {
+    holds
+        .iter()
+        .enumerate()
+        .map(|(i, h)| bias_from_hold(h, cal, noise, i))
+        .collect()
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 mod tests {
     use super::*;
     use crate::synth::Rng;
@@ -615,7 +725,9 @@ mod tests {
 
     fn truth() -> Truth {
         Truth {
-            delta_m: Matrix3::new(300e-6, 400e-6, -200e-6, -500e-6, -250e-6, 100e-6, -550e-6, 350e-6, 150e-6),
+            delta_m: Matrix3::new(
+                300e-6, 400e-6, -200e-6, -500e-6, -250e-6, 100e-6, -550e-6, 350e-6, 150e-6,
+            ),
             // paper's primary high-rate biases, deg/s → rad/s
             bias_rad_per_s: Vector3::new(1.66e-4, 0.99e-4, 1.41e-4) * RAD_PER_DEG,
         }
@@ -639,11 +751,18 @@ mod tests {
         let mut steps = Vec::with_capacity(true_steps.len());
         for s in &true_steps {
             a = rot(&s.dtheta_acs_rad) * a;
-            let raw = inv * (s.dtheta_acs_rad + truth.bias_rad_per_s * s.dt_s) + rng.normal3() * (sigma_v * s.dt_s.sqrt());
-            steps.push(GyroStep { dtheta_acs_rad: raw, dt_s: s.dt_s });
+            let raw = inv * (s.dtheta_acs_rad + truth.bias_rad_per_s * s.dt_s)
+                + rng.normal3() * (sigma_v * s.dt_s.sqrt());
+            steps.push(GyroStep {
+                dtheta_acs_rad: raw,
+                dt_s: s.dt_s,
+            });
         }
         let cov = Matrix3::identity() * fix_sigma_rad * fix_sigma_rad;
-        let mut fix = |m: Matrix3<f64>| AttitudeFix { m_acs_from_eci: rot(&(rng.normal3() * fix_sigma_rad)) * m, cov_acs_rad2: cov };
+        let mut fix = |m: Matrix3<f64>| AttitudeFix {
+            m_acs_from_eci: rot(&(rng.normal3() * fix_sigma_rad)) * m,
+            cov_acs_rad2: cov,
+        };
         let start = fix(a0);
         let end = fix(a);
         CalibrationInterval { start, end, steps }
@@ -669,28 +788,59 @@ mod tests {
         let tr = truth();
         let mut rng = Rng::new(2024);
         let sigma_fix = 10.0 * RAD_PER_ARCSEC;
-        let noise = GyroNoise { sigma_v_rad_per_sqrt_s: 1e-7, sigma_u_rad_per_s_1p5: 0.0 };
-        let intervals: Vec<_> =
-            plan().iter().map(|&(ax, ang, dur)| simulate(&mut rng, &tr, ax, ang, dur, sigma_fix, noise.sigma_v_rad_per_sqrt_s)).collect();
-        let cfg = IrucalConfig { noise, ..IrucalConfig::default() };
+        let noise = GyroNoise {
+            sigma_v_rad_per_sqrt_s: 1e-7,
+            sigma_u_rad_per_s_1p5: 0.0,
+        };
+        let intervals: Vec<_> = plan()
+            .iter()
+            .map(|&(ax, ang, dur)| {
+                simulate(
+                    &mut rng,
+                    &tr,
+                    ax,
+                    ang,
+                    dur,
+                    sigma_fix,
+                    noise.sigma_v_rad_per_sqrt_s,
+                )
+            })
+            .collect();
+        let cfg = IrucalConfig {
+            noise,
+            ..IrucalConfig::default()
+        };
         let sol = irucal(&intervals, &GyroCalibration::default(), &cfg).unwrap();
         for j in 0..3 {
             for i in 0..3 {
                 let err = sol.calibration.delta_m[(i, j)] - tr.delta_m[(i, j)];
-                assert!(err.abs() < 3.0 * sol.sigma_delta_m[(i, j)], "ΔM[{i}][{j}] error {err:e} σ {:e}", sol.sigma_delta_m[(i, j)]);
+                assert!(
+                    err.abs() < 3.0 * sol.sigma_delta_m[(i, j)],
+                    "ΔM[{i}][{j}] error {err:e} σ {:e}",
+                    sol.sigma_delta_m[(i, j)]
+                );
             }
             let err = sol.calibration.bias_acs_rad_per_s[j] - tr.bias_rad_per_s[j];
-            assert!(err.abs() < 3.0 * sol.sigma_bias_acs_rad_per_s[j], "bias[{j}] error {err:e}");
+            assert!(
+                err.abs() < 3.0 * sol.sigma_bias_acs_rad_per_s[j],
+                "bias[{j}] error {err:e}"
+            );
         }
         assert!(sol.residual_before_arcsec.iter().any(|&r| r > 300.0));
-        assert!(sol.residual_after_arcsec.iter().all(|&r| r < 80.0), "{:?}", sol.residual_after_arcsec);
+        assert!(
+            sol.residual_after_arcsec.iter().all(|&r| r < 80.0),
+            "{:?}",
+            sol.residual_after_arcsec
+        );
         assert!(sol.iterations <= 5);
 
         // The covariance study of the same plan predicts the same σ (nominal vs actual motion,
         // 2 % tolerance for the ΔM-induced difference of the propagated path).
         let planned: Vec<PlannedManeuver> = plan()
             .iter()
-            .map(|&(ax, ang, dur)| PlannedManeuver::isotropic(ax, ang * RAD_PER_DEG, dur, sigma_fix, sigma_fix))
+            .map(|&(ax, ang, dur)| {
+                PlannedManeuver::isotropic(ax, ang * RAD_PER_DEG, dur, sigma_fix, sigma_fix)
+            })
             .collect();
         let study = study_plan(&planned, &noise, 1.0).unwrap();
         for j in 0..3 {
@@ -710,11 +860,20 @@ mod tests {
             .iter()
             .map(|&ang| simulate(&mut rng, &tr, Vector3::x(), ang, 600.0, s, 0.0))
             .collect();
-        let err = irucal(&only_x, &GyroCalibration::default(), &IrucalConfig::default()).unwrap_err();
+        let err = irucal(
+            &only_x,
+            &GyroCalibration::default(),
+            &IrucalConfig::default(),
+        )
+        .unwrap_err();
         assert!(matches!(err, IruError::Unobservable { .. }), "{err}");
         assert!(err.to_string().contains("three non-coplanar axes"));
         assert!(matches!(
-            irucal(&only_x[..3], &GyroCalibration::default(), &IrucalConfig::default()),
+            irucal(
+                &only_x[..3],
+                &GyroCalibration::default(),
+                &IrucalConfig::default()
+            ),
             Err(IruError::TooFewIntervals { got: 3 })
         ));
     }
@@ -727,11 +886,17 @@ mod tests {
         let sigma_fix = 10.0 * RAD_PER_ARCSEC;
         let cal = GyroCalibration::default();
         let mut holds = Vec::new();
-        let biases: Vec<Vector3<f64>> =
-            (0..3).map(|k| Vector3::new(0.6, 0.36, 0.5 + 0.1 * f64::from(k)) * RAD_PER_ARCSEC).collect();
+        let biases: Vec<Vector3<f64>> = (0..3)
+            .map(|k| Vector3::new(0.6, 0.36, 0.5 + 0.1 * f64::from(k)) * RAD_PER_ARCSEC)
+            .collect();
         for b in &biases {
             let a0 = rng.rotation();
-            let steps: Vec<GyroStep> = (0..3600).map(|_| GyroStep { dtheta_acs_rad: *b, dt_s: 1.0 }).collect();
+            let steps: Vec<GyroStep> = (0..3600)
+                .map(|_| GyroStep {
+                    dtheta_acs_rad: *b,
+                    dt_s: 1.0,
+                })
+                .collect();
             // true body is inertial; raw gyro reads the bias
             let fixes = (0..=360)
                 .map(|j| TimedFix {
@@ -747,11 +912,20 @@ mod tests {
         for (est, b) in history.iter().zip(&biases) {
             for k in 0..3 {
                 let err = est.bias_acs_rad_per_s[k] - b[k];
-                assert!(err.abs() < 3.0 * est.sigma_acs_rad_per_s[k], "axis {k}: {err:e}");
+                assert!(
+                    err.abs() < 3.0 * est.sigma_acs_rad_per_s[k],
+                    "axis {k}: {err:e}"
+                );
                 assert!((est.sigma_acs_rad_per_s[k] / expected_sigma - 1.0).abs() < 0.02);
             }
         }
-        let short = InertialHold { fixes: holds[0].fixes.clone(), steps: holds[0].steps[..100].to_vec() };
-        assert!(matches!(bias_from_hold(&short, &cal, &GyroNoise::default(), 0), Err(IruError::BadHold { .. })));
+        let short = InertialHold {
+            fixes: holds[0].fixes.clone(),
+            steps: holds[0].steps[..100].to_vec(),
+        };
+        assert!(matches!(
+            bias_from_hold(&short, &cal, &GyroNoise::default(), 0),
+            Err(IruError::BadHold { .. })
+        ));
     }
 }
