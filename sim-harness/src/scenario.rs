@@ -434,3 +434,23 @@ config = "backup"
         assert!((s.initial.quat().z - std::f64::consts::FRAC_1_SQRT_2).abs() < 1e-12);
     }
 }
+
+#[cfg(test)]
+mod shipped_scenarios {
+    use super::*;
+
+    /// Every file in the workspace `scenarios/` folder parses and validates.
+    #[test]
+    fn all_shipped_scenarios_load() {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios");
+        let mut count = 0;
+        for entry in std::fs::read_dir(&dir).unwrap() {
+            let path = entry.unwrap().path();
+            if path.extension().is_some_and(|e| e == "toml") {
+                Scenario::load(&path).unwrap_or_else(|e| panic!("{}: {e:#}", path.display()));
+                count += 1;
+            }
+        }
+        assert!(count >= 2, "found {count} scenarios in {}", dir.display());
+    }
+}
