@@ -198,8 +198,16 @@ fn rotation_coefficients(angle: f64) -> (f64, f64, f64, f64, f64) {
 /// Quaternion of `Rot(v)` (series for small angles, no trig below 0.01 rad).
 #[must_use]
 pub fn quat_from_small_rotation(v: &Vector3<f64>) -> Quat {
-    let (_, _, _, s, c) = rotation_coefficients(v.norm());
-    Quat::new(v.x * s, v.y * s, v.z * s, c)
+    let a2 = v.norm_squared();
+    if a2 < SERIES_LIMIT_RAD * SERIES_LIMIT_RAD {
+        let h2 = 0.25 * a2;
+        let h4 = h2 * h2;
+        let s = 0.5 * (1.0 - h2 / 6.0 + h4 / 120.0 - h4 * h2 / 5040.0);
+        let c = 1.0 - h2 / 2.0 + h4 / 24.0 - h4 * h2 / 720.0 + h4 * h4 / 40_320.0;
+        Quat::new(v.x * s, v.y * s, v.z * s, c)
+    } else {
+        Quat::from_rotation_vector(v)
+    }
 }
 
 /// Normalised copy of a direction, `None` unless finite with norm in (0.5, 2).
@@ -216,7 +224,7 @@ fn inverse_spd2(s: &Matrix2<f64>) -> Option<Matrix2<f64>> {
         return None;
     }
     let inv = Matrix2::new(d, -b, -b, a) / det;
-    inv.iter().all(|x| x.is_finite()).then_some(inv)
+    all_finite(inv.as_slice()).then_some(inv)
 }
 
 /// TRIAD attitude (ACS from ECI) from two body/reference pairs; the first pair is matched
@@ -431,7 +439,7 @@ impl Mekf {
         let su2 = table.rrw_rad_per_s_sqrt_s * table.rrw_rad_per_s_sqrt_s;
         let ok = dt_s > 0.0
             && dt_s <= MAX_PROPAGATION_STEP_S
-            && delta_theta_acs_rad.iter().all(|x| x.is_finite())
+            && all_finite(delta_theta_acs_rad.as_slice())
             && delta_theta_acs_rad.norm() <= MAX_DELTA_THETA_RAD
             && sv2.is_finite()
             && su2.is_finite()
@@ -464,7 +472,7 @@ impl Mekf {
         let n11 = a * phi11.transpose() + b * phi12.transpose();
         let n11 = (n11 + n11.transpose()) * 0.5 + eye * q11;
         let n12 = b + eye * q12;
-        let n22 = (p22 + p22.transpose()) * 0.5 + eye * q22;
+        let n22 = p22 + eye * q22;
 
         let mut np = Matrix6::zeros();
         np.fixed_view_mut::<3, 3>(0, 0).copy_from(&n11);
@@ -526,9 +534,7 @@ impl Mekf {
         let Some(r) = unit(ref_dir_eci) else {
             return self.reject(UpdateRejection::InvalidInput, [0.0; 2], f64::NAN);
         };
-        let ok = h_rad.is_finite()
-            && v_rad.is_finite()
-            && m_acs_from_sensor.iter().all(|x| x.is_finite());
+        let ok = h_rad.is_finite() && v_rad.is_finite() && all_finite(m_acs_from_sensor.as_slice());
         if !ok {
             return self.reject(UpdateRejection::InvalidInput, [0.0; 2], f64::NAN);
         }
@@ -563,8 +569,8 @@ impl Mekf {
         let nu_arr = [nu.x, nu.y];
         let ok = positive_finite(sigma_rad)
             && positive_finite(gate_chi2)
-            && nu.iter().all(|x| x.is_finite())
-            && h.iter().all(|x| x.is_finite());
+            && all_finite(nu.as_slice())
+            && all_finite(h.as_slice());
         if !ok {
             return self.reject(UpdateRejection::InvalidInput, [0.0; 2], f64::NAN);
         }
@@ -601,7 +607,7 @@ impl Mekf {
         let dtheta = Vector3::new(dx.x, dx.y, dx.z);
         let dbias = Vector3::new(dx.w, dx.a, dx.b);
         let q = quat_from_small_rotation(&dtheta).compose(&self.q_acs_from_eci);
-        if !(q.is_finite() && dbias.iter().all(|x| x.is_finite())) {
+        if !(q.is_finite() && all_finite(dbias.as_slice())) {
             return self.reject(UpdateRejection::NumericalFault, nu_arr, nis);
         }
         self.q_acs_from_eci = q.normalized();
@@ -622,9 +628,15 @@ fn positive_finite(x: f64) -> bool {
     x > 0.0 && x.is_finite()
 }
 
+/// Every element finite: the sum of finite numbers of covariance size is finite, and any NaN
+/// or infinity makes it non-finite (a plain loop, cheaper than per-element tests).
+fn all_finite(values: &[f64]) -> bool {
+    values.iter().fold(0.0, |acc, x| acc + x).is_finite()
+}
+
 /// Finite with a positive diagonal.
 fn covariance_ok(p: &Matrix6<f64>) -> bool {
-    p.iter().all(|x| x.is_finite())
+    all_finite(p.as_slice())
         && p.m11 > 0.0
         && p.m22 > 0.0
         && p.m33 > 0.0
@@ -660,6 +672,19 @@ mod tests {
         assert!((below.4 - exact.4).abs() < 1e-15);
         let above = rotation_coefficients(x * (1.0 + 1e-12));
         assert!((above.2 - below.2).abs() < 1e-9);
+    }
+
+    #[test]
+    fn small_rotation_quaternion_matches_the_exact_one() {
+        for v in [
+            Vector3::new(1e-9, 0.0, -2e-9),
+            Vector3::new(3e-3, -4e-3, 5e-3),
+            Vector3::new(0.2, 0.1, -0.3),
+        ] {
+            let a = quat_from_small_rotation(&v);
+            let b = Quat::from_rotation_vector(&v);
+            assert!((a.vector() - b.vector()).norm() < 1e-17 && (a.w - b.w).abs() < 2e-16);
+        }
     }
 
     #[test]

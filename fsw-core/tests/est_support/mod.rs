@@ -1,0 +1,103 @@
+//! Shared helpers of the `est_*` integration tests: a deterministic PRNG, Gaussian samples,
+//! random rotations, and a reader for the reference CSV files in `data/`.
+#![allow(
+    dead_code,
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::indexing_slicing,
+    clippy::arithmetic_side_effects
+)]
+
+use fsw_core::attitude::Quat;
+use nalgebra::Vector3;
+
+/// SplitMix64: small, deterministic, good enough for test noise.
+pub struct Rng(u64);
+
+impl Rng {
+    pub fn new(seed: u64) -> Self {
+        Self(seed)
+    }
+
+    pub fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+
+    /// Uniform in [0, 1).
+    pub fn uniform(&mut self) -> f64 {
+        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    /// Uniform in [lo, hi).
+    pub fn range(&mut self, lo: f64, hi: f64) -> f64 {
+        lo + (hi - lo) * self.uniform()
+    }
+
+    /// Standard normal (Box–Muller).
+    pub fn gauss(&mut self) -> f64 {
+        let u1 = self.uniform().max(1e-300);
+        let u2 = self.uniform();
+        (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+    }
+
+    pub fn gauss3(&mut self) -> Vector3<f64> {
+        Vector3::new(self.gauss(), self.gauss(), self.gauss())
+    }
+
+    /// Uniform on the unit sphere.
+    pub fn unit_vector(&mut self) -> Vector3<f64> {
+        let z = self.range(-1.0, 1.0);
+        let phi = self.range(0.0, std::f64::consts::TAU);
+        let r = (1.0 - z * z).sqrt();
+        Vector3::new(r * phi.cos(), r * phi.sin(), z)
+    }
+
+    /// Uniform random rotation.
+    pub fn quaternion(&mut self) -> Quat {
+        Quat::new(self.gauss(), self.gauss(), self.gauss(), self.gauss()).normalized()
+    }
+}
+
+/// A CSV file of `data/`: `#` comment lines, one header, comma-separated rows.
+pub struct Csv {
+    pub header: Vec<String>,
+    pub rows: Vec<Vec<String>>,
+}
+
+impl Csv {
+    pub fn read(name: &str) -> Self {
+        let path = format!("{}/../data/{name}", env!("CARGO_MANIFEST_DIR"));
+        let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{path}: {e}"));
+        let mut lines = text
+            .lines()
+            .filter(|l| !l.starts_with('#') && !l.trim().is_empty());
+        let header = lines
+            .next()
+            .expect("header")
+            .split(',')
+            .map(str::to_owned)
+            .collect();
+        let rows = lines
+            .map(|l| l.split(',').map(str::to_owned).collect())
+            .collect();
+        Self { header, rows }
+    }
+
+    pub fn col(&self, name: &str) -> usize {
+        self.header
+            .iter()
+            .position(|h| h == name)
+            .unwrap_or_else(|| panic!("no column {name}"))
+    }
+
+    pub fn f64(&self, row: &[String], col: usize) -> f64 {
+        row[col]
+            .parse()
+            .unwrap_or_else(|e| panic!("{}: {e}", row[col]))
+    }
+}
