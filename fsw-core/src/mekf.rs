@@ -227,6 +227,11 @@ fn inverse_spd2(s: &Matrix2<f64>) -> Option<Matrix2<f64>> {
     all_finite(inv.as_slice()).then_some(inv)
 }
 
+/// The matrix with columns `a`, `b`, `c`.
+fn columns(a: &Vector3<f64>, b: &Vector3<f64>, c: &Vector3<f64>) -> Matrix3<f64> {
+    Matrix3::new(a.x, b.x, c.x, a.y, b.y, c.y, a.z, b.z, c.z)
+}
+
 /// TRIAD attitude (ACS from ECI) from two body/reference pairs; the first pair is matched
 /// exactly, the second only fixes the rotation about it.
 ///
@@ -256,8 +261,8 @@ pub fn triad(
         return Err(MekfError::Inconsistent);
     }
     let (b2n, r2n) = (bc / bs, rc / rs);
-    let tb = Matrix3::from_columns(&[b1, b2n, b1.cross(&b2n)]);
-    let tr = Matrix3::from_columns(&[r1, r2n, r1.cross(&r2n)]);
+    let tb = columns(&b1, &b2n, &b1.cross(&b2n));
+    let tr = columns(&r1, &r2n, &r1.cross(&r2n));
     let q = Quat::from_dcm(&(tb * tr.transpose()));
     if q.is_finite() {
         Ok(q)

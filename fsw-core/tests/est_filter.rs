@@ -1,15 +1,18 @@
 //! MEKF on synthetic FHST + IRU data with known truth.
 //!
 //! * Truth: a slow body rotation (5e-5 rad/s plus a 1e-5 rad/s limit cycle), integrated at
-//!   10 Hz with the exact rotation per sub-step.
+//!   10 Hz with the exact rotation per sub-step; in the second test also 30° slews at
+//!   0.08°/s.
 //! * IRU: the DRIRU II primary channels see `G⁻¹(ω + b + η_v)`, with the truth bias a random
 //!   walk (σ_u) from a GRO-like start (~0.5″/s per axis), angle random walk σ_v, and integer
-//!   low-rate pulses (0.05″) in 16-bit wrapping counters → [`IruIntegrator`].
+//!   pulses (0.05″ low rate, 0.8″ high rate during slews, the fraction carried across a
+//!   switch) in 16-bit wrapping counters → [`IruIntegrator`].
 //! * FHST1 and FHST2 (prelaunch alignments, boresights 90° apart) each track one star: placed
 //!   at a random (H, V) at acquisition, tracked until it leaves ±3.8° or for 1–5 min, then a new
-//!   one. Each second: noise σ(m) for a random magnitude 2–5.7 (8–24″), 7.78″ quantization,
-//!   raw counts → [`fhst::measure`] → [`Mekf::update_focal_plane`].
-//! * Filter: 1° initial attitude error, zero initial bias, table noise values; 4 h at 1 Hz.
+//!   one after one cycle of search. Each second: noise σ(m) for a random magnitude 2–5.7
+//!   (8–24″), 7.78″ quantization, raw counts → [`fhst::measure`] →
+//!   [`Mekf::update_focal_plane`] with σ from [`fhst::measurement_sigma_rad`].
+//! * Filter: 1° initial attitude error, zero initial bias, table noise values, 1 Hz.
 #![allow(
     clippy::unwrap_used,
     clippy::expect_used,
@@ -37,27 +40,30 @@ use nalgebra::{Matrix3, Vector3};
 struct TruthIru {
     ginv: Matrix3<f64>,
     angle_rad: Vector3<f64>,
-    pulses: [i64; 3],
-    weight_rad: f64,
+    pulsed_rad: [f64; 3],
+    counts: [u16; 6],
 }
 
 impl TruthIru {
-    fn sample(&mut self) -> IruSample {
-        let mut counts = [0u16; 6];
+    /// Counters at the end of an interval spent in the given mode: a pulse per `w` of angle
+    /// not yet pulsed (the remainder carries over a mode switch).
+    fn sample(&mut self, high_rate: bool, table: &IruTable) -> IruSample {
+        let w = pulse_weight_rad(high_rate, table);
         let ch = IruConfiguration::Primary.channels();
         for axis in 0..3 {
-            let n = (self.angle_rad[axis] / self.weight_rad).floor() as i64;
-            self.pulses[axis] = n;
-            counts[ch[axis]] = n as u16; // wraps: the register is 16 bits
+            let n = ((self.angle_rad[axis] - self.pulsed_rad[axis]) / w).floor();
+            self.pulsed_rad[axis] += n * w;
+            let c = &mut self.counts[ch[axis]];
+            *c = c.wrapping_add(n as i64 as u16); // the register is 16 bits
         }
-        // Unused backup channels count too (not stuck), with arbitrary values.
-        for (i, c) in [0usize, 3, 5].into_iter().enumerate() {
-            counts[c] = (self.pulses[i] / 3) as u16;
+        // Unused backup channels count too (not stuck).
+        for c in [0usize, 3, 5] {
+            self.counts[c] = self.counts[c].wrapping_add(7);
         }
         IruSample {
-            counts,
+            counts: self.counts,
             channel_failed: 0,
-            high_rate: false,
+            high_rate,
         }
     }
 }
@@ -80,16 +86,61 @@ fn new_track(rng: &mut Rng, a_true: &Matrix3<f64>, m: &Matrix3<f64>, now: u32) -
     }
 }
 
-#[test]
-fn mekf_converges_is_consistent_and_estimates_the_bias() {
+/// A slew of the truth: start time, axis (ACS), angle.
+#[derive(Clone, Copy)]
+struct Slew {
+    start_s: f64,
+    axis: Vector3<f64>,
+    angle_rad: f64,
+}
+
+const SLEW_RATE: f64 = 0.08 * std::f64::consts::PI / 180.0;
+const SLEW_RAMP_S: f64 = 60.0;
+
+impl Slew {
+    fn duration_s(&self) -> f64 {
+        self.angle_rad / SLEW_RATE + SLEW_RAMP_S
+    }
+    /// Trapezoidal rate profile (ramps of SLEW_RAMP_S).
+    fn rate(&self, t: f64) -> Vector3<f64> {
+        let tau = t - self.start_s;
+        let d = self.duration_s();
+        if tau <= 0.0 || tau >= d {
+            return Vector3::zeros();
+        }
+        let s = (tau / SLEW_RAMP_S).min(1.0).min((d - tau) / SLEW_RAMP_S);
+        self.axis * (SLEW_RATE * s)
+    }
+    fn high_rate(&self, t: f64) -> bool {
+        let tau = t - self.start_s;
+        tau > -10.0 && tau < self.duration_s() + 10.0
+    }
+}
+
+struct Stats {
+    converged_at: Option<u32>,
+    max_err_after_rad: f64,
+    containment: [f64; 3],
+    nees_mean: f64,
+    final_sigma_rad: Vector3<f64>,
+    bias_err: Vector3<f64>,
+    bias_sigma: Vector3<f64>,
+    bias_truth: Vector3<f64>,
+    accepted: u32,
+    gated: u32,
+    other_rejections: u32,
+    worst_nis: f64,
+    high_rate_cycles: u32,
+}
+
+fn run(seed: u64, duration_s: u32, settle_s: u32, slews: &[Slew]) -> Stats {
     let filter_table = FilterTable::default_boot();
     let iru_table = IruTable::prelaunch();
     let al = AlignmentTable::prelaunch();
     let rows = [al.m_acs_from_fhst1, al.m_acs_from_fhst2];
     let ms = rows.map(|r| matrix_from_rows(&r));
-    let mut rng = Rng::new(0xF117_E125);
+    let mut rng = Rng::new(seed);
 
-    let duration_s: u32 = 4 * 3600;
     let substeps = 10;
     let dt = 1.0 / f64::from(substeps);
     let sigma_v = filter_table.arw_rad_per_sqrt_s;
@@ -105,8 +156,8 @@ fn mekf_converges_is_consistent_and_estimates_the_bias() {
             .try_inverse()
             .unwrap(),
         angle_rad: Vector3::new(1.0e-3, -2.0e-3, 0.5e-3),
-        pulses: [0; 3],
-        weight_rad: pulse_weight_rad(false, &iru_table),
+        pulsed_rad: [0.0; 3],
+        counts: [100, 40_000, 65_000, 7, 123, 30_000],
     };
 
     // Filter: 1° initial error about a skew axis.
@@ -119,17 +170,31 @@ fn mekf_converges_is_consistent_and_estimates_the_bias() {
         )
         .unwrap();
     let mut iru = IruIntegrator::new();
-    iru.process(&gyro.sample(), IruConfiguration::Primary, &iru_table);
+    iru.process(
+        &gyro.sample(false, &iru_table),
+        IruConfiguration::Primary,
+        &iru_table,
+    );
     let mut tracks = [0, 1].map(|i| new_track(&mut rng, &q_true.to_dcm(), &ms[i], 0));
 
-    let settle_s = 1800;
     let mut inside = [0u32; 3];
     let mut samples = 0u32;
     let mut nees_sum = 0.0;
-    let mut max_err_after = 0.0_f64;
-    let mut converged_at: Option<u32> = None;
-    let mut worst_nis = 0.0_f64;
-    let mut updates = 0u32;
+    let mut st = Stats {
+        converged_at: None,
+        max_err_after_rad: 0.0,
+        containment: [0.0; 3],
+        nees_mean: 0.0,
+        final_sigma_rad: Vector3::zeros(),
+        bias_err: Vector3::zeros(),
+        bias_sigma: Vector3::zeros(),
+        bias_truth: Vector3::zeros(),
+        accepted: 0,
+        gated: 0,
+        other_rejections: 0,
+        worst_nis: 0.0,
+        high_rate_cycles: 0,
+    };
     for k in 1..=duration_s {
         let t = f64::from(k);
         // Truth over one second.
@@ -140,7 +205,7 @@ fn mekf_converges_is_consistent_and_estimates_the_bias() {
                 (ts / 151.0 + 1.0).sin(),
                 (ts / 263.0 + 2.0).cos(),
             ) * 1e-5;
-            let w = omega0 + wobble;
+            let w = omega0 + wobble + slews.iter().map(|s| s.rate(ts)).sum::<Vector3<f64>>();
             q_true = Quat::from_rotation_vector(&(w * dt))
                 .compose(&q_true)
                 .normalized();
@@ -150,18 +215,29 @@ fn mekf_converges_is_consistent_and_estimates_the_bias() {
         }
 
         // OBC cycle: IRU, propagation, two FHST updates.
-        let out = iru.process(&gyro.sample(), IruConfiguration::Primary, &iru_table);
+        let high = slews.iter().any(|s| s.high_rate(t - 0.5));
+        st.high_rate_cycles += u32::from(high);
+        let out = iru.process(
+            &gyro.sample(high, &iru_table),
+            IruConfiguration::Primary,
+            &iru_table,
+        );
         let d = out.delta_theta_acs_rad.expect("healthy IRU");
         filter.propagate(&d, 1.0, &filter_table).unwrap();
         let a_true = q_true.to_dcm();
         for i in 0..2 {
             let m = &ms[i];
             let s = m.transpose() * (a_true * tracks[i].r_eci);
-            let (h, v) = fhst::hv_from_dir(&s).unwrap();
             let lim = 3.8_f64.to_radians();
-            if k >= tracks[i].ends_at_s || h.abs() > lim || v.abs() > lim {
+            let Some((h, v)) =
+                fhst::hv_from_dir(&s).filter(|(h, v)| h.abs() < lim && v.abs() < lim)
+            else {
                 tracks[i] = new_track(&mut rng, &a_true, m, k);
-                continue; // the tracker searches for one cycle
+                continue; // lost: the tracker searches for one cycle
+            };
+            if k >= tracks[i].ends_at_s {
+                tracks[i] = new_track(&mut rng, &a_true, m, k);
+                continue;
             }
             let sigma = filter_table.fhst_sigma_rad(tracks[i].magnitude);
             let nh = ((h + sigma * rng.gauss()) / FHST_RAD_PER_COUNT).round();
@@ -188,8 +264,7 @@ fn mekf_converges_is_consistent_and_estimates_the_bias() {
                 filter_table.gate_chi2,
             );
             if k > settle_s {
-                worst_nis = worst_nis.max(o.nis);
-                updates += 1;
+                st.worst_nis = st.worst_nis.max(o.nis);
             }
         }
 
@@ -197,9 +272,9 @@ fn mekf_converges_is_consistent_and_estimates_the_bias() {
         let e = attitude_error_rad(&q_true, &filter.q_acs_from_eci);
         let sig = filter.attitude_sigma_rad();
         if e.norm() * ARCSEC_PER_RAD > 30.0 {
-            converged_at = None;
-        } else if converged_at.is_none() {
-            converged_at = Some(k);
+            st.converged_at = None;
+        } else if st.converged_at.is_none() {
+            st.converged_at = Some(k);
         }
         if k > settle_s {
             samples += 1;
@@ -210,59 +285,84 @@ fn mekf_converges_is_consistent_and_estimates_the_bias() {
             }
             let p11 = filter.covariance.fixed_view::<3, 3>(0, 0).into_owned();
             nees_sum += (e.transpose() * p11.try_inverse().unwrap() * e).x;
-            max_err_after = max_err_after.max(e.norm());
+            st.max_err_after_rad = st.max_err_after_rad.max(e.norm());
         }
     }
+    st.containment = inside.map(|n| f64::from(n) / f64::from(samples));
+    st.nees_mean = nees_sum / f64::from(samples);
+    st.final_sigma_rad = filter.attitude_sigma_rad();
+    st.bias_err = filter.bias_rad_per_s - bias;
+    st.bias_sigma = filter.bias_sigma_rad_per_s();
+    st.bias_truth = bias;
+    st.accepted = filter.counters.accepted;
+    st.gated = filter.counters.gated;
+    st.other_rejections = filter.counters.other_rejections;
+    let p = filter.covariance;
+    assert!((p - p.transpose()).norm() == 0.0 && p.cholesky().is_some());
+    st
+}
 
-    let frac = inside.map(|n| f64::from(n) / f64::from(samples));
-    let b_err = filter.bias_rad_per_s - bias;
-    let b_sig = filter.bias_sigma_rad_per_s();
-    let sig = filter.attitude_sigma_rad();
-    let c = filter.counters;
-    println!("MEKF, 4 h at 1 Hz, 1 deg initial error, statistics after {settle_s} s:");
+fn report(name: &str, settle_s: u32, st: &Stats) {
+    let a = ARCSEC_PER_RAD;
+    println!("{name} (statistics after {settle_s} s):");
     println!(
-        "  converged below 30\" (total) at t = {} s; max error after settling {:.2}\"",
-        converged_at.unwrap(),
-        max_err_after * ARCSEC_PER_RAD
+        "  converged below 30\" (total) at t = {:?} s; max error after settling {:.2}\"; high-rate cycles {}",
+        st.converged_at,
+        st.max_err_after_rad * a,
+        st.high_rate_cycles
     );
     println!(
-        "  3-sigma containment per ACS axis: {:.2} % {:.2} % {:.2} %; mean NEES (3 dof) {:.2}",
-        100.0 * frac[0],
-        100.0 * frac[1],
-        100.0 * frac[2],
-        nees_sum / f64::from(samples)
+        "  3-sigma containment per ACS axis: {:.2} % {:.2} % {:.2} %; mean NEES (3 dof, expect 3) {:.2}",
+        100.0 * st.containment[0],
+        100.0 * st.containment[1],
+        100.0 * st.containment[2],
+        st.nees_mean
     );
     println!(
         "  final attitude sigma {:.2}\" {:.2}\" {:.2}\"",
-        sig.x * ARCSEC_PER_RAD,
-        sig.y * ARCSEC_PER_RAD,
-        sig.z * ARCSEC_PER_RAD
+        st.final_sigma_rad.x * a,
+        st.final_sigma_rad.y * a,
+        st.final_sigma_rad.z * a
     );
     println!(
-        "  bias truth {:.4} {:.4} {:.4} \"/s; error {:.2e} {:.2e} {:.2e} rad/s = {:.5} {:.5} {:.5} \"/s; filter sigma {:.2e} {:.2e} {:.2e} rad/s",
-        bias.x * ARCSEC_PER_RAD,
-        bias.y * ARCSEC_PER_RAD,
-        bias.z * ARCSEC_PER_RAD,
-        b_err.x,
-        b_err.y,
-        b_err.z,
-        b_err.x * ARCSEC_PER_RAD,
-        b_err.y * ARCSEC_PER_RAD,
-        b_err.z * ARCSEC_PER_RAD,
-        b_sig.x,
-        b_sig.y,
-        b_sig.z
+        "  bias truth {:.4} {:.4} {:.4} \"/s; error {:.2e} {:.2e} {:.2e} rad/s ({:.5} {:.5} {:.5} \"/s); filter sigma {:.2e} {:.2e} {:.2e} rad/s",
+        st.bias_truth.x * a,
+        st.bias_truth.y * a,
+        st.bias_truth.z * a,
+        st.bias_err.x,
+        st.bias_err.y,
+        st.bias_err.z,
+        st.bias_err.x * a,
+        st.bias_err.y * a,
+        st.bias_err.z * a,
+        st.bias_sigma.x,
+        st.bias_sigma.y,
+        st.bias_sigma.z
     );
     println!(
-        "  updates: accepted {}, gated {}, other rejections {}; worst NIS after settling {:.1} over {} updates",
-        c.accepted, c.gated, c.other_rejections, worst_nis, updates
+        "  updates: accepted {}, gated {} ({:.2} %), other rejections {}; worst NIS after settling {:.1}",
+        st.accepted,
+        st.gated,
+        100.0 * f64::from(st.gated) / f64::from(st.accepted + st.gated),
+        st.other_rejections,
+        st.worst_nis
     );
+}
 
+#[test]
+fn mekf_converges_is_consistent_and_estimates_the_bias() {
+    let settle_s = 1800;
+    let st = run(0xF117_E125, 4 * 3600, settle_s, &[]);
+    report(
+        "MEKF, inertial hold, 4 h at 1 Hz, 1 deg initial error",
+        settle_s,
+        &st,
+    );
     assert!(
-        converged_at.unwrap() < 600,
+        st.converged_at.unwrap() < 600,
         "did not converge within 10 min"
     );
-    for (ax, f) in frac.iter().enumerate() {
+    for (ax, f) in st.containment.iter().enumerate() {
         assert!(
             *f >= 0.97,
             "axis {ax}: only {:.2} % inside 3 sigma",
@@ -272,17 +372,54 @@ fn mekf_converges_is_consistent_and_estimates_the_bias() {
     // Bias: within 3σ of the filter and within 1.5e-8 rad/s (0.003″/s, 0.5 % of the bias).
     for ax in 0..3 {
         assert!(
-            b_err[ax].abs() <= 3.0 * b_sig[ax],
+            st.bias_err[ax].abs() <= 3.0 * st.bias_sigma[ax],
             "bias axis {ax} outside 3 sigma"
         );
         assert!(
-            b_err[ax].abs() <= 1.5e-8,
+            st.bias_err[ax].abs() <= 1.5e-8,
             "bias axis {ax} error {:e}",
-            b_err[ax]
+            st.bias_err[ax]
         );
     }
-    assert_eq!(c.other_rejections, 0);
-    assert!(f64::from(c.gated) < 0.01 * f64::from(c.accepted));
-    let p = filter.covariance;
-    assert!((p - p.transpose()).norm() == 0.0 && p.cholesky().is_some());
+    assert_eq!(st.other_rejections, 0);
+    assert!(f64::from(st.gated) < 0.01 * f64::from(st.accepted));
+}
+
+#[test]
+fn mekf_stays_consistent_through_slews_with_high_rate_iru() {
+    // Four 30° slews about different axes, one every 40 min, IRU in high rate around each.
+    let axes = [
+        Vector3::new(1.0, 0.0, 0.0),
+        Vector3::new(0.0, 1.0, 0.0),
+        Vector3::new(0.0, 0.0, -1.0),
+        Vector3::new(0.6, -0.48, 0.64),
+    ];
+    let slews: Vec<Slew> = axes
+        .iter()
+        .enumerate()
+        .map(|(i, a)| Slew {
+            start_s: 1200.0 + 2400.0 * i as f64,
+            axis: a.normalize(),
+            angle_rad: 30.0_f64.to_radians(),
+        })
+        .collect();
+    let settle_s = 600;
+    let st = run(0x51E3_0002, 3 * 3600, settle_s, &slews);
+    report("MEKF, four 30 deg slews at 0.08 deg/s, 3 h", settle_s, &st);
+    for (ax, f) in st.containment.iter().enumerate() {
+        assert!(
+            *f >= 0.97,
+            "axis {ax}: only {:.2} % inside 3 sigma",
+            100.0 * f
+        );
+    }
+    for ax in 0..3 {
+        assert!(
+            st.bias_err[ax].abs() <= 3.0 * st.bias_sigma[ax],
+            "bias axis {ax} outside 3 sigma"
+        );
+    }
+    assert!(st.max_err_after_rad * ARCSEC_PER_RAD < 20.0);
+    assert_eq!(st.other_rejections, 0);
+    assert!(f64::from(st.gated) < 0.01 * f64::from(st.accepted));
 }
