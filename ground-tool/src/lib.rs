@@ -29,6 +29,7 @@
 //! - [`paper`]: reproduction of the paper's tables and numbers (`ground-tool paper`).
 //! - [`tp`]: TP, telemetry processing of `telemetry.bin` (`docs/icd.md`), robust to damage.
 //! - [`bench`]: FFCAL throughput check (`ground-tool bench`).
+//! - [`table`]: uplink table images (inspect, diff, write) in `fsw_core::tables` format.
 //! - [`synth`]: deterministic synthetic data (tests, benchmarks).
 
 pub mod attitude;
@@ -38,6 +39,7 @@ pub mod linalg;
 pub mod paper;
 pub mod pipeline;
 pub mod synth;
+pub mod table;
 pub mod tp;
 
 pub use fsw_core::units::{ARCSEC_PER_RAD, DEG_PER_RAD, RAD_PER_ARCSEC, RAD_PER_DEG};

@@ -17,6 +17,11 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Uplink table images (fsw-core format): inspect, diff, write.
+    Table {
+        #[command(subcommand)]
+        action: TableAction,
+    },
     /// Time FFCAL on synthetic data (requirement: 10^6 pairs in <= 2 s, release build).
     Bench {
         /// Number of dot-product pairs per Gauss-Newton pass.
@@ -31,20 +36,143 @@ enum Command {
     },
 }
 
+#[derive(Subcommand)]
+enum TableAction {
+    /// Check and print one image (header, CRC, OBC validation, content).
+    Inspect {
+        /// Image file.
+        file: std::path::PathBuf,
+        /// JSON output.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Differences between two images of the same table.
+    Diff {
+        /// First image.
+        a: std::path::PathBuf,
+        /// Second image.
+        b: std::path::PathBuf,
+        /// JSON output.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Write the alignment table the paper uplinked on 1991-05-14 (Table 1 x Table 2).
+    WritePaperAlignment {
+        /// Output image file.
+        out: std::path::PathBuf,
+    },
+    /// Write the prelaunch (boot) alignment table.
+    WritePrelaunchAlignment {
+        /// Output image file.
+        out: std::path::PathBuf,
+    },
+}
+
+fn run_table(action: TableAction) -> Result<()> {
+    use ground_tool::table::{self, AnyTable};
+    match action {
+        TableAction::Inspect { file, json } => {
+            let bytes = table::read_file(&file)?;
+            let ins = table::inspect(&bytes, &file.display().to_string())?;
+            if json {
+                println!("{}", serde_json::to_string_pretty(&ins)?);
+            } else {
+                println!(
+                    "{}: {} table, format v{}, {} bytes (payload {}), created {:.3} s TAI since 1958, CRC ok, OBC validation: {}",
+                    file.display(),
+                    ins.table,
+                    ins.format_version,
+                    ins.image_len,
+                    ins.payload_len,
+                    ins.created_tai_s,
+                    ins.validation_error.as_deref().unwrap_or("pass")
+                );
+                if let Some(rot) = &ins.rotation_from_prelaunch_arcsec {
+                    for (id, v, n) in rot {
+                        println!("  {id:5} rotation from prelaunch [{:8.1}, {:8.1}, {:8.1}]″  |θ| {n:7.1}″", v[0], v[1], v[2]);
+                    }
+                }
+                println!("{}", serde_json::to_string_pretty(&ins.content)?);
+            }
+            if ins.validation_error.is_some() {
+                anyhow::bail!("the OBC would reject this table");
+            }
+        }
+        TableAction::Diff { a, b, json } => {
+            let d = table::diff(&table::read_file(&a)?, &table::read_file(&b)?)?;
+            if json {
+                println!("{}", serde_json::to_string_pretty(&d)?);
+            } else {
+                println!("{} table: {} field(s) differ", d.table, d.fields.len());
+                for f in &d.fields {
+                    let fmt = |x: Option<f64>| x.map_or("-".to_owned(), |v| format!("{v:.9}"));
+                    println!("  {:40} {:>16} -> {:>16}", f.path, fmt(f.a), fmt(f.b));
+                }
+                if let Some(rot) = &d.alignment_rotation_arcsec {
+                    for (id, v, n) in rot {
+                        println!(
+                            "  {id:5} rotation A->B [{:8.1}, {:8.1}, {:8.1}]″  |θ| {n:7.1}″",
+                            v[0], v[1], v[2]
+                        );
+                    }
+                }
+                if let Some(ppm) = d.iru_max_g_change_ppm {
+                    println!("  largest G change {ppm:.1} ppm");
+                }
+            }
+        }
+        TableAction::WritePaperAlignment { out } => {
+            let t = AnyTable::Alignment(table::paper_alignment_table()?);
+            let tag = fsw_core::raw::TimeTag {
+                coarse_s: table::PAPER_UPLINK_TAI_S,
+                fine: 0,
+            };
+            let img = table::write_image(&t, tag)?;
+            std::fs::write(&out, &img)?;
+            println!("wrote {} ({} bytes)", out.display(), img.len());
+        }
+        TableAction::WritePrelaunchAlignment { out } => {
+            let t = AnyTable::Alignment(fsw_core::tables::AlignmentTable::prelaunch());
+            let img = table::write_image(
+                &t,
+                fsw_core::raw::TimeTag {
+                    coarse_s: 0,
+                    fine: 0,
+                },
+            )?;
+            std::fs::write(&out, &img)?;
+            println!("wrote {} ({} bytes)", out.display(), img.len());
+        }
+    }
+    Ok(())
+}
+
 fn main() -> Result<()> {
     let cli = Cli::parse();
     match cli.command {
         Command::Paper { json } => {
             let r = ground_tool::paper::reproduce()?;
             if json {
-                println!("{}", serde_json::to_string_pretty(&ground_tool::paper::to_json(&r))?);
+                println!(
+                    "{}",
+                    serde_json::to_string_pretty(&ground_tool::paper::to_json(&r))?
+                );
             } else {
                 print!("{}", ground_tool::paper::render_table(&r));
             }
         }
-        Command::Bench { pairs, shuster1982, json } => {
+        Command::Table { action } => run_table(action)?,
+        Command::Bench {
+            pairs,
+            shuster1982,
+            json,
+        } => {
             use ground_tool::calibration::alignment::Weighting;
-            let weighting = if shuster1982 { Weighting::Shuster1982 } else { Weighting::Optimal1990 };
+            let weighting = if shuster1982 {
+                Weighting::Shuster1982
+            } else {
+                Weighting::Optimal1990
+            };
             let t = ground_tool::bench::ffcal_timing(pairs, weighting, 1)?;
             if json {
                 println!("{}", serde_json::to_string_pretty(&t)?);
