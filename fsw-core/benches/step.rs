@@ -1,1 +1,3 @@
+//! Criterion bench of `FlightCore::step` (filled in with the synthetic scenario of
+//! `examples/step_cost.rs`).
 fn main() {}

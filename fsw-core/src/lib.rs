@@ -2,11 +2,20 @@
 //!
 //! See `docs/conventions.md` and [`attitude`] for the one attitude convention of the workspace.
 #![no_std]
-#![cfg_attr(test, allow(clippy::unwrap_used, clippy::expect_used, clippy::indexing_slicing, clippy::arithmetic_side_effects))]
+#![cfg_attr(
+    test,
+    allow(
+        clippy::unwrap_used,
+        clippy::expect_used,
+        clippy::indexing_slicing,
+        clippy::arithmetic_side_effects
+    )
+)]
 
 pub mod attitude;
 pub mod control;
 pub mod events;
+pub mod executive;
 pub mod fhst;
 pub mod fss;
 pub mod iru;

@@ -43,7 +43,7 @@ impl TimeTag {
     /// The time tag nearest to `seconds` since 1958-01-01 TAI; `None` if out of range or not finite.
     #[must_use]
     pub fn from_seconds(seconds: f64) -> Option<Self> {
-        if !(seconds.is_finite() && seconds >= 0.0 && seconds < 4_294_967_295.0) {
+        if !(0.0..4_294_967_295.0).contains(&seconds) {
             return None;
         }
         let ticks = libm::round(seconds * 65_536.0);

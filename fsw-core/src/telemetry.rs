@@ -528,6 +528,7 @@ pub fn decode_ephemeris(time: TimeTag, data: &[u8]) -> Result<EphemerisRecord, R
 }
 
 #[cfg(test)]
+#[allow(clippy::field_reassign_with_default)]
 mod tests {
     use super::*;
 

@@ -30,7 +30,9 @@ pub const CRC_LEN: usize = 4;
 pub const IMAGE_CRC: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
 
 /// Which table an image holds. Discriminants are the on-wire ids.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, serde::Serialize, serde::Deserialize)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, serde::Serialize, serde::Deserialize,
+)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[repr(u8)]
 pub enum TableId {
@@ -239,7 +241,8 @@ pub fn parse_image(bytes: &[u8]) -> Result<(ImageHeader, &[u8]), TableError> {
         return Err(TableError::BadMagic { found: magic });
     }
     let id_byte = *bytes.get(4).ok_or(TableError::TooShort { len })?;
-    let table_id = TableId::from_u8(id_byte).ok_or(TableError::UnknownTableId { found: id_byte })?;
+    let table_id =
+        TableId::from_u8(id_byte).ok_or(TableError::UnknownTableId { found: id_byte })?;
     let format_version = *bytes.get(5).ok_or(TableError::TooShort { len })?;
     if format_version != FORMAT_VERSION {
         return Err(TableError::UnsupportedVersion {
@@ -288,7 +291,7 @@ pub fn parse_image(bytes: &[u8]) -> Result<(ImageHeader, &[u8]), TableError> {
 /// [`TableError::PayloadDecode`].
 pub fn decode_payload<T: DeserializeOwned>(payload: &[u8]) -> Result<T, TableError> {
     match postcard::take_from_bytes::<T>(payload) {
-        Ok((value, rest)) if rest.is_empty() => Ok(value),
+        Ok((value, [])) => Ok(value),
         _ => Err(TableError::PayloadDecode),
     }
 }

@@ -1,0 +1,868 @@
+//! # The executive: one fixed-period cycle of the OBC attitude software
+//!
+//! [`FlightCore::step`] takes one cycle of raw sensor words and ground commands and returns
+//! the housekeeping record and the events of that cycle. The phase order is fixed
+//! (documented in `docs/icd.md` §3.2 and here) and every phase is bounded:
+//!
+//! 1. **Time**: check the frame time is after the previous one and within 10 periods
+//!    (otherwise count, raise `TimeTagAnomaly`, and use the nominal period).
+//! 2. **Commands** in the order given (at most [`MAX_COMMANDS_PER_CYCLE`]): table
+//!    load/activate/abort (activation therefore always happens at a cycle boundary, before
+//!    any table is used in the cycle), IRU configuration, filter init/reset, slew/hold.
+//! 3. **IRU**: pulse integration (paper eq. 5); a failed selected channel switches to the
+//!    backup configuration automatically.
+//! 4. **Propagation** of the MEKF with the exact rotation-vector update.
+//! 5. **FHST1, FHST2**: counts → unit vector in ACS; star identification on a new
+//!    acquisition; sequential vector update with χ² gating.
+//! 6. **FSS1, FSS2**: counts → Sun vector in ACS; onboard Sun ephemeris; update.
+//! 7. **Control**: inertial hold or rate-limited eigen-axis slew → wheel torque; IRU rate
+//!    mode request (high for slews).
+//! 8. **Housekeeping**.
+//!
+//! Worst case per cycle: one star identification per tracker (a linear scan of at most
+//! `MAX_CATALOG_STARS` stars, only on a new acquisition), four 2-component filter updates.
+
+use crate::attitude::{rot, Quat};
+use crate::control::Controller;
+use crate::events::{raise, Counters, Event, EventId, MAX_EVENTS_PER_CYCLE};
+use crate::fhst;
+use crate::fss;
+use crate::iru::{IruConfiguration, IruIntegrator};
+use crate::mekf::Mekf;
+use crate::raw::{RawSensorFrame, TimeTag, FHST_FLAG_NEW_STAR};
+use crate::star_id::{self, StarIdError, StarMatch};
+use crate::sun_ephemeris;
+use crate::tables::{TableId, TableSet};
+use crate::telemetry::{MeasurementStatus, ObcHousekeeping, SensorResidual};
+use crate::units::ARCSEC_PER_RAD;
+use nalgebra::Vector3;
+
+/// Largest number of commands processed in one cycle (further ones are refused).
+pub const MAX_COMMANDS_PER_CYCLE: usize = 8;
+
+/// Cycles without an accepted FHST measurement after which fine mode drops to coarse.
+const FINE_MODE_TIMEOUT_CYCLES: u32 = 900;
+
+/// A frame more than this many nominal periods after the previous one is a time-tag jump.
+const MAX_GAP_PERIODS: f64 = 10.0;
+
+/// Filter mode, telemetry code in brackets.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[repr(u8)]
+pub enum FilterMode {
+    /// No attitude yet (0).
+    Uninitialized = 0,
+    /// Attitude from propagation and FSS only (1).
+    Coarse = 1,
+    /// FHST stars identified and used (2).
+    Fine = 2,
+}
+
+/// Control mode, telemetry code in brackets.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[repr(u8)]
+pub enum ControlMode {
+    /// No attitude, no control (0).
+    Idle = 0,
+    /// Inertial hold (1).
+    Hold = 1,
+    /// Slew to a target (2).
+    Slew = 2,
+}
+
+/// A ground command for this cycle.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Command<'a> {
+    /// Slew to the target attitude `q_acs_from_eci`, then hold it.
+    SlewTo(Quat),
+    /// Hold the current estimated attitude.
+    Hold,
+    /// Select the IRU configuration.
+    SelectIruConfig(IruConfiguration),
+    /// Load a table image into its inactive buffer.
+    TableLoad(&'a [u8]),
+    /// Activate the validated inactive buffer of a table.
+    TableActivate(TableId),
+    /// Clear the inactive buffer of a table.
+    TableAbort(TableId),
+    /// Initialise the filter at this attitude with the table's initial covariance.
+    FilterInitialize(Quat),
+    /// Reset the filter: keep the estimate, reopen the covariance to its initial values.
+    FilterReset,
+}
+
+impl Command<'_> {
+    /// Command code used in `CommandRejected` events.
+    #[must_use]
+    pub fn code(&self) -> u32 {
+        match self {
+            Self::SlewTo(_) => 1,
+            Self::Hold => 2,
+            Self::SelectIruConfig(_) => 3,
+            Self::TableLoad(_) => 4,
+            Self::TableActivate(_) => 5,
+            Self::TableAbort(_) => 6,
+            Self::FilterInitialize(_) => 7,
+            Self::FilterReset => 8,
+        }
+    }
+}
+
+/// Everything a cycle produces.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CycleOutput {
+    /// The housekeeping record (downlinked every cycle).
+    pub housekeeping: ObcHousekeeping,
+    /// Events raised in this cycle.
+    pub events: heapless::Vec<Event, MAX_EVENTS_PER_CYCLE>,
+}
+
+/// Identification state of one tracker.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct TrackerState {
+    /// The star identified for the current track, if any.
+    star: Option<StarMatch>,
+    /// Identification was tried for this track and failed (do not retry until a new star).
+    failed: bool,
+}
+
+/// The OBC attitude software state. No heap; `size_of::<FlightCore>()` is reported in
+/// `docs/performance.md` (the star catalog table dominates it).
+#[derive(Clone, Debug)]
+pub struct FlightCore {
+    tables: TableSet,
+    iru: IruIntegrator,
+    iru_config: IruConfiguration,
+    filter: Mekf,
+    filter_mode: FilterMode,
+    controller: Controller,
+    control_mode: ControlMode,
+    last_time: Option<TimeTag>,
+    trackers: [TrackerState; 2],
+    counters: Counters,
+    cycles_since_star: u32,
+    gated_run: [bool; 4],
+    rejected_run: [bool; 5],
+    iru_high_rate_cmd: bool,
+    slew_count: u32,
+    last_rate_acs_rad_per_s: Vector3<f64>,
+    wheel_torque_cmd_nm: Vector3<f64>,
+}
+
+impl Default for FlightCore {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+fn to_u32(v: usize) -> u32 {
+    u32::try_from(v).unwrap_or(u32::MAX)
+}
+
+impl FlightCore {
+    /// Boot with the built-in tables (paper Table 1 alignments, prelaunch IRU G).
+    #[must_use]
+    pub fn new() -> Self {
+        Self::with_tables(TableSet::boot())
+    }
+
+    /// Boot with a given table set.
+    #[must_use]
+    pub fn with_tables(tables: TableSet) -> Self {
+        Self {
+            tables,
+            iru: IruIntegrator::new(),
+            iru_config: IruConfiguration::Primary,
+            filter: Mekf::new(),
+            filter_mode: FilterMode::Uninitialized,
+            controller: Controller::new(),
+            control_mode: ControlMode::Idle,
+            last_time: None,
+            trackers: [TrackerState::default(); 2],
+            counters: Counters::default(),
+            cycles_since_star: u32::MAX,
+            gated_run: [false; 4],
+            rejected_run: [false; 5],
+            iru_high_rate_cmd: false,
+            slew_count: 0,
+            last_rate_acs_rad_per_s: Vector3::zeros(),
+            wheel_torque_cmd_nm: Vector3::zeros(),
+        }
+    }
+
+    /// The tables (active copies and status).
+    #[must_use]
+    pub fn tables(&self) -> &TableSet {
+        &self.tables
+    }
+
+    /// Current filter mode.
+    #[must_use]
+    pub fn filter_mode(&self) -> FilterMode {
+        self.filter_mode
+    }
+
+    /// Current attitude estimate `q_acs_from_eci`.
+    #[must_use]
+    pub fn attitude(&self) -> Quat {
+        self.filter.q_acs_from_eci
+    }
+
+    /// Run one cycle.
+    pub fn step(&mut self, frame: &RawSensorFrame, commands: &[Command<'_>]) -> CycleOutput {
+        let mut events = heapless::Vec::new();
+        let mut residuals = [SensorResidual::default(); 4];
+        self.counters.cycles = self.counters.cycles.saturating_add(1);
+
+        // 1. Time.
+        let dt_s = self.check_time(frame.time, &mut events);
+
+        // 2. Commands.
+        for (i, cmd) in commands.iter().enumerate() {
+            if i >= MAX_COMMANDS_PER_CYCLE {
+                raise(
+                    &mut events,
+                    &mut self.counters,
+                    EventId::CommandRejected,
+                    cmd.code(),
+                    1,
+                );
+                continue;
+            }
+            self.execute(cmd, &mut events);
+        }
+
+        // 3–4. IRU and propagation.
+        let increment = self.integrate_iru(frame, &mut events);
+        let initialized = self.filter_mode != FilterMode::Uninitialized;
+        let delta_theta = match increment {
+            Some(d) => d,
+            None => Vector3::zeros(),
+        };
+        if dt_s > 0.0 {
+            self.last_rate_acs_rad_per_s = delta_theta / dt_s - self.filter.bias_rad_per_s;
+        }
+        if initialized
+            && self
+                .filter
+                .propagate(&delta_theta, dt_s, self.tables.filter())
+                .is_err()
+        {
+            // Out-of-range increment or step: the estimate is left untouched and counted.
+            self.counters.iru_unusable_cycles = self.counters.iru_unusable_cycles.saturating_add(1);
+        }
+
+        // 5–6. Measurements.
+        if initialized {
+            for tracker in 0..2usize {
+                let r = self.process_fhst(frame, tracker, &mut events);
+                if let Some(slot) = residuals.get_mut(tracker) {
+                    *slot = r;
+                }
+            }
+            for sensor in 0..2usize {
+                let r = self.process_fss(frame, sensor, &mut events);
+                if let Some(slot) = residuals.get_mut(sensor.saturating_add(2)) {
+                    *slot = r;
+                }
+            }
+        }
+        self.update_filter_mode(&residuals, &mut events);
+
+        // 7. Control.
+        self.control(&mut events);
+
+        // 8. Housekeeping.
+        let housekeeping = self.housekeeping(frame.time, residuals);
+        CycleOutput {
+            housekeeping,
+            events,
+        }
+    }
+
+    fn check_time(
+        &mut self,
+        now: TimeTag,
+        events: &mut heapless::Vec<Event, MAX_EVENTS_PER_CYCLE>,
+    ) -> f64 {
+        let period = self.tables.filter().cycle_period_s;
+        let dt = match self.last_time {
+            Some(prev) => {
+                let dt = now.seconds() - prev.seconds();
+                if dt > 0.0 && dt <= MAX_GAP_PERIODS * period {
+                    dt
+                } else {
+                    self.counters.time_tag_anomalies =
+                        self.counters.time_tag_anomalies.saturating_add(1);
+                    raise(
+                        events,
+                        &mut self.counters,
+                        EventId::TimeTagAnomaly,
+                        prev.coarse_s,
+                        now.coarse_s,
+                    );
+                    period
+                }
+            }
+            None => period,
+        };
+        self.last_time = Some(now);
+        dt
+    }
+
+    fn execute(
+        &mut self,
+        cmd: &Command<'_>,
+        events: &mut heapless::Vec<Event, MAX_EVENTS_PER_CYCLE>,
+    ) {
+        let counters = &mut self.counters;
+        match *cmd {
+            Command::TableLoad(image) => match self.tables.load(image) {
+                Ok(id) => raise(
+                    events,
+                    counters,
+                    EventId::TableLoaded,
+                    u32::from(id as u8),
+                    0,
+                ),
+                Err((id, e)) => raise(
+                    events,
+                    counters,
+                    EventId::TableRejected,
+                    id.map_or(0, |i| u32::from(i as u8)),
+                    u32::from(e.code()),
+                ),
+            },
+            Command::TableActivate(id) => match self.tables.activate(id) {
+                Ok(()) => {
+                    let crc = self
+                        .tables
+                        .status()
+                        .get(id.index())
+                        .map_or(0, |s| s.active_crc);
+                    raise(
+                        events,
+                        counters,
+                        EventId::TableActivated,
+                        u32::from(id as u8),
+                        crc,
+                    );
+                    if id == TableId::StarCatalog || id == TableId::Alignment {
+                        // Stars identified with the old catalog/alignment are re-identified.
+                        self.trackers = [TrackerState::default(); 2];
+                    }
+                }
+                Err(reason) => raise(
+                    events,
+                    counters,
+                    EventId::TableActivateFailed,
+                    u32::from(id as u8),
+                    reason.map_or(0, |e| u32::from(e.code())),
+                ),
+            },
+            Command::TableAbort(id) => {
+                let pending = self.tables.abort(id);
+                raise(
+                    events,
+                    counters,
+                    EventId::TableAborted,
+                    u32::from(id as u8),
+                    u32::from(pending),
+                );
+            }
+            Command::SelectIruConfig(config) => {
+                if config != self.iru_config {
+                    self.iru_config = config;
+                    raise(
+                        events,
+                        counters,
+                        EventId::IruConfigSwitched,
+                        config.code(),
+                        0,
+                    );
+                }
+            }
+            Command::FilterInitialize(q) => {
+                let q = q.normalized();
+                if self.filter.initialize(&q, self.tables.filter()).is_ok() {
+                    self.filter_mode = FilterMode::Coarse;
+                    self.trackers = [TrackerState::default(); 2];
+                    raise(events, counters, EventId::FilterInitialized, 1, 0);
+                    if self.control_mode == ControlMode::Idle && self.controller.hold(&q).is_ok() {
+                        self.control_mode = ControlMode::Hold;
+                    }
+                } else {
+                    raise(events, counters, EventId::CommandRejected, cmd.code(), 2);
+                }
+            }
+            Command::FilterReset => {
+                if self.filter.reset_covariance(self.tables.filter()).is_ok() {
+                    self.trackers = [TrackerState::default(); 2];
+                    raise(events, counters, EventId::FilterReset, 0, 0);
+                } else {
+                    raise(events, counters, EventId::CommandRejected, cmd.code(), 2);
+                }
+            }
+            Command::SlewTo(target) => {
+                if self.filter_mode != FilterMode::Uninitialized
+                    && self.controller.slew_to(&target).is_ok()
+                {
+                    self.control_mode = ControlMode::Slew;
+                    self.slew_count = self.slew_count.saturating_add(1);
+                    raise(events, counters, EventId::SlewStarted, self.slew_count, 0);
+                } else {
+                    raise(events, counters, EventId::CommandRejected, cmd.code(), 2);
+                }
+            }
+            Command::Hold => {
+                if self.filter_mode != FilterMode::Uninitialized
+                    && self.controller.hold(&self.filter.q_acs_from_eci).is_ok()
+                {
+                    self.control_mode = ControlMode::Hold;
+                } else {
+                    raise(events, counters, EventId::CommandRejected, cmd.code(), 3);
+                }
+            }
+        }
+    }
+
+    fn integrate_iru(
+        &mut self,
+        frame: &RawSensorFrame,
+        events: &mut heapless::Vec<Event, MAX_EVENTS_PER_CYCLE>,
+    ) -> Option<Vector3<f64>> {
+        let table = *self.tables.iru();
+        let excluded_before = self.iru.excluded_mask();
+        let mut out = self.iru.process(&frame.iru, self.iru_config, &table);
+        let newly = self.iru.excluded_mask() & !excluded_before;
+        for ch in 0..6u8 {
+            if newly & (1u8 << ch) != 0 {
+                let reason = self.iru.exclusion_reason(usize::from(ch));
+                raise(
+                    events,
+                    &mut self.counters,
+                    EventId::IruChannelExcluded,
+                    u32::from(ch),
+                    reason,
+                );
+            }
+        }
+        if !out.selected_usable && self.iru_config == IruConfiguration::Primary {
+            // Automatic switch to the backup channels (their counters were tracked too).
+            self.iru_config = IruConfiguration::Backup;
+            raise(events, &mut self.counters, EventId::IruConfigSwitched, 1, 1);
+            out = self.iru.reprocess(self.iru_config, &table);
+        }
+        if out.delta_theta_acs_rad.is_none() && self.iru.is_initialized() {
+            self.counters.iru_unusable_cycles = self.counters.iru_unusable_cycles.saturating_add(1);
+            if !self.rejected_run[4] {
+                raise(
+                    events,
+                    &mut self.counters,
+                    EventId::IruDataUnusable,
+                    u32::from(self.iru.excluded_mask()),
+                    0,
+                );
+            }
+            self.rejected_run[4] = true;
+        } else {
+            self.rejected_run[4] = false;
+        }
+        out.delta_theta_acs_rad
+    }
+
+    /// Rotate a measured body vector from its sample time (frame time − τ) to the frame time.
+    fn time_align(&self, dir_acs: Vector3<f64>, offset_s: f64) -> Vector3<f64> {
+        if offset_s == 0.0 {
+            return dir_acs;
+        }
+        // A fixed inertial direction seen from a body turning at ω: b(t) = Rot(ω τ) b(t − τ).
+        rot(&(self.last_rate_acs_rad_per_s * offset_s)) * dir_acs
+    }
+
+    fn reference_star(&self, star: &StarMatch, time: TimeTag) -> Vector3<f64> {
+        let dir = star.star.dir();
+        if self.tables.filter().aberration_correction {
+            match sun_ephemeris::earth_velocity_over_c(time.seconds_since_j2000_tt()) {
+                Ok(beta) => sun_ephemeris::aberrate(&dir, &beta),
+                Err(_) => dir,
+            }
+        } else {
+            dir
+        }
+    }
+
+    fn note_rejected(
+        &mut self,
+        sensor: usize,
+        reason: u32,
+        events: &mut heapless::Vec<Event, MAX_EVENTS_PER_CYCLE>,
+    ) {
+        self.counters.rejected_inputs = self.counters.rejected_inputs.saturating_add(1);
+        if let Some(run) = self.rejected_run.get_mut(sensor) {
+            if !*run {
+                raise(
+                    events,
+                    &mut self.counters,
+                    EventId::InputRejected,
+                    to_u32(sensor),
+                    reason,
+                );
+            }
+            *run = true;
+        }
+    }
+
+    fn note_outcome(
+        &mut self,
+        sensor: usize,
+        accepted: bool,
+        events: &mut heapless::Vec<Event, MAX_EVENTS_PER_CYCLE>,
+    ) -> MeasurementStatus {
+        let run = self.gated_run.get(sensor).copied().unwrap_or(false);
+        if accepted {
+            self.counters.accepted_measurements =
+                self.counters.accepted_measurements.saturating_add(1);
+            if let Some(r) = self.gated_run.get_mut(sensor) {
+                *r = false;
+            }
+            MeasurementStatus::Accepted
+        } else {
+            self.counters.gated_measurements = self.counters.gated_measurements.saturating_add(1);
+            if !run {
+                raise(
+                    events,
+                    &mut self.counters,
+                    EventId::MeasurementGated,
+                    to_u32(sensor),
+                    0,
+                );
+            }
+            if let Some(r) = self.gated_run.get_mut(sensor) {
+                *r = true;
+            }
+            MeasurementStatus::Gated
+        }
+    }
+
+    fn process_fhst(
+        &mut self,
+        frame: &RawSensorFrame,
+        tracker: usize,
+        events: &mut heapless::Vec<Event, MAX_EVENTS_PER_CYCLE>,
+    ) -> SensorResidual {
+        let Some(sample) = frame.fhst.get(tracker) else {
+            return SensorResidual::default();
+        };
+        let alignment = self.tables.alignment();
+        let m_acs_from_fhst = if tracker == 0 {
+            &alignment.m_acs_from_fhst1
+        } else {
+            &alignment.m_acs_from_fhst2
+        };
+        let distortion = alignment
+            .corrections
+            .fhst_distortion
+            .get(tracker)
+            .copied()
+            .unwrap_or([0.0; 3]);
+        let offset_s = alignment
+            .corrections
+            .time_offset_s
+            .get(tracker)
+            .copied()
+            .unwrap_or(0.0);
+        let meas = match fhst::measure(sample, m_acs_from_fhst, &distortion) {
+            Ok(m) => {
+                if let Some(r) = self.rejected_run.get_mut(tracker) {
+                    *r = false;
+                }
+                m
+            }
+            Err(reject) => {
+                if reject.is_no_data() {
+                    if let Some(t) = self.trackers.get_mut(tracker) {
+                        *t = TrackerState::default();
+                    }
+                    return SensorResidual::default();
+                }
+                self.note_rejected(tracker, u32::from(reject.code()), events);
+                return SensorResidual {
+                    status: MeasurementStatus::Rejected,
+                    ..SensorResidual::default()
+                };
+            }
+        };
+        let dir_acs = self.time_align(meas.dir_acs, offset_s);
+
+        // Identify on a new acquisition (or if not yet identified for this track).
+        let new_star = sample.flags & FHST_FLAG_NEW_STAR != 0;
+        let mut state = self.trackers.get(tracker).copied().unwrap_or_default();
+        if new_star {
+            state = TrackerState::default();
+        }
+        if state.star.is_none() && !state.failed {
+            let filter_table = self.tables.filter();
+            let result = if self.tables.catalog().stars.is_empty() {
+                Err(StarIdError::NoCatalog)
+            } else {
+                star_id::identify(
+                    &dir_acs,
+                    meas.magnitude,
+                    &self.filter.q_acs_from_eci,
+                    self.tables.catalog(),
+                    filter_table,
+                )
+            };
+            match result {
+                Ok(star) => {
+                    state.star = Some(star);
+                    self.counters.stars_identified =
+                        self.counters.stars_identified.saturating_add(1);
+                    raise(
+                        events,
+                        &mut self.counters,
+                        EventId::StarIdentified,
+                        to_u32(tracker),
+                        star.star.id,
+                    );
+                }
+                Err(e) => {
+                    state.failed = true;
+                    let code = match e {
+                        StarIdError::NoMatch => {
+                            self.counters.star_id_unmatched =
+                                self.counters.star_id_unmatched.saturating_add(1);
+                            1
+                        }
+                        StarIdError::Ambiguous { .. } => {
+                            self.counters.star_id_ambiguous =
+                                self.counters.star_id_ambiguous.saturating_add(1);
+                            2
+                        }
+                        StarIdError::NoCatalog | StarIdError::InvalidInput => u32::from(e.code()),
+                    };
+                    raise(
+                        events,
+                        &mut self.counters,
+                        EventId::StarIdFailed,
+                        to_u32(tracker),
+                        code,
+                    );
+                }
+            }
+        }
+        if let Some(t) = self.trackers.get_mut(tracker) {
+            *t = state;
+        }
+        let Some(star) = state.star else {
+            return SensorResidual {
+                status: MeasurementStatus::Unidentified,
+                ..SensorResidual::default()
+            };
+        };
+        let ref_eci = self.reference_star(&star, frame.time);
+        let sigma = self.tables.filter().fhst_sigma_rad(meas.magnitude);
+        let gate = self.tables.filter().gate_chi2;
+        let outcome = self.filter.update_vector(&dir_acs, &ref_eci, sigma, gate);
+        let status = self.note_outcome(tracker, outcome.accepted, events);
+        if outcome.accepted {
+            self.cycles_since_star = 0;
+        }
+        #[allow(clippy::cast_possible_truncation)]
+        SensorResidual {
+            status,
+            innovation_arcsec: [
+                (outcome.innovation_rad[0] * ARCSEC_PER_RAD) as f32,
+                (outcome.innovation_rad[1] * ARCSEC_PER_RAD) as f32,
+            ],
+            star_id: star.star.id,
+        }
+    }
+
+    fn process_fss(
+        &mut self,
+        frame: &RawSensorFrame,
+        sensor: usize,
+        events: &mut heapless::Vec<Event, MAX_EVENTS_PER_CYCLE>,
+    ) -> SensorResidual {
+        let Some(sample) = frame.fss.get(sensor) else {
+            return SensorResidual::default();
+        };
+        let index = sensor.saturating_add(2);
+        let alignment = self.tables.alignment();
+        let m_acs_from_fss = if sensor == 0 {
+            &alignment.m_acs_from_fss1
+        } else {
+            &alignment.m_acs_from_fss2
+        };
+        let transfer = alignment
+            .corrections
+            .fss_transfer
+            .get(sensor)
+            .copied()
+            .unwrap_or([0.0; 6]);
+        let offset_s = alignment
+            .corrections
+            .time_offset_s
+            .get(index)
+            .copied()
+            .unwrap_or(0.0);
+        let meas = match fss::measure(sample, m_acs_from_fss, &transfer) {
+            Ok(m) => {
+                if let Some(r) = self.rejected_run.get_mut(index) {
+                    *r = false;
+                }
+                m
+            }
+            Err(reject) => {
+                if reject.is_no_data() {
+                    return SensorResidual::default();
+                }
+                self.note_rejected(index, u32::from(reject.code()), events);
+                return SensorResidual {
+                    status: MeasurementStatus::Rejected,
+                    ..SensorResidual::default()
+                };
+            }
+        };
+        let dir_acs = self.time_align(meas.dir_acs, offset_s);
+        let Ok(sun_eci) = sun_ephemeris::sun_dir_eci(frame.time.seconds_since_j2000_tt()) else {
+            return SensorResidual {
+                status: MeasurementStatus::NotUsed,
+                ..SensorResidual::default()
+            };
+        };
+        let filter_table = self.tables.filter();
+        let sigma = filter_table.fss_sigma_arcsec / ARCSEC_PER_RAD;
+        let gate = filter_table.gate_chi2;
+        let outcome = self.filter.update_vector(&dir_acs, &sun_eci, sigma, gate);
+        let status = self.note_outcome(index, outcome.accepted, events);
+        #[allow(clippy::cast_possible_truncation)]
+        SensorResidual {
+            status,
+            innovation_arcsec: [
+                (outcome.innovation_rad[0] * ARCSEC_PER_RAD) as f32,
+                (outcome.innovation_rad[1] * ARCSEC_PER_RAD) as f32,
+            ],
+            star_id: 0,
+        }
+    }
+
+    fn update_filter_mode(
+        &mut self,
+        residuals: &[SensorResidual; 4],
+        events: &mut heapless::Vec<Event, MAX_EVENTS_PER_CYCLE>,
+    ) {
+        let star_used = residuals
+            .iter()
+            .take(2)
+            .any(|r| r.status == MeasurementStatus::Accepted);
+        if !star_used {
+            self.cycles_since_star = self.cycles_since_star.saturating_add(1);
+        }
+        let new_mode = match self.filter_mode {
+            FilterMode::Uninitialized => FilterMode::Uninitialized,
+            _ if self.cycles_since_star < FINE_MODE_TIMEOUT_CYCLES => FilterMode::Fine,
+            _ => FilterMode::Coarse,
+        };
+        if new_mode != self.filter_mode {
+            self.filter_mode = new_mode;
+            raise(
+                events,
+                &mut self.counters,
+                EventId::FilterModeChanged,
+                u32::from(new_mode as u8),
+                0,
+            );
+        }
+    }
+
+    fn control(&mut self, events: &mut heapless::Vec<Event, MAX_EVENTS_PER_CYCLE>) {
+        if self.control_mode == ControlMode::Idle {
+            self.wheel_torque_cmd_nm = Vector3::zeros();
+            return;
+        }
+        let out = self.controller.update(
+            &self.filter.q_acs_from_eci,
+            &self.last_rate_acs_rad_per_s,
+            self.tables.filter(),
+        );
+        self.wheel_torque_cmd_nm = out.torque_acs_nm;
+        if self.control_mode == ControlMode::Slew && out.slew_complete {
+            self.control_mode = ControlMode::Hold;
+            raise(
+                events,
+                &mut self.counters,
+                EventId::SlewCompleted,
+                self.slew_count,
+                0,
+            );
+        }
+        if out.high_rate_iru != self.iru_high_rate_cmd {
+            self.iru_high_rate_cmd = out.high_rate_iru;
+            raise(
+                events,
+                &mut self.counters,
+                EventId::IruRateModeChanged,
+                u32::from(out.high_rate_iru),
+                0,
+            );
+        }
+    }
+
+    fn housekeeping(&self, time: TimeTag, residuals: [SensorResidual; 4]) -> ObcHousekeeping {
+        let status = self.tables.status();
+        let mut table_crc = [0u32; 4];
+        let mut table_pending_mask = 0u8;
+        for (i, (crc, s)) in table_crc.iter_mut().zip(status.iter()).enumerate() {
+            *crc = s.active_crc;
+            if s.pending {
+                table_pending_mask |= 1u8 << (i & 7);
+            }
+        }
+        let b = self.filter.bias_rad_per_s;
+        let mut covariance_diag = [0.0; 6];
+        for (dst, src) in covariance_diag
+            .iter_mut()
+            .zip(self.filter.covariance.diagonal().iter())
+        {
+            *dst = *src;
+        }
+        #[allow(clippy::cast_possible_truncation)]
+        ObcHousekeeping {
+            time,
+            q_acs_from_eci: self.filter.q_acs_from_eci,
+            bias_acs_rad_per_s: [b.x, b.y, b.z],
+            covariance_diag,
+            filter_mode: self.filter_mode as u8,
+            control_mode: self.control_mode as u8,
+            iru_config: self.iru_config.code() as u8,
+            iru_high_rate_cmd: u8::from(self.iru_high_rate_cmd),
+            wheel_torque_cmd_nm: [
+                self.wheel_torque_cmd_nm.x as f32,
+                self.wheel_torque_cmd_nm.y as f32,
+                self.wheel_torque_cmd_nm.z as f32,
+            ],
+            residuals,
+            iru_excluded_mask: self.iru.excluded_mask(),
+            counters: self.counters,
+            table_crc,
+            table_pending_mask,
+        }
+    }
+
+    /// The IRU high-rate command the hardware should apply from the next interval.
+    #[must_use]
+    pub fn iru_high_rate_command(&self) -> bool {
+        self.iru_high_rate_cmd
+    }
+
+    /// The wheel torque command of the last cycle in ACS, N m.
+    #[must_use]
+    pub fn wheel_torque_command_nm(&self) -> Vector3<f64> {
+        self.wheel_torque_cmd_nm
+    }
+}
