@@ -12,8 +12,9 @@
 //! 3. **IRU**: pulse integration (paper eq. 5); a failed selected channel switches to the
 //!    backup configuration automatically.
 //! 4. **Propagation** of the MEKF with the exact rotation-vector update.
-//! 5. **FHST1, FHST2**: counts → unit vector in ACS; star identification on a new
-//!    acquisition; sequential vector update with χ² gating.
+//! 5. **FHST1, FHST2** (not during slews: gyro-only propagation, as on GRO): counts → unit
+//!    vector in ACS; star identification on a new acquisition; sequential vector update with
+//!    χ² gating.
 //! 6. **FSS1, FSS2**: counts → Sun vector in ACS; onboard Sun ephemeris; update.
 //! 7. **Control**: inertial hold or rate-limited eigen-axis slew → wheel torque; IRU rate
 //!    mode request (high for slews).
@@ -254,8 +255,10 @@ impl FlightCore {
             self.counters.iru_unusable_cycles = self.counters.iru_unusable_cycles.saturating_add(1);
         }
 
-        // 5–6. Measurements.
-        if initialized {
+        // 5–6. Measurements. During a slew the OBC propagates on the gyros alone, as GRO
+        // did: the post-maneuver error then measures the gyro calibration, and star
+        // identification after the slew is what the 0.5° requirement protects.
+        if initialized && self.control_mode != ControlMode::Slew {
             for tracker in 0..2usize {
                 let r = self.process_fhst(frame, tracker, &mut events);
                 if let Some(slot) = residuals.get_mut(tracker) {

@@ -363,7 +363,7 @@ impl FilterTable {
             max_alignment_change_arcsec: 3600.0,
             max_iru_change_ppm: 20_000.0,
             slew_rate_limit_rad_per_s: 0.08 * RAD_PER_DEG,
-            inertia_kg_m2: [1.2e5, 1.4e5, 0.9e5],
+            inertia_kg_m2: [1.10e5, 1.25e5, 1.70e5],
             control_bandwidth_rad_per_s: 0.05,
             control_damping: 0.9,
             torque_limit_nm: 0.5,
