@@ -165,7 +165,8 @@ pub struct IruOutput {
     pub delta_counts: [i16; IRU_CHANNELS],
     /// Health of all six channels.
     pub health: ChannelHealth,
-    /// All three selected channels usable.
+    /// All three selected channels usable (health only: also true on the first sample, whose
+    /// increment is `None` for lack of a previous count).
     pub selected_usable: bool,
     /// Rate mode of the interval that ended (copied from the sample).
     pub high_rate: bool,
@@ -220,8 +221,8 @@ pub struct IruIntegrator {
 
 /// The output for given count differences and health, in configuration `config`.
 fn output_for(last: &LastCycle, config: IruConfiguration, table: &IruTable) -> IruOutput {
-    let selected_usable = last.has_delta && last.health.unusable() & config.channel_mask() == 0;
-    let delta_theta_acs_rad = if selected_usable {
+    let selected_usable = last.health.unusable() & config.channel_mask() == 0;
+    let delta_theta_acs_rad = if selected_usable && last.has_delta {
         let [ix, iy, iz] = config.channels();
         let pick = |i: usize| f64::from(last.delta_counts.get(i).copied().unwrap_or(0));
         let dtheta = delta_theta_from_pulses(
@@ -657,7 +658,8 @@ mod tests {
         let table = IruTable::prelaunch();
         let mut integ = IruIntegrator::new();
         let s = IruSample::default();
-        integ.process(&s, IruConfiguration::Primary, &table);
+        let first = integ.process(&s, IruConfiguration::Primary, &table);
+        assert!(first.selected_usable && first.delta_theta_acs_rad.is_none());
         assert!(integ.is_initialized());
         integ.reset();
         let out = integ.process(&s, IruConfiguration::Primary, &table);

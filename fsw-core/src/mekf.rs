@@ -27,7 +27,9 @@
 //!   dropped: `ν = [e₁·z, e₂·z]`, and from `z ≈ ẑ + [ẑ×]δθ`, `h = [−e₂ᵀ; e₁ᵀ]`.
 //! * [`Mekf::update_focal_plane`] (FHST, §3.1): `ŝ = M_ASᵀ Â r`, `ν = (H − Ĥ, V − V̂)`,
 //!   `h = ∂(H,V)/∂s · M_ASᵀ [b̂×]` ([`crate::fhst::hv_jacobian`]).
-//! * `S = h P₁₁ hᵀ + R` (2×2, inverted in closed form only if `det S > 0` and finite),
+//! * `S = h P₁₁ hᵀ + R` (2×2, inverted in closed form only if `det S > 0` and finite);
+//!   `R` is floored so that one update reduces the variance by at most
+//!   [`MAX_VARIANCE_REDUCTION`] (keeps `P` positive definite in double precision),
 //!   `d² = νᵀS⁻¹ν` (NIS), rejected when `d² > gate` (χ²₂: 11.83 = 99.73 %).
 //! * `K = P Hᵀ S⁻¹` (6×2); Joseph form `P⁺ = (I − KH) P (I − KH)ᵀ + K R Kᵀ`, evaluated as
 //!   `T = P − K (HP)`, `P⁺ = T − (T Hᵀ − σ²K) Kᵀ` (exactly the Joseph product, ~180
@@ -55,6 +57,11 @@ use nalgebra::{Matrix2, Matrix2x3, Matrix3, Matrix3x2, Matrix6, Matrix6x2, Vecto
 
 /// Below this rotation angle (rad) the propagation uses Taylor series (no trig).
 const SERIES_LIMIT_RAD: f64 = 0.01;
+/// Largest variance reduction one update may make: `R ≥ tr(h P₁₁ hᵀ)/2 / 1e10`. Any real
+/// sensor is far inside this (a 1° prior and a 0.1″ star give 1.3e9), but a near-zero σ
+/// would push an eigenvalue of `P` below the rounding level of its largest one (ε‖P‖) and
+/// `P` would lose definiteness; `R` is raised to the floor instead.
+pub const MAX_VARIANCE_REDUCTION: f64 = 1.0e10;
 /// Longest accepted propagation step, s.
 pub const MAX_PROPAGATION_STEP_S: f64 = 10.0;
 /// Largest accepted gyro increment in one step, rad (well above 2¹⁵ high-rate pulses).
@@ -579,7 +586,6 @@ impl Mekf {
         if !ok {
             return self.reject(UpdateRejection::InvalidInput, [0.0; 2], f64::NAN);
         }
-        let r = sigma_rad * sigma_rad;
         let p = &self.covariance;
         let p11 = p.fixed_view::<3, 3>(0, 0).into_owned();
         let p12 = p.fixed_view::<3, 3>(0, 3).into_owned();
@@ -587,7 +593,9 @@ impl Mekf {
         // P Hᵀ = [P₁₁ hᵀ; P₂₁ hᵀ]
         let pht_top: Matrix3x2<f64> = p11 * ht;
         let pht_bot: Matrix3x2<f64> = p12.transpose() * ht;
-        let s = h * pht_top + Matrix2::identity() * r;
+        let hph = h * pht_top;
+        let r = (sigma_rad * sigma_rad).max(0.5 * (hph.m11 + hph.m22) / MAX_VARIANCE_REDUCTION);
+        let s = hph + Matrix2::identity() * r;
         let Some(s_inv) = inverse_spd2(&s) else {
             return self.reject(UpdateRejection::Singular, nu_arr, f64::NAN);
         };
@@ -825,6 +833,28 @@ mod tests {
         assert!(f.propagate(&Vector3::zeros(), f64::NAN, &t).is_err());
         assert!(f.propagate(&Vector3::new(1.0, 0.0, 0.0), 1.0, &t).is_err());
         assert_eq!(f.covariance, before.covariance);
+    }
+
+    #[test]
+    fn near_zero_sigma_does_not_break_positive_definiteness() {
+        // Found by the est_mekf_robust property test: σ = 5.7e-12 rad against a 1° prior.
+        let mut f = Mekf::new();
+        f.initialize(
+            &Quat::from_rotation_vector(&Vector3::new(0.1, 0.2, 0.3)),
+            &table(),
+        )
+        .unwrap();
+        let m = Matrix3::new(0.0, 0.0, 1.0, 0.0, 1.0, 0.0, -1.0, 0.0, 0.0);
+        let out = f.update_focal_plane(
+            0.0,
+            0.0,
+            &Vector3::new(0.672_719_502_888_829_6, 0.0, 0.0),
+            &m,
+            5.730_599_888_929_648_6e-12,
+            1e164,
+        );
+        assert!(out.accepted);
+        assert!(f.covariance.cholesky().is_some());
     }
 
     #[test]

@@ -50,11 +50,11 @@ impl TruthIru {
     fn sample(&mut self, high_rate: bool, table: &IruTable) -> IruSample {
         let w = pulse_weight_rad(high_rate, table);
         let ch = IruConfiguration::Primary.channels();
-        for axis in 0..3 {
+        for (axis, &c) in ch.iter().enumerate() {
             let n = ((self.angle_rad[axis] - self.pulsed_rad[axis]) / w).floor();
             self.pulsed_rad[axis] += n * w;
-            let c = &mut self.counts[ch[axis]];
-            *c = c.wrapping_add(n as i64 as u16); // the register is 16 bits
+            // The register is 16 bits: it wraps.
+            self.counts[c] = self.counts[c].wrapping_add(n as i64 as u16);
         }
         // Unused backup channels count too (not stuck).
         for c in [0usize, 3, 5] {
