@@ -36,10 +36,11 @@
 //!   multiplications), then symmetrised. An update whose `P⁺` is not finite with a positive
 //!   diagonal is discarded (state unchanged).
 //! * Reset: `q̂ ← normalize(δq(δθ̂) ⊗ q̂)`, `b̂ ← b̂ + δb̂`. The covariance reset
-//!   `T P Tᵀ, T = blkdiag(I − ½[δθ̂×], I)` [Mueller17] is second order and omitted.
+//!   `T P Tᵀ, T = blkdiag(I − ½[δθ̂×], I)` (Mueller 2017, algorithms.md §12) is second order
+//!   and omitted.
 //! * Updates in one cycle are processed one after the other, each re-linearised at the reset
-//!   state ([SMEKF18]), which is more robust than batch processing when the prior error is
-//!   large (1° at initialisation).
+//!   state (SMEKF 2018, algorithms.md §12), which is more robust than batch processing when
+//!   the prior error is large (1° at initialisation).
 //!
 //! ## Initialisation
 //! [`Mekf::initialize`] from a known attitude, or [`Mekf::initialize_from_two_vectors`]
