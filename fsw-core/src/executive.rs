@@ -33,6 +33,7 @@ use crate::mekf::Mekf;
 use crate::raw::{RawSensorFrame, TimeTag, FHST_FLAG_NEW_STAR};
 use crate::star_id::{self, StarIdError, StarMatch};
 use crate::sun_ephemeris;
+use crate::tables::types::matrix_from_rows;
 use crate::tables::{TableId, TableSet};
 use crate::telemetry::{MeasurementStatus, ObcHousekeeping, SensorResidual};
 use crate::units::ARCSEC_PER_RAD;
@@ -211,6 +212,13 @@ impl FlightCore {
         self.filter.q_acs_from_eci
     }
 
+    /// The attitude filter (estimate and full covariance), read-only: for test harnesses
+    /// that score consistency (NEES needs the off-diagonal `P_θθ`).
+    #[must_use]
+    pub fn filter(&self) -> &Mekf {
+        &self.filter
+    }
+
     /// Run one cycle.
     pub fn step(&mut self, frame: &RawSensorFrame, commands: &[Command<'_>]) -> CycleOutput {
         let mut events = heapless::Vec::new();
@@ -238,9 +246,11 @@ impl FlightCore {
         // 3–4. IRU and propagation.
         let increment = self.integrate_iru(frame, &mut events);
         let initialized = self.filter_mode != FilterMode::Uninitialized;
+        // Without gyro data for a cycle, propagate with the last known body rate (a coast),
+        // not with zero rate.
         let delta_theta = match increment {
             Some(d) => d,
-            None => Vector3::zeros(),
+            None => (self.last_rate_acs_rad_per_s + self.filter.bias_rad_per_s) * dt_s,
         };
         if dt_s > 0.0 {
             self.last_rate_acs_rad_per_s = delta_theta / dt_s - self.filter.bias_rad_per_s;
@@ -560,11 +570,12 @@ impl FlightCore {
             return SensorResidual::default();
         };
         let alignment = self.tables.alignment();
-        let m_acs_from_fhst = if tracker == 0 {
-            &alignment.m_acs_from_fhst1
+        let m_acs_from_fhst_rows = if tracker == 0 {
+            alignment.m_acs_from_fhst1
         } else {
-            &alignment.m_acs_from_fhst2
+            alignment.m_acs_from_fhst2
         };
+        let m_acs_from_fhst = matrix_from_rows(&m_acs_from_fhst_rows);
         let distortion = alignment
             .corrections
             .fhst_distortion
@@ -577,7 +588,7 @@ impl FlightCore {
             .get(tracker)
             .copied()
             .unwrap_or(0.0);
-        let meas = match fhst::measure(sample, m_acs_from_fhst, &distortion) {
+        let meas = match fhst::measure(sample, &m_acs_from_fhst_rows, &distortion) {
             Ok(m) => {
                 if let Some(r) = self.rejected_run.get_mut(tracker) {
                     *r = false;
@@ -667,9 +678,19 @@ impl FlightCore {
             };
         };
         let ref_eci = self.reference_star(&star, frame.time);
-        let sigma = self.tables.filter().fhst_sigma_rad(meas.magnitude);
-        let gate = self.tables.filter().gate_chi2;
-        let outcome = self.filter.update_vector(&dir_acs, &ref_eci, sigma, gate);
+        let filter_table = self.tables.filter();
+        let sigma = fhst::measurement_sigma_rad(meas.magnitude, filter_table);
+        let gate = filter_table.gate_chi2;
+        // Focal-plane update (H, V): the measurement space of the tracker.
+        let (h_rad, v_rad) = if offset_s == 0.0 {
+            (meas.h_rad, meas.v_rad)
+        } else {
+            fhst::hv_from_dir(&(m_acs_from_fhst.transpose() * dir_acs))
+                .unwrap_or((meas.h_rad, meas.v_rad))
+        };
+        let outcome =
+            self.filter
+                .update_focal_plane(h_rad, v_rad, &ref_eci, &m_acs_from_fhst, sigma, gate);
         let status = self.note_outcome(tracker, outcome.accepted, events);
         if outcome.accepted {
             self.cycles_since_star = 0;
