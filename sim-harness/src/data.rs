@@ -9,6 +9,10 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{anyhow, Context};
 
+/// The Hipparcos subset (`data/hipparcos_mag6p5.csv`), embedded so that a run does not
+/// depend on the working directory.
+pub const HIPPARCOS_CSV: &str = include_str!("../../data/hipparcos_mag6p5.csv");
+
 /// The workspace `data/` directory (next to this crate).
 #[must_use]
 pub fn data_dir() -> PathBuf {

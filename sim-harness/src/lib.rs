@@ -1,18 +1,49 @@
-//! # sim-harness: truth and sensor models for the Compton GRO attitude emulation
+//! # sim-harness: the closed-loop simulator of the Compton GRO attitude emulation
 //!
 //! Design principles:
 //! 1. One convention: attitudes, alignments and rotation vectors are [`fsw_core::attitude`]'s
 //!    (`A = m_acs_from_eci`, `M_AS = m_acs_from_<sensor>`, paper `Rot(θ)`).
 //! 2. Sensor models produce exactly [`fsw_core::raw::RawSensorFrame`]: counts and flags.
-//! 3. Deterministic: every random draw comes from a seeded `ChaCha8Rng`, one stream per model.
+//! 3. Deterministic: every random draw comes from a seeded `ChaCha8Rng`, one stream per model;
+//!    the same scenario and seed give a byte-identical `telemetry.bin`.
 //! 4. The per-cycle path does not allocate.
 //! 5. Every error parameter is a serde field with a default; undeclared effects default off.
-/// The closed-loop driver needs `fsw_core::executive` (`FlightCore`), which is written but
-/// not yet exported by fsw-core; build it with `--features closed-loop` once it is.
-#[cfg(feature = "closed-loop")]
+//!
+//! Modules: [`truth`] and [`sensors`] (phase 1), [`scenario`] (TOML), [`onboard`] (what the
+//! ground uplinks at t = 0), [`closed_loop`] (truth → FlightCore → wheels), [`telemetry`]
+//! (CCSDS packets), [`run`] (run folder, scores, bench), [`campaign`] (Monte Carlo, merge).
+pub mod campaign;
 pub mod closed_loop;
 pub mod data;
+pub mod onboard;
 pub mod paper;
+pub mod run;
 pub mod scenario;
 pub mod sensors;
+pub mod telemetry;
 pub mod truth;
+
+/// A bad input (scenario, table file, option): the CLI exits with code 2.
+#[derive(Debug, thiserror::Error)]
+#[error("{0:#}")]
+pub struct InputError(pub anyhow::Error);
+
+impl From<anyhow::Error> for InputError {
+    fn from(e: anyhow::Error) -> Self {
+        Self(e)
+    }
+}
+
+impl InputError {
+    /// An input error from a message.
+    pub fn msg(m: impl std::fmt::Display) -> Self {
+        Self(anyhow::anyhow!("{m}"))
+    }
+}
+
+/// The error (or one of its causes) is an [`InputError`].
+#[must_use]
+pub fn is_input_error(e: &anyhow::Error) -> bool {
+    e.downcast_ref::<InputError>().is_some()
+        || e.chain().any(|c| c.downcast_ref::<InputError>().is_some())
+}

@@ -1,1 +1,319 @@
-fn main() {}
+//! `sim-harness`: fly the Compton GRO onboard attitude software (fsw-core) in closed loop
+//! against the truth models and write run folders for the ground tool. `--help` teaches.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use anyhow::Context;
+use clap::{Parser, Subcommand};
+
+use sim_harness::campaign::{self, CampaignOptions};
+use sim_harness::run::{self, RunOptions};
+use sim_harness::scenario::{self, Scenario};
+use sim_harness::{is_input_error, InputError};
+
+const ABOUT: &str = "Closed-loop simulator of the Compton Gamma Ray Observatory (1991) attitude system.
+
+Each 1 s cycle: truth (orbit, Sun, Hipparcos sky, rigid body + wheels) -> sensor words (FHST,
+FSS, DRIRU II, temperatures) -> the onboard software fsw-core (FlightCore::step with the
+scenario's commands) -> its wheel torque drives the dynamics and its IRU rate-mode request goes
+to the gyro model. At t = 0 the harness uplinks the onboard star catalog (the prelaunch ground
+system's, built from Hipparcos) and initialises the filter 0.1 deg off the truth.
+
+Scenarios are TOML files (see scenarios/*.toml, each documented). A bare name such as
+`gro-early-mission` means scenarios/gro-early-mission.toml (built into the binary too).
+
+Exit codes: 0 ok, 2 bad input (scenario or table file; the message names the field),
+1 runtime failure.";
+
+const AFTER: &str = "Examples:
+  sim-harness run gro-early-mission --out runs/early
+  sim-harness run scenarios/normal-ops.toml --out runs/ops --duration 1800 --json
+  sim-harness run gro-early-mission --out runs/cal --tables ground-out/tables
+  sim-harness monte-carlo normal-ops -n 32 --seed 100 --duration 3600 --out runs/mc
+  sim-harness monte-carlo normal-ops -n 32 --seed 100 --out runs/mc --shard $SLURM_ARRAY_TASK_ID/8
+  sim-harness merge runs/mc
+  sim-harness bench --duration 3600 --json";
+
+#[derive(Parser)]
+#[command(name = "sim-harness", version, about = ABOUT, long_about = ABOUT, after_help = AFTER)]
+struct Cli {
+    #[command(subcommand)]
+    command: Cmd,
+}
+
+#[derive(Subcommand)]
+enum Cmd {
+    /// Fly one scenario and write a run folder.
+    ///
+    /// Writes into DIR (docs/icd.md §5): telemetry.bin (CCSDS packets: raw frame 0x010,
+    /// ephemeris 0x020 every 10 s, housekeeping 0x011, events 0x012), metadata.json (what the
+    /// operator declares: noise figures, declared effects, boot tables and uploads),
+    /// uploads/*.tbl (every table image uplinked), truth.json (true alignments, IRU delta_m
+    /// and G, bias history, undeclared effects: for scoring only) and summary.json (attitude
+    /// error rms/3-sigma per axis, post-maneuver errors, NEES, rejected measurements, speed).
+    /// Files are written under *.partial names and renamed at the end, summary.json last.
+    #[command(after_help = "Example: sim-harness run gro-early-mission --out runs/early --json")]
+    Run {
+        /// Scenario TOML file, or a bare built-in name (gro-early-mission, gro-bias-history,
+        /// normal-ops, inertial_hold, undeclared_effects).
+        scenario: String,
+        /// Run folder (created; an old summary.json in it is removed first).
+        #[arg(long)]
+        out: PathBuf,
+        /// Override the scenario's duration_s (s).
+        #[arg(long)]
+        duration: Option<f64>,
+        /// Override the scenario's seed (every random stream derives from it).
+        #[arg(long)]
+        seed: Option<u64>,
+        /// Load and activate every *.tbl table image of DIR at t = 0 (after the catalog),
+        /// e.g. the tables written by `ground-tool calibrate`.
+        #[arg(long, value_name = "DIR")]
+        tables: Option<PathBuf>,
+        /// Print summary.json to stdout.
+        #[arg(long)]
+        json: bool,
+        /// No progress bar (it is also hidden when stderr is not a terminal).
+        #[arg(long, short)]
+        quiet: bool,
+    },
+    /// Fly one scenario with N seeds in parallel (rayon) and aggregate the scores.
+    ///
+    /// Run i (0 ≤ i < N) has seed S + i and its own run folder DIR/run_<i>/. The aggregate
+    /// (mean/std/min/max over runs of the rms error per axis, max error, post-maneuver errors
+    /// per slew, NEES, fine-mode fraction, real-time factor) goes to DIR/aggregate.json, or
+    /// with --shard K/M to DIR/aggregate.shard-K-of-M.json: the shard flies only runs with
+    /// i mod M = K, so M array tasks (Slurm, Kubernetes indexed jobs) fly one campaign;
+    /// combine them with `sim-harness merge`. Threads: RAYON_NUM_THREADS (default: all cores).
+    #[command(
+        name = "monte-carlo",
+        after_help = "Example: sim-harness monte-carlo normal-ops -n 16 --seed 1 --duration 3600 --out runs/mc"
+    )]
+    MonteCarlo {
+        /// Scenario file or built-in name.
+        scenario: String,
+        /// Number of runs in the whole campaign.
+        #[arg(short = 'n', long = "runs")]
+        runs: u32,
+        /// Seed of run 0.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Campaign folder.
+        #[arg(long)]
+        out: PathBuf,
+        /// Fly only the runs of shard K of M (0-based K), e.g. 3/8.
+        #[arg(long, value_name = "K/M")]
+        shard: Option<String>,
+        /// Override the scenario's duration_s (s).
+        #[arg(long)]
+        duration: Option<f64>,
+        /// Table images to activate at t = 0 in every run.
+        #[arg(long, value_name = "DIR")]
+        tables: Option<PathBuf>,
+        /// Print the aggregate to stdout.
+        #[arg(long)]
+        json: bool,
+        /// No progress bar.
+        #[arg(long, short)]
+        quiet: bool,
+    },
+    /// Combine the runs of campaign folders (e.g. the shards of a job array) into one
+    /// aggregate.json.
+    ///
+    /// Reads every DIR/run_*/summary.json (each seed once) and writes the aggregate to
+    /// --out or DIR[0]/aggregate.json, and prints it.
+    #[command(after_help = "Example: sim-harness merge runs/mc-shard0 runs/mc-shard1 --out runs/mc.json")]
+    Merge {
+        /// Campaign folders.
+        #[arg(required = true)]
+        dirs: Vec<PathBuf>,
+        /// Output file (default: the first DIR's aggregate.json).
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
+    /// Measure the closed-loop speed on the built-in gro-early-mission (no files written).
+    ///
+    /// Flies the embedded scenario for --duration seconds with fsw-core in the loop and the
+    /// telemetry encoded into a sink, on one thread, and prints real-time factor, simulated
+    /// and wall seconds, cycles and ns per cycle (JSON with --json). Build with --release.
+    #[command(after_help = "Example: cargo run --release -p sim-harness -- bench --duration 3600 --json")]
+    Bench {
+        /// Simulated seconds.
+        #[arg(long, default_value_t = 3600.0)]
+        duration: f64,
+        /// JSON output: {\"real_time_factor\",\"sim_seconds\",\"wall_seconds\",\"cycles\",\"ns_per_cycle\"}.
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+fn load_scenario(arg: &str, duration: Option<f64>, seed: Option<u64>) -> anyhow::Result<Scenario> {
+    let mut s = scenario::resolve(arg).map_err(InputError::from)?;
+    if let Some(d) = duration {
+        if !(d.is_finite() && d >= 0.0) {
+            return Err(InputError::msg(format!("--duration must be ≥ 0, got {d}")).into());
+        }
+        s.duration_s = d;
+    }
+    if let Some(seed) = seed {
+        s.seed = seed;
+    }
+    Ok(s)
+}
+
+fn print_json(v: &impl serde::Serialize) -> anyhow::Result<()> {
+    println!("{}", serde_json::to_string_pretty(v)?);
+    Ok(())
+}
+
+fn main_inner(cli: Cli) -> anyhow::Result<()> {
+    match cli.command {
+        Cmd::Run {
+            scenario,
+            out,
+            duration,
+            seed,
+            tables,
+            json,
+            quiet,
+        } => {
+            let s = load_scenario(&scenario, duration, seed)?;
+            let name = s.name.clone();
+            let summary = run::run(
+                s,
+                &RunOptions {
+                    out_dir: Some(out.clone()),
+                    tables_dir: tables,
+                    progress: !quiet,
+                },
+            )?;
+            if json {
+                print_json(&summary)?;
+            } else {
+                let e = &summary.attitude_error_arcsec;
+                eprintln!(
+                    "{name}: {} cycles, {:.0} s simulated in {:.2} s ({:.0}x real time)\n\
+                     attitude error (t >= 600 s, outside slews): rms [{:.2}, {:.2}, {:.2}] arcsec, max {:.2} arcsec; NEES mean {}\n\
+                     post-maneuver errors (deg): {:?}\n\
+                     wrote {}",
+                    summary.cycles,
+                    summary.sim_seconds,
+                    summary.wall_seconds,
+                    summary.real_time_factor,
+                    e.rms[0],
+                    e.rms[1],
+                    e.rms[2],
+                    e.max,
+                    summary
+                        .filter_nees_mean
+                        .map_or_else(|| "n/a".to_owned(), |n| format!("{n:.2}")),
+                    summary
+                        .post_maneuver_error_deg
+                        .iter()
+                        .map(|x| (x * 1e4).round() / 1e4)
+                        .collect::<Vec<_>>(),
+                    out.display()
+                );
+            }
+        }
+        Cmd::MonteCarlo {
+            scenario,
+            runs,
+            seed,
+            out,
+            shard,
+            duration,
+            tables,
+            json,
+            quiet,
+        } => {
+            let s = load_scenario(&scenario, duration, None)?;
+            let shard = match shard {
+                Some(t) => campaign::parse_shard(&t).map_err(InputError::from)?,
+                None => (0, 1),
+            };
+            if runs == 0 {
+                return Err(InputError::msg("-n must be ≥ 1").into());
+            }
+            let mine = (0..runs).filter(|i| i % shard.1 == shard.0).count() as u64;
+            use std::io::IsTerminal;
+            let pb = (!quiet && std::io::stderr().is_terminal()).then(|| {
+                let pb = indicatif::ProgressBar::new(mine);
+                pb.set_style(
+                    indicatif::ProgressStyle::with_template(
+                        "[{elapsed_precise}] {wide_bar} {pos}/{len} runs (eta {eta})",
+                    )
+                    .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+                );
+                pb
+            });
+            let done = AtomicU64::new(0);
+            let on_done = || {
+                let n = done.fetch_add(1, Ordering::Relaxed) + 1;
+                if let Some(pb) = &pb {
+                    pb.set_position(n);
+                }
+            };
+            let (agg, path) = campaign::monte_carlo(
+                &s,
+                &CampaignOptions {
+                    runs,
+                    seed,
+                    out_dir: out,
+                    shard,
+                    tables_dir: tables,
+                    duration_s: duration,
+                },
+                &on_done,
+            )?;
+            if let Some(pb) = pb {
+                pb.finish_and_clear();
+            }
+            if json {
+                print_json(&agg)?;
+            }
+            eprintln!("{} runs aggregated into {}", agg.runs, path.display());
+        }
+        Cmd::Merge { dirs, out } => {
+            let (agg, path) = campaign::merge(&dirs, out.as_deref())
+                .context("merge")
+                .map_err(InputError::from)?;
+            print_json(&agg)?;
+            eprintln!("{} runs aggregated into {}", agg.runs, path.display());
+        }
+        Cmd::Bench { duration, json } => {
+            if !(duration.is_finite() && duration > 0.0) {
+                return Err(InputError::msg(format!("--duration must be > 0, got {duration}")).into());
+            }
+            let v = run::bench(duration)?;
+            if json {
+                println!("{}", serde_json::to_string(&v)?);
+            } else {
+                println!(
+                    "gro-early-mission, {} s simulated in {:.3} s: {:.0}x real time, {:.0} ns/cycle",
+                    v["sim_seconds"], v["wall_seconds"].as_f64().unwrap_or(0.0),
+                    v["real_time_factor"].as_f64().unwrap_or(0.0),
+                    v["ns_per_cycle"].as_f64().unwrap_or(0.0)
+                );
+            }
+        }
+    }
+    Ok(())
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    match main_inner(cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("sim-harness: error: {e:#}");
+            if is_input_error(&e) {
+                ExitCode::from(2)
+            } else {
+                ExitCode::from(1)
+            }
+        }
+    }
+}

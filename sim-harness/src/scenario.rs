@@ -16,11 +16,44 @@
 //! [fhst1.effects]
 //! radial_distortion_arcsec_at_4deg = 15.0
 //! [[commands]]
-//! at_s = 0
-//! kind = "filter_initialize"
+//! at_s = 600
+//! kind = "slew_to"          # rotate +60° about body X from the current target
+//! axis = "x"
+//! angle_deg = 60.0
+//! [[commands]]
+//! at_s = 3000
+//! kind = "table_load"       # an uplink image, path relative to this file
+//! file = "tables/alignment.tbl"
+//! [[commands]]
+//! at_s = 3000
+//! kind = "table_activate"
+//! table = "alignment"
 //! ```
+//!
+//! # What the harness does at t = 0 by itself (before the timeline)
+//! 1. Uplinks the onboard star catalog ([`crate::onboard`]) with `TableLoad` + `TableActivate`
+//!    (unless `uplink_catalog = false`);
+//! 2. with `fly_true_alignments = true`, uplinks an alignment table equal to the truth;
+//! 3. loads and activates every `*.tbl` of `--tables DIR` (file-name order);
+//! 4. initialises the filter with `FilterInitialize(Rot(error) · A_true)`, `error` =
+//!    `[initial_estimate]` (default 0.1° about (1, 1, 1)/√3), which also starts the inertial
+//!    hold (unless `initial_estimate.enabled = false`).
+//!
+//! At most 8 commands go to the OBC per cycle (`MAX_COMMANDS_PER_CYCLE`); the rest wait for
+//! the next cycle in order.
+//!
+//! # Timeline command kinds
+//! | kind | fields | what the OBC gets |
+//! |---|---|---|
+//! | `slew_to` | `q_acs_from_eci`, or `axis` ("x", "y", "z") + `angle_deg` | `SlewTo(q)`; the relative form is `q = Rot(angle · axis) ⊗ current target` (a rotation of the body about its own axis) |
+//! | `hold` | — | `Hold` (the current estimate becomes the target) |
+//! | `select_iru_config` | `config` = "primary" / "backup" | `SelectIruConfig` |
+//! | `table_load` | `file` (relative to the scenario file) | `TableLoad(image)` |
+//! | `table_activate`, `table_abort` | `table` = "alignment", "iru", "filter", "star_catalog" | `TableActivate(id)`, `TableAbort(id)` |
+//! | `filter_initialize` | optional `q_acs_from_eci` (default: truth rotated by `[initial_estimate]`) | `FilterInitialize(q)` |
+//! | `filter_reset` | — | `FilterReset` |
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context};
 use nalgebra::Vector3;
@@ -48,7 +81,52 @@ fn default_sun_refresh() -> f64 {
     600.0
 }
 fn default_ephemeris_period() -> f64 {
+    10.0
+}
+fn default_one() -> u32 {
+    1
+}
+fn default_true() -> bool {
+    true
+}
+fn default_bias_period() -> f64 {
     60.0
+}
+
+/// The filter initialisation the harness sends at t = 0 (scenario `[initial_estimate]`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct InitialEstimate {
+    /// Send `FilterInitialize` at t = 0.
+    pub enabled: bool,
+    /// Size of the initial attitude error (deg): the estimate is `Rot(error) · A_true`.
+    pub error_deg: f64,
+    /// Axis of the error rotation in ACS (normalised).
+    pub axis_acs: [f64; 3],
+}
+
+impl Default for InitialEstimate {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            error_deg: 0.1,
+            axis_acs: [1.0, 1.0, 1.0],
+        }
+    }
+}
+
+impl InitialEstimate {
+    /// The error rotation vector (rad, ACS).
+    #[must_use]
+    pub fn error_rad(&self) -> Vector3<f64> {
+        let a = Vector3::from(self.axis_acs);
+        let n = a.norm();
+        if n > 0.0 {
+            a * (self.error_deg * fsw_core::units::RAD_PER_DEG / n)
+        } else {
+            Vector3::zeros()
+        }
+    }
 }
 
 /// Initial true state.
@@ -151,10 +229,51 @@ pub enum CommandKind {
     Hold,
     /// Select the IRU triad `config` ("primary" or "backup").
     SelectIruConfig,
-    /// Initialise the filter at `q_acs_from_eci`, or at the true attitude if absent.
+    /// Initialise the filter at `q_acs_from_eci`, or at the true attitude rotated by the
+    /// `[initial_estimate]` error if absent.
     FilterInitialize,
     /// Reopen the filter covariance.
     FilterReset,
+    /// Load the table image `file` (path relative to the scenario file).
+    TableLoad,
+    /// Activate the pending image of `table`.
+    TableActivate,
+    /// Clear the pending image of `table`.
+    TableAbort,
+}
+
+/// A table name of a timeline command (`table = "alignment"`, ...).
+///
+/// # Errors
+/// An unknown name.
+pub fn table_id_from_name(name: &str) -> anyhow::Result<fsw_core::tables::TableId> {
+    use fsw_core::tables::TableId;
+    TableId::ALL
+        .into_iter()
+        .find(|id| id.name() == name)
+        .ok_or_else(|| {
+            anyhow::anyhow!(
+                "unknown table {name:?} (alignment, iru, filter, star_catalog)"
+            )
+        })
+}
+
+/// A body axis of a relative slew (`axis = "x"`, "y", "z", optionally signed "-y").
+///
+/// # Errors
+/// An unknown name.
+pub fn body_axis_from_name(name: &str) -> anyhow::Result<Vector3<f64>> {
+    let (sign, rest) = match name.strip_prefix('-') {
+        Some(r) => (-1.0, r),
+        None => (1.0, name.strip_prefix('+').unwrap_or(name)),
+    };
+    let v = match rest.to_ascii_lowercase().as_str() {
+        "x" => Vector3::x(),
+        "y" => Vector3::y(),
+        "z" => Vector3::z(),
+        _ => bail!("unknown axis {name:?} (\"x\", \"y\", \"z\", optionally signed)"),
+    };
+    Ok(v * sign)
 }
 
 /// One timeline entry.
@@ -171,6 +290,18 @@ pub struct TimedCommand {
     /// IRU configuration (`select_iru_config`): "primary" or "backup".
     #[serde(default)]
     pub config: Option<String>,
+    /// Body axis of a relative `slew_to`: "x", "y" or "z".
+    #[serde(default)]
+    pub axis: Option<String>,
+    /// Angle of a relative `slew_to` (deg, right-handed about `axis`).
+    #[serde(default)]
+    pub angle_deg: Option<f64>,
+    /// Table image file of `table_load`, relative to the scenario file.
+    #[serde(default)]
+    pub file: Option<String>,
+    /// Table name of `table_activate` / `table_abort`.
+    #[serde(default)]
+    pub table: Option<String>,
 }
 
 /// A whole scenario.
@@ -196,9 +327,34 @@ pub struct Scenario {
     /// Refresh interval of the cached Sun ephemeris (s).
     #[serde(default = "default_sun_refresh")]
     pub sun_refresh_s: f64,
-    /// Period of the definitive-orbit telemetry records (s, ICD §3.4: ≤ 60).
+    /// Period of the definitive-orbit telemetry records (s, ICD §3.4: ≤ 60). Default 10.
     #[serde(default = "default_ephemeris_period")]
     pub ephemeris_period_s: f64,
+    /// Downlink the raw frame and the housekeeping every n-th cycle (events always; the
+    /// ephemeris at the first downlinked cycle at or after it is due). The IRU counters must
+    /// then still change by less than 2¹⁵ pulses between downlinked frames, or the ground
+    /// cannot unwrap them: n · max rate / pulse weight < 32 768 (e.g. at the 0.08°/s slew
+    /// rate in high-rate mode, 360 pulses/s, n < 91). The run counts violations
+    /// (`summary.json` `iru_counter_aliasing_frames`).
+    #[serde(default = "default_one")]
+    pub telemetry_every_n_cycles: u32,
+    /// Spacing of the true-bias samples in truth.json (s, ≥ 60).
+    #[serde(default = "default_bias_period")]
+    pub truth_bias_period_s: f64,
+    /// Uplink the onboard star catalog at t = 0.
+    #[serde(default = "default_true")]
+    pub uplink_catalog: bool,
+    /// Uplink, at t = 0, an alignment table equal to the true alignments (no calibration
+    /// needed: the reference case for normal operations).
+    #[serde(default)]
+    pub fly_true_alignments: bool,
+    /// Effects the operator declares (metadata.json `declared_effects`); `None` = the
+    /// physical ones every GRO analyst knows about ([`DEFAULT_DECLARED_EFFECTS`]).
+    #[serde(default)]
+    pub declared_effects: Option<Vec<String>>,
+    /// The filter initialisation sent at t = 0.
+    #[serde(default)]
+    pub initial_estimate: InitialEstimate,
     /// Star catalogue CSV (default: the workspace data/hipparcos_mag6p5.csv).
     #[serde(default)]
     pub catalog_path: Option<String>,
@@ -235,6 +391,74 @@ pub struct Scenario {
     /// Command timeline.
     #[serde(default)]
     pub commands: Vec<TimedCommand>,
+    /// Folder of the scenario file (table files are relative to it); not a TOML key.
+    #[serde(skip)]
+    pub base_dir: Option<PathBuf>,
+}
+
+/// Effects declared when a scenario does not say (`declared_effects`): stellar and solar
+/// aberration, Sun parallax, the FSS transfer-function errors, the early IRU bias drift.
+pub const DEFAULT_DECLARED_EFFECTS: [&str; 4] = [
+    "aberration",
+    "sun_parallax",
+    "fss_transfer_function",
+    "iru_bias_transient",
+];
+
+/// Scenarios shipped in `scenarios/` and embedded in the binary: (name, TOML text).
+pub const EMBEDDED_SCENARIOS: [(&str, &str); 5] = [
+    (
+        "gro-early-mission",
+        include_str!("../../scenarios/gro-early-mission.toml"),
+    ),
+    (
+        "gro-bias-history",
+        include_str!("../../scenarios/gro-bias-history.toml"),
+    ),
+    ("normal-ops", include_str!("../../scenarios/normal-ops.toml")),
+    (
+        "inertial_hold",
+        include_str!("../../scenarios/inertial_hold.toml"),
+    ),
+    (
+        "undeclared_effects",
+        include_str!("../../scenarios/undeclared_effects.toml"),
+    ),
+];
+
+/// The workspace `scenarios/` folder (compile-time path).
+#[must_use]
+pub fn scenarios_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join("scenarios")
+}
+
+/// Resolve a scenario argument: an existing path is read; a bare name (`gro-early-mission`)
+/// is `scenarios/NAME.toml` of the workspace, or the embedded copy when that file is absent
+/// (so the binary works from any directory).
+///
+/// # Errors
+/// Unknown name, unreadable file, or an invalid scenario (naming the field).
+pub fn resolve(arg: &str) -> anyhow::Result<Scenario> {
+    let path = Path::new(arg);
+    if path.exists() {
+        return Scenario::load(path);
+    }
+    let bare = !arg.contains('/') && !arg.contains('\\');
+    let name = arg.strip_suffix(".toml").unwrap_or(arg);
+    if bare {
+        let file = scenarios_dir().join(format!("{name}.toml"));
+        if file.exists() {
+            return Scenario::load(&file);
+        }
+        if let Some((_, text)) = EMBEDDED_SCENARIOS.iter().find(|(n, _)| *n == name) {
+            let mut s = Scenario::from_toml_str(text, &format!("{name} (embedded)"))?;
+            s.base_dir = Some(scenarios_dir());
+            return Ok(s);
+        }
+        let known: Vec<&str> = EMBEDDED_SCENARIOS.iter().map(|(n, _)| *n).collect();
+        bail!("no scenario file {arg:?} and no built-in scenario of that name (built in: {})", known.join(", "));
+    }
+    bail!("scenario file {} does not exist", path.display())
 }
 
 impl Scenario {
@@ -257,7 +481,37 @@ impl Scenario {
     pub fn load(path: &Path) -> anyhow::Result<Self> {
         let text =
             std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-        Self::from_toml_str(&text, &path.display().to_string())
+        let mut s = Self::from_toml_str(&text, &path.display().to_string())?;
+        s.base_dir = Some(
+            path.parent()
+                .map_or_else(|| PathBuf::from("."), Path::to_path_buf),
+        );
+        Ok(s)
+    }
+
+    /// Path of a file named in the scenario (relative to the scenario's folder).
+    #[must_use]
+    pub fn resolve_file(&self, name: &str) -> PathBuf {
+        let p = Path::new(name);
+        if p.is_absolute() {
+            p.to_path_buf()
+        } else {
+            self.base_dir
+                .clone()
+                .unwrap_or_else(|| PathBuf::from("."))
+                .join(p)
+        }
+    }
+
+    /// The declared effects (metadata.json).
+    #[must_use]
+    pub fn declared_effects(&self) -> Vec<String> {
+        self.declared_effects.clone().unwrap_or_else(|| {
+            DEFAULT_DECLARED_EFFECTS
+                .iter()
+                .map(|s| (*s).to_owned())
+                .collect()
+        })
     }
 
     /// Check values serde cannot.
@@ -277,6 +531,31 @@ impl Scenario {
         }
         pos("sun_refresh_s", self.sun_refresh_s)?;
         pos("ephemeris_period_s", self.ephemeris_period_s)?;
+        if self.ephemeris_period_s > 60.0 {
+            bail!(
+                "ephemeris_period_s must be ≤ 60 (ICD §3.4), got {}",
+                self.ephemeris_period_s
+            );
+        }
+        if self.telemetry_every_n_cycles == 0 {
+            bail!("telemetry_every_n_cycles must be ≥ 1, got 0");
+        }
+        if !(self.truth_bias_period_s.is_finite() && self.truth_bias_period_s >= 60.0) {
+            bail!(
+                "truth_bias_period_s must be ≥ 60, got {}",
+                self.truth_bias_period_s
+            );
+        }
+        let ie = &self.initial_estimate;
+        if !(ie.error_deg.is_finite() && (0.0..=10.0).contains(&ie.error_deg)) {
+            bail!(
+                "initial_estimate.error_deg must be in [0, 10], got {}",
+                ie.error_deg
+            );
+        }
+        if ie.error_deg > 0.0 && Vector3::from(ie.axis_acs).norm() < 1e-9 {
+            bail!("initial_estimate.axis_acs must not be zero");
+        }
         crate::truth::time::epoch_from_iso(&self.epoch_utc).context("epoch_utc")?;
         let q = self.initial.q_acs_from_eci;
         let n = q.iter().map(|x| x * x).sum::<f64>().sqrt();
@@ -330,8 +609,37 @@ impl Scenario {
                 bail!("{here}.at_s must be ≥ 0, got {}", c.at_s);
             }
             match c.kind {
-                CommandKind::SlewTo if c.q_acs_from_eci.is_none() => {
-                    bail!("{here}: kind = \"slew_to\" needs q_acs_from_eci")
+                CommandKind::SlewTo => {
+                    let relative = c.axis.is_some() || c.angle_deg.is_some();
+                    match (c.q_acs_from_eci.is_some(), relative) {
+                        (false, false) => bail!(
+                            "{here}: kind = \"slew_to\" needs q_acs_from_eci or axis + angle_deg"
+                        ),
+                        (true, true) => bail!(
+                            "{here}: kind = \"slew_to\" takes q_acs_from_eci or axis + angle_deg, not both"
+                        ),
+                        (false, true) => {
+                            let axis = c.axis.as_deref().ok_or_else(|| {
+                                anyhow::anyhow!("{here}.axis missing (angle_deg given)")
+                            })?;
+                            body_axis_from_name(axis).with_context(|| format!("{here}.axis"))?;
+                            match c.angle_deg {
+                                Some(a) if a.is_finite() && a.abs() <= 180.0 => {}
+                                Some(a) => bail!("{here}.angle_deg must be in [-180, 180], got {a}"),
+                                None => bail!("{here}.angle_deg missing (axis given)"),
+                            }
+                        }
+                        (true, false) => {}
+                    }
+                }
+                CommandKind::TableLoad if c.file.is_none() => {
+                    bail!("{here}: kind = \"table_load\" needs file")
+                }
+                CommandKind::TableActivate | CommandKind::TableAbort => {
+                    let name = c.table.as_deref().ok_or_else(|| {
+                        anyhow::anyhow!("{here}: this kind needs table = \"alignment\" | \"iru\" | \"filter\" | \"star_catalog\"")
+                    })?;
+                    table_id_from_name(name).with_context(|| format!("{here}.table"))?;
                 }
                 CommandKind::SelectIruConfig
                     if !matches!(c.config.as_deref(), Some("primary" | "backup")) =>

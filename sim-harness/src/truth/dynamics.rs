@@ -18,6 +18,14 @@
 //!   momentum cannot pass its limit within the step (the body then gets less torque).
 //! * External torque: gravity gradient `3 μ/r³ n × (I n)`, `n` the zenith unit vector in ACS,
 //!   held constant over a step (evaluated at the step start).
+//! * Momentum unloading (truth side, not flight software): GRO dumped wheel momentum with
+//!   magnetic torquers, which the emulated OBC attitude software does not include. Without it
+//!   the orbit-averaged gravity gradient (~0.1 N·m for this inertia) saturates the 250 N·m·s
+//!   wheels within an orbit of inertial hold. The model is an ideal external torque
+//!   `τ_u = −h_w / T_u` (h_w the total wheel momentum in ACS, `T_u` =
+//!   `momentum_unloading_time_constant_s`, default 600 s, 0 = off), held over a step; the
+//!   attitude controller sees it as a slow disturbance and moves the momentum out of the
+//!   wheels. The steady wheel momentum is then ≈ T_u × the secular torque (~60 N·m·s).
 //!
 //! # Integration (per step `h`, torque held)
 //! 1. RK4 on (ω, h_wheels) with `I ω̇ = τ_gg − W τ_w − ω × (I ω + W h_w)`, `ḣ_w = τ_w`.
@@ -57,6 +65,8 @@ pub struct DynamicsParams {
     pub initial_wheel_momentum_nms: Vec<f64>,
     /// Apply the gravity-gradient torque.
     pub gravity_gradient: bool,
+    /// Time constant of the ideal magnetic momentum unloading (s); 0 = off.
+    pub momentum_unloading_time_constant_s: f64,
 }
 
 impl Default for DynamicsParams {
@@ -73,6 +83,7 @@ impl Default for DynamicsParams {
             wheel_momentum_limit_nms: 250.0,
             initial_wheel_momentum_nms: Vec::new(),
             gravity_gradient: true,
+            momentum_unloading_time_constant_s: 600.0,
         }
     }
 }
@@ -97,7 +108,7 @@ pub struct StepReport {
     pub rotation_vector_acs_rad: Vector3<f64>,
     /// Body torque the wheels actually applied (N·m), after saturation.
     pub wheel_torque_applied_acs_nm: Vector3<f64>,
-    /// Gravity-gradient torque (N·m).
+    /// External torque (N·m): gravity gradient plus the ideal momentum unloading.
     pub gravity_gradient_acs_nm: Vector3<f64>,
     /// Some wheel hit its torque or momentum limit.
     pub saturated: bool,
@@ -115,6 +126,7 @@ pub struct RigidBody {
     torque_limit_nm: f64,
     momentum_limit_nms: f64,
     gravity_gradient: bool,
+    unloading_rate_per_s: f64,
     state: AttitudeState,
 }
 
@@ -180,6 +192,11 @@ impl RigidBody {
             torque_limit_nm: p.wheel_torque_limit_nm.abs(),
             momentum_limit_nms: p.wheel_momentum_limit_nms.abs(),
             gravity_gradient: p.gravity_gradient,
+            unloading_rate_per_s: if p.momentum_unloading_time_constant_s > 0.0 {
+                1.0 / p.momentum_unloading_time_constant_s
+            } else {
+                0.0
+            },
             state: AttitudeState {
                 q_acs_from_eci: q_acs_from_eci.normalized(),
                 rate_acs_rad_per_s,
@@ -273,11 +290,14 @@ impl RigidBody {
         pos_eci_km: &Vector3<f64>,
     ) -> StepReport {
         let s0 = self.state;
-        let gg = if self.gravity_gradient {
+        let mut gg = if self.gravity_gradient {
             self.gravity_gradient_acs_nm(&s0.q_acs_from_eci, pos_eci_km)
         } else {
             Vector3::zeros()
         };
+        if self.unloading_rate_per_s > 0.0 {
+            gg -= self.wheel_momentum_acs(&s0.wheel_momentum_nms) * self.unloading_rate_per_s;
+        }
         let (tau_w, saturated) = self.wheel_torques(torque_cmd_acs_nm, h_s);
         let add_h = |h: &[f64; MAX_WHEELS], scale: f64| {
             let mut o = *h;
@@ -339,6 +359,7 @@ mod tests {
     fn free_params() -> DynamicsParams {
         DynamicsParams {
             gravity_gradient: false,
+            momentum_unloading_time_constant_s: 0.0,
             ..DynamicsParams::default()
         }
     }
@@ -375,6 +396,7 @@ mod tests {
         let p = DynamicsParams {
             inertia_acs_kg_m2: [[1.0e5, 0.0, 0.0], [0.0, 1.2e5, 0.0], [0.0, 0.0, 0.9e5]],
             gravity_gradient: false,
+            momentum_unloading_time_constant_s: 0.0,
             ..DynamicsParams::default()
         };
         let w = Vector3::new(0.0, 0.0, 0.002);

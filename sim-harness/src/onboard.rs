@@ -1,0 +1,158 @@
+//! # What the ground uplinks before the first cycle: the onboard star catalog and tables
+//!
+//! # The onboard star catalog (prelaunch ground system product)
+//! The OBC boots with an empty catalog (docs/tables.md, table 4). Before launch the ground
+//! system prepared the FHST catalog from the star catalogue; the harness plays that role at
+//! t = 0 and uplinks it with `TableLoad` + `TableActivate`. Construction:
+//! * source: the same Hipparcos file as the truth sky (the **catalogue** proper motions,
+//!   never the truth's perturbed ones: `[sky] proper_motion_error_*` makes the truth differ
+//!   from this catalog, which is the point of that effect);
+//! * magnitude: the instrument magnitude of the truth FHST (`[sky] magnitude_system`,
+//!   `colour_term`, default Hipparcos Hp), so catalog and tracker agree on the system;
+//! * window: the FHST window `[fhst1] magnitude_min ..= magnitude_max` (2.0–5.7);
+//! * direction: catalogue position at J1991.25 moved by its proper motion to the scenario
+//!   epoch (linear space motion, no parallax, no aberration: the OBC applies aberration
+//!   itself if its filter table says so), normalised, stored as `f32`;
+//! * at most [`MAX_CATALOG_STARS`]: if more stars qualify, the brightest are kept; order is
+//!   the catalogue (HIP) order, so the image is deterministic;
+//! * catalog epoch = scenario epoch in Julian years since J2000.0 TT.
+//!
+//! # True alignment table (`fly_true_alignments = true`)
+//! The alignment table whose four `M_AS` equal the truth's (without thermal drift), no
+//! corrections: what a perfect calibration would uplink.
+
+use anyhow::Context;
+use nalgebra::Matrix3;
+
+use crate::data::{CsvTable, HIPPARCOS_CSV};
+use crate::scenario::Scenario;
+use crate::truth::sky::{Sky, SkyParams, HIPPARCOS_EPOCH_J2000_TT_S};
+use crate::truth::time::S_PER_JULIAN_YEAR;
+use fsw_core::raw::TimeTag;
+use fsw_core::tables::image::encode_image;
+use fsw_core::tables::types::rows_from_matrix;
+use fsw_core::tables::{
+    AlignmentTable, CatalogStar, SensorCorrections, StarCatalogTable, TableId, MAX_CATALOG_STARS,
+};
+
+/// Room for the largest image (catalog: ≤ 4096 × 21 octets + header).
+const IMAGE_CAPACITY: usize = 20 + 10 + MAX_CATALOG_STARS * 24 + 4;
+
+/// Read the scenario's catalogue file (or the embedded one).
+///
+/// # Errors
+/// I/O or format errors, with the path.
+pub fn catalogue_table(scenario: &Scenario) -> anyhow::Result<CsvTable> {
+    match &scenario.catalog_path {
+        Some(p) => CsvTable::read(&scenario.resolve_file(p)).context("catalog_path"),
+        None => CsvTable::parse(HIPPARCOS_CSV, "data/hipparcos_mag6p5.csv (embedded)"),
+    }
+}
+
+/// The onboard catalog for a scenario whose epoch is `j2000_tt_s` (module doc).
+///
+/// # Errors
+/// Catalogue format errors.
+pub fn build_star_catalog(
+    catalogue: &CsvTable,
+    scenario: &Scenario,
+    j2000_tt_s: f64,
+) -> anyhow::Result<StarCatalogTable> {
+    let params = SkyParams {
+        apply_parallax: false,
+        proper_motion_scale: 1.0,
+        proper_motion_error_sigma_mas_per_yr: 0.0,
+        ..scenario.sky.clone()
+    };
+    let sky = Sky::from_csv(catalogue, &params)?;
+    let (lo, hi) = (scenario.fhst1.magnitude_min, scenario.fhst1.magnitude_max);
+    let mut picked: Vec<_> = sky
+        .stars()
+        .iter()
+        .filter(|s| (lo..=hi).contains(&s.magnitude))
+        .collect();
+    if picked.len() > MAX_CATALOG_STARS {
+        picked.sort_by(|a, b| a.magnitude.total_cmp(&b.magnitude).then(a.hip.cmp(&b.hip)));
+        picked.truncate(MAX_CATALOG_STARS);
+    }
+    picked.sort_by_key(|s| s.hip);
+    let years = (j2000_tt_s - HIPPARCOS_EPOCH_J2000_TT_S) / S_PER_JULIAN_YEAR;
+    let mut table = StarCatalogTable {
+        epoch_years_since_j2000: j2000_tt_s / S_PER_JULIAN_YEAR,
+        stars: heapless::Vec::new(),
+    };
+    for s in picked {
+        let d = (s.dir_cat_eci + s.pm_eci_rad_per_yr * years).normalize();
+        #[allow(clippy::cast_possible_truncation)]
+        let star = CatalogStar {
+            id: s.hip,
+            dir_eci: [d.x as f32, d.y as f32, d.z as f32],
+            magnitude_centimag: (s.magnitude * 100.0).round().clamp(-200.0, 900.0) as i16,
+        };
+        table
+            .stars
+            .push(star)
+            .map_err(|_| anyhow::anyhow!("onboard catalog over capacity"))?;
+    }
+    table
+        .validate()
+        .map_err(|e| anyhow::anyhow!("onboard catalog invalid: {e:?}"))?;
+    Ok(table)
+}
+
+/// The alignment table of the true alignments (FHST1, FHST2, FSS1, FSS2), no corrections.
+#[must_use]
+pub fn true_alignment_table(m_acs_from_sensor_true: &[Matrix3<f64>; 4]) -> AlignmentTable {
+    AlignmentTable {
+        m_acs_from_fhst1: rows_from_matrix(&m_acs_from_sensor_true[0]),
+        m_acs_from_fhst2: rows_from_matrix(&m_acs_from_sensor_true[1]),
+        m_acs_from_fss1: rows_from_matrix(&m_acs_from_sensor_true[2]),
+        m_acs_from_fss2: rows_from_matrix(&m_acs_from_sensor_true[3]),
+        corrections: SensorCorrections::default(),
+    }
+}
+
+/// Encode a table as an uplink image (fsw-core's format).
+///
+/// # Errors
+/// The table does not fit (cannot happen for the four table types).
+pub fn image<T: serde::Serialize>(
+    id: TableId,
+    created: TimeTag,
+    table: &T,
+) -> anyhow::Result<Vec<u8>> {
+    let mut buf = vec![0_u8; IMAGE_CAPACITY];
+    let n = encode_image(id, created, table, &mut buf)
+        .map_err(|e| anyhow::anyhow!("encoding the {} table image: {e:?}", id.name()))?;
+    buf.truncate(n);
+    Ok(buf)
+}
+
+/// The table id of an image (octet 4), if valid.
+#[must_use]
+pub fn image_table_id(image: &[u8]) -> Option<TableId> {
+    image.get(4).copied().and_then(TableId::from_u8)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use fsw_core::tables::TableSet;
+
+    /// The catalog holds the Hp 2.0–5.7 stars (3231, below the 4096 capacity), is accepted by
+    /// the OBC's table services, and a known star sits where the catalogue puts it.
+    #[test]
+    fn catalog_builds_loads_and_matches_hipparcos() {
+        let s = Scenario::from_toml_str("name = \"x\"\nduration_s = 1\n", "t").unwrap();
+        let j2000 = -2.74e8;
+        let cat = build_star_catalog(&catalogue_table(&s).unwrap(), &s, j2000).unwrap();
+        assert_eq!(cat.stars.len(), 3231);
+        assert!(cat.stars.iter().all(|s| (200..=570).contains(&s.magnitude_centimag)));
+        let img = image(TableId::StarCatalog, TimeTag::default(), &cat).unwrap();
+        let mut set = TableSet::boot();
+        assert_eq!(set.load(&img), Ok(TableId::StarCatalog));
+        set.activate(TableId::StarCatalog).unwrap();
+        assert_eq!(set.catalog().stars.len(), 3231);
+        assert_eq!(image_table_id(&img), Some(TableId::StarCatalog));
+    }
+}

@@ -1,0 +1,863 @@
+//! # One run: the closed loop, the telemetry file, the truth and the scores
+//!
+//! [`run`] flies a scenario and, with an output folder, writes the run folder of
+//! docs/icd.md §5:
+//!
+//! | file | content |
+//! |---|---|
+//! | `telemetry.bin` | CCSDS packets ([`crate::telemetry`]) |
+//! | `metadata.json` | what the operator declares: `scenario`, `epoch_utc`, `cycle_period_s`, `sensors` (declared noise from the scenario's sensor parameters), `declared_effects`, `boot_tables`, `uploads` |
+//! | `uploads/*.tbl` | every table image uplinked (catalog, `--tables`, timeline loads) |
+//! | `truth.json` | scoring only: true `alignments.{FHST1,FHST2,FSS1,FSS2}` (`M_AS`, row-major), IRU `delta_m` and `g` per configuration, `bias_history`, `undeclared_effects` |
+//! | `summary.json` | run statistics ([`Summary`]) |
+//!
+//! Every file is written under a `.partial` name and renamed when complete; `summary.json`
+//! is renamed last, so a folder with a `summary.json` is a finished run.
+//!
+//! # Scores (`summary.json`)
+//! * `attitude_error_arcsec`: per-axis rms, mean, std, 3σ and the max of `|δθ|` over the
+//!   cycles with `t ≥ 600 s`, the filter initialised and the OBC not slewing (its control
+//!   mode, from housekeeping); `attitude_error_arcsec_all`: every initialised cycle.
+//! * `post_maneuver_error_deg`: `|δθ|` at the cycle of each `SlewCompleted` event. The OBC
+//!   propagates on the gyros alone during slews, so this is the estimation error the slew
+//!   left (what star identification after a maneuver must cope with; paper: < 0.5°).
+//! * `filter_nees_mean`: mean of `δθᵀ P_θθ⁻¹ δθ` over the first window (3 if consistent).
+//! * `rejected_measurements`: gated + input-rejected measurements (OBC counters).
+
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::Context;
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use nalgebra::{Matrix3, Vector3};
+use serde::{Deserialize, Serialize};
+
+use crate::closed_loop::{CycleRecord, Simulation};
+use crate::paper::PaperFacts;
+use crate::scenario::Scenario;
+use crate::sensors::iru::{BACKUP_CHANNELS, PRIMARY_CHANNELS};
+use crate::telemetry::PacketWriter;
+use crate::truth::time::utc_string;
+use fsw_core::events::EventId;
+use fsw_core::raw::IRU_CHANNELS;
+use fsw_core::tables::TableId;
+use fsw_core::telemetry::EphemerisRecord;
+use fsw_core::units::{ARCSEC_PER_RAD, RAD_PER_ARCSEC, RAD_PER_DEG};
+
+/// Start of the scored window (s): the filter has converged from its initial error.
+pub const SCORE_START_S: f64 = 600.0;
+/// Progress-bar update interval (cycles).
+const PROGRESS_EVERY: u64 = 4096;
+
+/// Options of one run.
+#[derive(Clone, Debug, Default)]
+pub struct RunOptions {
+    /// Run folder; `None` = write nothing (bench).
+    pub out_dir: Option<PathBuf>,
+    /// `--tables DIR`.
+    pub tables_dir: Option<PathBuf>,
+    /// Draw a progress bar on stderr (only if it is a terminal).
+    pub progress: bool,
+}
+
+/// Attitude-error statistics over a window (arcsec).
+#[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
+pub struct ErrorStats {
+    /// Cycles in the window.
+    pub cycles: u64,
+    /// RMS per ACS axis.
+    pub rms: [f64; 3],
+    /// Mean per axis.
+    pub mean: [f64; 3],
+    /// Standard deviation per axis.
+    pub std: [f64; 3],
+    /// 3 × std per axis (compare with the paper's 0.024° = 86.4″ fine requirement).
+    pub three_sigma: [f64; 3],
+    /// Largest `|δθ|`.
+    pub max: f64,
+}
+
+#[derive(Clone, Debug, Default)]
+struct Accumulator {
+    n: u64,
+    sum: [f64; 3],
+    sumsq: [f64; 3],
+    max: f64,
+}
+
+impl Accumulator {
+    fn add(&mut self, e_arcsec: &Vector3<f64>) {
+        self.n += 1;
+        for i in 0..3 {
+            self.sum[i] += e_arcsec[i];
+            self.sumsq[i] += e_arcsec[i] * e_arcsec[i];
+        }
+        self.max = self.max.max(e_arcsec.norm());
+    }
+
+    fn stats(&self) -> ErrorStats {
+        if self.n == 0 {
+            return ErrorStats::default();
+        }
+        let n = self.n as f64;
+        let mut s = ErrorStats {
+            cycles: self.n,
+            max: self.max,
+            ..ErrorStats::default()
+        };
+        for i in 0..3 {
+            let mean = self.sum[i] / n;
+            let ms = self.sumsq[i] / n;
+            s.mean[i] = mean;
+            s.rms[i] = ms.sqrt();
+            s.std[i] = (ms - mean * mean).max(0.0).sqrt();
+            s.three_sigma[i] = 3.0 * s.std[i];
+        }
+        s
+    }
+}
+
+/// One slew of the run.
+#[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
+pub struct SlewReport {
+    /// OBC slew number.
+    pub number: u32,
+    /// Start (s).
+    pub start_s: f64,
+    /// Completion (s).
+    pub end_s: f64,
+    /// `|δθ|` at completion (deg).
+    pub post_maneuver_error_deg: f64,
+    /// `δθ` at completion per ACS axis (arcsec).
+    pub post_maneuver_error_acs_arcsec: [f64; 3],
+}
+
+/// One uplinked table.
+#[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
+pub struct TableReport {
+    /// Table name.
+    pub table: String,
+    /// File in the run folder (`uploads/...`).
+    pub file: String,
+    /// Where the image came from.
+    pub source: String,
+    /// Load command time (s).
+    pub loaded_at_s: f64,
+    /// The OBC accepted it.
+    pub accepted: bool,
+    /// Rejection reason code (docs/tables.md), 0 if accepted.
+    pub reject_reason: u32,
+    /// Activation time (s), if activated.
+    pub activated_at_s: Option<f64>,
+    /// CRC-32 of the image (as reported at activation).
+    pub crc32: u32,
+}
+
+/// OBC measurement counters at the end of the run.
+#[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
+pub struct MeasurementCounters {
+    /// Accepted.
+    pub accepted: u32,
+    /// Refused by the χ² gate.
+    pub gated: u32,
+    /// Refused by input validation.
+    pub rejected_inputs: u32,
+    /// Stars identified.
+    pub stars_identified: u32,
+    /// Star identification without match.
+    pub star_id_unmatched: u32,
+    /// Ambiguous identifications.
+    pub star_id_ambiguous: u32,
+    /// Events dropped (more than 8 in a cycle).
+    pub events_dropped: u32,
+}
+
+/// summary.json.
+#[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
+pub struct Summary {
+    /// Scenario name.
+    pub scenario: String,
+    /// Seed.
+    pub seed: u64,
+    /// Simulated time (s).
+    pub sim_seconds: f64,
+    /// Wall-clock time of the loop (s).
+    pub wall_seconds: f64,
+    /// `sim_seconds / wall_seconds`.
+    pub real_time_factor: f64,
+    /// Cycles run.
+    pub cycles: u64,
+    /// Wall time per cycle (ns).
+    pub ns_per_cycle: f64,
+    /// Errors over `t ≥ 600 s`, outside slews, filter initialised.
+    pub attitude_error_arcsec: ErrorStats,
+    /// Errors over every initialised cycle.
+    pub attitude_error_arcsec_all: ErrorStats,
+    /// `|δθ|` at each slew completion (deg).
+    pub post_maneuver_error_deg: Vec<f64>,
+    /// Slews.
+    pub slews: Vec<SlewReport>,
+    /// Mean NEES over the scored window (3 = consistent).
+    pub filter_nees_mean: Option<f64>,
+    /// Cycles in the NEES mean.
+    pub filter_nees_cycles: u64,
+    /// Fraction of the scored window in fine mode.
+    pub fine_mode_fraction: f64,
+    /// Gated + input-rejected measurements.
+    pub rejected_measurements: u64,
+    /// OBC counters.
+    pub measurement_counters: MeasurementCounters,
+    /// Tables uplinked.
+    pub tables_loaded: Vec<TableReport>,
+    /// Telemetry packets written.
+    pub telemetry_packets: u64,
+    /// Telemetry octets written.
+    pub telemetry_bytes: u64,
+    /// Downlinked raw frames whose IRU counters moved by ≥ 2¹⁵ since the previous one.
+    pub iru_counter_aliasing_frames: u64,
+    /// Largest true wheel momentum (N·m·s).
+    pub max_wheel_momentum_nms: f64,
+}
+
+/// The scoring state of a run.
+struct Scorer {
+    steady: Accumulator,
+    all: Accumulator,
+    nees_sum: f64,
+    nees_n: u64,
+    fine: u64,
+    slews: Vec<SlewReport>,
+    open_slew: Option<(u32, f64)>,
+    tables: Vec<TableReport>,
+    load_cursor: usize,
+    max_wheel: f64,
+    counters: fsw_core::events::Counters,
+}
+
+impl Scorer {
+    fn new(sim: &Simulation) -> Self {
+        let tables = sim
+            .uploads()
+            .iter()
+            .enumerate()
+            .map(|(i, up)| TableReport {
+                table: crate::onboard::image_table_id(&up.image)
+                    .map_or("unknown", TableId::name)
+                    .to_owned(),
+                file: format!("uploads/{i:02}_{}", up.name),
+                source: up.source.clone(),
+                loaded_at_s: up.at_s,
+                ..TableReport::default()
+            })
+            .collect();
+        Self {
+            steady: Accumulator::default(),
+            all: Accumulator::default(),
+            nees_sum: 0.0,
+            nees_n: 0,
+            fine: 0,
+            slews: Vec::new(),
+            open_slew: None,
+            tables,
+            load_cursor: 0,
+            max_wheel: 0.0,
+            counters: fsw_core::events::Counters::default(),
+        }
+    }
+
+    fn add(&mut self, rec: &CycleRecord, wheel_momentum: &[f64]) {
+        let hk = &rec.output.housekeeping;
+        let t = rec.truth.t_s;
+        let err = rec.attitude_error_acs_rad * ARCSEC_PER_RAD;
+        self.counters = hk.counters;
+        for h in wheel_momentum {
+            self.max_wheel = self.max_wheel.max(h.abs());
+        }
+        for e in &rec.output.events {
+            match e.id {
+                EventId::SlewStarted => self.open_slew = Some((e.p1, t)),
+                EventId::SlewCompleted => {
+                    let start = match self.open_slew.take() {
+                        Some((n, s)) if n == e.p1 => s,
+                        _ => t,
+                    };
+                    self.slews.push(SlewReport {
+                        number: e.p1,
+                        start_s: start,
+                        end_s: t,
+                        post_maneuver_error_deg: rec.attitude_error_acs_rad.norm() / RAD_PER_DEG,
+                        post_maneuver_error_acs_arcsec: [err.x, err.y, err.z],
+                    });
+                }
+                EventId::TableLoaded | EventId::TableRejected => {
+                    if let Some(tr) = self.tables.get_mut(self.load_cursor) {
+                        tr.accepted = e.id == EventId::TableLoaded;
+                        tr.reject_reason = if tr.accepted { 0 } else { e.p2 };
+                    }
+                    self.load_cursor += 1;
+                }
+                EventId::TableActivated => {
+                    let name = TableId::from_u8(u8::try_from(e.p1).unwrap_or(0))
+                        .map_or("unknown", TableId::name);
+                    let upto = self.load_cursor.min(self.tables.len());
+                    if let Some(tr) = self.tables[..upto]
+                        .iter_mut()
+                        .rev()
+                        .find(|tr| tr.table == name && tr.accepted && tr.activated_at_s.is_none())
+                    {
+                        tr.activated_at_s = Some(t);
+                        tr.crc32 = e.p2;
+                    }
+                }
+                _ => {}
+            }
+        }
+        if hk.filter_mode == 0 {
+            return;
+        }
+        self.all.add(&err);
+        if t >= SCORE_START_S && hk.control_mode != 2 {
+            self.steady.add(&err);
+            if hk.filter_mode == 2 {
+                self.fine += 1;
+            }
+            if let Some(n) = rec.nees {
+                self.nees_sum += n;
+                self.nees_n += 1;
+            }
+        }
+    }
+}
+
+/// Writes truth-bias samples every `period` seconds.
+struct BiasRecorder {
+    period_s: f64,
+    next_s: f64,
+    w_primary_inv: Matrix3<f64>,
+    w_backup_inv: Matrix3<f64>,
+    samples: Vec<serde_json::Value>,
+}
+
+impl BiasRecorder {
+    fn new(sim: &Simulation) -> Self {
+        let rows = |chs: [usize; 3]| {
+            let input = sim.iru().input_acs();
+            Matrix3::from_rows(&[
+                input[chs[0]].transpose(),
+                input[chs[1]].transpose(),
+                input[chs[2]].transpose(),
+            ])
+            .try_inverse()
+            .unwrap_or_else(Matrix3::identity)
+        };
+        Self {
+            period_s: sim.scenario().truth_bias_period_s,
+            next_s: 0.0,
+            w_primary_inv: rows(PRIMARY_CHANNELS),
+            w_backup_inv: rows(BACKUP_CHANNELS),
+            samples: Vec::new(),
+        }
+    }
+
+    fn add(&mut self, sim: &Simulation, t_s: f64) {
+        if t_s + 1e-9 < self.next_s {
+            return;
+        }
+        self.next_s += self.period_s;
+        let dev = sim.thermal(4).map_or(0.0, |n| n.deviation_c());
+        let mut ch = [0.0; IRU_CHANNELS];
+        for (i, b) in ch.iter_mut().enumerate() {
+            *b = sim.iru().bias_rad_per_s(i, t_s, dev);
+        }
+        let triad = |chs: [usize; 3]| Vector3::new(ch[chs[0]], ch[chs[1]], ch[chs[2]]);
+        let p = self.w_primary_inv * triad(PRIMARY_CHANNELS);
+        let b = self.w_backup_inv * triad(BACKUP_CHANNELS);
+        self.samples.push(serde_json::json!({
+            "t_s": t_s,
+            "bias_acs_rad_per_s": [p.x, p.y, p.z],
+            "backup_bias_acs_rad_per_s": [b.x, b.y, b.z],
+            "channel_bias_rad_per_s": ch,
+        }));
+    }
+}
+
+fn rows(m: &Matrix3<f64>) -> [[f64; 3]; 3] {
+    fsw_core::tables::types::rows_from_matrix(m)
+}
+
+/// Effects active in a scenario's truth, by name (`sensor.effect` for per-unit hooks).
+#[must_use]
+pub fn present_effects(s: &Scenario) -> Vec<String> {
+    let mut out: Vec<String> = vec!["aberration".into(), "sun_parallax".into()];
+    if s.sky.apply_parallax {
+        out.push("stellar_parallax".into());
+    }
+    if s.sky.proper_motion_error_sigma_mas_per_yr > 0.0 {
+        out.push("catalog_proper_motion_error".into());
+    }
+    if (s.sky.proper_motion_scale - 1.0).abs() > 0.0 {
+        out.push("proper_motion_scale".into());
+    }
+    let nz = |v: &[f64]| v.iter().any(|x| *x != 0.0);
+    for (name, f) in [("fhst1", &s.fhst1), ("fhst2", &s.fhst2)] {
+        let e = &f.effects;
+        if e.time_tag_offset_s != 0.0 {
+            out.push(format!("{name}.time_tag_offset"));
+        }
+        if nz(&e.thermal_alignment_arcsec_per_c) {
+            out.push(format!("{name}.thermal_alignment_drift"));
+        }
+        if e.radial_distortion_arcsec_at_4deg != 0.0 || nz(&e.hv_distortion_arcsec_at_corner) {
+            out.push(format!("{name}.fhst_distortion"));
+        }
+        if nz(&e.magnitude_bias_arcsec_per_mag) {
+            out.push(format!("{name}.magnitude_bias"));
+        }
+    }
+    let mut fss_tf = false;
+    for (name, f) in [("fss1", &s.fss1), ("fss2", &s.fss2)] {
+        for h in [&f.alpha, &f.beta] {
+            fss_tf |= h.offset_arcsec != 0.0
+                || h.scale_ppm != 0.0
+                || h.cyclic_arcsec != 0.0
+                || h.cross_arcsec_at_corner != 0.0
+                || h.cubic_arcsec_at_edge != 0.0;
+        }
+        if f.effects.time_tag_offset_s != 0.0 {
+            out.push(format!("{name}.time_tag_offset"));
+        }
+        if nz(&f.effects.thermal_alignment_arcsec_per_c) {
+            out.push(format!("{name}.thermal_alignment_drift"));
+        }
+    }
+    if fss_tf {
+        out.push("fss_transfer_function".into());
+    }
+    let i = &s.iru;
+    if nz(&i.bias_transient_deg_per_s) {
+        out.push("iru_bias_transient".into());
+    }
+    if nz(&i.high_rate_scale_ppm) {
+        out.push("iru_mode_ratio_error".into());
+    }
+    if nz(&i.channel_scale_ppm) {
+        out.push("iru_channel_scale_error".into());
+    }
+    if i.effects.time_tag_offset_s != 0.0 {
+        out.push("iru.time_tag_offset".into());
+    }
+    if nz(&i.effects.scale_asymmetry_ppm) {
+        out.push("iru.scale_asymmetry".into());
+    }
+    if nz(&i.effects.thermal_bias_deg_per_s_per_c) {
+        out.push("iru.thermal_bias".into());
+    }
+    if i.failure.is_some() {
+        out.push("iru_channel_failure".into());
+    }
+    out
+}
+
+/// Present effects the scenario does not declare (a declared `x` covers `unit.x`).
+#[must_use]
+pub fn undeclared_effects(s: &Scenario) -> Vec<String> {
+    let declared = s.declared_effects();
+    present_effects(s)
+        .into_iter()
+        .filter(|e| {
+            let short = e.split('.').next_back().unwrap_or(e);
+            !declared.iter().any(|d| d == e || d == short)
+        })
+        .collect()
+}
+
+/// Declared noise figures (metadata.json `sensors`) from the scenario's sensor parameters:
+/// FHST σ for a bright on-axis and a faint corner star with the count quantization added in
+/// quadrature; FSS noise in counts, and as an angle (noise ⊕ quantization ⊕ rms of the
+/// transfer-function error over ±25°); IRU random walks in SI units.
+#[must_use]
+pub fn declared_noise(s: &Scenario) -> serde_json::Value {
+    let f = &s.fhst1;
+    let q2 = f.resolution_arcsec_per_count.powi(2) / 12.0;
+    let corner = f.fov_half_width_deg * RAD_PER_DEG * std::f64::consts::SQRT_2;
+    let bright = (f.sigma_arcsec(f.magnitude_min, 0.0).powi(2) + q2).sqrt();
+    let faint = (f.sigma_arcsec(f.magnitude_max, corner).powi(2) + q2).sqrt();
+    let fss = &s.fss1;
+    let count_arcsec = fss.resolution_deg_per_count * 3600.0;
+    let mut tf2 = 0.0;
+    let mut n = 0.0;
+    for i in -5..=5 {
+        for j in -5..=5 {
+            let a = f64::from(i) * 5.0 * RAD_PER_DEG;
+            let b = f64::from(j) * 5.0 * RAD_PER_DEG;
+            let ea = (fss.alpha.apply(a, b) - a) * ARCSEC_PER_RAD;
+            let eb = (fss.beta.apply(b, a) - b) * ARCSEC_PER_RAD;
+            tf2 += 0.5 * (ea * ea + eb * eb);
+            n += 1.0;
+        }
+    }
+    let fss_sigma = ((fss.noise_counts_1sigma * count_arcsec).powi(2)
+        + count_arcsec.powi(2) / 12.0
+        + tf2 / n)
+        .sqrt();
+    serde_json::json!({
+        "fhst_sigma_arcsec": [bright, faint],
+        "fss_noise_counts": fss.noise_counts_1sigma,
+        "fss_sigma_arcsec": fss_sigma,
+        "iru_arw_rad_per_sqrt_s": s.iru.angle_random_walk_arcsec_per_sqrt_s * RAD_PER_ARCSEC,
+        "iru_rrw_rad_per_s_sqrt_s": s.iru.bias_random_walk_arcsec_per_s15 * RAD_PER_ARCSEC,
+    })
+}
+
+fn metadata_json(sim: &Simulation, scorer: &Scorer) -> serde_json::Value {
+    let s = sim.scenario();
+    let uploads: Vec<_> = scorer
+        .tables
+        .iter()
+        .map(|t| {
+            serde_json::json!({
+                "table": t.table,
+                "file": t.file,
+                "source": t.source,
+                "loaded_at_s": t.loaded_at_s,
+                "accepted": t.accepted,
+                "activated_at_s": t.activated_at_s,
+                "activated_utc": t.activated_at_s.map(|a| utc_string(sim.clock().epoch(a))),
+                "crc32": t.crc32,
+            })
+        })
+        .collect();
+    serde_json::json!({
+        "scenario": s.name,
+        "description": s.description,
+        "seed": s.seed,
+        "epoch_utc": s.epoch_utc,
+        "cycle_period_s": s.step_s,
+        "duration_s": s.duration_s,
+        "telemetry_every_n_cycles": s.telemetry_every_n_cycles,
+        "ephemeris_period_s": s.ephemeris_period_s,
+        "sensors": declared_noise(s),
+        "declared_effects": s.declared_effects(),
+        "boot_tables": {
+            "alignment": "fsw-core boot table: paper Table 1 prelaunch alignments",
+            "iru": "fsw-core boot table: paper prelaunch G, k = 1",
+            "filter": "fsw-core boot table: FilterTable::default_boot (docs/tables.md)",
+            "star_catalog": "empty (the catalog is uplinked at t = 0)",
+        },
+        "uploads": uploads,
+    })
+}
+
+fn truth_json(sim: &Simulation, bias: &BiasRecorder) -> anyhow::Result<serde_json::Value> {
+    let s = sim.scenario();
+    let paper = PaperFacts::load()?;
+    let m = sim.true_alignments();
+    let names = crate::paper::SENSOR_NAMES;
+    let mut alignments = serde_json::Map::new();
+    let mut thetas = serde_json::Map::new();
+    for k in 0..4 {
+        alignments.insert(names[k].into(), serde_json::json!(rows(&m[k])));
+        let theta =
+            fsw_core::attitude::rotvec_from_rot(&(m[k] * paper.prelaunch(k).transpose()))
+                * ARCSEC_PER_RAD;
+        thetas.insert(names[k].into(), serde_json::json!([theta.x, theta.y, theta.z]));
+    }
+    let dm_p = s
+        .iru
+        .delta_m_true_primary
+        .unwrap_or_else(|| rows(&paper.iru_delta_m));
+    Ok(serde_json::json!({
+        "scenario": s.name,
+        "seed": s.seed,
+        "alignments": alignments,
+        "misalignment_from_prelaunch_acs_arcsec": thetas,
+        "iru": {
+            "primary": {
+                "channels": ["X2", "Y1", "Z1"],
+                "g": rows(&paper.iru_g),
+                "delta_m": dm_p,
+                "channel_scale_ppm": PRIMARY_CHANNELS.map(|c| s.iru.channel_scale_ppm[c]),
+                "high_rate_scale_ppm": PRIMARY_CHANNELS.map(|c| s.iru.high_rate_scale_ppm[c]),
+            },
+            "backup": {
+                "channels": ["X1", "Y2", "Z2"],
+                "g": rows(&paper.iru_g),
+                "delta_m": s.iru.delta_m_true_backup,
+                "channel_scale_ppm": BACKUP_CHANNELS.map(|c| s.iru.channel_scale_ppm[c]),
+                "high_rate_scale_ppm": BACKUP_CHANNELS.map(|c| s.iru.high_rate_scale_ppm[c]),
+            },
+            "convention": "Δθ_acs = (I + delta_m) g Δφ (channel angles X, Y, Z of the triad)",
+        },
+        "bias_history": {
+            "period_s": bias.period_s,
+            "note": "true gyro bias mapped to ACS through the true triad geometry; channel biases in raw channel order X1, X2, Y1, Y2, Z1, Z2",
+            "samples": bias.samples,
+        },
+        "present_effects": present_effects(s),
+        "undeclared_effects": undeclared_effects(s),
+    }))
+}
+
+/// The run folder's files are written as `NAME.partial` and renamed by [`RunFolder::commit`].
+struct RunFolder {
+    dir: PathBuf,
+    renames: Vec<(PathBuf, PathBuf)>,
+}
+
+impl RunFolder {
+    fn new(dir: &Path) -> anyhow::Result<Self> {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        // A previous run's summary would make a half-written folder look complete.
+        let old = dir.join("summary.json");
+        if old.exists() {
+            std::fs::remove_file(&old).with_context(|| format!("removing {}", old.display()))?;
+        }
+        Ok(Self {
+            dir: dir.to_path_buf(),
+            renames: Vec::new(),
+        })
+    }
+
+    fn create(&mut self, name: &str) -> anyhow::Result<std::fs::File> {
+        let final_path = self.dir.join(name);
+        if let Some(parent) = final_path.parent() {
+            std::fs::create_dir_all(parent)?;
+        }
+        let partial = PathBuf::from(format!("{}.partial", final_path.display()));
+        let f = std::fs::File::create(&partial)
+            .with_context(|| format!("creating {}", partial.display()))?;
+        self.renames.push((partial, final_path));
+        Ok(f)
+    }
+
+    fn write_json(&mut self, name: &str, v: &impl Serialize) -> anyhow::Result<()> {
+        let mut f = BufWriter::new(self.create(name)?);
+        serde_json::to_writer_pretty(&mut f, v)?;
+        f.write_all(b"\n")?;
+        f.flush()?;
+        Ok(())
+    }
+
+    fn commit(self) -> anyhow::Result<()> {
+        // summary.json last.
+        let (mut last, mut rest): (Vec<_>, Vec<_>) = self
+            .renames
+            .into_iter()
+            .partition(|(_, f)| f.file_name().is_some_and(|n| n == "summary.json"));
+        rest.append(&mut last);
+        for (from, to) in rest {
+            std::fs::rename(&from, &to)
+                .with_context(|| format!("renaming {} to {}", from.display(), to.display()))?;
+        }
+        Ok(())
+    }
+}
+
+fn progress_bar(enabled: bool, cycles: u64) -> Option<ProgressBar> {
+    use std::io::IsTerminal;
+    if !enabled || !std::io::stderr().is_terminal() {
+        return None;
+    }
+    let pb = ProgressBar::with_draw_target(Some(cycles), ProgressDrawTarget::stderr());
+    pb.set_style(
+        ProgressStyle::with_template(
+            "{spinner} [{elapsed_precise}] {wide_bar} {pos}/{len} cycles ({per_sec}, eta {eta})",
+        )
+        .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    Some(pb)
+}
+
+/// The loop shared by [`run`] and [`bench`].
+fn drive<W: Write>(
+    sim: &mut Simulation,
+    tm: &mut PacketWriter<W>,
+    scorer: &mut Scorer,
+    mut bias: Option<&mut BiasRecorder>,
+    pb: Option<&ProgressBar>,
+) -> anyhow::Result<u64> {
+    let n_tm = u64::from(sim.scenario().telemetry_every_n_cycles.max(1));
+    let eph_period = sim.scenario().ephemeris_period_s;
+    let mut next_eph = 0.0;
+    let mut aliasing = 0_u64;
+    let mut since_downlink = [0_i64; IRU_CHANNELS];
+    let mut prev_counts: Option<[u16; IRU_CHANNELS]> = None;
+    while let Some(rec) = sim.step() {
+        let t = rec.truth.t_s;
+        let counts = rec.frame.iru.counts;
+        if let Some(prev) = prev_counts {
+            for ch in 0..IRU_CHANNELS {
+                #[allow(clippy::cast_possible_wrap)]
+                let d = counts[ch].wrapping_sub(prev[ch]) as i16;
+                since_downlink[ch] += i64::from(d);
+            }
+        }
+        prev_counts = Some(counts);
+        let time = rec.frame.time;
+        if rec.cycle % n_tm == 0 {
+            if since_downlink.iter().any(|d| d.abs() >= 32_768) {
+                aliasing += 1;
+            }
+            since_downlink = [0; IRU_CHANNELS];
+            tm.raw(&rec.frame)?;
+            if t + 1e-9 >= next_eph {
+                tm.ephemeris(&EphemerisRecord {
+                    time,
+                    pos_eci_km: rec.truth.pos_eci_km.into(),
+                    vel_eci_km_per_s: rec.truth.vel_eci_km_per_s.into(),
+                })?;
+                while next_eph <= t + 1e-9 {
+                    next_eph += eph_period;
+                }
+            }
+            tm.housekeeping(&rec.output.housekeeping)?;
+        }
+        for e in &rec.output.events {
+            tm.event(time, e)?;
+        }
+        scorer.add(&rec, &sim.true_attitude().wheel_momentum_nms);
+        if let Some(b) = bias.as_deref_mut() {
+            b.add(sim, t);
+        }
+        if let Some(pb) = pb {
+            if rec.cycle % PROGRESS_EVERY == 0 {
+                pb.set_position(rec.cycle);
+            }
+        }
+    }
+    Ok(aliasing)
+}
+
+fn summary(
+    sim: &Simulation,
+    scorer: Scorer,
+    wall_s: f64,
+    cycles: u64,
+    aliasing: u64,
+    packets: u64,
+    bytes: u64,
+) -> Summary {
+    let s = sim.scenario();
+    let sim_s = (cycles.saturating_sub(1)) as f64 * s.step_s;
+    let k = scorer.counters;
+    let counters = MeasurementCounters {
+        accepted: k.accepted_measurements,
+        gated: k.gated_measurements,
+        rejected_inputs: k.rejected_inputs,
+        stars_identified: k.stars_identified,
+        star_id_unmatched: k.star_id_unmatched,
+        star_id_ambiguous: k.star_id_ambiguous,
+        events_dropped: k.events_dropped,
+    };
+    let steady = scorer.steady.stats();
+    Summary {
+        scenario: s.name.clone(),
+        seed: s.seed,
+        sim_seconds: sim_s,
+        wall_seconds: wall_s,
+        real_time_factor: if wall_s > 0.0 { sim_s / wall_s } else { 0.0 },
+        cycles,
+        ns_per_cycle: if cycles > 0 {
+            wall_s * 1e9 / cycles as f64
+        } else {
+            0.0
+        },
+        fine_mode_fraction: if steady.cycles > 0 {
+            scorer.fine as f64 / steady.cycles as f64
+        } else {
+            0.0
+        },
+        attitude_error_arcsec: steady,
+        attitude_error_arcsec_all: scorer.all.stats(),
+        post_maneuver_error_deg: scorer
+            .slews
+            .iter()
+            .map(|s| s.post_maneuver_error_deg)
+            .collect(),
+        slews: scorer.slews,
+        filter_nees_mean: (scorer.nees_n > 0).then(|| scorer.nees_sum / scorer.nees_n as f64),
+        filter_nees_cycles: scorer.nees_n,
+        rejected_measurements: u64::from(counters.gated) + u64::from(counters.rejected_inputs),
+        measurement_counters: counters,
+        tables_loaded: scorer.tables,
+        telemetry_packets: packets,
+        telemetry_bytes: bytes,
+        iru_counter_aliasing_frames: aliasing,
+        max_wheel_momentum_nms: scorer.max_wheel,
+    }
+}
+
+/// Fly a scenario; with `opts.out_dir`, write the run folder (module doc).
+///
+/// # Errors
+/// [`crate::InputError`] for bad inputs (tables, parameters); I/O and internal errors.
+pub fn run(scenario: Scenario, opts: &RunOptions) -> anyhow::Result<Summary> {
+    let mut sim = Simulation::new(scenario, opts.tables_dir.as_deref())?;
+    let mut scorer = Scorer::new(&sim);
+    let pb = progress_bar(opts.progress, sim.cycle_count());
+    let Some(dir) = opts.out_dir.as_deref() else {
+        let mut tm = PacketWriter::new(std::io::sink());
+        let start = Instant::now();
+        let aliasing = drive(&mut sim, &mut tm, &mut scorer, None, pb.as_ref())?;
+        let wall = start.elapsed().as_secs_f64();
+        if let Some(pb) = pb {
+            pb.finish_and_clear();
+        }
+        let cycles = sim.cycle_count();
+        let (packets, bytes) = (tm.packets(), tm.bytes());
+        return Ok(summary(&sim, scorer, wall, cycles, aliasing, packets, bytes));
+    };
+    let mut folder = RunFolder::new(dir)?;
+    for (i, up) in sim.uploads().iter().enumerate() {
+        let mut f = folder.create(&format!("uploads/{i:02}_{}", up.name))?;
+        f.write_all(&up.image)?;
+    }
+    let file = folder.create("telemetry.bin")?;
+    let mut tm = PacketWriter::new(BufWriter::with_capacity(1 << 20, file));
+    let mut bias = BiasRecorder::new(&sim);
+    let start = Instant::now();
+    let aliasing = drive(&mut sim, &mut tm, &mut scorer, Some(&mut bias), pb.as_ref())?;
+    let wall = start.elapsed().as_secs_f64();
+    if let Some(pb) = pb {
+        pb.finish_and_clear();
+    }
+    let (packets, bytes) = (tm.packets(), tm.bytes());
+    tm.finish().context("writing telemetry.bin")?;
+    folder.write_json("metadata.json", &metadata_json(&sim, &scorer))?;
+    folder.write_json("truth.json", &truth_json(&sim, &bias)?)?;
+    let cycles = sim.cycle_count();
+    let summary = summary(&sim, scorer, wall, cycles, aliasing, packets, bytes);
+    folder.write_json("summary.json", &summary)?;
+    folder.commit()?;
+    Ok(summary)
+}
+
+/// The bench scenario: the embedded gro-early-mission.
+///
+/// # Errors
+/// A defect in the embedded scenario.
+pub fn bench_scenario() -> anyhow::Result<Scenario> {
+    let (_, text) = crate::scenario::EMBEDDED_SCENARIOS[0];
+    let mut s = Scenario::from_toml_str(text, "gro-early-mission (embedded)")?;
+    s.base_dir = Some(crate::scenario::scenarios_dir());
+    Ok(s)
+}
+
+/// `sim-harness bench`: fly the embedded gro-early-mission for `duration_s` with the
+/// telemetry encoded into a sink (no files) and report the speed.
+///
+/// # Errors
+/// As [`run`].
+pub fn bench(duration_s: f64) -> anyhow::Result<serde_json::Value> {
+    let mut s = bench_scenario()?;
+    s.duration_s = duration_s;
+    let sum = run(s, &RunOptions::default())?;
+    Ok(serde_json::json!({
+        "real_time_factor": sum.real_time_factor,
+        "sim_seconds": sum.sim_seconds,
+        "wall_seconds": sum.wall_seconds,
+        "cycles": sum.cycles,
+        "ns_per_cycle": sum.ns_per_cycle,
+    }))
+}
