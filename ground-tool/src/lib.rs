@@ -38,6 +38,7 @@ pub mod calibration;
 pub mod linalg;
 pub mod paper;
 pub mod pipeline;
+pub mod report;
 pub mod synth;
 pub mod table;
 pub mod tp;

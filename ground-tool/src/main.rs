@@ -3,7 +3,16 @@ use anyhow::Result;
 use clap::{Parser, Subcommand};
 
 #[derive(Parser)]
-#[command(name = "ground-tool", about = "CGRO flight-dynamics ground tool")]
+#[command(
+    name = "ground-tool",
+    about = "CGRO flight-dynamics ground tool: telemetry processing, alignment (FFCAL) and gyro (IRUCAL) calibration, uplink tables, the paper reproduced",
+    long_about = "The flight-dynamics side of the emulated Compton Gamma Ray Observatory (Davis et al., \
+in-flight attitude sensor calibration, 1991).\n\n\
+Typical loop:\n  sim-harness run gro-early-mission --out runs/a      # fly with the prelaunch tables\n  \
+ground-tool calibrate runs/a --out runs/a-cal        # TP -> FADS -> FFCAL -> adjustment -> IRUCAL -> tables\n  \
+sim-harness run gro-early-mission --out runs/b --tables runs/a-cal/tables   # fly again\n\n\
+Exit codes: 0 success, 1 failure, 2 bad or insufficient input (the message says what is missing)."
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -11,6 +20,27 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Calibrate from a run folder: TP -> DA/FADS -> FFCAL -> adjustment -> IRUCAL -> tables.
+    ///
+    /// Reads RUN_DIR/telemetry.bin (docs/icd.md) and RUN_DIR/metadata.json (optional); never
+    /// truth.json. Writes OUT/report.json, OUT/report.md, PNG plots and OUT/tables/*.tbl
+    /// (binary images that fsw-core loads).
+    Calibrate {
+        /// Run folder with telemetry.bin.
+        run_dir: std::path::PathBuf,
+        /// Output folder.
+        #[arg(long)]
+        out: std::path::PathBuf,
+        /// Folder with the alignment.tbl / iru.tbl images that were flown (default: boot tables).
+        #[arg(long)]
+        tables: Option<std::path::PathBuf>,
+        /// Use Shuster's 1982 scalar weights instead of the optimal (1990) weighting.
+        #[arg(long)]
+        shuster1982: bool,
+        /// Print report.json to stdout.
+        #[arg(long)]
+        json: bool,
+    },
     /// Reproduce the paper's numbers from data/gro_paper.toml.
     Paper {
         /// Machine-readable JSON instead of the table.
@@ -147,9 +177,85 @@ fn run_table(action: TableAction) -> Result<()> {
     Ok(())
 }
 
-fn main() -> Result<()> {
+/// Flown tables from a folder (alignment.tbl, iru.tbl), each optional.
+fn read_flown_tables(
+    dir: Option<&std::path::Path>,
+) -> Result<(
+    Option<fsw_core::tables::AlignmentTable>,
+    Option<fsw_core::tables::IruTable>,
+)> {
+    use fsw_core::tables::image::{decode_payload, parse_image};
+    let Some(dir) = dir else { return Ok((None, None)) };
+    let read = |name: &str| -> Result<Option<Vec<u8>>> {
+        let p = dir.join(name);
+        if p.exists() {
+            Ok(Some(std::fs::read(&p)?))
+        } else {
+            Ok(None)
+        }
+    };
+    let alignment = match read("alignment.tbl")? {
+        Some(b) => {
+            let (_, payload) = parse_image(&b).map_err(|e| anyhow::anyhow!("alignment.tbl: {e:?}"))?;
+            Some(decode_payload(payload).map_err(|e| anyhow::anyhow!("alignment.tbl: {e:?}"))?)
+        }
+        None => None,
+    };
+    let iru = match read("iru.tbl")? {
+        Some(b) => {
+            let (_, payload) = parse_image(&b).map_err(|e| anyhow::anyhow!("iru.tbl: {e:?}"))?;
+            Some(decode_payload(payload).map_err(|e| anyhow::anyhow!("iru.tbl: {e:?}"))?)
+        }
+        None => None,
+    };
+    Ok((alignment, iru))
+}
+
+fn run_calibrate(
+    run_dir: &std::path::Path,
+    out: &std::path::Path,
+    tables: Option<&std::path::Path>,
+    shuster1982: bool,
+    json: bool,
+) -> Result<()> {
+    use ground_tool::calibration::alignment::Weighting;
+    use ground_tool::pipeline::calibrate::{calibrate_run, CalibrateOptions};
+    let (flown_alignment, flown_iru) = read_flown_tables(tables)?;
+    let options = CalibrateOptions {
+        flown_alignment,
+        flown_iru,
+        weighting: if shuster1982 { Weighting::Shuster1982 } else { Weighting::Optimal1990 },
+        ..CalibrateOptions::default()
+    };
+    let result = calibrate_run(run_dir, out, &options)?;
+    let flown = flown_alignment.unwrap_or_else(fsw_core::tables::AlignmentTable::prelaunch);
+    ground_tool::report::write_calibration_report(out, &result, &flown)?;
+    if json {
+        println!("{}", serde_json::to_string_pretty(&result.report)?);
+    } else {
+        eprintln!("wrote {}/report.md, report.json and tables/", out.display());
+    }
+    Ok(())
+}
+
+fn main() {
     let cli = Cli::parse();
+    if let Err(e) = run(cli) {
+        eprintln!("error: {e:#}");
+        // Input problems (missing or malformed files, too little data) are exit code 2.
+        let text = format!("{e:#}");
+        let input = ["not found", "needs", "malformed", "not valid", "only ", "cannot read", "FFCAL:"]
+            .iter()
+            .any(|k| text.contains(k));
+        std::process::exit(if input { 2 } else { 1 });
+    }
+}
+
+fn run(cli: Cli) -> Result<()> {
     match cli.command {
+        Command::Calibrate { run_dir, out, tables, shuster1982, json } => {
+            run_calibrate(&run_dir, &out, tables.as_deref(), shuster1982, json)?
+        }
         Command::Paper { json } => {
             let r = ground_tool::paper::reproduce()?;
             if json {
