@@ -1,0 +1,111 @@
+//! `calibration-loop`: the main job in one command.
+//!
+//! Fly a scenario (default `gro-early-mission`) with the paper's prelaunch tables against the
+//! true misalignments → calibrate on the ground from the telemetry alone → uplink the new
+//! tables → fly again → print and write the before/after comparison.
+
+use anyhow::Context;
+use clap::Parser;
+use gro_tests::loop_report::{compare, render_markdown, LoopReport};
+use ground_tool::pipeline::calibrate::{calibrate_run, CalibrateOptions};
+use sim_harness::run::{run, RunOptions};
+use sim_harness::scenario::resolve;
+use std::path::PathBuf;
+
+#[derive(Parser)]
+#[command(
+    name = "calibration-loop",
+    about = "Fly with prelaunch tables, calibrate on the ground, uplink, fly again; print the error before and after",
+    long_about = "The whole in-flight calibration loop of the Compton GRO paper in one command.\n\n\
+Steps: (1) sim-harness flies SCENARIO with the boot (prelaunch, paper Table 1) tables against the \
+scenario's true misalignments and IRU errors; (2) ground-tool calibrates from OUT/1-fly-prelaunch/telemetry.bin \
+only (TP -> FADS -> FFCAL -> adjustment -> IRUCAL); (3) the new tables OUT/2-calibration/tables/*.tbl are \
+uplinked and the same scenario (same seed) is flown again; (4) the comparison is printed and written to \
+OUT/report.md and OUT/report.json (truth is used only here, for scoring).\n\n\
+Example: calibration-loop --out runs/loop"
+)]
+struct Args {
+    /// Scenario name (scenarios/NAME.toml, built in) or a TOML path.
+    #[arg(long, default_value = "gro-early-mission")]
+    scenario: String,
+    /// Output folder.
+    #[arg(long, default_value = "runs/loop")]
+    out: PathBuf,
+    /// Seed (both flights use it, so only the tables differ).
+    #[arg(long)]
+    seed: Option<u64>,
+    /// Shortened run for CI: limit each flight to this many seconds.
+    #[arg(long)]
+    duration: Option<f64>,
+    /// Print report.json instead of the table.
+    #[arg(long)]
+    json: bool,
+}
+
+fn main() {
+    let args = Args::parse();
+    if let Err(e) = run_loop(&args) {
+        eprintln!("error: {e:#}");
+        std::process::exit(1);
+    }
+}
+
+fn run_loop(args: &Args) -> anyhow::Result<()> {
+    let t_start = std::time::Instant::now();
+    let mut scenario = resolve(&args.scenario)?;
+    if let Some(seed) = args.seed {
+        scenario.seed = seed;
+    }
+    if let Some(d) = args.duration {
+        scenario.duration_s = scenario.duration_s.min(d);
+    }
+    std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
+    let fly_a = args.out.join("1-fly-prelaunch");
+    let cal = args.out.join("2-calibration");
+    let fly_b = args.out.join("3-fly-calibrated");
+
+    eprintln!("[1/3] flying {} with the prelaunch tables ...", scenario.name);
+    let summary_a = run(
+        scenario.clone(),
+        &RunOptions {
+            out_dir: Some(fly_a.clone()),
+            tables_dir: None,
+            progress: true,
+        },
+    )?;
+    eprintln!("[2/3] calibrating from {}/telemetry.bin ...", fly_a.display());
+    let calibration = calibrate_run(&fly_a, &cal, &CalibrateOptions::default())?;
+    ground_tool::report::write_calibration_report(
+        &cal,
+        &calibration,
+        &fsw_core::tables::AlignmentTable::prelaunch(),
+    )?;
+    eprintln!("[3/3] flying again with the uplinked tables {}/tables ...", cal.display());
+    let summary_b = run(
+        scenario,
+        &RunOptions {
+            out_dir: Some(fly_b.clone()),
+            tables_dir: Some(cal.join("tables")),
+            progress: true,
+        },
+    )?;
+    let truth: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(fly_a.join("truth.json")).context("reading truth.json")?,
+    )?;
+    let mut report: LoopReport = compare(&summary_a, &summary_b, &calibration, &truth)?;
+    report.wall_seconds = t_start.elapsed().as_secs_f64();
+    std::fs::write(args.out.join("report.json"), serde_json::to_string_pretty(&report)?)?;
+    let md = render_markdown(&report);
+    std::fs::write(args.out.join("report.md"), &md)?;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        println!("{md}");
+        eprintln!(
+            "wrote {}/report.md, report.json; calibration report and plots in {}",
+            args.out.display(),
+            cal.display()
+        );
+    }
+    Ok(())
+}

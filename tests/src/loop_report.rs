@@ -1,0 +1,182 @@
+//! # Before/after comparison of the calibration loop (scoring against truth)
+//!
+//! Truth (`truth.json`) is used only here, to score; the calibration never sees it.
+
+use anyhow::Context;
+use fsw_core::attitude::rotvec_from_rot;
+use fsw_core::tables::types::matrix_from_rows;
+use fsw_core::tables::AlignmentTable;
+use fsw_core::units::ARCSEC_PER_RAD;
+use ground_tool::pipeline::calibrate::{CalibrationOutput, SENSOR_NAMES};
+use nalgebra::Matrix3;
+use serde::Serialize;
+use sim_harness::run::Summary;
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+
+/// A quantity before and after the uplink.
+#[derive(Clone, Debug, Serialize, Default)]
+pub struct Pair<T> {
+    /// Flown with the prelaunch tables.
+    pub before: T,
+    /// Flown with the calibrated tables.
+    pub after: T,
+}
+
+/// The loop's result.
+#[derive(Clone, Debug, Serialize, Default)]
+pub struct LoopReport {
+    /// Scenario.
+    pub scenario: String,
+    /// Seed of both flights.
+    pub seed: u64,
+    /// Relative alignment error against truth, arcsec, per sensor pair
+    /// (angle of `R_iᵀ R_j`, `R_k = M_k,table M_k,trueᵀ`).
+    pub relative_alignment_error_arcsec: Pair<BTreeMap<String, f64>>,
+    /// Absolute alignment error against truth per sensor, arcsec (includes the common
+    /// rotation that the adjustment deliberately keeps).
+    pub absolute_alignment_error_arcsec: Pair<BTreeMap<String, f64>>,
+    /// FFCAL residual RMS per sensor, arcsec (before: flown tables; after: calibrated).
+    pub residual_rms_arcsec: Pair<BTreeMap<String, f64>>,
+    /// Post-maneuver attitude error at each slew completion, deg.
+    pub post_maneuver_error_deg: Pair<Vec<f64>>,
+    /// Fine-attitude error, 3 × RMS per ACS axis (bias included), arcsec, outside slews.
+    pub fine_attitude_error_3rms_arcsec: Pair<[f64; 3]>,
+    /// Largest |δM element| error against the true δM, ppm (before = the prelaunch G, δM = 0).
+    pub iru_delta_m_max_error_ppm: Pair<Option<f64>>,
+    /// Every δM element within 3σ of truth.
+    pub iru_delta_m_within_3sigma: Option<bool>,
+    /// Filter NEES mean (3 = consistent).
+    pub filter_nees_mean: Pair<Option<f64>>,
+    /// Wall time of each flight, s.
+    pub flight_wall_seconds: Pair<f64>,
+    /// Whole loop wall time, s.
+    pub wall_seconds: f64,
+}
+
+fn matrix_from_json(v: &serde_json::Value) -> anyhow::Result<Matrix3<f64>> {
+    let mut rows = [[0.0; 3]; 3];
+    for (i, row) in rows.iter_mut().enumerate() {
+        for (j, x) in row.iter_mut().enumerate() {
+            *x = v[i][j].as_f64().context("matrix element")?;
+        }
+    }
+    Ok(matrix_from_rows(&rows))
+}
+
+fn alignment_errors(
+    table: &AlignmentTable,
+    truth: &[Matrix3<f64>; 4],
+) -> (BTreeMap<String, f64>, BTreeMap<String, f64>) {
+    let est = table.matrices().map(matrix_from_rows);
+    let r: Vec<Matrix3<f64>> = (0..4).map(|k| est[k] * truth[k].transpose()).collect();
+    let mut relative = BTreeMap::new();
+    for (i, j) in [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)] {
+        let angle = rotvec_from_rot(&(r[i].transpose() * r[j])).norm() * ARCSEC_PER_RAD;
+        relative.insert(format!("{}-{}", SENSOR_NAMES[i], SENSOR_NAMES[j]), angle);
+    }
+    let mut absolute = BTreeMap::new();
+    for k in 0..4 {
+        absolute.insert(SENSOR_NAMES[k].to_string(), rotvec_from_rot(&r[k]).norm() * ARCSEC_PER_RAD);
+    }
+    (relative, absolute)
+}
+
+fn three_rms(s: &Summary) -> [f64; 3] {
+    s.attitude_error_arcsec.rms.map(|x| 3.0 * x)
+}
+
+/// Score the loop.
+///
+/// # Errors
+/// A malformed `truth.json`.
+pub fn compare(
+    a: &Summary,
+    b: &Summary,
+    calibration: &CalibrationOutput,
+    truth: &serde_json::Value,
+) -> anyhow::Result<LoopReport> {
+    let mut true_m = [Matrix3::identity(); 4];
+    for (k, name) in SENSOR_NAMES.iter().enumerate() {
+        true_m[k] = matrix_from_json(&truth["alignments"][name]).with_context(|| format!("truth.json alignments.{name}"))?;
+    }
+    let (rel_before, abs_before) = alignment_errors(&AlignmentTable::prelaunch(), &true_m);
+    let (rel_after, abs_after) = alignment_errors(&calibration.alignment, &true_m);
+    let true_dm = matrix_from_json(&truth["iru"]["primary"]["delta_m"]).ok();
+    let (dm_before, dm_after, within) = match (true_dm, &calibration.irucal) {
+        (Some(t), Some(sol)) => {
+            let err = sol.calibration.delta_m - t;
+            let within = (0..9).all(|k| err[k].abs() <= 3.0 * sol.sigma_delta_m[k]);
+            (Some(t.abs().max() * 1e6), Some(err.abs().max() * 1e6), Some(within))
+        }
+        (Some(t), None) => (Some(t.abs().max() * 1e6), None, None),
+        _ => (None, None, None),
+    };
+    Ok(LoopReport {
+        scenario: a.scenario.clone(),
+        seed: a.seed,
+        relative_alignment_error_arcsec: Pair { before: rel_before, after: rel_after },
+        absolute_alignment_error_arcsec: Pair { before: abs_before, after: abs_after },
+        residual_rms_arcsec: Pair {
+            before: calibration.report.residual_rms_arcsec.before.clone(),
+            after: calibration.report.residual_rms_arcsec.after.clone(),
+        },
+        post_maneuver_error_deg: Pair {
+            before: a.post_maneuver_error_deg.clone(),
+            after: b.post_maneuver_error_deg.clone(),
+        },
+        fine_attitude_error_3rms_arcsec: Pair { before: three_rms(a), after: three_rms(b) },
+        iru_delta_m_max_error_ppm: Pair { before: dm_before, after: dm_after },
+        iru_delta_m_within_3sigma: within,
+        filter_nees_mean: Pair { before: a.filter_nees_mean, after: b.filter_nees_mean },
+        flight_wall_seconds: Pair { before: a.wall_seconds, after: b.wall_seconds },
+        wall_seconds: 0.0,
+    })
+}
+
+/// The before/after table for people.
+#[must_use]
+pub fn render_markdown(r: &LoopReport) -> String {
+    let mut md = String::new();
+    let _ = writeln!(md, "# Calibration loop: {} (seed {})\n", r.scenario, r.seed);
+    let _ = writeln!(md, "| quantity | before (prelaunch tables) | after (calibrated, uplinked) |");
+    let _ = writeln!(md, "|---|---|---|");
+    for (k, before) in &r.relative_alignment_error_arcsec.before {
+        let after = r.relative_alignment_error_arcsec.after.get(k).copied().unwrap_or(f64::NAN);
+        let _ = writeln!(md, "| relative alignment error {k} (″, vs truth) | {before:.1} | {after:.1} |");
+    }
+    for (k, before) in &r.residual_rms_arcsec.before {
+        let after = r.residual_rms_arcsec.after.get(k).copied().unwrap_or(f64::NAN);
+        let _ = writeln!(md, "| residual RMS {k} (″) | {before:.1} | {after:.1} |");
+    }
+    let fmt_list = |v: &[f64]| v.iter().map(|x| format!("{x:.4}")).collect::<Vec<_>>().join(", ");
+    let _ = writeln!(
+        md,
+        "| post-maneuver error per slew (°) | {} | {} |",
+        fmt_list(&r.post_maneuver_error_deg.before),
+        fmt_list(&r.post_maneuver_error_deg.after)
+    );
+    let f = |a: [f64; 3]| format!("[{:.1}, {:.1}, {:.1}]", a[0], a[1], a[2]);
+    let _ = writeln!(
+        md,
+        "| fine-attitude error 3×RMS per axis (″; requirement 86.4″) | {} | {} |",
+        f(r.fine_attitude_error_3rms_arcsec.before),
+        f(r.fine_attitude_error_3rms_arcsec.after)
+    );
+    let o = |x: Option<f64>| x.map_or("n/a".to_string(), |v| format!("{v:.0}"));
+    let _ = writeln!(
+        md,
+        "| IRU δM max element error (ppm, vs truth) | {} | {}{} |",
+        o(r.iru_delta_m_max_error_ppm.before),
+        o(r.iru_delta_m_max_error_ppm.after),
+        match r.iru_delta_m_within_3sigma {
+            Some(true) => " (all within 3σ)",
+            Some(false) => " (NOT all within 3σ)",
+            None => "",
+        }
+    );
+    let n = |x: Option<f64>| x.map_or("n/a".to_string(), |v| format!("{v:.2}"));
+    let _ = writeln!(md, "| filter NEES mean (3 = consistent) | {} | {} |", n(r.filter_nees_mean.before), n(r.filter_nees_mean.after));
+    let _ = writeln!(md, "\nWall time: {:.1} s (flights {:.1} s and {:.1} s).", r.wall_seconds, r.flight_wall_seconds.before, r.flight_wall_seconds.after);
+    md
+}
