@@ -74,7 +74,10 @@ fn val_table3_from_tables_1_and_2() {
     // antisymmetric to rounding, like element (2,3) = 0.0000000) gives 5.6e-8.
     let printed = m("table1_prelaunch", "FHST2") * m("table2_misalignment", "FHST2");
     let printed_diff = (printed - m("table3_adjusted", "FHST2")).abs().max();
-    assert!(printed_diff > 1.5e-7 && printed_diff < 2.5e-7, "{printed_diff:e}");
+    assert!(
+        printed_diff > 1.5e-7 && printed_diff < 2.5e-7,
+        "{printed_diff:e}"
+    );
     for sensor in ["FHST1", "FHST2"] {
         let mut t2 = m("table2_misalignment", sensor);
         if sensor == "FHST2" {
@@ -87,6 +90,11 @@ fn val_table3_from_tables_1_and_2() {
         assert!(diff < 1e-7, "{sensor}: max |T1·T2 − T3| = {diff:e}");
         // Eq. 4: the same correction is a left rotation Rot(θ) in ACS.
         let theta = rotvec_from_rot(&(published * m("table1_prelaunch", sensor).transpose()));
-        assert!((rot(&theta) * m("table1_prelaunch", sensor) - published).abs().max() < 1e-6);
+        assert!(
+            (rot(&theta) * m("table1_prelaunch", sensor) - published)
+                .abs()
+                .max()
+                < 1e-6
+        );
     }
 }

@@ -110,7 +110,10 @@ impl Default for TableSet {
 fn crc_of(bytes: &[u8]) -> u32 {
     let n = bytes.len();
     let start = n.saturating_sub(4);
-    match bytes.get(start..n).and_then(|s| <[u8; 4]>::try_from(s).ok()) {
+    match bytes
+        .get(start..n)
+        .and_then(|s| <[u8; 4]>::try_from(s).ok())
+    {
         Some(b) => u32::from_be_bytes(b),
         None => 0,
     }
@@ -324,7 +327,16 @@ mod tests {
 
     fn image_of<T: serde::Serialize>(id: TableId, t: &T) -> ([u8; 1024], usize) {
         let mut buf = [0u8; 1024];
-        let n = encode_image(id, TimeTag { coarse_s: 1_000, fine: 7 }, t, &mut buf).unwrap();
+        let n = encode_image(
+            id,
+            TimeTag {
+                coarse_s: 1_000,
+                fine: 7,
+            },
+            t,
+            &mut buf,
+        )
+        .unwrap();
         (buf, n)
     }
 
