@@ -15,7 +15,8 @@
 //! 5. **FHST1, FHST2** (not during slews: gyro-only propagation, as on GRO): counts → unit
 //!    vector in ACS; star identification on a new acquisition; sequential vector update with
 //!    χ² gating.
-//! 6. **FSS1, FSS2**: counts → Sun vector in ACS; onboard Sun ephemeris; update.
+//! 6. **FSS1, FSS2**: counts → Sun vector in ACS; onboard Sun ephemeris; update in coarse
+//!    mode only (fine mode is FHST-only, as on GRO); the α/β innovation is always reported.
 //! 7. **Control**: inertial hold or rate-limited eigen-axis slew → wheel torque; IRU rate
 //!    mode request (high for slews).
 //! 8. **Housekeeping**.
@@ -717,7 +718,7 @@ impl FlightCore {
         };
         let index = sensor.saturating_add(2);
         let alignment = self.tables.alignment();
-        let m_acs_from_fss = if sensor == 0 {
+        let m_acs_from_fss_rows = if sensor == 0 {
             &alignment.m_acs_from_fss1
         } else {
             &alignment.m_acs_from_fss2
@@ -734,7 +735,7 @@ impl FlightCore {
             .get(index)
             .copied()
             .unwrap_or(0.0);
-        let meas = match fss::measure(sample, m_acs_from_fss, &transfer) {
+        let meas = match fss::measure(sample, m_acs_from_fss_rows, &transfer) {
             Ok(m) => {
                 if let Some(r) = self.rejected_run.get_mut(index) {
                     *r = false;
@@ -759,18 +760,39 @@ impl FlightCore {
                 ..SensorResidual::default()
             };
         };
+        // Innovation in the sensor's own axes (α, β), reported whether or not it is used.
+        let m_acs_from_fss = matrix_from_rows(m_acs_from_fss_rows);
+        let predicted = fss::angles_from_dir(
+            &(m_acs_from_fss.transpose() * (self.filter.q_acs_from_eci.to_dcm() * sun_eci)),
+        );
+        let measured = fss::angles_from_dir(&(m_acs_from_fss.transpose() * dir_acs));
+        let innovation_rad = match (measured, predicted) {
+            (Some((a_m, b_m)), Some((a_p, b_p))) => [a_m - a_p, b_m - b_p],
+            _ => [0.0; 2],
+        };
+        #[allow(clippy::cast_possible_truncation)]
+        let innovation_arcsec = [
+            (innovation_rad[0] * ARCSEC_PER_RAD) as f32,
+            (innovation_rad[1] * ARCSEC_PER_RAD) as f32,
+        ];
+        // Fine mode uses the FHSTs only; the FSSs serve coarse mode (paper §2: FSS + IRU
+        // coarse attitude, FHST + IRU fine attitude). An uncalibrated FSS would otherwise pull
+        // the fine attitude by its misalignment.
+        if self.filter_mode == FilterMode::Fine {
+            return SensorResidual {
+                status: MeasurementStatus::NotUsed,
+                innovation_arcsec,
+                star_id: 0,
+            };
+        }
         let filter_table = self.tables.filter();
         let sigma = filter_table.fss_sigma_arcsec / ARCSEC_PER_RAD;
         let gate = filter_table.gate_chi2;
         let outcome = self.filter.update_vector(&dir_acs, &sun_eci, sigma, gate);
         let status = self.note_outcome(index, outcome.accepted, events);
-        #[allow(clippy::cast_possible_truncation)]
         SensorResidual {
             status,
-            innovation_arcsec: [
-                (outcome.innovation_rad[0] * ARCSEC_PER_RAD) as f32,
-                (outcome.innovation_rad[1] * ARCSEC_PER_RAD) as f32,
-            ],
+            innovation_arcsec,
             star_id: 0,
         }
     }

@@ -171,6 +171,9 @@ impl TableSet {
     ///
     /// # Errors
     /// Why the image was refused; the id is returned when it could be read.
+    // Kept out of line: the star-catalog path moves ~82 KB values, which must not
+    // enlarge the stack frame of every cycle (`FlightCore::step`).
+    #[inline(never)]
     pub fn load(&mut self, image: &[u8]) -> Result<TableId, (Option<TableId>, TableError)> {
         let (header, payload) = parse_image(image).map_err(|e| {
             let id = image.get(4).copied().and_then(TableId::from_u8);
@@ -212,6 +215,9 @@ impl TableSet {
         }
     }
 
+    // Kept out of line: the star-catalog path moves ~82 KB values, which must not
+    // enlarge the stack frame of every cycle (`FlightCore::step`).
+    #[inline(never)]
     fn decode_and_validate(
         &mut self,
         id: TableId,
@@ -252,6 +258,9 @@ impl TableSet {
     /// # Errors
     /// `None` in the inner option means nothing was pending; `Some(e)` a re-check failed (the
     /// inactive buffer is then cleared).
+    // Kept out of line: the star-catalog path moves ~82 KB values, which must not
+    // enlarge the stack frame of every cycle (`FlightCore::step`).
+    #[inline(never)]
     pub fn activate(&mut self, id: TableId) -> Result<(), Option<TableError>> {
         let recheck = match id {
             TableId::Alignment => match &self.alignment.inactive {
@@ -298,6 +307,9 @@ impl TableSet {
     ///
     /// # Errors
     /// [`TableError::BufferTooSmall`].
+    // Kept out of line: the star-catalog path moves ~82 KB values, which must not
+    // enlarge the stack frame of every cycle (`FlightCore::step`).
+    #[inline(never)]
     pub fn dump(&self, id: TableId, out: &mut [u8]) -> Result<usize, TableError> {
         match id {
             TableId::Alignment => encode_image(
