@@ -195,6 +195,19 @@ impl Simulation {
                 },
             );
         }
+        if let Some(overrides) = &scenario.filter_table {
+            let table = onboard::filter_table_with(overrides).map_err(InputError::from)?;
+            push_upload(
+                &mut uploads,
+                &mut timeline,
+                Upload {
+                    source: format!("scenario filter_table (boot values except {:?})", overrides.keys().collect::<Vec<_>>()),
+                    name: "filter.tbl".into(),
+                    image: onboard::image(TableId::Filter, created, &table)?,
+                    at_s: 0.0,
+                },
+            );
+        }
         if scenario.fly_true_alignments {
             let m = [
                 *fhst[0].m_acs_from_fhst_true(),

@@ -32,7 +32,7 @@ use fsw_core::raw::TimeTag;
 use fsw_core::tables::image::encode_image;
 use fsw_core::tables::types::rows_from_matrix;
 use fsw_core::tables::{
-    AlignmentTable, CatalogStar, SensorCorrections, StarCatalogTable, TableId, MAX_CATALOG_STARS,
+    AlignmentTable, CatalogStar, FilterTable, SensorCorrections, StarCatalogTable, TableId, MAX_CATALOG_STARS,
 };
 
 /// Room for the largest image (catalog: ≤ 4096 × 21 octets + header).
@@ -110,6 +110,31 @@ pub fn true_alignment_table(m_acs_from_sensor_true: &[Matrix3<f64>; 4]) -> Align
         m_acs_from_fss2: rows_from_matrix(&m_acs_from_sensor_true[3]),
         corrections: SensorCorrections::default(),
     }
+}
+
+/// The boot filter table with the scenario's `filter_table` fields laid over it, validated.
+///
+/// # Errors
+/// An unknown field, a wrong type or a value `FilterTable::validate` refuses (named).
+pub fn filter_table_with(overrides: &toml::Table) -> anyhow::Result<FilterTable> {
+    let boot = FilterTable::default_boot();
+    let mut value = toml::Table::try_from(boot).context("filter_table")?;
+    for (k, v) in overrides {
+        if !value.contains_key(k) {
+            anyhow::bail!(
+                "filter_table.{k}: unknown field (fields of FilterTable: {})",
+                value.keys().cloned().collect::<Vec<_>>().join(", ")
+            );
+        }
+        value.insert(k.clone(), v.clone());
+    }
+    let table: FilterTable = toml::Value::Table(value)
+        .try_into()
+        .map_err(|e| anyhow::anyhow!("filter_table: {e}"))?;
+    table
+        .validate()
+        .map_err(|e| anyhow::anyhow!("filter_table: refused by FilterTable::validate: {e:?}"))?;
+    Ok(table)
 }
 
 /// Encode a table as an uplink image (fsw-core's format).

@@ -390,6 +390,9 @@ fn rows(m: &Matrix3<f64>) -> [[f64; 3]; 3] {
 #[must_use]
 pub fn present_effects(s: &Scenario) -> Vec<String> {
     let mut out: Vec<String> = vec!["aberration".into(), "sun_parallax".into()];
+    if s.sky.orbital_aberration {
+        out.push("orbital_aberration".into());
+    }
     if s.sky.apply_parallax {
         out.push("stellar_parallax".into());
     }

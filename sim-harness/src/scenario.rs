@@ -348,6 +348,11 @@ pub struct Scenario {
     /// needed: the reference case for normal operations).
     #[serde(default)]
     pub fly_true_alignments: bool,
+    /// Filter-table settings to uplink at t = 0: any fields of fsw-core's `FilterTable`
+    /// (docs/tables.md, table 3), the others keep their boot values; absent = no upload.
+    /// Example: `filter_table = { aberration_correction = true }`.
+    #[serde(default)]
+    pub filter_table: Option<toml::Table>,
     /// Effects the operator declares (metadata.json `declared_effects`); `None` = the
     /// physical ones every GRO analyst knows about ([`DEFAULT_DECLARED_EFFECTS`]).
     #[serde(default)]
@@ -397,9 +402,10 @@ pub struct Scenario {
 }
 
 /// Effects declared when a scenario does not say (`declared_effects`): stellar and solar
-/// aberration, Sun parallax, the FSS transfer-function errors, the early IRU bias drift.
-pub const DEFAULT_DECLARED_EFFECTS: [&str; 4] = [
+/// aberration (annual and orbital), Sun parallax, the FSS transfer-function errors, the early IRU bias drift.
+pub const DEFAULT_DECLARED_EFFECTS: [&str; 5] = [
     "aberration",
+    "orbital_aberration",
     "sun_parallax",
     "fss_transfer_function",
     "iru_bias_transient",

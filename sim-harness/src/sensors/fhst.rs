@@ -292,7 +292,11 @@ impl Fhst {
             return FhstSample::default();
         }
         let obs_pos = truth.observer_pos_bary_eci_km();
-        let obs_vel = truth.observer_vel_bary_eci_km_per_s();
+        let obs_vel = if sky.orbital_aberration() {
+            truth.observer_vel_bary_eci_km_per_s()
+        } else {
+            truth.earth_vel_bary_eci_km_per_s
+        };
         let apparent_in_sensor = |idx: usize| {
             sky.star(idx)
                 .map(|s| m_fhst_from_eci * s.apparent_dir_eci(truth.j2000_tt_s, &obs_pos, &obs_vel))

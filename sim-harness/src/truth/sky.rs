@@ -75,6 +75,9 @@ pub struct SkyParams {
     pub proper_motion_error_seed: u64,
     /// Cell size of the cone index (deg).
     pub cell_deg: f64,
+    /// Include the spacecraft's orbital velocity (≤ 5.2″) in the stars' aberration; `false`
+    /// keeps only the annual part (attribution studies: the OBC can correct only that one).
+    pub orbital_aberration: bool,
 }
 
 impl Default for SkyParams {
@@ -87,6 +90,7 @@ impl Default for SkyParams {
             proper_motion_error_sigma_mas_per_yr: 0.0,
             proper_motion_error_seed: 0,
             cell_deg: 2.0,
+            orbital_aberration: true,
         }
     }
 }
@@ -156,6 +160,7 @@ pub struct Sky {
     /// First cell of each declination band (len = bands + 1).
     band_first_cell: Vec<u32>,
     band_rad: f64,
+    orbital_aberration: bool,
 }
 
 impl Sky {
@@ -231,7 +236,15 @@ impl Sky {
                 v_mag: v,
             });
         }
-        Ok(Self::build_index(stars, params.cell_deg))
+        let mut sky = Self::build_index(stars, params.cell_deg);
+        sky.orbital_aberration = params.orbital_aberration;
+        Ok(sky)
+    }
+
+    /// Whether the FHST truth adds the orbital velocity to the aberration (see [`SkyParams`]).
+    #[must_use]
+    pub fn orbital_aberration(&self) -> bool {
+        self.orbital_aberration
     }
 
     /// Load a catalogue file.
@@ -269,6 +282,7 @@ impl Sky {
             cell_start: Vec::new(),
             band_first_cell,
             band_rad,
+            orbital_aberration: true,
         };
         let mut keyed: Vec<(u32, SkyStar)> = stars
             .drain(..)
