@@ -35,6 +35,7 @@
 pub mod attitude;
 pub mod bench;
 pub mod calibration;
+pub mod diagnose;
 pub mod linalg;
 pub mod paper;
 pub mod pipeline;

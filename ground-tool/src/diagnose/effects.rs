@@ -1,0 +1,355 @@
+//! # The library of candidate effects (sensor side)
+//!
+//! Each effect is a parameterised addition to the measured angles with its own partial
+//! derivatives (columns of the design matrix, arcsec per parameter unit), fitted jointly with
+//! the per-sensor alignment rotations and the per-batch attitude (see [`super::fit`]).
+//! Parameter units are chosen to be readable and well scaled:
+//!
+//! | effect | params | column on (measured − predicted) | signature (algorithms.md §9) |
+//! |---|---|---|---|
+//! | `aberration_annual` | k (scale of the annual β-term; 1 = full aberration) | `J Mᵀ A (β_E − u(u·β_E))` | differential between sensors, with the velocity direction |
+//! | `aberration_orbital` | k (orbital β-term) | same with the orbital velocity | once per orbit |
+//! | `time_tag_offset` | τ (ms, + = sample older than its tag) | `J Mᵀ (ω × b)` | ∝ rate, flips with slew sign |
+//! | `thermal_alignment_drift` | 3 (″/°C, ACS) | `−J Mᵀ [b×] ΔT` | follows the sensor temperature |
+//! | `orbit_periodic_alignment` | 6 (″: cos u, sin u per ACS axis) | `−J Mᵀ [b×] (cos u, sin u)` | orbit phase |
+//! | `fhst_distortion` | radial Δρ at 4°, H·V terms at the (4°, 4°) corner (″) | `(ρ²H, ρ²V)/F³`, `(HV/F², 0)`, `(0, HV/F²)` | FOV position |
+//! | `magnitude_bias` | (″/mag in H, V) | `(m − 4)` | magnitude |
+//! | `fss_transfer_function` | scale (ppm), cross (″ at the 32° corner), cubic (″ at the edge), per head | `α`, `α β²/E³`, `α³/E³` | head angles |
+//! | `fss_cyclic_error` | sin/cos amplitudes per head (″) at a fitted pitch | `sin/cos(2π α / p)` | head angles, reticle pitch |
+//! | `catalog_proper_motion_error` | per star east/north offsets (″) | `J Mᵀ A e_{E,N}` | star id |
+//!
+//! Offsets degenerate with the alignment (FSS null offsets, the mean magnitude bias) are left
+//! to the alignment parameters.
+
+use super::measurements::{Measurement, MeasurementSet};
+use fsw_core::units::{ARCSEC_PER_RAD, RAD_PER_DEG};
+use serde::Serialize;
+
+/// FHST reference field radius of the distortion parameters (4°).
+pub const FHST_REF_RAD: f64 = 4.0 * RAD_PER_DEG;
+/// FSS field edge of the transfer-function parameters (32°).
+pub const FSS_EDGE_RAD: f64 = 32.0 * RAD_PER_DEG;
+/// Reference magnitude of the magnitude bias.
+pub const MAGNITUDE_REF: f64 = 4.0;
+/// Stars need this many measurements to get catalog-offset parameters.
+pub const CATALOG_MIN_SAMPLES: usize = 20;
+
+/// Kinds of sensor-side effect.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum EffectKind {
+    /// Annual velocity aberration (scale of the Earth-velocity term).
+    AberrationAnnual,
+    /// Orbital velocity aberration.
+    AberrationOrbital,
+    /// Time-tag offset of one sensor.
+    TimeTagOffset,
+    /// Alignment rotation ∝ the sensor temperature.
+    ThermalAlignmentDrift,
+    /// Alignment rotation at the orbit period.
+    OrbitPeriodicAlignment,
+    /// FHST focal-plane distortion (table form).
+    FhstDistortion,
+    /// Magnitude-dependent FHST bias.
+    MagnitudeBias,
+    /// FSS transfer-function error (table form plus a cubic term).
+    FssTransferFunction,
+    /// FSS cyclic (fine-reticle interpolation) error.
+    FssCyclicError,
+    /// Per-star catalog position / proper-motion error.
+    CatalogProperMotionError,
+}
+
+impl EffectKind {
+    /// Report name.
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::AberrationAnnual => "aberration_annual",
+            Self::AberrationOrbital => "aberration_orbital",
+            Self::TimeTagOffset => "time_tag_offset",
+            Self::ThermalAlignmentDrift => "thermal_alignment_drift",
+            Self::OrbitPeriodicAlignment => "orbit_periodic_alignment",
+            Self::FhstDistortion => "fhst_distortion",
+            Self::MagnitudeBias => "magnitude_bias",
+            Self::FssTransferFunction => "fss_transfer_function",
+            Self::FssCyclicError => "fss_cyclic_error",
+            Self::CatalogProperMotionError => "catalog_proper_motion_error",
+        }
+    }
+
+    /// The name `sim-harness` uses in `truth.json` (`present_effects`, `undeclared_effects`)
+    /// without the unit prefix.
+    #[must_use]
+    pub fn truth_name(self) -> &'static str {
+        match self {
+            Self::AberrationAnnual | Self::AberrationOrbital => "aberration",
+            Self::ThermalAlignmentDrift | Self::OrbitPeriodicAlignment => "thermal_alignment_drift",
+            Self::FssCyclicError | Self::FssTransferFunction => "fss_transfer_function",
+            other => other.name(),
+        }
+    }
+}
+
+/// One candidate effect (kind, sensor and its fixed settings).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Effect {
+    /// Kind.
+    pub kind: EffectKind,
+    /// Sensor (None = all sensors).
+    pub sensor: Option<usize>,
+    /// Parameter names.
+    pub params: Vec<String>,
+    /// Parameter units.
+    pub units: Vec<&'static str>,
+    /// Weak prior 1σ per parameter (keeps ill-observed parameters finite).
+    #[serde(skip)]
+    pub prior_sigma: Vec<f64>,
+    /// Pitch of the cyclic error (rad).
+    pub pitch_rad: Option<f64>,
+    /// Stars of the catalog effect (HIP).
+    #[serde(skip)]
+    pub stars: Vec<u32>,
+    /// Extra (nonlinear) parameters searched on a grid (for the BIC): the cyclic pitch.
+    pub extra_params: usize,
+}
+
+impl Effect {
+    fn new(kind: EffectKind, sensor: Option<usize>, params: &[(&str, &'static str, f64)]) -> Self {
+        Self {
+            kind,
+            sensor,
+            params: params.iter().map(|p| p.0.to_owned()).collect(),
+            units: params.iter().map(|p| p.1).collect(),
+            prior_sigma: params.iter().map(|p| p.2).collect(),
+            pitch_rad: None,
+            stars: Vec::new(),
+            extra_params: 0,
+        }
+    }
+
+    /// Number of linear parameters.
+    #[must_use]
+    pub fn len(&self) -> usize {
+        self.params.len()
+    }
+
+    /// No parameters.
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        self.params.is_empty()
+    }
+
+    /// Short label, e.g. `time_tag_offset[FHST1]`.
+    #[must_use]
+    pub fn label(&self) -> String {
+        match self.sensor {
+            Some(s) => format!("{}[{}]", self.kind.name(), super::measurements::SENSOR_NAMES[s]),
+            None => self.kind.name().to_owned(),
+        }
+    }
+
+    /// Does the effect act on this measurement at all?
+    #[must_use]
+    pub fn applies(&self, m: &Measurement) -> bool {
+        self.sensor.is_none_or(|s| s == m.sensor)
+    }
+
+    /// Columns (param index, [∂r_axis0, ∂r_axis1] in arcsec per parameter unit).
+    pub fn columns(&self, m: &Measurement, star_index: &dyn Fn(u32) -> Option<usize>, out: &mut Vec<(usize, [f64; 2])>) {
+        if !self.applies(m) {
+            return;
+        }
+        let v2 = |v: nalgebra::Vector2<f64>| [v.x, v.y];
+        let alignment_col = |axis: usize| {
+            let mut e = nalgebra::Vector3::zeros();
+            e[axis] = 1.0;
+            -(m.jm * m.b_acs.cross(&e))
+        };
+        match self.kind {
+            EffectKind::AberrationAnnual => out.push((0, v2(m.jm * m.ab_annual_acs * ARCSEC_PER_RAD))),
+            EffectKind::AberrationOrbital => out.push((0, v2(m.jm * m.ab_orbital_acs * ARCSEC_PER_RAD))),
+            EffectKind::TimeTagOffset => {
+                out.push((0, v2(m.jm * m.rate_acs.cross(&m.b_acs) * (ARCSEC_PER_RAD * 1e-3))));
+            }
+            EffectKind::ThermalAlignmentDrift => {
+                let dt = m.dtemp[m.sensor];
+                for ax in 0..3 {
+                    out.push((ax, v2(alignment_col(ax) * dt)));
+                }
+            }
+            EffectKind::OrbitPeriodicAlignment => {
+                if m.orbit_phase.is_finite() {
+                    let (s, c) = m.orbit_phase.sin_cos();
+                    for ax in 0..3 {
+                        let col = alignment_col(ax);
+                        out.push((ax, v2(col * c)));
+                        out.push((3 + ax, v2(col * s)));
+                    }
+                }
+            }
+            EffectKind::FhstDistortion => {
+                let [h, v] = m.ang;
+                let rho2 = h * h + v * v;
+                let f3 = FHST_REF_RAD.powi(3);
+                let f2 = FHST_REF_RAD.powi(2);
+                out.push((0, [rho2 * h / f3, rho2 * v / f3]));
+                out.push((1, [h * v / f2, 0.0]));
+                out.push((2, [0.0, h * v / f2]));
+            }
+            EffectKind::MagnitudeBias => {
+                if m.magnitude.is_finite() {
+                    let dm = m.magnitude - MAGNITUDE_REF;
+                    out.push((0, [dm, 0.0]));
+                    out.push((1, [0.0, dm]));
+                }
+            }
+            EffectKind::FssTransferFunction => {
+                let (a, b) = (m.ang[0], m.ang[1]);
+                let (x, y) = (a / FSS_EDGE_RAD, b / FSS_EDGE_RAD);
+                out.push((0, [a * 1e-6 * ARCSEC_PER_RAD, 0.0]));
+                out.push((1, [x * y * y, 0.0]));
+                out.push((2, [x * x * x, 0.0]));
+                out.push((3, [0.0, b * 1e-6 * ARCSEC_PER_RAD]));
+                out.push((4, [0.0, y * x * x]));
+                out.push((5, [0.0, y * y * y]));
+            }
+            EffectKind::FssCyclicError => {
+                if let Some(p) = self.pitch_rad {
+                    let w = std::f64::consts::TAU / p;
+                    let (sa, ca) = (w * m.ang[0]).sin_cos();
+                    let (sb, cb) = (w * m.ang[1]).sin_cos();
+                    out.push((0, [sa, 0.0]));
+                    out.push((1, [ca, 0.0]));
+                    out.push((2, [0.0, sb]));
+                    out.push((3, [0.0, cb]));
+                }
+            }
+            EffectKind::CatalogProperMotionError => {
+                if m.sensor < 2 {
+                    if let Some(k) = star_index(m.star) {
+                        out.push((2 * k, v2(m.jm * m.tangent_acs[0])));
+                        out.push((2 * k + 1, v2(m.jm * m.tangent_acs[1])));
+                    }
+                }
+            }
+        }
+    }
+
+    /// Regressors whose structure this effect should remove (adequacy check).
+    #[must_use]
+    pub fn signature(&self) -> &'static [super::structure::Regressor] {
+        use super::structure::Regressor as R;
+        match self.kind {
+            EffectKind::AberrationAnnual | EffectKind::AberrationOrbital => &[],
+            EffectKind::TimeTagOffset => &[R::RateX, R::RateY, R::RateZ],
+            EffectKind::ThermalAlignmentDrift | EffectKind::OrbitPeriodicAlignment => &[R::Temperature, R::OrbitPhase, R::Time],
+            EffectKind::FhstDistortion => &[R::FovH, R::FovV, R::FovRadius],
+            EffectKind::MagnitudeBias => &[R::Magnitude],
+            EffectKind::FssTransferFunction | EffectKind::FssCyclicError => &[R::FovH, R::FovV],
+            EffectKind::CatalogProperMotionError => &[R::StarId],
+        }
+    }
+}
+
+/// Sensors with enough data (≥ 50 measurements).
+fn active_sensors(set: &MeasurementSet) -> [bool; 4] {
+    let c = set.count_per_sensor();
+    [c[0] >= 50, c[1] >= 50, c[2] >= 50, c[3] >= 50]
+}
+
+/// The candidate library for a measurement set. `fss_pitch_rad[i]` is the cyclic pitch found
+/// for FSS i (none: no cyclic candidate).
+#[must_use]
+pub fn library(set: &MeasurementSet, fss_pitch_rad: [Option<f64>; 2]) -> Vec<Effect> {
+    let active = active_sensors(set);
+    let mut out = vec![
+        Effect::new(EffectKind::AberrationAnnual, None, &[("k_annual_minus_applied", "1", 10.0)]),
+        Effect::new(EffectKind::AberrationOrbital, None, &[("k_orbital_minus_applied", "1", 10.0)]),
+    ];
+    for s in 0..4 {
+        if !active[s] {
+            continue;
+        }
+        out.push(Effect::new(EffectKind::TimeTagOffset, Some(s), &[("tau", "ms", 5000.0)]));
+        out.push(Effect::new(
+            EffectKind::ThermalAlignmentDrift,
+            Some(s),
+            &[("x", "arcsec/degC", 300.0), ("y", "arcsec/degC", 300.0), ("z", "arcsec/degC", 300.0)],
+        ));
+        out.push(Effect::new(
+            EffectKind::OrbitPeriodicAlignment,
+            Some(s),
+            &[
+                ("cos_x", "arcsec", 600.0),
+                ("cos_y", "arcsec", 600.0),
+                ("cos_z", "arcsec", 600.0),
+                ("sin_x", "arcsec", 600.0),
+                ("sin_y", "arcsec", 600.0),
+                ("sin_z", "arcsec", 600.0),
+            ],
+        ));
+        if s < 2 {
+            out.push(Effect::new(
+                EffectKind::FhstDistortion,
+                Some(s),
+                &[("radial_at_4deg", "arcsec", 600.0), ("hv_h_at_corner", "arcsec", 600.0), ("hv_v_at_corner", "arcsec", 600.0)],
+            ));
+            out.push(Effect::new(
+                EffectKind::MagnitudeBias,
+                Some(s),
+                &[("h_per_mag", "arcsec/mag", 300.0), ("v_per_mag", "arcsec/mag", 300.0)],
+            ));
+        } else {
+            out.push(Effect::new(
+                EffectKind::FssTransferFunction,
+                Some(s),
+                &[
+                    ("alpha_scale", "ppm", 1.0e5),
+                    ("alpha_cross_at_corner", "arcsec", 3000.0),
+                    ("alpha_cubic_at_edge", "arcsec", 3000.0),
+                    ("beta_scale", "ppm", 1.0e5),
+                    ("beta_cross_at_corner", "arcsec", 3000.0),
+                    ("beta_cubic_at_edge", "arcsec", 3000.0),
+                ],
+            ));
+            if let Some(p) = fss_pitch_rad[s - 2] {
+                let mut e = Effect::new(
+                    EffectKind::FssCyclicError,
+                    Some(s),
+                    &[("alpha_sin", "arcsec", 300.0), ("alpha_cos", "arcsec", 300.0), ("beta_sin", "arcsec", 300.0), ("beta_cos", "arcsec", 300.0)],
+                );
+                e.pitch_rad = Some(p);
+                e.extra_params = 1;
+                out.push(e);
+            }
+        }
+    }
+    // Catalog: stars seen often enough, in at least two batches.
+    let mut seen: std::collections::BTreeMap<u32, (usize, usize, usize)> = std::collections::BTreeMap::new();
+    for m in set.meas.iter().filter(|m| m.sensor < 2 && !m.outlier && m.star != 0) {
+        let e = seen.entry(m.star).or_insert((0, usize::MAX, 0));
+        e.0 += 1;
+        if e.1 != m.batch {
+            e.2 += 1;
+            e.1 = m.batch;
+        }
+    }
+    let stars: Vec<u32> = seen
+        .iter()
+        .filter(|(_, (n, _, b))| *n >= CATALOG_MIN_SAMPLES && *b >= 2)
+        .map(|(h, _)| *h)
+        .collect();
+    if stars.len() >= 3 {
+        let mut names = Vec::with_capacity(2 * stars.len());
+        for h in &stars {
+            names.push((format!("HIP{h}_east"), "arcsec", 60.0));
+            names.push((format!("HIP{h}_north"), "arcsec", 60.0));
+        }
+        let refs: Vec<(&str, &'static str, f64)> = names.iter().map(|(n, u, s)| (n.as_str(), *u, *s)).collect();
+        let mut e = Effect::new(EffectKind::CatalogProperMotionError, None, &refs);
+        e.stars = stars;
+        out.push(e);
+    }
+    out
+}

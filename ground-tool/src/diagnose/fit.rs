@@ -1,0 +1,519 @@
+//! # Joint least squares: batch attitudes + alignments + effects
+//!
+//! Model of every measurement residual (arcsec):
+//! `r = A (δθ_b + δθ̇_b (t − t_b)) + G g + noise`, with the per-batch attitude correction
+//! (6 nuisance parameters: angle and rate), `g` the global parameters (alignment rotations of
+//! FHST2, FSS1, FSS2 in ACS — FHST1 is the reference, its absolute alignment being
+//! indistinguishable from attitude, algorithms.md §3.1 — and every candidate effect).
+//!
+//! **The attitude comes from the FHSTs only.** FSS measurements do not inform the batch
+//! attitude (their errors would leak into it); their rows use the FHST estimate
+//! `â_b = â0_b − S_b g` and enter as `r − F â0_b = (K − F S_b) g + noise`.
+//!
+//! **One pass, every sub-model.** The nuisance is eliminated batch by batch (Schur
+//! complement); both the FHST reduction and the FSS rows act column by column, so the reduced
+//! normal equations of any subset of the global parameters are the corresponding sub-blocks
+//! of the full system. The candidate search therefore accumulates once and then solves small
+//! systems. Halves of the data (first/second half of the batches in time) are accumulated
+//! separately; the full system is their sum.
+
+use super::effects::{Effect, EffectKind};
+use super::measurements::{Measurement, MeasurementSet, NUISANCE_ANGLE_PRIOR_ARCSEC, NUISANCE_RATE_PRIOR};
+use nalgebra::{DMatrix, DVector, Matrix6, Vector6};
+use std::collections::HashMap;
+
+/// Global alignment parameters: FHST2, FSS1, FSS2 × 3 (arcsec, ACS).
+pub const N_ALIGN: usize = 9;
+/// Nuisance parameters per batch.
+pub const NUISANCE: usize = 6;
+/// Prior 1σ of an alignment correction (arcsec).
+const ALIGN_PRIOR_ARCSEC: f64 = 3600.0;
+/// Time unit of the batch rate nuisance (s).
+const RATE_UNIT_S: f64 = 100.0;
+
+/// Offset of a sensor's alignment parameters (None for the reference FHST1).
+#[must_use]
+pub fn align_offset(sensor: usize) -> Option<usize> {
+    match sensor {
+        1 => Some(0),
+        2 => Some(3),
+        3 => Some(6),
+        _ => None,
+    }
+}
+
+/// Where every effect's parameters sit in the global vector.
+#[derive(Clone, Debug)]
+pub struct Layout {
+    /// The effects.
+    pub effects: Vec<Effect>,
+    /// Offset of each effect's first parameter.
+    pub offsets: Vec<usize>,
+    /// Total number of global parameters.
+    pub total: usize,
+    star_index: HashMap<u32, usize>,
+}
+
+impl Layout {
+    /// Layout of alignments + the given effects.
+    #[must_use]
+    pub fn new(effects: Vec<Effect>) -> Self {
+        let mut offsets = Vec::with_capacity(effects.len());
+        let mut total = N_ALIGN;
+        let mut star_index = HashMap::new();
+        for e in &effects {
+            offsets.push(total);
+            total += e.len();
+            if e.kind == EffectKind::CatalogProperMotionError {
+                for (k, h) in e.stars.iter().enumerate() {
+                    star_index.insert(*h, k);
+                }
+            }
+        }
+        Self {
+            effects,
+            offsets,
+            total,
+            star_index,
+        }
+    }
+
+    /// Parameter indices of effect `i`.
+    #[must_use]
+    pub fn range(&self, i: usize) -> std::ops::Range<usize> {
+        self.offsets[i]..self.offsets[i] + self.effects[i].len()
+    }
+
+    /// Index of an effect by kind and sensor.
+    #[must_use]
+    pub fn find(&self, kind: EffectKind, sensor: Option<usize>) -> Option<usize> {
+        self.effects.iter().position(|e| e.kind == kind && e.sensor == sensor)
+    }
+
+    /// All global columns of a measurement: (global index, [axis 0, axis 1]).
+    pub fn row_columns(&self, m: &Measurement, out: &mut Vec<(usize, [f64; 2])>, scratch: &mut Vec<(usize, [f64; 2])>) {
+        out.clear();
+        if let Some(o) = align_offset(m.sensor) {
+            for ax in 0..3 {
+                let mut e = nalgebra::Vector3::zeros();
+                e[ax] = 1.0;
+                let c = -(m.jm * m.b_acs.cross(&e));
+                out.push((o + ax, [c.x, c.y]));
+            }
+        }
+        let lookup = |h: u32| self.star_index.get(&h).copied();
+        for (i, e) in self.effects.iter().enumerate() {
+            scratch.clear();
+            e.columns(m, &lookup, scratch);
+            let o = self.offsets[i];
+            out.extend(scratch.iter().map(|(k, v)| (o + k, *v)));
+        }
+    }
+
+    /// Prior information (1/σ²) per global parameter.
+    #[must_use]
+    pub fn prior_information(&self) -> DVector<f64> {
+        let mut p = DVector::from_element(self.total, 1.0 / (ALIGN_PRIOR_ARCSEC * ALIGN_PRIOR_ARCSEC));
+        for (i, e) in self.effects.iter().enumerate() {
+            for (k, s) in e.prior_sigma.iter().enumerate() {
+                p[self.offsets[i] + k] = 1.0 / (s * s);
+            }
+        }
+        p
+    }
+}
+
+/// Reduced normal equations of the global parameters.
+#[derive(Clone, Debug)]
+pub struct Normal {
+    /// `Σ G'ᵀ W G'` (reduced).
+    pub n: DMatrix<f64>,
+    /// `Σ G'ᵀ W r'`.
+    pub b: DVector<f64>,
+    /// `Σ r'ᵀ W r'` after the nuisance.
+    pub chi2: f64,
+    /// Scalar equations.
+    pub rows: usize,
+    /// Nuisance parameters eliminated.
+    pub nuisance: usize,
+}
+
+impl Normal {
+    fn zeros(p: usize) -> Self {
+        Self {
+            n: DMatrix::zeros(p, p),
+            b: DVector::zeros(p),
+            chi2: 0.0,
+            rows: 0,
+            nuisance: 0,
+        }
+    }
+
+    /// Sum of two systems (disjoint data).
+    #[must_use]
+    pub fn sum(&self, other: &Self) -> Self {
+        Self {
+            n: &self.n + &other.n,
+            b: &self.b + &other.b,
+            chi2: self.chi2 + other.chi2,
+            rows: self.rows + other.rows,
+            nuisance: self.nuisance + other.nuisance,
+        }
+    }
+}
+
+fn nuisance_prior() -> Matrix6<f64> {
+    let mut p = Matrix6::zeros();
+    for j in 0..3 {
+        p[(j, j)] = 1.0 / NUISANCE_ANGLE_PRIOR_ARCSEC.powi(2);
+        p[(j + 3, j + 3)] = 1.0 / NUISANCE_RATE_PRIOR.powi(2);
+    }
+    p
+}
+
+fn nuisance_row(m: &Measurement) -> [Vector6<f64>; 2] {
+    let a = MeasurementSet::attitude_partial(m);
+    let t = m.dt_center_s / RATE_UNIT_S;
+    let mut out = [Vector6::zeros(); 2];
+    for ax in 0..2 {
+        for j in 0..3 {
+            out[ax][j] = a[(ax, j)];
+            out[ax][j + 3] = a[(ax, j)] * t;
+        }
+    }
+    out
+}
+
+fn batch_ranges(set: &MeasurementSet) -> Vec<std::ops::Range<usize>> {
+    let mut out = vec![0..0; set.batches.len()];
+    let mut i = 0;
+    while i < set.meas.len() {
+        let b = set.meas[i].batch;
+        let mut j = i + 1;
+        while j < set.meas.len() && set.meas[j].batch == b {
+            j += 1;
+        }
+        out[b] = i..j;
+        i = j;
+    }
+    out
+}
+
+/// Accumulate the reduced normal equations over the batches selected by `use_batch`.
+#[must_use]
+pub fn accumulate(set: &MeasurementSet, layout: &Layout, use_batch: &dyn Fn(usize) -> bool) -> Normal {
+    let p = layout.total;
+    let mut out = Normal::zeros(p);
+    let mut local = vec![usize::MAX; p];
+    let mut touched: Vec<usize> = Vec::new();
+    let mut nag: Vec<Vector6<f64>> = Vec::new();
+    let mut cols = Vec::new();
+    let mut scratch = Vec::new();
+    let mut dense: Vec<(usize, f64)> = Vec::new();
+    for (bi, range) in batch_ranges(set).into_iter().enumerate() {
+        if !use_batch(bi) || range.is_empty() {
+            continue;
+        }
+        let ms = &set.meas[range];
+        if !ms.iter().any(|m| m.sensor < 2 && !m.outlier) {
+            continue;
+        }
+        let mut naa = nuisance_prior();
+        let mut na = Vector6::<f64>::zeros();
+        touched.clear();
+        nag.clear();
+        for m in ms.iter().filter(|m| m.sensor < 2 && !m.outlier) {
+            layout.row_columns(m, &mut cols, &mut scratch);
+            let arow = nuisance_row(m);
+            let w = 1.0 / (m.sigma * m.sigma);
+            for &(c, _) in &cols {
+                if local[c] == usize::MAX {
+                    local[c] = touched.len();
+                    touched.push(c);
+                    nag.push(Vector6::zeros());
+                }
+            }
+            for ax in 0..2 {
+                let r = m.r[ax];
+                let a = &arow[ax];
+                naa += a * a.transpose() * w;
+                na += a * (w * r);
+                out.chi2 += w * r * r;
+                out.rows += 1;
+                for &(c1, v1) in &cols {
+                    let wv = w * v1[ax];
+                    if wv == 0.0 {
+                        continue;
+                    }
+                    nag[local[c1]] += a * wv;
+                    out.b[c1] += wv * r;
+                    for &(c2, v2) in &cols {
+                        out.n[(c1, c2)] += wv * v2[ax];
+                    }
+                }
+            }
+        }
+        let Some(inv) = naa.try_inverse() else {
+            for &c in &touched {
+                local[c] = usize::MAX;
+            }
+            continue;
+        };
+        out.nuisance += NUISANCE;
+        let a0 = inv * na;
+        out.chi2 -= na.dot(&a0);
+        let s: Vec<Vector6<f64>> = nag.iter().map(|v| inv * v).collect();
+        for (i, &ci) in touched.iter().enumerate() {
+            out.b[ci] -= nag[i].dot(&a0);
+            for (j, &cj) in touched.iter().enumerate() {
+                out.n[(ci, cj)] -= nag[i].dot(&s[j]);
+            }
+        }
+        // FSS rows against the FHST attitude: r' = r − F â0 = (K − F S) g + F e + noise, where
+        // e = a − â0 is the error of the FHST attitude, with information `naa`. Eliminating e
+        // as well (sequential least squares) gives the exact likelihood: the FSS rows of one
+        // batch share the attitude error.
+        let mut nee = naa;
+        let mut ne = Vector6::<f64>::zeros();
+        let mut neg: Vec<Vector6<f64>> = vec![Vector6::zeros(); touched.len()];
+        let n_fhst_cols = touched.len();
+        let mut any_fss = false;
+        for m in ms.iter().filter(|m| m.sensor >= 2 && !m.outlier) {
+            any_fss = true;
+            layout.row_columns(m, &mut cols, &mut scratch);
+            let arow = nuisance_row(m);
+            let w = 1.0 / (m.sigma * m.sigma);
+            for &(c, _) in &cols {
+                if local[c] == usize::MAX {
+                    local[c] = touched.len();
+                    touched.push(c);
+                    neg.push(Vector6::zeros());
+                }
+            }
+            for ax in 0..2 {
+                let a = &arow[ax];
+                let r = m.r[ax] - a.dot(&a0);
+                dense.clear();
+                for i in 0..n_fhst_cols {
+                    let v = -a.dot(&s[i]);
+                    if v != 0.0 {
+                        dense.push((touched[i], v));
+                    }
+                }
+                for &(c, v) in &cols {
+                    if v[ax] == 0.0 {
+                        continue;
+                    }
+                    if let Some(e) = dense.iter_mut().find(|(k, _)| *k == c) {
+                        e.1 += v[ax];
+                    } else {
+                        dense.push((c, v[ax]));
+                    }
+                }
+                out.chi2 += w * r * r;
+                out.rows += 1;
+                nee += a * a.transpose() * w;
+                ne += a * (w * r);
+                for &(c1, v1) in &dense {
+                    let wv = w * v1;
+                    out.b[c1] += wv * r;
+                    neg[local[c1]] += a * wv;
+                    for &(c2, v2) in &dense {
+                        out.n[(c1, c2)] += wv * v2;
+                    }
+                }
+            }
+        }
+        if any_fss {
+            if let Some(inv_e) = nee.try_inverse() {
+                let e0 = inv_e * ne;
+                out.chi2 -= ne.dot(&e0);
+                let se: Vec<Vector6<f64>> = neg.iter().map(|v| inv_e * v).collect();
+                for (i, &ci) in touched.iter().enumerate() {
+                    if neg[i] == Vector6::zeros() {
+                        continue;
+                    }
+                    out.b[ci] -= neg[i].dot(&e0);
+                    for (j, &cj) in touched.iter().enumerate() {
+                        out.n[(ci, cj)] -= neg[i].dot(&se[j]);
+                    }
+                }
+            }
+        }
+        for &c in &touched {
+            local[c] = usize::MAX;
+        }
+    }
+    out
+}
+
+/// The three systems of the search: first half, second half, both.
+#[derive(Clone, Debug)]
+pub struct Systems {
+    /// First half of the batches (time order).
+    pub first: Normal,
+    /// Second half.
+    pub second: Normal,
+    /// All data.
+    pub full: Normal,
+}
+
+/// Accumulate both halves and their sum.
+#[must_use]
+pub fn accumulate_halves(set: &MeasurementSet, layout: &Layout) -> Systems {
+    let half = set.batches.len() / 2;
+    let (first, second) = rayon::join(
+        || accumulate(set, layout, &|b| b < half),
+        || accumulate(set, layout, &|b| b >= half),
+    );
+    let full = first.sum(&second);
+    Systems { first, second, full }
+}
+
+/// Solution of a sub-model.
+#[derive(Clone, Debug)]
+pub struct SubFit {
+    /// Global indices solved.
+    pub idx: Vec<usize>,
+    /// Estimates (same order).
+    pub x: DVector<f64>,
+    /// Inverse of the normal matrix (unscaled covariance).
+    pub cov: DMatrix<f64>,
+    /// Data χ² after the fit.
+    pub chi2: f64,
+    /// Degrees of freedom.
+    pub dof: f64,
+}
+
+impl SubFit {
+    /// Reduced χ² (≥ a small floor).
+    #[must_use]
+    pub fn s2(&self) -> f64 {
+        if self.dof > 0.0 {
+            (self.chi2 / self.dof).max(1e-6)
+        } else {
+            1.0
+        }
+    }
+
+    /// Full-length vector (zeros outside `idx`).
+    #[must_use]
+    pub fn expand(&self, total: usize) -> DVector<f64> {
+        let mut g = DVector::zeros(total);
+        for (k, &i) in self.idx.iter().enumerate() {
+            g[i] = self.x[k];
+        }
+        g
+    }
+
+    /// Estimate and 1σ (scaled by max(1, s²)) of global parameter `i`, if solved.
+    #[must_use]
+    pub fn param(&self, i: usize) -> Option<(f64, f64)> {
+        let k = self.idx.iter().position(|&j| j == i)?;
+        Some((self.x[k], (self.cov[(k, k)] * self.s2().max(1.0)).sqrt()))
+    }
+}
+
+/// Solve the sub-model with the given global indices.
+#[must_use]
+pub fn solve(normal: &Normal, layout: &Layout, idx: &[usize]) -> Option<SubFit> {
+    let prior = layout.prior_information();
+    let k = idx.len();
+    let mut n = DMatrix::zeros(k, k);
+    let mut b = DVector::zeros(k);
+    for (a, &i) in idx.iter().enumerate() {
+        b[a] = normal.b[i];
+        for (c, &j) in idx.iter().enumerate() {
+            n[(a, c)] = normal.n[(i, j)];
+        }
+    }
+    let mut np = n.clone();
+    for (a, &i) in idx.iter().enumerate() {
+        np[(a, a)] += prior[i];
+    }
+    let chol = np.clone().cholesky()?;
+    let x = chol.solve(&b);
+    let cov = chol.inverse();
+    let chi2 = (normal.chi2 - 2.0 * x.dot(&b) + x.dot(&(&n * &x))).max(0.0);
+    // Parameters without information do not consume degrees of freedom.
+    let informed = (0..k).filter(|&a| n[(a, a)] > 1e-6 * np[(a, a)].max(1e-30)).count();
+    let dof = normal.rows as f64 - normal.nuisance as f64 - informed as f64;
+    Some(SubFit {
+        idx: idx.to_vec(),
+        x,
+        cov,
+        chi2,
+        dof,
+    })
+}
+
+/// Global indices of the alignments plus the given effects.
+#[must_use]
+pub fn indices(layout: &Layout, effects: &[usize]) -> Vec<usize> {
+    let mut idx: Vec<usize> = (0..N_ALIGN).collect();
+    for &e in effects {
+        idx.extend(layout.range(e));
+    }
+    idx
+}
+
+/// Post-fit residuals (arcsec) for the full-length global vector `g`, with the batch
+/// attitudes re-solved from the FHSTs; also each batch's nuisance estimate and covariance.
+#[must_use]
+pub fn post_fit(set: &MeasurementSet, layout: &Layout, g: &DVector<f64>) -> PostFit {
+    let mut resid = vec![[0.0; 2]; set.meas.len()];
+    let mut batch_nuisance = vec![None; set.batches.len()];
+    let mut cols = Vec::new();
+    let mut scratch = Vec::new();
+    let model = |m: &Measurement, cols: &mut Vec<(usize, [f64; 2])>, scratch: &mut Vec<(usize, [f64; 2])>| {
+        layout.row_columns(m, cols, scratch);
+        let mut r = m.r;
+        for &(c, v) in cols.iter() {
+            r[0] -= v[0] * g[c];
+            r[1] -= v[1] * g[c];
+        }
+        r
+    };
+    for (bi, range) in batch_ranges(set).into_iter().enumerate() {
+        if range.is_empty() {
+            continue;
+        }
+        let mut naa = nuisance_prior();
+        let mut na = Vector6::<f64>::zeros();
+        let mut any = false;
+        for i in range.clone() {
+            let m = &set.meas[i];
+            let r = model(m, &mut cols, &mut scratch);
+            resid[i] = r;
+            if m.sensor >= 2 || m.outlier {
+                continue;
+            }
+            any = true;
+            let arow = nuisance_row(m);
+            let w = 1.0 / (m.sigma * m.sigma);
+            for ax in 0..2 {
+                naa += arow[ax] * arow[ax].transpose() * w;
+                na += arow[ax] * (w * r[ax]);
+            }
+        }
+        let a_hat = if any { naa.try_inverse().map(|inv| (inv * na, inv)) } else { None };
+        if let Some((a, inv)) = a_hat {
+            batch_nuisance[bi] = Some((a, inv));
+            for i in range {
+                let arow = nuisance_row(&set.meas[i]);
+                resid[i][0] -= arow[0].dot(&a);
+                resid[i][1] -= arow[1].dot(&a);
+            }
+        }
+    }
+    PostFit { resid, batch_nuisance }
+}
+
+/// Output of [`post_fit`].
+#[derive(Clone, Debug)]
+pub struct PostFit {
+    /// Residual per measurement (arcsec).
+    pub resid: Vec<[f64; 2]>,
+    /// Per batch: nuisance estimate (angle arcsec, rate arcsec/100 s) and its covariance.
+    pub batch_nuisance: Vec<Option<(Vector6<f64>, Matrix6<f64>)>>,
+}

@@ -1,0 +1,549 @@
+//! # Residuals and regressors of every measurement
+//!
+//! **Reference attitude.** The frames are cut into batches (≤ 60 s in holds, ≤ 20 s while the
+//! IRU is in high-rate mode, never across a gap). Each batch has a FHST-only fine attitude at
+//! its centre frame ([`fine_attitude`]: every star vector carried to the centre with the
+//! calibrated gyro), and that attitude is carried to every frame of the batch with the gyro.
+//! The OBC's own attitude is the fallback when a batch has fewer than two stars.
+//!
+//! **Residual** of a measurement = measured − predicted, in the sensor's own axes (FHST H, V;
+//! FSS α, β), arcsec, after the current tables (alignment, distortion, transfer function, time
+//! offsets: a sensor with a table time offset τ₀ is predicted at `t − τ₀`).
+//!
+//! **Partials** (docs/algorithms.md §1, §3.1): with `J = ∂(angles)/∂s`, `s = Mᵀ b`:
+//! attitude `∂r/∂δθ = J Mᵀ [b×]` (left body error), alignment `∂r/∂θ_M = −J Mᵀ [b×]`
+//! (`M' = Rot(θ_M) M`), plus what [`super::effects`] needs (rate, aberration vectors, star
+//! tangent basis, temperatures, FOV angles).
+//!
+//! **Regressors** (issue 5): time, orbit phase (argument of latitude from the definitive
+//! orbit), Sun angle to the boresight, FOV position and radius, magnitude, body rate about the
+//! sensor axes (sign included), rate mode, direction of the barycentric velocity in sensor
+//! axes, the sensor's temperature, star id, time since the last slew.
+//!
+//! **Noise floor** per sensor from successive differences of residuals within a batch (same
+//! star, low-rate mode): slowly varying effects cancel, so this is a model-free estimate of
+//! the white noise. The declared σ (its magnitude shape) is rescaled to it.
+
+use crate::calibration::iru::GyroCalibration;
+use crate::pipeline::observations::{fine_attitude, AttitudeSensors, FrameObservations};
+use fsw_core::attitude::{rot, skew};
+use fsw_core::fhst::{hv_from_dir, hv_jacobian};
+use fsw_core::tables::types::matrix_from_rows;
+use fsw_core::tables::AlignmentTable;
+use fsw_core::units::{ARCSEC_PER_RAD, DEG_PER_RAD};
+use nalgebra::{Matrix2x3, Matrix3, Vector3};
+
+/// Sensor names in table order.
+pub const SENSOR_NAMES: [&str; 4] = ["FHST1", "FHST2", "FSS1", "FSS2"];
+/// Speed of light (km/s).
+pub const C_KM_PER_S: f64 = 299_792.458;
+/// Longest batch in low-rate mode (s).
+pub const BATCH_HOLD_S: f64 = 60.0;
+/// Longest batch in high-rate mode (s).
+pub const BATCH_SLEW_S: f64 = 20.0;
+/// Residuals beyond this many robust σ are outliers (misidentifications, glitches).
+const OUTLIER_SIGMA: f64 = 6.0;
+
+/// Names of a sensor's two measurement axes.
+#[must_use]
+pub fn axis_names(sensor: usize) -> [&'static str; 2] {
+    if sensor < 2 {
+        ["H", "V"]
+    } else {
+        ["alpha", "beta"]
+    }
+}
+
+/// Everything the analysis needs besides the frames.
+#[derive(Clone, Debug)]
+pub struct DiagnoseInput<'a> {
+    /// The frames (DA/FADS output built with `alignment`).
+    pub frames: &'a [FrameObservations],
+    /// Earth barycentric velocity per frame (km/s, J2000).
+    pub earth_vel_eci_km_per_s: Vec<Vector3<f64>>,
+    /// Apparent Sun direction per frame (J2000, unit), for the Sun-angle regressor.
+    pub sun_eci: Vec<Vector3<f64>>,
+    /// Gyro calibration (δM on the DA increments; the bias is the fallback).
+    pub gyro: GyroCalibration,
+    /// Bias per frame (e.g. the OBC's estimate); `None` = `gyro.bias_acs_rad_per_s`.
+    pub bias_per_frame: Option<Vec<Vector3<f64>>>,
+    /// The tables the frames were built with (matrices and corrections).
+    pub alignment: AlignmentTable,
+    /// The references carry aberration (annual and orbital): the model's k₀ = 1, else 0.
+    pub aberration_applied: bool,
+    /// Effects the operator declares (metadata.json `declared_effects`).
+    pub declared_effects: Vec<String>,
+}
+
+/// One two-axis measurement.
+#[derive(Clone, Debug)]
+pub struct Measurement {
+    /// 0 FHST1, 1 FHST2, 2 FSS1, 3 FSS2.
+    pub sensor: usize,
+    /// Frame index.
+    pub frame: usize,
+    /// Batch index.
+    pub batch: usize,
+    /// Time since the first frame (s).
+    pub t_s: f64,
+    /// Time from the batch centre (s).
+    pub dt_center_s: f64,
+    /// Residual measured − predicted (arcsec), sensor axes.
+    pub r: [f64; 2],
+    /// 1σ per axis (arcsec): declared shape × the sensor's measured noise scale.
+    pub sigma: f64,
+    /// `J Mᵀ` (2×3): angle change (rad) per body-vector change.
+    pub jm: Matrix2x3<f64>,
+    /// Predicted body vector (unit, ACS).
+    pub b_acs: Vector3<f64>,
+    /// Predicted angles (rad): H, V or α, β. Regressors and effect columns use these, not
+    /// the measured angles: binning on a measured angle selects on its noise and makes
+    /// structure out of nothing (errors in variables).
+    pub ang: [f64; 2],
+    /// Body rate (rad/s, ACS, calibrated gyro).
+    pub rate_acs: Vector3<f64>,
+    /// Body rate about the sensor axes (rad/s).
+    pub rate_sensor: Vector3<f64>,
+    /// `A (β − u (u·β))` for the Earth's barycentric velocity (rad, ACS).
+    pub ab_annual_acs: Vector3<f64>,
+    /// The same for the spacecraft's orbital velocity.
+    pub ab_orbital_acs: Vector3<f64>,
+    /// Star tangent basis in ACS (east, north of the reference direction).
+    pub tangent_acs: [Vector3<f64>; 2],
+    /// HIP number (0 for the Sun).
+    pub star: u32,
+    /// Catalog magnitude (NaN for the Sun).
+    pub magnitude: f64,
+    /// Temperature deviations from the run mean (°C), all five slots.
+    pub dtemp: [f64; 5],
+    /// Argument of latitude (rad), NaN without orbit.
+    pub orbit_phase: f64,
+    /// IRU in high-rate mode.
+    pub high_rate: bool,
+    /// Sun angle to the boresight (deg).
+    pub sun_angle_deg: f64,
+    /// Unit barycentric velocity in sensor axes.
+    pub vel_sensor: Vector3<f64>,
+    /// Time since the end of the last slew (s), NaN before the first.
+    pub since_slew_s: f64,
+    /// Excluded as an outlier.
+    pub outlier: bool,
+}
+
+/// A batch of frames sharing one reference attitude.
+#[derive(Clone, Debug)]
+pub struct Batch {
+    /// First frame.
+    pub lo: usize,
+    /// One past the last frame.
+    pub hi: usize,
+    /// Centre frame.
+    pub center: usize,
+    /// Time of the centre (s since the first frame).
+    pub t_center_s: f64,
+    /// Reference attitude at the centre.
+    pub m_acs_from_eci: Matrix3<f64>,
+    /// From the FHSTs (else the OBC fallback).
+    pub fine: bool,
+    /// High-rate batch.
+    pub high_rate: bool,
+    /// The FHSTs determine the batch attitude well enough (all three axes better than
+    /// [`MAX_BATCH_SIGMA_ARCSEC`]); measurements of other batches are not used.
+    pub usable: bool,
+}
+
+/// A batch whose FHST attitude is worse than this (1σ, any axis, arcsec) is not used.
+pub const MAX_BATCH_SIGMA_ARCSEC: f64 = 15.0;
+/// Prior 1σ of the batch attitude correction (arcsec).
+pub const NUISANCE_ANGLE_PRIOR_ARCSEC: f64 = 600.0;
+/// Prior 1σ of the batch rate correction (arcsec per 100 s).
+pub const NUISANCE_RATE_PRIOR: f64 = 10.0;
+
+/// All measurements of a run.
+#[derive(Clone, Debug)]
+pub struct MeasurementSet {
+    /// Measurements (time order within a batch, FHSTs first).
+    pub meas: Vec<Measurement>,
+    /// Batches.
+    pub batches: Vec<Batch>,
+    /// Reference attitude per frame (None outside batches).
+    pub frame_attitude: Vec<Option<Matrix3<f64>>>,
+    /// Calibrated body rate per frame (rad/s).
+    pub frame_rate: Vec<Vector3<f64>>,
+    /// Noise floor per sensor (arcsec, per axis), from successive differences.
+    pub noise_floor_arcsec: [f64; 4],
+    /// Scale applied to the declared σ per sensor.
+    pub sigma_scale: [f64; 4],
+    /// Alignment matrices the frames were built with.
+    pub m_acs_from_sensor: [Matrix3<f64>; 4],
+    /// k₀ of the references (1 with aberration applied).
+    pub aberration_k0: f64,
+    /// Time-tag offsets already applied (table), s.
+    pub time_offset0_s: [f64; 4],
+    /// Orbit period (s) estimated from the orbit, if any.
+    pub orbit_period_s: Option<f64>,
+}
+
+fn orbit_phase(pos: &Vector3<f64>, vel: &Vector3<f64>) -> f64 {
+    let h = pos.cross(vel);
+    let n = Vector3::z().cross(&h);
+    let n = if n.norm() < 1e-9 { Vector3::x() } else { n.normalize() };
+    let hn = h.normalize();
+    let y = hn.cross(&n);
+    pos.dot(&y).atan2(pos.dot(&n)).rem_euclid(std::f64::consts::TAU)
+}
+
+fn aberration_term(u: &Vector3<f64>, v_km_per_s: &Vector3<f64>) -> Vector3<f64> {
+    let beta = v_km_per_s / C_KM_PER_S;
+    beta - u * u.dot(&beta)
+}
+
+fn tangent_basis(u: &Vector3<f64>) -> [Vector3<f64>; 2] {
+    let east = Vector3::z().cross(u);
+    let east = if east.norm() < 1e-9 { Vector3::x() } else { east.normalize() };
+    [east, u.cross(&east)]
+}
+
+/// Cut the frames into batches.
+fn make_batches(frames: &[FrameObservations]) -> Vec<(usize, usize, bool)> {
+    let mut out = Vec::new();
+    let mut lo = 0usize;
+    while lo < frames.len() {
+        let t0 = frames[lo].time.seconds();
+        let hr = frames[lo].high_rate;
+        let limit = if hr { BATCH_SLEW_S } else { BATCH_HOLD_S };
+        let mut hi = lo + 1;
+        while hi < frames.len() {
+            let f = &frames[hi];
+            let gap = f.time.seconds() - frames[hi - 1].time.seconds();
+            if f.high_rate != hr || f.time.seconds() - t0 >= limit || gap > 5.0 || f.gyro.is_none() {
+                break;
+            }
+            hi += 1;
+        }
+        out.push((lo, hi, hr));
+        lo = hi;
+    }
+    out
+}
+
+impl MeasurementSet {
+    /// Build residuals, partials and regressors.
+    #[must_use]
+    pub fn build(input: &DiagnoseInput<'_>) -> Self {
+        let frames = input.frames;
+        let n = frames.len();
+        let m_sensor: [Matrix3<f64>; 4] = {
+            let t = input.alignment.matrices();
+            [matrix_from_rows(t[0]), matrix_from_rows(t[1]), matrix_from_rows(t[2]), matrix_from_rows(t[3])]
+        };
+        let tau0 = input.alignment.corrections.time_offset_s;
+        let k0 = if input.aberration_applied { 1.0 } else { 0.0 };
+        let t_first = frames.first().map_or(0.0, |f| f.time.seconds());
+        let bias_at = |k: usize| -> Vector3<f64> {
+            input
+                .bias_per_frame
+                .as_ref()
+                .and_then(|b| b.get(k).copied())
+                .unwrap_or(input.gyro.bias_acs_rad_per_s)
+        };
+        // Calibrated increments and rates per frame (step k ends at frame k).
+        let mut phi = vec![Vector3::zeros(); n];
+        let mut dts = vec![0.0; n];
+        for (k, f) in frames.iter().enumerate() {
+            if let Some(g) = f.gyro {
+                phi[k] = (Matrix3::identity() + input.gyro.delta_m) * g.dtheta_acs_rad - bias_at(k) * g.dt_s;
+                dts[k] = g.dt_s;
+            }
+        }
+        let mut frame_rate = vec![Vector3::zeros(); n];
+        for k in 0..n {
+            let (mut s, mut t) = (Vector3::zeros(), 0.0);
+            for j in [k, k + 1] {
+                if j < n && dts[j] > 0.0 {
+                    s += phi[j];
+                    t += dts[j];
+                }
+            }
+            if t > 0.0 {
+                frame_rate[k] = s / t;
+            }
+        }
+        // Temperatures: deviation from the run mean per slot.
+        let mut tmean = [0.0; 5];
+        if n > 0 {
+            for f in frames {
+                for (m, t) in tmean.iter_mut().zip(f.temperatures_c) {
+                    *m += t;
+                }
+            }
+            for m in &mut tmean {
+                *m /= n as f64;
+            }
+        }
+        // Time since the end of the last slew.
+        let mut since_slew = vec![f64::NAN; n];
+        let mut last_end: Option<f64> = None;
+        for (k, f) in frames.iter().enumerate() {
+            if f.high_rate {
+                last_end = Some(f.time.seconds());
+            }
+            since_slew[k] = last_end.map_or(f64::NAN, |e| f.time.seconds() - e);
+        }
+        // Orbit period from the first orbit state (two-body).
+        let orbit_period_s = frames.iter().find_map(|f| f.orbit).map(|(p, v)| {
+            let mu = 398_600.441_8;
+            let r = p.norm();
+            let energy = 0.5 * v.norm_squared() - mu / r;
+            let a = -mu / (2.0 * energy);
+            std::f64::consts::TAU * (a.powi(3) / mu).sqrt()
+        });
+
+        let mut batches = Vec::new();
+        let mut frame_attitude = vec![None; n];
+        let mut meas = Vec::new();
+        for (lo, hi, hr) in make_batches(frames) {
+            let center = (lo + hi) / 2;
+            let bias = bias_at(center);
+            let fine = fine_attitude(frames, lo..hi, center, &bias, &input.gyro.delta_m, AttitudeSensors::FhstOnly).ok();
+            let (a_center, is_fine) = match (fine, frames[center].obc_q_acs_from_eci) {
+                (Some(s), _) => (s.m_acs_from_eci, true),
+                (None, Some(q)) => (q.to_dcm(), false),
+                (None, None) => continue,
+            };
+            // Carry the attitude to every frame: A(k) = Rot(φ_k) A(k−1).
+            let mut att = vec![Matrix3::identity(); hi - lo];
+            att[center - lo] = a_center;
+            for k in center + 1..hi {
+                att[k - lo] = rot(&phi[k]) * att[k - 1 - lo];
+            }
+            for k in (lo..center).rev() {
+                att[k - lo] = rot(&phi[k + 1]).transpose() * att[k + 1 - lo];
+            }
+            let batch_index = batches.len();
+            let t_center = frames[center].time.seconds() - t_first;
+            batches.push(Batch {
+                lo,
+                hi,
+                center,
+                t_center_s: t_center,
+                m_acs_from_eci: a_center,
+                fine: is_fine,
+                high_rate: hr,
+                usable: true,
+            });
+            for k in lo..hi {
+                let f = &frames[k];
+                let a_k = att[k - lo];
+                frame_attitude[k] = Some(a_k);
+                let t_s = f.time.seconds() - t_first;
+                let (phase, v_sc) = match f.orbit {
+                    Some((p, v)) => (orbit_phase(&p, &v), v),
+                    None => (f64::NAN, Vector3::zeros()),
+                };
+                let v_e = input.earth_vel_eci_km_per_s.get(k).copied().unwrap_or_else(Vector3::zeros);
+                let v_tot = v_e + v_sc;
+                let sun = input.sun_eci.get(k).copied().unwrap_or_else(Vector3::zeros);
+                let mut dtemp = [0.0; 5];
+                for (d, (t, m)) in dtemp.iter_mut().zip(f.temperatures_c.iter().zip(tmean)) {
+                    *d = t - m;
+                }
+                let rate = frame_rate[k];
+                let mut push = |sensor: usize, u: Vector3<f64>, ang: [f64; 2], sigma_rad: f64, star: u32, mag: f64| {
+                    let m = &m_sensor[sensor];
+                    // Attitude at the sample time t − τ₀.
+                    let a_s = if tau0[sensor] == 0.0 { a_k } else { rot(&(-rate * tau0[sensor])) * a_k };
+                    let b = a_s * u;
+                    let s = m.transpose() * b;
+                    let Some((p0, p1)) = hv_from_dir(&s) else { return };
+                    let jm = hv_jacobian(&s) * m.transpose();
+                    let boresight = m.column(2).into_owned();
+                    let tb = tangent_basis(&u);
+                    let vdir = if v_tot.norm() > 0.0 { v_tot.normalize() } else { v_tot };
+                    meas.push(Measurement {
+                        sensor,
+                        frame: k,
+                        batch: batch_index,
+                        t_s,
+                        dt_center_s: t_s - t_center,
+                        r: [(ang[0] - p0) * ARCSEC_PER_RAD, (ang[1] - p1) * ARCSEC_PER_RAD],
+                        sigma: sigma_rad * ARCSEC_PER_RAD,
+                        jm,
+                        b_acs: b,
+                        ang: [p0, p1],
+                        rate_acs: rate,
+                        rate_sensor: m.transpose() * rate,
+                        ab_annual_acs: a_s * aberration_term(&u, &v_e),
+                        ab_orbital_acs: a_s * aberration_term(&u, &v_sc),
+                        tangent_acs: [a_s * tb[0], a_s * tb[1]],
+                        star,
+                        magnitude: mag,
+                        dtemp,
+                        orbit_phase: phase,
+                        high_rate: f.high_rate,
+                        sun_angle_deg: if sun.norm() > 0.0 {
+                            (a_s * sun).dot(&boresight).clamp(-1.0, 1.0).acos() * DEG_PER_RAD
+                        } else {
+                            f64::NAN
+                        },
+                        vel_sensor: m.transpose() * (a_s * vdir),
+                        since_slew_s: since_slew[k],
+                        outlier: false,
+                    });
+                };
+                for (i, s) in f.stars.iter().enumerate() {
+                    let Some(s) = s else { continue };
+                    let Some((hip, dir)) = s.identified else { continue };
+                    push(i, dir, [s.meas.h_rad, s.meas.v_rad], s.sigma_rad, hip, s.catalog_magnitude);
+                }
+                for (i, s) in f.suns.iter().enumerate() {
+                    let Some(s) = s else { continue };
+                    push(i + 2, s.sun_eci, [s.meas.alpha_rad, s.meas.beta_rad], s.sigma_rad, 0, f64::NAN);
+                }
+            }
+        }
+        let mut set = Self {
+            meas,
+            batches,
+            frame_attitude,
+            frame_rate,
+            noise_floor_arcsec: [f64::NAN; 4],
+            sigma_scale: [1.0; 4],
+            m_acs_from_sensor: m_sensor,
+            aberration_k0: k0,
+            time_offset0_s: tau0,
+            orbit_period_s,
+        };
+        set.estimate_noise();
+        set.check_batches();
+        set
+    }
+
+    /// Mark batches whose FHST attitude is poorly determined (one star, short slew batches)
+    /// and exclude their measurements.
+    fn check_batches(&mut self) {
+        let mut info = vec![nalgebra::Matrix6::<f64>::zeros(); self.batches.len()];
+        for m in self.meas.iter().filter(|m| m.sensor < 2 && !m.outlier) {
+            let a = Self::attitude_partial(m);
+            let t = m.dt_center_s / 100.0;
+            let w = 1.0 / (m.sigma * m.sigma);
+            for ax in 0..2 {
+                let mut row = nalgebra::Vector6::zeros();
+                for j in 0..3 {
+                    row[j] = a[(ax, j)];
+                    row[j + 3] = a[(ax, j)] * t;
+                }
+                info[m.batch] += row * row.transpose() * w;
+            }
+        }
+        for (b, inf) in self.batches.iter_mut().zip(info.iter_mut()) {
+            for j in 0..3 {
+                inf[(j, j)] += 1.0 / NUISANCE_ANGLE_PRIOR_ARCSEC.powi(2);
+                inf[(j + 3, j + 3)] += 1.0 / NUISANCE_RATE_PRIOR.powi(2);
+            }
+            b.usable = match inf.try_inverse() {
+                Some(cov) => (0..3).all(|j| cov[(j, j)].sqrt() < MAX_BATCH_SIGMA_ARCSEC),
+                None => false,
+            };
+        }
+        let usable: Vec<bool> = self.batches.iter().map(|b| b.usable).collect();
+        for m in &mut self.meas {
+            if !usable[m.batch] {
+                m.outlier = true;
+            }
+        }
+    }
+
+    /// Successive-difference noise floor and σ rescaling; flags outliers.
+    fn estimate_noise(&mut self) {
+        for sensor in 0..4 {
+            // Successive pairs within a batch, same star, low rate.
+            let idx: Vec<usize> = (0..self.meas.len()).filter(|&i| self.meas[i].sensor == sensor).collect();
+            let mut z = Vec::new();
+            let mut d_abs = Vec::new();
+            for w in idx.windows(2) {
+                let (a, b) = (&self.meas[w[0]], &self.meas[w[1]]);
+                if a.batch != b.batch || a.star != b.star || a.high_rate || b.high_rate || b.frame != a.frame + 1 {
+                    continue;
+                }
+                let s = (a.sigma * a.sigma + b.sigma * b.sigma).sqrt();
+                for ax in 0..2 {
+                    let d = b.r[ax] - a.r[ax];
+                    z.push((d / s).abs());
+                    d_abs.push(d.abs() / std::f64::consts::SQRT_2);
+                }
+            }
+            if z.len() < 20 {
+                continue;
+            }
+            // Robust start (MAD), then the RMS of the pairs within 5 of it: quantized data make
+            // the median alone jump between count levels.
+            let mut sorted = z.clone();
+            sorted.sort_by(f64::total_cmp);
+            let mad = 1.4826 * sorted[sorted.len() / 2];
+            let lim = 5.0 * mad.max(1e-9);
+            let keep: Vec<usize> = (0..z.len()).filter(|&i| z[i] <= lim).collect();
+            let scale = (keep.iter().map(|&i| z[i] * z[i]).sum::<f64>() / keep.len().max(1) as f64).sqrt();
+            let floor = (keep.iter().map(|&i| d_abs[i] * d_abs[i]).sum::<f64>() / keep.len().max(1) as f64).sqrt();
+            if scale.is_finite() && scale > 1e-3 {
+                self.sigma_scale[sensor] = scale;
+                self.noise_floor_arcsec[sensor] = floor;
+                for m in self.meas.iter_mut().filter(|m| m.sensor == sensor) {
+                    m.sigma *= scale;
+                }
+            }
+        }
+        // Outliers against a per-batch median (robust to the reference attitude's error).
+        for m in &mut self.meas {
+            let z = (m.r[0].powi(2) + m.r[1].powi(2)).sqrt() / m.sigma;
+            // Generous: the baseline residuals still hold every unmodelled effect.
+            m.outlier = !z.is_finite() || z > OUTLIER_SIGMA * 4.0;
+        }
+    }
+
+    /// Flag outliers from post-fit residuals (`OUTLIER_SIGMA` × σ per axis).
+    pub fn flag_outliers(&mut self, post: &[[f64; 2]]) {
+        let usable: Vec<bool> = self.batches.iter().map(|b| b.usable).collect();
+        for (m, r) in self.meas.iter_mut().zip(post) {
+            let z = r[0].abs().max(r[1].abs()) / m.sigma;
+            m.outlier = !usable[m.batch] || !z.is_finite() || z > OUTLIER_SIGMA;
+        }
+    }
+
+    /// Attitude partial `∂r/∂δθ` (arcsec per arcsec).
+    #[must_use]
+    pub fn attitude_partial(m: &Measurement) -> Matrix2x3<f64> {
+        m.jm * skew(&m.b_acs)
+    }
+
+    /// Residual RMS per sensor (arcsec, both axes pooled) of the given residuals.
+    #[must_use]
+    pub fn rms_per_sensor(&self, r: &[[f64; 2]]) -> [f64; 4] {
+        let mut s = [0.0; 4];
+        let mut c = [0usize; 4];
+        for (m, r) in self.meas.iter().zip(r) {
+            if m.outlier {
+                continue;
+            }
+            s[m.sensor] += r[0] * r[0] + r[1] * r[1];
+            c[m.sensor] += 2;
+        }
+        let mut out = [f64::NAN; 4];
+        for k in 0..4 {
+            if c[k] > 0 {
+                out[k] = (s[k] / c[k] as f64).sqrt();
+            }
+        }
+        out
+    }
+
+    /// Number of (non-outlier) measurements per sensor.
+    #[must_use]
+    pub fn count_per_sensor(&self) -> [usize; 4] {
+        let mut c = [0usize; 4];
+        for m in self.meas.iter().filter(|m| !m.outlier) {
+            c[m.sensor] += 1;
+        }
+        c
+    }
+}

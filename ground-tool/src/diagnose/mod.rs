@@ -1,0 +1,184 @@
+//! # Diagnose: residual analysis that finds effects the model lacks (issue 5)
+//!
+//! Calibration fixes the parameters of a model; it cannot fix a model that lacks an effect.
+//! `ground-tool diagnose RUN_DIR --out DIR` runs the calibration chain with the current model,
+//! then:
+//!
+//! 1. [`measurements`]: residuals of every FHST star and FSS Sun sample, in the sensor's own
+//!    axes, against a ground fine attitude (FHST batches every ≤ 60 s with gyro propagation),
+//!    with the regressors telemetry and ephemerides provide;
+//! 2. [`structure`]: structure tests with stated significance (binned means against the noise,
+//!    cubic fits, orbital harmonics, per-star grouping), Holm–Bonferroni corrected;
+//! 3. [`effects`] + [`fit`]: a library of candidate effects, each a parameterised addition with
+//!    its own partials, fitted jointly with the alignments and the batch attitudes;
+//! 4. [`search`]: the loop — add the best-supported effect (likelihood ratio, BIC, agreement
+//!    of the halves, adequacy), refit, test again; leftover structure is reported as
+//!    unexplained with the regressor it follows;
+//! 5. [`gyro`]: the same for the gyro (bias drift and thermal bias from the hold-to-hold
+//!    attitude differences, scale asymmetry from the slews);
+//! 6. [`flight`]: effects the OBC should correct become table data (alignment corrections,
+//!    filter aberration flag) that `fsw-core` applies;
+//! 7. [`report`]: `report.md` with before/after plots against the guilty regressor and
+//!    `report.json`; scoring against `truth.json` only when it exists ([`scoring`]).
+//!
+//! [`synthetic`] makes frames with known effects for tests.
+
+pub mod effects;
+pub mod fit;
+pub mod flight;
+pub mod gyro;
+pub mod measurements;
+pub mod report;
+pub mod run;
+pub mod scoring;
+pub mod search;
+pub mod stats;
+pub mod structure;
+pub mod synthetic;
+
+use measurements::{DiagnoseInput, MeasurementSet, SENSOR_NAMES};
+use search::{search, SearchConfig, SearchResult};
+use serde::Serialize;
+use std::collections::BTreeMap;
+
+/// A detected effect.
+#[derive(Clone, Debug, Serialize)]
+pub struct Detected {
+    /// Effect name (library name, e.g. `time_tag_offset`).
+    pub effect: String,
+    /// Sensor (`FHST1` … `FSS2`, `IRU`, or `all`).
+    pub sensor: String,
+    /// Parameter estimates (name → value, units in `units`).
+    pub parameters: BTreeMap<String, f64>,
+    /// 1σ of each parameter.
+    pub sigma: BTreeMap<String, f64>,
+    /// Units of each parameter.
+    pub units: BTreeMap<String, String>,
+    /// The evidence that kept it.
+    pub evidence: search::Evidence,
+}
+
+/// Structure no candidate explains.
+#[derive(Clone, Debug, Serialize)]
+pub struct Unexplained {
+    /// Sensor.
+    pub sensor: String,
+    /// Regressor the structure follows.
+    pub regressor: String,
+    /// Axis (H, V, alpha, beta, or a gyro axis).
+    pub axis: String,
+    /// Test method.
+    pub method: String,
+    /// Size (arcsec; arcsec/s for gyro bias structure).
+    pub size: f64,
+    /// Holm-adjusted p-value.
+    pub p_value: f64,
+    /// Raw p-value.
+    pub p_raw: f64,
+}
+
+/// Result of the sensor-side analysis.
+#[derive(Clone, Debug)]
+pub struct Analysis {
+    /// The measurement set.
+    pub set: MeasurementSet,
+    /// The search.
+    pub search: SearchResult,
+    /// Detected effects (sensor side).
+    pub detected: Vec<Detected>,
+    /// Unexplained structure (sensor side).
+    pub unexplained: Vec<Unexplained>,
+    /// Residual RMS per sensor before (baseline model) and after (final model), arcsec.
+    pub rms_before: [f64; 4],
+    /// After.
+    pub rms_after: [f64; 4],
+}
+
+/// Parameters of effect `i` of a fit as (name → value, name → σ).
+#[must_use]
+pub fn effect_parameters(res: &SearchResult, i: usize) -> (BTreeMap<String, f64>, BTreeMap<String, f64>, BTreeMap<String, String>) {
+    let e = &res.layout.effects[i];
+    let mut v = BTreeMap::new();
+    let mut s = BTreeMap::new();
+    let mut u = BTreeMap::new();
+    for (k, gi) in res.layout.range(i).enumerate() {
+        if let Some((x, sig)) = res.final_fit.param(gi) {
+            v.insert(e.params[k].clone(), x);
+            s.insert(e.params[k].clone(), sig);
+            u.insert(e.params[k].clone(), e.units[k].to_owned());
+        }
+    }
+    if let Some(p) = e.pitch_rad {
+        v.insert("pitch_deg".into(), p.to_degrees());
+        u.insert("pitch_deg".into(), "deg".into());
+    }
+    (v, s, u)
+}
+
+/// Unexplained structure from a family of tests: per sensor, the most significant test
+/// (Holm-adjusted p below `alpha`).
+#[must_use]
+pub fn unexplained_from(tests: &[structure::StructureTest], alpha: f64) -> Vec<Unexplained> {
+    let mut out: Vec<Unexplained> = Vec::new();
+    for sensor in 0..4 {
+        let best = tests
+            .iter()
+            .filter(|t| t.sensor == sensor && t.p_holm < alpha)
+            .max_by(|a, b| a.f.total_cmp(&b.f));
+        if let Some(t) = best {
+            out.push(Unexplained {
+                sensor: SENSOR_NAMES[sensor].to_owned(),
+                regressor: t.regressor.name().to_owned(),
+                axis: t.axis_name.to_owned(),
+                method: format!("{:?}", t.method).to_lowercase(),
+                size: t.size_arcsec,
+                p_value: t.p_holm,
+                p_raw: t.p_value,
+            });
+        }
+    }
+    out
+}
+
+/// Run the sensor-side analysis on prepared input.
+///
+/// # Errors
+/// No usable data.
+pub fn analyse(input: &DiagnoseInput<'_>, config: &SearchConfig) -> anyhow::Result<Analysis> {
+    let mut set = MeasurementSet::build(input);
+    if set.meas.len() < 100 {
+        anyhow::bail!(
+            "diagnose needs identified FHST stars and FSS Sun samples: only {} measurements with references",
+            set.meas.len()
+        );
+    }
+    let res = search(&mut set, &input.declared_effects, config)?;
+    let detected = res
+        .added
+        .iter()
+        .zip(&res.evidence)
+        .map(|(&i, ev)| {
+            let e = &res.layout.effects[i];
+            let (parameters, sigma, units) = effect_parameters(&res, i);
+            Detected {
+                effect: e.kind.name().to_owned(),
+                sensor: e.sensor.map_or_else(|| "all".to_owned(), |s| SENSOR_NAMES[s].to_owned()),
+                parameters,
+                sigma,
+                units,
+                evidence: ev.clone(),
+            }
+        })
+        .collect();
+    let unexplained = unexplained_from(&res.tests_after, config.alpha);
+    let rms_before = set.rms_per_sensor(&res.before.resid);
+    let rms_after = set.rms_per_sensor(&res.after.resid);
+    Ok(Analysis {
+        set,
+        search: res,
+        detected,
+        unexplained,
+        rms_before,
+        rms_after,
+    })
+}

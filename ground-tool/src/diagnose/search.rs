@@ -1,0 +1,376 @@
+//! # The loop: add the best-supported effect, refit, test again
+//!
+//! Each iteration fits, for every candidate not yet in the model, the model + candidate
+//! (alignments and batch attitudes always re-estimated with it: the recalibration) and keeps
+//! the candidate only when **all** of these hold:
+//!
+//! 1. **likelihood ratio**: `F = (Δχ²/k) / s²` of the larger model, p-value Holm-corrected
+//!    over the candidates of the iteration, below `alpha`;
+//! 2. **BIC** improves: `n ln(χ²₀/χ²₁) − (k + extra) ln n > 0` (extra = grid-searched
+//!    nonlinear parameters such as a cyclic pitch);
+//! 3. **halves agree**: the candidate's parameters fitted on the first and on the second half
+//!    of the batches differ by less than 3σ (χ² of the difference, p > 0.0027);
+//! 4. **adequacy**: the structure the candidate is meant to explain (its signature regressors
+//!    on its sensor, [`Effect::signature`]) is gone afterwards (not significant at the
+//!    Bonferroni level of the whole test family) or reduced by ≥ 80 %; a candidate that only
+//!    soaks up part of a structure it cannot describe is not forced onto it.
+//!
+//! Among the passing candidates the one with the largest ΔBIC is added. The loop ends when
+//! none passes; whatever structure the final residuals still show is reported as unexplained.
+
+use super::effects::{Effect, EffectKind};
+use super::fit::{accumulate_halves, indices, post_fit, solve, Layout, PostFit, SubFit, Systems};
+use super::measurements::MeasurementSet;
+use super::stats::{chi2_sf, f_sf, holm_adjust};
+use super::structure::{run_tests, Regressor, StructureTest};
+use nalgebra::DMatrix;
+use serde::Serialize;
+
+/// Settings of the search.
+#[derive(Clone, Copy, Debug)]
+pub struct SearchConfig {
+    /// Family-wise significance of the tests.
+    pub alpha: f64,
+    /// Halves must agree within this many σ (two-sided normal equivalent).
+    pub halves_sigma: f64,
+    /// Most effects added.
+    pub max_iterations: usize,
+    /// Required reduction of a signature structure that stays significant.
+    pub adequacy_reduction: f64,
+}
+
+impl Default for SearchConfig {
+    fn default() -> Self {
+        Self {
+            alpha: 1.0e-3,
+            halves_sigma: 3.0,
+            max_iterations: 12,
+            adequacy_reduction: 0.8,
+        }
+    }
+}
+
+/// The evidence for one candidate in one iteration.
+#[derive(Clone, Debug, Serialize)]
+pub struct Evidence {
+    /// Candidate label.
+    pub effect: String,
+    /// Linear parameters.
+    pub k: usize,
+    /// χ² reduction (σ rescaled to the measured noise floor).
+    pub delta_chi2: f64,
+    /// F statistic of the likelihood-ratio test.
+    pub f: f64,
+    /// p-value of the LR (F) test.
+    pub p_value: f64,
+    /// Holm-adjusted over the candidates of the iteration.
+    pub p_holm: f64,
+    /// BIC improvement (> 0 favours the candidate).
+    pub delta_bic: f64,
+    /// χ² of the difference between the halves' estimates.
+    pub halves_chi2: f64,
+    /// Its p-value.
+    pub halves_p: f64,
+    /// Estimates from the first and second halves.
+    pub halves_estimates: (Vec<f64>, Vec<f64>),
+    /// Signature structure before/after (max F excess over the signature tests).
+    pub signature_excess: (f64, f64),
+    /// The adequacy check passed.
+    pub adequate: bool,
+    /// Added to the model.
+    pub accepted: bool,
+    /// Why not, if rejected.
+    pub rejected_because: Option<String>,
+}
+
+/// One iteration of the loop.
+#[derive(Clone, Debug, Serialize)]
+pub struct Iteration {
+    /// Iteration number (1-based).
+    pub number: usize,
+    /// Effect added (None: the loop stopped).
+    pub added: Option<String>,
+    /// Evidence of every candidate tried.
+    pub candidates: Vec<Evidence>,
+}
+
+/// Result of the search.
+#[derive(Clone, Debug)]
+pub struct SearchResult {
+    /// Layout (alignments + library).
+    pub layout: Layout,
+    /// Declared effects in the model from the start (effect indices).
+    pub baseline: Vec<usize>,
+    /// Effects added, in order.
+    pub added: Vec<usize>,
+    /// Fit of the baseline model (calibration chain + declared effects).
+    pub baseline_fit: SubFit,
+    /// Final fit.
+    pub final_fit: SubFit,
+    /// Post-fit residuals of the baseline.
+    pub before: PostFit,
+    /// Post-fit residuals of the final model.
+    pub after: PostFit,
+    /// Iterations.
+    pub iterations: Vec<Iteration>,
+    /// Structure tests of the baseline residuals.
+    pub tests_before: Vec<StructureTest>,
+    /// Structure tests of the final residuals.
+    pub tests_after: Vec<StructureTest>,
+    /// Final evidence of each added effect (from the iteration that added it).
+    pub evidence: Vec<Evidence>,
+    /// The systems (for the halves of the final model).
+    pub systems: Systems,
+}
+
+/// Estimate the cyclic pitch of an FSS from residuals: a grid of pitches (0.5°–8°, 1 % steps),
+/// each fitted as sin/cos of both head angles on top of a low-order polynomial in α, β; the
+/// pitch with the largest χ² reduction (None if the sensor has too little data).
+#[must_use]
+pub fn cyclic_pitch(set: &MeasurementSet, resid: &[[f64; 2]], sensor: usize) -> Option<f64> {
+    let rows: Vec<(f64, f64, [f64; 2], f64)> = set
+        .meas
+        .iter()
+        .zip(resid)
+        .filter(|(m, _)| m.sensor == sensor && !m.outlier)
+        .map(|(m, r)| (m.ang[0], m.ang[1], *r, 1.0 / (m.sigma * m.sigma)))
+        .collect();
+    if rows.len() < 200 {
+        return None;
+    }
+    let e = super::effects::FSS_EDGE_RAD;
+    let mut best: Option<(f64, f64)> = None;
+    let mut p_deg = 0.5;
+    while p_deg <= 8.0 {
+        let w = std::f64::consts::TAU / (p_deg * fsw_core::units::RAD_PER_DEG);
+        let mut gain = 0.0;
+        for axis in 0..2 {
+            let k = 8;
+            let mut n = DMatrix::<f64>::zeros(k, k);
+            let mut b = nalgebra::DVector::<f64>::zeros(k);
+            for (a, bb, r, wt) in &rows {
+                let (own, other) = if axis == 0 { (*a, *bb) } else { (*bb, *a) };
+                let (x, y) = (own / e, other / e);
+                let (s, c) = (w * own).sin_cos();
+                let row = [1.0, x, y, x * x * x, x * y * y, x * x, s, c];
+                for i in 0..k {
+                    b[i] += wt * row[i] * r[axis];
+                    for j in 0..k {
+                        n[(i, j)] += wt * row[i] * row[j];
+                    }
+                }
+            }
+            for i in 0..k {
+                n[(i, i)] += 1e-9 * n[(i, i)].max(1e-30);
+            }
+            let full = n.clone().cholesky().map(|c| c.solve(&b).dot(&b));
+            let n6 = n.view((0, 0), (6, 6)).into_owned();
+            let b6 = b.rows(0, 6).into_owned();
+            let reduced = n6.cholesky().map(|c| c.solve(&b6).dot(&b6));
+            if let (Some(f), Some(r)) = (full, reduced) {
+                gain += f - r;
+            }
+        }
+        if best.is_none_or(|(_, g)| gain > g) {
+            best = Some((p_deg, gain));
+        }
+        p_deg *= 1.01;
+    }
+    best.map(|(p, _)| p * fsw_core::units::RAD_PER_DEG)
+}
+
+/// Is an effect covered by the declared effects? (`x` covers `unit.x`, as in sim-harness.)
+#[must_use]
+pub fn is_declared(effect: &Effect, declared: &[String]) -> bool {
+    let truth = effect.kind.truth_name();
+    let unit = effect.sensor.map(|s| super::measurements::SENSOR_NAMES[s].to_ascii_lowercase());
+    declared.iter().any(|d| {
+        d == truth || d == effect.kind.name() || unit.as_ref().is_some_and(|u| *d == format!("{u}.{truth}"))
+    }) && !matches!(effect.kind, EffectKind::AberrationAnnual | EffectKind::AberrationOrbital)
+}
+
+fn max_excess(tests: &[StructureTest]) -> f64 {
+    tests.iter().map(|t| t.f - 1.0).fold(0.0, f64::max)
+}
+
+fn sensors_of(effect: &Effect) -> Vec<usize> {
+    match effect.sensor {
+        Some(s) => vec![s],
+        None if effect.kind == EffectKind::CatalogProperMotionError => vec![0, 1],
+        None => vec![0, 1, 2, 3],
+    }
+}
+
+/// Run the loop.
+///
+/// # Errors
+/// The baseline fit is singular (no usable data).
+pub fn search(set: &mut MeasurementSet, declared: &[String], config: &SearchConfig) -> anyhow::Result<SearchResult> {
+    // Preliminary fit (alignments only) to get clean residuals for the pitch search and the
+    // outlier flags.
+    let prelim_layout = Layout::new(super::effects::library(set, [None, None]));
+    let prelim_sys = accumulate_halves(set, &prelim_layout);
+    let prelim = solve(&prelim_sys.full, &prelim_layout, &indices(&prelim_layout, &[]))
+        .ok_or_else(|| anyhow::anyhow!("diagnose: the alignment fit is singular (no epochs with FHST stars?)"))?;
+    let pf = post_fit(set, &prelim_layout, &prelim.expand(prelim_layout.total));
+    set.flag_outliers(&pf.resid);
+    let pitch = [cyclic_pitch(set, &pf.resid, 2), cyclic_pitch(set, &pf.resid, 3)];
+
+    let layout = Layout::new(super::effects::library(set, pitch));
+    let systems = accumulate_halves(set, &layout);
+    let baseline: Vec<usize> = (0..layout.effects.len()).filter(|&i| is_declared(&layout.effects[i], declared)).collect();
+    let mut model = baseline.clone();
+    let fit_model = |sys: &super::fit::Normal, effects: &[usize]| solve(sys, &layout, &indices(&layout, effects));
+    let baseline_fit = fit_model(&systems.full, &model).ok_or_else(|| anyhow::anyhow!("diagnose: the baseline fit is singular"))?;
+    let before = post_fit(set, &layout, &baseline_fit.expand(layout.total));
+    let tests_before = run_tests(set, &before, None, None);
+    let family = tests_before.len().max(1) as f64;
+    let p_thr = config.alpha / family;
+    let n_rows = systems.full.rows as f64;
+
+    let mut current = baseline_fit.clone();
+    let mut current_post = before.clone();
+    let mut iterations = Vec::new();
+    let mut evidence_added = Vec::new();
+    let mut added = Vec::new();
+    for number in 1..=config.max_iterations {
+        let candidates: Vec<usize> = (0..layout.effects.len()).filter(|i| !model.contains(i)).collect();
+        let mut evs: Vec<(usize, Evidence, Option<SubFit>)> = Vec::new();
+        for &c in &candidates {
+            let effect = &layout.effects[c];
+            let mut with = model.clone();
+            with.push(c);
+            let Some(big) = fit_model(&systems.full, &with) else { continue };
+            let k = effect.len();
+            let dchi2 = current.chi2 - big.chi2;
+            let s2 = big.s2();
+            let f = (dchi2 / k as f64) / s2;
+            let p = f_sf(f, k as f64, big.dof);
+            let dbic = n_rows * (current.chi2 / big.chi2).ln() - (k + effect.extra_params) as f64 * n_rows.ln();
+            // Halves.
+            let range: Vec<usize> = layout.range(c).collect();
+            let (mut hchi2, mut hp, mut est) = (f64::NAN, 0.0, (Vec::new(), Vec::new()));
+            if let (Some(a), Some(b)) = (fit_model(&systems.first, &with), fit_model(&systems.second, &with)) {
+                let pos = |fit: &SubFit| -> Vec<usize> { range.iter().filter_map(|i| fit.idx.iter().position(|j| j == i)).collect() };
+                let (pa, pb) = (pos(&a), pos(&b));
+                let xa = nalgebra::DVector::from_iterator(k, pa.iter().map(|&i| a.x[i]));
+                let xb = nalgebra::DVector::from_iterator(k, pb.iter().map(|&i| b.x[i]));
+                let mut cab = DMatrix::zeros(k, k);
+                for (r, (&ia, &ib)) in pa.iter().zip(&pb).enumerate() {
+                    for (q, (&ja, &jb)) in pa.iter().zip(&pb).enumerate() {
+                        cab[(r, q)] = a.cov[(ia, ja)] * a.s2().max(1.0) + b.cov[(ib, jb)] * b.s2().max(1.0);
+                    }
+                }
+                let (inv, rank) = crate::linalg::sym_pinv(&cab, 1e-12);
+                let d = &xa - &xb;
+                hchi2 = d.dot(&(&inv * &d));
+                hp = chi2_sf(hchi2, rank.max(1) as f64);
+                est = (xa.iter().copied().collect(), xb.iter().copied().collect());
+            }
+            evs.push((
+                c,
+                Evidence {
+                    effect: effect.label(),
+                    k,
+                    delta_chi2: dchi2,
+                    f,
+                    p_value: p,
+                    p_holm: 1.0,
+                    delta_bic: dbic,
+                    halves_chi2: hchi2,
+                    halves_p: hp,
+                    halves_estimates: est,
+                    signature_excess: (f64::NAN, f64::NAN),
+                    adequate: false,
+                    accepted: false,
+                    rejected_because: None,
+                },
+                Some(big),
+            ));
+        }
+        let adj = holm_adjust(&evs.iter().map(|e| e.1.p_value).collect::<Vec<_>>());
+        let halves_p_min = chi2_sf(config.halves_sigma * config.halves_sigma, 1.0);
+        for ((_, e, _), a) in evs.iter_mut().zip(adj) {
+            e.p_holm = a;
+        }
+        // Adequacy only for the candidates that pass the statistical criteria (cost).
+        let mut best: Option<(usize, f64)> = None;
+        for (i, (c, e, big)) in evs.iter_mut().enumerate() {
+            let mut why = Vec::new();
+            if !(e.p_holm < config.alpha) {
+                why.push(format!("LR p_holm {:.3e} ≥ {}", e.p_holm, config.alpha));
+            }
+            if !(e.delta_bic > 0.0) {
+                why.push(format!("ΔBIC {:.1} ≤ 0", e.delta_bic));
+            }
+            if !(e.halves_p > halves_p_min) {
+                why.push(format!("halves differ (χ² {:.1}, p {:.2e})", e.halves_chi2, e.halves_p));
+            }
+            if why.is_empty() {
+                let effect = &layout.effects[*c];
+                let sig: &[Regressor] = effect.signature();
+                if sig.is_empty() {
+                    e.adequate = true;
+                } else if let Some(big) = big.as_ref() {
+                    let sensors = sensors_of(effect);
+                    let pre = run_tests(set, &current_post, Some(&sensors), Some(sig));
+                    let post = post_fit(set, &layout, &big.expand(layout.total));
+                    let after = run_tests(set, &post, Some(&sensors), Some(sig));
+                    let (x0, x1) = (max_excess(&pre), max_excess(&after));
+                    e.signature_excess = (x0, x1);
+                    let still = after.iter().any(|t| t.p_value < p_thr);
+                    e.adequate = !still || x1 <= (1.0 - config.adequacy_reduction) * x0;
+                    if !e.adequate {
+                        why.push(format!(
+                            "inadequate: signature structure remains (max F−1 {x0:.1} → {x1:.1})"
+                        ));
+                    }
+                }
+            }
+            if why.is_empty() {
+                if best.is_none_or(|(_, b)| e.delta_bic > b) {
+                    best = Some((i, e.delta_bic));
+                }
+            } else {
+                e.rejected_because = Some(why.join("; "));
+            }
+        }
+        let Some((bi, _)) = best else {
+            iterations.push(Iteration {
+                number,
+                added: None,
+                candidates: evs.into_iter().map(|e| e.1).collect(),
+            });
+            break;
+        };
+        let (c, _, big) = &mut evs[bi];
+        let c = *c;
+        let Some(big) = big.take() else { break };
+        evs[bi].1.accepted = true;
+        model.push(c);
+        added.push(c);
+        current_post = post_fit(set, &layout, &big.expand(layout.total));
+        current = big;
+        evidence_added.push(evs[bi].1.clone());
+        iterations.push(Iteration {
+            number,
+            added: Some(layout.effects[c].label()),
+            candidates: evs.into_iter().map(|e| e.1).collect(),
+        });
+    }
+    let tests_after = run_tests(set, &current_post, None, None);
+    Ok(SearchResult {
+        layout,
+        baseline,
+        added,
+        baseline_fit,
+        final_fit: current,
+        before,
+        after: current_post,
+        iterations,
+        tests_before,
+        tests_after,
+        evidence: evidence_added,
+        systems,
+    })
+}

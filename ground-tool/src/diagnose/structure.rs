@@ -1,0 +1,486 @@
+//! # Structure tests: is there anything in the residuals that the noise cannot explain?
+//!
+//! For every sensor, axis and regressor, the residuals (arcsec, outliers excluded) are tested
+//! with weights `1/σ²` and the noise level estimated from the data itself (so a wrong declared
+//! σ does not make structure):
+//!
+//! * **binned means** (≤ 10 quantile bins): weighted one-way ANOVA, `F = (SS_between/(B−1)) /
+//!   (SS_within/(N−B))`, i.e. the χ² of the bin means against the noise within the bins;
+//! * **low-order fit**: cubic in the regressor (scaled to ±1) against a constant, F-test with
+//!   (3, N−4) dof;
+//! * **orbital harmonics** 1–3 of the orbit phase (periodogram at the harmonics), F(6, N−7);
+//! * **grouping** by star id or rate mode: ANOVA over the groups.
+//!
+//! All p-values of a run form one family and are Holm–Bonferroni corrected. The *size* of a
+//! structure is the weighted RMS of the fitted signal (bin means or curve about the mean) with
+//! the expected noise contribution removed, in arcsec.
+
+use super::fit::PostFit;
+use super::measurements::{axis_names, Measurement, MeasurementSet, SENSOR_NAMES};
+use super::stats::{f_sf, holm_adjust};
+use fsw_core::units::DEG_PER_RAD;
+use serde::Serialize;
+
+/// A regressor of the residual analysis.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Regressor {
+    /// Time since the first frame (s).
+    Time,
+    /// Argument of latitude (rad).
+    OrbitPhase,
+    /// Sun angle to the boresight (deg).
+    SunAngle,
+    /// FOV position H or α (deg).
+    FovH,
+    /// FOV position V or β (deg).
+    FovV,
+    /// FOV radius (deg).
+    FovRadius,
+    /// Catalog magnitude.
+    Magnitude,
+    /// Body rate about the sensor x axis (deg/s).
+    RateX,
+    /// About y.
+    RateY,
+    /// About z (boresight).
+    RateZ,
+    /// IRU rate mode (0 low, 1 high).
+    RateMode,
+    /// Barycentric velocity direction, sensor x component.
+    VelocityX,
+    /// Sensor y component.
+    VelocityY,
+    /// The sensor's temperature deviation (°C).
+    Temperature,
+    /// IRU baseplate temperature deviation (°C).
+    IruTemperature,
+    /// Star id (grouping).
+    StarId,
+    /// Time since the end of the last slew (s).
+    SinceSlew,
+}
+
+impl Regressor {
+    /// All regressors.
+    pub const ALL: [Regressor; 17] = [
+        Self::Time,
+        Self::OrbitPhase,
+        Self::SunAngle,
+        Self::FovH,
+        Self::FovV,
+        Self::FovRadius,
+        Self::Magnitude,
+        Self::RateX,
+        Self::RateY,
+        Self::RateZ,
+        Self::RateMode,
+        Self::VelocityX,
+        Self::VelocityY,
+        Self::Temperature,
+        Self::IruTemperature,
+        Self::StarId,
+        Self::SinceSlew,
+    ];
+
+    /// Report name.
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Time => "time_s",
+            Self::OrbitPhase => "orbit_phase_rad",
+            Self::SunAngle => "sun_angle_deg",
+            Self::FovH => "fov_h_deg",
+            Self::FovV => "fov_v_deg",
+            Self::FovRadius => "fov_radius_deg",
+            Self::Magnitude => "magnitude",
+            Self::RateX => "rate_sensor_x_deg_per_s",
+            Self::RateY => "rate_sensor_y_deg_per_s",
+            Self::RateZ => "rate_sensor_z_deg_per_s",
+            Self::RateMode => "rate_mode",
+            Self::VelocityX => "velocity_dir_sensor_x",
+            Self::VelocityY => "velocity_dir_sensor_y",
+            Self::Temperature => "temperature_c",
+            Self::IruTemperature => "iru_temperature_c",
+            Self::StarId => "star_id",
+            Self::SinceSlew => "time_since_slew_s",
+        }
+    }
+
+    /// Value for a measurement (NaN: not applicable).
+    #[must_use]
+    pub fn value(self, m: &Measurement) -> f64 {
+        match self {
+            Self::Time => m.t_s,
+            Self::OrbitPhase => m.orbit_phase,
+            Self::SunAngle => m.sun_angle_deg,
+            Self::FovH => m.ang[0] * DEG_PER_RAD,
+            Self::FovV => m.ang[1] * DEG_PER_RAD,
+            Self::FovRadius => (m.ang[0].powi(2) + m.ang[1].powi(2)).sqrt() * DEG_PER_RAD,
+            Self::Magnitude => m.magnitude,
+            Self::RateX => m.rate_sensor.x * DEG_PER_RAD,
+            Self::RateY => m.rate_sensor.y * DEG_PER_RAD,
+            Self::RateZ => m.rate_sensor.z * DEG_PER_RAD,
+            Self::RateMode => f64::from(u8::from(m.high_rate)),
+            Self::VelocityX => m.vel_sensor.x,
+            Self::VelocityY => m.vel_sensor.y,
+            Self::Temperature => m.dtemp[m.sensor],
+            Self::IruTemperature => m.dtemp[4],
+            Self::StarId => {
+                if m.star == 0 {
+                    f64::NAN
+                } else {
+                    f64::from(m.star)
+                }
+            }
+            Self::SinceSlew => m.since_slew_s,
+        }
+    }
+
+    fn methods(self) -> &'static [Method] {
+        match self {
+            Self::OrbitPhase => &[Method::Harmonics],
+            Self::StarId | Self::RateMode => &[Method::Groups],
+            _ => &[Method::Binned, Method::Cubic],
+        }
+    }
+}
+
+/// Test method.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Method {
+    /// Binned means (ANOVA over quantile bins).
+    Binned,
+    /// Cubic fit against a constant.
+    Cubic,
+    /// Orbital harmonics 1–3.
+    Harmonics,
+    /// Grouping (star id, rate mode).
+    Groups,
+}
+
+/// One structure test.
+#[derive(Clone, Debug, Serialize)]
+pub struct StructureTest {
+    /// Sensor index.
+    pub sensor: usize,
+    /// Sensor name.
+    pub sensor_name: &'static str,
+    /// Axis 0/1.
+    pub axis: usize,
+    /// Axis name.
+    pub axis_name: &'static str,
+    /// Regressor.
+    pub regressor: Regressor,
+    /// Method.
+    pub method: Method,
+    /// F statistic.
+    pub f: f64,
+    /// Degrees of freedom.
+    pub dof: (f64, f64),
+    /// Raw p-value.
+    pub p_value: f64,
+    /// Holm-adjusted p-value (within the family of this call).
+    pub p_holm: f64,
+    /// Size of the structure (arcsec, RMS of the fitted signal, noise removed).
+    pub size_arcsec: f64,
+    /// Samples.
+    pub n: usize,
+    /// Bin centres and weighted means (arcsec) for plots (binned and group tests).
+    #[serde(skip)]
+    pub bins: Vec<(f64, f64)>,
+}
+
+struct Sample {
+    x: f64,
+    r: f64,
+    w: f64,
+}
+
+/// Weighted least squares of r on the given basis functions (columns); returns RSS.
+fn wls_rss(samples: &[Sample], basis: &dyn Fn(f64, &mut [f64]), k: usize) -> Option<(f64, Vec<f64>)> {
+    let mut n = nalgebra::DMatrix::<f64>::zeros(k, k);
+    let mut b = nalgebra::DVector::<f64>::zeros(k);
+    let mut row = vec![0.0; k];
+    let mut rr = 0.0;
+    for s in samples {
+        basis(s.x, &mut row);
+        for i in 0..k {
+            b[i] += s.w * row[i] * s.r;
+            for j in 0..k {
+                n[(i, j)] += s.w * row[i] * row[j];
+            }
+        }
+        rr += s.w * s.r * s.r;
+    }
+    for i in 0..k {
+        n[(i, i)] += 1e-12 * n[(i, i)].max(1e-30);
+    }
+    let chol = n.clone().cholesky()?;
+    let x = chol.solve(&b);
+    let rss = (rr - x.dot(&b)).max(0.0);
+    Some((rss, x.iter().copied().collect()))
+}
+
+fn anova(samples: &[Sample], group: &dyn Fn(&Sample) -> i64) -> Option<(f64, f64, f64, f64, Vec<(f64, f64)>)> {
+    let mut groups: std::collections::BTreeMap<i64, (f64, f64, f64, usize)> = std::collections::BTreeMap::new();
+    for s in samples {
+        let g = groups.entry(group(s)).or_insert((0.0, 0.0, 0.0, 0));
+        g.0 += s.w;
+        g.1 += s.w * s.r;
+        g.2 += s.w * s.x;
+        g.3 += 1;
+    }
+    // Groups with fewer than 5 samples are dropped.
+    let keep: std::collections::BTreeMap<i64, (f64, f64, f64, usize)> =
+        groups.into_iter().filter(|(_, g)| g.3 >= 5).collect();
+    let ng = keep.len();
+    if ng < 2 {
+        return None;
+    }
+    let mut sw = 0.0;
+    let mut swr = 0.0;
+    let mut n = 0usize;
+    for g in keep.values() {
+        sw += g.0;
+        swr += g.1;
+        n += g.3;
+    }
+    let grand = swr / sw;
+    let mut ss_between = 0.0;
+    let mut bins = Vec::new();
+    for g in keep.values() {
+        let m = g.1 / g.0;
+        ss_between += g.0 * (m - grand).powi(2);
+        bins.push((g.2 / g.0, m));
+    }
+    let mut ss_within = 0.0;
+    for s in samples {
+        if let Some(g) = keep.get(&group(s)) {
+            let m = g.1 / g.0;
+            ss_within += s.w * (s.r - m).powi(2);
+        }
+    }
+    let d1 = (ng - 1) as f64;
+    let d2 = (n - ng) as f64;
+    if d2 < 1.0 || ss_within <= 0.0 {
+        return None;
+    }
+    let s2 = ss_within / d2;
+    let f = (ss_between / d1) / s2;
+    let size = ((ss_between - d1 * s2).max(0.0) / sw).sqrt();
+    Some((f, d1, d2, size, bins))
+}
+
+fn run_one(samples: &[Sample], method: Method) -> Option<(f64, f64, f64, f64, Vec<(f64, f64)>)> {
+    let n = samples.len();
+    match method {
+        Method::Groups => anova(samples, &|s| s.x.round() as i64),
+        Method::Binned => {
+            let mut xs: Vec<f64> = samples.iter().map(|s| s.x).collect();
+            xs.sort_by(f64::total_cmp);
+            let bins = 10usize.min(n / 10).max(2);
+            let mut edges: Vec<f64> = (1..bins).map(|k| xs[k * n / bins]).collect();
+            edges.dedup();
+            if edges.is_empty() || xs[0] == xs[n - 1] {
+                return None;
+            }
+            anova(samples, &|s| edges.partition_point(|e| *e <= s.x) as i64)
+        }
+        Method::Cubic | Method::Harmonics => {
+            let (lo, hi) = samples.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), s| (a.min(s.x), b.max(s.x)));
+            if !(hi > lo) {
+                return None;
+            }
+            let (mid, half) = (0.5 * (lo + hi), 0.5 * (hi - lo));
+            let cubic = |x: f64, row: &mut [f64]| {
+                let u = (x - mid) / half;
+                row[0] = 1.0;
+                row[1] = u;
+                row[2] = 1.5 * u * u - 0.5;
+                row[3] = 2.5 * u * u * u - 1.5 * u;
+            };
+            let harm = |x: f64, row: &mut [f64]| {
+                row[0] = 1.0;
+                for h in 1..=3 {
+                    let (s, c) = (h as f64 * x).sin_cos();
+                    row[2 * h - 1] = c;
+                    row[2 * h] = s;
+                }
+            };
+            let (basis, k): (&dyn Fn(f64, &mut [f64]), usize) =
+                if method == Method::Cubic { (&cubic, 4) } else { (&harm, 7) };
+            let (rss0, c0) = wls_rss(samples, &|_, row: &mut [f64]| row[0] = 1.0, 1)?;
+            let (rss1, c1) = wls_rss(samples, basis, k)?;
+            let d1 = (k - 1) as f64;
+            let d2 = n as f64 - k as f64;
+            if d2 < 1.0 || rss1 <= 0.0 {
+                return None;
+            }
+            let s2 = rss1 / d2;
+            let f = ((rss0 - rss1) / d1) / s2;
+            let sw: f64 = samples.iter().map(|s| s.w).sum();
+            let size = (((rss0 - rss1) - d1 * s2).max(0.0) / sw).sqrt();
+            // Curve samples for plots.
+            let mut curve = Vec::new();
+            let mut row = vec![0.0; k];
+            for i in 0..=40 {
+                let x = lo + (hi - lo) * f64::from(i) / 40.0;
+                basis(x, &mut row);
+                let y: f64 = row.iter().zip(&c1).map(|(a, b)| a * b).sum();
+                curve.push((x, y - c0[0]));
+            }
+            Some((f, d1, d2, size, curve))
+        }
+    }
+}
+
+/// Samples of one sensor axis against a regressor. FHST residuals are used one by one (the
+/// batch attitude is fitted out of them); FSS residuals are measured against the FHST
+/// attitude, so all FSS samples of a batch share its error: they are averaged per batch,
+/// with the variance `σ²/n + f P fᵀ` (f the mean attitude partial, P the batch attitude
+/// covariance), and the regressor averaged likewise.
+fn samples_for(set: &MeasurementSet, post: &PostFit, sensor: usize, axis: usize, reg: Regressor) -> Vec<Sample> {
+    let resid = &post.resid;
+    if sensor < 2 {
+        return set
+            .meas
+            .iter()
+            .zip(resid)
+            .filter(|(m, _)| m.sensor == sensor && !m.outlier)
+            .filter_map(|(m, r)| {
+                let x = reg.value(m);
+                (x.is_finite() && r[axis].is_finite()).then(|| Sample {
+                    x,
+                    r: r[axis],
+                    w: 1.0 / (m.sigma * m.sigma),
+                })
+            })
+            .collect();
+    }
+    let mut out = Vec::new();
+    let mut i = 0;
+    let meas = &set.meas;
+    while i < meas.len() {
+        let b = meas[i].batch;
+        let mut j = i;
+        let (mut sx, mut sr, mut sw, mut n) = (0.0, 0.0, 0.0, 0usize);
+        let mut f = nalgebra::Vector6::<f64>::zeros();
+        while j < meas.len() && meas[j].batch == b {
+            let m = &meas[j];
+            if m.sensor == sensor && !m.outlier {
+                let x = reg.value(m);
+                let r = resid[j][axis];
+                if x.is_finite() && r.is_finite() {
+                    let w = 1.0 / (m.sigma * m.sigma);
+                    sx += w * x;
+                    sr += w * r;
+                    sw += w;
+                    n += 1;
+                    let a = MeasurementSet::attitude_partial(m);
+                    for k in 0..3 {
+                        f[k] += w * a[(axis, k)];
+                        f[k + 3] += w * a[(axis, k)] * m.dt_center_s / 100.0;
+                    }
+                }
+            }
+            j += 1;
+        }
+        if n >= 3 && sw > 0.0 {
+            let f = f / sw;
+            let att_var = post
+                .batch_nuisance
+                .get(b)
+                .and_then(|x| x.as_ref())
+                .map_or(0.0, |(_, p)| f.dot(&(p * f)));
+            out.push(Sample {
+                x: sx / sw,
+                r: sr / sw,
+                w: 1.0 / (1.0 / sw + att_var),
+            });
+        }
+        i = j;
+    }
+    out
+}
+
+/// Run the tests for the given sensors and regressors (all when `None`), then Holm-adjust
+/// within the returned family.
+#[must_use]
+pub fn run_tests(
+    set: &MeasurementSet,
+    post: &PostFit,
+    sensors: Option<&[usize]>,
+    regressors: Option<&[Regressor]>,
+) -> Vec<StructureTest> {
+    let mut out = Vec::new();
+    let counts = set.count_per_sensor();
+    for sensor in 0..4 {
+        if sensors.is_some_and(|s| !s.contains(&sensor)) || counts[sensor] < 100 {
+            continue;
+        }
+        for reg in Regressor::ALL {
+            if regressors.is_some_and(|r| !r.contains(&reg)) {
+                continue;
+            }
+            if sensor >= 2 && matches!(reg, Regressor::Magnitude | Regressor::StarId) {
+                continue;
+            }
+            for axis in 0..2 {
+                let samples = samples_for(set, post, sensor, axis, reg);
+                if samples.len() < if sensor < 2 { 100 } else { 30 } {
+                    continue;
+                }
+                for &method in reg.methods() {
+                    if let Some((f, d1, d2, size, bins)) = run_one(&samples, method) {
+                        out.push(StructureTest {
+                            sensor,
+                            sensor_name: SENSOR_NAMES[sensor],
+                            axis,
+                            axis_name: axis_names(sensor)[axis],
+                            regressor: reg,
+                            method,
+                            f,
+                            dof: (d1, d2),
+                            p_value: f_sf(f, d1, d2),
+                            p_holm: 1.0,
+                            size_arcsec: size,
+                            n: samples.len(),
+                            bins,
+                        });
+                    }
+                }
+            }
+        }
+    }
+    let adj = holm_adjust(&out.iter().map(|t| t.p_value).collect::<Vec<_>>());
+    for (t, a) in out.iter_mut().zip(adj) {
+        t.p_holm = a;
+    }
+    out
+}
+
+/// Binned means of residuals against a regressor for plots: (bin centre, mean, standard error).
+#[must_use]
+pub fn binned_means(set: &MeasurementSet, post: &PostFit, sensor: usize, axis: usize, reg: Regressor, bins: usize) -> Vec<(f64, f64, f64)> {
+    let mut s = samples_for(set, post, sensor, axis, reg);
+    if s.len() < 2 * bins {
+        return Vec::new();
+    }
+    s.sort_by(|a, b| a.x.total_cmp(&b.x));
+    let n = s.len();
+    let mut out = Vec::new();
+    for k in 0..bins {
+        let chunk = &s[k * n / bins..(k + 1) * n / bins];
+        let sw: f64 = chunk.iter().map(|c| c.w).sum();
+        if sw <= 0.0 {
+            continue;
+        }
+        let x = chunk.iter().map(|c| c.w * c.x).sum::<f64>() / sw;
+        let m = chunk.iter().map(|c| c.w * c.r).sum::<f64>() / sw;
+        let var = chunk.iter().map(|c| c.w * (c.r - m).powi(2)).sum::<f64>() / sw;
+        out.push((x, m, (var / chunk.len() as f64).sqrt()));
+    }
+    out
+}

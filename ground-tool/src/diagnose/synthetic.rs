@@ -1,0 +1,452 @@
+//! # Synthetic frames with known effects (tests, studies)
+//!
+//! A small, fast stand-in for a `sim-harness` run that produces [`FrameObservations`]
+//! directly: a random star sky (no catalog file), a circular orbit, a fixed Sun, holds and
+//! slews at 0.08°/s about body axes, the paper's prelaunch alignments plus a true
+//! misalignment, FHST and FSS noise and quantization like the harness, orbit-periodic
+//! temperatures, and every effect of the library — plus effects that are *not* in it
+//! (a temperature-squared alignment term, a decaying structural oscillation after slews) to
+//! check that those end up as unexplained structure. The ground references are built as
+//! the ground tool builds them (aberration applied or not), so an undeclared effect is one
+//! that is in the truth and not in the references/tables.
+
+use crate::calibration::iru::{GyroCalibration, GyroStep};
+use crate::pipeline::observations::{DeclaredNoise, FrameObservations, StarObservation, SunObservation};
+use fsw_core::attitude::{rot, Quat};
+use fsw_core::fhst::FhstMeasurement;
+use fsw_core::fss::FssMeasurement;
+use fsw_core::raw::TimeTag;
+use fsw_core::tables::types::{matrix_from_rows, rows_from_matrix};
+use fsw_core::tables::AlignmentTable;
+use fsw_core::units::{ARCSEC_PER_RAD, RAD_PER_ARCSEC, RAD_PER_DEG};
+use nalgebra::{Matrix3, Vector3};
+use sim_harness::sensors::fss::FssHeadErrors;
+use sim_harness::truth::aberration::aberrate;
+
+use super::measurements::DiagnoseInput;
+
+/// Effects switched on in the synthetic truth (zero = off).
+#[derive(Clone, Debug, Default)]
+pub struct SynthEffects {
+    /// Time-tag offset per sensor (s): the sample is taken at `t − τ`.
+    pub time_tag_s: [f64; 4],
+    /// Thermal alignment per sensor (arcsec/°C, ACS).
+    pub thermal_arcsec_per_c: [[f64; 3]; 4],
+    /// FHST distortion: radial Δρ at 4°, H·V terms at the (4°, 4°) corner (arcsec).
+    pub distortion_arcsec: [[f64; 3]; 2],
+    /// FHST magnitude bias (arcsec/mag, H and V, about magnitude 4).
+    pub magnitude_bias: [[f64; 2]; 2],
+    /// FSS transfer errors per sensor (α head, β head); `None` = perfect.
+    pub fss_tf: [Option<(FssHeadErrors, FssHeadErrors)>; 2],
+    /// Catalog error: per-star offsets of this 1σ (arcsec) per axis.
+    pub catalog_sigma_arcsec: f64,
+    /// Not in the library: alignment ∝ ΔT² (arcsec/°C², ACS) per sensor.
+    pub thermal_squared: [[f64; 3]; 4],
+    /// Not in the library: (sensor, amplitude arcsec, period s, decay s) oscillation of the
+    /// sensor's alignment about ACS x after every slew.
+    pub post_slew_oscillation: Option<(usize, f64, f64, f64)>,
+}
+
+/// Synthetic run settings.
+#[derive(Clone, Debug)]
+pub struct SynthConfig {
+    /// Length (s).
+    pub duration_s: f64,
+    /// Seed.
+    pub seed: u64,
+    /// The ground references carry aberration (the operator declares it).
+    pub aberration_applied: bool,
+    /// Effects in the truth.
+    pub effects: SynthEffects,
+    /// Hold length between slews (s).
+    pub hold_s: f64,
+    /// Slew angle (deg).
+    pub slew_deg: f64,
+    /// Stars on the sky.
+    pub stars: usize,
+    /// Noise multiplier (0 = noise-free; quantization off too when 0).
+    pub noise_scale: f64,
+}
+
+impl Default for SynthConfig {
+    fn default() -> Self {
+        Self {
+            duration_s: 4.0 * 3600.0,
+            seed: 1,
+            aberration_applied: true,
+            effects: SynthEffects::default(),
+            hold_s: 900.0,
+            slew_deg: 20.0,
+            stars: 3000,
+            noise_scale: 1.0,
+        }
+    }
+}
+
+/// A synthetic run.
+#[derive(Clone, Debug)]
+pub struct SynthRun {
+    /// Frames as the ground tool would build them.
+    pub frames: Vec<FrameObservations>,
+    /// Earth velocity per frame.
+    pub earth_vel: Vec<Vector3<f64>>,
+    /// Sun per frame.
+    pub sun: Vec<Vector3<f64>>,
+    /// The alignment table the frames were built with (the "current calibration").
+    pub alignment: AlignmentTable,
+    /// True static alignments.
+    pub m_true: [Matrix3<f64>; 4],
+    /// True per-star catalog offsets (HIP → east, north arcsec).
+    pub catalog_offsets: std::collections::BTreeMap<u32, [f64; 2]>,
+    /// Settings.
+    pub config: SynthConfig,
+}
+
+impl SynthRun {
+    /// Input of the analysis.
+    #[must_use]
+    pub fn input(&self, declared: &[&str]) -> DiagnoseInput<'_> {
+        DiagnoseInput {
+            frames: &self.frames,
+            earth_vel_eci_km_per_s: self.earth_vel.clone(),
+            sun_eci: self.sun.clone(),
+            gyro: GyroCalibration {
+                delta_m: Matrix3::zeros(),
+                bias_acs_rad_per_s: Vector3::zeros(),
+            },
+            bias_per_frame: None,
+            alignment: self.alignment,
+            aberration_applied: self.config.aberration_applied,
+            declared_effects: declared.iter().map(|s| (*s).to_owned()).collect(),
+        }
+    }
+}
+
+struct Star {
+    hip: u32,
+    dir: Vector3<f64>,
+    mag: f64,
+    offset: Vector3<f64>,
+}
+
+/// SplitMix64: a small deterministic generator (no extra dependency).
+struct Rng64(u64);
+
+impl Rng64 {
+    fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+
+    /// Uniform in [0, 1).
+    fn uniform(&mut self) -> f64 {
+        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
+fn unit(rng: &mut Rng64) -> Vector3<f64> {
+    loop {
+        let v = Vector3::new(2.0 * rng.uniform() - 1.0, 2.0 * rng.uniform() - 1.0, 2.0 * rng.uniform() - 1.0);
+        let n = v.norm();
+        if n > 0.1 && n <= 1.0 {
+            return v / n;
+        }
+    }
+}
+
+fn gauss(rng: &mut Rng64) -> f64 {
+    // Box–Muller.
+    let u1 = rng.uniform().max(1e-300);
+    let u2 = rng.uniform();
+    (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+}
+
+/// The slew plan: (start time, body axis, signed angle deg), alternating axes and signs.
+fn plan(cfg: &SynthConfig) -> Vec<(f64, Vector3<f64>, f64)> {
+    let axes = [
+        (Vector3::x(), 1.0),
+        (Vector3::y(), -1.0),
+        (Vector3::z(), 1.0),
+        (Vector3::x(), -1.0),
+        (Vector3::y(), 1.0),
+        (Vector3::z(), -1.0),
+    ];
+    let rate = 0.08;
+    let mut out = Vec::new();
+    let mut t = cfg.hold_s;
+    let mut k = 0;
+    while t < cfg.duration_s {
+        let (axis, sign) = axes[k % axes.len()];
+        let angle = sign * cfg.slew_deg * if axis.z > 0.5 { 1.25 } else { 1.0 };
+        out.push((t, axis, angle));
+        t += angle.abs() / rate + cfg.hold_s;
+        k += 1;
+    }
+    out
+}
+
+/// Generate a run.
+#[must_use]
+#[allow(clippy::too_many_lines)]
+pub fn generate(cfg: &SynthConfig) -> SynthRun {
+    let mut rng = Rng64(cfg.seed.wrapping_mul(0x2545_F491_4F6C_DD1D) ^ 0x5851_F42D_4C95_7F2D);
+    let fx = &cfg.effects;
+    // Sky.
+    let mut stars = Vec::with_capacity(cfg.stars);
+    let mut catalog_offsets = std::collections::BTreeMap::new();
+    for k in 0..cfg.stars {
+        let dir = unit(&mut rng);
+        let mag = 2.0 + 3.7 * rng.uniform().powf(0.6);
+        let hip = 1000 + k as u32;
+        let mut offset = Vector3::zeros();
+        if fx.catalog_sigma_arcsec > 0.0 {
+            let east = Vector3::z().cross(&dir).normalize();
+            let north = dir.cross(&east);
+            let (de, dn) = (gauss(&mut rng) * fx.catalog_sigma_arcsec, gauss(&mut rng) * fx.catalog_sigma_arcsec);
+            offset = (east * de + north * dn) * RAD_PER_ARCSEC;
+            catalog_offsets.insert(hip, [de, dn]);
+        }
+        stars.push(Star { hip, dir, mag, offset });
+    }
+    // Geometry.
+    let pre = AlignmentTable::prelaunch();
+    let m_pre: Vec<Matrix3<f64>> = pre.matrices().iter().map(|m| matrix_from_rows(m)).collect();
+    let mis = [
+        Vector3::new(20.0, -30.0, 15.0),
+        Vector3::new(-40.0, 25.0, 60.0),
+        Vector3::new(300.0, -500.0, 200.0),
+        Vector3::new(-200.0, 150.0, 100.0),
+    ];
+    let m_true: [Matrix3<f64>; 4] = std::array::from_fn(|i| rot(&(mis[i] * RAD_PER_ARCSEC)) * m_pre[i]);
+    // The "current calibration": truth plus small errors relative to FHST1.
+    let cal_err = [Vector3::zeros(), Vector3::new(3.0, -2.0, 4.0), Vector3::new(20.0, -15.0, 10.0), Vector3::new(-10.0, 12.0, 8.0)];
+    let mut alignment = pre;
+    let flown: [Matrix3<f64>; 4] = std::array::from_fn(|i| rot(&(cal_err[i] * RAD_PER_ARCSEC)) * m_true[i]);
+    alignment.m_acs_from_fhst1 = rows_from_matrix(&flown[0]);
+    alignment.m_acs_from_fhst2 = rows_from_matrix(&flown[1]);
+    alignment.m_acs_from_fss1 = rows_from_matrix(&flown[2]);
+    alignment.m_acs_from_fss2 = rows_from_matrix(&flown[3]);
+    let sun_eci = Vector3::new(0.3, 0.9, 0.3).normalize();
+    let earth_vel = sun_eci.cross(&Vector3::z()).normalize() * 29.78;
+    // Initial attitude: the Sun at (10°, −5°) in FSS1.
+    let b_sun = m_true[2] * fsw_core::fss::dir_from_angles(10.0 * RAD_PER_DEG, -5.0 * RAD_PER_DEG);
+    let axis = sun_eci.cross(&b_sun);
+    let ang = sun_eci.dot(&b_sun).clamp(-1.0, 1.0).acos();
+    // A maps sun_eci to b_sun: A = exp(+[θ×]) = Rot(−θ) with θ along sun × b.
+    let mut a = rot(&(-axis.normalize() * ang));
+    a = rot(&(-b_sun * 0.7)) * a;
+    // Orbit.
+    let r_km: f64 = 6833.0;
+    let mu = 398_600.441_8;
+    let n_orb = (mu / r_km.powi(3)).sqrt();
+    let inc = 28.5 * RAD_PER_DEG;
+    let orbit = |t: f64| {
+        let u = n_orb * t + 0.3;
+        let p = Vector3::new(u.cos(), u.sin() * inc.cos(), u.sin() * inc.sin()) * r_km;
+        let v = Vector3::new(-u.sin(), u.cos() * inc.cos(), u.cos() * inc.sin()) * (r_km * n_orb);
+        (p, v)
+    };
+    let period = std::f64::consts::TAU / n_orb;
+    let temp = |t: f64, slot: usize| -> f64 {
+        let amp = [1.5, 2.0, 4.0, 4.0, 0.3][slot];
+        let ph = [0.0, 0.6, 1.3, 2.0, 2.7][slot];
+        amp * (std::f64::consts::TAU * t / period + ph).cos()
+    };
+    let slews = plan(cfg);
+    let rate_mag = 0.08 * RAD_PER_DEG;
+    let rate_at = |t: f64| -> (Vector3<f64>, bool, f64) {
+        let mut since = f64::NAN;
+        for (t0, axis, angle) in &slews {
+            let dur = angle.abs() / 0.08;
+            if t >= *t0 && t < t0 + dur {
+                return (axis * rate_mag * angle.signum(), true, f64::NAN);
+            }
+            if t >= t0 + dur {
+                since = t - (t0 + dur);
+            }
+        }
+        (Vector3::zeros(), false, since)
+    };
+    let noise = DeclaredNoise::default();
+    let t_base = 33.0 * 365.25 * 86_400.0 + 0.25 * 86_400.0;
+    let n = cfg.duration_s as usize;
+    let mut frames = Vec::with_capacity(n);
+    let mut earth = Vec::with_capacity(n);
+    let mut suns = Vec::with_capacity(n);
+    let mut track: [Option<(usize, f64)>; 2] = [None, None];
+    let mut recent: [Vec<(u32, f64)>; 2] = [Vec::new(), Vec::new()];
+    let ns = cfg.noise_scale;
+    let quant = |x: f64, q: f64| if ns > 0.0 { (x / q).round() * q } else { x };
+    let fhst_q = 7.78;
+    let fss_q = 0.004 * 3600.0;
+    let half = 4.0 * RAD_PER_DEG;
+    let mut prev_rate = Vector3::zeros();
+    for k in 0..n {
+        let t = k as f64;
+        let (_, _, since) = rate_at(t);
+        if k > 0 {
+            // Exact rotation over the step with the rate of the interval that ended now.
+            let (r_prev, _, _) = rate_at(t - 0.5);
+            a = rot(&(r_prev)) * a;
+            prev_rate = r_prev;
+        }
+        let (pos, vel) = orbit(t);
+        let v_obs = earth_vel + vel;
+        let dtemp: [f64; 5] = std::array::from_fn(|s| temp(t, s));
+        // Sensor alignment at this time (thermal and non-library terms).
+        let m_sensor = |s: usize| -> Matrix3<f64> {
+            let dt = dtemp[s];
+            let mut th = Vector3::from(fx.thermal_arcsec_per_c[s]) * dt + Vector3::from(fx.thermal_squared[s]) * (dt * dt);
+            if let Some((os, amp, per, decay)) = fx.post_slew_oscillation {
+                if os == s && since.is_finite() {
+                    th.x += amp * (-since / decay).exp() * (std::f64::consts::TAU * since / per).sin();
+                }
+            }
+            if th == Vector3::zeros() {
+                m_true[s]
+            } else {
+                rot(&(th * RAD_PER_ARCSEC)) * m_true[s]
+            }
+        };
+        // Attitude at the sensor's sample time.
+        let a_at = |tau: f64| if tau == 0.0 { a } else { rot(&(-prev_rate * tau)) * a };
+        let mut stars_obs = [None, None];
+        for tr in 0..2 {
+            let m = m_sensor(tr);
+            let a_s = a_at(fx.time_tag_s[tr]);
+            let to_sensor = m.transpose() * a_s;
+            let visible = |i: usize| -> Option<(f64, f64)> {
+                let st = &stars[i];
+                let u = aberrate(&(st.dir + st.offset).normalize(), &v_obs);
+                let s = to_sensor * u;
+                if s.z <= 0.0 {
+                    return None;
+                }
+                let (h, v) = (s.x.atan2(s.z), s.y.atan2(s.z));
+                (h.abs() <= half && v.abs() <= half).then_some((h, v))
+            };
+            let mut new_star = false;
+            let keep = track[tr].is_some_and(|(i, since_t)| t - since_t < 300.0 && visible(i).is_some());
+            if !keep {
+                if let Some((i, _)) = track[tr].take() {
+                    recent[tr].push((stars[i].hip, t));
+                }
+                let bore = (m.transpose() * a_s).row(2).transpose();
+                let mut best: Option<(usize, bool, f64)> = None;
+                for (i, st) in stars.iter().enumerate() {
+                    if st.dir.dot(&bore) < (6.0 * RAD_PER_DEG).cos() || visible(i).is_none() {
+                        continue;
+                    }
+                    let last = recent[tr].iter().filter(|(h, _)| *h == st.hip).map(|(_, tt)| *tt).fold(f64::NEG_INFINITY, f64::max);
+                    let fresh = t - last >= 1800.0;
+                    let better = match best {
+                        None => true,
+                        Some((_, bf, bm)) => (fresh && !bf) || (fresh == bf && st.mag < bm),
+                    };
+                    if better {
+                        best = Some((i, fresh, st.mag));
+                    }
+                }
+                if let Some((i, _, _)) = best {
+                    track[tr] = Some((i, t));
+                    new_star = true;
+                }
+            }
+            let Some((i, _)) = track[tr] else { continue };
+            let Some((h, v)) = visible(i) else { continue };
+            let st = &stars[i];
+            let f = 4.0 * RAD_PER_DEG;
+            let d = fx.distortion_arcsec[tr];
+            let rho2 = h * h + v * v;
+            let mut dh = d[0] * rho2 * h / f.powi(3) + d[1] * h * v / (f * f);
+            let mut dv = d[0] * rho2 * v / f.powi(3) + d[2] * h * v / (f * f);
+            dh += fx.magnitude_bias[tr][0] * (st.mag - 4.0);
+            dv += fx.magnitude_bias[tr][1] * (st.mag - 4.0);
+            let rho = rho2.sqrt();
+            let sigma = 6.0 + 12.0 * 10f64.powf(0.2 * (st.mag - 5.7)) + 6.0 * (rho / (half * std::f64::consts::SQRT_2)).powi(2);
+            let hm = quant(h * ARCSEC_PER_RAD + dh + ns * sigma * gauss(&mut rng), fhst_q) * RAD_PER_ARCSEC;
+            let vm = quant(v * ARCSEC_PER_RAD + dv + ns * sigma * gauss(&mut rng), fhst_q) * RAD_PER_ARCSEC;
+            let mag_m = st.mag + 0.05 * gauss(&mut rng);
+            let dir_sensor = fsw_core::fhst::dir_from_hv(hm, vm);
+            let reference = if cfg.aberration_applied { aberrate(&st.dir, &v_obs) } else { st.dir };
+            stars_obs[tr] = Some(StarObservation {
+                meas: FhstMeasurement {
+                    h_rad: hm,
+                    v_rad: vm,
+                    dir_sensor,
+                    dir_acs: flown[tr] * dir_sensor,
+                    magnitude: mag_m,
+                    new_star,
+                },
+                identified: Some((st.hip, reference)),
+                catalog_magnitude: st.mag,
+                sigma_rad: noise.fhst_sigma_rad(st.mag),
+            });
+        }
+        // FSS.
+        let in_umbra = pos.dot(&sun_eci) < 0.0 && (pos - sun_eci * pos.dot(&sun_eci)).norm() < 6378.0;
+        let sun_app = aberrate(&sun_eci, &v_obs);
+        let sun_ref = if cfg.aberration_applied { sun_app } else { sun_eci };
+        let mut suns_obs = [None, None];
+        if !in_umbra {
+            for u in 0..2 {
+                let s_idx = u + 2;
+                let m = m_sensor(s_idx);
+                let s = m.transpose() * (a_at(fx.time_tag_s[s_idx]) * sun_app);
+                if s.z <= 0.0 {
+                    continue;
+                }
+                let (al, be) = (s.x.atan2(s.z), s.y.atan2(s.z));
+                if al.abs() > 32.0 * RAD_PER_DEG || be.abs() > 32.0 * RAD_PER_DEG {
+                    continue;
+                }
+                let (am, bm) = match &fx.fss_tf[u] {
+                    Some((ea, eb)) => (ea.apply(al, be), eb.apply(be, al)),
+                    None => (al, be),
+                };
+                let mut q = |x: f64| quant(x * ARCSEC_PER_RAD + ns * 0.5 * fss_q * gauss(&mut rng), fss_q) * RAD_PER_ARCSEC;
+                let (aq, bq) = (q(am), q(bm));
+                let dir_sensor = fsw_core::fss::dir_from_angles(aq, bq);
+                suns_obs[u] = Some(SunObservation {
+                    meas: FssMeasurement {
+                        alpha_rad: aq,
+                        beta_rad: bq,
+                        dir_sensor,
+                        dir_acs: flown[s_idx] * dir_sensor,
+                    },
+                    sun_eci: sun_ref,
+                    sigma_rad: noise.fss_sigma_arcsec * RAD_PER_ARCSEC,
+                });
+            }
+        }
+        let gyro = (k > 0).then(|| GyroStep {
+            dtheta_acs_rad: prev_rate,
+            dt_s: 1.0,
+        });
+        let time = TimeTag::from_seconds(t_base + t).unwrap_or_default();
+        frames.push(FrameObservations {
+            time,
+            gyro,
+            high_rate: prev_rate.norm() > 0.0,
+            stars: stars_obs,
+            suns: suns_obs,
+            temperatures_c: std::array::from_fn(|s| 20.0 + dtemp[s]),
+            obc_q_acs_from_eci: Some(Quat::from_dcm(&a)),
+            orbit: Some((pos, vel)),
+        });
+        earth.push(earth_vel);
+        suns.push(sun_app);
+    }
+    SynthRun {
+        frames,
+        earth_vel: earth,
+        sun: suns,
+        alignment,
+        m_true,
+        catalog_offsets,
+        config: cfg.clone(),
+    }
+}
