@@ -46,6 +46,9 @@ pub const MAX_COMMANDS_PER_CYCLE: usize = 8;
 /// Cycles without an accepted FHST measurement after which fine mode drops to coarse.
 const FINE_MODE_TIMEOUT_CYCLES: u32 = 900;
 
+/// Largest age of the cached onboard Sun direction, s.
+const SUN_REFRESH_S: f64 = 10.0;
+
 /// A frame more than this many nominal periods after the previous one is a time-tag jump.
 const MAX_GAP_PERIODS: f64 = 10.0;
 
@@ -152,6 +155,7 @@ pub struct FlightCore {
     slew_count: u32,
     last_rate_acs_rad_per_s: Vector3<f64>,
     wheel_torque_cmd_nm: Vector3<f64>,
+    sun_cache: Option<(f64, Vector3<f64>)>,
 }
 
 impl Default for FlightCore {
@@ -192,6 +196,7 @@ impl FlightCore {
             slew_count: 0,
             last_rate_acs_rad_per_s: Vector3::zeros(),
             wheel_torque_cmd_nm: Vector3::zeros(),
+            sun_cache: None,
         }
     }
 
@@ -719,9 +724,9 @@ impl FlightCore {
         let index = sensor.saturating_add(2);
         let alignment = self.tables.alignment();
         let m_acs_from_fss_rows = if sensor == 0 {
-            &alignment.m_acs_from_fss1
+            alignment.m_acs_from_fss1
         } else {
-            &alignment.m_acs_from_fss2
+            alignment.m_acs_from_fss2
         };
         let transfer = alignment
             .corrections
@@ -735,7 +740,7 @@ impl FlightCore {
             .get(index)
             .copied()
             .unwrap_or(0.0);
-        let meas = match fss::measure(sample, m_acs_from_fss_rows, &transfer) {
+        let meas = match fss::measure(sample, &m_acs_from_fss_rows, &transfer) {
             Ok(m) => {
                 if let Some(r) = self.rejected_run.get_mut(index) {
                     *r = false;
@@ -754,14 +759,14 @@ impl FlightCore {
             }
         };
         let dir_acs = self.time_align(meas.dir_acs, offset_s);
-        let Ok(sun_eci) = sun_ephemeris::sun_dir_eci(frame.time.seconds_since_j2000_tt()) else {
+        let Some(sun_eci) = self.sun_direction(frame.time) else {
             return SensorResidual {
                 status: MeasurementStatus::NotUsed,
                 ..SensorResidual::default()
             };
         };
         // Innovation in the sensor's own axes (α, β), reported whether or not it is used.
-        let m_acs_from_fss = matrix_from_rows(m_acs_from_fss_rows);
+        let m_acs_from_fss = matrix_from_rows(&m_acs_from_fss_rows);
         let predicted = fss::angles_from_dir(
             &(m_acs_from_fss.transpose() * (self.filter.q_acs_from_eci.to_dcm() * sun_eci)),
         );
@@ -795,6 +800,20 @@ impl FlightCore {
             innovation_arcsec,
             star_id: 0,
         }
+    }
+
+    /// Onboard Sun direction, re-evaluated at most every [`SUN_REFRESH_S`] (the Sun moves
+    /// 0.04″/s, so a 10 s old direction is 0.4″ off: far below the FSS noise).
+    fn sun_direction(&mut self, time: TimeTag) -> Option<Vector3<f64>> {
+        let t = time.seconds_since_j2000_tt();
+        if let Some((t_cached, dir)) = self.sun_cache {
+            if (t - t_cached).abs() <= SUN_REFRESH_S {
+                return Some(dir);
+            }
+        }
+        let dir = sun_ephemeris::sun_dir_eci(t).ok()?;
+        self.sun_cache = Some((t, dir));
+        Some(dir)
     }
 
     fn update_filter_mode(
