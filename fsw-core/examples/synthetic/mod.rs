@@ -2,7 +2,6 @@
 /// `benches/step.rs` through `include!`): an inertial hold with one star in each FHST, the
 /// Sun in FSS1, and IRU counters that drift with a constant bias. Frames are generated once;
 /// the measured loop is `FlightCore::step` only.
-
 #[allow(dead_code)]
 mod synthetic {
     use fsw_core::attitude::{rot, Quat};
