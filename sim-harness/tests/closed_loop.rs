@@ -1,0 +1,417 @@
+//! Closed-loop tests with the real FlightCore: determinism, the ICD byte layout (read back
+//! with a decoder written here from docs/icd.md, not fsw-core's), the normal-ops smoke run,
+//! the early-mission maneuvers with prelaunch tables, and bad inputs.
+
+use std::path::Path;
+
+use fsw_core::units::RAD_PER_ARCSEC;
+use sim_harness::closed_loop::{CycleRecord, Simulation};
+use sim_harness::run::{run, RunOptions, Summary};
+use sim_harness::scenario::{self, Scenario};
+
+fn scenario(name: &str, duration_s: f64) -> Scenario {
+    let mut s = scenario::resolve(name).unwrap();
+    s.duration_s = duration_s;
+    s
+}
+
+fn run_to(s: Scenario, dir: &Path) -> Summary {
+    run(
+        s,
+        &RunOptions {
+            out_dir: Some(dir.to_path_buf()),
+            ..RunOptions::default()
+        },
+    )
+    .unwrap()
+}
+
+/// Same scenario and seed ⇒ byte-identical telemetry.bin (and truth.json); another seed
+/// changes it.
+#[test]
+fn determinism_same_seed_same_bytes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (a, b, c) = (tmp.path().join("a"), tmp.path().join("b"), tmp.path().join("c"));
+    run_to(scenario("gro-early-mission", 400.0), &a);
+    run_to(scenario("gro-early-mission", 400.0), &b);
+    let mut other = scenario("gro-early-mission", 400.0);
+    other.seed = 2;
+    run_to(other, &c);
+    let ta = std::fs::read(a.join("telemetry.bin")).unwrap();
+    let tb = std::fs::read(b.join("telemetry.bin")).unwrap();
+    let tc = std::fs::read(c.join("telemetry.bin")).unwrap();
+    assert!(ta.len() > 100_000);
+    assert!(ta == tb, "same seed, different telemetry");
+    assert!(ta != tc, "different seeds, same telemetry");
+    assert_eq!(
+        std::fs::read(a.join("truth.json")).unwrap(),
+        std::fs::read(b.join("truth.json")).unwrap()
+    );
+    for f in ["metadata.json", "truth.json", "summary.json", "uploads/00_star_catalog.tbl"] {
+        assert!(a.join(f).exists(), "{f}");
+    }
+    assert!(
+        !std::fs::read_dir(&a)
+            .unwrap()
+            .any(|e| e.unwrap().path().to_string_lossy().ends_with(".partial")),
+        "no .partial file left"
+    );
+}
+
+// ------------------------------------------------------------------------------------------
+// An independent reader of docs/icd.md (no fsw-core decoders).
+// ------------------------------------------------------------------------------------------
+
+struct Packet<'a> {
+    offset: usize,
+    version: u8,
+    tm: bool,
+    sec_header: bool,
+    apid: u16,
+    seq_flags: u8,
+    seq: u16,
+    coarse: u32,
+    fine: u16,
+    user: &'a [u8],
+}
+
+fn be16(b: &[u8], at: usize) -> u16 {
+    u16::from_be_bytes([b[at], b[at + 1]])
+}
+fn be32(b: &[u8], at: usize) -> u32 {
+    u32::from_be_bytes(b[at..at + 4].try_into().unwrap())
+}
+fn bef64(b: &[u8], at: usize) -> f64 {
+    f64::from_be_bytes(b[at..at + 8].try_into().unwrap())
+}
+fn bef32(b: &[u8], at: usize) -> f32 {
+    f32::from_be_bytes(b[at..at + 4].try_into().unwrap())
+}
+
+fn parse(file: &[u8]) -> Vec<Packet<'_>> {
+    let mut out = Vec::new();
+    let mut at = 0;
+    while at < file.len() {
+        assert!(at + 12 <= file.len(), "truncated header at {at}");
+        let w0 = be16(file, at);
+        let w1 = be16(file, at + 2);
+        let len = usize::from(be16(file, at + 4)) + 1;
+        let end = at + 6 + len;
+        assert!(end <= file.len(), "truncated packet at {at}");
+        out.push(Packet {
+            offset: at,
+            version: (w0 >> 13) as u8,
+            tm: (w0 >> 12) & 1 == 0,
+            sec_header: (w0 >> 11) & 1 == 1,
+            apid: w0 & 0x7ff,
+            seq_flags: (w1 >> 14) as u8,
+            seq: w1 & 0x3fff,
+            coarse: be32(file, at + 6),
+            fine: be16(file, at + 10),
+            user: &file[at + 12..end],
+        });
+        at = end;
+    }
+    out
+}
+
+/// Write packets with the harness, read them back by hand (docs/icd.md §2–4) and compare
+/// against the records the simulation produced.
+#[test]
+fn icd_round_trip_independent_decoder() {
+    let tmp = tempfile::tempdir().unwrap();
+    let s = scenario("gro-early-mission", 120.0);
+    run_to(s.clone(), tmp.path());
+    // The same run, cycle by cycle, for the reference values.
+    let mut sim = Simulation::new(s, None).unwrap();
+    let mut recs: Vec<CycleRecord> = Vec::new();
+    while let Some(r) = sim.step() {
+        recs.push(r);
+    }
+    let file = std::fs::read(tmp.path().join("telemetry.bin")).unwrap();
+    let packets = parse(&file);
+    let lengths = [(0x010, 48), (0x011, 230), (0x012, 10), (0x020, 48)];
+    let mut seq = std::collections::HashMap::new();
+    let mut cycle = 0usize;
+    let mut last_time = 0.0;
+    let mut expect = 0x010; // order within a cycle: raw, [ephemeris], housekeeping, events
+    let mut ephemeris_times = Vec::new();
+    for p in &packets {
+        assert_eq!(p.version, 0, "at {}", p.offset);
+        assert!(p.tm && p.sec_header, "at {}", p.offset);
+        assert_eq!(p.seq_flags, 0b11, "unsegmented at {}", p.offset);
+        let want_len = lengths.iter().find(|(a, _)| *a == p.apid).unwrap().1;
+        assert_eq!(p.user.len(), want_len, "APID {:#x} at {}", p.apid, p.offset);
+        let n = seq.entry(p.apid).or_insert(0u16);
+        assert_eq!(p.seq, *n, "APID {:#x} sequence at {}", p.apid, p.offset);
+        *n = (*n + 1) & 0x3fff;
+        let t = f64::from(p.coarse) + f64::from(p.fine) / 65536.0;
+        assert!(t >= last_time, "time decreases at {}", p.offset);
+        last_time = t;
+        match p.apid {
+            0x010 => {
+                assert!(expect == 0x010 || expect == 0x012, "raw out of order at {}", p.offset);
+                let r = &recs[cycle];
+                cycle += 1;
+                assert_eq!((p.coarse, p.fine), (r.frame.time.coarse_s, r.frame.time.fine));
+                for ch in 0..6 {
+                    assert_eq!(be16(p.user, 2 * ch), r.frame.iru.counts[ch]);
+                }
+                assert_eq!(p.user[12], r.frame.iru.channel_failed);
+                assert_eq!(p.user[13], u8::from(r.frame.iru.high_rate));
+                for k in 0..2 {
+                    let o = 14 + 7 * k;
+                    let f = &r.frame.fhst[k];
+                    assert_eq!(be16(p.user, o) as i16, f.h_counts);
+                    assert_eq!(be16(p.user, o + 2) as i16, f.v_counts);
+                    assert_eq!(be16(p.user, o + 4) as i16, f.magnitude_centimag);
+                    assert_eq!(p.user[o + 6], f.flags);
+                    let o = 28 + 5 * k;
+                    let f = &r.frame.fss[k];
+                    assert_eq!(be16(p.user, o) as i16, f.alpha_counts);
+                    assert_eq!(be16(p.user, o + 2) as i16, f.beta_counts);
+                    assert_eq!(p.user[o + 4], f.flags);
+                }
+                for i in 0..5 {
+                    assert_eq!(be16(p.user, 38 + 2 * i) as i16, r.frame.temperatures_centi_c[i]);
+                }
+                expect = 0x020;
+            }
+            0x020 => {
+                assert_eq!(expect, 0x020, "ephemeris out of order at {}", p.offset);
+                let r = &recs[cycle - 1];
+                let pos = [bef64(p.user, 0), bef64(p.user, 8), bef64(p.user, 16)];
+                let vel = [bef64(p.user, 24), bef64(p.user, 32), bef64(p.user, 40)];
+                assert_eq!(pos, <[f64; 3]>::from(r.truth.pos_eci_km));
+                assert_eq!(vel, <[f64; 3]>::from(r.truth.vel_eci_km_per_s));
+                let rn = pos.iter().map(|x| x * x).sum::<f64>().sqrt();
+                assert!((rn - 6833.0).abs() < 30.0, "{rn}");
+                ephemeris_times.push(r.truth.t_s);
+                expect = 0x011;
+            }
+            0x011 => {
+                assert!(expect == 0x020 || expect == 0x011, "hk out of order at {}", p.offset);
+                let h = &recs[cycle - 1].output.housekeeping;
+                let q = [bef64(p.user, 0), bef64(p.user, 8), bef64(p.user, 16), bef64(p.user, 24)];
+                assert_eq!(q, [h.q_acs_from_eci.x, h.q_acs_from_eci.y, h.q_acs_from_eci.z, h.q_acs_from_eci.w]);
+                for i in 0..3 {
+                    assert_eq!(bef64(p.user, 32 + 8 * i), h.bias_acs_rad_per_s[i]);
+                }
+                for i in 0..6 {
+                    assert_eq!(bef64(p.user, 56 + 8 * i), h.covariance_diag[i]);
+                }
+                assert_eq!(
+                    [p.user[104], p.user[105], p.user[106], p.user[107]],
+                    [h.filter_mode, h.control_mode, h.iru_config, h.iru_high_rate_cmd]
+                );
+                assert_eq!(bef32(p.user, 108), h.wheel_torque_cmd_nm[0]);
+                for k in 0..4 {
+                    let o = 120 + 13 * k;
+                    assert_eq!(p.user[o], h.residuals[k].status as u8);
+                    assert_eq!(bef32(p.user, o + 1), h.residuals[k].innovation_arcsec[0]);
+                    assert_eq!(be32(p.user, o + 9), h.residuals[k].star_id);
+                }
+                assert_eq!(be32(p.user, 173), h.counters.cycles);
+                assert_eq!(be32(p.user, 173 + 16), h.counters.stars_identified);
+                assert_eq!(be32(p.user, 213 + 12), h.table_crc[3]);
+                expect = 0x012;
+            }
+            0x012 => {
+                assert_eq!(expect, 0x012, "event out of order at {}", p.offset);
+                let r = &recs[cycle - 1];
+                let code = be16(p.user, 0);
+                assert!(
+                    r.output.events.iter().any(|e| e.id.code() == code
+                        && e.p1 == be32(p.user, 2)
+                        && e.p2 == be32(p.user, 6)),
+                    "event {code:#x} not in cycle {}",
+                    cycle - 1
+                );
+            }
+            other => panic!("unknown APID {other:#x}"),
+        }
+    }
+    assert_eq!(cycle, recs.len(), "one raw frame per cycle");
+    assert_eq!(seq[&0x011], recs.len() as u16);
+    // Ephemeris every 10 s of sim time; the catalog is activated at t = 0 (CRC in housekeeping).
+    assert_eq!(ephemeris_times, (0..13).map(|k| f64::from(k) * 10.0).collect::<Vec<_>>());
+    assert_ne!(recs[0].output.housekeeping.table_crc[3], 0);
+}
+
+/// 30 min of normal-ops (true alignments, onboard annual aberration correction): the filter
+/// reaches fine mode and the attitude error 3σ per axis is ≤ 15″ (requirement 86″).
+///
+/// NEES band: a consistent filter gives a mean of 3. This scenario keeps two effects the OBC
+/// does not model — orbital aberration of the stars (≤ 5.2″, the OBC has no orbit) and the
+/// FSS transfer-function residuals (tens of arcsec, against a 60″ table σ) — which measured
+/// (4 h trials, examples/search.rs) raise the mean NEES to ~18 with both, ~5 without the
+/// orbital part and ~3 without either. The band [1, 40] therefore accepts today's filter
+/// and catches a divergence (NEES in the hundreds, as the prelaunch-table runs show);
+/// [`normal_ops_filter_is_consistent_without_unmodelled_effects`] holds the tight band.
+#[test]
+fn e2e_normal_ops_smoke_fine_attitude() {
+    let s = scenario("normal-ops", 1800.0);
+    let start = std::time::Instant::now();
+    let sum = run(s, &RunOptions::default()).unwrap();
+    let e = &sum.attitude_error_arcsec;
+    eprintln!(
+        "normal-ops 30 min: {:.2} s wall; rms {:?}″, 3σ {:?}″, max {:.1}″, NEES {:?}, fine {:.2}",
+        start.elapsed().as_secs_f64(),
+        e.rms,
+        e.three_sigma,
+        e.max,
+        sum.filter_nees_mean,
+        sum.fine_mode_fraction
+    );
+    assert!(e.cycles > 1000);
+    for k in 0..3 {
+        assert!(e.three_sigma[k] <= 15.0, "3σ axis {k}: {}″", e.three_sigma[k]);
+        assert!(e.rms[k] <= 8.0, "rms axis {k}: {}″", e.rms[k]);
+    }
+    assert!(sum.fine_mode_fraction > 0.9);
+    let nees = sum.filter_nees_mean.unwrap();
+    assert!((1.0..=40.0).contains(&nees), "NEES {nees}");
+    assert!(sum.tables_loaded.iter().all(|t| t.accepted && t.activated_at_s == Some(0.0)));
+    assert_eq!(sum.tables_loaded.len(), 3, "catalog, filter table, true alignments");
+}
+
+/// The same 30 min without the two effects the OBC does not model (orbital aberration, FSS
+/// transfer-function errors): the filter is consistent. Band: 1800 samples but correlated
+/// over minutes (a few tens of independent χ²₃ draws), so the mean is 3 within a factor 2.
+#[test]
+fn normal_ops_filter_is_consistent_without_unmodelled_effects() {
+    let mut s = scenario("normal-ops", 1800.0);
+    s.sky.orbital_aberration = false;
+    for f in [&mut s.fss1, &mut s.fss2] {
+        for h in [&mut f.alpha, &mut f.beta] {
+            h.scale_ppm = 0.0;
+            h.cyclic_arcsec = 0.0;
+            h.cross_arcsec_at_corner = 0.0;
+            h.cubic_arcsec_at_edge = 0.0;
+        }
+    }
+    let sum = run(s, &RunOptions::default()).unwrap();
+    let nees = sum.filter_nees_mean.unwrap();
+    eprintln!("normal-ops without unmodelled effects: NEES {nees:.2}, rms {:?}″", sum.attitude_error_arcsec.rms);
+    assert!((1.5..=6.0).contains(&nees), "NEES {nees}");
+}
+
+/// gro-early-mission with the prelaunch tables through the first calibration maneuver
+/// (X +60°): every slew ends with an estimation error below the paper's 0.5°.
+#[test]
+fn e2e_early_mission_post_maneuver_error_below_half_degree() {
+    let s = scenario("gro-early-mission", 12_200.0);
+    let sum = run(s, &RunOptions::default()).unwrap();
+    eprintln!("post-maneuver errors (deg): {:?}", sum.post_maneuver_error_deg);
+    assert!(sum.slews.len() >= 6, "{} slews", sum.slews.len());
+    for (k, e) in sum.post_maneuver_error_deg.iter().enumerate() {
+        assert!(*e < 0.5, "slew {k}: {e}°");
+    }
+    // The X +60° maneuver was flown in high-rate mode about body X.
+    let last = sum.slews.last().unwrap();
+    assert!(last.end_s - last.start_s > 600.0);
+    assert_eq!(sum.iru_counter_aliasing_frames, 0);
+}
+
+/// A relative slew rotates the target about the body axis: after `axis = "z"`,
+/// `angle_deg = 20` the true attitude has turned 20° about body z.
+#[test]
+fn relative_slew_turns_about_the_body_axis() {
+    let text = r#"
+name = "rel"
+duration_s = 1500
+fly_true_alignments = true
+[initial]
+q_acs_from_eci = [0.778310, 0.625643, 0.052966, 0.0]
+[[commands]]
+at_s = 10
+kind = "slew_to"
+axis = "z"
+angle_deg = 20.0
+"#;
+    let s = Scenario::from_toml_str(text, "t").unwrap();
+    let q0 = s.initial.quat();
+    let mut sim = Simulation::new(s, None).unwrap();
+    let mut last = None;
+    while let Some(r) = sim.step() {
+        last = Some(r);
+    }
+    let q1 = last.unwrap().truth.q_acs_from_eci;
+    let rel = q1.compose(&q0.conjugate()).rotation_vector_rad();
+    assert!((rel.norm().to_degrees() - 20.0).abs() < 0.15, "{}", rel.norm().to_degrees());
+    assert!(rel.normalize().z > 0.99, "{rel:?}");
+    assert!(RAD_PER_ARCSEC > 0.0);
+}
+
+/// Bad inputs: errors name the field, are `InputError`s (exit code 2), and the CLI exits 2.
+#[test]
+fn bad_inputs_name_the_field_and_exit_2() {
+    let err = Scenario::from_toml_str("name = \"x\"\nduration_s = 10\n[fhst1]\nnoise_flor_arcsec = 1\n", "t")
+        .unwrap_err();
+    assert!(format!("{err:#}").contains("noise_flor_arcsec"), "{err:#}");
+    let err = Scenario::from_toml_str(
+        "name = \"x\"\nduration_s = 10\n[[commands]]\nat_s = 1\nkind = \"slew_to\"\naxis = \"w\"\nangle_deg = 5\n",
+        "t",
+    )
+    .unwrap_err();
+    assert!(format!("{err:#}").contains("commands[0].axis"), "{err:#}");
+    let err = Scenario::from_toml_str(
+        "name = \"x\"\nduration_s = 10\nfilter_table = { gate_chi = 3 }\n",
+        "t",
+    )
+    .map(|s| Simulation::new(s, None).map(|_| ()))
+    .unwrap()
+    .unwrap_err();
+    assert!(format!("{err:#}").contains("filter_table.gate_chi"), "{err:#}");
+    assert!(sim_harness::is_input_error(&err));
+    let tmp = tempfile::tempdir().unwrap();
+    let path = tmp.path().join("bad.toml");
+    std::fs::write(
+        &path,
+        "name = \"x\"\nduration_s = 10\n[[commands]]\nat_s = 1\nkind = \"table_load\"\nfile = \"missing.tbl\"\n",
+    )
+    .unwrap();
+    let err = Simulation::new(Scenario::load(&path).unwrap(), None)
+        .map(|_| ())
+        .unwrap_err();
+    assert!(format!("{err:#}").contains("commands[0].file"), "{err:#}");
+    assert!(sim_harness::is_input_error(&err));
+    std::fs::write(&path, "name = \"x\"\nduration_s = 10\nstep_s = 0\n").unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_sim-harness"))
+        .args(["run", path.to_str().unwrap(), "--out"])
+        .arg(tmp.path().join("o"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("step_s"));
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_sim-harness"))
+        .args(["run", "no-such-scenario", "--out"])
+        .arg(tmp.path().join("o"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+}
+
+/// Monte Carlo with shards and merge gives the same aggregate as one campaign.
+#[test]
+fn monte_carlo_shards_merge_to_the_campaign() {
+    use sim_harness::campaign::{merge, monte_carlo, CampaignOptions};
+    let tmp = tempfile::tempdir().unwrap();
+    let s = scenario("normal-ops", 120.0);
+    let opts = |dir: &str, shard| CampaignOptions {
+        runs: 3,
+        seed: 10,
+        out_dir: tmp.path().join(dir),
+        shard,
+        tables_dir: None,
+        duration_s: None,
+    };
+    let (whole, _) = monte_carlo(&s, &opts("all", (0, 1)), &|| {}).unwrap();
+    monte_carlo(&s, &opts("s0", (0, 2)), &|| {}).unwrap();
+    monte_carlo(&s, &opts("s1", (1, 2)), &|| {}).unwrap();
+    let (merged, path) = merge(&[tmp.path().join("s0"), tmp.path().join("s1")], None).unwrap();
+    assert!(path.exists());
+    assert_eq!(merged.seeds, vec![10, 11, 12]);
+    assert_eq!(merged.attitude_error_rms_arcsec, whole.attitude_error_rms_arcsec);
+    assert_eq!(merged.post_maneuver_error_deg, whole.post_maneuver_error_deg);
+}
