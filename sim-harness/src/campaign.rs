@@ -135,8 +135,14 @@ pub fn parse_shard(text: &str) -> anyhow::Result<(u32, u32)> {
     let (k, m) = text
         .split_once('/')
         .ok_or_else(|| anyhow::anyhow!("--shard must be K/M, got {text:?}"))?;
-    let k: u32 = k.trim().parse().with_context(|| format!("--shard K in {text:?}"))?;
-    let m: u32 = m.trim().parse().with_context(|| format!("--shard M in {text:?}"))?;
+    let k: u32 = k
+        .trim()
+        .parse()
+        .with_context(|| format!("--shard K in {text:?}"))?;
+    let m: u32 = m
+        .trim()
+        .parse()
+        .with_context(|| format!("--shard M in {text:?}"))?;
     if m == 0 || k >= m {
         anyhow::bail!("--shard K/M needs 0 ≤ K < M, got {text:?}");
     }
@@ -232,13 +238,22 @@ pub fn collect_summaries(dirs: &[PathBuf]) -> anyhow::Result<Vec<Summary>> {
             })
             .collect();
         entries.sort();
-        files.extend(entries.into_iter().map(|p| p.join("summary.json")).filter(|p| p.exists()));
+        files.extend(
+            entries
+                .into_iter()
+                .map(|p| p.join("summary.json"))
+                .filter(|p| p.exists()),
+        );
     }
     for f in files {
-        let text = std::fs::read_to_string(&f).with_context(|| format!("reading {}", f.display()))?;
-        let s: Summary =
-            serde_json::from_str(&text).with_context(|| format!("{} is not a run summary", f.display()))?;
-        if !out.iter().any(|o| o.seed == s.seed && o.scenario == s.scenario) {
+        let text =
+            std::fs::read_to_string(&f).with_context(|| format!("reading {}", f.display()))?;
+        let s: Summary = serde_json::from_str(&text)
+            .with_context(|| format!("{} is not a run summary", f.display()))?;
+        if !out
+            .iter()
+            .any(|o| o.seed == s.seed && o.scenario == s.scenario)
+        {
             out.push(s);
         }
     }

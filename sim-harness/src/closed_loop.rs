@@ -201,7 +201,10 @@ impl Simulation {
                 &mut uploads,
                 &mut timeline,
                 Upload {
-                    source: format!("scenario filter_table (boot values except {:?})", overrides.keys().collect::<Vec<_>>()),
+                    source: format!(
+                        "scenario filter_table (boot values except {:?})",
+                        overrides.keys().collect::<Vec<_>>()
+                    ),
                     name: "filter.tbl".into(),
                     image: onboard::image(TableId::Filter, created, &table)?,
                     at_s: 0.0,
@@ -237,11 +240,9 @@ impl Simulation {
                 .collect();
             files.sort();
             if files.is_empty() {
-                return Err(InputError::msg(format!(
-                    "--tables {}: no *.tbl files",
-                    dir.display()
-                ))
-                .into());
+                return Err(
+                    InputError::msg(format!("--tables {}: no *.tbl files", dir.display())).into(),
+                );
             }
             for f in files {
                 let image = read_image(&f).map_err(InputError::from)?;
@@ -298,7 +299,9 @@ impl Simulation {
                         IruConfiguration::Primary
                     })
                 }
-                CommandKind::FilterInitialize => Action::FilterInit(c.q_acs_from_eci.map(quat_from_array)),
+                CommandKind::FilterInitialize => {
+                    Action::FilterInit(c.q_acs_from_eci.map(quat_from_array))
+                }
                 CommandKind::FilterReset => Action::FilterReset,
                 CommandKind::TableLoad => {
                     let name = c.file.as_deref().unwrap_or_default();

@@ -13,7 +13,8 @@ use sim_harness::run::{self, RunOptions};
 use sim_harness::scenario::{self, Scenario};
 use sim_harness::{is_input_error, InputError};
 
-const ABOUT: &str = "Closed-loop simulator of the Compton Gamma Ray Observatory (1991) attitude system.
+const ABOUT: &str =
+    "Closed-loop simulator of the Compton Gamma Ray Observatory (1991) attitude system.
 
 Each 1 s cycle: truth (orbit, Sun, Hipparcos sky, rigid body + wheels) -> sensor words (FHST,
 FSS, DRIRU II, temperatures) -> the onboard software fsw-core (FlightCore::step with the
@@ -124,7 +125,9 @@ enum Cmd {
     ///
     /// Reads every DIR/run_*/summary.json (each seed once) and writes the aggregate to
     /// --out or DIR[0]/aggregate.json, and prints it.
-    #[command(after_help = "Example: sim-harness merge runs/mc-shard0 runs/mc-shard1 --out runs/mc.json")]
+    #[command(
+        after_help = "Example: sim-harness merge runs/mc-shard0 runs/mc-shard1 --out runs/mc.json"
+    )]
     Merge {
         /// Campaign folders.
         #[arg(required = true)]
@@ -138,7 +141,9 @@ enum Cmd {
     /// Flies the embedded scenario for --duration seconds with fsw-core in the loop and the
     /// telemetry encoded into a sink, on one thread, and prints real-time factor, simulated
     /// and wall seconds, cycles and ns per cycle (JSON with --json). Build with --release.
-    #[command(after_help = "Example: cargo run --release -p sim-harness -- bench --duration 3600 --json")]
+    #[command(
+        after_help = "Example: cargo run --release -p sim-harness -- bench --duration 3600 --json"
+    )]
     Bench {
         /// Simulated seconds.
         #[arg(long, default_value_t = 3600.0)]
@@ -285,7 +290,9 @@ fn main_inner(cli: Cli) -> anyhow::Result<()> {
         }
         Cmd::Bench { duration, json } => {
             if !(duration.is_finite() && duration > 0.0) {
-                return Err(InputError::msg(format!("--duration must be > 0, got {duration}")).into());
+                return Err(
+                    InputError::msg(format!("--duration must be > 0, got {duration}")).into(),
+                );
             }
             let v = run::bench(duration)?;
             if json {

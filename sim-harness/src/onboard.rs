@@ -32,7 +32,8 @@ use fsw_core::raw::TimeTag;
 use fsw_core::tables::image::encode_image;
 use fsw_core::tables::types::rows_from_matrix;
 use fsw_core::tables::{
-    AlignmentTable, CatalogStar, FilterTable, SensorCorrections, StarCatalogTable, TableId, MAX_CATALOG_STARS,
+    AlignmentTable, CatalogStar, FilterTable, SensorCorrections, StarCatalogTable, TableId,
+    MAX_CATALOG_STARS,
 };
 
 /// Room for the largest image (catalog: ≤ 4096 × 21 octets + header).
@@ -172,7 +173,10 @@ mod tests {
         let j2000 = -2.74e8;
         let cat = build_star_catalog(&catalogue_table(&s).unwrap(), &s, j2000).unwrap();
         assert_eq!(cat.stars.len(), 3231);
-        assert!(cat.stars.iter().all(|s| (200..=570).contains(&s.magnitude_centimag)));
+        assert!(cat
+            .stars
+            .iter()
+            .all(|s| (200..=570).contains(&s.magnitude_centimag)));
         let img = image(TableId::StarCatalog, TimeTag::default(), &cat).unwrap();
         let mut set = TableSet::boot();
         assert_eq!(set.load(&img), Ok(TableId::StarCatalog));

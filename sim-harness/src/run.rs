@@ -500,10 +500,9 @@ pub fn declared_noise(s: &Scenario) -> serde_json::Value {
             n += 1.0;
         }
     }
-    let fss_sigma = ((fss.noise_counts_1sigma * count_arcsec).powi(2)
-        + count_arcsec.powi(2) / 12.0
-        + tf2 / n)
-        .sqrt();
+    let fss_sigma =
+        ((fss.noise_counts_1sigma * count_arcsec).powi(2) + count_arcsec.powi(2) / 12.0 + tf2 / n)
+            .sqrt();
     serde_json::json!({
         "fhst_sigma_arcsec": [bright, faint],
         "fss_noise_counts": fss.noise_counts_1sigma,
@@ -561,10 +560,12 @@ fn truth_json(sim: &Simulation, bias: &BiasRecorder) -> anyhow::Result<serde_jso
     let mut thetas = serde_json::Map::new();
     for k in 0..4 {
         alignments.insert(names[k].into(), serde_json::json!(rows(&m[k])));
-        let theta =
-            fsw_core::attitude::rotvec_from_rot(&(m[k] * paper.prelaunch(k).transpose()))
-                * ARCSEC_PER_RAD;
-        thetas.insert(names[k].into(), serde_json::json!([theta.x, theta.y, theta.z]));
+        let theta = fsw_core::attitude::rotvec_from_rot(&(m[k] * paper.prelaunch(k).transpose()))
+            * ARCSEC_PER_RAD;
+        thetas.insert(
+            names[k].into(),
+            serde_json::json!([theta.x, theta.y, theta.z]),
+        );
     }
     let dm_p = s
         .iru
@@ -809,7 +810,9 @@ pub fn run(scenario: Scenario, opts: &RunOptions) -> anyhow::Result<Summary> {
         }
         let cycles = sim.cycle_count();
         let (packets, bytes) = (tm.packets(), tm.bytes());
-        return Ok(summary(&sim, scorer, wall, cycles, aliasing, packets, bytes));
+        return Ok(summary(
+            &sim, scorer, wall, cycles, aliasing, packets, bytes,
+        ));
     };
     let mut folder = RunFolder::new(dir)?;
     for (i, up) in sim.uploads().iter().enumerate() {

@@ -252,9 +252,7 @@ pub fn table_id_from_name(name: &str) -> anyhow::Result<fsw_core::tables::TableI
         .into_iter()
         .find(|id| id.name() == name)
         .ok_or_else(|| {
-            anyhow::anyhow!(
-                "unknown table {name:?} (alignment, iru, filter, star_catalog)"
-            )
+            anyhow::anyhow!("unknown table {name:?} (alignment, iru, filter, star_catalog)")
         })
 }
 
@@ -421,7 +419,10 @@ pub const EMBEDDED_SCENARIOS: [(&str, &str); 5] = [
         "gro-bias-history",
         include_str!("../../scenarios/gro-bias-history.toml"),
     ),
-    ("normal-ops", include_str!("../../scenarios/normal-ops.toml")),
+    (
+        "normal-ops",
+        include_str!("../../scenarios/normal-ops.toml"),
+    ),
     (
         "inertial_hold",
         include_str!("../../scenarios/inertial_hold.toml"),
@@ -435,7 +436,9 @@ pub const EMBEDDED_SCENARIOS: [(&str, &str); 5] = [
 /// The workspace `scenarios/` folder (compile-time path).
 #[must_use]
 pub fn scenarios_dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join("scenarios")
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("..")
+        .join("scenarios")
 }
 
 /// Resolve a scenario argument: an existing path is read; a bare name (`gro-early-mission`)
@@ -462,7 +465,10 @@ pub fn resolve(arg: &str) -> anyhow::Result<Scenario> {
             return Ok(s);
         }
         let known: Vec<&str> = EMBEDDED_SCENARIOS.iter().map(|(n, _)| *n).collect();
-        bail!("no scenario file {arg:?} and no built-in scenario of that name (built in: {})", known.join(", "));
+        bail!(
+            "no scenario file {arg:?} and no built-in scenario of that name (built in: {})",
+            known.join(", ")
+        );
     }
     bail!("scenario file {} does not exist", path.display())
 }
