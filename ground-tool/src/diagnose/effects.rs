@@ -14,8 +14,7 @@
 //! | `orbit_periodic_alignment` | 6 (″: cos u, sin u per ACS axis) | `−J Mᵀ [b×] (cos u, sin u)` | orbit phase |
 //! | `fhst_distortion` | radial Δρ at 4°, H·V terms at the (4°, 4°) corner (″) | `(ρ²H, ρ²V)/F³`, `(HV/F², 0)`, `(0, HV/F²)` | FOV position |
 //! | `magnitude_bias` | (″/mag in H, V) | `(m − 4)` | magnitude |
-//! | `fss_transfer_function` | scale (ppm), cross (″ at the 32° corner), cubic (″ at the edge), per head | `α`, `α β²/E³`, `α³/E³` | head angles |
-//! | `fss_cyclic_error` | sin/cos amplitudes per head (″) at a fitted pitch | `sin/cos(2π α / p)` | head angles, reticle pitch |
+//! | `fss_transfer_function` | scale (ppm), cross (″ at the 32° corner), cubic (″ at the edge), cyclic sin/cos (″) at a grid-searched pitch, per head | `α`, `α β²/E³`, `α³/E³`, `sin/cos(2π α / p)` | head angles |
 //! | `catalog_proper_motion_error` | per star east/north offsets (″) | `J Mᵀ A e_{E,N}` | star id |
 //!
 //! Offsets degenerate with the alignment (FSS null offsets, the mean magnitude bias) are left
@@ -144,7 +143,11 @@ impl Effect {
     #[must_use]
     pub fn label(&self) -> String {
         match self.sensor {
-            Some(s) => format!("{}[{}]", self.kind.name(), super::measurements::SENSOR_NAMES[s]),
+            Some(s) => format!(
+                "{}[{}]",
+                self.kind.name(),
+                super::measurements::SENSOR_NAMES[s]
+            ),
             None => self.kind.name().to_owned(),
         }
     }
@@ -156,7 +159,12 @@ impl Effect {
     }
 
     /// Columns (param index, [∂r_axis0, ∂r_axis1] in arcsec per parameter unit).
-    pub fn columns(&self, m: &Measurement, star_index: &dyn Fn(u32) -> Option<usize>, out: &mut Vec<(usize, [f64; 2])>) {
+    pub fn columns(
+        &self,
+        m: &Measurement,
+        star_index: &dyn Fn(u32) -> Option<usize>,
+        out: &mut Vec<(usize, [f64; 2])>,
+    ) {
         if !self.applies(m) {
             return;
         }
@@ -167,10 +175,17 @@ impl Effect {
             -(m.jm * m.b_acs.cross(&e))
         };
         match self.kind {
-            EffectKind::AberrationAnnual => out.push((0, v2(m.jm * m.ab_annual_acs * ARCSEC_PER_RAD))),
-            EffectKind::AberrationOrbital => out.push((0, v2(m.jm * m.ab_orbital_acs * ARCSEC_PER_RAD))),
+            EffectKind::AberrationAnnual => {
+                out.push((0, v2(m.jm * m.ab_annual_acs * ARCSEC_PER_RAD)))
+            }
+            EffectKind::AberrationOrbital => {
+                out.push((0, v2(m.jm * m.ab_orbital_acs * ARCSEC_PER_RAD)))
+            }
             EffectKind::TimeTagOffset => {
-                out.push((0, v2(m.jm * m.rate_acs.cross(&m.b_acs) * (ARCSEC_PER_RAD * 1e-3))));
+                out.push((
+                    0,
+                    v2(m.jm * m.rate_acs.cross(&m.b_acs) * (ARCSEC_PER_RAD * 1e-3)),
+                ));
             }
             EffectKind::ThermalAlignmentDrift => {
                 let dt = m.dtemp[m.sensor];
@@ -213,18 +228,17 @@ impl Effect {
                 out.push((3, [0.0, b * 1e-6 * ARCSEC_PER_RAD]));
                 out.push((4, [0.0, y * x * x]));
                 out.push((5, [0.0, y * y * y]));
-            }
-            EffectKind::FssCyclicError => {
                 if let Some(p) = self.pitch_rad {
                     let w = std::f64::consts::TAU / p;
-                    let (sa, ca) = (w * m.ang[0]).sin_cos();
-                    let (sb, cb) = (w * m.ang[1]).sin_cos();
-                    out.push((0, [sa, 0.0]));
-                    out.push((1, [ca, 0.0]));
-                    out.push((2, [0.0, sb]));
-                    out.push((3, [0.0, cb]));
+                    let (sa, ca) = (w * a).sin_cos();
+                    let (sb, cb) = (w * b).sin_cos();
+                    out.push((6, [sa, 0.0]));
+                    out.push((7, [ca, 0.0]));
+                    out.push((8, [0.0, sb]));
+                    out.push((9, [0.0, cb]));
                 }
             }
+            EffectKind::FssCyclicError => {}
             EffectKind::CatalogProperMotionError => {
                 if m.sensor < 2 {
                     if let Some(k) = star_index(m.star) {
@@ -236,14 +250,28 @@ impl Effect {
         }
     }
 
+    /// Must the signature structure be significant before the candidate may be added?
+    /// Not for aberration: its annual part is nearly a common rotation that the attitude
+    /// absorbs, so the fit sees it before any single-regressor test does.
+    #[must_use]
+    pub fn needs_indication(&self) -> bool {
+        !matches!(
+            self.kind,
+            EffectKind::AberrationAnnual | EffectKind::AberrationOrbital
+        )
+    }
+
     /// Regressors whose structure this effect should remove (adequacy check).
     #[must_use]
     pub fn signature(&self) -> &'static [super::structure::Regressor] {
         use super::structure::Regressor as R;
         match self.kind {
-            EffectKind::AberrationAnnual | EffectKind::AberrationOrbital => &[],
+            EffectKind::AberrationAnnual => &[],
+            EffectKind::AberrationOrbital => &[R::OrbitPhase],
             EffectKind::TimeTagOffset => &[R::RateX, R::RateY, R::RateZ],
-            EffectKind::ThermalAlignmentDrift | EffectKind::OrbitPeriodicAlignment => &[R::Temperature, R::OrbitPhase, R::Time],
+            EffectKind::ThermalAlignmentDrift | EffectKind::OrbitPeriodicAlignment => {
+                &[R::Temperature, R::OrbitPhase, R::Time]
+            }
             EffectKind::FhstDistortion => &[R::FovH, R::FovV, R::FovRadius],
             EffectKind::MagnitudeBias => &[R::Magnitude],
             EffectKind::FssTransferFunction | EffectKind::FssCyclicError => &[R::FovH, R::FovV],
@@ -264,18 +292,34 @@ fn active_sensors(set: &MeasurementSet) -> [bool; 4] {
 pub fn library(set: &MeasurementSet, fss_pitch_rad: [Option<f64>; 2]) -> Vec<Effect> {
     let active = active_sensors(set);
     let mut out = vec![
-        Effect::new(EffectKind::AberrationAnnual, None, &[("k_annual_minus_applied", "1", 10.0)]),
-        Effect::new(EffectKind::AberrationOrbital, None, &[("k_orbital_minus_applied", "1", 10.0)]),
+        Effect::new(
+            EffectKind::AberrationAnnual,
+            None,
+            &[("k_annual_minus_applied", "1", 10.0)],
+        ),
+        Effect::new(
+            EffectKind::AberrationOrbital,
+            None,
+            &[("k_orbital_minus_applied", "1", 10.0)],
+        ),
     ];
     for s in 0..4 {
         if !active[s] {
             continue;
         }
-        out.push(Effect::new(EffectKind::TimeTagOffset, Some(s), &[("tau", "ms", 5000.0)]));
+        out.push(Effect::new(
+            EffectKind::TimeTagOffset,
+            Some(s),
+            &[("tau", "ms", 5000.0)],
+        ));
         out.push(Effect::new(
             EffectKind::ThermalAlignmentDrift,
             Some(s),
-            &[("x", "arcsec/degC", 300.0), ("y", "arcsec/degC", 300.0), ("z", "arcsec/degC", 300.0)],
+            &[
+                ("x", "arcsec/degC", 300.0),
+                ("y", "arcsec/degC", 300.0),
+                ("z", "arcsec/degC", 300.0),
+            ],
         ));
         out.push(Effect::new(
             EffectKind::OrbitPeriodicAlignment,
@@ -293,41 +337,52 @@ pub fn library(set: &MeasurementSet, fss_pitch_rad: [Option<f64>; 2]) -> Vec<Eff
             out.push(Effect::new(
                 EffectKind::FhstDistortion,
                 Some(s),
-                &[("radial_at_4deg", "arcsec", 600.0), ("hv_h_at_corner", "arcsec", 600.0), ("hv_v_at_corner", "arcsec", 600.0)],
+                &[
+                    ("radial_at_4deg", "arcsec", 600.0),
+                    ("hv_h_at_corner", "arcsec", 600.0),
+                    ("hv_v_at_corner", "arcsec", 600.0),
+                ],
             ));
             out.push(Effect::new(
                 EffectKind::MagnitudeBias,
                 Some(s),
-                &[("h_per_mag", "arcsec/mag", 300.0), ("v_per_mag", "arcsec/mag", 300.0)],
-            ));
-        } else {
-            out.push(Effect::new(
-                EffectKind::FssTransferFunction,
-                Some(s),
                 &[
-                    ("alpha_scale", "ppm", 1.0e5),
-                    ("alpha_cross_at_corner", "arcsec", 3000.0),
-                    ("alpha_cubic_at_edge", "arcsec", 3000.0),
-                    ("beta_scale", "ppm", 1.0e5),
-                    ("beta_cross_at_corner", "arcsec", 3000.0),
-                    ("beta_cubic_at_edge", "arcsec", 3000.0),
+                    ("h_per_mag", "arcsec/mag", 300.0),
+                    ("v_per_mag", "arcsec/mag", 300.0),
                 ],
             ));
-            if let Some(p) = fss_pitch_rad[s - 2] {
-                let mut e = Effect::new(
-                    EffectKind::FssCyclicError,
-                    Some(s),
-                    &[("alpha_sin", "arcsec", 300.0), ("alpha_cos", "arcsec", 300.0), ("beta_sin", "arcsec", 300.0), ("beta_cos", "arcsec", 300.0)],
-                );
-                e.pitch_rad = Some(p);
-                e.extra_params = 1;
-                out.push(e);
+        } else {
+            let mut params = vec![
+                ("alpha_scale", "ppm", 1.0e5),
+                ("alpha_cross_at_corner", "arcsec", 3000.0),
+                ("alpha_cubic_at_edge", "arcsec", 3000.0),
+                ("beta_scale", "ppm", 1.0e5),
+                ("beta_cross_at_corner", "arcsec", 3000.0),
+                ("beta_cubic_at_edge", "arcsec", 3000.0),
+            ];
+            let pitch = fss_pitch_rad[s - 2];
+            if pitch.is_some() {
+                params.extend([
+                    ("alpha_cyclic_sin", "arcsec", 300.0),
+                    ("alpha_cyclic_cos", "arcsec", 300.0),
+                    ("beta_cyclic_sin", "arcsec", 300.0),
+                    ("beta_cyclic_cos", "arcsec", 300.0),
+                ]);
             }
+            let mut e = Effect::new(EffectKind::FssTransferFunction, Some(s), &params);
+            e.pitch_rad = pitch;
+            e.extra_params = usize::from(pitch.is_some());
+            out.push(e);
         }
     }
     // Catalog: stars seen often enough, in at least two batches.
-    let mut seen: std::collections::BTreeMap<u32, (usize, usize, usize)> = std::collections::BTreeMap::new();
-    for m in set.meas.iter().filter(|m| m.sensor < 2 && !m.outlier && m.star != 0) {
+    let mut seen: std::collections::BTreeMap<u32, (usize, usize, usize)> =
+        std::collections::BTreeMap::new();
+    for m in set
+        .meas
+        .iter()
+        .filter(|m| m.sensor < 2 && !m.outlier && m.star != 0)
+    {
         let e = seen.entry(m.star).or_insert((0, usize::MAX, 0));
         e.0 += 1;
         if e.1 != m.batch {
@@ -346,7 +401,8 @@ pub fn library(set: &MeasurementSet, fss_pitch_rad: [Option<f64>; 2]) -> Vec<Eff
             names.push((format!("HIP{h}_east"), "arcsec", 60.0));
             names.push((format!("HIP{h}_north"), "arcsec", 60.0));
         }
-        let refs: Vec<(&str, &'static str, f64)> = names.iter().map(|(n, u, s)| (n.as_str(), *u, *s)).collect();
+        let refs: Vec<(&str, &'static str, f64)> =
+            names.iter().map(|(n, u, s)| (n.as_str(), *u, *s)).collect();
         let mut e = Effect::new(EffectKind::CatalogProperMotionError, None, &refs);
         e.stars = stars;
         out.push(e);

@@ -18,7 +18,9 @@
 //! separately; the full system is their sum.
 
 use super::effects::{Effect, EffectKind};
-use super::measurements::{Measurement, MeasurementSet, NUISANCE_ANGLE_PRIOR_ARCSEC, NUISANCE_RATE_PRIOR};
+use super::measurements::{
+    Measurement, MeasurementSet, NUISANCE_ANGLE_PRIOR_ARCSEC, NUISANCE_RATE_PRIOR,
+};
 use nalgebra::{DMatrix, DVector, Matrix6, Vector6};
 use std::collections::HashMap;
 
@@ -87,11 +89,18 @@ impl Layout {
     /// Index of an effect by kind and sensor.
     #[must_use]
     pub fn find(&self, kind: EffectKind, sensor: Option<usize>) -> Option<usize> {
-        self.effects.iter().position(|e| e.kind == kind && e.sensor == sensor)
+        self.effects
+            .iter()
+            .position(|e| e.kind == kind && e.sensor == sensor)
     }
 
     /// All global columns of a measurement: (global index, [axis 0, axis 1]).
-    pub fn row_columns(&self, m: &Measurement, out: &mut Vec<(usize, [f64; 2])>, scratch: &mut Vec<(usize, [f64; 2])>) {
+    pub fn row_columns(
+        &self,
+        m: &Measurement,
+        out: &mut Vec<(usize, [f64; 2])>,
+        scratch: &mut Vec<(usize, [f64; 2])>,
+    ) {
         out.clear();
         if let Some(o) = align_offset(m.sensor) {
             for ax in 0..3 {
@@ -113,7 +122,8 @@ impl Layout {
     /// Prior information (1/σ²) per global parameter.
     #[must_use]
     pub fn prior_information(&self) -> DVector<f64> {
-        let mut p = DVector::from_element(self.total, 1.0 / (ALIGN_PRIOR_ARCSEC * ALIGN_PRIOR_ARCSEC));
+        let mut p =
+            DVector::from_element(self.total, 1.0 / (ALIGN_PRIOR_ARCSEC * ALIGN_PRIOR_ARCSEC));
         for (i, e) in self.effects.iter().enumerate() {
             for (k, s) in e.prior_sigma.iter().enumerate() {
                 p[self.offsets[i] + k] = 1.0 / (s * s);
@@ -201,7 +211,11 @@ fn batch_ranges(set: &MeasurementSet) -> Vec<std::ops::Range<usize>> {
 
 /// Accumulate the reduced normal equations over the batches selected by `use_batch`.
 #[must_use]
-pub fn accumulate(set: &MeasurementSet, layout: &Layout, use_batch: &dyn Fn(usize) -> bool) -> Normal {
+pub fn accumulate(
+    set: &MeasurementSet,
+    layout: &Layout,
+    use_batch: &dyn Fn(usize) -> bool,
+) -> Normal {
     let p = layout.total;
     let mut out = Normal::zeros(p);
     let mut local = vec![usize::MAX; p];
@@ -367,7 +381,11 @@ pub fn accumulate_halves(set: &MeasurementSet, layout: &Layout) -> Systems {
         || accumulate(set, layout, &|b| b >= half),
     );
     let full = first.sum(&second);
-    Systems { first, second, full }
+    Systems {
+        first,
+        second,
+        full,
+    }
 }
 
 /// Solution of a sub-model.
@@ -436,7 +454,9 @@ pub fn solve(normal: &Normal, layout: &Layout, idx: &[usize]) -> Option<SubFit> 
     let cov = chol.inverse();
     let chi2 = (normal.chi2 - 2.0 * x.dot(&b) + x.dot(&(&n * &x))).max(0.0);
     // Parameters without information do not consume degrees of freedom.
-    let informed = (0..k).filter(|&a| n[(a, a)] > 1e-6 * np[(a, a)].max(1e-30)).count();
+    let informed = (0..k)
+        .filter(|&a| n[(a, a)] > 1e-6 * np[(a, a)].max(1e-30))
+        .count();
     let dof = normal.rows as f64 - normal.nuisance as f64 - informed as f64;
     Some(SubFit {
         idx: idx.to_vec(),
@@ -465,7 +485,9 @@ pub fn post_fit(set: &MeasurementSet, layout: &Layout, g: &DVector<f64>) -> Post
     let mut batch_nuisance = vec![None; set.batches.len()];
     let mut cols = Vec::new();
     let mut scratch = Vec::new();
-    let model = |m: &Measurement, cols: &mut Vec<(usize, [f64; 2])>, scratch: &mut Vec<(usize, [f64; 2])>| {
+    let model = |m: &Measurement,
+                 cols: &mut Vec<(usize, [f64; 2])>,
+                 scratch: &mut Vec<(usize, [f64; 2])>| {
         layout.row_columns(m, cols, scratch);
         let mut r = m.r;
         for &(c, v) in cols.iter() {
@@ -496,7 +518,11 @@ pub fn post_fit(set: &MeasurementSet, layout: &Layout, g: &DVector<f64>) -> Post
                 na += arow[ax] * (w * r[ax]);
             }
         }
-        let a_hat = if any { naa.try_inverse().map(|inv| (inv * na, inv)) } else { None };
+        let a_hat = if any {
+            naa.try_inverse().map(|inv| (inv * na, inv))
+        } else {
+            None
+        };
         if let Some((a, inv)) = a_hat {
             batch_nuisance[bi] = Some((a, inv));
             for i in range {
@@ -506,7 +532,10 @@ pub fn post_fit(set: &MeasurementSet, layout: &Layout, g: &DVector<f64>) -> Post
             }
         }
     }
-    PostFit { resid, batch_nuisance }
+    PostFit {
+        resid,
+        batch_nuisance,
+    }
 }
 
 /// Output of [`post_fit`].

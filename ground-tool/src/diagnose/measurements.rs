@@ -187,10 +187,16 @@ pub struct MeasurementSet {
 fn orbit_phase(pos: &Vector3<f64>, vel: &Vector3<f64>) -> f64 {
     let h = pos.cross(vel);
     let n = Vector3::z().cross(&h);
-    let n = if n.norm() < 1e-9 { Vector3::x() } else { n.normalize() };
+    let n = if n.norm() < 1e-9 {
+        Vector3::x()
+    } else {
+        n.normalize()
+    };
     let hn = h.normalize();
     let y = hn.cross(&n);
-    pos.dot(&y).atan2(pos.dot(&n)).rem_euclid(std::f64::consts::TAU)
+    pos.dot(&y)
+        .atan2(pos.dot(&n))
+        .rem_euclid(std::f64::consts::TAU)
 }
 
 fn aberration_term(u: &Vector3<f64>, v_km_per_s: &Vector3<f64>) -> Vector3<f64> {
@@ -200,7 +206,11 @@ fn aberration_term(u: &Vector3<f64>, v_km_per_s: &Vector3<f64>) -> Vector3<f64> 
 
 fn tangent_basis(u: &Vector3<f64>) -> [Vector3<f64>; 2] {
     let east = Vector3::z().cross(u);
-    let east = if east.norm() < 1e-9 { Vector3::x() } else { east.normalize() };
+    let east = if east.norm() < 1e-9 {
+        Vector3::x()
+    } else {
+        east.normalize()
+    };
     [east, u.cross(&east)]
 }
 
@@ -216,7 +226,8 @@ fn make_batches(frames: &[FrameObservations]) -> Vec<(usize, usize, bool)> {
         while hi < frames.len() {
             let f = &frames[hi];
             let gap = f.time.seconds() - frames[hi - 1].time.seconds();
-            if f.high_rate != hr || f.time.seconds() - t0 >= limit || gap > 5.0 || f.gyro.is_none() {
+            if f.high_rate != hr || f.time.seconds() - t0 >= limit || gap > 5.0 || f.gyro.is_none()
+            {
                 break;
             }
             hi += 1;
@@ -235,7 +246,12 @@ impl MeasurementSet {
         let n = frames.len();
         let m_sensor: [Matrix3<f64>; 4] = {
             let t = input.alignment.matrices();
-            [matrix_from_rows(t[0]), matrix_from_rows(t[1]), matrix_from_rows(t[2]), matrix_from_rows(t[3])]
+            [
+                matrix_from_rows(t[0]),
+                matrix_from_rows(t[1]),
+                matrix_from_rows(t[2]),
+                matrix_from_rows(t[3]),
+            ]
         };
         let tau0 = input.alignment.corrections.time_offset_s;
         let k0 = if input.aberration_applied { 1.0 } else { 0.0 };
@@ -252,7 +268,8 @@ impl MeasurementSet {
         let mut dts = vec![0.0; n];
         for (k, f) in frames.iter().enumerate() {
             if let Some(g) = f.gyro {
-                phi[k] = (Matrix3::identity() + input.gyro.delta_m) * g.dtheta_acs_rad - bias_at(k) * g.dt_s;
+                phi[k] = (Matrix3::identity() + input.gyro.delta_m) * g.dtheta_acs_rad
+                    - bias_at(k) * g.dt_s;
                 dts[k] = g.dt_s;
             }
         }
@@ -305,7 +322,15 @@ impl MeasurementSet {
         for (lo, hi, hr) in make_batches(frames) {
             let center = (lo + hi) / 2;
             let bias = bias_at(center);
-            let fine = fine_attitude(frames, lo..hi, center, &bias, &input.gyro.delta_m, AttitudeSensors::FhstOnly).ok();
+            let fine = fine_attitude(
+                frames,
+                lo..hi,
+                center,
+                &bias,
+                &input.gyro.delta_m,
+                AttitudeSensors::FhstOnly,
+            )
+            .ok();
             let (a_center, is_fine) = match (fine, frames[center].obc_q_acs_from_eci) {
                 (Some(s), _) => (s.m_acs_from_eci, true),
                 (None, Some(q)) => (q.to_dcm(), false),
@@ -341,7 +366,11 @@ impl MeasurementSet {
                     Some((p, v)) => (orbit_phase(&p, &v), v),
                     None => (f64::NAN, Vector3::zeros()),
                 };
-                let v_e = input.earth_vel_eci_km_per_s.get(k).copied().unwrap_or_else(Vector3::zeros);
+                let v_e = input
+                    .earth_vel_eci_km_per_s
+                    .get(k)
+                    .copied()
+                    .unwrap_or_else(Vector3::zeros);
                 let v_tot = v_e + v_sc;
                 let sun = input.sun_eci.get(k).copied().unwrap_or_else(Vector3::zeros);
                 let mut dtemp = [0.0; 5];
@@ -349,24 +378,42 @@ impl MeasurementSet {
                     *d = t - m;
                 }
                 let rate = frame_rate[k];
-                let mut push = |sensor: usize, u: Vector3<f64>, ang: [f64; 2], sigma_rad: f64, star: u32, mag: f64| {
+                let mut push = |sensor: usize,
+                                u: Vector3<f64>,
+                                ang: [f64; 2],
+                                sigma_rad: f64,
+                                star: u32,
+                                mag: f64| {
                     let m = &m_sensor[sensor];
                     // Attitude at the sample time t − τ₀.
-                    let a_s = if tau0[sensor] == 0.0 { a_k } else { rot(&(-rate * tau0[sensor])) * a_k };
+                    let a_s = if tau0[sensor] == 0.0 {
+                        a_k
+                    } else {
+                        rot(&(-rate * tau0[sensor])) * a_k
+                    };
                     let b = a_s * u;
                     let s = m.transpose() * b;
-                    let Some((p0, p1)) = hv_from_dir(&s) else { return };
+                    let Some((p0, p1)) = hv_from_dir(&s) else {
+                        return;
+                    };
                     let jm = hv_jacobian(&s) * m.transpose();
                     let boresight = m.column(2).into_owned();
                     let tb = tangent_basis(&u);
-                    let vdir = if v_tot.norm() > 0.0 { v_tot.normalize() } else { v_tot };
+                    let vdir = if v_tot.norm() > 0.0 {
+                        v_tot.normalize()
+                    } else {
+                        v_tot
+                    };
                     meas.push(Measurement {
                         sensor,
                         frame: k,
                         batch: batch_index,
                         t_s,
                         dt_center_s: t_s - t_center,
-                        r: [(ang[0] - p0) * ARCSEC_PER_RAD, (ang[1] - p1) * ARCSEC_PER_RAD],
+                        r: [
+                            (ang[0] - p0) * ARCSEC_PER_RAD,
+                            (ang[1] - p1) * ARCSEC_PER_RAD,
+                        ],
                         sigma: sigma_rad * ARCSEC_PER_RAD,
                         jm,
                         b_acs: b,
@@ -393,12 +440,28 @@ impl MeasurementSet {
                 };
                 for (i, s) in f.stars.iter().enumerate() {
                     let Some(s) = s else { continue };
-                    let Some((hip, dir)) = s.identified else { continue };
-                    push(i, dir, [s.meas.h_rad, s.meas.v_rad], s.sigma_rad, hip, s.catalog_magnitude);
+                    let Some((hip, dir)) = s.identified else {
+                        continue;
+                    };
+                    push(
+                        i,
+                        dir,
+                        [s.meas.h_rad, s.meas.v_rad],
+                        s.sigma_rad,
+                        hip,
+                        s.catalog_magnitude,
+                    );
                 }
                 for (i, s) in f.suns.iter().enumerate() {
                     let Some(s) = s else { continue };
-                    push(i + 2, s.sun_eci, [s.meas.alpha_rad, s.meas.beta_rad], s.sigma_rad, 0, f64::NAN);
+                    push(
+                        i + 2,
+                        s.sun_eci,
+                        [s.meas.alpha_rad, s.meas.beta_rad],
+                        s.sigma_rad,
+                        0,
+                        f64::NAN,
+                    );
                 }
             }
         }
@@ -458,12 +521,19 @@ impl MeasurementSet {
     fn estimate_noise(&mut self) {
         for sensor in 0..4 {
             // Successive pairs within a batch, same star, low rate.
-            let idx: Vec<usize> = (0..self.meas.len()).filter(|&i| self.meas[i].sensor == sensor).collect();
+            let idx: Vec<usize> = (0..self.meas.len())
+                .filter(|&i| self.meas[i].sensor == sensor)
+                .collect();
             let mut z = Vec::new();
             let mut d_abs = Vec::new();
             for w in idx.windows(2) {
                 let (a, b) = (&self.meas[w[0]], &self.meas[w[1]]);
-                if a.batch != b.batch || a.star != b.star || a.high_rate || b.high_rate || b.frame != a.frame + 1 {
+                if a.batch != b.batch
+                    || a.star != b.star
+                    || a.high_rate
+                    || b.high_rate
+                    || b.frame != a.frame + 1
+                {
                     continue;
                 }
                 let s = (a.sigma * a.sigma + b.sigma * b.sigma).sqrt();
@@ -483,8 +553,11 @@ impl MeasurementSet {
             let mad = 1.4826 * sorted[sorted.len() / 2];
             let lim = 5.0 * mad.max(1e-9);
             let keep: Vec<usize> = (0..z.len()).filter(|&i| z[i] <= lim).collect();
-            let scale = (keep.iter().map(|&i| z[i] * z[i]).sum::<f64>() / keep.len().max(1) as f64).sqrt();
-            let floor = (keep.iter().map(|&i| d_abs[i] * d_abs[i]).sum::<f64>() / keep.len().max(1) as f64).sqrt();
+            let scale =
+                (keep.iter().map(|&i| z[i] * z[i]).sum::<f64>() / keep.len().max(1) as f64).sqrt();
+            let floor = (keep.iter().map(|&i| d_abs[i] * d_abs[i]).sum::<f64>()
+                / keep.len().max(1) as f64)
+                .sqrt();
             if scale.is_finite() && scale > 1e-3 {
                 self.sigma_scale[sensor] = scale;
                 self.noise_floor_arcsec[sensor] = floor;

@@ -96,7 +96,14 @@ pub struct Analysis {
 
 /// Parameters of effect `i` of a fit as (name → value, name → σ).
 #[must_use]
-pub fn effect_parameters(res: &SearchResult, i: usize) -> (BTreeMap<String, f64>, BTreeMap<String, f64>, BTreeMap<String, String>) {
+pub fn effect_parameters(
+    res: &SearchResult,
+    i: usize,
+) -> (
+    BTreeMap<String, f64>,
+    BTreeMap<String, f64>,
+    BTreeMap<String, String>,
+) {
     let e = &res.layout.effects[i];
     let mut v = BTreeMap::new();
     let mut s = BTreeMap::new();
@@ -162,7 +169,9 @@ pub fn analyse(input: &DiagnoseInput<'_>, config: &SearchConfig) -> anyhow::Resu
             let (parameters, sigma, units) = effect_parameters(&res, i);
             Detected {
                 effect: e.kind.name().to_owned(),
-                sensor: e.sensor.map_or_else(|| "all".to_owned(), |s| SENSOR_NAMES[s].to_owned()),
+                sensor: e
+                    .sensor
+                    .map_or_else(|| "all".to_owned(), |s| SENSOR_NAMES[s].to_owned()),
                 parameters,
                 sigma,
                 units,

@@ -6,14 +6,17 @@
 //!
 //! 1. **likelihood ratio**: `F = (Δχ²/k) / s²` of the larger model, p-value Holm-corrected
 //!    over the candidates of the iteration, below `alpha`;
-//! 2. **BIC** improves: `n ln(χ²₀/χ²₁) − (k + extra) ln n > 0` (extra = grid-searched
+//! 2. **BIC** improves: `n ln(χ²₀/χ²₁) − (k + extra) ln n > 10` (extra = grid-searched
 //!    nonlinear parameters such as a cyclic pitch);
 //! 3. **halves agree**: the candidate's parameters fitted on the first and on the second half
 //!    of the batches differ by less than 3σ (χ² of the difference, p > 0.0027);
-//! 4. **adequacy**: the structure the candidate is meant to explain (its signature regressors
-//!    on its sensor, [`Effect::signature`]) is gone afterwards (not significant at the
-//!    Bonferroni level of the whole test family) or reduced by ≥ 80 %; a candidate that only
-//!    soaks up part of a structure it cannot describe is not forced onto it.
+//! 4. **indication and adequacy**: the structure the candidate is meant to explain (its
+//!    signature regressors on its sensor, [`Effect::signature`]) must be there before
+//!    (Bonferroni over the signature tests, p < `indication_alpha`) — a flexible candidate
+//!    must not win on structure that shows up elsewhere — and gone afterwards (not
+//!    significant at the Bonferroni level of the whole test family) or reduced by ≥ 80 %; a
+//!    candidate that only soaks up part of a structure it cannot describe is not forced
+//!    onto it.
 //!
 //! Among the passing candidates the one with the largest ΔBIC is added. The loop ends when
 //! none passes; whatever structure the final residuals still show is reported as unexplained.
@@ -37,6 +40,11 @@ pub struct SearchConfig {
     pub max_iterations: usize,
     /// Required reduction of a signature structure that stays significant.
     pub adequacy_reduction: f64,
+    /// Significance (Bonferroni over its signature tests) of the structure that indicates a
+    /// candidate.
+    pub indication_alpha: f64,
+    /// Smallest BIC improvement accepted (10: "very strong" on the Kass–Raftery scale).
+    pub min_delta_bic: f64,
 }
 
 impl Default for SearchConfig {
@@ -46,6 +54,8 @@ impl Default for SearchConfig {
             halves_sigma: 3.0,
             max_iterations: 12,
             adequacy_reduction: 0.8,
+            indication_alpha: 0.01,
+            min_delta_bic: 10.0,
         }
     }
 }
@@ -183,10 +193,17 @@ pub fn cyclic_pitch(set: &MeasurementSet, resid: &[[f64; 2]], sensor: usize) -> 
 #[must_use]
 pub fn is_declared(effect: &Effect, declared: &[String]) -> bool {
     let truth = effect.kind.truth_name();
-    let unit = effect.sensor.map(|s| super::measurements::SENSOR_NAMES[s].to_ascii_lowercase());
+    let unit = effect
+        .sensor
+        .map(|s| super::measurements::SENSOR_NAMES[s].to_ascii_lowercase());
     declared.iter().any(|d| {
-        d == truth || d == effect.kind.name() || unit.as_ref().is_some_and(|u| *d == format!("{u}.{truth}"))
-    }) && !matches!(effect.kind, EffectKind::AberrationAnnual | EffectKind::AberrationOrbital)
+        d == truth
+            || d == effect.kind.name()
+            || unit.as_ref().is_some_and(|u| *d == format!("{u}.{truth}"))
+    }) && !matches!(
+        effect.kind,
+        EffectKind::AberrationAnnual | EffectKind::AberrationOrbital
+    )
 }
 
 fn max_excess(tests: &[StructureTest]) -> f64 {
@@ -205,23 +222,41 @@ fn sensors_of(effect: &Effect) -> Vec<usize> {
 ///
 /// # Errors
 /// The baseline fit is singular (no usable data).
-pub fn search(set: &mut MeasurementSet, declared: &[String], config: &SearchConfig) -> anyhow::Result<SearchResult> {
+pub fn search(
+    set: &mut MeasurementSet,
+    declared: &[String],
+    config: &SearchConfig,
+) -> anyhow::Result<SearchResult> {
     // Preliminary fit (alignments only) to get clean residuals for the pitch search and the
     // outlier flags.
     let prelim_layout = Layout::new(super::effects::library(set, [None, None]));
     let prelim_sys = accumulate_halves(set, &prelim_layout);
-    let prelim = solve(&prelim_sys.full, &prelim_layout, &indices(&prelim_layout, &[]))
-        .ok_or_else(|| anyhow::anyhow!("diagnose: the alignment fit is singular (no epochs with FHST stars?)"))?;
+    let prelim = solve(
+        &prelim_sys.full,
+        &prelim_layout,
+        &indices(&prelim_layout, &[]),
+    )
+    .ok_or_else(|| {
+        anyhow::anyhow!("diagnose: the alignment fit is singular (no epochs with FHST stars?)")
+    })?;
     let pf = post_fit(set, &prelim_layout, &prelim.expand(prelim_layout.total));
     set.flag_outliers(&pf.resid);
-    let pitch = [cyclic_pitch(set, &pf.resid, 2), cyclic_pitch(set, &pf.resid, 3)];
+    let pitch = [
+        cyclic_pitch(set, &pf.resid, 2),
+        cyclic_pitch(set, &pf.resid, 3),
+    ];
 
     let layout = Layout::new(super::effects::library(set, pitch));
     let systems = accumulate_halves(set, &layout);
-    let baseline: Vec<usize> = (0..layout.effects.len()).filter(|&i| is_declared(&layout.effects[i], declared)).collect();
+    let baseline: Vec<usize> = (0..layout.effects.len())
+        .filter(|&i| is_declared(&layout.effects[i], declared))
+        .collect();
     let mut model = baseline.clone();
-    let fit_model = |sys: &super::fit::Normal, effects: &[usize]| solve(sys, &layout, &indices(&layout, effects));
-    let baseline_fit = fit_model(&systems.full, &model).ok_or_else(|| anyhow::anyhow!("diagnose: the baseline fit is singular"))?;
+    let fit_model = |sys: &super::fit::Normal, effects: &[usize]| {
+        solve(sys, &layout, &indices(&layout, effects))
+    };
+    let baseline_fit = fit_model(&systems.full, &model)
+        .ok_or_else(|| anyhow::anyhow!("diagnose: the baseline fit is singular"))?;
     let before = post_fit(set, &layout, &baseline_fit.expand(layout.total));
     let tests_before = run_tests(set, &before, None, None);
     let family = tests_before.len().max(1) as f64;
@@ -234,31 +269,45 @@ pub fn search(set: &mut MeasurementSet, declared: &[String], config: &SearchConf
     let mut evidence_added = Vec::new();
     let mut added = Vec::new();
     for number in 1..=config.max_iterations {
-        let candidates: Vec<usize> = (0..layout.effects.len()).filter(|i| !model.contains(i)).collect();
+        let candidates: Vec<usize> = (0..layout.effects.len())
+            .filter(|i| !model.contains(i))
+            .collect();
         let mut evs: Vec<(usize, Evidence, Option<SubFit>)> = Vec::new();
         for &c in &candidates {
             let effect = &layout.effects[c];
             let mut with = model.clone();
             with.push(c);
-            let Some(big) = fit_model(&systems.full, &with) else { continue };
+            let Some(big) = fit_model(&systems.full, &with) else {
+                continue;
+            };
             let k = effect.len();
             let dchi2 = current.chi2 - big.chi2;
             let s2 = big.s2();
             let f = (dchi2 / k as f64) / s2;
             let p = f_sf(f, k as f64, big.dof);
-            let dbic = n_rows * (current.chi2 / big.chi2).ln() - (k + effect.extra_params) as f64 * n_rows.ln();
+            let dbic = n_rows * (current.chi2 / big.chi2).ln()
+                - (k + effect.extra_params) as f64 * n_rows.ln();
             // Halves.
             let range: Vec<usize> = layout.range(c).collect();
             let (mut hchi2, mut hp, mut est) = (f64::NAN, 0.0, (Vec::new(), Vec::new()));
-            if let (Some(a), Some(b)) = (fit_model(&systems.first, &with), fit_model(&systems.second, &with)) {
-                let pos = |fit: &SubFit| -> Vec<usize> { range.iter().filter_map(|i| fit.idx.iter().position(|j| j == i)).collect() };
+            if let (Some(a), Some(b)) = (
+                fit_model(&systems.first, &with),
+                fit_model(&systems.second, &with),
+            ) {
+                let pos = |fit: &SubFit| -> Vec<usize> {
+                    range
+                        .iter()
+                        .filter_map(|i| fit.idx.iter().position(|j| j == i))
+                        .collect()
+                };
                 let (pa, pb) = (pos(&a), pos(&b));
                 let xa = nalgebra::DVector::from_iterator(k, pa.iter().map(|&i| a.x[i]));
                 let xb = nalgebra::DVector::from_iterator(k, pb.iter().map(|&i| b.x[i]));
                 let mut cab = DMatrix::zeros(k, k);
                 for (r, (&ia, &ib)) in pa.iter().zip(&pb).enumerate() {
                     for (q, (&ja, &jb)) in pa.iter().zip(&pb).enumerate() {
-                        cab[(r, q)] = a.cov[(ia, ja)] * a.s2().max(1.0) + b.cov[(ib, jb)] * b.s2().max(1.0);
+                        cab[(r, q)] =
+                            a.cov[(ia, ja)] * a.s2().max(1.0) + b.cov[(ib, jb)] * b.s2().max(1.0);
                     }
                 }
                 let (inv, rank) = crate::linalg::sym_pinv(&cab, 1e-12);
@@ -300,11 +349,17 @@ pub fn search(set: &mut MeasurementSet, declared: &[String], config: &SearchConf
             if !(e.p_holm < config.alpha) {
                 why.push(format!("LR p_holm {:.3e} ≥ {}", e.p_holm, config.alpha));
             }
-            if !(e.delta_bic > 0.0) {
-                why.push(format!("ΔBIC {:.1} ≤ 0", e.delta_bic));
+            if !(e.delta_bic > config.min_delta_bic) {
+                why.push(format!(
+                    "ΔBIC {:.1} ≤ {}",
+                    e.delta_bic, config.min_delta_bic
+                ));
             }
             if !(e.halves_p > halves_p_min) {
-                why.push(format!("halves differ (χ² {:.1}, p {:.2e})", e.halves_chi2, e.halves_p));
+                why.push(format!(
+                    "halves differ (χ² {:.1}, p {:.2e})",
+                    e.halves_chi2, e.halves_p
+                ));
             }
             if why.is_empty() {
                 let effect = &layout.effects[*c];
@@ -318,9 +373,15 @@ pub fn search(set: &mut MeasurementSet, declared: &[String], config: &SearchConf
                     let after = run_tests(set, &post, Some(&sensors), Some(sig));
                     let (x0, x1) = (max_excess(&pre), max_excess(&after));
                     e.signature_excess = (x0, x1);
+                    let p_min = pre.iter().map(|t| t.p_value).fold(1.0, f64::min);
+                    let indicated = !effect.needs_indication()
+                        || p_min * (pre.len().max(1) as f64) < config.indication_alpha;
                     let still = after.iter().any(|t| t.p_value < p_thr);
-                    e.adequate = !still || x1 <= (1.0 - config.adequacy_reduction) * x0;
-                    if !e.adequate {
+                    e.adequate =
+                        indicated && (!still || x1 <= (1.0 - config.adequacy_reduction) * x0);
+                    if !indicated {
+                        why.push(format!("not indicated: no signature structure before (min p {p_min:.2e} over {} tests)", pre.len()));
+                    } else if !e.adequate {
                         why.push(format!(
                             "inadequate: signature structure remains (max F−1 {x0:.1} → {x1:.1})"
                         ));

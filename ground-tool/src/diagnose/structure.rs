@@ -141,6 +141,7 @@ impl Regressor {
         match self {
             Self::OrbitPhase => &[Method::Harmonics],
             Self::StarId | Self::RateMode => &[Method::Groups],
+            Self::SinceSlew => &[Method::Binned, Method::Cubic, Method::FineBinned],
             _ => &[Method::Binned, Method::Cubic],
         }
     }
@@ -158,6 +159,8 @@ pub enum Method {
     Harmonics,
     /// Grouping (star id, rate mode).
     Groups,
+    /// Fixed 15-s bins over the first 900 s after a slew (oscillations after maneuvers).
+    FineBinned,
 }
 
 /// One structure test.
@@ -199,7 +202,11 @@ struct Sample {
 }
 
 /// Weighted least squares of r on the given basis functions (columns); returns RSS.
-fn wls_rss(samples: &[Sample], basis: &dyn Fn(f64, &mut [f64]), k: usize) -> Option<(f64, Vec<f64>)> {
+fn wls_rss(
+    samples: &[Sample],
+    basis: &dyn Fn(f64, &mut [f64]),
+    k: usize,
+) -> Option<(f64, Vec<f64>)> {
     let mut n = nalgebra::DMatrix::<f64>::zeros(k, k);
     let mut b = nalgebra::DVector::<f64>::zeros(k);
     let mut row = vec![0.0; k];
@@ -223,8 +230,12 @@ fn wls_rss(samples: &[Sample], basis: &dyn Fn(f64, &mut [f64]), k: usize) -> Opt
     Some((rss, x.iter().copied().collect()))
 }
 
-fn anova(samples: &[Sample], group: &dyn Fn(&Sample) -> i64) -> Option<(f64, f64, f64, f64, Vec<(f64, f64)>)> {
-    let mut groups: std::collections::BTreeMap<i64, (f64, f64, f64, usize)> = std::collections::BTreeMap::new();
+fn anova(
+    samples: &[Sample],
+    group: &dyn Fn(&Sample) -> i64,
+) -> Option<(f64, f64, f64, f64, Vec<(f64, f64)>)> {
+    let mut groups: std::collections::BTreeMap<i64, (f64, f64, f64, usize)> =
+        std::collections::BTreeMap::new();
     for s in samples {
         let g = groups.entry(group(s)).or_insert((0.0, 0.0, 0.0, 0));
         g.0 += s.w;
@@ -277,6 +288,21 @@ fn run_one(samples: &[Sample], method: Method) -> Option<(f64, f64, f64, f64, Ve
     let n = samples.len();
     match method {
         Method::Groups => anova(samples, &|s| s.x.round() as i64),
+        Method::FineBinned => {
+            let early: Vec<Sample> = samples
+                .iter()
+                .filter(|s| s.x < 900.0)
+                .map(|s| Sample {
+                    x: s.x,
+                    r: s.r,
+                    w: s.w,
+                })
+                .collect();
+            if early.len() < 100 {
+                return None;
+            }
+            anova(&early, &|s| (s.x / 15.0).floor() as i64)
+        }
         Method::Binned => {
             let mut xs: Vec<f64> = samples.iter().map(|s| s.x).collect();
             xs.sort_by(f64::total_cmp);
@@ -289,7 +315,11 @@ fn run_one(samples: &[Sample], method: Method) -> Option<(f64, f64, f64, f64, Ve
             anova(samples, &|s| edges.partition_point(|e| *e <= s.x) as i64)
         }
         Method::Cubic | Method::Harmonics => {
-            let (lo, hi) = samples.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), s| (a.min(s.x), b.max(s.x)));
+            let (lo, hi) = samples
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), s| {
+                    (a.min(s.x), b.max(s.x))
+                });
             if !(hi > lo) {
                 return None;
             }
@@ -309,8 +339,11 @@ fn run_one(samples: &[Sample], method: Method) -> Option<(f64, f64, f64, f64, Ve
                     row[2 * h] = s;
                 }
             };
-            let (basis, k): (&dyn Fn(f64, &mut [f64]), usize) =
-                if method == Method::Cubic { (&cubic, 4) } else { (&harm, 7) };
+            let (basis, k): (&dyn Fn(f64, &mut [f64]), usize) = if method == Method::Cubic {
+                (&cubic, 4)
+            } else {
+                (&harm, 7)
+            };
             let (rss0, c0) = wls_rss(samples, &|_, row: &mut [f64]| row[0] = 1.0, 1)?;
             let (rss1, c1) = wls_rss(samples, basis, k)?;
             let d1 = (k - 1) as f64;
@@ -341,7 +374,13 @@ fn run_one(samples: &[Sample], method: Method) -> Option<(f64, f64, f64, f64, Ve
 /// attitude, so all FSS samples of a batch share its error: they are averaged per batch,
 /// with the variance `σ²/n + f P fᵀ` (f the mean attitude partial, P the batch attitude
 /// covariance), and the regressor averaged likewise.
-fn samples_for(set: &MeasurementSet, post: &PostFit, sensor: usize, axis: usize, reg: Regressor) -> Vec<Sample> {
+fn samples_for(
+    set: &MeasurementSet,
+    post: &PostFit,
+    sensor: usize,
+    axis: usize,
+    reg: Regressor,
+) -> Vec<Sample> {
     let resid = &post.resid;
     if sensor < 2 {
         return set
@@ -463,7 +502,14 @@ pub fn run_tests(
 
 /// Binned means of residuals against a regressor for plots: (bin centre, mean, standard error).
 #[must_use]
-pub fn binned_means(set: &MeasurementSet, post: &PostFit, sensor: usize, axis: usize, reg: Regressor, bins: usize) -> Vec<(f64, f64, f64)> {
+pub fn binned_means(
+    set: &MeasurementSet,
+    post: &PostFit,
+    sensor: usize,
+    axis: usize,
+    reg: Regressor,
+    bins: usize,
+) -> Vec<(f64, f64, f64)> {
     let mut s = samples_for(set, post, sensor, axis, reg);
     if s.len() < 2 * bins {
         return Vec::new();

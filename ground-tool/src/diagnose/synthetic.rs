@@ -11,7 +11,9 @@
 //! that is in the truth and not in the references/tables.
 
 use crate::calibration::iru::{GyroCalibration, GyroStep};
-use crate::pipeline::observations::{DeclaredNoise, FrameObservations, StarObservation, SunObservation};
+use crate::pipeline::observations::{
+    DeclaredNoise, FrameObservations, StarObservation, SunObservation,
+};
 use fsw_core::attitude::{rot, Quat};
 use fsw_core::fhst::FhstMeasurement;
 use fsw_core::fss::FssMeasurement;
@@ -42,9 +44,9 @@ pub struct SynthEffects {
     pub catalog_sigma_arcsec: f64,
     /// Not in the library: alignment ∝ ΔT² (arcsec/°C², ACS) per sensor.
     pub thermal_squared: [[f64; 3]; 4],
-    /// Not in the library: (sensor, amplitude arcsec, period s, decay s) oscillation of the
-    /// sensor's alignment about ACS x after every slew.
-    pub post_slew_oscillation: Option<(usize, f64, f64, f64)>,
+    /// Not in the library: (sensor, amplitude arcsec, period s, decay s, ACS axis) oscillation
+    /// of the sensor's alignment after every slew.
+    pub post_slew_oscillation: Option<(usize, f64, f64, f64, usize)>,
 }
 
 /// Synthetic run settings.
@@ -149,7 +151,11 @@ impl Rng64 {
 
 fn unit(rng: &mut Rng64) -> Vector3<f64> {
     loop {
-        let v = Vector3::new(2.0 * rng.uniform() - 1.0, 2.0 * rng.uniform() - 1.0, 2.0 * rng.uniform() - 1.0);
+        let v = Vector3::new(
+            2.0 * rng.uniform() - 1.0,
+            2.0 * rng.uniform() - 1.0,
+            2.0 * rng.uniform() - 1.0,
+        );
         let n = v.norm();
         if n > 0.1 && n <= 1.0 {
             return v / n;
@@ -205,11 +211,19 @@ pub fn generate(cfg: &SynthConfig) -> SynthRun {
         if fx.catalog_sigma_arcsec > 0.0 {
             let east = Vector3::z().cross(&dir).normalize();
             let north = dir.cross(&east);
-            let (de, dn) = (gauss(&mut rng) * fx.catalog_sigma_arcsec, gauss(&mut rng) * fx.catalog_sigma_arcsec);
+            let (de, dn) = (
+                gauss(&mut rng) * fx.catalog_sigma_arcsec,
+                gauss(&mut rng) * fx.catalog_sigma_arcsec,
+            );
             offset = (east * de + north * dn) * RAD_PER_ARCSEC;
             catalog_offsets.insert(hip, [de, dn]);
         }
-        stars.push(Star { hip, dir, mag, offset });
+        stars.push(Star {
+            hip,
+            dir,
+            mag,
+            offset,
+        });
     }
     // Geometry.
     let pre = AlignmentTable::prelaunch();
@@ -220,11 +234,18 @@ pub fn generate(cfg: &SynthConfig) -> SynthRun {
         Vector3::new(300.0, -500.0, 200.0),
         Vector3::new(-200.0, 150.0, 100.0),
     ];
-    let m_true: [Matrix3<f64>; 4] = std::array::from_fn(|i| rot(&(mis[i] * RAD_PER_ARCSEC)) * m_pre[i]);
+    let m_true: [Matrix3<f64>; 4] =
+        std::array::from_fn(|i| rot(&(mis[i] * RAD_PER_ARCSEC)) * m_pre[i]);
     // The "current calibration": truth plus small errors relative to FHST1.
-    let cal_err = [Vector3::zeros(), Vector3::new(3.0, -2.0, 4.0), Vector3::new(20.0, -15.0, 10.0), Vector3::new(-10.0, 12.0, 8.0)];
+    let cal_err = [
+        Vector3::zeros(),
+        Vector3::new(3.0, -2.0, 4.0),
+        Vector3::new(20.0, -15.0, 10.0),
+        Vector3::new(-10.0, 12.0, 8.0),
+    ];
     let mut alignment = pre;
-    let flown: [Matrix3<f64>; 4] = std::array::from_fn(|i| rot(&(cal_err[i] * RAD_PER_ARCSEC)) * m_true[i]);
+    let flown: [Matrix3<f64>; 4] =
+        std::array::from_fn(|i| rot(&(cal_err[i] * RAD_PER_ARCSEC)) * m_true[i]);
     alignment.m_acs_from_fhst1 = rows_from_matrix(&flown[0]);
     alignment.m_acs_from_fhst2 = rows_from_matrix(&flown[1]);
     alignment.m_acs_from_fss1 = rows_from_matrix(&flown[2]);
@@ -299,10 +320,12 @@ pub fn generate(cfg: &SynthConfig) -> SynthRun {
         // Sensor alignment at this time (thermal and non-library terms).
         let m_sensor = |s: usize| -> Matrix3<f64> {
             let dt = dtemp[s];
-            let mut th = Vector3::from(fx.thermal_arcsec_per_c[s]) * dt + Vector3::from(fx.thermal_squared[s]) * (dt * dt);
-            if let Some((os, amp, per, decay)) = fx.post_slew_oscillation {
+            let mut th = Vector3::from(fx.thermal_arcsec_per_c[s]) * dt
+                + Vector3::from(fx.thermal_squared[s]) * (dt * dt);
+            if let Some((os, amp, per, decay, axis)) = fx.post_slew_oscillation {
                 if os == s && since.is_finite() {
-                    th.x += amp * (-since / decay).exp() * (std::f64::consts::TAU * since / per).sin();
+                    th[axis.min(2)] +=
+                        amp * (-since / decay).exp() * (std::f64::consts::TAU * since / per).sin();
                 }
             }
             if th == Vector3::zeros() {
@@ -312,7 +335,13 @@ pub fn generate(cfg: &SynthConfig) -> SynthRun {
             }
         };
         // Attitude at the sensor's sample time.
-        let a_at = |tau: f64| if tau == 0.0 { a } else { rot(&(-prev_rate * tau)) * a };
+        let a_at = |tau: f64| {
+            if tau == 0.0 {
+                a
+            } else {
+                rot(&(-prev_rate * tau)) * a
+            }
+        };
         let mut stars_obs = [None, None];
         for tr in 0..2 {
             let m = m_sensor(tr);
@@ -329,7 +358,8 @@ pub fn generate(cfg: &SynthConfig) -> SynthRun {
                 (h.abs() <= half && v.abs() <= half).then_some((h, v))
             };
             let mut new_star = false;
-            let keep = track[tr].is_some_and(|(i, since_t)| t - since_t < 300.0 && visible(i).is_some());
+            let keep =
+                track[tr].is_some_and(|(i, since_t)| t - since_t < 300.0 && visible(i).is_some());
             if !keep {
                 if let Some((i, _)) = track[tr].take() {
                     recent[tr].push((stars[i].hip, t));
@@ -340,7 +370,11 @@ pub fn generate(cfg: &SynthConfig) -> SynthRun {
                     if st.dir.dot(&bore) < (6.0 * RAD_PER_DEG).cos() || visible(i).is_none() {
                         continue;
                     }
-                    let last = recent[tr].iter().filter(|(h, _)| *h == st.hip).map(|(_, tt)| *tt).fold(f64::NEG_INFINITY, f64::max);
+                    let last = recent[tr]
+                        .iter()
+                        .filter(|(h, _)| *h == st.hip)
+                        .map(|(_, tt)| *tt)
+                        .fold(f64::NEG_INFINITY, f64::max);
                     let fresh = t - last >= 1800.0;
                     let better = match best {
                         None => true,
@@ -366,12 +400,24 @@ pub fn generate(cfg: &SynthConfig) -> SynthRun {
             dh += fx.magnitude_bias[tr][0] * (st.mag - 4.0);
             dv += fx.magnitude_bias[tr][1] * (st.mag - 4.0);
             let rho = rho2.sqrt();
-            let sigma = 6.0 + 12.0 * 10f64.powf(0.2 * (st.mag - 5.7)) + 6.0 * (rho / (half * std::f64::consts::SQRT_2)).powi(2);
-            let hm = quant(h * ARCSEC_PER_RAD + dh + ns * sigma * gauss(&mut rng), fhst_q) * RAD_PER_ARCSEC;
-            let vm = quant(v * ARCSEC_PER_RAD + dv + ns * sigma * gauss(&mut rng), fhst_q) * RAD_PER_ARCSEC;
+            let sigma = 6.0
+                + 12.0 * 10f64.powf(0.2 * (st.mag - 5.7))
+                + 6.0 * (rho / (half * std::f64::consts::SQRT_2)).powi(2);
+            let hm = quant(
+                h * ARCSEC_PER_RAD + dh + ns * sigma * gauss(&mut rng),
+                fhst_q,
+            ) * RAD_PER_ARCSEC;
+            let vm = quant(
+                v * ARCSEC_PER_RAD + dv + ns * sigma * gauss(&mut rng),
+                fhst_q,
+            ) * RAD_PER_ARCSEC;
             let mag_m = st.mag + 0.05 * gauss(&mut rng);
             let dir_sensor = fsw_core::fhst::dir_from_hv(hm, vm);
-            let reference = if cfg.aberration_applied { aberrate(&st.dir, &v_obs) } else { st.dir };
+            let reference = if cfg.aberration_applied {
+                aberrate(&st.dir, &v_obs)
+            } else {
+                st.dir
+            };
             stars_obs[tr] = Some(StarObservation {
                 meas: FhstMeasurement {
                     h_rad: hm,
@@ -387,9 +433,14 @@ pub fn generate(cfg: &SynthConfig) -> SynthRun {
             });
         }
         // FSS.
-        let in_umbra = pos.dot(&sun_eci) < 0.0 && (pos - sun_eci * pos.dot(&sun_eci)).norm() < 6378.0;
+        let in_umbra =
+            pos.dot(&sun_eci) < 0.0 && (pos - sun_eci * pos.dot(&sun_eci)).norm() < 6378.0;
         let sun_app = aberrate(&sun_eci, &v_obs);
-        let sun_ref = if cfg.aberration_applied { sun_app } else { sun_eci };
+        let sun_ref = if cfg.aberration_applied {
+            sun_app
+        } else {
+            sun_eci
+        };
         let mut suns_obs = [None, None];
         if !in_umbra {
             for u in 0..2 {
@@ -407,7 +458,12 @@ pub fn generate(cfg: &SynthConfig) -> SynthRun {
                     Some((ea, eb)) => (ea.apply(al, be), eb.apply(be, al)),
                     None => (al, be),
                 };
-                let mut q = |x: f64| quant(x * ARCSEC_PER_RAD + ns * 0.5 * fss_q * gauss(&mut rng), fss_q) * RAD_PER_ARCSEC;
+                let mut q = |x: f64| {
+                    quant(
+                        x * ARCSEC_PER_RAD + ns * 0.5 * fss_q * gauss(&mut rng),
+                        fss_q,
+                    ) * RAD_PER_ARCSEC
+                };
                 let (aq, bq) = (q(am), q(bm));
                 let dir_sensor = fsw_core::fss::dir_from_angles(aq, bq);
                 suns_obs[u] = Some(SunObservation {
