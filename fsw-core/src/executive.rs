@@ -38,7 +38,7 @@ use crate::tables::types::matrix_from_rows;
 use crate::tables::{TableId, TableSet};
 use crate::telemetry::{MeasurementStatus, ObcHousekeeping, SensorResidual};
 use crate::units::ARCSEC_PER_RAD;
-use nalgebra::Vector3;
+use nalgebra::{Matrix3, Vector3};
 
 /// Largest number of commands processed in one cycle (further ones are refused).
 pub const MAX_COMMANDS_PER_CYCLE: usize = 8;
@@ -156,6 +156,7 @@ pub struct FlightCore {
     last_rate_acs_rad_per_s: Vector3<f64>,
     wheel_torque_cmd_nm: Vector3<f64>,
     sun_cache: Option<(f64, Vector3<f64>)>,
+    slew_angle_rad: f64,
 }
 
 impl Default for FlightCore {
@@ -197,6 +198,7 @@ impl FlightCore {
             last_rate_acs_rad_per_s: Vector3::zeros(),
             wheel_torque_cmd_nm: Vector3::zeros(),
             sun_cache: None,
+            slew_angle_rad: 0.0,
         }
     }
 
@@ -260,6 +262,11 @@ impl FlightCore {
         };
         if dt_s > 0.0 {
             self.last_rate_acs_rad_per_s = delta_theta / dt_s - self.filter.bias_rad_per_s;
+        }
+        if initialized && self.control_mode == ControlMode::Slew {
+            self.inflate_for_gyro_calibration(&delta_theta);
+        } else {
+            self.slew_angle_rad = 0.0;
         }
         if initialized
             && self
@@ -800,6 +807,23 @@ impl FlightCore {
             innovation_arcsec,
             star_id: 0,
         }
+    }
+
+    /// Gyro scale-factor/misalignment uncertainty during a slew: the attitude error it causes
+    /// is coherent (∝ angle turned), so the standard deviation grows linearly with the angle:
+    /// `var += k² ((θ + |Δθ|)² − θ²)` per axis, `k` = `gyro_scale_uncertainty`.
+    fn inflate_for_gyro_calibration(&mut self, delta_theta: &Vector3<f64>) {
+        let k = self.tables.filter().gyro_scale_uncertainty;
+        let step = delta_theta.norm();
+        if !(step.is_finite() && k.is_finite()) {
+            return;
+        }
+        let before = self.slew_angle_rad;
+        let after = before + step;
+        self.slew_angle_rad = after;
+        let var = k * k * (after * after - before * before);
+        let mut block = self.filter.covariance.fixed_view_mut::<3, 3>(0, 0);
+        block += Matrix3::identity() * var;
     }
 
     /// Onboard Sun direction, re-evaluated at most every [`SUN_REFRESH_S`] (the Sun moves

@@ -341,6 +341,11 @@ pub struct FilterTable {
     pub torque_limit_nm: f64,
     /// Attitude error below which a slew is complete and the IRU returns to low rate, rad.
     pub slew_complete_rad: f64,
+    /// Relative uncertainty of the gyro scale factors and misalignments (unitless, e.g. 1e-3
+    /// before IRU calibration): during slews the attitude covariance grows coherently by this
+    /// fraction of the angle turned, so that the filter accepts the post-maneuver star
+    /// updates instead of gating them out.
+    pub gyro_scale_uncertainty: f64,
 }
 
 impl FilterTable {
@@ -368,10 +373,11 @@ impl FilterTable {
             control_damping: 0.9,
             torque_limit_nm: 0.5,
             slew_complete_rad: 0.05 * RAD_PER_DEG,
+            gyro_scale_uncertainty: 1.0e-3,
         }
     }
 
-    /// Content checks; field numbers are the declaration order 0..=19.
+    /// Content checks; field numbers are the declaration order 0..=20.
     ///
     /// # Errors
     /// The first failed check.
@@ -397,6 +403,7 @@ impl FilterTable {
         check_range(self.control_damping, 0.1, 5.0, 17)?;
         check_range(self.torque_limit_nm, 1e-3, 100.0, 18)?;
         check_range(self.slew_complete_rad, 1e-6, 0.5, 19)?;
+        check_range(self.gyro_scale_uncertainty, 0.0, 0.05, 20)?;
         Ok(())
     }
 

@@ -44,6 +44,16 @@ use std::path::{Path, PathBuf};
 /// Sensor names in table order.
 pub const SENSOR_NAMES: [&str; 4] = ["FHST1", "FHST2", "FSS1", "FSS2"];
 
+/// Largest per-axis σ of a fine attitude accepted as an IRUCAL interval end, arcsec.
+const MAX_FIX_SIGMA_ARCSEC: f64 = 120.0;
+
+/// σ floor added to every fine attitude per axis (residual alignment error), arcsec.
+const FIX_SIGMA_FLOOR_ARCSEC: f64 = 3.0;
+
+/// Fewest intervals kept by the outlier loop, and needed before a new G is uplinked: 12
+/// unknowns need redundancy (≥ 18 equations) for the residuals to vouch for the solution.
+const MIN_IRUCAL_INTERVALS: usize = 6;
+
 /// Half-length of the fine-attitude batches (s): the paper's 10-min batches.
 const BATCH_HALF_S: f64 = 300.0;
 
@@ -117,6 +127,8 @@ pub struct IruReport {
     pub residual_after_arcsec: Vec<f64>,
     /// Whether the new G was written (δM significant at 3σ somewhere).
     pub g_updated: bool,
+    /// Intervals dropped as outliers (index in the order they were built, after earlier drops).
+    pub rejected_intervals: Vec<usize>,
 }
 
 /// A maneuver found in the telemetry.
@@ -253,8 +265,10 @@ pub fn read_metadata(run_dir: &Path) -> anyhow::Result<Metadata> {
     if !path.exists() {
         return Ok(Metadata::default());
     }
-    let text = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
-    serde_json::from_str(&text).with_context(|| format!("{} is not valid metadata (docs/icd.md §5)", path.display()))
+    let text =
+        std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
+    serde_json::from_str(&text)
+        .with_context(|| format!("{} is not valid metadata (docs/icd.md §5)", path.display()))
 }
 
 /// FFCAL input from the frames.
@@ -315,12 +329,44 @@ fn batch_fix(
     if hi <= lo + 10 || center < lo || center >= hi {
         return None;
     }
-    let sol = fine_attitude(frames, lo..hi, center, bias, delta_m, AttitudeSensors::FhstOnly).ok()?;
+    // FHST-only ends are best (the paper's recommendation); when the trackers do not give two
+    // non-parallel vectors in the batch (Earth occultation, a single star), fall back to
+    // FHST + FSS ends as the paper itself did for some of its intervals.
+    let sol = fine_attitude(
+        frames,
+        lo..hi,
+        center,
+        bias,
+        delta_m,
+        AttitudeSensors::FhstOnly,
+    )
+    .or_else(|_| {
+        fine_attitude(
+            frames,
+            lo..hi,
+            center,
+            bias,
+            delta_m,
+            AttitudeSensors::FhstAndFss,
+        )
+    })
+    .ok()?;
+    // A fix is an interval end only if every axis is known to FSS quality or better (the
+    // paper's FSS-based ends were 0.022°); a batch with one star and the Sun nearly parallel
+    // gives a formally valid but useless attitude.
+    let sigma_max_rad = (0..3)
+        .map(|i| sol.cov_acs_rad2[(i, i)].max(0.0).sqrt())
+        .fold(0.0, f64::max);
+    if !(sigma_max_rad * ARCSEC_PER_RAD <= MAX_FIX_SIGMA_ARCSEC) {
+        return None;
+    }
+    // Floor for systematic errors the formal covariance ignores (residual alignment error).
+    let floor = (FIX_SIGMA_FLOOR_ARCSEC / ARCSEC_PER_RAD).powi(2);
     Some((
         center,
         AttitudeFix {
             m_acs_from_eci: sol.m_acs_from_eci,
-            cov_acs_rad2: sol.cov_acs_rad2,
+            cov_acs_rad2: sol.cov_acs_rad2 + Matrix3::identity() * floor,
         },
     ))
 }
@@ -372,10 +418,19 @@ pub fn calibrate_telemetry(
             tm.raw.len()
         );
     }
-    let flown_alignment = options.flown_alignment.unwrap_or_else(AlignmentTable::prelaunch);
+    let flown_alignment = options
+        .flown_alignment
+        .unwrap_or_else(AlignmentTable::prelaunch);
     let flown_iru = options.flown_iru.unwrap_or_else(IruTable::prelaunch);
     let sky = load_catalog()?;
-    let frames = build_observations(tm, &flown_alignment, &flown_iru, &metadata.sensors, &sky, &options.identify);
+    let frames = build_observations(
+        tm,
+        &flown_alignment,
+        &flown_iru,
+        &metadata.sensors,
+        &sky,
+        &options.identify,
+    );
     let mut summary = DataSummary {
         frames: frames.len(),
         ..DataSummary::default()
@@ -403,7 +458,11 @@ pub fn calibrate_telemetry(
     // FFCAL.
     let data = alignment_data(&frames);
     summary.ffcal_epochs = data.epoch_count();
-    let flown: Vec<Matrix3<f64>> = flown_alignment.matrices().iter().map(|m| matrix_from_rows(m)).collect();
+    let flown: Vec<Matrix3<f64>> = flown_alignment
+        .matrices()
+        .iter()
+        .map(|m| matrix_from_rows(m))
+        .collect();
     let sensors: Vec<SensorSpec> = SENSOR_NAMES
         .iter()
         .zip(flown.iter())
@@ -422,13 +481,21 @@ pub fn calibrate_telemetry(
     })?;
 
     // Adjustment.
-    let calibrated: Vec<Matrix3<f64>> = solution.sensors.iter().map(|s| s.m_acs_from_sensor_calibrated).collect();
+    let calibrated: Vec<Matrix3<f64>> = solution
+        .sensors
+        .iter()
+        .map(|s| s.m_acs_from_sensor_calibrated)
+        .collect();
     let adjustment = preserve_obc_attitude(&flown, &calibrated, 0, 1, BoresightFrame::Bisector)?;
     let mut alignments = std::collections::BTreeMap::new();
     let mut alignments_adjusted = std::collections::BTreeMap::new();
     let mut residual = BeforeAfter::default();
     for (i, s) in solution.sensors.iter().enumerate() {
-        let sigma = [s.sigma_acs_arcsec.x, s.sigma_acs_arcsec.y, s.sigma_acs_arcsec.z];
+        let sigma = [
+            s.sigma_acs_arcsec.x,
+            s.sigma_acs_arcsec.y,
+            s.sigma_acs_arcsec.z,
+        ];
         alignments.insert(
             s.id.clone(),
             AlignmentReport {
@@ -447,15 +514,22 @@ pub fn calibrate_telemetry(
                 theta_acs_arcsec: theta.into(),
             },
         );
-        residual.before.insert(s.id.clone(), s.residual_rms_before_arcsec);
-        residual.after.insert(s.id.clone(), s.residual_rms_after_arcsec);
+        residual
+            .before
+            .insert(s.id.clone(), s.residual_rms_before_arcsec);
+        residual
+            .after
+            .insert(s.id.clone(), s.residual_rms_after_arcsec);
     }
     let rel = solution.relative_covariance_arcsec2(1, 0);
     let ffcal_summary = FfcalSummary {
         weighting: solution.weighting,
         iterations: solution.iterations,
         epochs: solution.epochs,
-        eigenvalues: solution.observability.eigenvalues_with_prior_per_arcsec2.clone(),
+        eigenvalues: solution
+            .observability
+            .eigenvalues_with_prior_per_arcsec2
+            .clone(),
         sigma_fhst2_rel_fhst1_arcsec: [rel[(0, 0)].sqrt(), rel[(1, 1)].sqrt(), rel[(2, 2)].sqrt()],
     };
     let mut new_alignment = flown_alignment;
@@ -464,11 +538,20 @@ pub fn calibrate_telemetry(
     new_alignment.m_acs_from_fhst2 = ortho(&adjustment.m_acs_from_sensor_adjusted[1]);
     new_alignment.m_acs_from_fss1 = ortho(&adjustment.m_acs_from_sensor_adjusted[2]);
     new_alignment.m_acs_from_fss2 = ortho(&adjustment.m_acs_from_sensor_adjusted[3]);
-    new_alignment.validate().map_err(|e| anyhow::anyhow!("calibrated alignment table invalid: {e:?}"))?;
+    new_alignment
+        .validate()
+        .map_err(|e| anyhow::anyhow!("calibrated alignment table invalid: {e:?}"))?;
 
     // IRUCAL: re-derive observations with the calibrated alignments so that end attitudes
     // use the best alignments.
-    let frames_cal = build_observations(tm, &new_alignment, &flown_iru, &metadata.sensors, &sky, &options.identify);
+    let frames_cal = build_observations(
+        tm,
+        &new_alignment,
+        &flown_iru,
+        &metadata.sensors,
+        &sky,
+        &options.identify,
+    );
     let t0 = frames_cal.first().map_or(0.0, |f| f.time.seconds());
     let noise = GyroNoise {
         sigma_v_rad_per_sqrt_s: metadata.sensors.iru_arw_rad_per_sqrt_s,
@@ -480,6 +563,14 @@ pub fn calibrate_telemetry(
         .first()
         .map_or(Vector3::zeros(), |h| Vector3::from(h.bias_acs_rad_per_s));
     let zero_dm = Matrix3::zeros();
+    // The OBC's filter bias near a time (housekeeping): the batches that give the interval end
+    // attitudes carry their vectors over ±5 min with it, so the bias is not smeared into them.
+    let obc_bias_at = |t_s: f64| -> Vector3<f64> {
+        let i = tm.housekeeping.partition_point(|h| h.time.seconds() < t_s);
+        tm.housekeeping
+            .get(i.min(tm.housekeeping.len().saturating_sub(1)))
+            .map_or(initial_bias, |h| Vector3::from(h.bias_acs_rad_per_s))
+    };
     let mut intervals = Vec::new();
     let mut maneuver_reports = Vec::new();
     let mut holds: Vec<(usize, usize)> = Vec::new();
@@ -496,7 +587,11 @@ pub fn calibrate_telemetry(
     for (k, &(s, e)) in maneuvers.iter().enumerate() {
         let t_start = frames_cal[s].time.seconds();
         let t_end = frames_cal[e].time.seconds();
-        let lo_hold = if k == 0 { t0 } else { frames_cal[maneuvers[k - 1].1].time.seconds() };
+        let lo_hold = if k == 0 {
+            t0
+        } else {
+            frames_cal[maneuvers[k - 1].1].time.seconds()
+        };
         let hi_hold = maneuvers
             .get(k + 1)
             .map_or(f64::INFINITY, |m| frames_cal[m.0].time.seconds());
@@ -506,8 +601,22 @@ pub fn calibrate_telemetry(
             .map(|g| g.dtheta_acs_rad)
             .sum::<Vector3<f64>>()
             .norm();
-        let before = batch_fix(&frames_cal, t_start - BATCH_HALF_S, lo_hold, t_start, &initial_bias, &zero_dm);
-        let after = batch_fix(&frames_cal, t_end + BATCH_HALF_S, t_end, hi_hold, &initial_bias, &zero_dm);
+        let before = batch_fix(
+            &frames_cal,
+            t_start - BATCH_HALF_S,
+            lo_hold,
+            t_start,
+            &initial_bias,
+            &zero_dm,
+        );
+        let after = batch_fix(
+            &frames_cal,
+            t_end + BATCH_HALF_S,
+            t_end,
+            hi_hold,
+            &initial_bias,
+            &zero_dm,
+        );
         let used = match (before, after) {
             (Some((a, fa)), Some((b, fb))) if b > a => {
                 intervals.push(CalibrationInterval {
@@ -538,18 +647,21 @@ pub fn calibrate_telemetry(
         let mut first_idx = None;
         let mut t = ta + BATCH_HALF_S;
         while t + BATCH_HALF_S <= tb {
-            if let Some((idx, fix)) = batch_fix(&frames_cal, t, ta, tb, &initial_bias, &zero_dm) {
+            if let Some((idx, fix)) = batch_fix(&frames_cal, t, ta, tb, &obc_bias_at(t), &zero_dm) {
                 let origin = *first_idx.get_or_insert(idx);
                 let sigma = Vector3::new(
                     fix.cov_acs_rad2[(0, 0)].sqrt(),
                     fix.cov_acs_rad2[(1, 1)].sqrt(),
                     fix.cov_acs_rad2[(2, 2)].sqrt(),
                 );
-                fixes.push((idx, TimedFix {
-                    t_s: frames_cal[idx].time.seconds() - frames_cal[origin].time.seconds(),
-                    m_acs_from_eci: fix.m_acs_from_eci,
-                    sigma_acs_rad: sigma,
-                }));
+                fixes.push((
+                    idx,
+                    TimedFix {
+                        t_s: frames_cal[idx].time.seconds() - frames_cal[origin].time.seconds(),
+                        m_acs_from_eci: fix.m_acs_from_eci,
+                        sigma_acs_rad: sigma,
+                    },
+                ));
             }
             t += 2.0 * BATCH_HALF_S;
         }
@@ -558,7 +670,9 @@ pub fn calibrate_telemetry(
             let (i1, f1) = fixes[fixes.len() - 1];
             let fix = |f: &TimedFix| AttitudeFix {
                 m_acs_from_eci: f.m_acs_from_eci,
-                cov_acs_rad2: Matrix3::from_diagonal(&f.sigma_acs_rad.component_mul(&f.sigma_acs_rad)),
+                cov_acs_rad2: Matrix3::from_diagonal(
+                    &f.sigma_acs_rad.component_mul(&f.sigma_acs_rad),
+                ),
             };
             intervals.push(CalibrationInterval {
                 start: fix(&f0),
@@ -579,8 +693,43 @@ pub fn calibrate_telemetry(
         bias_acs_rad_per_s: initial_bias,
     };
     let mut iru_skipped = None;
+    let mut rejected_intervals: Vec<usize> = Vec::new();
     let irucal_solution = if maneuver_reports.iter().filter(|m| m.used).count() >= 3 {
-        match irucal(&intervals, &initial_cal, &IrucalConfig { noise, ..IrucalConfig::default() }) {
+        // The prelaunch calibration is the prior (3000 ppm on δM, 1″/s on the bias correction
+        // from the OBC's estimate): it only regularises combinations the maneuvers leave weak.
+        let cfg = IrucalConfig {
+            noise,
+            prior_sigma_ppm_and_arcsec_per_s: Some((3000.0, 1.0)),
+            ..IrucalConfig::default()
+        };
+        // Robust loop: an interval whose residual after the fit exceeds 5σ of its end
+        // attitudes (plus 20″ for gyro noise and systematics) has a bad end attitude; it is
+        // dropped (reported) and the fit repeated, while at least four intervals remain.
+        let mut result = irucal(&intervals, &initial_cal, &cfg);
+        while let Ok(sol) = &result {
+            let worst = sol
+                .residual_after_arcsec
+                .iter()
+                .zip(&intervals)
+                .enumerate()
+                .map(|(k, (r, iv))| {
+                    let sigma = ((iv.start.cov_acs_rad2.trace() + iv.end.cov_acs_rad2.trace())
+                        .max(0.0))
+                    .sqrt()
+                        * ARCSEC_PER_RAD;
+                    (k, r / (5.0 * sigma + 20.0))
+                })
+                .max_by(|a, b| a.1.total_cmp(&b.1));
+            match worst {
+                Some((k, ratio)) if ratio > 1.0 && intervals.len() > MIN_IRUCAL_INTERVALS => {
+                    rejected_intervals.push(k);
+                    intervals.remove(k);
+                    result = irucal(&intervals, &initial_cal, &cfg);
+                }
+                _ => break,
+            }
+        }
+        match result {
             Ok(s) => Some(s),
             Err(e) => {
                 iru_skipped = Some(format!("IRUCAL failed: {e}"));
@@ -600,7 +749,10 @@ pub fn calibrate_telemetry(
         let dm = s.calibration.delta_m;
         let sig = s.sigma_delta_m;
         let significant = (0..9).any(|k| dm[k].abs() > 3.0 * sig[k]);
-        if significant {
+        // Uplink a new G only from a redundant, self-consistent fit: enough intervals, none
+        // rejected as outliers. Otherwise the prelaunch G stays (and the report says why).
+        let consistent = intervals.len() >= MIN_IRUCAL_INTERVALS && rejected_intervals.is_empty();
+        if significant && consistent {
             let g = (Matrix3::identity() + dm) * matrix_from_rows(&flown_iru.g_primary);
             new_iru.g_primary = rows(&g);
         }
@@ -612,20 +764,26 @@ pub fn calibrate_telemetry(
             intervals: intervals.len(),
             residual_before_arcsec: s.residual_before_arcsec.clone(),
             residual_after_arcsec: s.residual_after_arcsec.clone(),
-            g_updated: significant,
+            g_updated: significant && consistent,
+            rejected_intervals: rejected_intervals.clone(),
         }
     });
-    let cal_for_bias = irucal_solution.as_ref().map_or(initial_cal, |s| s.calibration);
+    let cal_for_bias = irucal_solution
+        .as_ref()
+        .map_or(initial_cal, |s| s.calibration);
     let holds_only: Vec<InertialHold> = inertial_holds.iter().map(|(_, h)| h.clone()).collect();
-    let history: Vec<BiasEstimate> = bias_history(&holds_only, &cal_for_bias, &noise).unwrap_or_default();
+    let history: Vec<BiasEstimate> =
+        bias_history(&holds_only, &cal_for_bias, &noise).unwrap_or_default();
     let bias_history_points = history
         .iter()
         .zip(inertial_holds.iter())
         .map(|(b, (t_origin, _))| {
             let t_s = t_origin + b.t_mid_s;
-            let hk = tm
-                .housekeeping
-                .get(tm.housekeeping.partition_point(|h| h.time.seconds() - t0 < t_s).min(tm.housekeeping.len().saturating_sub(1)));
+            let hk = tm.housekeeping.get(
+                tm.housekeeping
+                    .partition_point(|h| h.time.seconds() - t0 < t_s)
+                    .min(tm.housekeeping.len().saturating_sub(1)),
+            );
             BiasHistoryPoint {
                 t_s,
                 bias_rad_per_s: b.bias_acs_rad_per_s.into(),
@@ -663,10 +821,16 @@ pub fn calibrate_telemetry(
 ///
 /// # Errors
 /// Encoding or I/O failure.
-pub fn write_table<T: serde::Serialize>(path: &Path, id: TableId, table: &T, created_tai1958_s: f64) -> anyhow::Result<()> {
+pub fn write_table<T: serde::Serialize>(
+    path: &Path,
+    id: TableId,
+    table: &T,
+    created_tai1958_s: f64,
+) -> anyhow::Result<()> {
     let created = fsw_core::raw::TimeTag::from_seconds(created_tai1958_s).unwrap_or_default();
     let mut buf = vec![0u8; 256 * 1024];
-    let n = encode_image(id, created, table, &mut buf).map_err(|e| anyhow::anyhow!("encoding {} table: {e:?}", id.name()))?;
+    let n = encode_image(id, created, table, &mut buf)
+        .map_err(|e| anyhow::anyhow!("encoding {} table: {e:?}", id.name()))?;
     std::fs::write(path, &buf[..n]).with_context(|| format!("writing {}", path.display()))
 }
 
@@ -674,7 +838,11 @@ pub fn write_table<T: serde::Serialize>(path: &Path, id: TableId, table: &T, cre
 ///
 /// # Errors
 /// Unreadable inputs, too little data, I/O.
-pub fn calibrate_run(run_dir: &Path, out_dir: &Path, options: &CalibrateOptions) -> anyhow::Result<CalibrationOutput> {
+pub fn calibrate_run(
+    run_dir: &Path,
+    out_dir: &Path,
+    options: &CalibrateOptions,
+) -> anyhow::Result<CalibrationOutput> {
     let telemetry_path = run_dir.join("telemetry.bin");
     if !telemetry_path.exists() {
         bail!(
@@ -687,13 +855,18 @@ pub fn calibrate_run(run_dir: &Path, out_dir: &Path, options: &CalibrateOptions)
     let metadata = read_metadata(run_dir)?;
     let mut out = calibrate_telemetry(&tm, &metadata, options)?;
     let tables_dir = out_dir.join("tables");
-    std::fs::create_dir_all(&tables_dir).with_context(|| format!("creating {}", tables_dir.display()))?;
+    std::fs::create_dir_all(&tables_dir)
+        .with_context(|| format!("creating {}", tables_dir.display()))?;
     let created = tm.raw.last().map_or(0.0, |r| r.time.seconds());
     let alignment_path: PathBuf = tables_dir.join("alignment.tbl");
     write_table(&alignment_path, TableId::Alignment, &out.alignment, created)?;
-    out.report.tables.insert("alignment".into(), alignment_path.display().to_string());
+    out.report
+        .tables
+        .insert("alignment".into(), alignment_path.display().to_string());
     let iru_path = tables_dir.join("iru.tbl");
     write_table(&iru_path, TableId::Iru, &out.iru, created)?;
-    out.report.tables.insert("iru".into(), iru_path.display().to_string());
+    out.report
+        .tables
+        .insert("iru".into(), iru_path.display().to_string());
     Ok(out)
 }
