@@ -615,7 +615,7 @@ pub fn render_table(r: &PaperReproduction) -> String {
             if s.id == "FHST1" {
                 "agrees to the printed 8 digits once the lost minus sign of element (1,1) is restored (the product fixes it)"
             } else {
-                "2e-7 (0.04″) is above the 8-digit rounding: a transcription/typo-level slip in Table 2 or 3, immaterial for alignment"
+                "2e-7 (0.04″) is above the 8-digit rounding, all in the middle column: Table 2 FHST2 element (3,2) is printed 0.0000003 (7 decimals where every other entry has 8); read as 0.00000003 the product matches Table 3 to 5.6e-8 (fsw-core/tests/prop_conventions.rs)"
             },
         );
     }
