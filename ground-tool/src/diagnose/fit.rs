@@ -503,14 +503,15 @@ pub fn post_fit(set: &MeasurementSet, layout: &Layout, g: &DVector<f64>) -> Post
         let mut naa = nuisance_prior();
         let mut na = Vector6::<f64>::zeros();
         let mut any = false;
+        let fhst_only = set.batches[bi].fhst_only;
         for i in range.clone() {
             let m = &set.meas[i];
             let r = model(m, &mut cols, &mut scratch);
             resid[i] = r;
-            if m.sensor >= 2 || m.outlier {
+            if (m.sensor >= 2 && fhst_only) || m.outlier {
                 continue;
             }
-            any = true;
+            any |= m.sensor < 2;
             let arow = nuisance_row(m);
             let w = 1.0 / (m.sigma * m.sigma);
             for ax in 0..2 {

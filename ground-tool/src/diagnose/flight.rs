@@ -1,1 +1,142 @@
-//! (in progress)
+//! # Into the flight model: detected effects as table data that `fsw-core` applies
+//!
+//! | effect | table field | what the OBC does (fsw-core) |
+//! |---|---|---|
+//! | alignments (joint fit) | `AlignmentTable.m_acs_from_*` (re-adjusted so the OBC's two-tracker frame is kept, paper appendix) | `M_AS` |
+//! | `time_tag_offset` | `corrections.time_offset_s[i] += τ` | `executive::time_align`: `b(t) = Rot(ω τ) b(t − τ)` |
+//! | `fhst_distortion` | `corrections.fhst_distortion[i] += [d0, d1, d2]` with `d0 = Δρ(4°)/F³`, `d1,2 = c/F²` (rad) | `fhst::correct_distortion`: `H = H_m − (d0 ρ² H_m + d1 H_m V_m)` |
+//! | `fss_transfer_function` | `corrections.fss_transfer[i] += [scale, cross/E³, 0, scale, cross/E³, 0]` | `fss::correct_transfer`: `α = α_m − (c0 α_m + c1 α_m β_m² + c2)` |
+//! | `aberration_annual` | `FilterTable.aberration_correction = true` | annual aberration of catalog stars and the Sun |
+//!
+//! Signs: every library column is the effect's addition to the *measured* angle, and the
+//! tables subtract that addition from the measurement (distortion, transfer) or carry the
+//! measurement forward by τ (time tag), so the estimate goes in with the sign it has.
+//! Effects without a flight hook (orbital aberration — the OBC has no orbit —, thermal or
+//! orbit-periodic alignment, magnitude bias, the FSS cubic and cyclic terms, catalog
+//! offsets, gyro effects) are listed as ground-only.
+
+use super::effects::{EffectKind, FHST_REF_RAD, FSS_EDGE_RAD};
+use super::fit::align_offset;
+use super::search::SearchResult;
+use crate::calibration::adjust::{preserve_obc_attitude, BoresightFrame};
+use fsw_core::attitude::{rot, Quat};
+use fsw_core::tables::types::{matrix_from_rows, rows_from_matrix};
+use fsw_core::tables::{AlignmentTable, FilterTable};
+use fsw_core::units::RAD_PER_ARCSEC;
+use nalgebra::{Matrix3, Vector3};
+use serde::Serialize;
+
+/// What goes up.
+#[derive(Clone, Debug, Serialize)]
+pub struct FlightUpdate {
+    /// New alignment table.
+    #[serde(skip)]
+    pub alignment: AlignmentTable,
+    /// New filter table, when a filter setting changes.
+    #[serde(skip)]
+    pub filter: Option<FilterTable>,
+    /// What went into the tables.
+    pub applied: Vec<String>,
+    /// Effects with no flight-table hook (corrected on the ground only).
+    pub ground_only: Vec<String>,
+}
+
+/// Build the tables from the final fit.
+///
+/// # Errors
+/// The adjusted table does not validate (an effect too large for the table's range).
+pub fn flight_update(
+    res: &SearchResult,
+    base: &AlignmentTable,
+    flown_filter: &FilterTable,
+) -> anyhow::Result<FlightUpdate> {
+    let g = res.final_fit.expand(res.layout.total);
+    let mut applied = Vec::new();
+    let mut ground_only = Vec::new();
+    // Alignments: M' = Rot(θ) M for FHST2, FSS1, FSS2 (FHST1 is the reference), then the
+    // common rotation that keeps the OBC's FHST frame.
+    let m_base: Vec<Matrix3<f64>> = base
+        .matrices()
+        .iter()
+        .map(|m| matrix_from_rows(m))
+        .collect();
+    let mut m_new = m_base.clone();
+    for (s, m) in m_new.iter_mut().enumerate() {
+        if let Some(o) = align_offset(s) {
+            let theta = Vector3::new(g[o], g[o + 1], g[o + 2]) * RAD_PER_ARCSEC;
+            *m = rot(&theta) * *m;
+        }
+    }
+    let adj = preserve_obc_attitude(&m_base, &m_new, 0, 1, BoresightFrame::Bisector)?;
+    let ortho = |m: &Matrix3<f64>| rows_from_matrix(&Quat::from_dcm(m).to_dcm());
+    let mut table = *base;
+    table.m_acs_from_fhst1 = ortho(&adj.m_acs_from_sensor_adjusted[0]);
+    table.m_acs_from_fhst2 = ortho(&adj.m_acs_from_sensor_adjusted[1]);
+    table.m_acs_from_fss1 = ortho(&adj.m_acs_from_sensor_adjusted[2]);
+    table.m_acs_from_fss2 = ortho(&adj.m_acs_from_sensor_adjusted[3]);
+    applied.push(
+        "alignments re-estimated jointly with the effects (FHST frame of the OBC kept)".to_owned(),
+    );
+    let mut filter = None;
+    let names = super::measurements::SENSOR_NAMES;
+    let mut effects: Vec<usize> = res.baseline.clone();
+    effects.extend(&res.added);
+    for i in effects {
+        let e = &res.layout.effects[i];
+        let r = res.layout.range(i);
+        let p = |k: usize| g[r.start + k];
+        let label = e.label();
+        match (e.kind, e.sensor) {
+            (EffectKind::TimeTagOffset, Some(s)) => {
+                table.corrections.time_offset_s[s] += p(0) * 1e-3;
+                applied.push(format!(
+                    "{label}: alignment.corrections.time_offset_s[{}] = {:.4} s",
+                    names[s], table.corrections.time_offset_s[s]
+                ));
+            }
+            (EffectKind::FhstDistortion, Some(s)) if s < 2 => {
+                let d = &mut table.corrections.fhst_distortion[s];
+                d[0] += p(0) * RAD_PER_ARCSEC / FHST_REF_RAD.powi(3);
+                d[1] += p(1) * RAD_PER_ARCSEC / FHST_REF_RAD.powi(2);
+                d[2] += p(2) * RAD_PER_ARCSEC / FHST_REF_RAD.powi(2);
+                applied.push(format!(
+                    "{label}: alignment.corrections.fhst_distortion[{}] = [{:.5}, {:.5}, {:.5}]",
+                    names[s], d[0], d[1], d[2]
+                ));
+            }
+            (EffectKind::FssTransferFunction, Some(s)) if s >= 2 => {
+                let c = &mut table.corrections.fss_transfer[s - 2];
+                let e3 = FSS_EDGE_RAD.powi(3);
+                c[0] += p(0) * 1e-6;
+                c[1] += p(1) * RAD_PER_ARCSEC / e3;
+                c[3] += p(3) * 1e-6;
+                c[4] += p(4) * RAD_PER_ARCSEC / e3;
+                applied.push(format!(
+                    "{label}: alignment.corrections.fss_transfer[{}] = [{:.3e}, {:.3e}, {:.3e}, {:.3e}, {:.3e}, {:.3e}] (scale and cross terms)",
+                    names[s], c[0], c[1], c[2], c[3], c[4], c[5]
+                ));
+                ground_only.push(format!("{label}: cubic and cyclic terms (no table field)"));
+            }
+            (EffectKind::AberrationAnnual, _) => {
+                let mut f = *flown_filter;
+                f.aberration_correction = true;
+                filter = Some(f);
+                applied.push(format!("{label}: filter.aberration_correction = true"));
+            }
+            _ => ground_only.push(format!("{label}: no flight-table hook")),
+        }
+    }
+    table.validate().map_err(|e| {
+        anyhow::anyhow!("diagnose: the corrected alignment table does not validate ({e:?})")
+    })?;
+    if let Some(f) = &filter {
+        f.validate()
+            .map_err(|e| anyhow::anyhow!("diagnose: the filter table does not validate ({e:?})"))?;
+    }
+    Ok(FlightUpdate {
+        alignment: table,
+        filter,
+        applied,
+        ground_only,
+    })
+}

@@ -1,1 +1,697 @@
-//! (in progress)
+//! # Gyro-side effects: bias drift, thermal bias, scale-factor asymmetry
+//!
+//! The batch attitudes of the sensor-side fit (FHST batches, corrected by the joint fit) are
+//! attitude measurements every ≤ 60 s. Between two of them the calibrated gyro predicts the
+//! rotation; the difference is the gyro's error (docs/algorithms.md §7–§8).
+//!
+//! **Bias history.** For consecutive hold batches (low rate, contiguous), the bias error
+//! relative to a constant reference `b_ref` is `y = −z/Δt` with
+//! `z = rotvec(A_{k+1} (Φ A_k)ᵀ)` (Φ propagated with `b_ref`). Per axis, `y` is fitted by
+//! generalised least squares with the covariance of the declared bias random walk
+//! (`σ_u² min(tᵢ, tⱼ)`), the angle random walk, and the batch attitude errors (which make
+//! consecutive samples anti-correlated). Candidates: a **ramp**, an **exponential transient**
+//! `A e^{−t/τ}` (τ grid-searched, counted as one more parameter) and a **thermal bias**
+//! `k ΔT_IRU`, each with one parameter per ACS axis, kept with the same evidence rules as the
+//! sensor side (F-test, ΔBIC > 10, halves within 3σ).
+//!
+//! **Scale-factor asymmetry.** For every slew, the last hold batch before and the first after
+//! give `z = S x` (the Davenport/Keat transition recursion, §7) with a common bias correction
+//! and per-axis scale corrections as the baseline and, as the candidate, a rectified term
+//! `a_j |Δθ_j|` per ACS axis (a channel whose scale is `1 + a` for positive and `1 − a` for
+//! negative rates over-reads by `a |Δθ|` in both directions). The IRU mode-ratio error is not
+//! separable from the scale factor when all slews run in high-rate mode (not a candidate).
+
+use super::fit::PostFit;
+use super::measurements::{DiagnoseInput, MeasurementSet};
+use super::search::Evidence;
+use super::stats::{chi2_sf, f_sf};
+use super::Detected;
+use fsw_core::attitude::{rot, rotvec_from_rot};
+use fsw_core::units::{ARCSEC_PER_RAD, RAD_PER_ARCSEC};
+use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
+use std::collections::BTreeMap;
+
+/// Settings of the gyro analysis.
+#[derive(Clone, Copy, Debug)]
+pub struct GyroConfig {
+    /// Family-wise significance.
+    pub alpha: f64,
+    /// Smallest ΔBIC accepted.
+    pub min_delta_bic: f64,
+    /// Declared bias random walk (rad/s^1.5).
+    pub rrw_rad_per_s15: f64,
+    /// Declared angle random walk (rad/√s).
+    pub arw_rad_per_sqrt_s: f64,
+    /// The operator declares the early bias transient (a ramp is in the baseline).
+    pub transient_declared: bool,
+}
+
+/// A gyro attitude-difference sample.
+#[derive(Clone, Debug)]
+struct BiasSample {
+    t_s: f64,
+    dt_s: f64,
+    /// Bias error (arcsec/s), ACS.
+    y: Vector3<f64>,
+    /// Attitude variance (arcsec²) of the start and end batch, per axis.
+    var_start: Vector3<f64>,
+    var_end: Vector3<f64>,
+    /// The end batch is the next sample's start batch.
+    chained: bool,
+    /// IRU temperature deviation (°C) at the mid time.
+    dtemp_iru: f64,
+}
+
+/// The gyro analysis result.
+#[derive(Clone, Debug, Default)]
+pub struct GyroAnalysis {
+    /// Detected gyro effects.
+    pub detected: Vec<Detected>,
+    /// Evidence of every candidate (for the report).
+    pub candidates: Vec<Evidence>,
+    /// Number of bias samples and slews used.
+    pub bias_samples: usize,
+    /// Slews used for the asymmetry.
+    pub slews: usize,
+    /// Bias history (t s, bias error arcsec/s per axis) for plots.
+    pub bias_series: Vec<(f64, [f64; 3])>,
+    /// Baseline fit of the bias (t, fitted arcsec/s per axis) and the final one.
+    pub bias_fit_before: Vec<(f64, [f64; 3])>,
+    /// Final fit.
+    pub bias_fit_after: Vec<(f64, [f64; 3])>,
+    /// Slew residuals before/after the asymmetry (angle deg signed about the dominant axis,
+    /// residual arcsec along it).
+    pub slew_residuals: Vec<(f64, f64, f64)>,
+    /// Notes (why something was not analysed).
+    pub notes: Vec<String>,
+}
+
+fn batch_attitudes(
+    set: &MeasurementSet,
+    post: &PostFit,
+) -> Vec<Option<(Matrix3<f64>, Vector3<f64>)>> {
+    set.batches
+        .iter()
+        .enumerate()
+        .map(|(i, b)| {
+            if !b.usable {
+                return None;
+            }
+            let (a, cov) = post.batch_nuisance.get(i)?.as_ref()?;
+            let dtheta = Vector3::new(a[0], a[1], a[2]) * RAD_PER_ARCSEC;
+            let var = Vector3::new(cov[(0, 0)], cov[(1, 1)], cov[(2, 2)]);
+            Some((rot(&dtheta) * b.m_acs_from_eci, var))
+        })
+        .collect()
+}
+
+fn propagate(
+    input: &DiagnoseInput<'_>,
+    from: usize,
+    to: usize,
+    bias: &Vector3<f64>,
+) -> Matrix3<f64> {
+    let mut m = Matrix3::identity();
+    for k in from + 1..=to {
+        if let Some(g) = input.frames[k].gyro {
+            let phi = (Matrix3::identity() + input.gyro.delta_m) * g.dtheta_acs_rad - bias * g.dt_s;
+            m = rot(&phi) * m;
+        }
+    }
+    m
+}
+
+/// Cholesky factors of the per-axis covariance of a run of bias samples.
+struct Whitener {
+    l: Vec<DMatrix<f64>>,
+}
+
+impl Whitener {
+    fn new(samples: &[BiasSample], cfg: &GyroConfig) -> Option<Self> {
+        let n = samples.len();
+        let t0 = samples.first()?.t_s;
+        let sigma_u = cfg.rrw_rad_per_s15 * ARCSEC_PER_RAD;
+        let sigma_v = cfg.arw_rad_per_sqrt_s * ARCSEC_PER_RAD;
+        let mut l = Vec::with_capacity(3);
+        for axis in 0..3 {
+            let mut c = DMatrix::zeros(n, n);
+            for i in 0..n {
+                for j in 0..n {
+                    let ti = samples[i].t_s - t0;
+                    let tj = samples[j].t_s - t0;
+                    c[(i, j)] = sigma_u * sigma_u * ti.min(tj);
+                }
+                let s = &samples[i];
+                c[(i, i)] += (s.var_start[axis] + s.var_end[axis]) / (s.dt_s * s.dt_s)
+                    + sigma_v * sigma_v / s.dt_s;
+                if s.chained && i + 1 < n {
+                    let v = -s.var_end[axis] / (s.dt_s * samples[i + 1].dt_s);
+                    c[(i, i + 1)] += v;
+                    c[(i + 1, i)] += v;
+                }
+            }
+            l.push(c.cholesky()?.l());
+        }
+        Some(Self { l })
+    }
+}
+
+struct BiasModel {
+    name: &'static str,
+    unit: &'static str,
+    column: Box<dyn Fn(&BiasSample) -> f64>,
+    extra: usize,
+}
+
+/// GLS fit of `y = b0 + Σ models` per axis: (χ², β per axis, covariance per axis, equations).
+fn bias_fit(
+    samples: &[BiasSample],
+    w: &Whitener,
+    models: &[&BiasModel],
+) -> Option<(f64, Vec<DVector<f64>>, Vec<DMatrix<f64>>, usize)> {
+    let n = samples.len();
+    let k = 1 + models.len();
+    let mut x = DMatrix::zeros(n, k);
+    for (i, s) in samples.iter().enumerate() {
+        x[(i, 0)] = 1.0;
+        for (j, m) in models.iter().enumerate() {
+            x[(i, j + 1)] = (m.column)(s);
+        }
+    }
+    let mut chi2 = 0.0;
+    let mut betas = Vec::new();
+    let mut covs = Vec::new();
+    for axis in 0..3 {
+        let l = &w.l[axis];
+        let y = DVector::from_iterator(n, samples.iter().map(|s| s.y[axis]));
+        let wx = l.solve_lower_triangular(&x)?;
+        let wy = l.solve_lower_triangular(&y)?;
+        let nm = wx.transpose() * &wx;
+        let ch = nm.cholesky()?;
+        let beta = ch.solve(&(wx.transpose() * &wy));
+        let r = &wy - &wx * &beta;
+        chi2 += r.dot(&r);
+        betas.push(beta);
+        covs.push(ch.inverse());
+    }
+    Some((chi2, betas, covs, 3 * n))
+}
+
+/// Run the gyro analysis on the final sensor-side fit.
+#[must_use]
+#[allow(clippy::too_many_lines)]
+pub fn analyse(
+    input: &DiagnoseInput<'_>,
+    set: &MeasurementSet,
+    post: &PostFit,
+    cfg: &GyroConfig,
+) -> GyroAnalysis {
+    let mut out = GyroAnalysis::default();
+    let att = batch_attitudes(set, post);
+    let frames = input.frames;
+    let t_first = frames.first().map_or(0.0, |f| f.time.seconds());
+    let b_ref = input
+        .bias_per_frame
+        .as_ref()
+        .and_then(|b| {
+            let n = b.len().max(1) as f64;
+            Some(b.iter().sum::<Vector3<f64>>() / n)
+        })
+        .unwrap_or(input.gyro.bias_acs_rad_per_s);
+    let tmean_iru =
+        frames.iter().map(|f| f.temperatures_c[4]).sum::<f64>() / frames.len().max(1) as f64;
+    // Bias samples.
+    let mut samples: Vec<BiasSample> = Vec::new();
+    for i in 0..set.batches.len().saturating_sub(1) {
+        let (a, b) = (&set.batches[i], &set.batches[i + 1]);
+        if a.high_rate || b.high_rate || a.hi != b.lo {
+            continue;
+        }
+        let (Some((ma, va)), Some((mb, vb))) = (att[i], att[i + 1]) else {
+            continue;
+        };
+        let phi = propagate(input, a.center, b.center, &b_ref);
+        let z = rotvec_from_rot(&(mb * (phi * ma).transpose())) * ARCSEC_PER_RAD;
+        let dt = b.t_center_s - a.t_center_s;
+        if dt <= 1.0 {
+            continue;
+        }
+        let mid = (a.center + b.center) / 2;
+        if let Some(prev) = samples.last_mut() {
+            prev.chained = (prev.t_s + 0.5 * prev.dt_s - a.t_center_s).abs() < 1e-6;
+        }
+        samples.push(BiasSample {
+            t_s: 0.5 * (a.t_center_s + b.t_center_s),
+            dt_s: dt,
+            y: -z / dt,
+            var_start: va,
+            var_end: vb,
+            chained: false,
+            dtemp_iru: frames[mid].temperatures_c[4] - tmean_iru,
+        });
+    }
+    out.bias_samples = samples.len();
+    out.bias_series = samples
+        .iter()
+        .map(|s| (s.t_s, [s.y.x, s.y.y, s.y.z]))
+        .collect();
+    let b_ref_arcsec = b_ref * ARCSEC_PER_RAD;
+    let half = samples.len() / 2;
+    let whiteners = (
+        Whitener::new(&samples, cfg),
+        Whitener::new(&samples[..half], cfg),
+        Whitener::new(&samples[half..], cfg),
+    );
+    if let (true, (Some(w_all), Some(w_a), Some(w_b))) = (samples.len() >= 20, &whiteners) {
+        let t0 = samples[0].t_s;
+        let span = samples.last().map_or(1.0, |s| s.t_s - t0).max(1.0);
+        let t_mid = t0 + 0.5 * span;
+        let ramp = BiasModel {
+            name: "gyro_bias_ramp",
+            unit: "arcsec/s per hour",
+            column: Box::new(move |s: &BiasSample| (s.t_s - t_mid) / 3600.0),
+            extra: 0,
+        };
+        let thermal = BiasModel {
+            name: "gyro_thermal_bias",
+            unit: "arcsec/s per degC",
+            column: Box::new(|s: &BiasSample| s.dtemp_iru),
+            extra: 0,
+        };
+        // Exponential transient: τ on a grid, best by χ² given the baseline.
+        let base_models: Vec<&BiasModel> = if cfg.transient_declared {
+            vec![&ramp]
+        } else {
+            vec![]
+        };
+        let mut best_tau: Option<(f64, f64)> = None;
+        let mut tau = 600.0;
+        while tau <= 4.0 * 86_400.0 {
+            let m = BiasModel {
+                name: "gyro_bias_transient",
+                unit: "arcsec/s",
+                column: Box::new(move |s: &BiasSample| (-(s.t_s - t0) / tau).exp()),
+                extra: 1,
+            };
+            let mut ms = base_models.clone();
+            ms.push(&m);
+            if let Some((c2, ..)) = bias_fit(&samples, w_all, &ms) {
+                if best_tau.is_none_or(|(_, b)| c2 < b) {
+                    best_tau = Some((tau, c2));
+                }
+            }
+            tau *= 1.25;
+        }
+        let tau_best = best_tau.map_or(86_400.0, |t| t.0);
+        let transient = BiasModel {
+            name: "gyro_bias_transient",
+            unit: "arcsec/s",
+            column: Box::new(move |s: &BiasSample| (-(s.t_s - t0) / tau_best).exp()),
+            extra: 1,
+        };
+        let mut candidates: Vec<&BiasModel> = vec![&thermal, &transient];
+        if !cfg.transient_declared {
+            candidates.insert(0, &ramp);
+        }
+        let mut model: Vec<&BiasModel> = base_models.clone();
+        let fitted = |ms: &[&BiasModel]| -> Vec<(f64, [f64; 3])> {
+            match bias_fit(&samples, w_all, ms) {
+                Some((_, betas, _, _)) => samples
+                    .iter()
+                    .map(|s| {
+                        let mut v = [0.0; 3];
+                        for (ax, b) in betas.iter().enumerate() {
+                            v[ax] = b[0]
+                                + ms.iter()
+                                    .enumerate()
+                                    .map(|(j, m)| b[j + 1] * (m.column)(s))
+                                    .sum::<f64>();
+                        }
+                        (s.t_s, v)
+                    })
+                    .collect(),
+                None => Vec::new(),
+            }
+        };
+        out.bias_fit_before = fitted(&model);
+        for _round in 0..3 {
+            let Some((c0, ..)) = bias_fit(&samples, w_all, &model) else {
+                break;
+            };
+            let mut best: Option<(usize, Evidence, Vec<f64>, Vec<f64>)> = None;
+            let mut round_evs = Vec::new();
+            for (ci, cand) in candidates.iter().enumerate() {
+                if model.iter().any(|m| m.name == cand.name) {
+                    continue;
+                }
+                let mut ms = model.clone();
+                ms.push(cand);
+                let Some((c1, betas, covs, n)) = bias_fit(&samples, w_all, &ms) else {
+                    continue;
+                };
+                let k = 3usize;
+                let dof = n as f64 - (3 * (ms.len() + 1)) as f64;
+                let s2 = (c1 / dof).max(1e-9);
+                let f = ((c0 - c1) / k as f64) / s2.max(1.0);
+                let p = f_sf(f, k as f64, dof);
+                let dbic = n as f64 * (c0 / c1).ln() - (k + cand.extra) as f64 * (n as f64).ln();
+                let j = ms.len();
+                let est: Vec<f64> = betas.iter().map(|b| b[j]).collect();
+                let sig: Vec<f64> = covs
+                    .iter()
+                    .map(|c| (c[(j, j)] * s2.max(1.0)).sqrt())
+                    .collect();
+                // Halves.
+                let (fa, fb) = (
+                    bias_fit(&samples[..half], w_a, &ms),
+                    bias_fit(&samples[half..], w_b, &ms),
+                );
+                let (mut hchi2, mut hp, mut hest) = (f64::NAN, 0.0, (Vec::new(), Vec::new()));
+                if let (Some((_, ba, ca, _)), Some((_, bb, cb, _))) = (fa, fb) {
+                    hchi2 = (0..3)
+                        .map(|ax| {
+                            (ba[ax][j] - bb[ax][j]).powi(2) / (ca[ax][(j, j)] + cb[ax][(j, j)])
+                        })
+                        .sum::<f64>();
+                    hp = chi2_sf(hchi2, 3.0);
+                    hest = (
+                        (0..3).map(|ax| ba[ax][j]).collect(),
+                        (0..3).map(|ax| bb[ax][j]).collect(),
+                    );
+                }
+                let mut why = Vec::new();
+                if !(p * (candidates.len() as f64) < cfg.alpha) {
+                    why.push(format!(
+                        "LR p {p:.2e} (×{} candidates) ≥ {}",
+                        candidates.len(),
+                        cfg.alpha
+                    ));
+                }
+                if !(dbic > cfg.min_delta_bic) {
+                    why.push(format!("ΔBIC {dbic:.1} ≤ {}", cfg.min_delta_bic));
+                }
+                if !(hp > 0.0027) {
+                    why.push(format!("halves differ (χ² {hchi2:.1}, p {hp:.2e})"));
+                }
+                let ev = Evidence {
+                    effect: format!("{}[IRU]", cand.name),
+                    k,
+                    delta_chi2: c0 - c1,
+                    f,
+                    p_value: p,
+                    p_holm: (p * candidates.len() as f64).min(1.0),
+                    delta_bic: dbic,
+                    halves_chi2: hchi2,
+                    halves_p: hp,
+                    halves_estimates: hest,
+                    signature_excess: (f64::NAN, f64::NAN),
+                    adequate: true,
+                    accepted: false,
+                    rejected_because: (!why.is_empty()).then(|| why.join("; ")),
+                };
+                if why.is_empty() && best.as_ref().is_none_or(|b| dbic > b.1.delta_bic) {
+                    best = Some((ci, ev.clone(), est, sig));
+                }
+                round_evs.push(ev);
+            }
+            let Some((ci, mut ev, est, sig)) = best else {
+                out.candidates.extend(round_evs);
+                break;
+            };
+            ev.accepted = true;
+            for e in &mut round_evs {
+                if e.effect == ev.effect {
+                    e.accepted = true;
+                    e.rejected_because = None;
+                }
+            }
+            out.candidates.extend(round_evs);
+            let cand = candidates[ci];
+            model.push(cand);
+            let mut parameters = BTreeMap::new();
+            let mut sigma = BTreeMap::new();
+            let mut units = BTreeMap::new();
+            for (ax, name) in ["x", "y", "z"].iter().enumerate() {
+                parameters.insert((*name).to_owned(), est[ax]);
+                sigma.insert((*name).to_owned(), sig[ax]);
+                units.insert((*name).to_owned(), cand.unit.to_owned());
+            }
+            if cand.name == "gyro_bias_transient" {
+                parameters.insert("tau_s".into(), tau_best);
+                units.insert("tau_s".into(), "s".into());
+            }
+            for (ax, name) in ["ref_bias_x", "ref_bias_y", "ref_bias_z"]
+                .iter()
+                .enumerate()
+            {
+                parameters.insert((*name).to_owned(), b_ref_arcsec[ax]);
+                units.insert((*name).to_owned(), "arcsec/s".into());
+            }
+            out.detected.push(Detected {
+                effect: cand.name.to_owned(),
+                sensor: "IRU".into(),
+                parameters,
+                sigma,
+                units,
+                evidence: ev,
+            });
+        }
+        out.bias_fit_after = fitted(&model);
+    } else {
+        out.notes.push(format!(
+            "bias history: {} hold-to-hold samples (need 20 and a positive-definite covariance)",
+            samples.len()
+        ));
+    }
+
+    // Scale asymmetry from the slews.
+    asymmetry(input, set, &att, &b_ref, cfg, &mut out);
+    let _ = t_first;
+    out
+}
+
+#[allow(clippy::too_many_lines)]
+fn asymmetry(
+    input: &DiagnoseInput<'_>,
+    set: &MeasurementSet,
+    att: &[Option<(Matrix3<f64>, Vector3<f64>)>],
+    b_ref: &Vector3<f64>,
+    cfg: &GyroConfig,
+    out: &mut GyroAnalysis,
+) {
+    let frames = input.frames;
+    // Slews: runs of high-rate frames.
+    let mut slews = Vec::new();
+    let mut start = None;
+    for (i, f) in frames.iter().enumerate() {
+        match (f.high_rate, start) {
+            (true, None) => start = Some(i),
+            (false, Some(s)) => {
+                slews.push((s, i - 1));
+                start = None;
+            }
+            _ => {}
+        }
+    }
+    // (z arcsec, S rows 3×9 [bias 3, scale 3, asym 3], var arcsec², angle vector rad)
+    let mut rows: Vec<(
+        Vector3<f64>,
+        nalgebra::SMatrix<f64, 3, 9>,
+        Vector3<f64>,
+        Vector3<f64>,
+    )> = Vec::new();
+    for &(s, e) in &slews {
+        let before = (0..set.batches.len()).rev().find(|&i| {
+            set.batches[i].hi <= s
+                && !set.batches[i].high_rate
+                && att[i].is_some()
+                && s - set.batches[i].center < 400
+        });
+        let after = (0..set.batches.len()).find(|&i| {
+            set.batches[i].lo > e
+                && !set.batches[i].high_rate
+                && att[i].is_some()
+                && set.batches[i].center - e < 400
+        });
+        let (Some(ia), Some(ib)) = (before, after) else {
+            continue;
+        };
+        let (Some((ma, va)), Some((mb, vb))) = (att[ia], att[ib]) else {
+            continue;
+        };
+        let (ca, cb) = (set.batches[ia].center, set.batches[ib].center);
+        let bias = input
+            .bias_per_frame
+            .as_ref()
+            .and_then(|b| b.get(ca).copied())
+            .unwrap_or(*b_ref);
+        let mut phi_total = Matrix3::identity();
+        let mut sm = nalgebra::SMatrix::<f64, 3, 9>::zeros();
+        let mut angle = Vector3::zeros();
+        for k in ca + 1..=cb {
+            let Some(g) = frames[k].gyro else { continue };
+            let dth = g.dtheta_acs_rad;
+            let phi = (Matrix3::identity() + input.gyro.delta_m) * dth - bias * g.dt_s;
+            let mut u = nalgebra::SMatrix::<f64, 3, 9>::zeros();
+            for j in 0..3 {
+                u[(j, j)] = -g.dt_s;
+                u[(j, 3 + j)] = dth[j];
+                u[(j, 6 + j)] = -dth[j].abs();
+            }
+            let r = rot(&phi);
+            sm = r * sm + rot(&(phi * 0.5)) * u;
+            phi_total = r * phi_total;
+            angle += dth;
+        }
+        let z = rotvec_from_rot(&(mb * (phi_total * ma).transpose())) * ARCSEC_PER_RAD;
+        // S maps rad-per-unit parameters; use arcsec for z, rad/s → arcsec/s for bias, ppm.
+        let mut s_scaled = sm;
+        for j in 0..3 {
+            for i in 0..3 {
+                s_scaled[(i, j)] *= ARCSEC_PER_RAD * RAD_PER_ARCSEC; // bias in arcsec/s: S·(arcsec/s) → arcsec
+                s_scaled[(i, 3 + j)] *= ARCSEC_PER_RAD * 1e-6; // ppm
+                s_scaled[(i, 6 + j)] *= ARCSEC_PER_RAD * 1e-6; // ppm
+            }
+        }
+        let t = (cb - ca) as f64;
+        let proc = (cfg.arw_rad_per_sqrt_s * ARCSEC_PER_RAD).powi(2) * t
+            + (cfg.rrw_rad_per_s15 * ARCSEC_PER_RAD).powi(2) * t.powi(3) / 3.0;
+        rows.push((z, s_scaled, va + vb + Vector3::repeat(proc), angle));
+    }
+    out.slews = rows.len();
+    if rows.len() < 4 {
+        out.notes.push(format!(
+            "scale asymmetry: only {} slews with hold attitudes on both sides (need 4)",
+            rows.len()
+        ));
+        return;
+    }
+    let solve = |cols: &[usize],
+                 use_row: &dyn Fn(usize) -> bool|
+     -> Option<(f64, DVector<f64>, DMatrix<f64>, usize)> {
+        let k = cols.len();
+        let mut n = DMatrix::<f64>::zeros(k, k);
+        let mut b = DVector::<f64>::zeros(k);
+        let mut rr = 0.0;
+        let mut m = 0;
+        for (ri, (z, s, var, _)) in rows.iter().enumerate() {
+            if !use_row(ri) {
+                continue;
+            }
+            for i in 0..3 {
+                let w = 1.0 / var[i];
+                m += 1;
+                rr += w * z[i] * z[i];
+                for (a, &ca) in cols.iter().enumerate() {
+                    b[a] += w * s[(i, ca)] * z[i];
+                    for (c, &cc) in cols.iter().enumerate() {
+                        n[(a, c)] += w * s[(i, ca)] * s[(i, cc)];
+                    }
+                }
+            }
+        }
+        for a in 0..k {
+            n[(a, a)] += 1e-12;
+        }
+        let ch = n.clone().cholesky()?;
+        let x = ch.solve(&b);
+        let chi2 = (rr - x.dot(&b)).max(0.0);
+        Some((chi2, x, ch.inverse(), m))
+    };
+    let base: Vec<usize> = (0..6).collect();
+    let full: Vec<usize> = (0..9).collect();
+    let all = |_: usize| true;
+    let (Some((c0, x0, _, m)), Some((c1, x1, cov1, _))) = (solve(&base, &all), solve(&full, &all))
+    else {
+        out.notes
+            .push("scale asymmetry: singular slew geometry".into());
+        return;
+    };
+    let dof = m as f64 - 9.0;
+    let s2 = if dof > 0.0 { (c1 / dof).max(1e-9) } else { 1.0 };
+    let f = ((c0 - c1) / 3.0) / s2.max(1.0);
+    let p = if dof > 0.0 { f_sf(f, 3.0, dof) } else { 1.0 };
+    let dbic = m as f64 * (c0 / c1.max(1e-9)).ln() - 3.0 * (m as f64).ln();
+    let half = rows.len() / 2;
+    // Halves: interleaved (slews alternate axes and signs, so consecutive halves would lose
+    // observability).
+    let (ha, hb) = (solve(&full, &|i| i % 2 == 0), solve(&full, &|i| i % 2 == 1));
+    let (mut hchi2, mut hp, mut hest) = (f64::NAN, 1.0, (Vec::new(), Vec::new()));
+    if let (Some((_, xa, ca, _)), Some((_, xb, cb, _))) = (ha, hb) {
+        hchi2 = (6..9)
+            .map(|j| (xa[j] - xb[j]).powi(2) / (ca[(j, j)] + cb[(j, j)]))
+            .sum::<f64>();
+        hp = chi2_sf(hchi2, 3.0);
+        hest = (
+            (6..9).map(|j| xa[j]).collect(),
+            (6..9).map(|j| xb[j]).collect(),
+        );
+    }
+    let _ = half;
+    let mut why = Vec::new();
+    if !(p < cfg.alpha) {
+        why.push(format!("LR p {p:.2e} ≥ {}", cfg.alpha));
+    }
+    if !(dbic > cfg.min_delta_bic) {
+        why.push(format!("ΔBIC {dbic:.1} ≤ {}", cfg.min_delta_bic));
+    }
+    if !(hp > 0.0027) {
+        why.push(format!("halves differ (χ² {hchi2:.1}, p {hp:.2e})"));
+    }
+    let ev = Evidence {
+        effect: "gyro_scale_asymmetry[IRU]".into(),
+        k: 3,
+        delta_chi2: c0 - c1,
+        f,
+        p_value: p,
+        p_holm: p,
+        delta_bic: dbic,
+        halves_chi2: hchi2,
+        halves_p: hp,
+        halves_estimates: hest,
+        signature_excess: (f64::NAN, f64::NAN),
+        adequate: true,
+        accepted: why.is_empty(),
+        rejected_because: (!why.is_empty()).then(|| why.join("; ")),
+    };
+    for (z, s, _, angle) in &rows {
+        let j = angle.iamax();
+        let fit0 = (s * nalgebra::SVector::<f64, 9>::from_iterator((0..9).map(|i| {
+            if i < 6 {
+                x0[i]
+            } else {
+                0.0
+            }
+        })))[j];
+        let _ = fit0;
+        let resid0 = z[j] - (0..6).map(|c| s[(j, c)] * x0[c]).sum::<f64>();
+        let resid1 = z[j] - (0..9).map(|c| s[(j, c)] * x1[c]).sum::<f64>();
+        out.slew_residuals
+            .push((angle[j].to_degrees(), resid0, resid1));
+    }
+    if why.is_empty() {
+        let mut parameters = BTreeMap::new();
+        let mut sigma = BTreeMap::new();
+        let mut units = BTreeMap::new();
+        for (ax, name) in ["x", "y", "z"].iter().enumerate() {
+            parameters.insert((*name).to_owned(), x1[6 + ax]);
+            sigma.insert(
+                (*name).to_owned(),
+                (cov1[(6 + ax, 6 + ax)] * s2.max(1.0)).sqrt(),
+            );
+            units.insert(
+                (*name).to_owned(),
+                "ppm (+: over-reads both ways)".to_owned(),
+            );
+        }
+        out.detected.push(Detected {
+            effect: "gyro_scale_asymmetry".into(),
+            sensor: "IRU".into(),
+            parameters,
+            sigma,
+            units,
+            evidence: ev.clone(),
+        });
+    }
+    out.candidates.push(ev);
+}

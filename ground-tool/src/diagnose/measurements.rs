@@ -69,8 +69,11 @@ pub struct DiagnoseInput<'a> {
     pub bias_per_frame: Option<Vec<Vector3<f64>>>,
     /// The tables the frames were built with (matrices and corrections).
     pub alignment: AlignmentTable,
-    /// The references carry aberration (annual and orbital): the model's k₀ = 1, else 0.
-    pub aberration_applied: bool,
+    /// The frames' references carry aberration (annual and orbital together, FADS).
+    pub frames_aberration: bool,
+    /// The model's aberration (annual, orbital): the references are adjusted to it
+    /// (k₀ = 1 or 0 per part).
+    pub aberration_model: [bool; 2],
     /// Effects the operator declares (metadata.json `declared_effects`).
     pub declared_effects: Vec<String>,
 }
@@ -148,8 +151,12 @@ pub struct Batch {
     /// High-rate batch.
     pub high_rate: bool,
     /// The FHSTs determine the batch attitude well enough (all three axes better than
-    /// [`MAX_BATCH_SIGMA_ARCSEC`]); measurements of other batches are not used.
+    /// [`MAX_BATCH_SIGMA_ARCSEC`]), with the FSSs' help where the FHSTs alone cannot
+    /// (one tracker); measurements of other batches are not used.
     pub usable: bool,
+    /// The FHSTs alone determine the attitude (else the residuals of the batch are taken
+    /// against the FHST + FSS attitude).
+    pub fhst_only: bool,
 }
 
 /// A batch whose FHST attitude is worse than this (1σ, any axis, arcsec) is not used.
@@ -176,8 +183,8 @@ pub struct MeasurementSet {
     pub sigma_scale: [f64; 4],
     /// Alignment matrices the frames were built with.
     pub m_acs_from_sensor: [Matrix3<f64>; 4],
-    /// k₀ of the references (1 with aberration applied).
-    pub aberration_k0: f64,
+    /// k₀ of the references (annual, orbital; 1 with aberration applied).
+    pub aberration_k0: [f64; 2],
     /// Time-tag offsets already applied (table), s.
     pub time_offset0_s: [f64; 4],
     /// Orbit period (s) estimated from the orbit, if any.
@@ -254,7 +261,9 @@ impl MeasurementSet {
             ]
         };
         let tau0 = input.alignment.corrections.time_offset_s;
-        let k0 = if input.aberration_applied { 1.0 } else { 0.0 };
+        let k_frames = if input.frames_aberration { 1.0 } else { 0.0 };
+        let k0 = input.aberration_model.map(|b| if b { 1.0 } else { 0.0 });
+        let (dk_annual, dk_orbital) = (k0[0] - k_frames, k0[1] - k_frames);
         let t_first = frames.first().map_or(0.0, |f| f.time.seconds());
         let bias_at = |k: usize| -> Vector3<f64> {
             input
@@ -322,15 +331,16 @@ impl MeasurementSet {
         for (lo, hi, hr) in make_batches(frames) {
             let center = (lo + hi) / 2;
             let bias = bias_at(center);
-            let fine = fine_attitude(
-                frames,
-                lo..hi,
-                center,
-                &bias,
-                &input.gyro.delta_m,
-                AttitudeSensors::FhstOnly,
-            )
-            .ok();
+            // FHST-only fine attitude; with one tracker, the FSSs help; else the OBC's.
+            let well_determined = |s: &crate::attitude::quest::AttitudeSolution| {
+                (0..3).all(|i| s.cov_acs_rad2[(i, i)].max(0.0).sqrt() * ARCSEC_PER_RAD < 60.0)
+            };
+            let fine = [AttitudeSensors::FhstOnly, AttitudeSensors::FhstAndFss]
+                .into_iter()
+                .filter_map(|which| {
+                    fine_attitude(frames, lo..hi, center, &bias, &input.gyro.delta_m, which).ok()
+                })
+                .find(well_determined);
             let (a_center, is_fine) = match (fine, frames[center].obc_q_acs_from_eci) {
                 (Some(s), _) => (s.m_acs_from_eci, true),
                 (None, Some(q)) => (q.to_dcm(), false),
@@ -356,6 +366,7 @@ impl MeasurementSet {
                 fine: is_fine,
                 high_rate: hr,
                 usable: true,
+                fhst_only: true,
             });
             for k in lo..hi {
                 let f = &frames[k];
@@ -385,6 +396,14 @@ impl MeasurementSet {
                                 star: u32,
                                 mag: f64| {
                     let m = &m_sensor[sensor];
+                    // References to the model's aberration (first order).
+                    let u = if dk_annual == 0.0 && dk_orbital == 0.0 {
+                        u
+                    } else {
+                        (u + aberration_term(&u, &v_e) * dk_annual
+                            + aberration_term(&u, &v_sc) * dk_orbital)
+                            .normalize()
+                    };
                     // Attitude at the sample time t − τ₀.
                     let a_s = if tau0[sensor] == 0.0 {
                         a_k
@@ -485,8 +504,11 @@ impl MeasurementSet {
     /// Mark batches whose FHST attitude is poorly determined (one star, short slew batches)
     /// and exclude their measurements.
     fn check_batches(&mut self) {
-        let mut info = vec![nalgebra::Matrix6::<f64>::zeros(); self.batches.len()];
-        for m in self.meas.iter().filter(|m| m.sensor < 2 && !m.outlier) {
+        let nb = self.batches.len();
+        let mut info_fhst = vec![nalgebra::Matrix6::<f64>::zeros(); nb];
+        let mut info_all = vec![nalgebra::Matrix6::<f64>::zeros(); nb];
+        let mut has_fhst = vec![false; nb];
+        for m in self.meas.iter().filter(|m| !m.outlier) {
             let a = Self::attitude_partial(m);
             let t = m.dt_center_s / 100.0;
             let w = 1.0 / (m.sigma * m.sigma);
@@ -496,18 +518,28 @@ impl MeasurementSet {
                     row[j] = a[(ax, j)];
                     row[j + 3] = a[(ax, j)] * t;
                 }
-                info[m.batch] += row * row.transpose() * w;
+                let add = row * row.transpose() * w;
+                info_all[m.batch] += add;
+                if m.sensor < 2 {
+                    info_fhst[m.batch] += add;
+                    has_fhst[m.batch] = true;
+                }
             }
         }
-        for (b, inf) in self.batches.iter_mut().zip(info.iter_mut()) {
+        let good = |inf: &mut nalgebra::Matrix6<f64>| {
             for j in 0..3 {
                 inf[(j, j)] += 1.0 / NUISANCE_ANGLE_PRIOR_ARCSEC.powi(2);
                 inf[(j + 3, j + 3)] += 1.0 / NUISANCE_RATE_PRIOR.powi(2);
             }
-            b.usable = match inf.try_inverse() {
+            match inf.try_inverse() {
                 Some(cov) => (0..3).all(|j| cov[(j, j)].sqrt() < MAX_BATCH_SIGMA_ARCSEC),
                 None => false,
-            };
+            }
+        };
+        for (i, b) in self.batches.iter_mut().enumerate() {
+            b.fhst_only = good(&mut info_fhst[i]);
+            // A batch needs a star: the Sun alone gives two axes.
+            b.usable = has_fhst[i] && (b.fhst_only || good(&mut info_all[i]));
         }
         let usable: Vec<bool> = self.batches.iter().map(|b| b.usable).collect();
         for m in &mut self.meas {

@@ -1,1 +1,317 @@
-//! (in progress)
+//! # `ground-tool diagnose RUN_DIR --out DIR`: the whole analysis of a run folder
+//!
+//! 1. TP, metadata (declared effects: a missing `declared_effects` means the GRO defaults,
+//!    the same list `sim-harness` declares), the tables flown (`--tables DIR`, else the
+//!    run's activated uploads, else the boot tables);
+//! 2. the calibration chain with the current model (`calibrate_telemetry`: FADS with the
+//!    declared aberration, FFCAL, adjustment, IRUCAL);
+//! 3. residual analysis and the effect loop ([`super::analyse`]), then the gyro side;
+//! 4. tables (`OUT/tables/alignment.tbl`, `iru.tbl`, and `filter.tbl` when a filter setting
+//!    changes) for a closed-loop run with `sim-harness run ... --tables OUT/tables`;
+//! 5. `report.json`, `report.md`, plots; scoring against `truth.json` only if it exists.
+
+use super::gyro::{self, GyroConfig};
+use super::measurements::{DiagnoseInput, SENSOR_NAMES};
+use super::report::{
+    markdown, write_plots, BeforeAfter, DiagnoseReport, FlightSummary, GyroSummary, Scoring,
+};
+use super::scoring::{calibration_error_arcsec, check_parameters, matches_truth, read_truth};
+use super::search::SearchConfig;
+use super::{analyse, Analysis};
+use crate::calibration::iru::GyroCalibration;
+use crate::pipeline::calibrate::{
+    calibrate_telemetry, read_metadata, write_table, CalibrateOptions, CalibrationOutput,
+};
+use crate::tp;
+use anyhow::{bail, Context};
+use fsw_core::tables::image::{decode_payload, parse_image};
+use fsw_core::tables::{AlignmentTable, FilterTable, IruTable, TableId};
+use nalgebra::{Matrix3, Vector3};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+/// The GRO defaults of the declared effects (as `sim-harness` declares them).
+pub const DEFAULT_DECLARED: [&str; 5] = [
+    "aberration",
+    "orbital_aberration",
+    "sun_parallax",
+    "fss_transfer_function",
+    "iru_bias_transient",
+];
+
+/// Options of a diagnose run.
+#[derive(Clone, Debug, Default)]
+pub struct DiagnoseOptions {
+    /// Folder with the tables flown (alignment.tbl, iru.tbl, filter.tbl).
+    pub tables: Option<PathBuf>,
+    /// Search settings.
+    pub search: SearchConfig,
+}
+
+/// Everything a diagnose run produced.
+#[derive(Debug)]
+pub struct DiagnoseOutput {
+    /// The report (also written as JSON).
+    pub report: DiagnoseReport,
+    /// Sensor-side analysis.
+    pub analysis: Analysis,
+    /// The calibration chain's output.
+    pub calibration: CalibrationOutput,
+    /// New alignment table.
+    pub alignment: AlignmentTable,
+    /// New filter table (if changed).
+    pub filter: Option<FilterTable>,
+}
+
+fn read_image<T: serde::de::DeserializeOwned>(path: &Path) -> anyhow::Result<T> {
+    let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let (_, payload) = parse_image(&bytes)
+        .map_err(|e| anyhow::anyhow!("{} is not valid (table image): {e:?}", path.display()))?;
+    decode_payload(payload)
+        .map_err(|e| anyhow::anyhow!("{} is not valid (payload): {e:?}", path.display()))
+}
+
+/// Tables flown: from `--tables`, else the run's activated uploads (last one per table).
+fn flown_tables(
+    run_dir: &Path,
+    meta: &serde_json::Value,
+    tables: Option<&Path>,
+) -> anyhow::Result<(
+    Option<AlignmentTable>,
+    Option<IruTable>,
+    Option<FilterTable>,
+)> {
+    if let Some(dir) = tables {
+        let get = |name: &str| {
+            let p = dir.join(name);
+            p.exists().then_some(p)
+        };
+        let a = get("alignment.tbl").map(|p| read_image(&p)).transpose()?;
+        let i = get("iru.tbl").map(|p| read_image(&p)).transpose()?;
+        let f = get("filter.tbl").map(|p| read_image(&p)).transpose()?;
+        return Ok((a, i, f));
+    }
+    let mut a = None;
+    let mut i = None;
+    let mut f = None;
+    if let Some(ups) = meta["uploads"].as_array() {
+        for u in ups {
+            if u["activated_at_s"].is_null() || u["accepted"].as_bool() == Some(false) {
+                continue;
+            }
+            let Some(file) = u["file"].as_str() else {
+                continue;
+            };
+            let p = run_dir.join(file);
+            if !p.exists() {
+                continue;
+            }
+            match u["table"].as_str() {
+                Some("alignment") => a = Some(read_image(&p)?),
+                Some("iru") => i = Some(read_image(&p)?),
+                Some("filter") => f = Some(read_image(&p)?),
+                _ => {}
+            }
+        }
+    }
+    Ok((a, i, f))
+}
+
+/// Run the diagnosis of a run folder and write the report and tables into `out_dir`.
+///
+/// # Errors
+/// Missing or malformed inputs (the message says what), too little data, I/O.
+#[allow(clippy::too_many_lines)]
+pub fn diagnose_run(
+    run_dir: &Path,
+    out_dir: &Path,
+    opts: &DiagnoseOptions,
+) -> anyhow::Result<DiagnoseOutput> {
+    let telemetry_path = run_dir.join("telemetry.bin");
+    if !telemetry_path.exists() {
+        bail!(
+            "{} not found: a run folder needs telemetry.bin (docs/icd.md); run `sim-harness run SCENARIO --out {}` first",
+            telemetry_path.display(),
+            run_dir.display()
+        );
+    }
+    let tm = tp::read_file(&telemetry_path)?;
+    let metadata = read_metadata(run_dir)?;
+    let meta_raw: serde_json::Value = match std::fs::read_to_string(run_dir.join("metadata.json")) {
+        Ok(t) => serde_json::from_str(&t).unwrap_or(serde_json::Value::Null),
+        Err(_) => serde_json::Value::Null,
+    };
+    let declared: Vec<String> = match meta_raw.get("declared_effects").and_then(|v| v.as_array()) {
+        Some(a) => a
+            .iter()
+            .filter_map(|x| x.as_str().map(str::to_owned))
+            .collect(),
+        None => DEFAULT_DECLARED.iter().map(|s| (*s).to_owned()).collect(),
+    };
+    let annual = declared.iter().any(|d| d == "aberration");
+    let orbital = declared.iter().any(|d| d == "orbital_aberration");
+    let (flown_alignment, flown_iru, flown_filter) =
+        flown_tables(run_dir, &meta_raw, opts.tables.as_deref())?;
+    let mut copt = CalibrateOptions {
+        flown_alignment,
+        flown_iru,
+        ..CalibrateOptions::default()
+    };
+    copt.identify.aberration = annual;
+    let cal = calibrate_telemetry(&tm, &metadata, &copt)?;
+
+    // Ephemerides per frame.
+    let frames = &cal.frames;
+    let mut earth = Vec::with_capacity(frames.len());
+    let mut sun = Vec::with_capacity(frames.len());
+    let mut eph: Option<sim_harness::truth::sun::SunEphemeris> = None;
+    for f in frames {
+        let t = f.time.seconds_since_j2000_tt();
+        let e = eph.get_or_insert_with(|| sim_harness::truth::sun::SunEphemeris::new(t, 600.0));
+        let st = e.state(t);
+        earth.push(st.earth_vel_bary_eci_km_per_s);
+        let (p, v) = f.orbit.unwrap_or((Vector3::zeros(), Vector3::zeros()));
+        sun.push(st.apparent_dir_from_sc_eci(&p, &v));
+    }
+    // OBC bias per frame.
+    let mut bias = Vec::with_capacity(frames.len());
+    let mut j = 0usize;
+    let hk = &tm.housekeeping;
+    for f in frames {
+        while j + 1 < hk.len() && hk[j + 1].time <= f.time {
+            j += 1;
+        }
+        bias.push(
+            hk.get(j)
+                .map_or(Vector3::zeros(), |h| Vector3::from(h.bias_acs_rad_per_s)),
+        );
+    }
+    let gyro_cal = cal.irucal.as_ref().map_or(
+        GyroCalibration {
+            delta_m: Matrix3::zeros(),
+            bias_acs_rad_per_s: bias.first().copied().unwrap_or_else(Vector3::zeros),
+        },
+        |s| s.calibration,
+    );
+    let input = DiagnoseInput {
+        frames,
+        earth_vel_eci_km_per_s: earth,
+        sun_eci: sun,
+        gyro: gyro_cal,
+        bias_per_frame: Some(bias),
+        alignment: cal.alignment,
+        frames_aberration: annual,
+        aberration_model: [annual, orbital],
+        declared_effects: declared.clone(),
+    };
+    let analysis = analyse(&input, &opts.search)?;
+    let gcfg = GyroConfig {
+        alpha: opts.search.alpha,
+        min_delta_bic: opts.search.min_delta_bic,
+        rrw_rad_per_s15: metadata.sensors.iru_rrw_rad_per_s_sqrt_s,
+        arw_rad_per_sqrt_s: metadata.sensors.iru_arw_rad_per_sqrt_s,
+        transient_declared: declared.iter().any(|d| d == "iru_bias_transient"),
+    };
+    let gyro_res = gyro::analyse(&input, &analysis.set, &analysis.search.after, &gcfg);
+
+    // Flight tables.
+    let filter_flown = flown_filter.unwrap_or_else(FilterTable::default_boot);
+    let flight = super::flight::flight_update(&analysis.search, &cal.alignment, &filter_flown)?;
+    std::fs::create_dir_all(out_dir.join("tables"))
+        .with_context(|| format!("creating {}", out_dir.display()))?;
+    let created = tm.raw.last().map_or(0.0, |r| r.time.seconds());
+    let mut written = Vec::new();
+    let p = out_dir.join("tables").join("alignment.tbl");
+    write_table(&p, TableId::Alignment, &flight.alignment, created)?;
+    written.push(p.display().to_string());
+    let p = out_dir.join("tables").join("iru.tbl");
+    write_table(&p, TableId::Iru, &cal.iru, created)?;
+    written.push(p.display().to_string());
+    if let Some(f) = &flight.filter {
+        let p = out_dir.join("tables").join("filter.tbl");
+        write_table(&p, TableId::Filter, f, created)?;
+        written.push(p.display().to_string());
+    }
+
+    // Report.
+    let mut detected = analysis.detected.clone();
+    detected.extend(gyro_res.detected.iter().cloned());
+    let names = SENSOR_NAMES;
+    let to_map = |v: [f64; 4]| -> BTreeMap<String, f64> {
+        (0..4)
+            .filter(|&i| v[i].is_finite())
+            .map(|i| (names[i].to_owned(), v[i]))
+            .collect()
+    };
+    let counts = analysis.set.count_per_sensor();
+    let truth = read_truth(run_dir)?;
+    let (calibration_error, scoring) = match &truth {
+        Some(t) => {
+            let ce = BeforeAfter {
+                before: calibration_error_arcsec(&cal.alignment, t),
+                after: calibration_error_arcsec(&flight.alignment, t),
+            };
+            let sc = Scoring {
+                label: "scoring only: from truth.json, never used by the analysis".into(),
+                truth_undeclared_effects: t.undeclared.clone(),
+                detections_in_truth: detected
+                    .iter()
+                    .map(|d| (d.effect.clone(), d.sensor.clone(), matches_truth(d, t)))
+                    .collect(),
+                parameters: check_parameters(&detected, t, analysis.set.aberration_k0),
+            };
+            (Some(ce), Some(sc))
+        }
+        None => (None, None),
+    };
+    let mut report = DiagnoseReport {
+        run_dir: run_dir.display().to_string(),
+        scenario: metadata.scenario.clone(),
+        declared_effects: declared,
+        baseline_model: analysis
+            .search
+            .baseline
+            .iter()
+            .map(|&i| analysis.search.layout.effects[i].label())
+            .collect(),
+        detected: detected.clone(),
+        unexplained: analysis.unexplained.clone(),
+        residual_rms_arcsec: BeforeAfter {
+            before: to_map(analysis.rms_before),
+            after: to_map(analysis.rms_after),
+        },
+        noise_floor_arcsec: to_map(analysis.set.noise_floor_arcsec),
+        measurements: (0..4).map(|i| (names[i].to_owned(), counts[i])).collect(),
+        iterations: analysis.search.iterations.len(),
+        iteration_log: analysis.search.iterations.clone(),
+        gyro: GyroSummary {
+            bias_samples: gyro_res.bias_samples,
+            slews: gyro_res.slews,
+            candidates: gyro_res.candidates.clone(),
+            notes: gyro_res.notes.clone(),
+        },
+        flight_tables: FlightSummary {
+            written,
+            applied: flight.applied.clone(),
+            ground_only: flight.ground_only.clone(),
+        },
+        calibration_error_arcsec: calibration_error,
+        scoring,
+        plots: Vec::new(),
+    };
+    report.plots = write_plots(out_dir, &analysis, &detected, &gyro_res)?;
+    std::fs::write(
+        out_dir.join("report.json"),
+        serde_json::to_string_pretty(&report)?,
+    )
+    .with_context(|| format!("writing {}", out_dir.join("report.json").display()))?;
+    std::fs::write(out_dir.join("report.md"), markdown(&report))
+        .with_context(|| format!("writing {}", out_dir.join("report.md").display()))?;
+    Ok(DiagnoseOutput {
+        report,
+        analysis,
+        alignment: flight.alignment,
+        filter: flight.filter,
+        calibration: cal,
+    })
+}

@@ -118,7 +118,8 @@ impl SynthRun {
             },
             bias_per_frame: None,
             alignment: self.alignment,
-            aberration_applied: self.config.aberration_applied,
+            frames_aberration: self.config.aberration_applied,
+            aberration_model: [self.config.aberration_applied; 2],
             declared_effects: declared.iter().map(|s| (*s).to_owned()).collect(),
         }
     }
