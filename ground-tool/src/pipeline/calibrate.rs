@@ -186,6 +186,9 @@ pub struct DataSummary {
     pub sun_samples: [usize; 2],
     /// FFCAL epochs (frames with ≥ 2 referenced vectors).
     pub ffcal_epochs: usize,
+    /// Sensors never observed together with another one: left out of FFCAL, their flown
+    /// alignment is kept.
+    pub not_observed: Vec<String>,
 }
 
 /// Per-sensor before/after.
@@ -272,16 +275,18 @@ pub fn read_metadata(run_dir: &Path) -> anyhow::Result<Metadata> {
 }
 
 /// FFCAL input from the frames.
-fn alignment_data(frames: &[FrameObservations]) -> AlignmentData {
+/// FFCAL input from the frames; `map[k]` is the FFCAL index of table sensor `k` (FHST1,
+/// FHST2, FSS1, FSS2), `None` to leave it out.
+fn alignment_data(frames: &[FrameObservations], map: &[Option<usize>; 4]) -> AlignmentData {
     let mut data = AlignmentData::with_capacity(frames.len(), 4);
     let mut obs = Vec::with_capacity(4);
     for f in frames {
         obs.clear();
         for (i, s) in f.stars.iter().enumerate() {
             if let Some(s) = s {
-                if let Some((_, dir_eci)) = s.identified {
+                if let (Some((_, dir_eci)), Some(sensor)) = (s.identified, map[i]) {
                     obs.push(SensorObservation {
-                        sensor: i,
+                        sensor,
                         dir_sensor: s.meas.dir_sensor,
                         dir_eci,
                         sigma_rad: s.sigma_rad,
@@ -290,9 +295,9 @@ fn alignment_data(frames: &[FrameObservations]) -> AlignmentData {
             }
         }
         for (i, s) in f.suns.iter().enumerate() {
-            if let Some(s) = s {
+            if let (Some(s), Some(sensor)) = (s, map[i + 2]) {
                 obs.push(SensorObservation {
-                    sensor: i + 2,
+                    sensor,
                     dir_sensor: s.meas.dir_sensor,
                     dir_eci: s.sun_eci,
                     sigma_rad: s.sigma_rad,
@@ -455,19 +460,43 @@ pub fn calibrate_telemetry(
         eprintln!("warning: no ephemeris packets (APID 0x020): orbital aberration and Sun parallax are not corrected");
     }
 
-    // FFCAL.
-    let data = alignment_data(&frames);
+    // FFCAL. A sensor never seen together with another one (e.g. an FSS the Sun never
+    // visited) is left out and keeps its flown alignment (reported as not observed).
+    let all: [Option<usize>; 4] = [Some(0), Some(1), Some(2), Some(3)];
+    let mut seen = [0usize; 4];
+    for epoch in alignment_data(&frames, &all).epochs() {
+        for o in epoch {
+            seen[o.sensor] += 1;
+        }
+    }
+    if seen[0] == 0 || seen[1] == 0 {
+        bail!(
+            "FFCAL needs both FHSTs observing with another sensor at the same time; epochs per sensor FHST1/FHST2/FSS1/FSS2: {seen:?} (stars identified per FHST: {:?})",
+            summary.stars_identified
+        );
+    }
+    let mut map = [None; 4];
+    let mut observed = Vec::new();
+    for k in 0..4 {
+        if seen[k] > 0 {
+            map[k] = Some(observed.len());
+            observed.push(k);
+        }
+    }
+    let data = alignment_data(&frames, &map);
     summary.ffcal_epochs = data.epoch_count();
+    summary.not_observed = (0..4)
+        .filter(|k| seen[*k] == 0)
+        .map(|k| SENSOR_NAMES[k].to_string())
+        .collect();
     let flown: Vec<Matrix3<f64>> = flown_alignment
         .matrices()
         .iter()
         .map(|m| matrix_from_rows(m))
         .collect();
-    let sensors: Vec<SensorSpec> = SENSOR_NAMES
+    let sensors: Vec<SensorSpec> = observed
         .iter()
-        .zip(flown.iter())
-        .zip(PRIOR_SIGMA_ARCSEC)
-        .map(|((name, m), sigma)| SensorSpec::new(name, *m, sigma))
+        .map(|&k| SensorSpec::new(SENSOR_NAMES[k], flown[k], PRIOR_SIGMA_ARCSEC[k]))
         .collect();
     let cfg = FfcalConfig {
         weighting: options.weighting,
@@ -480,17 +509,17 @@ pub fn calibrate_telemetry(
         )
     })?;
 
-    // Adjustment.
-    let calibrated: Vec<Matrix3<f64>> = solution
-        .sensors
-        .iter()
-        .map(|s| s.m_acs_from_sensor_calibrated)
-        .collect();
+    // Adjustment (over all four sensors; the unobserved keep their flown alignment).
+    let mut calibrated = flown.clone();
+    for (j, &k) in observed.iter().enumerate() {
+        calibrated[k] = solution.sensors[j].m_acs_from_sensor_calibrated;
+    }
     let adjustment = preserve_obc_attitude(&flown, &calibrated, 0, 1, BoresightFrame::Bisector)?;
     let mut alignments = std::collections::BTreeMap::new();
     let mut alignments_adjusted = std::collections::BTreeMap::new();
     let mut residual = BeforeAfter::default();
-    for (i, s) in solution.sensors.iter().enumerate() {
+    for (j, s) in solution.sensors.iter().enumerate() {
+        let i = observed[j];
         let sigma = [
             s.sigma_acs_arcsec.x,
             s.sigma_acs_arcsec.y,
