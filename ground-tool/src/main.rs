@@ -185,7 +185,9 @@ fn read_flown_tables(
     Option<fsw_core::tables::IruTable>,
 )> {
     use fsw_core::tables::image::{decode_payload, parse_image};
-    let Some(dir) = dir else { return Ok((None, None)) };
+    let Some(dir) = dir else {
+        return Ok((None, None));
+    };
     let read = |name: &str| -> Result<Option<Vec<u8>>> {
         let p = dir.join(name);
         if p.exists() {
@@ -196,7 +198,8 @@ fn read_flown_tables(
     };
     let alignment = match read("alignment.tbl")? {
         Some(b) => {
-            let (_, payload) = parse_image(&b).map_err(|e| anyhow::anyhow!("alignment.tbl: {e:?}"))?;
+            let (_, payload) =
+                parse_image(&b).map_err(|e| anyhow::anyhow!("alignment.tbl: {e:?}"))?;
             Some(decode_payload(payload).map_err(|e| anyhow::anyhow!("alignment.tbl: {e:?}"))?)
         }
         None => None,
@@ -224,7 +227,11 @@ fn run_calibrate(
     let options = CalibrateOptions {
         flown_alignment,
         flown_iru,
-        weighting: if shuster1982 { Weighting::Shuster1982 } else { Weighting::Optimal1990 },
+        weighting: if shuster1982 {
+            Weighting::Shuster1982
+        } else {
+            Weighting::Optimal1990
+        },
         ..CalibrateOptions::default()
     };
     let result = calibrate_run(run_dir, out, &options)?;
@@ -244,18 +251,30 @@ fn main() {
         eprintln!("error: {e:#}");
         // Input problems (missing or malformed files, too little data) are exit code 2.
         let text = format!("{e:#}");
-        let input = ["not found", "needs", "malformed", "not valid", "only ", "cannot read", "FFCAL:"]
-            .iter()
-            .any(|k| text.contains(k));
+        let input = [
+            "not found",
+            "needs",
+            "malformed",
+            "not valid",
+            "only ",
+            "cannot read",
+            "FFCAL:",
+        ]
+        .iter()
+        .any(|k| text.contains(k));
         std::process::exit(if input { 2 } else { 1 });
     }
 }
 
 fn run(cli: Cli) -> Result<()> {
     match cli.command {
-        Command::Calibrate { run_dir, out, tables, shuster1982, json } => {
-            run_calibrate(&run_dir, &out, tables.as_deref(), shuster1982, json)?
-        }
+        Command::Calibrate {
+            run_dir,
+            out,
+            tables,
+            shuster1982,
+            json,
+        } => run_calibrate(&run_dir, &out, tables.as_deref(), shuster1982, json)?,
         Command::Paper { json } => {
             let r = ground_tool::paper::reproduce()?;
             if json {

@@ -47,8 +47,17 @@ pub fn plot_series(
     series: &[Series],
 ) -> anyhow::Result<()> {
     register_font();
-    let all: Vec<(f64, f64)> = series.iter().flat_map(|s| s.points.iter().copied()).filter(|(x, y)| x.is_finite() && y.is_finite()).collect();
-    let (mut x0, mut x1, mut y0, mut y1) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
+    let all: Vec<(f64, f64)> = series
+        .iter()
+        .flat_map(|s| s.points.iter().copied())
+        .filter(|(x, y)| x.is_finite() && y.is_finite())
+        .collect();
+    let (mut x0, mut x1, mut y0, mut y1) = (
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+    );
     for (x, y) in &all {
         x0 = x0.min(*x);
         x1 = x1.max(*x);
@@ -84,7 +93,11 @@ pub fn plot_series(
     for s in series {
         let color = s.color;
         chart
-            .draw_series(s.points.iter().map(|&(x, y)| Circle::new((x, y), 2, color.filled())))
+            .draw_series(
+                s.points
+                    .iter()
+                    .map(|&(x, y)| Circle::new((x, y), 2, color.filled())),
+            )
             .map_err(|e| anyhow::anyhow!("{e}"))?
             .label(s.label.clone())
             .legend(move |(x, y)| Circle::new((x, y), 4, color.filled()));
@@ -181,24 +194,48 @@ pub fn write_calibration_report(
         let name = format!("residual_{}_{}.png", SENSOR_NAMES[i], SENSOR_NAMES[j]).to_lowercase();
         plot_series(
             &out_dir.join(&name),
-            &format!("{}–{} dot-product residual (paper Fig. 2)", SENSOR_NAMES[i], SENSOR_NAMES[j]),
+            &format!(
+                "{}–{} dot-product residual (paper Fig. 2)",
+                SENSOR_NAMES[i], SENSOR_NAMES[j]
+            ),
             "time (h)",
             "residual (arcsec)",
             &[
-                Series { label: "before (flown tables)".into(), points: b, color: RGBColor(200, 60, 40) },
-                Series { label: "after (calibrated)".into(), points: a, color: RGBColor(30, 90, 200) },
+                Series {
+                    label: "before (flown tables)".into(),
+                    points: b,
+                    color: RGBColor(200, 60, 40),
+                },
+                Series {
+                    label: "after (calibrated)".into(),
+                    points: a,
+                    color: RGBColor(30, 90, 200),
+                },
             ],
         )?;
         plots.push(name);
     }
     if !out.report.bias_history.is_empty() {
         let mut series = Vec::new();
-        let colors = [RGBColor(200, 60, 40), RGBColor(30, 150, 60), RGBColor(30, 90, 200)];
-        let light = [RGBColor(240, 160, 150), RGBColor(150, 220, 160), RGBColor(150, 180, 240)];
+        let colors = [
+            RGBColor(200, 60, 40),
+            RGBColor(30, 150, 60),
+            RGBColor(30, 90, 200),
+        ];
+        let light = [
+            RGBColor(240, 160, 150),
+            RGBColor(150, 220, 160),
+            RGBColor(150, 180, 240),
+        ];
         for (axis, name) in ["x", "y", "z"].iter().enumerate() {
             series.push(Series {
                 label: format!("ground {name}"),
-                points: out.report.bias_history.iter().map(|p| (p.t_s / 3600.0, p.bias_rad_per_s[axis] * ARCSEC_PER_RAD)).collect(),
+                points: out
+                    .report
+                    .bias_history
+                    .iter()
+                    .map(|p| (p.t_s / 3600.0, p.bias_rad_per_s[axis] * ARCSEC_PER_RAD))
+                    .collect(),
                 color: colors[axis],
             });
             series.push(Series {
@@ -207,12 +244,21 @@ pub fn write_calibration_report(
                     .report
                     .bias_history
                     .iter()
-                    .filter_map(|p| p.obc_bias_rad_per_s.map(|b| (p.t_s / 3600.0, b[axis] * ARCSEC_PER_RAD)))
+                    .filter_map(|p| {
+                        p.obc_bias_rad_per_s
+                            .map(|b| (p.t_s / 3600.0, b[axis] * ARCSEC_PER_RAD))
+                    })
                     .collect(),
                 color: light[axis],
             });
         }
-        plot_series(&out_dir.join("bias_history.png"), "Gyro bias history (paper Figs. 3–4)", "time (h)", "bias (arcsec/s)", &series)?;
+        plot_series(
+            &out_dir.join("bias_history.png"),
+            "Gyro bias history (paper Figs. 3–4)",
+            "time (h)",
+            "bias (arcsec/s)",
+            &series,
+        )?;
         plots.push("bias_history.png".into());
     }
 
@@ -231,7 +277,11 @@ pub fn write_calibration_report(
         r.data.stars_identified[0], r.data.stars_identified[1], r.data.stars_unidentified[0], r.data.stars_unidentified[1],
         r.data.sun_samples[0], r.data.sun_samples[1], r.data.ffcal_epochs
     );
-    let _ = writeln!(md, "## Alignments (FFCAL, {:?} weighting, {} passes)\n", r.ffcal.weighting, r.ffcal.iterations);
+    let _ = writeln!(
+        md,
+        "## Alignments (FFCAL, {:?} weighting, {} passes)\n",
+        r.ffcal.weighting, r.ffcal.iterations
+    );
     let _ = writeln!(md, "| sensor | θ calibrated (ACS, ″) | σ (″) | θ adjusted (uplinked, ″) | residual RMS before (″) | after (″) |");
     let _ = writeln!(md, "|---|---|---|---|---|---|");
     for name in SENSOR_NAMES {
@@ -254,26 +304,52 @@ pub fn write_calibration_report(
     );
     let _ = writeln!(md, "## IRU\n");
     for m in &r.maneuvers {
-        let _ = writeln!(md, "- maneuver at {:.0}–{:.0} s, {:.2}° {}", m.start_s, m.end_s, m.angle_deg, if m.used { "(used)" } else { "(ends lack attitude solutions: not used)" });
+        let _ = writeln!(
+            md,
+            "- maneuver at {:.0}–{:.0} s, {:.2}° {}",
+            m.start_s,
+            m.end_s,
+            m.angle_deg,
+            if m.used {
+                "(used)"
+            } else {
+                "(ends lack attitude solutions: not used)"
+            }
+        );
     }
     match (&r.iru, &r.iru_skipped) {
         (Some(iru), _) => {
-            let _ = writeln!(md, "\nδM (ppm) with 1σ, from {} intervals:\n", iru.intervals);
+            let _ = writeln!(
+                md,
+                "\nδM (ppm) with 1σ, from {} intervals:\n",
+                iru.intervals
+            );
             for row in 0..3 {
                 let _ = writeln!(
                     md,
                     "    [{:8.0} ±{:5.0}] [{:8.0} ±{:5.0}] [{:8.0} ±{:5.0}]",
-                    iru.delta_m[row][0] * 1e6, iru.delta_m_sigma[row][0] * 1e6,
-                    iru.delta_m[row][1] * 1e6, iru.delta_m_sigma[row][1] * 1e6,
-                    iru.delta_m[row][2] * 1e6, iru.delta_m_sigma[row][2] * 1e6
+                    iru.delta_m[row][0] * 1e6,
+                    iru.delta_m_sigma[row][0] * 1e6,
+                    iru.delta_m[row][1] * 1e6,
+                    iru.delta_m_sigma[row][1] * 1e6,
+                    iru.delta_m[row][2] * 1e6,
+                    iru.delta_m_sigma[row][2] * 1e6
                 );
             }
             let _ = writeln!(
                 md,
                 "\nBias (ACS, arcsec/s): [{:.5}, {:.5}, {:.5}] ± [{:.5}, {:.5}, {:.5}]. G {}.\n",
-                iru.bias_rad_per_s[0] * ARCSEC_PER_RAD, iru.bias_rad_per_s[1] * ARCSEC_PER_RAD, iru.bias_rad_per_s[2] * ARCSEC_PER_RAD,
-                iru.bias_sigma_rad_per_s[0] * ARCSEC_PER_RAD, iru.bias_sigma_rad_per_s[1] * ARCSEC_PER_RAD, iru.bias_sigma_rad_per_s[2] * ARCSEC_PER_RAD,
-                if iru.g_updated { "updated in the uplinked IRU table (δM significant at 3σ)" } else { "left at its flown value (δM not significant at 3σ, as the paper decided)" }
+                iru.bias_rad_per_s[0] * ARCSEC_PER_RAD,
+                iru.bias_rad_per_s[1] * ARCSEC_PER_RAD,
+                iru.bias_rad_per_s[2] * ARCSEC_PER_RAD,
+                iru.bias_sigma_rad_per_s[0] * ARCSEC_PER_RAD,
+                iru.bias_sigma_rad_per_s[1] * ARCSEC_PER_RAD,
+                iru.bias_sigma_rad_per_s[2] * ARCSEC_PER_RAD,
+                if iru.g_updated {
+                    "updated in the uplinked IRU table (δM significant at 3σ)"
+                } else {
+                    "left at its flown value (δM not significant at 3σ, as the paper decided)"
+                }
             );
         }
         (None, Some(why)) => {

@@ -144,8 +144,7 @@ fn resync(bytes: &[u8], from: usize) -> usize {
     while at < bytes.len() {
         if let Some(h) = plausible_at(bytes, at) {
             let next = at + h.total_len;
-            if next == bytes.len() || (next < bytes.len() && plausible_at(bytes, next).is_some())
-            {
+            if next == bytes.len() || (next < bytes.len() && plausible_at(bytes, next).is_some()) {
                 return at;
             }
         }
@@ -193,7 +192,9 @@ pub fn decode(bytes: &[u8]) -> Telemetry {
         let Some(expected_user) = user_len(h.apid) else {
             // Unknown APID: trust its length if it fits, otherwise resync.
             let end = at + h.total_len;
-            let next = if end <= bytes.len() && (end == bytes.len() || plausible_at(bytes, end).is_some()) {
+            let next = if end <= bytes.len()
+                && (end == bytes.len() || plausible_at(bytes, end).is_some())
+            {
                 end
             } else {
                 resync(bytes, at + 1)

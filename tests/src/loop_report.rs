@@ -77,7 +77,10 @@ fn alignment_errors(
     }
     let mut absolute = BTreeMap::new();
     for k in 0..4 {
-        absolute.insert(SENSOR_NAMES[k].to_string(), rotvec_from_rot(&r[k]).norm() * ARCSEC_PER_RAD);
+        absolute.insert(
+            SENSOR_NAMES[k].to_string(),
+            rotvec_from_rot(&r[k]).norm() * ARCSEC_PER_RAD,
+        );
     }
     (relative, absolute)
 }
@@ -98,7 +101,8 @@ pub fn compare(
 ) -> anyhow::Result<LoopReport> {
     let mut true_m = [Matrix3::identity(); 4];
     for (k, name) in SENSOR_NAMES.iter().enumerate() {
-        true_m[k] = matrix_from_json(&truth["alignments"][name]).with_context(|| format!("truth.json alignments.{name}"))?;
+        true_m[k] = matrix_from_json(&truth["alignments"][name])
+            .with_context(|| format!("truth.json alignments.{name}"))?;
     }
     let (rel_before, abs_before) = alignment_errors(&AlignmentTable::prelaunch(), &true_m);
     let (rel_after, abs_after) = alignment_errors(&calibration.alignment, &true_m);
@@ -107,7 +111,11 @@ pub fn compare(
         (Some(t), Some(sol)) => {
             let err = sol.calibration.delta_m - t;
             let within = (0..9).all(|k| err[k].abs() <= 3.0 * sol.sigma_delta_m[k]);
-            (Some(t.abs().max() * 1e6), Some(err.abs().max() * 1e6), Some(within))
+            (
+                Some(t.abs().max() * 1e6),
+                Some(err.abs().max() * 1e6),
+                Some(within),
+            )
         }
         (Some(t), None) => (Some(t.abs().max() * 1e6), None, None),
         _ => (None, None, None),
@@ -115,8 +123,14 @@ pub fn compare(
     Ok(LoopReport {
         scenario: a.scenario.clone(),
         seed: a.seed,
-        relative_alignment_error_arcsec: Pair { before: rel_before, after: rel_after },
-        absolute_alignment_error_arcsec: Pair { before: abs_before, after: abs_after },
+        relative_alignment_error_arcsec: Pair {
+            before: rel_before,
+            after: rel_after,
+        },
+        absolute_alignment_error_arcsec: Pair {
+            before: abs_before,
+            after: abs_after,
+        },
         residual_rms_arcsec: Pair {
             before: calibration.report.residual_rms_arcsec.before.clone(),
             after: calibration.report.residual_rms_arcsec.after.clone(),
@@ -125,11 +139,23 @@ pub fn compare(
             before: a.post_maneuver_error_deg.clone(),
             after: b.post_maneuver_error_deg.clone(),
         },
-        fine_attitude_error_3rms_arcsec: Pair { before: three_rms(a), after: three_rms(b) },
-        iru_delta_m_max_error_ppm: Pair { before: dm_before, after: dm_after },
+        fine_attitude_error_3rms_arcsec: Pair {
+            before: three_rms(a),
+            after: three_rms(b),
+        },
+        iru_delta_m_max_error_ppm: Pair {
+            before: dm_before,
+            after: dm_after,
+        },
         iru_delta_m_within_3sigma: within,
-        filter_nees_mean: Pair { before: a.filter_nees_mean, after: b.filter_nees_mean },
-        flight_wall_seconds: Pair { before: a.wall_seconds, after: b.wall_seconds },
+        filter_nees_mean: Pair {
+            before: a.filter_nees_mean,
+            after: b.filter_nees_mean,
+        },
+        flight_wall_seconds: Pair {
+            before: a.wall_seconds,
+            after: b.wall_seconds,
+        },
         wall_seconds: 0.0,
     })
 }
@@ -139,17 +165,38 @@ pub fn compare(
 pub fn render_markdown(r: &LoopReport) -> String {
     let mut md = String::new();
     let _ = writeln!(md, "# Calibration loop: {} (seed {})\n", r.scenario, r.seed);
-    let _ = writeln!(md, "| quantity | before (prelaunch tables) | after (calibrated, uplinked) |");
+    let _ = writeln!(
+        md,
+        "| quantity | before (prelaunch tables) | after (calibrated, uplinked) |"
+    );
     let _ = writeln!(md, "|---|---|---|");
     for (k, before) in &r.relative_alignment_error_arcsec.before {
-        let after = r.relative_alignment_error_arcsec.after.get(k).copied().unwrap_or(f64::NAN);
-        let _ = writeln!(md, "| relative alignment error {k} (″, vs truth) | {before:.1} | {after:.1} |");
+        let after = r
+            .relative_alignment_error_arcsec
+            .after
+            .get(k)
+            .copied()
+            .unwrap_or(f64::NAN);
+        let _ = writeln!(
+            md,
+            "| relative alignment error {k} (″, vs truth) | {before:.1} | {after:.1} |"
+        );
     }
     for (k, before) in &r.residual_rms_arcsec.before {
-        let after = r.residual_rms_arcsec.after.get(k).copied().unwrap_or(f64::NAN);
+        let after = r
+            .residual_rms_arcsec
+            .after
+            .get(k)
+            .copied()
+            .unwrap_or(f64::NAN);
         let _ = writeln!(md, "| residual RMS {k} (″) | {before:.1} | {after:.1} |");
     }
-    let fmt_list = |v: &[f64]| v.iter().map(|x| format!("{x:.4}")).collect::<Vec<_>>().join(", ");
+    let fmt_list = |v: &[f64]| {
+        v.iter()
+            .map(|x| format!("{x:.4}"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
     let _ = writeln!(
         md,
         "| post-maneuver error per slew (°) | {} | {} |",
@@ -176,7 +223,16 @@ pub fn render_markdown(r: &LoopReport) -> String {
         }
     );
     let n = |x: Option<f64>| x.map_or("n/a".to_string(), |v| format!("{v:.2}"));
-    let _ = writeln!(md, "| filter NEES mean (3 = consistent) | {} | {} |", n(r.filter_nees_mean.before), n(r.filter_nees_mean.after));
-    let _ = writeln!(md, "\nWall time: {:.1} s (flights {:.1} s and {:.1} s).", r.wall_seconds, r.flight_wall_seconds.before, r.flight_wall_seconds.after);
+    let _ = writeln!(
+        md,
+        "| filter NEES mean (3 = consistent) | {} | {} |",
+        n(r.filter_nees_mean.before),
+        n(r.filter_nees_mean.after)
+    );
+    let _ = writeln!(
+        md,
+        "\nWall time: {:.1} s (flights {:.1} s and {:.1} s).",
+        r.wall_seconds, r.flight_wall_seconds.before, r.flight_wall_seconds.after
+    );
     md
 }

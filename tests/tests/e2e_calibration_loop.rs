@@ -20,13 +20,21 @@ fn e2e_calibration_loop_gro_early_mission() {
     let cal = out.join("cal");
     let a = run(
         scenario.clone(),
-        &RunOptions { out_dir: Some(fly_a.clone()), tables_dir: None, progress: false },
+        &RunOptions {
+            out_dir: Some(fly_a.clone()),
+            tables_dir: None,
+            progress: false,
+        },
     )
     .unwrap();
     let calibration = calibrate_run(&fly_a, &cal, &CalibrateOptions::default()).unwrap();
     let b = run(
         scenario,
-        &RunOptions { out_dir: Some(out.join("b")), tables_dir: Some(cal.join("tables")), progress: false },
+        &RunOptions {
+            out_dir: Some(out.join("b")),
+            tables_dir: Some(cal.join("tables")),
+            progress: false,
+        },
     )
     .unwrap();
     let truth: serde_json::Value =
@@ -45,18 +53,29 @@ fn e2e_calibration_loop_gro_early_mission() {
     // Residual RMS lower after, for every sensor.
     for (sensor, before) in &r.residual_rms_arcsec.before {
         let after = r.residual_rms_arcsec.after[sensor];
-        assert!(after < *before, "{sensor}: residual {before:.1}″ → {after:.1}″");
+        assert!(
+            after < *before,
+            "{sensor}: residual {before:.1}″ → {after:.1}″"
+        );
     }
     // Fine attitude (3 × RMS per axis, bias included) inside the paper's 0.024° after the uplink.
     for axis in 0..3 {
         let after = r.fine_attitude_error_3rms_arcsec.after[axis];
         let before = r.fine_attitude_error_3rms_arcsec.before[axis];
-        assert!(after < 86.4, "axis {axis}: 3×RMS {after:.1}″ (before {before:.1}″)");
+        assert!(
+            after < 86.4,
+            "axis {axis}: 3×RMS {after:.1}″ (before {before:.1}″)"
+        );
         assert!(after < before, "axis {axis}: {before:.1}″ → {after:.1}″");
     }
     // Post-maneuver errors inside the paper's 0.5° in both flights.
     assert!(!r.post_maneuver_error_deg.before.is_empty());
-    for e in r.post_maneuver_error_deg.before.iter().chain(&r.post_maneuver_error_deg.after) {
+    for e in r
+        .post_maneuver_error_deg
+        .before
+        .iter()
+        .chain(&r.post_maneuver_error_deg.after)
+    {
         assert!(*e < 0.5, "post-maneuver error {e}°");
     }
     let _ = std::fs::remove_dir_all(&out);

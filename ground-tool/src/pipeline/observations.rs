@@ -145,7 +145,8 @@ pub fn interpolate_orbit(
         + v0 * (s3 - 2.0 * s2 + s)
         + p1 * (-2.0 * s3 + 3.0 * s2)
         + v1 * (s3 - s2);
-    let vel = (p0 * (6.0 * s2 - 6.0 * s) + v0 * (3.0 * s2 - 4.0 * s + 1.0)
+    let vel = (p0 * (6.0 * s2 - 6.0 * s)
+        + v0 * (3.0 * s2 - 4.0 * s + 1.0)
         + p1 * (-6.0 * s2 + 6.0 * s)
         + v1 * (3.0 * s2 - 2.0 * s))
         / h;
@@ -332,14 +333,18 @@ pub fn fine_attitude(
     for k in center + 1..hi {
         let step = frames[k]
             .gyro
-            .map(|g| (Matrix3::identity() + delta_m) * g.dtheta_acs_rad - bias_acs_rad_per_s * g.dt_s)
+            .map(|g| {
+                (Matrix3::identity() + delta_m) * g.dtheta_acs_rad - bias_acs_rad_per_s * g.dt_s
+            })
             .unwrap_or_else(Vector3::zeros);
         to_center[k - lo] = to_center[k - 1 - lo] * rot(&step).transpose();
     }
     for k in (lo..center).rev() {
         let step = frames[k + 1]
             .gyro
-            .map(|g| (Matrix3::identity() + delta_m) * g.dtheta_acs_rad - bias_acs_rad_per_s * g.dt_s)
+            .map(|g| {
+                (Matrix3::identity() + delta_m) * g.dtheta_acs_rad - bias_acs_rad_per_s * g.dt_s
+            })
             .unwrap_or_else(Vector3::zeros);
         to_center[k - lo] = to_center[k + 1 - lo] * rot(&step);
     }

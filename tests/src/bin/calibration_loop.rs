@@ -59,12 +59,16 @@ fn run_loop(args: &Args) -> anyhow::Result<()> {
     if let Some(d) = args.duration {
         scenario.duration_s = scenario.duration_s.min(d);
     }
-    std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating {}", args.out.display()))?;
     let fly_a = args.out.join("1-fly-prelaunch");
     let cal = args.out.join("2-calibration");
     let fly_b = args.out.join("3-fly-calibrated");
 
-    eprintln!("[1/3] flying {} with the prelaunch tables ...", scenario.name);
+    eprintln!(
+        "[1/3] flying {} with the prelaunch tables ...",
+        scenario.name
+    );
     let summary_a = run(
         scenario.clone(),
         &RunOptions {
@@ -73,14 +77,20 @@ fn run_loop(args: &Args) -> anyhow::Result<()> {
             progress: true,
         },
     )?;
-    eprintln!("[2/3] calibrating from {}/telemetry.bin ...", fly_a.display());
+    eprintln!(
+        "[2/3] calibrating from {}/telemetry.bin ...",
+        fly_a.display()
+    );
     let calibration = calibrate_run(&fly_a, &cal, &CalibrateOptions::default())?;
     ground_tool::report::write_calibration_report(
         &cal,
         &calibration,
         &fsw_core::tables::AlignmentTable::prelaunch(),
     )?;
-    eprintln!("[3/3] flying again with the uplinked tables {}/tables ...", cal.display());
+    eprintln!(
+        "[3/3] flying again with the uplinked tables {}/tables ...",
+        cal.display()
+    );
     let summary_b = run(
         scenario,
         &RunOptions {
@@ -94,7 +104,10 @@ fn run_loop(args: &Args) -> anyhow::Result<()> {
     )?;
     let mut report: LoopReport = compare(&summary_a, &summary_b, &calibration, &truth)?;
     report.wall_seconds = t_start.elapsed().as_secs_f64();
-    std::fs::write(args.out.join("report.json"), serde_json::to_string_pretty(&report)?)?;
+    std::fs::write(
+        args.out.join("report.json"),
+        serde_json::to_string_pretty(&report)?,
+    )?;
     let md = render_markdown(&report);
     std::fs::write(args.out.join("report.md"), &md)?;
     if args.json {
