@@ -941,7 +941,6 @@ fn mutated_images_rejected_or_usable() {
 /// them, so this strict check fails today; it is kept, ignored, until the loader compares the
 /// payload with its re-encoding.
 #[test]
-#[ignore = "finding REL-1: non-canonical (overlong varint) payloads are accepted; dump differs"]
 fn non_canonical_payload_is_refused_or_dumps_bit_identical() {
     let mut t = IruTable::prelaunch();
     t.stuck_cycles = 5;

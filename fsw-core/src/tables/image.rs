@@ -285,14 +285,56 @@ pub fn parse_image(bytes: &[u8]) -> Result<(ImageHeader, &[u8]), TableError> {
     ))
 }
 
-/// Decode a postcard payload completely (trailing bytes are an error).
+/// Decode a postcard payload completely (trailing bytes are an error) and require it to be
+/// the *canonical* encoding of the value (postcard accepts over-long varints such as
+/// `85 00` for 5): otherwise the dump of the activated table would differ from the image the
+/// ground uplinked and telemetered (TBL-002). The check re-encodes without a buffer, comparing
+/// each octet with the payload ([`CompareFlavor`]).
 ///
 /// # Errors
 /// [`TableError::PayloadDecode`].
-pub fn decode_payload<T: DeserializeOwned>(payload: &[u8]) -> Result<T, TableError> {
+pub fn decode_payload<T: DeserializeOwned + Serialize>(payload: &[u8]) -> Result<T, TableError> {
     match postcard::take_from_bytes::<T>(payload) {
-        Ok((value, [])) => Ok(value),
+        Ok((value, [])) if is_canonical(&value, payload) => Ok(value),
         _ => Err(TableError::PayloadDecode),
+    }
+}
+
+/// `payload` is exactly the postcard encoding of `value` (no buffer: see [`CompareFlavor`]).
+#[inline(never)]
+fn is_canonical<T: Serialize>(value: &T, payload: &[u8]) -> bool {
+    let flavor = CompareFlavor {
+        expected: payload,
+        at: 0,
+    };
+    matches!(
+        postcard::serialize_with_flavor::<T, CompareFlavor<'_>, usize>(value, flavor),
+        Ok(n) if n == payload.len()
+    )
+}
+
+/// A postcard output "flavor" that stores nothing: it compares every octet the serializer
+/// produces with the expected payload and fails at the first difference.
+pub struct CompareFlavor<'a> {
+    expected: &'a [u8],
+    at: usize,
+}
+
+impl postcard::ser_flavors::Flavor for CompareFlavor<'_> {
+    type Output = usize;
+
+    fn try_push(&mut self, data: u8) -> postcard::Result<()> {
+        match self.expected.get(self.at) {
+            Some(&b) if b == data => {
+                self.at = self.at.saturating_add(1);
+                Ok(())
+            }
+            _ => Err(postcard::Error::SerializeBufferFull),
+        }
+    }
+
+    fn finalize(self) -> postcard::Result<usize> {
+        Ok(self.at)
     }
 }
 
