@@ -1,0 +1,76 @@
+//! Fuzz the ground telemetry reader `ground_tool::tp::decode` with arbitrary bytes
+//! (docs/reliability.md).
+//!
+//! Invariants: never panics; the report's file length is the input length; skipped regions
+//! are non-empty, inside the file, in increasing order and disjoint; duplicate offsets are
+//! inside the file; decoded packets, dropped duplicates and skipped regions add up to the
+//! whole file (every octet is accounted for exactly once); the record counts match the
+//! records returned, which are sorted by time.
+#![no_main]
+
+use fsw_core::telemetry::{
+    APID_EPHEMERIS, APID_EVENT, APID_HOUSEKEEPING, APID_RAW_SENSORS, EPHEMERIS_LEN, EVENT_LEN,
+    HOUSEKEEPING_LEN, RAW_FRAME_LEN,
+};
+use libfuzzer_sys::fuzz_target;
+
+const OVERHEAD: usize = 12;
+
+fn packet_len(apid: u16) -> usize {
+    OVERHEAD
+        + match apid {
+            APID_RAW_SENSORS => RAW_FRAME_LEN,
+            APID_HOUSEKEEPING => HOUSEKEEPING_LEN,
+            APID_EVENT => EVENT_LEN,
+            APID_EPHEMERIS => EPHEMERIS_LEN,
+            _ => panic!("duplicate with unknown APID 0x{apid:03x}"),
+        }
+}
+
+fuzz_target!(|data: &[u8]| {
+    let tm = ground_tool::tp::decode(data);
+    let r = &tm.report;
+    assert_eq!(r.file_len, data.len());
+    let mut end = 0usize;
+    for s in &r.skipped {
+        assert!(s.len > 0, "empty skipped region {s:?}");
+        assert!(
+            s.offset >= end,
+            "skipped regions overlap or are out of order: {:?}",
+            r.skipped
+        );
+        end = s.offset.checked_add(s.len).expect("no overflow");
+        assert!(
+            end <= data.len(),
+            "skipped region beyond the end of the file: {s:?}"
+        );
+    }
+    let mut dup_octets = 0usize;
+    for &d in &r.duplicates {
+        assert!(d + 6 <= data.len());
+        let apid = u16::from_be_bytes([data[d], data[d + 1]]) & 0x07ff;
+        let n = packet_len(apid);
+        assert!(d + n <= data.len());
+        dup_octets += n;
+    }
+    for &(off, _, _) in &r.time_reversals {
+        assert!(off < data.len());
+    }
+    assert_eq!(r.packets_raw, tm.raw.len());
+    assert_eq!(r.packets_housekeeping, tm.housekeeping.len());
+    assert_eq!(r.packets_event, tm.events.len());
+    assert_eq!(r.packets_ephemeris, tm.ephemeris.len());
+    let decoded = r.packets_raw * (OVERHEAD + RAW_FRAME_LEN)
+        + r.packets_housekeeping * (OVERHEAD + HOUSEKEEPING_LEN)
+        + r.packets_event * (OVERHEAD + EVENT_LEN)
+        + r.packets_ephemeris * (OVERHEAD + EPHEMERIS_LEN);
+    assert_eq!(
+        decoded + dup_octets + r.skipped_octets(),
+        data.len(),
+        "octets not accounted for exactly once"
+    );
+    assert!(tm.raw.windows(2).all(|w| w[0].time <= w[1].time));
+    assert!(tm.housekeeping.windows(2).all(|w| w[0].time <= w[1].time));
+    assert!(tm.events.windows(2).all(|w| w[0].0 <= w[1].0));
+    assert!(tm.ephemeris.windows(2).all(|w| w[0].time <= w[1].time));
+});
