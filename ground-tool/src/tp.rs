@@ -18,7 +18,7 @@ use fsw_core::telemetry::{
     APID_RAW_SENSORS, EPHEMERIS_LEN, EVENT_LEN, HOUSEKEEPING_LEN, RAW_FRAME_LEN, TIME_CODE_LEN,
 };
 use serde::Serialize;
-use std::collections::HashSet;
+use std::collections::HashMap;
 use std::path::Path;
 
 /// CCSDS primary header length.
@@ -50,8 +50,11 @@ pub struct TpReport {
     pub packets_ephemeris: usize,
     /// Regions skipped (truncated, unknown, corrupt), with offsets.
     pub skipped: Vec<Skipped>,
-    /// Duplicated packets dropped (offsets).
+    /// Duplicated packets dropped (offsets): identical octets to an earlier copy.
     pub duplicates: Vec<usize>,
+    /// Packets with the key (APID, sequence count, time) of an earlier one but other octets:
+    /// both kept (offsets of the later ones).
+    pub duplicate_conflicts: Vec<usize>,
     /// Places where a packet's time was earlier than the previous packet of the same APID:
     /// `(offset, previous time s, time s)`.
     pub time_reversals: Vec<(usize, f64, f64)>,
@@ -139,6 +142,17 @@ fn plausible_at(bytes: &[u8], at: usize) -> Option<Header> {
     (h.total_len == expected).then_some(h)
 }
 
+/// First confirmed packet start in `[from, before)` (a plausible header followed by another
+/// plausible header or the end of the file), if any.
+fn confirmed_start_before(bytes: &[u8], from: usize, before: usize) -> Option<usize> {
+    (from..before.min(bytes.len())).find(|&at| {
+        plausible_at(bytes, at).is_some_and(|h| {
+            let next = at + h.total_len;
+            next == bytes.len() || (next < bytes.len() && plausible_at(bytes, next).is_some())
+        })
+    })
+}
+
 fn resync(bytes: &[u8], from: usize) -> usize {
     let mut at = from;
     while at < bytes.len() {
@@ -170,7 +184,7 @@ pub fn read_file(path: &Path) -> Result<Telemetry, TpError> {
 pub fn decode(bytes: &[u8]) -> Telemetry {
     let mut tm = Telemetry::default();
     tm.report.file_len = bytes.len();
-    let mut seen: HashSet<(u16, u16, u32, u16)> = HashSet::new();
+    let mut seen: HashMap<(u16, u16, u32, u16), usize> = HashMap::new();
     let mut last_time: [Option<f64>; 4] = [None; 4];
     let mut at = 0usize;
     while at < bytes.len() {
@@ -191,13 +205,15 @@ pub fn decode(bytes: &[u8]) -> Telemetry {
         };
         let Some(expected_user) = user_len(h.apid) else {
             // Unknown APID: trust its length if it fits, otherwise resync.
+            // Never skip past a confirmed known-APID packet inside the claimed length.
             let end = at + h.total_len;
+            let confirmed = resync(bytes, at + 1);
             let next = if end <= bytes.len()
                 && (end == bytes.len() || plausible_at(bytes, end).is_some())
             {
-                end
+                end.min(confirmed)
             } else {
-                resync(bytes, at + 1)
+                confirmed
             };
             tm.report.skipped.push(Skipped {
                 offset: at,
@@ -234,6 +250,23 @@ pub fn decode(bytes: &[u8]) -> Telemetry {
             });
             break;
         }
+        // A packet cut short by a drop-out or splice would swallow the packets after it:
+        // when its end is not a packet boundary, look for a confirmed packet start inside it.
+        let end = at + h.total_len;
+        if end < bytes.len() && plausible_at(bytes, end).is_none() {
+            if let Some(q) = confirmed_start_before(bytes, at + 1, end) {
+                tm.report.skipped.push(Skipped {
+                    offset: at,
+                    len: q - at,
+                    reason: format!(
+                        "APID 0x{:03x}: packet cut short (a packet starts inside it)",
+                        h.apid
+                    ),
+                });
+                at = q;
+                continue;
+            }
+        }
         let data = &bytes[at + PRIMARY_HEADER_LEN..at + h.total_len];
         let time = match decode_time_code(data) {
             Ok(t) => t,
@@ -248,10 +281,18 @@ pub fn decode(bytes: &[u8]) -> Telemetry {
             }
         };
         let user = &data[TIME_CODE_LEN..];
-        if !seen.insert((h.apid, h.seq, time.coarse_s, time.fine)) {
-            tm.report.duplicates.push(at);
-            at += h.total_len;
-            continue;
+        // A duplicate is a packet whose octets equal an earlier copy's; the same key with
+        // other octets (e.g. a flipped sequence count) is kept and reported as a conflict.
+        let key = (h.apid, h.seq, time.coarse_s, time.fine);
+        if let Some(&first) = seen.get(&key) {
+            if bytes.get(first..first + h.total_len) == bytes.get(at..at + h.total_len) {
+                tm.report.duplicates.push(at);
+                at += h.total_len;
+                continue;
+            }
+            tm.report.duplicate_conflicts.push(at);
+        } else {
+            seen.insert(key, at);
         }
         let slot = match h.apid {
             APID_RAW_SENSORS => 0,
