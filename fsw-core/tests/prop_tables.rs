@@ -747,10 +747,13 @@ fn check_mutated(
                 prop_assert_eq!(set.status()[other.index()], before[other.index()]);
             }
             // The dump re-loads (change 0 from the active table) and activates to the same set.
+            // TBL-002: the dump is the accepted image bit for bit (non-canonical payloads are
+            // refused since REL-1 was fixed).
             let dump = dump_of(&set, id);
             if dump != img {
                 t.accepted_non_canonical += 1;
             }
+            prop_assert!(dump == img, "dump of an accepted image differs from it");
             let snapshot = set.clone();
             prop_assert_eq!(set.load(&dump), Ok(id));
             prop_assert_eq!(set.activate(id), Ok(()));
@@ -936,10 +939,9 @@ fn mutated_images_rejected_or_usable() {
 /// such an image is *not* the canonical encoding of its table.
 ///
 /// Requirement TBL-002 (a dump of the active table is the activated image bit for bit, and the
-/// telemetered `active_crc` is the CRC of that dump) then holds only if the OBC refuses
-/// non-canonical payloads. Finding REL-1 (`docs/reliability.md`): `decode_payload` accepts
-/// them, so this strict check fails today; it is kept, ignored, until the loader compares the
-/// payload with its re-encoding.
+/// telemetered `active_crc` is the CRC of that dump) holds only if the OBC refuses
+/// non-canonical payloads. Finding REL-1 (`docs/reliability.md`): `decode_payload` accepted
+/// them; fixed by comparing the payload with its re-encoding.
 #[test]
 fn non_canonical_payload_is_refused_or_dumps_bit_identical() {
     let mut t = IruTable::prelaunch();

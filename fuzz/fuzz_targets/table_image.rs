@@ -7,7 +7,8 @@
 //!
 //! Invariants: a rejected image leaves every active table and its status unchanged and has a
 //! reason; an accepted image changes no active table until activated, activates, validates,
-//! and its dump re-loads and re-activates to the same tables.
+//! its dump is the image bit for bit, and the dump re-loads and re-activates to the same
+//! tables.
 #![no_main]
 
 use fsw_core::raw::TimeTag;
@@ -106,6 +107,8 @@ fuzz_target!(|data: &[u8]| {
             let mut buf = vec![0u8; image.len()];
             let n = set.dump(id, &mut buf).expect("dump fits");
             let dump = &buf[..n];
+            // TBL-002: the dump is the accepted image bit for bit.
+            assert_eq!(dump, &image[..], "dump differs from the accepted image");
             let snapshot = set.clone();
             assert_eq!(
                 set.load(dump),
