@@ -116,8 +116,8 @@ impl Command<'_> {
     }
 }
 
-/// Everything a cycle produces.
-#[derive(Clone, Debug, PartialEq)]
+/// Everything a cycle produces (postcard-serializable: fixed field order, no maps).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct CycleOutput {
     /// The housekeeping record (downlinked every cycle).
     pub housekeeping: ObcHousekeeping,
