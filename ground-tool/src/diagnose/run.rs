@@ -63,7 +63,7 @@ pub struct DiagnoseOutput {
     pub filter: Option<FilterTable>,
 }
 
-fn read_image<T: serde::de::DeserializeOwned>(path: &Path) -> anyhow::Result<T> {
+fn read_image<T: serde::de::DeserializeOwned + serde::Serialize>(path: &Path) -> anyhow::Result<T> {
     let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
     let (_, payload) = parse_image(&bytes)
         .map_err(|e| anyhow::anyhow!("{} is not valid (table image): {e:?}", path.display()))?;
