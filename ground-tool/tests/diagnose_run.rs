@@ -32,8 +32,16 @@ fn debug_run_batches() {
     let run = std::path::PathBuf::from(std::env::var("RUN_DIR").unwrap());
     let tm = ground_tool::tp::read_file(&run.join("telemetry.bin")).unwrap();
     let md = read_metadata(&run).unwrap();
-    let cal = calibrate_telemetry(&tm, &md, &CalibrateOptions::default()).unwrap();
-    let f = &cal.frames;
+    let sky = load_catalog().unwrap();
+    let frames = ground_tool::pipeline::observations::build_observations(
+        &tm,
+        &fsw_core::tables::AlignmentTable::prelaunch(),
+        &fsw_core::tables::IruTable::prelaunch(),
+        &md.sensors,
+        &sky,
+        &Default::default(),
+    );
+    let f = &frames;
     let mut c = [0usize; 8];
     for fr in f {
         for i in 0..2 {
@@ -82,4 +90,243 @@ fn debug_run_batches() {
         line += &format!("[{a},{b}|{s1},{s2}|{h}] ");
     }
     eprintln!("{line}");
+}
+
+/// `RUNS=/tmp/a,/tmp/b OUT_ROOT=/tmp/o cargo test -p ground-tool --test diagnose_run summary -- --ignored --nocapture`
+#[test]
+#[ignore = "needs run folders: RUNS=dir1,dir2 OUT_ROOT=..."]
+fn summary_runs() {
+    let runs = std::env::var("RUNS").unwrap();
+    let out_root = std::path::PathBuf::from(std::env::var("OUT_ROOT").unwrap());
+    for run in runs.split(',') {
+        let run = std::path::PathBuf::from(run);
+        let name = run.file_name().unwrap().to_string_lossy().to_string();
+        let t = std::time::Instant::now();
+        match diagnose_run(&run, &out_root.join(&name), &DiagnoseOptions::default()) {
+            Err(e) => eprintln!("== {name}: ERROR {e:#}"),
+            Ok(o) => {
+                let r = &o.report;
+                eprintln!(
+                    "== {name} ({:.1} s) truth undeclared {:?}",
+                    t.elapsed().as_secs_f64(),
+                    r.scoring
+                        .as_ref()
+                        .map(|s| s.truth_undeclared_effects.clone())
+                );
+                for d in &r.detected {
+                    let p = if d.parameters.len() > 14 {
+                        format!("{} params", d.parameters.len())
+                    } else {
+                        d.parameters
+                            .iter()
+                            .map(|(k, v)| {
+                                format!(
+                                    "{k}={v:.3}±{:.3}",
+                                    d.sigma.get(k).copied().unwrap_or(f64::NAN)
+                                )
+                            })
+                            .collect::<Vec<_>>()
+                            .join(" ")
+                    };
+                    eprintln!(
+                        "   DETECTED {}[{}] ΔBIC {:.0}: {p}",
+                        d.effect, d.sensor, d.evidence.delta_bic
+                    );
+                }
+                for u in &r.unexplained {
+                    eprintln!(
+                        "   UNEXPLAINED {} {} vs {} ({}) size {:.2} p {:.1e}",
+                        u.sensor, u.axis, u.regressor, u.method, u.size, u.p_value
+                    );
+                }
+                if let Some(s) = &r.scoring {
+                    for p in &s.parameters {
+                        if p.parameter.starts_with("HIP") {
+                            continue;
+                        }
+                        eprintln!(
+                            "   PARAM {}[{}].{} est {:.3} ± {:.3} truth {:.3} z {:.2}",
+                            p.effect, p.sensor, p.parameter, p.estimate, p.sigma, p.truth, p.z
+                        );
+                    }
+                }
+                eprintln!(
+                    "   rms before {:?}",
+                    r.residual_rms_arcsec
+                        .before
+                        .values()
+                        .map(|v| format!("{v:.2}"))
+                        .collect::<Vec<_>>()
+                );
+                eprintln!(
+                    "   rms after  {:?}",
+                    r.residual_rms_arcsec
+                        .after
+                        .values()
+                        .map(|v| format!("{v:.2}"))
+                        .collect::<Vec<_>>()
+                );
+                eprintln!(
+                    "   floor      {:?} n {:?}",
+                    r.noise_floor_arcsec
+                        .values()
+                        .map(|v| format!("{v:.2}"))
+                        .collect::<Vec<_>>(),
+                    r.measurements.values().collect::<Vec<_>>()
+                );
+                if let Some(c) = &r.calibration_error_arcsec {
+                    eprintln!(
+                        "   cal err before {:?} after {:?}",
+                        c.before
+                            .values()
+                            .map(|v| format!("{v:.1}"))
+                            .collect::<Vec<_>>(),
+                        c.after
+                            .values()
+                            .map(|v| format!("{v:.1}"))
+                            .collect::<Vec<_>>()
+                    );
+                }
+                for c in &r.gyro.candidates {
+                    eprintln!(
+                        "   gyro {} ΔBIC {:.1} halves {:.3} {}",
+                        c.effect,
+                        c.delta_bic,
+                        c.halves_p,
+                        c.rejected_because.clone().unwrap_or_else(|| "KEPT".into())
+                    );
+                }
+                for n in r.notes.iter().chain(&r.gyro.notes) {
+                    eprintln!("   note: {}", &n[..n.len().min(160)]);
+                }
+            }
+        }
+    }
+}
+
+#[test]
+#[ignore = "needs RUN_DIR"]
+fn debug_fss_truth_fit() {
+    use ground_tool::diagnose::effects::EffectKind;
+    use ground_tool::diagnose::fit::*;
+    let run = std::path::PathBuf::from(std::env::var("RUN_DIR").unwrap());
+    let o = diagnose_run(
+        &run,
+        &std::path::PathBuf::from("/tmp/dg/dbg"),
+        &DiagnoseOptions::default(),
+    )
+    .unwrap();
+    let res = &o.analysis.search;
+    let lay = &res.layout;
+    let tf = lay.find(EffectKind::FssTransferFunction, Some(3)).unwrap();
+    let e = &lay.effects[tf];
+    eprintln!(
+        "params {:?} pitch {:?}",
+        e.params,
+        e.pitch_rad.map(f64::to_degrees)
+    );
+    let truth = [150.0, 30.0, 20.0, -120.0, -25.0, 20.0, 6.0, 0.0, 6.0, 0.0];
+    for (name, sys) in [
+        ("full", &res.systems.full),
+        ("first", &res.systems.first),
+        ("second", &res.systems.second),
+    ] {
+        let idx = indices(lay, &[tf]);
+        let fit = solve(sys, lay, &idx).unwrap();
+        let base = solve(sys, lay, &indices(lay, &[])).unwrap();
+        // TF fixed at truth: move its columns to the right-hand side.
+        let r = lay.range(tf);
+        let others: Vec<usize> = indices(lay, &[]);
+        let mut b = nalgebra::DVector::zeros(others.len());
+        let mut n = nalgebra::DMatrix::zeros(others.len(), others.len());
+        let prior = lay.prior_information();
+        for (a, &i) in others.iter().enumerate() {
+            b[a] = sys.b[i]
+                - r.clone()
+                    .enumerate()
+                    .map(|(k, j)| sys.n[(i, j)] * truth[k.min(truth.len() - 1)])
+                    .sum::<f64>();
+            for (c, &j) in others.iter().enumerate() {
+                n[(a, c)] = sys.n[(i, j)];
+            }
+            n[(a, a)] += prior[i];
+        }
+        let x = n.clone().cholesky().unwrap().solve(&b);
+        let mut full = nalgebra::DVector::zeros(lay.total);
+        for (a, &i) in others.iter().enumerate() {
+            full[i] = x[a];
+        }
+        for (k, j) in r.clone().enumerate() {
+            full[j] = truth[k];
+        }
+        let chi2 = sys.chi2 - 2.0 * full.dot(&sys.b) + full.dot(&(&sys.n * &full));
+        eprintln!(
+            "{name}: chi2 base {:.1} fit {:.1} truth-TF {:.1}; fitted TF {:?}",
+            base.chi2,
+            fit.chi2,
+            chi2,
+            r.clone()
+                .map(|j| fit.param(j).map(|p| (p.0 * 10.0).round() / 10.0))
+                .collect::<Vec<_>>()
+        );
+    }
+}
+
+#[test]
+#[ignore = "needs RUN_DIR (a catalog scenario)"]
+fn debug_catalog() {
+    use ground_tool::diagnose::effects::EffectKind;
+    use ground_tool::diagnose::fit::*;
+    let run = std::path::PathBuf::from(std::env::var("RUN_DIR").unwrap());
+    let o = diagnose_run(
+        &run,
+        &std::path::PathBuf::from("/tmp/dg/dbg"),
+        &DiagnoseOptions::default(),
+    )
+    .unwrap();
+    let res = &o.analysis.search;
+    let lay = &res.layout;
+    let ci = lay
+        .find(EffectKind::CatalogProperMotionError, None)
+        .unwrap();
+    let truth = ground_tool::diagnose::scoring::read_truth(&run)
+        .unwrap()
+        .unwrap();
+    let t0 = o.analysis.set.meas.first().map(|_| 0.0).unwrap_or(0.0);
+    let _ = t0;
+    let tt = o
+        .calibration
+        .as_ref()
+        .map(|c| c.frames[0].time.seconds_since_j2000_tt())
+        .unwrap();
+    let cat = ground_tool::diagnose::scoring::catalog_truth(&truth, tt);
+    let stars = &lay.effects[ci].stars;
+    let idx = indices(lay, &[ci]);
+    let fits: Vec<SubFit> = [&res.systems.full, &res.systems.first, &res.systems.second]
+        .iter()
+        .map(|s| solve(s, lay, &idx).unwrap())
+        .collect();
+    let mut zs = Vec::new();
+    for (k, h) in stars.iter().enumerate() {
+        let r = lay.range(ci);
+        let g = |f: &SubFit, j: usize| f.param(r.start + 2 * k + j).unwrap();
+        let t = cat.get(h).copied().unwrap_or([f64::NAN; 2]);
+        let n = o
+            .analysis
+            .set
+            .meas
+            .iter()
+            .filter(|m| m.star == *h && !m.outlier)
+            .count();
+        let (e, n_) = (g(&fits[0], 0), g(&fits[0], 1));
+        let (a, b) = (g(&fits[1], 0), g(&fits[2], 0));
+        zs.push((e.0 - t[0]) / e.1);
+        zs.push((n_.0 - t[1]) / n_.1);
+        eprintln!("HIP{h} n {n}: east {:.1}±{:.1} (truth {:.1}) halves {:.1}±{:.1}/{:.1}±{:.1}; north {:.1}±{:.1} (truth {:.1})", e.0, e.1, t[0], a.0, a.1, b.0, b.1, n_.0, n_.1, t[1]);
+    }
+    let chi2: f64 = zs.iter().filter(|z| z.is_finite()).map(|z| z * z).sum();
+    eprintln!(
+        "chi2 vs truth {chi2:.1} over {}",
+        zs.iter().filter(|z| z.is_finite()).count()
+    );
 }

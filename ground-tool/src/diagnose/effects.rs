@@ -31,7 +31,7 @@ pub const FSS_EDGE_RAD: f64 = 32.0 * RAD_PER_DEG;
 /// Reference magnitude of the magnitude bias.
 pub const MAGNITUDE_REF: f64 = 4.0;
 /// Stars need this many measurements to get catalog-offset parameters.
-pub const CATALOG_MIN_SAMPLES: usize = 20;
+pub const CATALOG_MIN_SAMPLES: usize = 5;
 
 /// Kinds of sensor-side effect.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize)]
@@ -101,7 +101,11 @@ pub struct Effect {
     pub params: Vec<String>,
     /// Parameter units.
     pub units: Vec<&'static str>,
-    /// Weak prior 1σ per parameter (keeps ill-observed parameters finite).
+    /// Prior 1σ per parameter: physically plausible sizes (FSS transfer terms ≤ 200″ and
+    /// 0.2 % scale, FHST distortion ≤ 100″, thermal ≤ 30″/°C, time tags ≤ 1 s, ...). They
+    /// keep combinations that the data leave unobserved (a transfer polynomial over a small
+    /// part of the field) from taking absurd values, which would also make the split-half
+    /// comparison meaningless.
     #[serde(skip)]
     pub prior_sigma: Vec<f64>,
     /// Pitch of the cyclic error (rad).
@@ -109,6 +113,13 @@ pub struct Effect {
     /// Stars of the catalog effect (HIP).
     #[serde(skip)]
     pub stars: Vec<u32>,
+    /// Their reference directions (J2000, unit), same order.
+    #[serde(skip)]
+    pub star_dirs: Vec<nalgebra::Vector3<f64>>,
+    /// Soft linear constraints on the parameters: (param index, coefficient) rows = 0 with
+    /// the given 1σ (the catalog offsets' net rotation per tracker).
+    #[serde(skip)]
+    pub constraints: Vec<(Vec<(usize, f64)>, f64)>,
     /// Extra (nonlinear) parameters searched on a grid (for the BIC): the cyclic pitch.
     pub extra_params: usize,
 }
@@ -123,6 +134,8 @@ impl Effect {
             prior_sigma: params.iter().map(|p| p.2).collect(),
             pitch_rad: None,
             stars: Vec::new(),
+            star_dirs: Vec::new(),
+            constraints: Vec::new(),
             extra_params: 0,
         }
     }
@@ -280,6 +293,49 @@ impl Effect {
     }
 }
 
+/// Per-star offsets are known only up to a common rotation of the sky (the batch attitudes
+/// absorb it): remove the weighted least-squares net rotation `ω` (`east = e_N·ω`,
+/// `north = −e_E·ω`) from a vector of per-star (east, north) offsets with variances `var`.
+#[must_use]
+pub fn remove_net_rotation(dirs: &[nalgebra::Vector3<f64>], x: &[f64], var: &[f64]) -> Vec<f64> {
+    let mut n = nalgebra::Matrix3::<f64>::zeros();
+    let mut b = nalgebra::Vector3::<f64>::zeros();
+    let rows = |k: usize| {
+        let [e, nn] = tangent_basis_eci(&dirs[k]);
+        [nn, -e]
+    };
+    for k in 0..dirs.len() {
+        let r = rows(k);
+        for j in 0..2 {
+            let i = 2 * k + j;
+            if !(var[i].is_finite() && var[i] > 0.0) {
+                continue;
+            }
+            let w = 1.0 / var[i];
+            n += r[j] * r[j].transpose() * w;
+            b += r[j] * (w * x[i]);
+        }
+    }
+    let omega = n
+        .try_inverse()
+        .map_or_else(nalgebra::Vector3::zeros, |inv| inv * b);
+    (0..x.len())
+        .map(|i| x[i] - rows(i / 2)[i % 2].dot(&omega))
+        .collect()
+}
+
+/// East/north basis of a direction (as the measurement set builds it).
+#[must_use]
+pub fn tangent_basis_eci(u: &nalgebra::Vector3<f64>) -> [nalgebra::Vector3<f64>; 2] {
+    let east = nalgebra::Vector3::z().cross(u);
+    let east = if east.norm() < 1e-9 {
+        nalgebra::Vector3::x()
+    } else {
+        east.normalize()
+    };
+    [east, u.cross(&east)]
+}
+
 /// Sensors with enough data (≥ 50 measurements).
 fn active_sensors(set: &MeasurementSet) -> [bool; 4] {
     let c = set.count_per_sensor();
@@ -310,27 +366,27 @@ pub fn library(set: &MeasurementSet, fss_pitch_rad: [Option<f64>; 2]) -> Vec<Eff
         out.push(Effect::new(
             EffectKind::TimeTagOffset,
             Some(s),
-            &[("tau", "ms", 5000.0)],
+            &[("tau", "ms", 1000.0)],
         ));
         out.push(Effect::new(
             EffectKind::ThermalAlignmentDrift,
             Some(s),
             &[
-                ("x", "arcsec/degC", 300.0),
-                ("y", "arcsec/degC", 300.0),
-                ("z", "arcsec/degC", 300.0),
+                ("x", "arcsec/degC", 30.0),
+                ("y", "arcsec/degC", 30.0),
+                ("z", "arcsec/degC", 30.0),
             ],
         ));
         out.push(Effect::new(
             EffectKind::OrbitPeriodicAlignment,
             Some(s),
             &[
-                ("cos_x", "arcsec", 600.0),
-                ("cos_y", "arcsec", 600.0),
-                ("cos_z", "arcsec", 600.0),
-                ("sin_x", "arcsec", 600.0),
-                ("sin_y", "arcsec", 600.0),
-                ("sin_z", "arcsec", 600.0),
+                ("cos_x", "arcsec", 100.0),
+                ("cos_y", "arcsec", 100.0),
+                ("cos_z", "arcsec", 100.0),
+                ("sin_x", "arcsec", 100.0),
+                ("sin_y", "arcsec", 100.0),
+                ("sin_z", "arcsec", 100.0),
             ],
         ));
         if s < 2 {
@@ -338,35 +394,35 @@ pub fn library(set: &MeasurementSet, fss_pitch_rad: [Option<f64>; 2]) -> Vec<Eff
                 EffectKind::FhstDistortion,
                 Some(s),
                 &[
-                    ("radial_at_4deg", "arcsec", 600.0),
-                    ("hv_h_at_corner", "arcsec", 600.0),
-                    ("hv_v_at_corner", "arcsec", 600.0),
+                    ("radial_at_4deg", "arcsec", 100.0),
+                    ("hv_h_at_corner", "arcsec", 100.0),
+                    ("hv_v_at_corner", "arcsec", 100.0),
                 ],
             ));
             out.push(Effect::new(
                 EffectKind::MagnitudeBias,
                 Some(s),
                 &[
-                    ("h_per_mag", "arcsec/mag", 300.0),
-                    ("v_per_mag", "arcsec/mag", 300.0),
+                    ("h_per_mag", "arcsec/mag", 20.0),
+                    ("v_per_mag", "arcsec/mag", 20.0),
                 ],
             ));
         } else {
             let mut params = vec![
-                ("alpha_scale", "ppm", 1.0e5),
-                ("alpha_cross_at_corner", "arcsec", 3000.0),
-                ("alpha_cubic_at_edge", "arcsec", 3000.0),
-                ("beta_scale", "ppm", 1.0e5),
-                ("beta_cross_at_corner", "arcsec", 3000.0),
-                ("beta_cubic_at_edge", "arcsec", 3000.0),
+                ("alpha_scale", "ppm", 2000.0),
+                ("alpha_cross_at_corner", "arcsec", 200.0),
+                ("alpha_cubic_at_edge", "arcsec", 200.0),
+                ("beta_scale", "ppm", 2000.0),
+                ("beta_cross_at_corner", "arcsec", 200.0),
+                ("beta_cubic_at_edge", "arcsec", 200.0),
             ];
             let pitch = fss_pitch_rad[s - 2];
             if pitch.is_some() {
                 params.extend([
-                    ("alpha_cyclic_sin", "arcsec", 300.0),
-                    ("alpha_cyclic_cos", "arcsec", 300.0),
-                    ("beta_cyclic_sin", "arcsec", 300.0),
-                    ("beta_cyclic_cos", "arcsec", 300.0),
+                    ("alpha_cyclic_sin", "arcsec", 60.0),
+                    ("alpha_cyclic_cos", "arcsec", 60.0),
+                    ("beta_cyclic_sin", "arcsec", 60.0),
+                    ("beta_cyclic_cos", "arcsec", 60.0),
                 ]);
             }
             let mut e = Effect::new(EffectKind::FssTransferFunction, Some(s), &params);
@@ -378,11 +434,17 @@ pub fn library(set: &MeasurementSet, fss_pitch_rad: [Option<f64>; 2]) -> Vec<Eff
     // Catalog: stars seen often enough, in at least two batches.
     let mut seen: std::collections::BTreeMap<u32, (usize, usize, usize)> =
         std::collections::BTreeMap::new();
+    let mut dirs: std::collections::BTreeMap<u32, nalgebra::Vector3<f64>> =
+        std::collections::BTreeMap::new();
+    let mut trackers: std::collections::BTreeMap<u32, [bool; 2]> =
+        std::collections::BTreeMap::new();
     for m in set
         .meas
         .iter()
         .filter(|m| m.sensor < 2 && !m.outlier && m.star != 0)
     {
+        dirs.entry(m.star).or_insert(m.u_eci);
+        trackers.entry(m.star).or_insert([false; 2])[m.sensor] = true;
         let e = seen.entry(m.star).or_insert((0, usize::MAX, 0));
         e.0 += 1;
         if e.1 != m.batch {
@@ -392,7 +454,7 @@ pub fn library(set: &MeasurementSet, fss_pitch_rad: [Option<f64>; 2]) -> Vec<Eff
     }
     let stars: Vec<u32> = seen
         .iter()
-        .filter(|(_, (n, _, b))| *n >= CATALOG_MIN_SAMPLES && *b >= 2)
+        .filter(|(_, (n, _, _))| *n >= CATALOG_MIN_SAMPLES)
         .map(|(h, _)| *h)
         .collect();
     if stars.len() >= 3 {
@@ -404,6 +466,43 @@ pub fn library(set: &MeasurementSet, fss_pitch_rad: [Option<f64>; 2]) -> Vec<Eff
         let refs: Vec<(&str, &'static str, f64)> =
             names.iter().map(|(n, u, s)| (n.as_str(), *u, *s)).collect();
         let mut e = Effect::new(EffectKind::CatalogProperMotionError, None, &refs);
+        e.star_dirs = stars
+            .iter()
+            .map(|h| dirs.get(h).copied().unwrap_or_else(nalgebra::Vector3::z))
+            .collect();
+        // Gauge: a common rotation of the stars one tracker sees is the same as a rotation of
+        // that tracker (or of the attitude), so per-star offsets can move the alignments
+        // (the roll about a boresight above all). The offsets are therefore constrained to
+        // have no least-squares net rotation per tracker (0 ± 0.5″ in every axis): the
+        // catalog effect cannot move a tracker's alignment, which stays what the data give
+        // without it.
+        for tr in 0..2 {
+            let members: Vec<usize> = (0..stars.len())
+                .filter(|&k| trackers.get(&stars[k]).is_some_and(|t| t[tr]))
+                .collect();
+            if members.len() < 3 {
+                continue;
+            }
+            let n = members.len() as f64;
+            let mut pm = nalgebra::Matrix3::<f64>::zeros();
+            for &k in &members {
+                let [east, north] = tangent_basis_eci(&e.star_dirs[k]);
+                pm += (north * north.transpose() + east * east.transpose()) / n;
+            }
+            let Some(pinv) = pm.try_inverse() else {
+                continue;
+            };
+            for axis in 0..3 {
+                let coef = pinv.row(axis).transpose();
+                let mut row = Vec::with_capacity(2 * members.len());
+                for &k in &members {
+                    let [east, north] = tangent_basis_eci(&e.star_dirs[k]);
+                    row.push((2 * k, coef.dot(&north) / n));
+                    row.push((2 * k + 1, -coef.dot(&east) / n));
+                }
+                e.constraints.push((row, 0.5));
+            }
+        }
         e.stars = stars;
         out.push(e);
     }

@@ -361,10 +361,24 @@ pub fn accumulate(
     out
 }
 
+/// Length of the alternating time blocks that make the two halves (s).
+pub const HALF_BLOCK_S: f64 = 600.0;
+
+/// The halves are alternating 10-min blocks of batches: each half then covers the same
+/// attitudes, Sun positions, temperatures and orbit phases, so a field- or
+/// temperature-dependent effect has comparable parameters in both (split-half agreement);
+/// contiguous time halves would compare extrapolations of different parts of the field.
+#[must_use]
+pub fn in_first_half(set: &MeasurementSet, batch: usize) -> bool {
+    set.batches
+        .get(batch)
+        .is_some_and(|b| (b.t_center_s / HALF_BLOCK_S).floor() as i64 % 2 == 0)
+}
+
 /// The three systems of the search: first half, second half, both.
 #[derive(Clone, Debug)]
 pub struct Systems {
-    /// First half of the batches (time order).
+    /// First half of the batches (even 10-min blocks, [`in_first_half`]).
     pub first: Normal,
     /// Second half.
     pub second: Normal,
@@ -375,10 +389,10 @@ pub struct Systems {
 /// Accumulate both halves and their sum.
 #[must_use]
 pub fn accumulate_halves(set: &MeasurementSet, layout: &Layout) -> Systems {
-    let half = set.batches.len() / 2;
+    let in_first = |b: usize| in_first_half(set, b);
     let (first, second) = rayon::join(
-        || accumulate(set, layout, &|b| b < half),
-        || accumulate(set, layout, &|b| b >= half),
+        || accumulate(set, layout, &|b| in_first(b)),
+        || accumulate(set, layout, &|b| !in_first(b)),
     );
     let full = first.sum(&second);
     Systems {
@@ -432,9 +446,22 @@ impl SubFit {
     }
 }
 
-/// Solve the sub-model with the given global indices.
+/// Solve the sub-model with the given global indices (soft constraints included).
 #[must_use]
 pub fn solve(normal: &Normal, layout: &Layout, idx: &[usize]) -> Option<SubFit> {
+    solve_opt(normal, layout, idx, true)
+}
+
+/// [`solve`], optionally without the soft constraints (the split-half comparison of the
+/// catalog offsets removes their gauge itself: with the constraints, stars a half does not
+/// see would carry the other stars' net rotation).
+#[must_use]
+pub fn solve_opt(
+    normal: &Normal,
+    layout: &Layout,
+    idx: &[usize],
+    constraints: bool,
+) -> Option<SubFit> {
     let prior = layout.prior_information();
     let k = idx.len();
     let mut n = DMatrix::zeros(k, k);
@@ -448,6 +475,23 @@ pub fn solve(normal: &Normal, layout: &Layout, idx: &[usize]) -> Option<SubFit> 
     let mut np = n.clone();
     for (a, &i) in idx.iter().enumerate() {
         np[(a, a)] += prior[i];
+    }
+    // Soft constraints whose parameters are all in the sub-model.
+    for (ei, e) in layout.effects.iter().enumerate().filter(|_| constraints) {
+        let o = layout.offsets[ei];
+        for (row, sigma) in &e.constraints {
+            let pos: Option<Vec<(usize, f64)>> = row
+                .iter()
+                .map(|(j, c)| idx.iter().position(|&g| g == o + j).map(|p| (p, *c)))
+                .collect();
+            let Some(pos) = pos else { continue };
+            let w = 1.0 / (sigma * sigma);
+            for &(p1, c1) in &pos {
+                for &(p2, c2) in &pos {
+                    np[(p1, p2)] += w * c1 * c2;
+                }
+            }
+        }
     }
     let chol = np.clone().cholesky()?;
     let x = chol.solve(&b);

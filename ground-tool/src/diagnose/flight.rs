@@ -49,6 +49,7 @@ pub fn flight_update(
     res: &SearchResult,
     base: &AlignmentTable,
     flown_filter: &FilterTable,
+    counts: [usize; 4],
 ) -> anyhow::Result<FlightUpdate> {
     let g = res.final_fit.expand(res.layout.total);
     let mut applied = Vec::new();
@@ -74,6 +75,19 @@ pub fn flight_update(
     table.m_acs_from_fhst2 = ortho(&adj.m_acs_from_sensor_adjusted[1]);
     table.m_acs_from_fss1 = ortho(&adj.m_acs_from_sensor_adjusted[2]);
     table.m_acs_from_fss2 = ortho(&adj.m_acs_from_sensor_adjusted[3]);
+    // A sensor without data keeps its flown alignment (the common rotation of the adjustment
+    // is a change of gauge, not information about it).
+    for (s, &c) in counts.iter().enumerate() {
+        if c < 50 {
+            let rows = *base.matrices()[s];
+            match s {
+                0 => table.m_acs_from_fhst1 = rows,
+                1 => table.m_acs_from_fhst2 = rows,
+                2 => table.m_acs_from_fss1 = rows,
+                _ => table.m_acs_from_fss2 = rows,
+            }
+        }
+    }
     applied.push(
         "alignments re-estimated jointly with the effects (FHST frame of the OBC kept)".to_owned(),
     );

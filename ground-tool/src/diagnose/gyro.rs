@@ -454,6 +454,7 @@ pub fn analyse(
                 sigma,
                 units,
                 evidence: ev,
+                star_dirs: BTreeMap::new(),
             });
         }
         out.bias_fit_after = fitted(&model);
@@ -691,6 +692,7 @@ fn asymmetry(
             sigma,
             units,
             evidence: ev.clone(),
+            star_dirs: BTreeMap::new(),
         });
     }
     out.candidates.push(ev);

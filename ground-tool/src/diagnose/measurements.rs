@@ -113,6 +113,8 @@ pub struct Measurement {
     pub ab_orbital_acs: Vector3<f64>,
     /// Star tangent basis in ACS (east, north of the reference direction).
     pub tangent_acs: [Vector3<f64>; 2],
+    /// Reference direction (J2000, unit) as used by the model.
+    pub u_eci: Vector3<f64>,
     /// HIP number (0 for the Sun).
     pub star: u32,
     /// Catalog magnitude (NaN for the Sun).
@@ -161,6 +163,11 @@ pub struct Batch {
 
 /// A batch whose FHST attitude is worse than this (1σ, any axis, arcsec) is not used.
 pub const MAX_BATCH_SIGMA_ARCSEC: f64 = 15.0;
+/// Use batches whose attitude needs the FSS (one tracker + Sun): in LEO the Earth often
+/// hides one tracker, and the Sun may be in an FSS mostly then. Their residuals are taken
+/// against the FHST + FSS attitude, so FSS and FHST effects can trade through it; the fit is
+/// still the exact joint likelihood.
+pub const ALLOW_FSS_AIDED: bool = true;
 /// Prior 1σ of the batch attitude correction (arcsec).
 pub const NUISANCE_ANGLE_PRIOR_ARCSEC: f64 = 600.0;
 /// Prior 1σ of the batch rate correction (arcsec per 100 s).
@@ -442,6 +449,7 @@ impl MeasurementSet {
                         ab_annual_acs: a_s * aberration_term(&u, &v_e),
                         ab_orbital_acs: a_s * aberration_term(&u, &v_sc),
                         tangent_acs: [a_s * tb[0], a_s * tb[1]],
+                        u_eci: u,
                         star,
                         magnitude: mag,
                         dtemp,
@@ -539,7 +547,7 @@ impl MeasurementSet {
         for (i, b) in self.batches.iter_mut().enumerate() {
             b.fhst_only = good(&mut info_fhst[i]);
             // A batch needs a star: the Sun alone gives two axes.
-            b.usable = has_fhst[i] && (b.fhst_only || good(&mut info_all[i]));
+            b.usable = has_fhst[i] && (b.fhst_only || (ALLOW_FSS_AIDED && good(&mut info_all[i])));
         }
         let usable: Vec<bool> = self.batches.iter().map(|b| b.usable).collect();
         for m in &mut self.meas {

@@ -56,6 +56,9 @@ pub struct Detected {
     pub units: BTreeMap<String, String>,
     /// The evidence that kept it.
     pub evidence: search::Evidence,
+    /// Reference directions of the catalog effect's stars (HIP number → J2000 unit vector).
+    #[serde(skip)]
+    pub star_dirs: BTreeMap<String, nalgebra::Vector3<f64>>,
 }
 
 /// Structure no candidate explains.
@@ -176,6 +179,12 @@ pub fn analyse(input: &DiagnoseInput<'_>, config: &SearchConfig) -> anyhow::Resu
                 sigma,
                 units,
                 evidence: ev.clone(),
+                star_dirs: e
+                    .stars
+                    .iter()
+                    .zip(&e.star_dirs)
+                    .map(|(h, u)| (h.to_string(), *u))
+                    .collect(),
             }
         })
         .collect();

@@ -70,14 +70,22 @@ pub struct DiagnoseReport {
     pub gyro: GyroSummary,
     /// Flight tables written and what went in.
     pub flight_tables: FlightSummary,
-    /// Scoring only (truth.json): alignment error per sensor before/after, arcsec.
+    /// Scoring only (truth.json): alignment error per sensor before (calibration chain) and
+    /// after (diagnose), arcsec: RMS direction error over the sensor's measurements of this
+    /// run, FHST-pair common rotation removed ([`super::scoring::calibration_error_arcsec`]).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub calibration_error_arcsec: Option<BeforeAfter>,
+    /// Scoring only: the full rotation angle of the same alignment errors (includes
+    /// rotations the data do not constrain), arcsec.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub calibration_rotation_error_arcsec: Option<BeforeAfter>,
     /// Scoring only (truth.json).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub scoring: Option<Scoring>,
     /// Plots written.
     pub plots: Vec<String>,
+    /// Notes (e.g. the calibration chain could not run).
+    pub notes: Vec<String>,
 }
 
 /// Gyro part of the report.
@@ -361,6 +369,9 @@ pub fn markdown(r: &DiagnoseReport) -> String {
             r.baseline_model.join(", ")
         }
     );
+    for n in &r.notes {
+        let _ = writeln!(s, "> Note: {n}\n");
+    }
     let _ = writeln!(s, "## Detected effects\n");
     if r.detected.is_empty() {
         let _ = writeln!(
@@ -414,7 +425,7 @@ pub fn markdown(r: &DiagnoseReport) -> String {
         );
     }
     if let Some(c) = &r.calibration_error_arcsec {
-        let _ = writeln!(s, "\n## Calibration error (SCORING ONLY: from truth.json)\n\nAlignment error per sensor, common FHST-pair rotation removed (arcsec).\n\n| sensor | before (chain) | after (diagnose) |\n|---|---|---|");
+        let _ = writeln!(s, "\n## Calibration error (SCORING ONLY: from truth.json)\n\nAlignment error per sensor (arcsec): RMS direction error over this run's measurements of the sensor, common FHST-pair rotation removed (the full rotation angles are in report.json).\n\n| sensor | before (chain) | after (diagnose) |\n|---|---|---|");
         for n in SENSOR_NAMES {
             let _ = writeln!(
                 s,

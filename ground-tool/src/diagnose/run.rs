@@ -15,7 +15,9 @@ use super::measurements::{DiagnoseInput, SENSOR_NAMES};
 use super::report::{
     markdown, write_plots, BeforeAfter, DiagnoseReport, FlightSummary, GyroSummary, Scoring,
 };
-use super::scoring::{calibration_error_arcsec, check_parameters, matches_truth, read_truth};
+use super::scoring::{
+    calibration_error_arcsec, check_parameters, matches_truth, read_truth, rotation_error_arcsec,
+};
 use super::search::SearchConfig;
 use super::{analyse, Analysis};
 use crate::calibration::iru::GyroCalibration;
@@ -55,8 +57,8 @@ pub struct DiagnoseOutput {
     pub report: DiagnoseReport,
     /// Sensor-side analysis.
     pub analysis: Analysis,
-    /// The calibration chain's output.
-    pub calibration: CalibrationOutput,
+    /// The calibration chain's output (None when it failed and the flown tables were used).
+    pub calibration: Option<CalibrationOutput>,
     /// New alignment table.
     pub alignment: AlignmentTable,
     /// New filter table (if changed).
@@ -117,6 +119,45 @@ fn flown_tables(
     Ok((a, i, f))
 }
 
+/// What the analysis takes from the calibration chain.
+struct Chain {
+    frames: Vec<crate::pipeline::observations::FrameObservations>,
+    alignment: AlignmentTable,
+    iru: IruTable,
+    irucal: Option<crate::calibration::iru::IrucalSolution>,
+    output: Option<CalibrationOutput>,
+}
+
+/// The chain's output without FFCAL/IRUCAL: DA/FADS with the flown tables.
+fn chain_fallback(
+    tm: &tp::Telemetry,
+    metadata: &crate::pipeline::calibrate::Metadata,
+    copt: &CalibrateOptions,
+) -> anyhow::Result<Chain> {
+    use crate::pipeline::calibrate::load_catalog;
+    use crate::pipeline::observations::build_observations;
+    let alignment = copt
+        .flown_alignment
+        .unwrap_or_else(AlignmentTable::prelaunch);
+    let iru = copt.flown_iru.unwrap_or_else(IruTable::prelaunch);
+    let sky = load_catalog()?;
+    let frames = build_observations(
+        tm,
+        &alignment,
+        &iru,
+        &metadata.sensors,
+        &sky,
+        &copt.identify,
+    );
+    Ok(Chain {
+        frames,
+        alignment,
+        iru,
+        irucal: None,
+        output: None,
+    })
+}
+
 /// Run the diagnosis of a run folder and write the report and tables into `out_dir`.
 ///
 /// # Errors
@@ -158,7 +199,29 @@ pub fn diagnose_run(
         ..CalibrateOptions::default()
     };
     copt.identify.aberration = annual;
-    let cal = calibrate_telemetry(&tm, &metadata, &copt)?;
+    let mut notes = Vec::new();
+    let cal = match calibrate_telemetry(&tm, &metadata, &copt) {
+        Ok(c) => Chain {
+            frames: c.frames.clone(),
+            alignment: c.alignment,
+            iru: c.iru,
+            irucal: c.irucal.clone(),
+            output: Some(c),
+        },
+        Err(e) => {
+            // The chain needs every sensor observed with another (FFCAL) and maneuvers
+            // (IRUCAL); without it the joint fit still estimates the alignments from the
+            // flown tables.
+            let why = format!("{e:#}");
+            if why.contains("only ") && why.contains("raw sensor frames") {
+                return Err(e);
+            }
+            notes.push(format!(
+                "calibration chain failed ({why}); analysis from the flown tables"
+            ));
+            chain_fallback(&tm, &metadata, &copt)?
+        }
+    };
 
     // Ephemerides per frame.
     let frames = &cal.frames;
@@ -216,7 +279,12 @@ pub fn diagnose_run(
 
     // Flight tables.
     let filter_flown = flown_filter.unwrap_or_else(FilterTable::default_boot);
-    let flight = super::flight::flight_update(&analysis.search, &cal.alignment, &filter_flown)?;
+    let flight = super::flight::flight_update(
+        &analysis.search,
+        &cal.alignment,
+        &filter_flown,
+        analysis.set.count_per_sensor(),
+    )?;
     std::fs::create_dir_all(out_dir.join("tables"))
         .with_context(|| format!("creating {}", out_dir.display()))?;
     let created = tm.raw.last().map_or(0.0, |r| r.time.seconds());
@@ -245,12 +313,53 @@ pub fn diagnose_run(
     };
     let counts = analysis.set.count_per_sensor();
     let truth = read_truth(run_dir)?;
+    let frames_t0_j2000 = input
+        .frames
+        .first()
+        .map_or(0.0, |f| f.time.seconds_since_j2000_tt());
+    let mut rotation_error = None;
     let (calibration_error, scoring) = match &truth {
         Some(t) => {
-            let ce = BeforeAfter {
-                before: calibration_error_arcsec(&cal.alignment, t),
-                after: calibration_error_arcsec(&flight.alignment, t),
+            // The final model's field corrections (transfer function, distortion) per
+            // measurement; the chain has none beyond the flown tables.
+            let res = &analysis.search;
+            let g = res.final_fit.expand(res.layout.total);
+            let field: Vec<usize> = res
+                .baseline
+                .iter()
+                .chain(&res.added)
+                .copied()
+                .filter(|&i| {
+                    matches!(
+                        res.layout.effects[i].kind,
+                        super::effects::EffectKind::FssTransferFunction
+                            | super::effects::EffectKind::FhstDistortion
+                    )
+                })
+                .collect();
+            let field_after = |k: usize| -> [f64; 2] {
+                let m = &analysis.set.meas[k];
+                let mut out = [0.0; 2];
+                let mut cols = Vec::new();
+                for &i in &field {
+                    cols.clear();
+                    res.layout.effects[i].columns(m, &|_| None, &mut cols);
+                    let o = res.layout.offsets[i];
+                    for (p, v) in &cols {
+                        out[0] += v[0] * g[o + p];
+                        out[1] += v[1] * g[o + p];
+                    }
+                }
+                out
             };
+            let ce = BeforeAfter {
+                before: calibration_error_arcsec(&cal.alignment, t, &analysis.set, &|_| [0.0; 2]),
+                after: calibration_error_arcsec(&flight.alignment, t, &analysis.set, &field_after),
+            };
+            rotation_error = Some(BeforeAfter {
+                before: rotation_error_arcsec(&cal.alignment, t),
+                after: rotation_error_arcsec(&flight.alignment, t),
+            });
             let sc = Scoring {
                 label: "scoring only: from truth.json, never used by the analysis".into(),
                 truth_undeclared_effects: t.undeclared.clone(),
@@ -258,7 +367,12 @@ pub fn diagnose_run(
                     .iter()
                     .map(|d| (d.effect.clone(), d.sensor.clone(), matches_truth(d, t)))
                     .collect(),
-                parameters: check_parameters(&detected, t, analysis.set.aberration_k0),
+                parameters: check_parameters(
+                    &detected,
+                    t,
+                    analysis.set.aberration_k0,
+                    frames_t0_j2000,
+                ),
             };
             (Some(ce), Some(sc))
         }
@@ -296,8 +410,10 @@ pub fn diagnose_run(
             ground_only: flight.ground_only.clone(),
         },
         calibration_error_arcsec: calibration_error,
+        calibration_rotation_error_arcsec: rotation_error,
         scoring,
         plots: Vec::new(),
+        notes,
     };
     report.plots = write_plots(out_dir, &analysis, &detected, &gyro_res)?;
     std::fs::write(
@@ -312,6 +428,6 @@ pub fn diagnose_run(
         analysis,
         alignment: flight.alignment,
         filter: flight.filter,
-        calibration: cal,
+        calibration: cal.output,
     })
 }

@@ -79,18 +79,97 @@ pub fn read_truth(run_dir: &Path) -> anyhow::Result<Option<Truth>> {
     }))
 }
 
-/// Calibration error per sensor (arcsec), FHST-pair common rotation removed.
-#[must_use]
-pub fn calibration_error_arcsec(est: &AlignmentTable, truth: &Truth) -> BTreeMap<String, f64> {
+/// Alignment error vectors per sensor (ACS, arcsec), FHST-pair common rotation removed.
+fn alignment_errors(est: &AlignmentTable, truth: &Truth) -> Vec<Vector3<f64>> {
     let m: Vec<Matrix3<f64>> = est.matrices().iter().map(|r| matrix_from_rows(r)).collect();
     let e: Vec<Vector3<f64>> = (0..4)
         .map(|i| rotvec_from_rot(&(m[i] * truth.alignments[i].transpose())) * ARCSEC_PER_RAD)
         .collect();
     let common = (e[0] + e[1]) * 0.5;
+    e.iter().map(|x| x - common).collect()
+}
+
+/// Truth's field-dependent error of a measurement (arcsec, sensor axes): the FSS transfer
+/// function or the FHST distortion of the scenario (zero when unknown).
+fn truth_field_error(m: &super::measurements::Measurement, truth: &Truth) -> [f64; 2] {
+    let Some(s) = &truth.scenario_file else {
+        return [0.0; 2];
+    };
+    let [a, b] = m.ang;
+    match m.sensor {
+        0 | 1 => {
+            let fx = if m.sensor == 0 {
+                &s.fhst1.effects
+            } else {
+                &s.fhst2.effects
+            };
+            let f = 4.0 * fsw_core::units::RAD_PER_DEG;
+            let rho2 = a * a + b * b;
+            let k3 = fx.radial_distortion_arcsec_at_4deg / f.powi(3);
+            let hv = a * b / (f * f);
+            [
+                k3 * rho2 * a + fx.hv_distortion_arcsec_at_corner[0] * hv,
+                k3 * rho2 * b + fx.hv_distortion_arcsec_at_corner[1] * hv,
+            ]
+        }
+        _ => {
+            let f = if m.sensor == 2 { &s.fss1 } else { &s.fss2 };
+            [
+                (f.alpha.apply(a, b) - a) * ARCSEC_PER_RAD,
+                (f.beta.apply(b, a) - b) * ARCSEC_PER_RAD,
+            ]
+        }
+    }
+}
+
+/// Calibration error per sensor (arcsec per axis): the RMS, over the run's own measurements
+/// of that sensor, of the error of the calibrated measurement model — the alignment error
+/// (FHST-pair common rotation removed: absolute alignment is indistinguishable from
+/// attitude) plus the error of the modelled field function (FSS transfer function, FHST
+/// distortion) against the truth's. `field_est` gives the model's field correction of a
+/// measurement (arcsec). Rotations the data do not constrain (an FSS rolled about the Sun
+/// line) and a transfer polynomial that trades with the alignment over the part of the field
+/// the Sun visits do not count; sensors without measurements are not scored.
+#[must_use]
+pub fn calibration_error_arcsec(
+    est: &AlignmentTable,
+    truth: &Truth,
+    set: &super::measurements::MeasurementSet,
+    field_est: &dyn Fn(usize) -> [f64; 2],
+) -> BTreeMap<String, f64> {
+    let d = alignment_errors(est, truth);
     let names = super::measurements::SENSOR_NAMES;
+    let mut sum = [0.0; 4];
+    let mut n = [0usize; 4];
+    for (i, m) in set.meas.iter().enumerate() {
+        if m.outlier {
+            continue;
+        }
+        // M_est = Rot(d) M_true ⇒ predicted angles change by −J Mᵀ (b × d).
+        let align = -(m.jm
+            * m.b_acs
+                .cross(&(d[m.sensor] * fsw_core::units::RAD_PER_ARCSEC)))
+            * ARCSEC_PER_RAD;
+        let fe = field_est(i);
+        let ft = truth_field_error(m, truth);
+        let e0 = align.x + fe[0] - ft[0];
+        let e1 = align.y + fe[1] - ft[1];
+        sum[m.sensor] += 0.5 * (e0 * e0 + e1 * e1);
+        n[m.sensor] += 1;
+    }
     (0..4)
-        .map(|i| (names[i].to_owned(), (e[i] - common).norm()))
+        .filter(|&i| n[i] > 0)
+        .map(|i| (names[i].to_owned(), (sum[i] / n[i] as f64).sqrt()))
         .collect()
+}
+
+/// Full rotation angle of the alignment error per sensor (arcsec), FHST-pair common rotation
+/// removed.
+#[must_use]
+pub fn rotation_error_arcsec(est: &AlignmentTable, truth: &Truth) -> BTreeMap<String, f64> {
+    let d = alignment_errors(est, truth);
+    let names = super::measurements::SENSOR_NAMES;
+    (0..4).map(|i| (names[i].to_owned(), d[i].norm())).collect()
 }
 
 /// One parameter compared with the truth.
@@ -248,16 +327,140 @@ pub fn parameter_truth(
     out
 }
 
-/// Compare every detection's parameters with the truth.
+/// True per-star catalog offsets (HIP → (east, north) arcsec) at `j2000_tt_s`: the truth
+/// sky (the scenario's proper-motion errors) against the catalog the ground uses.
+#[must_use]
+pub fn catalog_truth(truth: &Truth, j2000_tt_s: f64) -> BTreeMap<u32, [f64; 2]> {
+    use sim_harness::truth::sky::{Sky, SkyParams};
+    let mut out = BTreeMap::new();
+    let Some(s) = &truth.scenario_file else {
+        return out;
+    };
+    if s.sky.proper_motion_error_sigma_mas_per_yr <= 0.0 && s.sky.proper_motion_scale == 1.0 {
+        return out;
+    }
+    let Ok(table) =
+        sim_harness::data::CsvTable::parse(sim_harness::data::HIPPARCOS_CSV, "hipparcos")
+    else {
+        return out;
+    };
+    let (Ok(sky_true), Ok(sky_ground)) = (
+        Sky::from_csv(&table, &s.sky),
+        Sky::from_csv(&table, &SkyParams::default()),
+    ) else {
+        return out;
+    };
+    let origin = Vector3::zeros();
+    for st in sky_ground.stars() {
+        let Some(t) = sky_true.index_of_hip(st.hip).and_then(|i| sky_true.star(i)) else {
+            continue;
+        };
+        let u = st.astrometric_dir_eci(j2000_tt_s, &origin);
+        let v = t.astrometric_dir_eci(j2000_tt_s, &origin);
+        let east = Vector3::z().cross(&u);
+        if east.norm() < 1e-9 {
+            continue;
+        }
+        let east = east.normalize();
+        let north = u.cross(&east);
+        let d = v - u;
+        out.insert(
+            st.hip,
+            [
+                d.dot(&east) * ARCSEC_PER_RAD,
+                d.dot(&north) * ARCSEC_PER_RAD,
+            ],
+        );
+    }
+    out
+}
+
+/// Compare every detection's parameters with the truth (catalog offsets per star).
 #[must_use]
 pub fn check_parameters(
     detected: &[Detected],
     truth: &Truth,
     aberration_k0: [f64; 2],
+    j2000_tt_s: f64,
 ) -> Vec<ParameterCheck> {
     let mut out = Vec::new();
+    let mut catalog: Option<BTreeMap<u32, [f64; 2]>> = None;
     for d in detected {
-        for (k, t) in parameter_truth(d, truth, aberration_k0) {
+        let mut truths = parameter_truth(d, truth, aberration_k0);
+        if d.effect == "catalog_proper_motion_error" {
+            let cat = catalog.get_or_insert_with(|| catalog_truth(truth, j2000_tt_s));
+            for k in d.parameters.keys() {
+                let Some(rest) = k.strip_prefix("HIP") else {
+                    continue;
+                };
+                let mut parts = rest.split('_');
+                let (Some(h), Some(dir)) = (
+                    parts.next().and_then(|h| h.parse::<u32>().ok()),
+                    parts.next(),
+                ) else {
+                    continue;
+                };
+                if let Some(t) = cat.get(&h) {
+                    truths.insert(k.clone(), if dir == "east" { t[0] } else { t[1] });
+                }
+            }
+        }
+        if d.effect == "catalog_proper_motion_error" {
+            // Offsets are known up to a common rotation: compare after removing the net
+            // rotation of (estimate − truth).
+            let keys: Vec<String> = truths.keys().cloned().collect();
+            let mut dirs = Vec::new();
+            let mut x = Vec::new();
+            let mut var = Vec::new();
+            let mut used = Vec::new();
+            let mut i = 0;
+            while i + 1 < keys.len() {
+                let (ke, kn) = (&keys[i], &keys[i + 1]);
+                let hip = ke
+                    .trim_start_matches("HIP")
+                    .split('_')
+                    .next()
+                    .unwrap_or_default()
+                    .to_owned();
+                if ke.ends_with("_east")
+                    && kn.ends_with("_north")
+                    && kn.starts_with(&format!("HIP{hip}_"))
+                {
+                    if let (Some(u), Some(e), Some(n), Some(se), Some(sn)) = (
+                        d.star_dirs.get(&hip),
+                        d.parameters.get(ke),
+                        d.parameters.get(kn),
+                        d.sigma.get(ke),
+                        d.sigma.get(kn),
+                    ) {
+                        dirs.push(*u);
+                        x.extend([e - truths[ke], n - truths[kn]]);
+                        var.extend([se * se, sn * sn]);
+                        used.push((ke.clone(), kn.clone()));
+                    }
+                    i += 2;
+                } else {
+                    i += 1;
+                }
+            }
+            let r = super::effects::remove_net_rotation(&dirs, &x, &var);
+            for (j, (ke, kn)) in used.iter().enumerate() {
+                for (kk, idx) in [(ke, 2 * j), (kn, 2 * j + 1)] {
+                    let s = var[idx].sqrt();
+                    out.push(ParameterCheck {
+                        effect: d.effect.clone(),
+                        sensor: d.sensor.clone(),
+                        parameter: format!("{kk} (net rotation removed)"),
+                        estimate: truths[kk] + r[idx],
+                        sigma: s,
+                        truth: truths[kk],
+                        z: r[idx] / s,
+                    });
+                }
+            }
+            continue;
+        }
+        for (k, t) in truths {
             if let (Some(&e), Some(&s)) = (d.parameters.get(&k), d.sigma.get(&k)) {
                 out.push(ParameterCheck {
                     effect: d.effect.clone(),

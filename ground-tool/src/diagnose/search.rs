@@ -8,8 +8,9 @@
 //!    over the candidates of the iteration, below `alpha`;
 //! 2. **BIC** improves: `n ln(χ²₀/χ²₁) − (k + extra) ln n > 10` (extra = grid-searched
 //!    nonlinear parameters such as a cyclic pitch);
-//! 3. **halves agree**: the candidate's parameters fitted on the first and on the second half
-//!    of the batches differ by less than 3σ (χ² of the difference, p > 0.0027);
+//! 3. **halves agree**: the candidate's parameters fitted on the two halves of the data
+//!    (alternating 10-min blocks, [`super::fit::in_first_half`]) differ by less than 3σ (χ² of
+//!    the difference, p > 0.0027);
 //! 4. **indication and adequacy**: the structure the candidate is meant to explain (its
 //!    signature regressors on its sensor, [`Effect::signature`]) must be there before
 //!    (Bonferroni over the signature tests, p < `indication_alpha`) — a flexible candidate
@@ -149,9 +150,7 @@ pub fn cyclic_pitch(set: &MeasurementSet, resid: &[[f64; 2]], sensor: usize) -> 
         return None;
     }
     let e = super::effects::FSS_EDGE_RAD;
-    let mut best: Option<(f64, f64)> = None;
-    let mut p_deg = 0.5;
-    while p_deg <= 8.0 {
+    let gain_at = |p_deg: f64| -> f64 {
         let w = std::f64::consts::TAU / (p_deg * fsw_core::units::RAD_PER_DEG);
         let mut gain = 0.0;
         for axis in 0..2 {
@@ -181,12 +180,34 @@ pub fn cyclic_pitch(set: &MeasurementSet, resid: &[[f64; 2]], sensor: usize) -> 
                 gain += f - r;
             }
         }
+        gain
+    };
+    // Coarse grid (1 % steps over 0.5°–5°), then a fine one (0.05 %) around the best.
+    let mut best: Option<(f64, f64)> = None;
+    let mut gains = Vec::new();
+    let mut p_deg = 0.5;
+    while p_deg <= 5.0 {
+        let gain = gain_at(p_deg);
         if best.is_none_or(|(_, g)| gain > g) {
             best = Some((p_deg, gain));
         }
+        gains.push(gain);
         p_deg *= 1.01;
     }
-    best.map(|(p, _)| p * fsw_core::units::RAD_PER_DEG)
+    if let Some((p0, _)) = best {
+        for k in -20..=20 {
+            let p = p0 * (1.0 + 0.0005 * f64::from(k));
+            let gain = gain_at(p);
+            if best.is_none_or(|(_, g)| gain > g) {
+                best = Some((p, gain));
+            }
+        }
+    }
+    // A real cyclic error stands out of the periodogram; otherwise no cyclic term.
+    gains.sort_by(f64::total_cmp);
+    let median = gains.get(gains.len() / 2).copied().unwrap_or(0.0);
+    best.filter(|(_, g)| *g > 30.0_f64.max(5.0 * median))
+        .map(|(p, _)| p * fsw_core::units::RAD_PER_DEG)
 }
 
 /// Is an effect covered by the declared effects? (`x` covers `unit.x`, as in sim-harness.)
@@ -229,13 +250,25 @@ pub fn search(
 ) -> anyhow::Result<SearchResult> {
     // Preliminary fit (alignments only) to get clean residuals for the pitch search and the
     // outlier flags.
+    // The FSS transfer polynomial is in the preliminary fit (only to clean the residuals of
+    // the pitch search).
     let prelim_layout = Layout::new(super::effects::library(set, [None, None]));
     let prelim_sys = accumulate_halves(set, &prelim_layout);
+    let prelim_tf: Vec<usize> = (0..prelim_layout.effects.len())
+        .filter(|&i| prelim_layout.effects[i].kind == EffectKind::FssTransferFunction)
+        .collect();
     let prelim = solve(
         &prelim_sys.full,
         &prelim_layout,
-        &indices(&prelim_layout, &[]),
+        &indices(&prelim_layout, &prelim_tf),
     )
+    .or_else(|| {
+        solve(
+            &prelim_sys.full,
+            &prelim_layout,
+            &indices(&prelim_layout, &[]),
+        )
+    })
     .ok_or_else(|| {
         anyhow::anyhow!("diagnose: the alignment fit is singular (no epochs with FHST stars?)")
     })?;
@@ -246,6 +279,12 @@ pub fn search(
         cyclic_pitch(set, &pf.resid, 3),
     ];
 
+    if std::env::var_os("DIAGNOSE_DEBUG").is_some() {
+        eprintln!(
+            "cyclic pitch (deg): {:?}",
+            pitch.map(|p| p.map(f64::to_degrees))
+        );
+    }
     let layout = Layout::new(super::effects::library(set, pitch));
     let systems = accumulate_halves(set, &layout);
     let baseline: Vec<usize> = (0..layout.effects.len())
@@ -290,10 +329,10 @@ pub fn search(
             // Halves.
             let range: Vec<usize> = layout.range(c).collect();
             let (mut hchi2, mut hp, mut est) = (f64::NAN, 0.0, (Vec::new(), Vec::new()));
-            if let (Some(a), Some(b)) = (
-                fit_model(&systems.first, &with),
-                fit_model(&systems.second, &with),
-            ) {
+            let fit_half = |sys: &super::fit::Normal| {
+                super::fit::solve_opt(sys, &layout, &indices(&layout, &with), false)
+            };
+            if let (Some(a), Some(b)) = (fit_half(&systems.first), fit_half(&systems.second)) {
                 let pos = |fit: &SubFit| -> Vec<usize> {
                     range
                         .iter()
@@ -311,10 +350,76 @@ pub fn search(
                     }
                 }
                 let (inv, rank) = crate::linalg::sym_pinv(&cab, 1e-12);
-                let d = &xa - &xb;
-                hchi2 = d.dot(&(&inv * &d));
-                hp = chi2_sf(hchi2, rank.max(1) as f64);
-                est = (xa.iter().copied().collect(), xb.iter().copied().collect());
+                if effect.kind == EffectKind::CatalogProperMotionError {
+                    // Gauge-free comparison: per-star offsets of the stars both halves
+                    // determine (σ below half the prior), each half's net rotation removed.
+                    let prior: Vec<f64> = effect.prior_sigma.clone();
+                    let va: Vec<f64> = pa
+                        .iter()
+                        .map(|&i| a.cov[(i, i)] * a.s2().max(1.0))
+                        .collect();
+                    let vb: Vec<f64> = pb
+                        .iter()
+                        .map(|&i| b.cov[(i, i)] * b.s2().max(1.0))
+                        .collect();
+                    let both: Vec<bool> = (0..k / 2)
+                        .map(|s| {
+                            (0..2).all(|j| {
+                                va[2 * s + j].sqrt() < 0.5 * prior[2 * s + j]
+                                    && vb[2 * s + j].sqrt() < 0.5 * prior[2 * s + j]
+                            })
+                        })
+                        .collect();
+                    let mask = |v: &[f64]| -> Vec<f64> {
+                        v.iter()
+                            .enumerate()
+                            .map(|(i, x)| if both[i / 2] { *x } else { f64::INFINITY })
+                            .collect()
+                    };
+                    let xa_v: Vec<f64> = xa.iter().copied().collect();
+                    let xb_v: Vec<f64> = xb.iter().copied().collect();
+                    let ra =
+                        super::effects::remove_net_rotation(&effect.star_dirs, &xa_v, &mask(&va));
+                    let rb =
+                        super::effects::remove_net_rotation(&effect.star_dirs, &xb_v, &mask(&vb));
+                    let mut c2 = 0.0;
+                    let mut n2 = 0usize;
+                    for i in 0..k {
+                        if both[i / 2] {
+                            c2 += (ra[i] - rb[i]).powi(2) / (va[i] + vb[i]);
+                            n2 += 1;
+                        }
+                    }
+                    hchi2 = c2;
+                    hp = if n2 > 3 {
+                        chi2_sf(c2, (n2 - 3) as f64)
+                    } else {
+                        1.0
+                    };
+                    est = (ra, rb);
+                    let _ = (inv, rank);
+                } else {
+                    if std::env::var_os("DIAGNOSE_DEBUG").is_some()
+                        && effect.kind == EffectKind::FssTransferFunction
+                    {
+                        let z: Vec<String> = (0..k)
+                            .map(|i| {
+                                format!(
+                                    "{:.1}±{:.1}/{:.1}±{:.1}",
+                                    xa[i],
+                                    (a.cov[(pa[i], pa[i])] * a.s2().max(1.0)).sqrt(),
+                                    xb[i],
+                                    (b.cov[(pb[i], pb[i])] * b.s2().max(1.0)).sqrt()
+                                )
+                            })
+                            .collect();
+                        eprintln!("halves {}: {}", effect.label(), z.join(" "));
+                    }
+                    let d = &xa - &xb;
+                    hchi2 = d.dot(&(&inv * &d));
+                    hp = chi2_sf(hchi2, rank.max(1) as f64);
+                    est = (xa.iter().copied().collect(), xb.iter().copied().collect());
+                }
             }
             evs.push((
                 c,
@@ -394,6 +499,29 @@ pub fn search(
                 }
             } else {
                 e.rejected_because = Some(why.join("; "));
+            }
+        }
+        // A stronger explanation that failed only on halves or adequacy vetoes a weaker one on
+        // the same sensors: the structure is then not forced onto the weaker candidate.
+        if let Some((bi, b_bic)) = best {
+            let chosen = &layout.effects[evs[bi].0];
+            let chosen_sensors = sensors_of(chosen);
+            let veto = evs.iter().find(|(c, e, _)| {
+                let other = &layout.effects[*c];
+                let statistically_ok =
+                    e.p_holm < config.alpha && e.delta_bic > config.min_delta_bic;
+                statistically_ok
+                    && e.rejected_because.is_some()
+                    && e.delta_bic > b_bic + config.min_delta_bic
+                    && sensors_of(other).iter().any(|s| chosen_sensors.contains(s))
+            });
+            if let Some((_, v, _)) = veto {
+                let why = format!(
+                    "vetoed: {} explains the same sensor better (ΔBIC {:.1}) but failed its checks",
+                    v.effect, v.delta_bic
+                );
+                evs[bi].1.rejected_because = Some(why);
+                best = None;
             }
         }
         let Some((bi, _)) = best else {
