@@ -16,7 +16,7 @@
 //!
 //! **Scale-factor asymmetry.** For every slew, the last hold batch before and the first after
 //! give `z = S x` (the Davenport/Keat transition recursion, §7) with a common bias correction
-//! and per-axis scale corrections as the baseline and, as the candidate, a rectified term
+//! and the full δM (on top of IRUCAL's) as the baseline and, as the candidate, a rectified term
 //! `a_j |Δθ_j|` per ACS axis (a channel whose scale is `1 + a` for positive and `1 − a` for
 //! negative rates over-reads by `a |Δθ|` in both directions). The IRU mode-ratio error is not
 //! separable from the scale factor when all slews run in high-rate mode (not a candidate).
@@ -471,6 +471,11 @@ pub fn analyse(
     out
 }
 
+/// Columns of the slew model: bias (3), δM (9), asymmetry (3).
+const NCOL: usize = 15;
+/// First asymmetry column.
+const ASYM: usize = 12;
+
 #[allow(clippy::too_many_lines)]
 fn asymmetry(
     input: &DiagnoseInput<'_>,
@@ -481,7 +486,10 @@ fn asymmetry(
     out: &mut GyroAnalysis,
 ) {
     let frames = input.frames;
-    // Slews: runs of high-rate frames.
+    // Slews (runs of high-rate frames), each bracketed by the last usable attitude batch
+    // before its end region and the first after its start region: holds on both sides when
+    // there are (within 20 min), else the outermost batches inside the slew; kept when the
+    // gyro turned by more than 5° between them.
     let mut slews = Vec::new();
     let mut start = None;
     for (i, f) in frames.iter().enumerate() {
@@ -494,29 +502,53 @@ fn asymmetry(
             _ => {}
         }
     }
-    // (z arcsec, S rows 3×9 [bias 3, scale 3, asym 3], var arcsec², angle vector rad)
-    let mut rows: Vec<(
-        Vector3<f64>,
-        nalgebra::SMatrix<f64, 3, 9>,
-        Vector3<f64>,
-        Vector3<f64>,
-    )> = Vec::new();
+    let usable: Vec<usize> = (0..set.batches.len())
+        .filter(|&i| att[i].is_some())
+        .collect();
+    let mut pairs = Vec::new();
     for &(s, e) in &slews {
-        let before = (0..set.batches.len()).rev().find(|&i| {
-            set.batches[i].hi <= s
-                && !set.batches[i].high_rate
-                && att[i].is_some()
-                && s - set.batches[i].center < 400
-        });
-        let after = (0..set.batches.len()).find(|&i| {
-            set.batches[i].lo > e
-                && !set.batches[i].high_rate
-                && att[i].is_some()
-                && set.batches[i].center - e < 400
-        });
+        let lo = s.saturating_sub(1200);
+        let hi = e + 1200;
+        let inside: Vec<usize> = usable
+            .iter()
+            .copied()
+            .filter(|&i| set.batches[i].center >= lo && set.batches[i].center <= hi)
+            .collect();
+        let before = inside
+            .iter()
+            .copied()
+            .filter(|&i| set.batches[i].center <= s)
+            .last()
+            .or_else(|| inside.first().copied());
+        let after = inside
+            .iter()
+            .copied()
+            .find(|&i| set.batches[i].center >= e)
+            .or_else(|| inside.last().copied());
         let (Some(ia), Some(ib)) = (before, after) else {
             continue;
         };
+        let (ca, cb) = (set.batches[ia].center, set.batches[ib].center);
+        if cb <= ca {
+            continue;
+        }
+        let turned: Vector3<f64> = frames[ca + 1..=cb]
+            .iter()
+            .filter_map(|f| f.gyro)
+            .map(|g| g.dtheta_acs_rad)
+            .sum();
+        if turned.norm() > 5.0 * fsw_core::units::RAD_PER_DEG {
+            pairs.push((ia, ib));
+        }
+    }
+    // (z arcsec, S rows 3×9 [bias 3, scale 3, asym 3], var arcsec², angle vector rad)
+    let mut rows: Vec<(
+        Vector3<f64>,
+        nalgebra::SMatrix<f64, 3, NCOL>,
+        Vector3<f64>,
+        Vector3<f64>,
+    )> = Vec::new();
+    for &(ia, ib) in &pairs {
         let (Some((ma, va)), Some((mb, vb))) = (att[ia], att[ib]) else {
             continue;
         };
@@ -527,17 +559,20 @@ fn asymmetry(
             .and_then(|b| b.get(ca).copied())
             .unwrap_or(*b_ref);
         let mut phi_total = Matrix3::identity();
-        let mut sm = nalgebra::SMatrix::<f64, 3, 9>::zeros();
+        let mut sm = nalgebra::SMatrix::<f64, 3, NCOL>::zeros();
         let mut angle = Vector3::zeros();
         for k in ca + 1..=cb {
             let Some(g) = frames[k].gyro else { continue };
             let dth = g.dtheta_acs_rad;
             let phi = (Matrix3::identity() + input.gyro.delta_m) * dth - bias * g.dt_s;
-            let mut u = nalgebra::SMatrix::<f64, 3, 9>::zeros();
+            let mut u = nalgebra::SMatrix::<f64, 3, NCOL>::zeros();
             for j in 0..3 {
                 u[(j, j)] = -g.dt_s;
-                u[(j, 3 + j)] = dth[j];
-                u[(j, 6 + j)] = -dth[j].abs();
+                // δM (column-major: element (j, c) multiplies Δθ_c into axis j).
+                for c in 0..3 {
+                    u[(j, 3 + 3 * c + j)] = dth[c];
+                }
+                u[(j, ASYM + j)] = -dth[j].abs();
             }
             let r = rot(&phi);
             sm = r * sm + rot(&(phi * 0.5)) * u;
@@ -547,22 +582,31 @@ fn asymmetry(
         let z = rotvec_from_rot(&(mb * (phi_total * ma).transpose())) * ARCSEC_PER_RAD;
         // S maps rad-per-unit parameters; use arcsec for z, rad/s → arcsec/s for bias, ppm.
         let mut s_scaled = sm;
-        for j in 0..3 {
-            for i in 0..3 {
+        for i in 0..3 {
+            for j in 0..3 {
                 s_scaled[(i, j)] *= ARCSEC_PER_RAD * RAD_PER_ARCSEC; // bias in arcsec/s: S·(arcsec/s) → arcsec
-                s_scaled[(i, 3 + j)] *= ARCSEC_PER_RAD * 1e-6; // ppm
-                s_scaled[(i, 6 + j)] *= ARCSEC_PER_RAD * 1e-6; // ppm
+            }
+            for j in 3..NCOL {
+                s_scaled[(i, j)] *= ARCSEC_PER_RAD * 1e-6; // δM and asymmetry in ppm
             }
         }
         let t = (cb - ca) as f64;
         let proc = (cfg.arw_rad_per_sqrt_s * ARCSEC_PER_RAD).powi(2) * t
             + (cfg.rrw_rad_per_s15 * ARCSEC_PER_RAD).powi(2) * t.powi(3) / 3.0;
+        if std::env::var_os("DIAGNOSE_DEBUG").is_some() {
+            eprintln!(
+                "interval {ca}..{cb}: angle deg {:.2?} z arcsec {:.1?} var {:.1?}",
+                (angle * fsw_core::units::DEG_PER_RAD).as_slice(),
+                z.as_slice(),
+                (va + vb).as_slice()
+            );
+        }
         rows.push((z, s_scaled, va + vb + Vector3::repeat(proc), angle));
     }
     out.slews = rows.len();
-    if rows.len() < 4 {
+    if rows.len() < 6 {
         out.notes.push(format!(
-            "scale asymmetry: only {} slews with hold attitudes on both sides (need 4)",
+            "scale asymmetry: only {} intervals with > 5° of rotation between attitude batches (need 6)",
             rows.len()
         ));
         return;
@@ -599,8 +643,8 @@ fn asymmetry(
         let chi2 = (rr - x.dot(&b)).max(0.0);
         Some((chi2, x, ch.inverse(), m))
     };
-    let base: Vec<usize> = (0..6).collect();
-    let full: Vec<usize> = (0..9).collect();
+    let base: Vec<usize> = (0..ASYM).collect();
+    let full: Vec<usize> = (0..NCOL).collect();
     let all = |_: usize| true;
     let (Some((c0, x0, _, m)), Some((c1, x1, cov1, _))) = (solve(&base, &all), solve(&full, &all))
     else {
@@ -608,7 +652,7 @@ fn asymmetry(
             .push("scale asymmetry: singular slew geometry".into());
         return;
     };
-    let dof = m as f64 - 9.0;
+    let dof = m as f64 - NCOL as f64;
     let s2 = if dof > 0.0 { (c1 / dof).max(1e-9) } else { 1.0 };
     let f = ((c0 - c1) / 3.0) / s2.max(1.0);
     let p = if dof > 0.0 { f_sf(f, 3.0, dof) } else { 1.0 };
@@ -619,13 +663,13 @@ fn asymmetry(
     let (ha, hb) = (solve(&full, &|i| i % 2 == 0), solve(&full, &|i| i % 2 == 1));
     let (mut hchi2, mut hp, mut hest) = (f64::NAN, 1.0, (Vec::new(), Vec::new()));
     if let (Some((_, xa, ca, _)), Some((_, xb, cb, _))) = (ha, hb) {
-        hchi2 = (6..9)
+        hchi2 = (ASYM..NCOL)
             .map(|j| (xa[j] - xb[j]).powi(2) / (ca[(j, j)] + cb[(j, j)]))
             .sum::<f64>();
         hp = chi2_sf(hchi2, 3.0);
         hest = (
-            (6..9).map(|j| xa[j]).collect(),
-            (6..9).map(|j| xb[j]).collect(),
+            (ASYM..NCOL).map(|j| xa[j]).collect(),
+            (ASYM..NCOL).map(|j| xb[j]).collect(),
         );
     }
     let _ = half;
@@ -657,16 +701,8 @@ fn asymmetry(
     };
     for (z, s, _, angle) in &rows {
         let j = angle.iamax();
-        let fit0 = (s * nalgebra::SVector::<f64, 9>::from_iterator((0..9).map(|i| {
-            if i < 6 {
-                x0[i]
-            } else {
-                0.0
-            }
-        })))[j];
-        let _ = fit0;
-        let resid0 = z[j] - (0..6).map(|c| s[(j, c)] * x0[c]).sum::<f64>();
-        let resid1 = z[j] - (0..9).map(|c| s[(j, c)] * x1[c]).sum::<f64>();
+        let resid0 = z[j] - (0..ASYM).map(|c| s[(j, c)] * x0[c]).sum::<f64>();
+        let resid1 = z[j] - (0..NCOL).map(|c| s[(j, c)] * x1[c]).sum::<f64>();
         out.slew_residuals
             .push((angle[j].to_degrees(), resid0, resid1));
     }
@@ -675,10 +711,10 @@ fn asymmetry(
         let mut sigma = BTreeMap::new();
         let mut units = BTreeMap::new();
         for (ax, name) in ["x", "y", "z"].iter().enumerate() {
-            parameters.insert((*name).to_owned(), x1[6 + ax]);
+            parameters.insert((*name).to_owned(), x1[ASYM + ax]);
             sigma.insert(
                 (*name).to_owned(),
-                (cov1[(6 + ax, 6 + ax)] * s2.max(1.0)).sqrt(),
+                (cov1[(ASYM + ax, ASYM + ax)] * s2.max(1.0)).sqrt(),
             );
             units.insert(
                 (*name).to_owned(),
