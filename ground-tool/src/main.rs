@@ -41,6 +41,32 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Diagnose: residual analysis that finds effects the model lacks (issue 5).
+    ///
+    /// Runs the calibration chain with the current model (declared effects from
+    /// RUN_DIR/metadata.json), then tests every FHST/FSS residual against time, orbit phase,
+    /// Sun angle, FOV position, magnitude, body rate, rate mode, velocity direction,
+    /// temperatures and star id; fits a library of candidate effects (aberration, time tags,
+    /// thermal/orbital alignment, FHST distortion and magnitude bias, FSS transfer function,
+    /// catalog errors, gyro bias drift, thermal bias and scale asymmetry) jointly with the
+    /// alignments and keeps an effect only on the evidence (likelihood ratio, BIC, halves).
+    /// Writes OUT/report.md, OUT/report.json, PNG plots and OUT/tables/*.tbl (alignment
+    /// corrections, filter flags) for `sim-harness run ... --tables OUT/tables`. Scores against
+    /// RUN_DIR/truth.json only if it exists (labelled as scoring).
+    Diagnose {
+        /// Run folder with telemetry.bin.
+        run_dir: std::path::PathBuf,
+        /// Output folder.
+        #[arg(long)]
+        out: std::path::PathBuf,
+        /// Folder with the tables flown (alignment.tbl, iru.tbl, filter.tbl); default: the
+        /// run's activated uploads, else the boot tables.
+        #[arg(long)]
+        tables: Option<std::path::PathBuf>,
+        /// Print report.json to stdout.
+        #[arg(long)]
+        json: bool,
+    },
     /// Reproduce the paper's numbers from data/gro_paper.toml.
     Paper {
         /// Machine-readable JSON instead of the table.
@@ -245,6 +271,36 @@ fn run_calibrate(
     Ok(())
 }
 
+fn run_diagnose(
+    run_dir: &std::path::Path,
+    out: &std::path::Path,
+    tables: Option<&std::path::Path>,
+    json: bool,
+) -> Result<()> {
+    use ground_tool::diagnose::run::{diagnose_run, DiagnoseOptions};
+    let options = DiagnoseOptions {
+        tables: tables.map(std::path::Path::to_path_buf),
+        ..DiagnoseOptions::default()
+    };
+    let result = diagnose_run(run_dir, out, &options)?;
+    if json {
+        println!("{}", serde_json::to_string_pretty(&result.report)?);
+    } else {
+        let r = &result.report;
+        for d in &r.detected {
+            eprintln!("detected: {} [{}] (ΔBIC {:.1})", d.effect, d.sensor, d.evidence.delta_bic);
+        }
+        for u in &r.unexplained {
+            eprintln!(
+                "unexplained: {} {} follows {} ({:.2}\", p {:.1e})",
+                u.sensor, u.axis, u.regressor, u.size, u.p_value
+            );
+        }
+        eprintln!("wrote {}/report.md, report.json and tables/", out.display());
+    }
+    Ok(())
+}
+
 fn main() {
     let cli = Cli::parse();
     if let Err(e) = run(cli) {
@@ -275,6 +331,12 @@ fn run(cli: Cli) -> Result<()> {
             shuster1982,
             json,
         } => run_calibrate(&run_dir, &out, tables.as_deref(), shuster1982, json)?,
+        Command::Diagnose {
+            run_dir,
+            out,
+            tables,
+            json,
+        } => run_diagnose(&run_dir, &out, tables.as_deref(), json)?,
         Command::Paper { json } => {
             let r = ground_tool::paper::reproduce()?;
             if json {
