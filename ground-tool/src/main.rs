@@ -288,7 +288,10 @@ fn run_diagnose(
     } else {
         let r = &result.report;
         for d in &r.detected {
-            eprintln!("detected: {} [{}] (ΔBIC {:.1})", d.effect, d.sensor, d.evidence.delta_bic);
+            eprintln!(
+                "detected: {} [{}] (ΔBIC {:.1})",
+                d.effect, d.sensor, d.evidence.delta_bic
+            );
         }
         for u in &r.unexplained {
             eprintln!(

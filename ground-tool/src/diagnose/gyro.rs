@@ -518,7 +518,7 @@ fn asymmetry(
             .iter()
             .copied()
             .filter(|&i| set.batches[i].center <= s)
-            .last()
+            .next_back()
             .or_else(|| inside.first().copied());
         let after = inside
             .iter()
