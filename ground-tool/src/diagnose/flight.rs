@@ -8,6 +8,8 @@
 //! | `fss_transfer_function` | `corrections.fss_transfer[i] += [scale, cross/E³, 0, scale, cross/E³, 0]` | `fss::correct_transfer`: `α = α_m − (c0 α_m + c1 α_m β_m² + c2)` |
 //! | `aberration_annual` | `FilterTable.aberration_correction = true` | annual aberration of catalog stars and the Sun |
 //!
+//! Only terms whose estimate exceeds 3σ are written (the others stay as flown).
+//!
 //! Signs: every library column is the effect's addition to the *measured* angle, and the
 //! tables subtract that addition from the measurement (distortion, transfer) or carry the
 //! measurement forward by τ (time tag), so the estimate goes in with the sign it has.
@@ -98,7 +100,13 @@ pub fn flight_update(
     for i in effects {
         let e = &res.layout.effects[i];
         let r = res.layout.range(i);
-        let p = |k: usize| g[r.start + k];
+        // Only terms determined at 3σ go up: an ill-determined polynomial term (a transfer
+        // function seen over a small part of the field) would make the OBC worse elsewhere.
+        let p = |k: usize| match res.final_fit.param(r.start + k) {
+            Some((x, s)) if x.abs() > 3.0 * s => x,
+            _ => 0.0,
+        };
+        let _ = &g;
         let label = e.label();
         match (e.kind, e.sensor) {
             (EffectKind::TimeTagOffset, Some(s)) => {

@@ -518,7 +518,7 @@ fn asymmetry(
             .iter()
             .copied()
             .filter(|&i| set.batches[i].center <= s)
-            .next_back()
+            .last()
             .or_else(|| inside.first().copied());
         let after = inside
             .iter()
