@@ -517,8 +517,7 @@ fn asymmetry(
         let before = inside
             .iter()
             .copied()
-            .filter(|&i| set.batches[i].center <= s)
-            .last()
+            .rfind(|&i| set.batches[i].center <= s)
             .or_else(|| inside.first().copied());
         let after = inside
             .iter()
