@@ -207,13 +207,13 @@ pub fn decode(bytes: &[u8]) -> Telemetry {
             // Unknown APID: trust its length if it fits, otherwise resync.
             // Never skip past a confirmed known-APID packet inside the claimed length.
             let end = at + h.total_len;
-            let confirmed = resync(bytes, at + 1);
+            // (Searching only inside the claimed length keeps decoding linear: REL-3.)
             let next = if end <= bytes.len()
                 && (end == bytes.len() || plausible_at(bytes, end).is_some())
             {
-                end.min(confirmed)
+                confirmed_start_before(bytes, at + 1, end).unwrap_or(end)
             } else {
-                confirmed
+                resync(bytes, at + 1)
             };
             tm.report.skipped.push(Skipped {
                 offset: at,
