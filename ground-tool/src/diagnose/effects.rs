@@ -9,6 +9,7 @@
 //! |---|---|---|---|
 //! | `aberration_annual` | k (scale of the annual β-term; 1 = full aberration) | `J Mᵀ A (β_E − u(u·β_E))` | differential between sensors, with the velocity direction |
 //! | `aberration_orbital` | k (orbital β-term) | same with the orbital velocity | once per orbit |
+//! | `aberration` | both k together (a model without aberration lacks both) | both columns | |
 //! | `time_tag_offset` | τ (ms, + = sample older than its tag) | `J Mᵀ (ω × b)` | ∝ rate, flips with slew sign |
 //! | `thermal_alignment_drift` | 3 (″/°C, ACS) | `−J Mᵀ [b×] ΔT` | follows the sensor temperature |
 //! | `orbit_periodic_alignment` | 6 (″: cos u, sin u per ACS axis) | `−J Mᵀ [b×] (cos u, sin u)` | orbit phase |
@@ -41,6 +42,9 @@ pub enum EffectKind {
     AberrationAnnual,
     /// Orbital velocity aberration.
     AberrationOrbital,
+    /// Both aberration terms together (a ground model without aberration lacks both; each
+    /// alone is then an incomplete model whose split halves disagree).
+    Aberration,
     /// Time-tag offset of one sensor.
     TimeTagOffset,
     /// Alignment rotation ∝ the sensor temperature.
@@ -66,6 +70,7 @@ impl EffectKind {
         match self {
             Self::AberrationAnnual => "aberration_annual",
             Self::AberrationOrbital => "aberration_orbital",
+            Self::Aberration => "aberration",
             Self::TimeTagOffset => "time_tag_offset",
             Self::ThermalAlignmentDrift => "thermal_alignment_drift",
             Self::OrbitPeriodicAlignment => "orbit_periodic_alignment",
@@ -82,7 +87,7 @@ impl EffectKind {
     #[must_use]
     pub fn truth_name(self) -> &'static str {
         match self {
-            Self::AberrationAnnual | Self::AberrationOrbital => "aberration",
+            Self::AberrationAnnual | Self::AberrationOrbital | Self::Aberration => "aberration",
             Self::ThermalAlignmentDrift | Self::OrbitPeriodicAlignment => "thermal_alignment_drift",
             Self::FssCyclicError | Self::FssTransferFunction => "fss_transfer_function",
             other => other.name(),
@@ -194,6 +199,10 @@ impl Effect {
             EffectKind::AberrationOrbital => {
                 out.push((0, v2(m.jm * m.ab_orbital_acs * ARCSEC_PER_RAD)))
             }
+            EffectKind::Aberration => {
+                out.push((0, v2(m.jm * m.ab_annual_acs * ARCSEC_PER_RAD)));
+                out.push((1, v2(m.jm * m.ab_orbital_acs * ARCSEC_PER_RAD)));
+            }
             EffectKind::TimeTagOffset => {
                 out.push((
                     0,
@@ -270,7 +279,7 @@ impl Effect {
     pub fn needs_indication(&self) -> bool {
         !matches!(
             self.kind,
-            EffectKind::AberrationAnnual | EffectKind::AberrationOrbital
+            EffectKind::AberrationAnnual | EffectKind::AberrationOrbital | EffectKind::Aberration
         )
     }
 
@@ -279,7 +288,7 @@ impl Effect {
     pub fn signature(&self) -> &'static [super::structure::Regressor] {
         use super::structure::Regressor as R;
         match self.kind {
-            EffectKind::AberrationAnnual => &[],
+            EffectKind::AberrationAnnual | EffectKind::Aberration => &[],
             EffectKind::AberrationOrbital => &[R::OrbitPhase],
             EffectKind::TimeTagOffset => &[R::RateX, R::RateY, R::RateZ],
             EffectKind::ThermalAlignmentDrift | EffectKind::OrbitPeriodicAlignment => {
@@ -357,6 +366,14 @@ pub fn library(set: &MeasurementSet, fss_pitch_rad: [Option<f64>; 2]) -> Vec<Eff
             EffectKind::AberrationOrbital,
             None,
             &[("k_orbital_minus_applied", "1", 10.0)],
+        ),
+        Effect::new(
+            EffectKind::Aberration,
+            None,
+            &[
+                ("k_annual_minus_applied", "1", 10.0),
+                ("k_orbital_minus_applied", "1", 10.0),
+            ],
         ),
     ];
     for s in 0..4 {

@@ -139,7 +139,7 @@ pub fn flight_update(
                 ));
                 ground_only.push(format!("{label}: cubic and cyclic terms (no table field)"));
             }
-            (EffectKind::AberrationAnnual, _) => {
+            (EffectKind::AberrationAnnual | EffectKind::Aberration, _) => {
                 let mut f = *flown_filter;
                 f.aberration_correction = true;
                 filter = Some(f);

@@ -120,7 +120,7 @@ const RED: RGBColor = RGBColor(214, 39, 40);
 fn regressor_for(d: &Detected, a: &Analysis) -> Option<(usize, usize, Regressor)> {
     let sensor = SENSOR_NAMES.iter().position(|s| *s == d.sensor);
     let reg = match d.effect.as_str() {
-        "aberration_annual" => Regressor::VelocityX,
+        "aberration_annual" | "aberration" => Regressor::VelocityX,
         "aberration_orbital" => Regressor::OrbitPhase,
         "time_tag_offset" => Regressor::RateX,
         "thermal_alignment_drift" => Regressor::Temperature,

@@ -199,7 +199,7 @@ fn unit_of(sensor: &str) -> String {
 #[must_use]
 pub fn matches_truth(d: &Detected, truth: &Truth) -> bool {
     let name = match d.effect.as_str() {
-        "aberration_annual" => "aberration".to_owned(),
+        "aberration_annual" | "aberration" => "aberration".to_owned(),
         "aberration_orbital" => "orbital_aberration".to_owned(),
         "gyro_scale_asymmetry" => "iru.scale_asymmetry".to_owned(),
         "gyro_thermal_bias" => "iru.thermal_bias".to_owned(),
@@ -250,6 +250,11 @@ pub fn parameter_truth(
         }
         "aberration_orbital" => {
             let k = if s.sky.orbital_aberration { 1.0 } else { 0.0 };
+            out.insert("k_orbital_minus_applied".into(), k - aberration_k0[1]);
+        }
+        "aberration" => {
+            let k = if s.sky.orbital_aberration { 1.0 } else { 0.0 };
+            out.insert("k_annual_minus_applied".into(), 1.0 - aberration_k0[0]);
             out.insert("k_orbital_minus_applied".into(), k - aberration_k0[1]);
         }
         "time_tag_offset" => {

@@ -206,7 +206,10 @@ pub fn cyclic_pitch(set: &MeasurementSet, resid: &[[f64; 2]], sensor: usize) -> 
     // A real cyclic error stands out of the periodogram; otherwise no cyclic term.
     gains.sort_by(f64::total_cmp);
     let median = gains.get(gains.len() / 2).copied().unwrap_or(0.0);
-    best.filter(|(_, g)| *g > 30.0_f64.max(5.0 * median))
+    if std::env::var_os("DIAGNOSE_DEBUG").is_some() {
+        eprintln!("pitch search sensor {sensor}: best {best:?} median {median}");
+    }
+    best.filter(|(_, g)| *g > 30.0_f64.max(3.0 * median))
         .map(|(p, _)| p * fsw_core::units::RAD_PER_DEG)
 }
 
@@ -223,7 +226,7 @@ pub fn is_declared(effect: &Effect, declared: &[String]) -> bool {
             || unit.as_ref().is_some_and(|u| *d == format!("{u}.{truth}"))
     }) && !matches!(
         effect.kind,
-        EffectKind::AberrationAnnual | EffectKind::AberrationOrbital
+        EffectKind::AberrationAnnual | EffectKind::AberrationOrbital | EffectKind::Aberration
     )
 }
 
