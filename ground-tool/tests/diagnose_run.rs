@@ -330,3 +330,61 @@ fn debug_catalog() {
         zs.iter().filter(|z| z.is_finite()).count()
     );
 }
+
+/// Not in the library, on real harness telemetry:
+/// `SRC=/tmp/clean OUT_ROOT=/tmp/o cargo test -p ground-tool --test diagnose_run inject -- --ignored --nocapture`
+/// (SRC = a run of scenarios/undeclared/clean.toml).
+#[test]
+#[ignore = "needs a run folder: SRC=... OUT_ROOT=..."]
+fn inject_non_library_effects() {
+    use ground_tool::diagnose::inject::{inject_run, Injected};
+    let src = std::path::PathBuf::from(std::env::var("SRC").unwrap());
+    let out_root = std::path::PathBuf::from(std::env::var("OUT_ROOT").unwrap());
+    for (name, effect) in [
+        (
+            "t2",
+            Injected::TemperatureSquared {
+                tracker: 1,
+                k_arcsec_per_c2: 2.0,
+            },
+        ),
+        (
+            "osc",
+            Injected::PostSlewOscillation {
+                tracker: 1,
+                amplitude_arcsec: 20.0,
+                period_s: 60.0,
+                decay_s: 200.0,
+            },
+        ),
+        (
+            "mag",
+            Injected::MagneticTwicePerOrbit {
+                tracker: 1,
+                amplitude_arcsec: 6.0,
+            },
+        ),
+    ] {
+        let run = out_root.join(format!("inject-{name}"));
+        inject_run(&src, &run, effect).unwrap();
+        let o = diagnose_run(
+            &run,
+            &out_root.join(format!("inject-{name}-diag")),
+            &DiagnoseOptions::default(),
+        )
+        .unwrap();
+        eprintln!("== {name}: {effect:?}");
+        for d in &o.report.detected {
+            eprintln!(
+                "   DETECTED {}[{}] ΔBIC {:.1}",
+                d.effect, d.sensor, d.evidence.delta_bic
+            );
+        }
+        for u in &o.report.unexplained {
+            eprintln!(
+                "   UNEXPLAINED {} {} vs {} ({}) size {:.2} p {:.1e}",
+                u.sensor, u.axis, u.regressor, u.method, u.size, u.p_value
+            );
+        }
+    }
+}

@@ -34,6 +34,9 @@ pub const MAGNITUDE_REF: f64 = 4.0;
 /// Stars need this many measurements to get catalog-offset parameters.
 pub const CATALOG_MIN_SAMPLES: usize = 5;
 
+/// Terms per axis of the generic alignment extension.
+pub const GENERIC_TERMS: usize = 7;
+
 /// Kinds of sensor-side effect.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize)]
 #[serde(rename_all = "snake_case")]
@@ -61,6 +64,10 @@ pub enum EffectKind {
     FssCyclicError,
     /// Per-star catalog position / proper-motion error.
     CatalogProperMotionError,
+    /// Not a candidate: a generic extension of a sensor's alignment variation (orbit
+    /// harmonics 2 and 3, the square of the temperature deviation) used only to test the
+    /// lack of fit of the thermal and orbit-periodic candidates.
+    GenericAlignmentExtension,
 }
 
 impl EffectKind {
@@ -79,6 +86,7 @@ impl EffectKind {
             Self::FssTransferFunction => "fss_transfer_function",
             Self::FssCyclicError => "fss_cyclic_error",
             Self::CatalogProperMotionError => "catalog_proper_motion_error",
+            Self::GenericAlignmentExtension => "generic_alignment_extension",
         }
     }
 
@@ -127,6 +135,9 @@ pub struct Effect {
     pub constraints: Vec<(Vec<(usize, f64)>, f64)>,
     /// Extra (nonlinear) parameters searched on a grid (for the BIC): the cyclic pitch.
     pub extra_params: usize,
+    /// Not a candidate (only used for lack-of-fit tests).
+    #[serde(skip)]
+    pub hidden: bool,
 }
 
 impl Effect {
@@ -142,6 +153,7 @@ impl Effect {
             star_dirs: Vec::new(),
             constraints: Vec::new(),
             extra_params: 0,
+            hidden: false,
         }
     }
 
@@ -261,6 +273,35 @@ impl Effect {
                 }
             }
             EffectKind::FssCyclicError => {}
+            EffectKind::GenericAlignmentExtension => {
+                // Orbit harmonics 2–3, the square of the own temperature, and for an FHST the
+                // other tracker's temperature and its square (only relative FHST alignment is
+                // observable: the other tracker's thermal motion looks like this one's).
+                let dt = m.dtemp[m.sensor];
+                let dto = if m.sensor < 2 {
+                    m.dtemp[1 - m.sensor]
+                } else {
+                    0.0
+                };
+                let u = m.orbit_phase;
+                let (c2, s2, c3, s3) = if u.is_finite() {
+                    (
+                        (2.0 * u).cos(),
+                        (2.0 * u).sin(),
+                        (3.0 * u).cos(),
+                        (3.0 * u).sin(),
+                    )
+                } else {
+                    (0.0, 0.0, 0.0, 0.0)
+                };
+                let terms = [c2, s2, c3, s3, dt * dt, dto, dto * dto];
+                for ax in 0..3 {
+                    let col = alignment_col(ax);
+                    for (k, t) in terms.iter().enumerate() {
+                        out.push((GENERIC_TERMS * ax + k, v2(col * *t)));
+                    }
+                }
+            }
             EffectKind::CatalogProperMotionError => {
                 if m.sensor < 2 {
                     if let Some(k) = star_index(m.star) {
@@ -298,6 +339,7 @@ impl Effect {
             EffectKind::MagnitudeBias => &[R::Magnitude],
             EffectKind::FssTransferFunction | EffectKind::FssCyclicError => &[R::FovH, R::FovV],
             EffectKind::CatalogProperMotionError => &[R::StarId],
+            EffectKind::GenericAlignmentExtension => &[],
         }
     }
 }
@@ -406,6 +448,27 @@ pub fn library(set: &MeasurementSet, fss_pitch_rad: [Option<f64>; 2]) -> Vec<Eff
                 ("sin_z", "arcsec", 100.0),
             ],
         ));
+        {
+            let mut names = Vec::new();
+            for ax in ["x", "y", "z"] {
+                for t in [
+                    "cos2u",
+                    "sin2u",
+                    "cos3u",
+                    "sin3u",
+                    "dT2",
+                    "dT_other",
+                    "dT_other2",
+                ] {
+                    names.push((format!("{ax}_{t}"), "arcsec", 100.0));
+                }
+            }
+            let refs: Vec<(&str, &'static str, f64)> =
+                names.iter().map(|(n, u, s)| (n.as_str(), *u, *s)).collect();
+            let mut e = Effect::new(EffectKind::GenericAlignmentExtension, Some(s), &refs);
+            e.hidden = true;
+            out.push(e);
+        }
         if s < 2 {
             out.push(Effect::new(
                 EffectKind::FhstDistortion,

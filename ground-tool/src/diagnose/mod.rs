@@ -27,6 +27,7 @@ pub mod effects;
 pub mod fit;
 pub mod flight;
 pub mod gyro;
+pub mod inject;
 pub mod measurements;
 pub mod report;
 pub mod run;

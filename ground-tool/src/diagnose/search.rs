@@ -242,6 +242,13 @@ fn sensors_of(effect: &Effect) -> Vec<usize> {
     }
 }
 
+/// Do two effects compete for the same structure? The same sensor, or both on FHSTs: only
+/// the trackers' relative alignment is observable, so an FHST1 effect and an FHST2 effect can
+/// explain the same data.
+fn overlapping(a: &[usize], b: &[usize]) -> bool {
+    a.iter().any(|s| b.contains(s)) || (a.iter().any(|&s| s < 2) && b.iter().any(|&s| s < 2))
+}
+
 /// Run the loop.
 ///
 /// # Errors
@@ -312,7 +319,7 @@ pub fn search(
     let mut added = Vec::new();
     for number in 1..=config.max_iterations {
         let candidates: Vec<usize> = (0..layout.effects.len())
-            .filter(|i| !model.contains(i))
+            .filter(|&i| !model.contains(&i) && !layout.effects[i].hidden)
             .collect();
         let mut evs: Vec<(usize, Evidence, Option<SubFit>)> = Vec::new();
         for &c in &candidates {
@@ -494,6 +501,37 @@ pub fn search(
                             "inadequate: signature structure remains (max F−1 {x0:.1} → {x1:.1})"
                         ));
                     }
+                    // Lack of fit of the alignment-variation candidates: does a generic
+                    // extension on the same sensor (orbit harmonics 2–3, ΔT²) still explain
+                    // something? Then the structure has another form than the candidate's.
+                    if e.adequate
+                        && matches!(
+                            effect.kind,
+                            EffectKind::ThermalAlignmentDrift | EffectKind::OrbitPeriodicAlignment
+                        )
+                    {
+                        if let Some(ext) =
+                            layout.find(EffectKind::GenericAlignmentExtension, effect.sensor)
+                        {
+                            let mut with_ext = model.clone();
+                            with_ext.push(*c);
+                            with_ext.push(ext);
+                            if let Some(fe) = fit_model(&systems.full, &with_ext) {
+                                let k_ext = layout.effects[ext].len() as f64;
+                                let d = big.chi2 - fe.chi2;
+                                let f_ext = (d / k_ext) / fe.s2();
+                                let p_ext = f_sf(f_ext, k_ext, fe.dof);
+                                let bic_ext =
+                                    n_rows * (big.chi2 / fe.chi2).ln() - k_ext * n_rows.ln();
+                                if p_ext < config.alpha && bic_ext > config.min_delta_bic {
+                                    e.adequate = false;
+                                    why.push(format!(
+                                        "lack of fit: a generic extension (orbit harmonics 2–3, ΔT²) still explains Δχ² {d:.1} (ΔBIC {bic_ext:.1})"
+                                    ));
+                                }
+                            }
+                        }
+                    }
                 }
             }
             if why.is_empty() {
@@ -516,7 +554,7 @@ pub fn search(
                 statistically_ok
                     && e.rejected_because.is_some()
                     && e.delta_bic > b_bic + config.min_delta_bic
-                    && sensors_of(other).iter().any(|s| chosen_sensors.contains(s))
+                    && overlapping(&sensors_of(other), &chosen_sensors)
             });
             if let Some((_, v, _)) = veto {
                 let why = format!(
