@@ -34,6 +34,9 @@ pub struct FlightUpdate {
     /// New alignment table.
     #[serde(skip)]
     pub alignment: AlignmentTable,
+    /// The ground model's alignments (the final fit, adjusted the same way), for scoring.
+    #[serde(skip)]
+    pub ground_alignment: AlignmentTable,
     /// New filter table, when a filter setting changes.
     #[serde(skip)]
     pub filter: Option<FilterTable>,
@@ -53,56 +56,45 @@ pub fn flight_update(
     flown_filter: &FilterTable,
     counts: [usize; 4],
 ) -> anyhow::Result<FlightUpdate> {
-    let g = res.final_fit.expand(res.layout.total);
+    // The flight fit: the final model restricted to what the OBC can apply (alignments, time
+    // offsets, distortion, the FSS scale and cross terms, annual aberration). The alignments
+    // then absorb the rest as well as they can for the OBC's own model; taking the full
+    // model's alignments would leave the OBC with alignments that were estimated together
+    // with terms it does not have (an FSS cubic or cyclic term trades with its alignment).
+    let mut effects: Vec<usize> = res.baseline.clone();
+    effects.extend(&res.added);
+    let mut idx: Vec<usize> = (0..super::fit::N_ALIGN).collect();
+    for &i in &effects {
+        let r = res.layout.range(i);
+        let keep: &[usize] = match res.layout.effects[i].kind {
+            EffectKind::TimeTagOffset | EffectKind::AberrationAnnual | EffectKind::Aberration => {
+                &[0]
+            }
+            EffectKind::FhstDistortion => &[0, 1, 2],
+            EffectKind::FssTransferFunction => &[0, 1, 3, 4],
+            _ => &[],
+        };
+        idx.extend(keep.iter().map(|k| r.start + k));
+    }
+    let flight_fit = super::fit::solve(&res.systems.full, &res.layout, &idx)
+        .unwrap_or_else(|| res.final_fit.clone());
+    let g = flight_fit.expand(res.layout.total);
     let mut applied = Vec::new();
     let mut ground_only = Vec::new();
-    // Alignments: M' = Rot(θ) M for FHST2, FSS1, FSS2 (FHST1 is the reference), then the
-    // common rotation that keeps the OBC's FHST frame.
-    let m_base: Vec<Matrix3<f64>> = base
-        .matrices()
-        .iter()
-        .map(|m| matrix_from_rows(m))
-        .collect();
-    let mut m_new = m_base.clone();
-    for (s, m) in m_new.iter_mut().enumerate() {
-        if let Some(o) = align_offset(s) {
-            let theta = Vector3::new(g[o], g[o + 1], g[o + 2]) * RAD_PER_ARCSEC;
-            *m = rot(&theta) * *m;
-        }
-    }
-    let adj = preserve_obc_attitude(&m_base, &m_new, 0, 1, BoresightFrame::Bisector)?;
-    let ortho = |m: &Matrix3<f64>| rows_from_matrix(&Quat::from_dcm(m).to_dcm());
-    let mut table = *base;
-    table.m_acs_from_fhst1 = ortho(&adj.m_acs_from_sensor_adjusted[0]);
-    table.m_acs_from_fhst2 = ortho(&adj.m_acs_from_sensor_adjusted[1]);
-    table.m_acs_from_fss1 = ortho(&adj.m_acs_from_sensor_adjusted[2]);
-    table.m_acs_from_fss2 = ortho(&adj.m_acs_from_sensor_adjusted[3]);
-    // A sensor without data keeps its flown alignment (the common rotation of the adjustment
-    // is a change of gauge, not information about it).
-    for (s, &c) in counts.iter().enumerate() {
-        if c < 50 {
-            let rows = *base.matrices()[s];
-            match s {
-                0 => table.m_acs_from_fhst1 = rows,
-                1 => table.m_acs_from_fhst2 = rows,
-                2 => table.m_acs_from_fss1 = rows,
-                _ => table.m_acs_from_fss2 = rows,
-            }
-        }
-    }
+    let mut table = adjusted_alignment(base, &g, counts)?;
+    let ground_alignment =
+        adjusted_alignment(base, &res.final_fit.expand(res.layout.total), counts)?;
     applied.push(
         "alignments re-estimated jointly with the effects (FHST frame of the OBC kept)".to_owned(),
     );
     let mut filter = None;
     let names = super::measurements::SENSOR_NAMES;
-    let mut effects: Vec<usize> = res.baseline.clone();
-    effects.extend(&res.added);
     for i in effects {
         let e = &res.layout.effects[i];
         let r = res.layout.range(i);
         // Only terms determined at 3σ go up: an ill-determined polynomial term (a transfer
         // function seen over a small part of the field) would make the OBC worse elsewhere.
-        let p = |k: usize| match res.final_fit.param(r.start + k) {
+        let p = |k: usize| match flight_fit.param(r.start + k) {
             Some((x, s)) if x.abs() > 3.0 * s => x,
             _ => 0.0,
         };
@@ -157,8 +149,53 @@ pub fn flight_update(
     }
     Ok(FlightUpdate {
         alignment: table,
+        ground_alignment,
         filter,
         applied,
         ground_only,
     })
+}
+
+/// `base` with the alignment corrections of `g` (M' = Rot(θ) M for FHST2, FSS1, FSS2; FHST1
+/// is the reference), then the common rotation that keeps the OBC's FHST frame.
+fn adjusted_alignment(
+    base: &AlignmentTable,
+    g: &nalgebra::DVector<f64>,
+    counts: [usize; 4],
+) -> anyhow::Result<AlignmentTable> {
+    // Alignments: M' = Rot(θ) M for FHST2, FSS1, FSS2 (FHST1 is the reference), then the
+    // common rotation that keeps the OBC's FHST frame.
+    let m_base: Vec<Matrix3<f64>> = base
+        .matrices()
+        .iter()
+        .map(|m| matrix_from_rows(m))
+        .collect();
+    let mut m_new = m_base.clone();
+    for (s, m) in m_new.iter_mut().enumerate() {
+        if let Some(o) = align_offset(s) {
+            let theta = Vector3::new(g[o], g[o + 1], g[o + 2]) * RAD_PER_ARCSEC;
+            *m = rot(&theta) * *m;
+        }
+    }
+    let adj = preserve_obc_attitude(&m_base, &m_new, 0, 1, BoresightFrame::Bisector)?;
+    let ortho = |m: &Matrix3<f64>| rows_from_matrix(&Quat::from_dcm(m).to_dcm());
+    let mut table = *base;
+    table.m_acs_from_fhst1 = ortho(&adj.m_acs_from_sensor_adjusted[0]);
+    table.m_acs_from_fhst2 = ortho(&adj.m_acs_from_sensor_adjusted[1]);
+    table.m_acs_from_fss1 = ortho(&adj.m_acs_from_sensor_adjusted[2]);
+    table.m_acs_from_fss2 = ortho(&adj.m_acs_from_sensor_adjusted[3]);
+    // A sensor without data keeps its flown alignment (the common rotation of the adjustment
+    // is a change of gauge, not information about it).
+    for (s, &c) in counts.iter().enumerate() {
+        if c < 50 {
+            let rows = *base.matrices()[s];
+            match s {
+                0 => table.m_acs_from_fhst1 = rows,
+                1 => table.m_acs_from_fhst2 = rows,
+                2 => table.m_acs_from_fss1 = rows,
+                _ => table.m_acs_from_fss2 = rows,
+            }
+        }
+    }
+    Ok(table)
 }

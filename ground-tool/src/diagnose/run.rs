@@ -354,11 +354,16 @@ pub fn diagnose_run(
             };
             let ce = BeforeAfter {
                 before: calibration_error_arcsec(&cal.alignment, t, &analysis.set, &|_| [0.0; 2]),
-                after: calibration_error_arcsec(&flight.alignment, t, &analysis.set, &field_after),
+                after: calibration_error_arcsec(
+                    &flight.ground_alignment,
+                    t,
+                    &analysis.set,
+                    &field_after,
+                ),
             };
             rotation_error = Some(BeforeAfter {
                 before: rotation_error_arcsec(&cal.alignment, t),
-                after: rotation_error_arcsec(&flight.alignment, t),
+                after: rotation_error_arcsec(&flight.ground_alignment, t),
             });
             let sc = Scoring {
                 label: "scoring only: from truth.json, never used by the analysis".into(),
