@@ -123,7 +123,6 @@ fn flown_tables(
 struct Chain {
     frames: Vec<crate::pipeline::observations::FrameObservations>,
     alignment: AlignmentTable,
-    iru: IruTable,
     irucal: Option<crate::calibration::iru::IrucalSolution>,
     output: Option<CalibrationOutput>,
 }
@@ -152,10 +151,61 @@ fn chain_fallback(
     Ok(Chain {
         frames,
         alignment,
-        iru,
         irucal: None,
         output: None,
     })
+}
+
+/// The IRU table diagnose writes: the flown table, its `G` updated only by the IRUCAL `δM`
+/// elements determined at 3σ, and only when the chain itself would update `G` (a redundant,
+/// self-consistent fit). The same rule as the effects' table terms ([`super::flight`]): an
+/// element the maneuvers do not determine (no rotation about that axis, σ of thousands of
+/// ppm) would make the OBC worse, not better. Returns the table and what was done.
+#[must_use]
+pub fn iru_table_out(flown: &IruTable, chain: Option<&CalibrationOutput>) -> (IruTable, String) {
+    let mut out = *flown;
+    let Some(c) = chain else {
+        return (out, "IRU table as flown (no calibration chain)".to_owned());
+    };
+    let (Some(sol), Some(rep)) = (&c.irucal, &c.report.iru) else {
+        return (out, "IRU table as flown (no IRUCAL solution)".to_owned());
+    };
+    if !rep.g_updated {
+        return (
+            out,
+            "IRU table as flown (IRUCAL did not update G: δM not significant or not self-consistent)"
+                .to_owned(),
+        );
+    }
+    let dm = sol.calibration.delta_m;
+    let sig = sol.sigma_delta_m;
+    let mut kept = Matrix3::zeros();
+    let mut dropped = Vec::new();
+    for i in 0..3 {
+        for j in 0..3 {
+            if dm[(i, j)].abs() > 3.0 * sig[(i, j)] {
+                kept[(i, j)] = dm[(i, j)];
+            } else if dm[(i, j)] != 0.0 {
+                dropped.push(format!(
+                    "δM[{i}][{j}] = {:.0} ± {:.0} ppm",
+                    dm[(i, j)] * 1e6,
+                    sig[(i, j)] * 1e6
+                ));
+            }
+        }
+    }
+    let g =
+        (Matrix3::identity() + kept) * fsw_core::tables::types::matrix_from_rows(&flown.g_primary);
+    out.g_primary = fsw_core::tables::types::rows_from_matrix(&g);
+    let note = if dropped.is_empty() {
+        "IRU table: G updated with the IRUCAL δM".to_owned()
+    } else {
+        format!(
+            "IRU table: G updated with the IRUCAL δM elements determined at 3σ; left as flown: {}",
+            dropped.join(", ")
+        )
+    };
+    (out, note)
 }
 
 /// Run the diagnosis of a run folder and write the report and tables into `out_dir`.
@@ -204,7 +254,6 @@ pub fn diagnose_run(
         Ok(c) => Chain {
             frames: c.frames.clone(),
             alignment: c.alignment,
-            iru: c.iru,
             irucal: c.irucal.clone(),
             output: Some(c),
         },
@@ -292,8 +341,12 @@ pub fn diagnose_run(
     let p = out_dir.join("tables").join("alignment.tbl");
     write_table(&p, TableId::Alignment, &flight.alignment, created)?;
     written.push(p.display().to_string());
+    let (iru_out, iru_note) = iru_table_out(
+        &copt.flown_iru.unwrap_or_else(IruTable::prelaunch),
+        cal.output.as_ref(),
+    );
     let p = out_dir.join("tables").join("iru.tbl");
-    write_table(&p, TableId::Iru, &cal.iru, created)?;
+    write_table(&p, TableId::Iru, &iru_out, created)?;
     written.push(p.display().to_string());
     if let Some(f) = &flight.filter {
         let p = out_dir.join("tables").join("filter.tbl");
@@ -411,7 +464,11 @@ pub fn diagnose_run(
         },
         flight_tables: FlightSummary {
             written,
-            applied: flight.applied.clone(),
+            applied: {
+                let mut a = flight.applied.clone();
+                a.push(iru_note.clone());
+                a
+            },
             ground_only: flight.ground_only.clone(),
         },
         calibration_error_arcsec: calibration_error,
