@@ -10,7 +10,8 @@
 //!    load/activate/abort (activation therefore always happens at a cycle boundary, before
 //!    any table is used in the cycle), IRU configuration, filter init/reset, slew/hold.
 //! 3. **IRU**: pulse integration (paper eq. 5); a failed selected channel switches to the
-//!    backup configuration automatically.
+//!    backup configuration automatically. Any configuration change (automatic or commanded)
+//!    reopens the filter's bias covariance: the new channels have their own biases.
 //! 4. **Propagation** of the MEKF with the exact rotation-vector update.
 //! 5. **FHST1, FHST2** (not during slews: gyro-only propagation, as on GRO): counts → unit
 //!    vector in ACS; star identification on a new acquisition; sequential vector update with
@@ -401,6 +402,15 @@ impl FlightCore {
             Command::SelectIruConfig(config) => {
                 if config != self.iru_config {
                     self.iru_config = config;
+                    // Other channels, other biases: see `Mekf::reopen_bias_covariance`.
+                    if self.filter_mode != FilterMode::Uninitialized
+                        && self
+                            .filter
+                            .reopen_bias_covariance(self.tables.filter())
+                            .is_err()
+                    {
+                        raise(events, counters, EventId::CommandRejected, cmd.code(), 2);
+                    }
                     raise(
                         events,
                         counters,
@@ -479,6 +489,12 @@ impl FlightCore {
             // Automatic switch to the backup channels (their counters were tracked too).
             self.iru_config = IruConfiguration::Backup;
             raise(events, &mut self.counters, EventId::IruConfigSwitched, 1, 1);
+            // The backup channels have their own biases: the estimate of the primary ones
+            // must not be trusted (`Mekf::reopen_bias_covariance`). The table σ was validated
+            // on load, so this cannot fail; if it did the old covariance would be kept.
+            if self.filter_mode != FilterMode::Uninitialized {
+                let _ = self.filter.reopen_bias_covariance(self.tables.filter());
+            }
             out = self.iru.reprocess(self.iru_config, &table);
         }
         if out.delta_theta_acs_rad.is_none() && self.iru.is_initialized() {

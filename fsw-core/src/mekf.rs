@@ -399,6 +399,35 @@ impl Mekf {
         Ok(())
     }
 
+    /// Keep the estimate and the attitude covariance, reopen the bias covariance to the
+    /// table's initial σ and decorrelate it from the attitude: for a change of the gyro
+    /// channels that feed the filter (IRU configuration switch). The bias estimate belongs to
+    /// the old channels; the new ones have their own biases (DRIRU II channel biases differ by
+    /// up to ~1″/s), and a converged `P_bb` would make the filter trust the old estimate, let
+    /// the attitude drift and then gate the stars that could correct it (issue 7,
+    /// `scenarios/faults/iru-channel-failure-mid-slew.toml`). Reopened, `P_bb` grows `P_θθ`
+    /// through propagation at the rate the bias error can move the attitude, so the next star
+    /// updates are accepted and re-estimate the bias.
+    ///
+    /// # Errors
+    /// [`MekfError::InvalidInput`] (state unchanged) for an invalid table σ.
+    pub fn reopen_bias_covariance(&mut self, table: &FilterTable) -> Result<(), MekfError> {
+        let sb = table.initial_bias_sigma_rad_per_s;
+        if !positive_finite(sb) {
+            return Err(MekfError::InvalidInput);
+        }
+        let mut p = self.covariance;
+        p.fixed_view_mut::<3, 3>(0, 3).fill(0.0);
+        p.fixed_view_mut::<3, 3>(3, 0).fill(0.0);
+        p.fixed_view_mut::<3, 3>(3, 3)
+            .copy_from(&(Matrix3::identity() * (sb * sb)));
+        if !covariance_ok(&p) {
+            return Err(MekfError::NumericalFault);
+        }
+        self.covariance = p;
+        Ok(())
+    }
+
     /// Attitude 1σ per axis, rad.
     #[must_use]
     pub fn attitude_sigma_rad(&self) -> Vector3<f64> {
@@ -834,6 +863,33 @@ mod tests {
         assert!(f.propagate(&Vector3::zeros(), f64::NAN, &t).is_err());
         assert!(f.propagate(&Vector3::new(1.0, 0.0, 0.0), 1.0, &t).is_err());
         assert_eq!(f.covariance, before.covariance);
+    }
+
+    #[test]
+    fn reopening_the_bias_keeps_the_attitude_block_and_decorrelates() {
+        let t = table();
+        let mut f = Mekf::new();
+        f.initialize(&Quat::IDENTITY, &t).unwrap();
+        // Converge a little and correlate attitude and bias by propagation.
+        f.covariance = Matrix6::identity() * 1e-14;
+        for _ in 0..100 {
+            f.propagate(&Vector3::new(1e-4, 0.0, 0.0), 1.0, &t).unwrap();
+        }
+        let before = f;
+        assert!(before.covariance.fixed_view::<3, 3>(0, 3).norm() > 0.0);
+        f.reopen_bias_covariance(&t).unwrap();
+        assert_eq!(
+            f.covariance.fixed_view::<3, 3>(0, 0),
+            before.covariance.fixed_view::<3, 3>(0, 0)
+        );
+        assert!(f.covariance.fixed_view::<3, 3>(0, 3).iter().all(|x| *x == 0.0));
+        let sb = t.initial_bias_sigma_rad_per_s;
+        assert_eq!(f.bias_sigma_rad_per_s(), Vector3::repeat(sb));
+        assert_eq!(f.q_acs_from_eci, before.q_acs_from_eci);
+        assert_eq!(f.bias_rad_per_s, before.bias_rad_per_s);
+        let mut bad = t;
+        bad.initial_bias_sigma_rad_per_s = f64::NAN;
+        assert_eq!(f.reopen_bias_covariance(&bad), Err(MekfError::InvalidInput));
     }
 
     #[test]

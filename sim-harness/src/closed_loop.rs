@@ -30,6 +30,7 @@
 use anyhow::Context;
 use nalgebra::{Matrix3, Vector3};
 
+use crate::faults::{Fault, FaultKind, FaultState};
 use crate::onboard;
 use crate::paper::PaperFacts;
 use crate::scenario::{body_axis_from_name, table_id_from_name, CommandKind, Scenario};
@@ -117,6 +118,8 @@ pub struct Simulation {
     uploads: Vec<Upload>,
     current_target: Quat,
     error_rotation: Quat,
+    faults: Vec<Fault>,
+    fault_state: FaultState,
 }
 
 fn quat_from_array([x, y, z, w]: [f64; 4]) -> Quat {
@@ -148,9 +151,17 @@ impl Simulation {
         )
         .map_err(InputError::from)?;
         let seed = scenario.seed;
-        let iru = Iru::new(scenario.iru.clone(), &paper, seed).map_err(InputError::from)?;
+        let mut iru = Iru::new(scenario.iru.clone(), &paper, seed).map_err(InputError::from)?;
+        for f in &scenario.faults {
+            if let (FaultKind::IruChannelFailure, Some(ch)) = (f.kind, f.channel_index()) {
+                iru.add_failure(ch, f.at_s, f.bit.unwrap_or(true));
+            }
+            if f.kind == FaultKind::IruCounterWrap {
+                iru.preset_counters_to_wrap(f.at_s, f.margin_pulses.unwrap_or(40));
+            }
+        }
         let pending_iru = IruSample {
-            counts: scenario.iru.initial_counts,
+            counts: iru.counts(),
             channel_failed: 0,
             high_rate: scenario.iru.initial_high_rate,
         };
@@ -332,6 +343,40 @@ impl Simulation {
             };
             timeline.push((c.at_s, action));
         }
+        // Faults that reach the OBC through the uplink (crate::faults).
+        for (i, f) in scenario.faults.iter().enumerate() {
+            match f.kind {
+                FaultKind::TableUpload => {
+                    let base = if scenario.fly_true_alignments {
+                        onboard::true_alignment_table(&[
+                            *fhst[0].m_acs_from_fhst_true(),
+                            *fhst[1].m_acs_from_fhst_true(),
+                            *fss[0].m_acs_from_fss_true(),
+                            *fss[1].m_acs_from_fss_true(),
+                        ])
+                    } else {
+                        fsw_core::tables::AlignmentTable::prelaunch()
+                    };
+                    let created = clock.time_tag(f.at_s).unwrap_or_default();
+                    let image = f.upload_image(&base, created)?;
+                    let damage = f
+                        .corruption
+                        .map_or_else(|| "none".to_owned(), |c| format!("{c:?}").to_lowercase());
+                    uploads.push(Upload {
+                        source: format!("faults[{i}]: alignment image, damage {damage}"),
+                        name: format!("fault{i}_{damage}_alignment.tbl"),
+                        image,
+                        at_s: f.at_s,
+                    });
+                    timeline.push((f.at_s, Action::Load(uploads.len() - 1)));
+                    if f.activate.unwrap_or(true) {
+                        timeline.push((f.at_s, Action::Activate(TableId::Alignment)));
+                    }
+                }
+                FaultKind::FilterReset => timeline.push((f.at_s, Action::FilterReset)),
+                _ => {}
+            }
+        }
         // Start-up entries are at 0 and come first; the scenario's are sorted: keep stable.
         timeline.sort_by(|a, b| a.0.total_cmp(&b.0));
 
@@ -357,6 +402,8 @@ impl Simulation {
             next_action: 0,
             uploads,
             error_rotation,
+            faults: scenario.faults.clone(),
+            fault_state: FaultState::new(&scenario.faults),
             scenario,
         })
     }
@@ -494,17 +541,57 @@ impl Simulation {
             temps[i] = node.centi_c();
             dev[i] = node.deviation_c();
         }
+        let mut fhst = [
+            self.fhst[0].sample(&truth, &self.sky, dev[0]),
+            self.fhst[1].sample(&truth, &self.sky, dev[1]),
+        ];
+        let mut fss = [
+            self.fss[0].sample(&truth, dev[2]),
+            self.fss[1].sample(&truth, dev[3]),
+        ];
+        let mut time_offset_s = 0.0;
+        if !self.faults.is_empty() {
+            for (unit, sample) in fhst.iter_mut().enumerate() {
+                let tracker = &self.fhst[unit];
+                let sky = &self.sky;
+                let other = || {
+                    crate::faults::other_star_offset(
+                        tracker.m_acs_from_fhst_true(),
+                        tracker.last_truth().hv_rad,
+                        &truth,
+                        sky,
+                        tracker.params().fov_half_width_deg * fsw_core::units::RAD_PER_DEG,
+                        (
+                            tracker.params().magnitude_min,
+                            tracker.params().magnitude_max,
+                        ),
+                    )
+                };
+                *sample = self.fault_state.apply_fhst(
+                    &self.faults,
+                    unit,
+                    t,
+                    *sample,
+                    tracker.params().resolution_arcsec_per_count,
+                    other,
+                );
+            }
+            for (unit, sample) in fss.iter_mut().enumerate() {
+                *sample = FaultState::apply_fss(
+                    &self.faults,
+                    unit,
+                    t,
+                    *sample,
+                    self.fss[unit].params().resolution_deg_per_count,
+                );
+            }
+            time_offset_s = FaultState::time_offset_s(&self.faults, t);
+        }
         let frame = RawSensorFrame {
-            time: self.clock.time_tag(t).unwrap_or_default(),
+            time: self.clock.time_tag(t + time_offset_s).unwrap_or_default(),
             iru: self.pending_iru,
-            fhst: [
-                self.fhst[0].sample(&truth, &self.sky, dev[0]),
-                self.fhst[1].sample(&truth, &self.sky, dev[1]),
-            ],
-            fss: [
-                self.fss[0].sample(&truth, dev[2]),
-                self.fss[1].sample(&truth, dev[3]),
-            ],
+            fhst,
+            fss,
             temperatures_centi_c: temps,
         };
 

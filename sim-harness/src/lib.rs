@@ -11,10 +11,12 @@
 //!
 //! Modules: [`truth`] and [`sensors`] (phase 1), [`scenario`] (TOML), [`onboard`] (what the
 //! ground uplinks at t = 0), [`closed_loop`] (truth → FlightCore → wheels), [`telemetry`]
-//! (CCSDS packets), [`run`] (run folder, scores, bench), [`campaign`] (Monte Carlo, merge).
+//! (CCSDS packets), [`run`] (run folder, scores, bench), [`campaign`] (Monte Carlo, merge),
+//! [`faults`] (fault injection, `[[faults]]`).
 pub mod campaign;
 pub mod closed_loop;
 pub mod data;
+pub mod faults;
 pub mod onboard;
 pub mod paper;
 pub mod run;

@@ -52,6 +52,12 @@
 //! | `table_activate`, `table_abort` | `table` = "alignment", "iru", "filter", "star_catalog" | `TableActivate(id)`, `TableAbort(id)` |
 //! | `filter_initialize` | optional `q_acs_from_eci` (default: truth rotated by `[initial_estimate]`) | `FilterInitialize(q)` |
 //! | `filter_reset` | — | `FilterReset` |
+//!
+//! # Faults (`[[faults]]`)
+//! Injected by the harness into the sensor words, the clock or the uplink at given times
+//! (kinds, fields and effects: [`crate::faults`]; examples: `scenarios/faults/`):
+//! `fhst_dropout`, `fhst_wrong_star`, `fss_glint`, `iru_channel_failure`, `time_tag_jump`,
+//! `table_upload` (damaged or valid alignment images), `filter_reset`.
 
 use std::path::{Path, PathBuf};
 
@@ -394,6 +400,9 @@ pub struct Scenario {
     /// Command timeline.
     #[serde(default)]
     pub commands: Vec<TimedCommand>,
+    /// Injected faults ([`crate::faults`], issue 7).
+    #[serde(default)]
+    pub faults: Vec<crate::faults::Fault>,
     /// Folder of the scenario file (table files are relative to it); not a TOML key.
     #[serde(skip)]
     pub base_dir: Option<PathBuf>,
@@ -667,6 +676,7 @@ impl Scenario {
                 }
             }
         }
+        crate::faults::validate_all(&self.faults)?;
         Ok(())
     }
 }

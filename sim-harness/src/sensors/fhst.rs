@@ -225,6 +225,12 @@ impl Fhst {
         self.state
     }
 
+    /// The model's parameters.
+    #[must_use]
+    pub fn params(&self) -> &FhstParams {
+        &self.params
+    }
+
     /// Truth of the last sample.
     #[must_use]
     pub fn last_truth(&self) -> FhstTruth {

@@ -178,6 +178,12 @@ impl Fss {
         &self.m_acs_from_fss_true
     }
 
+    /// The model's parameters.
+    #[must_use]
+    pub fn params(&self) -> &FssParams {
+        &self.params
+    }
+
     /// Truth of the last sample.
     #[must_use]
     pub fn last_truth(&self) -> FssTruth {

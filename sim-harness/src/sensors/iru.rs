@@ -146,7 +146,9 @@ pub struct Iru {
     counts: [u16; IRU_CHANNELS],
     /// Unwrapped pulse totals (truth, for tests and logs).
     total_pulses: [i64; IRU_CHANNELS],
-    failed_channel: Option<(usize, f64)>,
+    /// (channel, failure time, the BIT bit reports it): `[iru] failure` and the
+    /// `iru_channel_failure` faults ([`crate::faults`]).
+    failures: Vec<(usize, f64, bool)>,
     interval_high_rate: bool,
     commanded_high_rate: bool,
     previous_integral_acs_rad: Vector3<f64>,
@@ -222,13 +224,48 @@ impl Iru {
             remainder_rad: [0.0; IRU_CHANNELS],
             counts: params.initial_counts,
             total_pulses: [0; IRU_CHANNELS],
-            failed_channel,
+            failures: failed_channel
+                .map(|(c, at)| (c, at, true))
+                .into_iter()
+                .collect(),
             interval_high_rate: params.initial_high_rate,
             commanded_high_rate: params.initial_high_rate,
             previous_integral_acs_rad: Vector3::zeros(),
             rng,
             params,
         })
+    }
+
+    /// Fail channel `ch` from `at_s` on: its counter stops; `report_bit` sets its
+    /// built-in-test bit (otherwise it sticks silently).
+    pub fn add_failure(&mut self, ch: usize, at_s: f64, report_bit: bool) {
+        self.failures
+            .push((ch.min(IRU_CHANNELS - 1), at_s, report_bit));
+    }
+
+    /// Preset the six counters so that each wraps about `at_s` from now, `margin_pulses`
+    /// short of the wrap after counting its true bias at low rate until then (fault
+    /// `iru_counter_wrap`). Call before the first sample.
+    pub fn preset_counters_to_wrap(&mut self, at_s: f64, margin_pulses: u16) {
+        let q = self.params.low_rate_arcsec_per_pulse * RAD_PER_ARCSEC;
+        for ch in 0..IRU_CHANNELS {
+            let drift = self.bias_rad_per_s(ch, 0.5 * at_s, 0.0) * at_s / q;
+            let margin = f64::from(margin_pulses);
+            let target = if drift >= 0.0 {
+                65_536.0 - margin
+            } else {
+                margin
+            };
+            #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
+            let start = ((target - drift).round() as i64).rem_euclid(65_536) as u16;
+            self.counts[ch] = start;
+        }
+    }
+
+    /// The six counters as they read now.
+    #[must_use]
+    pub fn counts(&self) -> [u16; IRU_CHANNELS] {
+        self.counts
     }
 
     /// Command the rate mode; it takes effect from the next sample interval.
@@ -311,10 +348,16 @@ impl Iru {
             self.remainder_rad[ch] = acc - pulses * q_rad;
             #[allow(clippy::cast_possible_truncation)]
             let pulses = pulses as i64;
-            let failed = matches!(self.failed_channel, Some((c, at)) if c == ch && t_s >= at);
-            if failed {
-                failed_bits |= 1 << ch;
-            } else {
+            let mut failed = false;
+            for &(c, at, bit) in &self.failures {
+                if c == ch && t_s >= at {
+                    failed = true;
+                    if bit {
+                        failed_bits |= 1 << ch;
+                    }
+                }
+            }
+            if !failed {
                 self.total_pulses[ch] += pulses;
                 #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
                 let wrapped = (i64::from(self.counts[ch]) + pulses).rem_euclid(65_536) as u16;
