@@ -521,12 +521,14 @@ pub fn search(
                                 let d = big.chi2 - fe.chi2;
                                 let f_ext = (d / k_ext) / fe.s2();
                                 let p_ext = f_sf(f_ext, k_ext, fe.dof);
-                                let bic_ext =
-                                    n_rows * (big.chi2 / fe.chi2).ln() - k_ext * n_rows.ln();
-                                if p_ext < config.alpha && bic_ext > config.min_delta_bic {
+                                // A test of the candidate's form, not a model choice: the
+                                // F test at the family level decides (BIC would charge the
+                                // extension's 21 parameters and let a twice-per-orbit or a
+                                // quadratic structure be forced onto the linear candidate).
+                                if p_ext < config.alpha {
                                     e.adequate = false;
                                     why.push(format!(
-                                        "lack of fit: a generic extension (orbit harmonics 2–3, ΔT²) still explains Δχ² {d:.1} (ΔBIC {bic_ext:.1})"
+                                        "lack of fit: a generic extension (orbit harmonics 2–3, ΔT²) still explains Δχ² {d:.1} (F {f_ext:.2}, p {p_ext:.1e})"
                                     ));
                                 }
                             }
