@@ -770,7 +770,7 @@ fn fmt_opt(v: Option<f64>) -> String {
 #[must_use]
 pub fn markdown_table(reports: &[FaultReport]) -> String {
     let mut out = String::from(
-        "| scenario | fault window (s) | worst axis error, fault start → recovery (″) | same interval, no fault (″) | back inside 86.4″/axis after the fault end (s) | fine mode regained after the fault end (s) | 3×RMS last 600 s (″) | events raised (fault run / no-fault run, from the fault start) | tables |\n|---|---|---|---|---|---|---|---|---|\n",
+        "| scenario | fault window (s) | worst axis error, fault start → recovery (″) | same interval, no fault (″) | back inside 86.4″/axis after the fault end (s) | fine mode regained after the fault end (s) | 3×RMS per axis, bias included, last 600 s (″) | events raised (fault run / no-fault run, from the fault start) | tables |\n|---|---|---|---|---|---|---|---|---|\n",
     );
     for r in reports {
         let events = r
@@ -786,6 +786,11 @@ pub fn markdown_table(reports: &[FaultReport]) -> String {
             format!("changed ({} activated)", r.tables_activated)
         };
         let [a, b, c] = r.final_three_rms_arcsec;
+        let recovery = format!(
+            "{} (no fault: {})",
+            fmt_opt(r.recovery_s),
+            fmt_opt(r.baseline_recovery_s)
+        );
         out +=
             &format!(
             "| {} | {:.0}–{:.0} | {:.1} | {:.1} | {} | {} | {a:.1} / {b:.1} / {c:.1} | {} | {} |\n",
@@ -794,7 +799,7 @@ pub fn markdown_table(reports: &[FaultReport]) -> String {
             r.fault_end_s,
             r.worst_axis_error_arcsec,
             r.baseline_worst_axis_error_arcsec,
-            fmt_opt(r.recovery_s),
+            recovery,
             fmt_opt(r.fine_mode_regained_s),
             if events.is_empty() { "none".to_owned() } else { events },
             tables
