@@ -30,7 +30,8 @@
 //! * **failed**: the channel's built-in-test bit ([`IruSample::channel_failed`]);
 //! * **saturated**: `|ΔN| >` [`IruTable::saturation_pulses_per_cycle`] this cycle;
 //! * **stuck**: the counter has not changed for at least [`IruTable::stuck_cycles`]
-//!   consecutive cycles (it clears on the next change). On orbit the gyro bias alone makes
+//!   consecutive cycles, or has not changed in a cycle in which its healthy partner on the
+//!   same axis turned at least [`PAIR_STUCK_ARCSEC`] (it clears on the next change). On orbit the gyro bias alone makes
 //!   every healthy channel count (GRO: ~0.6″/s ≈ 12 low-rate pulses/s).
 //!
 //! An increment is produced only when all three selected channels are usable; otherwise
@@ -43,6 +44,20 @@ use crate::raw::{IruSample, IRU_CHANNELS};
 use crate::tables::types::{matrix_from_rows, IruTable};
 use crate::units::RAD_PER_ARCSEC;
 use nalgebra::{Matrix3, Vector3};
+
+/// The two channels of each axis (X1/X2, Y1/Y2, Z1/Z2): one of each triad, same input axis.
+pub const AXIS_PAIRS: [(usize, usize); 3] = [(0, 1), (2, 3), (4, 5)];
+
+/// Pair cross-check threshold, arcsec per cycle: a channel whose counter did not move while
+/// its healthy partner on the same axis turned at least this much is stuck *now*. Two
+/// channels of one axis see the same rate to within their bias difference (DRIRU II biases
+/// ~0.4″/s) and the 10⁻³ misalignments, so a healthy channel cannot read 0 pulses (< 0.8″ at
+/// high rate) while its partner reads 20″; any slew (0.08°/s = 288″/s) trips it in one
+/// cycle. Without it a channel that sticks silently (no built-in-test bit) mid-slew is only
+/// found after `stuck_cycles` (120 s): 3° of attitude error, outside the star
+/// identification window, from which the OBC does not recover (issue 7,
+/// `scenarios/faults/iru-stuck-channel-mid-slew.toml`).
+pub const PAIR_STUCK_ARCSEC: f64 = 20.0;
 
 /// Bit of each channel in the health masks, channel order X1, X2, Y1, Y2, Z1, Z2.
 pub const CHANNEL_BITS: [u8; IRU_CHANNELS] = [0x01, 0x02, 0x04, 0x08, 0x10, 0x20];
@@ -376,6 +391,34 @@ impl IruIntegrator {
                 health.stuck |= bit;
             }
         }
+        // Pair cross-check (`PAIR_STUCK_ARCSEC`): a stuck channel is latched through the
+        // unchanged-cycle count, so it stays excluded until its counter moves again.
+        let weight_arcsec = if sample.high_rate {
+            table.high_rate_arcsec_per_pulse
+        } else {
+            table.low_rate_arcsec_per_pulse
+        };
+        let bad = health.failed | health.saturated;
+        for (a, b) in AXIS_PAIRS {
+            for (me, partner) in [(a, b), (b, a)] {
+                let (Some(&d_me), Some(&d_partner), Some(&bit_me), Some(&bit_partner)) = (
+                    delta_counts.get(me),
+                    delta_counts.get(partner),
+                    CHANNEL_BITS.get(me),
+                    CHANNEL_BITS.get(partner),
+                ) else {
+                    continue;
+                };
+                let partner_turned_arcsec = f64::from(d_partner.unsigned_abs()) * weight_arcsec;
+                if d_me == 0 && bad & bit_partner == 0 && partner_turned_arcsec >= PAIR_STUCK_ARCSEC
+                {
+                    health.stuck |= bit_me;
+                    if let Some(u) = self.unchanged_cycles.get_mut(me) {
+                        *u = (*u).max(table.stuck_cycles);
+                    }
+                }
+            }
+        }
         self.last = LastCycle {
             delta_counts,
             health,
@@ -664,5 +707,56 @@ mod tests {
         integ.reset();
         let out = integ.process(&s, IruConfiguration::Primary, &table);
         assert!(out.delta_theta_acs_rad.is_none());
+    }
+
+    /// A channel that does not move while its partner on the same axis turns ≥ 20″ is stuck
+    /// at once (no built-in-test bit needed), stays excluded while it does not move, and is
+    /// usable again when it counts; a small partner increment (low rate, bias level) does not
+    /// trip the check.
+    #[test]
+    fn pair_cross_check_finds_a_silently_stuck_channel_at_once() {
+        let table = IruTable::prelaunch();
+        let mut integ = IruIntegrator::new();
+        let mut counts = [100_u16; IRU_CHANNELS];
+        let sample = |counts: [u16; IRU_CHANNELS], high_rate: bool| IruSample {
+            counts,
+            channel_failed: 0,
+            high_rate,
+        };
+        let _ = integ.process(&sample(counts, false), IruConfiguration::Primary, &table);
+        // Low rate, Y2 moves 5 pulses (0.25″), Y1 not: within bias differences, usable.
+        counts[3] = counts[3].wrapping_add(5);
+        let out = integ.process(&sample(counts, false), IruConfiguration::Primary, &table);
+        assert_eq!(out.health.stuck, 0);
+        assert!(out.selected_usable);
+        // High rate, every channel but Y1 turns 300 pulses (240″): Y1 (bit 2) stuck now.
+        for (i, c) in counts.iter_mut().enumerate() {
+            if i != 2 {
+                *c = c.wrapping_add(300);
+            }
+        }
+        let out = integ.process(&sample(counts, true), IruConfiguration::Primary, &table);
+        assert_eq!(out.health.stuck, 0x04);
+        assert!(!out.selected_usable);
+        assert_eq!(integ.exclusion_reason(2), EXCLUDED_STUCK);
+        assert!(
+            integ
+                .reprocess(IruConfiguration::Backup, &table)
+                .selected_usable
+        );
+        // The slew ends: nothing moves, Y1 stays excluded (latched).
+        let out = integ.process(&sample(counts, false), IruConfiguration::Primary, &table);
+        assert_eq!(out.health.stuck & 0x04, 0x04);
+        // Y1 counts again: usable.
+        counts[2] = counts[2].wrapping_add(7);
+        let out = integ.process(&sample(counts, false), IruConfiguration::Primary, &table);
+        assert_eq!(out.health.stuck & 0x04, 0);
+        // A saturated partner does not condemn a healthy channel.
+        let mut t2 = table;
+        t2.saturation_pulses_per_cycle = 100;
+        counts[3] = counts[3].wrapping_add(300);
+        let out = integ.process(&sample(counts, true), IruConfiguration::Primary, &t2);
+        assert_eq!(out.health.saturated & 0x08, 0x08);
+        assert_eq!(out.health.stuck & 0x04, 0);
     }
 }

@@ -249,7 +249,11 @@ fn e2e_fault_iru_channel_failure_mid_slew() {
     let (recs, sim) = fly(&s);
     assert_eq!(
         events_of(&recs, EventId::IruChannelExcluded),
-        vec![(900.0, 2, 1)]
+        vec![(
+            900.0,
+            2,
+            fsw_core::iru::EXCLUDED_FAILED | fsw_core::iru::EXCLUDED_STUCK
+        )]
     );
     assert_eq!(
         events_of(&recs, EventId::IruConfigSwitched),
@@ -279,6 +283,35 @@ fn e2e_fault_iru_channel_failure_mid_slew() {
         .final_three_rms_arcsec
         .iter()
         .all(|x| *x < 3.0 * FINE_REQUIREMENT_ARCSEC));
+}
+
+/// Gyro channel Y1 sticks silently (no built-in-test bit) mid-slew: the pair cross-check
+/// excludes it in the same cycle, and the rest is as for the reported failure.
+#[test]
+fn e2e_fault_iru_stuck_channel_mid_slew() {
+    let s = load("iru-stuck-channel-mid-slew");
+    let r = assess(&s).unwrap();
+    common(&r, false);
+    let (recs, _) = fly(&s);
+    // No BIT bit anywhere in the raw frames: the OBC found it by itself.
+    assert!(recs.iter().all(|r| r.frame.iru.channel_failed == 0));
+    assert_eq!(
+        events_of(&recs, EventId::IruChannelExcluded),
+        vec![(900.0, 2, fsw_core::iru::EXCLUDED_STUCK)]
+    );
+    assert_eq!(
+        events_of(&recs, EventId::IruConfigSwitched),
+        vec![(900.0, 1, 1)]
+    );
+    assert_eq!(
+        r.counters.iru_unusable_cycles,
+        r.baseline_counters.iru_unusable_cycles
+    );
+    // Identical figures to the reported failure (same cycle, same switch).
+    let reported = assess(&load("iru-channel-failure-mid-slew")).unwrap();
+    assert_eq!(r.worst_axis_error_arcsec, reported.worst_axis_error_arcsec);
+    assert!(r.post_slew_error_arcsec[0] < 0.5 * 3600.0);
+    assert!(r.recovery_s.unwrap() <= 1500.0);
 }
 
 /// The counters wrap at high rate: nothing for the OBC to notice, the attitude is identical
