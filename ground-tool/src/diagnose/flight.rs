@@ -7,8 +7,11 @@
 //! | `fhst_distortion` | `corrections.fhst_distortion[i] += [d0, d1, d2]` with `d0 = Δρ(4°)/F³`, `d1,2 = c/F²` (rad) | `fhst::correct_distortion`: `H = H_m − (d0 ρ² H_m + d1 H_m V_m)` |
 //! | `fss_transfer_function` | `corrections.fss_transfer[i] += [scale, cross/E³, 0, scale, cross/E³, 0]` | `fss::correct_transfer`: `α = α_m − (c0 α_m + c1 α_m β_m² + c2)` |
 //! | `aberration_annual` | `FilterTable.aberration_correction = true` | annual aberration of catalog stars and the Sun |
+//! | `catalog_proper_motion_error` | the flown `StarCatalogTable`, each star the data determine moved by its offset (net rotation removed), `u' = u + x_E e_E + x_N e_N` | the onboard catalog (identification and reference directions) |
 //!
-//! Only terms whose estimate exceeds 3σ are written (the others stay as flown).
+//! Only terms whose estimate exceeds 3σ are written (the others stay as flown); catalog offsets
+//! go up for every star the data determine (their σ carries the gauge, see
+//! [`corrected_catalog`]).
 //!
 //! Signs: every library column is the effect's addition to the *measured* angle, and the
 //! tables subtract that addition from the measurement (distortion, transfer) or carry the
@@ -23,7 +26,7 @@ use super::search::SearchResult;
 use crate::calibration::adjust::{preserve_obc_attitude, BoresightFrame};
 use fsw_core::attitude::{rot, Quat};
 use fsw_core::tables::types::{matrix_from_rows, rows_from_matrix};
-use fsw_core::tables::{AlignmentTable, FilterTable};
+use fsw_core::tables::{AlignmentTable, FilterTable, StarCatalogTable};
 use fsw_core::units::RAD_PER_ARCSEC;
 use nalgebra::{Matrix3, Vector3};
 use serde::Serialize;
@@ -40,6 +43,9 @@ pub struct FlightUpdate {
     /// New filter table, when a filter setting changes.
     #[serde(skip)]
     pub filter: Option<FilterTable>,
+    /// Corrected onboard star catalog, when catalog offsets were found.
+    #[serde(skip)]
+    pub catalog: Option<StarCatalogTable>,
     /// What went into the tables.
     pub applied: Vec<String>,
     /// Effects with no flight-table hook (corrected on the ground only).
@@ -54,6 +60,7 @@ pub fn flight_update(
     res: &SearchResult,
     base: &AlignmentTable,
     flown_filter: &FilterTable,
+    flown_catalog: Option<&StarCatalogTable>,
     counts: [usize; 4],
 ) -> anyhow::Result<FlightUpdate> {
     // The flight fit: the final model restricted to what the OBC can apply (alignments, time
@@ -66,13 +73,15 @@ pub fn flight_update(
     let mut idx: Vec<usize> = (0..super::fit::N_ALIGN).collect();
     for &i in &effects {
         let r = res.layout.range(i);
-        let keep: &[usize] = match res.layout.effects[i].kind {
+        let keep: Vec<usize> = match res.layout.effects[i].kind {
             EffectKind::TimeTagOffset | EffectKind::AberrationAnnual | EffectKind::Aberration => {
-                &[0]
+                vec![0]
             }
-            EffectKind::FhstDistortion => &[0, 1, 2],
-            EffectKind::FssTransferFunction => &[0, 1, 3, 4],
-            _ => &[],
+            EffectKind::FhstDistortion => vec![0, 1, 2],
+            EffectKind::FssTransferFunction => vec![0, 1, 3, 4],
+            // The onboard catalog takes every per-star offset.
+            EffectKind::CatalogProperMotionError => (0..r.len()).collect(),
+            _ => Vec::new(),
         };
         idx.extend(keep.iter().map(|k| r.start + k));
     }
@@ -88,6 +97,7 @@ pub fn flight_update(
         "alignments re-estimated jointly with the effects (FHST frame of the OBC kept)".to_owned(),
     );
     let mut filter = None;
+    let mut catalog = None;
     let names = super::measurements::SENSOR_NAMES;
     for i in effects {
         let e = &res.layout.effects[i];
@@ -131,6 +141,19 @@ pub fn flight_update(
                 ));
                 ground_only.push(format!("{label}: cubic and cyclic terms (no table field)"));
             }
+            (EffectKind::CatalogProperMotionError, _) => match flown_catalog {
+                Some(flown) => {
+                    let (c, n) = corrected_catalog(flown, e, r.start, &flight_fit);
+                    applied.push(format!(
+                        "{label}: star_catalog: {n} of {} stars moved by their offsets (net rotation removed)",
+                        e.stars.len()
+                    ));
+                    catalog = Some(c);
+                }
+                None => ground_only.push(format!(
+                    "{label}: no flown star catalog in the run folder to correct"
+                )),
+            },
             (EffectKind::AberrationAnnual | EffectKind::Aberration, _) => {
                 let mut f = *flown_filter;
                 f.aberration_correction = true;
@@ -147,10 +170,16 @@ pub fn flight_update(
         f.validate()
             .map_err(|e| anyhow::anyhow!("diagnose: the filter table does not validate ({e:?})"))?;
     }
+    if let Some(c) = &catalog {
+        c.validate().map_err(|e| {
+            anyhow::anyhow!("diagnose: the corrected star catalog does not validate ({e:?})")
+        })?;
+    }
     Ok(FlightUpdate {
         alignment: table,
         ground_alignment,
         filter,
+        catalog,
         applied,
         ground_only,
     })
@@ -198,4 +227,56 @@ fn adjusted_alignment(
         }
     }
     Ok(table)
+}
+
+/// The flown catalog with the offsets of effect `e` (parameters from `start` in `fit`, east
+/// and north per star, arcsec, true − catalog) applied to every star the data determine (σ
+/// of both components below half the prior, as in the halves check of the search). The
+/// per-star σ carries the gauge freedom (a common rotation of the stars is a rotation of the
+/// attitude), so it is not a test of each offset; the offsets go up with their weighted net
+/// rotation removed, which keeps the OBC's frame. Returns the table and the stars moved.
+fn corrected_catalog(
+    flown: &StarCatalogTable,
+    e: &super::effects::Effect,
+    start: usize,
+    fit: &super::fit::SubFit,
+) -> (StarCatalogTable, usize) {
+    let n = e.stars.len();
+    let mut x = vec![0.0; 2 * n];
+    let mut var = vec![f64::INFINITY; 2 * n];
+    let mut determined = vec![false; n];
+    for k in 0..n {
+        let (Some((xe, se)), Some((xn, sn))) =
+            (fit.param(start + 2 * k), fit.param(start + 2 * k + 1))
+        else {
+            continue;
+        };
+        if se < 0.5 * e.prior_sigma[2 * k] && sn < 0.5 * e.prior_sigma[2 * k + 1] {
+            determined[k] = true;
+            x[2 * k] = xe;
+            x[2 * k + 1] = xn;
+            var[2 * k] = se * se;
+            var[2 * k + 1] = sn * sn;
+        }
+    }
+    let x = super::effects::remove_net_rotation(&e.star_dirs, &x, &var);
+    let mut out = flown.clone();
+    let mut moved = 0;
+    for (k, hip) in e.stars.iter().enumerate() {
+        if !determined[k] {
+            continue;
+        }
+        let Some(star) = out.stars.iter_mut().find(|s| s.id == *hip) else {
+            continue;
+        };
+        let u = star.dir();
+        let [east, north] = super::effects::tangent_basis_eci(&u);
+        let v = (u + (east * x[2 * k] + north * x[2 * k + 1]) * RAD_PER_ARCSEC).normalize();
+        #[allow(clippy::cast_possible_truncation)]
+        {
+            star.dir_eci = [v.x as f32, v.y as f32, v.z as f32];
+        }
+        moved += 1;
+    }
+    (out, moved)
 }

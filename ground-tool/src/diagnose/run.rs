@@ -27,7 +27,7 @@ use crate::pipeline::calibrate::{
 use crate::tp;
 use anyhow::{bail, Context};
 use fsw_core::tables::image::{decode_payload, parse_image};
-use fsw_core::tables::{AlignmentTable, FilterTable, IruTable, TableId};
+use fsw_core::tables::{AlignmentTable, FilterTable, IruTable, StarCatalogTable, TableId};
 use nalgebra::{Matrix3, Vector3};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -117,6 +117,38 @@ fn flown_tables(
         }
     }
     Ok((a, i, f))
+}
+
+/// The onboard star catalog flown: `--tables DIR/star_catalog.tbl`, else the run's last
+/// activated catalog upload (None when neither exists).
+fn flown_catalog(
+    run_dir: &Path,
+    meta: &serde_json::Value,
+    tables: Option<&Path>,
+) -> anyhow::Result<Option<StarCatalogTable>> {
+    if let Some(p) = tables
+        .map(|d| d.join("star_catalog.tbl"))
+        .filter(|p| p.exists())
+    {
+        return Ok(Some(read_image(&p)?));
+    }
+    let mut out = None;
+    for u in meta["uploads"].as_array().into_iter().flatten() {
+        if u["activated_at_s"].is_null()
+            || u["accepted"].as_bool() == Some(false)
+            || u["table"].as_str() != Some("star_catalog")
+        {
+            continue;
+        }
+        if let Some(p) = u["file"]
+            .as_str()
+            .map(|f| run_dir.join(f))
+            .filter(|p| p.exists())
+        {
+            out = Some(read_image(&p)?);
+        }
+    }
+    Ok(out)
 }
 
 /// What the analysis takes from the calibration chain.
@@ -239,6 +271,7 @@ pub fn diagnose_run(
             .collect(),
         None => DEFAULT_DECLARED.iter().map(|s| (*s).to_owned()).collect(),
     };
+    let flown_catalog = flown_catalog(run_dir, &meta_raw, opts.tables.as_deref())?;
     let annual = declared.iter().any(|d| d == "aberration");
     let orbital = declared.iter().any(|d| d == "orbital_aberration");
     let (flown_alignment, flown_iru, flown_filter) =
@@ -332,6 +365,7 @@ pub fn diagnose_run(
         &analysis.search,
         &cal.alignment,
         &filter_flown,
+        flown_catalog.as_ref(),
         analysis.set.count_per_sensor(),
     )?;
     std::fs::create_dir_all(out_dir.join("tables"))
@@ -348,6 +382,11 @@ pub fn diagnose_run(
     let p = out_dir.join("tables").join("iru.tbl");
     write_table(&p, TableId::Iru, &iru_out, created)?;
     written.push(p.display().to_string());
+    if let Some(c) = &flight.catalog {
+        let p = out_dir.join("tables").join("star_catalog.tbl");
+        write_table(&p, TableId::StarCatalog, c, created)?;
+        written.push(p.display().to_string());
+    }
     if let Some(f) = &flight.filter {
         let p = out_dir.join("tables").join("filter.tbl");
         write_table(&p, TableId::Filter, f, created)?;

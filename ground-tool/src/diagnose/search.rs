@@ -258,6 +258,43 @@ pub fn search(
     declared: &[String],
     config: &SearchConfig,
 ) -> anyhow::Result<SearchResult> {
+    let first = search_with_pitch(set, declared, config, None)?;
+    // The cyclic pitch is a nonlinear parameter searched on the preliminary residuals; an
+    // effect not yet modelled there (a time tag, a thermal term) can hide the reticle's
+    // period. Search again on the final residuals; a period found only now restarts the loop
+    // with it (once).
+    let fss_pitch = |res: &SearchResult, s: usize| {
+        res.layout
+            .find(EffectKind::FssTransferFunction, Some(s))
+            .and_then(|i| res.layout.effects[i].pitch_rad)
+    };
+    let mut again = [None, None];
+    let mut any = false;
+    for (k, s) in [2usize, 3].into_iter().enumerate() {
+        again[k] = fss_pitch(&first, s);
+        if again[k].is_none() {
+            again[k] = cyclic_pitch(set, &first.after.resid, s);
+            any |= again[k].is_some();
+        }
+    }
+    if !any {
+        return Ok(first);
+    }
+    if std::env::var_os("DIAGNOSE_DEBUG").is_some() {
+        eprintln!(
+            "cyclic pitch found on the final residuals (deg): {:?}; loop again",
+            again.map(|p| p.map(f64::to_degrees))
+        );
+    }
+    search_with_pitch(set, declared, config, Some(again))
+}
+
+fn search_with_pitch(
+    set: &mut MeasurementSet,
+    declared: &[String],
+    config: &SearchConfig,
+    forced_pitch: Option<[Option<f64>; 2]>,
+) -> anyhow::Result<SearchResult> {
     // Preliminary fit (alignments only) to get clean residuals for the pitch search and the
     // outlier flags.
     // The FSS transfer polynomial is in the preliminary fit (only to clean the residuals of
@@ -284,10 +321,12 @@ pub fn search(
     })?;
     let pf = post_fit(set, &prelim_layout, &prelim.expand(prelim_layout.total));
     set.flag_outliers(&pf.resid);
-    let pitch = [
-        cyclic_pitch(set, &pf.resid, 2),
-        cyclic_pitch(set, &pf.resid, 3),
-    ];
+    let pitch = forced_pitch.unwrap_or_else(|| {
+        [
+            cyclic_pitch(set, &pf.resid, 2),
+            cyclic_pitch(set, &pf.resid, 3),
+        ]
+    });
 
     if std::env::var_os("DIAGNOSE_DEBUG").is_some() {
         eprintln!(
