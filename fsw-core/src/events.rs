@@ -26,8 +26,8 @@ pub enum EventId {
     TableActivateFailed = 0x0104,
     /// Inactive buffer cleared by command. p1 = table id, p2 = 1 if something was pending.
     TableAborted = 0x0105,
-    /// IRU channel excluded. p1 = channel 0..5 (X1..Z2), p2 = reason (1 failed, 2 saturated,
-    /// 3 stuck).
+    /// IRU channel excluded. p1 = channel 0..5 (X1..Z2), p2 = reason bits (1 failed,
+    /// 2 saturated, 4 stuck; e.g. 5 = failed and stuck), [`crate::iru::EXCLUDED_FAILED`] …
     IruChannelExcluded = 0x0201,
     /// IRU configuration switched. p1 = 0 primary, 1 backup; p2 = 1 if automatic.
     IruConfigSwitched = 0x0202,
