@@ -882,7 +882,11 @@ mod tests {
             f.covariance.fixed_view::<3, 3>(0, 0),
             before.covariance.fixed_view::<3, 3>(0, 0)
         );
-        assert!(f.covariance.fixed_view::<3, 3>(0, 3).iter().all(|x| *x == 0.0));
+        assert!(f
+            .covariance
+            .fixed_view::<3, 3>(0, 3)
+            .iter()
+            .all(|x| *x == 0.0));
         let sb = t.initial_bias_sigma_rad_per_s;
         assert_eq!(f.bias_sigma_rad_per_s(), Vector3::repeat(sb));
         assert_eq!(f.q_acs_from_eci, before.q_acs_from_eci);
