@@ -177,6 +177,36 @@ fn e2e_fault_fhst_offset_star() {
     assert_eq!(r.recovery_s, Some(0.0));
 }
 
+/// The spurious star over offsets from 18″ to 2°: the attitude stays inside the requirement
+/// whatever the offset. Small offsets (2–3σ of the FHST noise) pass the χ² gate and pull the
+/// attitude (measured worst 30″ at 0.02° = 72″); from 0.03° on they are gated; from 0.6° the
+/// identification fails, beyond the field edge the input is rejected.
+#[test]
+fn e2e_fault_fhst_offset_sweep() {
+    let base = load("fhst-offset-star");
+    for off_deg in [0.005, 0.01, 0.02, 0.025, 0.03, 0.1, 0.6, 1.0, 2.0] {
+        let mut s = base.clone();
+        s.faults[0].offset_deg = Some([off_deg, 0.0]);
+        let r = assess(&s).unwrap();
+        println!(
+            "offset {off_deg}°: worst {:.1}″ (fault-free {:.1}″), events {:?}",
+            r.worst_axis_error_arcsec, r.baseline_worst_axis_error_arcsec, r.fault_events
+        );
+        assert!(
+            r.worst_axis_error_arcsec < 0.5 * FINE_REQUIREMENT_ARCSEC,
+            "offset {off_deg}°: {}″",
+            r.worst_axis_error_arcsec
+        );
+        assert_eq!(r.recovery_s, Some(0.0));
+        assert!(r.tables_unchanged);
+        if off_deg >= 0.03 {
+            // Gated, rejected or unidentified: never pulls the attitude by more than 3″.
+            assert!(r.worst_axis_error_arcsec <= r.baseline_worst_axis_error_arcsec + 3.0);
+            assert!(!r.fault_events.is_empty(), "offset {off_deg}°: no event");
+        }
+    }
+}
+
 /// FSS2 glint in fine mode (no effect, visible in the innovation) and in coarse mode (gated).
 #[test]
 fn e2e_fault_fss_glint() {
