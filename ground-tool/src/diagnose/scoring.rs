@@ -31,6 +31,8 @@ pub struct Truth {
     pub present: Vec<String>,
     /// The scenario, if its file was found.
     pub scenario_file: Option<sim_harness::scenario::Scenario>,
+    /// True gyro bias history: (s since the start, ACS bias in arcsec/s).
+    pub bias_history: Vec<(f64, Vector3<f64>)>,
 }
 
 /// Read `truth.json` (None when absent).
@@ -76,6 +78,18 @@ pub fn read_truth(run_dir: &Path) -> anyhow::Result<Option<Truth>> {
         undeclared: list("undeclared_effects"),
         present: list("present_effects"),
         scenario_file,
+        bias_history: v["bias_history"]["samples"]
+            .as_array()
+            .map(|a| {
+                a.iter()
+                    .filter_map(|x| {
+                        let b: [f64; 3] =
+                            serde_json::from_value(x["bias_acs_rad_per_s"].clone()).ok()?;
+                        Some((x["t_s"].as_f64()?, Vector3::from(b) * ARCSEC_PER_RAD))
+                    })
+                    .collect()
+            })
+            .unwrap_or_default(),
     }))
 }
 
@@ -319,6 +333,21 @@ pub fn parameter_truth(
             let a = s.iru.effects.scale_asymmetry_ppm;
             for (n, ch) in [("x", 1), ("y", 2), ("z", 4)] {
                 out.insert(n.into(), a[ch]);
+            }
+        }
+        "gyro_bias_ramp" => {
+            // Least-squares slope of the true bias over the run (arcsec/s per hour).
+            let h = &truth.bias_history;
+            if h.len() >= 3 {
+                let n = h.len() as f64;
+                let tm = h.iter().map(|(t, _)| t / 3600.0).sum::<f64>() / n;
+                let bm = h.iter().map(|(_, b)| b).sum::<Vector3<f64>>() / n;
+                let stt: f64 = h.iter().map(|(t, _)| (t / 3600.0 - tm).powi(2)).sum();
+                let stb: Vector3<f64> = h.iter().map(|(t, b)| (b - bm) * (t / 3600.0 - tm)).sum();
+                let slope = stb / stt;
+                for (i, n) in ["x", "y", "z"].iter().enumerate() {
+                    out.insert((*n).into(), slope[i]);
+                }
             }
         }
         "gyro_thermal_bias" => {
