@@ -1,10 +1,12 @@
 //! e2e: the whole loop on the built-in `gro-early-mission` — fly with the prelaunch tables,
 //! calibrate from telemetry alone, uplink, fly again — scored against truth.
 //!
-//! Verifies: the issue "ground-tool" must-shows that hold today (relative alignments
-//! improve, residual RMS lower after, fine attitude inside the paper's requirement after the
-//! uplink, post-maneuver errors inside 0.5° in both flights). The IRU δM is *not* asserted:
-//! see README "Known gaps".
+//! Verifies issue 4's must-shows on one seed: relative alignments improve, FHST–FSS within
+//! 36″ of truth, the FHST1–FHST2 error consistent with its stated covariance, residual RMS
+//! lower after, δM within 3σ of truth, fine attitude inside the paper's requirement after the
+//! uplink, post-maneuver errors inside 0.5° in both flights and lower (RMS) after. The
+//! FHST1–FHST2 5″ aim is *not* asserted: its Cramér–Rao bound on this data is ≈ 9″ on two
+//! axes (README "Known gaps"; `calibration-mc` measures it over seeds).
 
 use gro_tests::loop_report::compare;
 use ground_tool::pipeline::calibrate::{calibrate_run, CalibrateOptions};
@@ -50,6 +52,26 @@ fn e2e_calibration_loop_gro_early_mission() {
             assert!(after < 0.2 * before, "{pair}: {before:.1}″ → {after:.1}″");
         }
     }
+    // FHST–FSS relative alignments within the issue's 36″.
+    for pair in ["FHST1-FSS1", "FHST1-FSS2", "FHST2-FSS1", "FHST2-FSS2"] {
+        let after = r.relative_alignment_error_arcsec.after[pair];
+        assert!(after < 36.0, "{pair}: {after:.1}″ after calibration");
+    }
+    // FHST2 relative to FHST1: error consistent with the stated covariance (χ²₃ at 99.9 %).
+    let sol = &calibration.ffcal;
+    let r_of = |k: usize| {
+        let s = &sol.sensors[k];
+        let t = &truth["alignments"][&s.id];
+        let t = nalgebra::Matrix3::from_fn(|i, j| t[i][j].as_f64().unwrap());
+        s.m_acs_from_sensor_calibrated * t.transpose()
+    };
+    let e = fsw_core::attitude::rotvec_from_rot(&(r_of(1) * r_of(0).transpose()))
+        * fsw_core::units::ARCSEC_PER_RAD;
+    let p = sol.relative_covariance_arcsec2(1, 0);
+    let nees = (e.transpose() * p.try_inverse().unwrap() * e)[(0, 0)];
+    assert!(nees < 16.27, "FHST2 rel FHST1 error {e:?}″, NEES {nees:.1}");
+    // IRU: every δM element within 3σ of truth.
+    assert_eq!(r.iru_delta_m_within_3sigma, Some(true), "δM vs truth");
     // Residual RMS lower after, for every sensor.
     for (sensor, before) in &r.residual_rms_arcsec.before {
         let after = r.residual_rms_arcsec.after[sensor];
@@ -78,5 +100,11 @@ fn e2e_calibration_loop_gro_early_mission() {
     {
         assert!(*e < 0.5, "post-maneuver error {e}°");
     }
+    let rms = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt();
+    let (pb, pa) = (
+        rms(&r.post_maneuver_error_deg.before),
+        rms(&r.post_maneuver_error_deg.after),
+    );
+    assert!(pa < pb, "post-maneuver RMS {pb:.4}° → {pa:.4}°");
     let _ = std::fs::remove_dir_all(&out);
 }

@@ -23,7 +23,8 @@ use super::observations::{
 };
 use crate::calibration::adjust::{preserve_obc_attitude, BoresightFrame};
 use crate::calibration::alignment::{
-    ffcal, AlignmentData, FfcalConfig, FfcalSolution, SensorObservation, SensorSpec, Weighting,
+    cramer_rao_covariance, ffcal, AlignmentData, FfcalConfig, FfcalSolution, SensorObservation,
+    SensorSpec, Weighting,
 };
 use crate::calibration::iru::{
     bias_history, irucal, AttitudeFix, BiasEstimate, CalibrationInterval, GyroCalibration,
@@ -50,12 +51,29 @@ const MAX_FIX_SIGMA_ARCSEC: f64 = 120.0;
 /// σ floor added to every fine attitude per axis (residual alignment error), arcsec.
 const FIX_SIGMA_FLOOR_ARCSEC: f64 = 3.0;
 
+/// Inherent error of an FSS-based attitude per axis after alignment calibration, arcsec: the
+/// paper's 0.022° (§5; the FSS transfer-function error that dominated its IRU calibration).
+const FSS_FIX_FLOOR_ARCSEC: f64 = 0.022 * 3600.0;
+
 /// Fewest intervals kept by the outlier loop, and needed before a new G is uplinked: 12
 /// unknowns need redundancy (≥ 18 equations) for the residuals to vouch for the solution.
 const MIN_IRUCAL_INTERVALS: usize = 6;
 
+/// Fewest simultaneous FHST1–FHST2 star epochs for the FHST stage of FFCAL.
+const MIN_FHST_STAGE_EPOCHS: usize = 100;
+
+/// Prior variance that holds the FHST alignments at their stage-1 values in stage 2 (arcsec²).
+const HELD_PRIOR_ARCSEC2: f64 = 1e-6;
+
+/// Size of the FSS field cells within which the systematic error counts as one (deg).
+const FSS_CELL_DEG: f64 = 1.0;
+
 /// Half-length of the fine-attitude batches (s): the paper's 10-min batches.
 const BATCH_HALF_S: f64 = 300.0;
+
+/// How far into a hold a FHST-only maneuver end is searched for (s), and the search step.
+const MAX_END_SEARCH_S: f64 = 1800.0;
+const END_SEARCH_STEP_S: f64 = 120.0;
 
 /// Prior 1σ of the flown alignments per axis (arcsec): FHSTs, FSSs. The paper's FSS1 moved by
 /// 733 arcsec, so the FSS prior must not constrain a change of that size.
@@ -84,6 +102,9 @@ pub struct CalibrateOptions {
     pub weighting: Weighting,
     /// Identification options (aberration on by default).
     pub identify: IdentifyOptions,
+    /// FFCAL in two stages (FHSTs from star pairs, then the FSSs relative to them; default)
+    /// instead of one joint fit of all four sensors.
+    pub staged_ffcal: bool,
 }
 
 impl Default for CalibrateOptions {
@@ -93,6 +114,7 @@ impl Default for CalibrateOptions {
             flown_iru: None,
             weighting: Weighting::Optimal1990,
             identify: IdentifyOptions::default(),
+            staged_ffcal: true,
         }
     }
 }
@@ -129,6 +151,22 @@ pub struct IruReport {
     pub g_updated: bool,
     /// Intervals dropped as outliers (index in the order they were built, after earlier drops).
     pub rejected_intervals: Vec<usize>,
+    /// Every interval built from the telemetry, in build order, with its use.
+    pub interval_spans: Vec<IntervalSpan>,
+}
+
+/// Where an IRUCAL interval lies in the telemetry (for the report and for checks against a
+/// simulation's truth).
+#[derive(Clone, Copy, Debug, Serialize, PartialEq)]
+pub struct IntervalSpan {
+    /// `"maneuver"` or `"hold"`.
+    pub kind: &'static str,
+    /// Time of the start fix, s since the first frame.
+    pub start_s: f64,
+    /// Time of the end fix, s since the first frame.
+    pub end_s: f64,
+    /// Rejected by the outlier loop.
+    pub rejected: bool,
 }
 
 /// A maneuver found in the telemetry.
@@ -186,6 +224,8 @@ pub struct DataSummary {
     pub sun_samples: [usize; 2],
     /// FFCAL epochs (frames with ≥ 2 referenced vectors).
     pub ffcal_epochs: usize,
+    /// Epochs of the FHST stage (both trackers on identified stars); 0 = one joint fit.
+    pub ffcal_fhst_stage_epochs: usize,
     /// Sensors never observed together with another one: left out of FFCAL, their flown
     /// alignment is kept.
     pub not_observed: Vec<String>,
@@ -213,6 +253,11 @@ pub struct FfcalSummary {
     pub eigenvalues: Vec<f64>,
     /// Relative alignment FHST2 w.r.t. FHST1, 1σ per axis, arcsec.
     pub sigma_fhst2_rel_fhst1_arcsec: [f64; 3],
+    /// Cramér–Rao bound of the same quantity from every FFCAL epoch (all sensors, declared
+    /// noise taken as the whole error), 1σ per axis, arcsec: what a joint fit would claim.
+    pub crb_sigma_fhst2_rel_fhst1_all_sensors_arcsec: [f64; 3],
+    /// The bound from the FHST star pairs alone (the data stage 1 uses), arcsec.
+    pub crb_sigma_fhst2_rel_fhst1_fhst_only_arcsec: [f64; 3],
 }
 
 /// One bias-history point.
@@ -243,6 +288,8 @@ pub struct CalibrationOutput {
     pub ffcal: FfcalSolution,
     /// IRUCAL solution.
     pub irucal: Option<IrucalSolution>,
+    /// Every IRUCAL interval built (before the outlier loop), with where it lies.
+    pub iru_intervals: Vec<(IntervalSpan, CalibrationInterval)>,
 }
 
 fn rows(m: &Matrix3<f64>) -> [[f64; 3]; 3] {
@@ -277,7 +324,34 @@ pub fn read_metadata(run_dir: &Path) -> anyhow::Result<Metadata> {
 /// FFCAL input from the frames.
 /// FFCAL input from the frames; `map[k]` is the FFCAL index of table sensor `k` (FHST1,
 /// FHST2, FSS1, FSS2), `None` to leave it out.
-fn alignment_data(frames: &[FrameObservations], map: &[Option<usize>; 4]) -> AlignmentData {
+/// FFCAL epochs from the frames (`map`: sensor → FFCAL index, `None` = left out).
+///
+/// An FSS sample's σ grows with the number of samples that share its place in the field
+/// (`FSS_CELL_DEG` cells): `σ² = σ_noise² + n σ_sys²`. Why: the FSS error that depends on the
+/// Sun's position in the field (`fss_systematic_arcsec`) is the same for every sample at that
+/// position, so a cell of `n` samples carries no more than one observation with `σ_sys` of
+/// information about it; white-noise weights would claim arcsec accuracy from a sensor whose
+/// error is tens of arcsec, and pull the alignments with it.
+fn alignment_data(
+    frames: &[FrameObservations],
+    map: &[Option<usize>; 4],
+    fss_systematic_arcsec: f64,
+) -> AlignmentData {
+    let cell = |d: &Vector3<f64>| -> (i64, i64) {
+        let a = d.x.atan2(d.z).to_degrees() / FSS_CELL_DEG;
+        let b = d.y.atan2(d.z).to_degrees() / FSS_CELL_DEG;
+        (a.floor() as i64, b.floor() as i64)
+    };
+    let mut per_cell: std::collections::HashMap<(usize, (i64, i64)), usize> =
+        std::collections::HashMap::new();
+    for f in frames {
+        for (i, s) in f.suns.iter().enumerate() {
+            if let Some(s) = s {
+                *per_cell.entry((i, cell(&s.meas.dir_sensor))).or_default() += 1;
+            }
+        }
+    }
+    let sys_rad = fss_systematic_arcsec / ARCSEC_PER_RAD;
     let mut data = AlignmentData::with_capacity(frames.len(), 4);
     let mut obs = Vec::with_capacity(4);
     for f in frames {
@@ -296,11 +370,15 @@ fn alignment_data(frames: &[FrameObservations], map: &[Option<usize>; 4]) -> Ali
         }
         for (i, s) in f.suns.iter().enumerate() {
             if let (Some(s), Some(sensor)) = (s, map[i + 2]) {
+                let n = per_cell
+                    .get(&(i, cell(&s.meas.dir_sensor)))
+                    .copied()
+                    .unwrap_or(1) as f64;
                 obs.push(SensorObservation {
                     sensor,
                     dir_sensor: s.meas.dir_sensor,
                     dir_eci: s.sun_eci,
-                    sigma_rad: s.sigma_rad,
+                    sigma_rad: (s.sigma_rad.powi(2) + n * sys_rad * sys_rad).sqrt(),
                 });
             }
         }
@@ -312,14 +390,126 @@ fn alignment_data(frames: &[FrameObservations], map: &[Option<usize>; 4]) -> Ali
     data
 }
 
+/// FFCAL in two stages. Why: the FSSs carry systematic errors of tens of arcsec (the paper's
+/// inherent 0.022° after calibration: transfer-function error) that their noise figure does
+/// not describe; in one joint fit these errors leak into the FHST1–FHST2 relative alignment,
+/// which the star pairs alone determine to a few arcsec. So:
+/// 1. the FHSTs (`sensors[0..2]`) from star–star epochs only (`fhst_data`);
+/// 2. every sensor from all epochs with the FHSTs held at their stage-1 values, which gives
+///    the FSSs relative to the FHST frame.
+///
+/// Covariance: the FHST block is stage 1's. An FSS's error is its stage-2 (conditional) error
+/// plus the error of the FHST frame it was tied to, taken as the mean rotation of the two
+/// trackers: `C(fss_i, fss_j) = C₂(i, j) + C_f`, `C(fss_i, fhst_k) = ½ (C₁(1,k) + C₁(2,k))`,
+/// `C_f = ¼ Σ C₁`. Residuals before are those of the flown alignments over all epochs.
+fn ffcal_staged(
+    sensors: &[SensorSpec],
+    fhst_data: &AlignmentData,
+    data: &AlignmentData,
+    cfg: &FfcalConfig,
+) -> anyhow::Result<FfcalSolution> {
+    let first = sensors
+        .get(..2)
+        .context("FFCAL stage 1 needs FHST1 and FHST2")?;
+    let stage1 =
+        ffcal(first, fhst_data, cfg).context("FFCAL stage 1 (FHST1 + FHST2 star pairs)")?;
+    let mut held = sensors.to_vec();
+    for (spec, s1) in held.iter_mut().zip(&stage1.sensors) {
+        spec.m_acs_from_sensor = s1.m_acs_from_sensor_calibrated;
+        spec.prior_cov_acs_arcsec2 = Matrix3::identity() * HELD_PRIOR_ARCSEC2;
+    }
+    let mut sol = ffcal(&held, data, cfg).context("FFCAL stage 2 (FSSs relative to the FHSTs)")?;
+    // Before-residuals and corrections relative to the flown alignments.
+    let before = ffcal(
+        sensors,
+        data,
+        &FfcalConfig {
+            max_iterations: 1,
+            ..*cfg
+        },
+    )
+    .ok();
+    let n = sol.covariance_arcsec2.nrows();
+    let c1 = &stage1.covariance_arcsec2;
+    let blk1 =
+        |a: usize, b: usize| -> Matrix3<f64> { c1.fixed_view::<3, 3>(3 * a, 3 * b).into_owned() };
+    let frame_cov = (blk1(0, 0) + blk1(0, 1) + blk1(1, 0) + blk1(1, 1)) * 0.25;
+    let mut cov = sol.covariance_arcsec2.clone();
+    for a in 0..n / 3 {
+        for b in 0..n / 3 {
+            let block = match (a < 2, b < 2) {
+                (true, true) => blk1(a, b),
+                (true, false) => (blk1(a, 0) + blk1(a, 1)) * 0.5,
+                (false, true) => (blk1(0, b) + blk1(1, b)) * 0.5,
+                (false, false) => {
+                    sol.covariance_arcsec2
+                        .fixed_view::<3, 3>(3 * a, 3 * b)
+                        .into_owned()
+                        + frame_cov
+                }
+            };
+            cov.fixed_view_mut::<3, 3>(3 * a, 3 * b).copy_from(&block);
+        }
+    }
+    sol.covariance_arcsec2 = cov;
+    for (k, (r, spec)) in sol.sensors.iter_mut().zip(sensors).enumerate() {
+        r.m_acs_from_sensor_prelaunch = spec.m_acs_from_sensor;
+        r.theta_acs_arcsec =
+            rotvec_from_rot(&(r.m_acs_from_sensor_calibrated * spec.m_acs_from_sensor.transpose()))
+                * ARCSEC_PER_RAD;
+        r.sigma_acs_arcsec = Vector3::from_fn(|i, _| {
+            sol.covariance_arcsec2[(3 * k + i, 3 * k + i)]
+                .max(0.0)
+                .sqrt()
+        });
+        if let Some(b) = before.as_ref().and_then(|b| b.sensors.get(k)) {
+            r.residual_rms_before_arcsec = b.residual_rms_before_arcsec;
+        }
+    }
+    sol.iterations += stage1.iterations;
+    Ok(sol)
+}
+
+/// 1σ per axis (arcsec) of the FHST2-relative-to-FHST1 alignment from the Cramér–Rao bound
+/// of `data` at the solution's alignments; NaN when the bound cannot be formed.
+fn crb_relative_sigma(
+    sensors: &[SensorSpec],
+    data: &AlignmentData,
+    solution: &FfcalSolution,
+) -> [f64; 3] {
+    let m: Vec<Matrix3<f64>> = solution
+        .sensors
+        .iter()
+        .take(sensors.len())
+        .map(|s| s.m_acs_from_sensor_calibrated)
+        .collect();
+    match cramer_rao_covariance(sensors, data, &m) {
+        Ok(c) if c.nrows() >= 6 => {
+            let blk = |a: usize, b: usize| -> Matrix3<f64> {
+                c.fixed_view::<3, 3>(3 * a, 3 * b).into_owned()
+            };
+            let r = blk(1, 1) + blk(0, 0) - blk(0, 1) - blk(1, 0);
+            [0, 1, 2].map(|i| r[(i, i)].max(0.0).sqrt())
+        }
+        _ => [f64::NAN; 3],
+    }
+}
+
 fn frame_index_at(frames: &[FrameObservations], t_s: f64) -> usize {
     frames
         .partition_point(|f| f.time.seconds() < t_s)
         .min(frames.len().saturating_sub(1))
 }
 
-/// A FHST-only fine attitude centred at `t_center_s` from frames within ±`BATCH_HALF_S`
-/// restricted to `[lo_s, hi_s]`.
+/// A fine attitude centred at `t_center_s` from frames within ±`BATCH_HALF_S` restricted to
+/// `[lo_s, hi_s]`: FHST-only when the trackers give it, else FHST + FSS.
+///
+/// The covariance adds what the formal one ignores: `floor_cov_rad2` for a FHST-only fix
+/// (the FHST1–FHST2 relative alignment uncertainty: a fix may follow either tracker's frame),
+/// and the FSS's inherent error ([`FSS_FIX_FLOOR_ARCSEC`] per axis) for a fix that needed the
+/// Sun, which otherwise would claim arcsec accuracy from hundreds of samples of a sensor
+/// whose error is systematic.
+#[allow(clippy::too_many_arguments)]
 fn batch_fix(
     frames: &[FrameObservations],
     t_center_s: f64,
@@ -327,6 +517,8 @@ fn batch_fix(
     hi_s: f64,
     bias: &Vector3<f64>,
     delta_m: &Matrix3<f64>,
+    floor_cov_rad2: &Matrix3<f64>,
+    allow_fss: bool,
 ) -> Option<(usize, AttitudeFix)> {
     let lo = frame_index_at(frames, (t_center_s - BATCH_HALF_S).max(lo_s));
     let hi = frame_index_at(frames, (t_center_s + BATCH_HALF_S).min(hi_s)) + 1;
@@ -337,43 +529,100 @@ fn batch_fix(
     // FHST-only ends are best (the paper's recommendation); when the trackers do not give two
     // non-parallel vectors in the batch (Earth occultation, a single star), fall back to
     // FHST + FSS ends as the paper itself did for some of its intervals.
-    let sol = fine_attitude(
+    let fhst_only = fine_attitude(
         frames,
         lo..hi,
         center,
         bias,
         delta_m,
         AttitudeSensors::FhstOnly,
-    )
-    .or_else(|_| {
-        fine_attitude(
-            frames,
-            lo..hi,
-            center,
-            bias,
-            delta_m,
-            AttitudeSensors::FhstAndFss,
-        )
-    })
-    .ok()?;
+    );
+    let (sol, floor) = match fhst_only {
+        Ok(sol) => (sol, *floor_cov_rad2),
+        Err(_) if !allow_fss => return None,
+        Err(_) => (
+            fine_attitude(
+                frames,
+                lo..hi,
+                center,
+                bias,
+                delta_m,
+                AttitudeSensors::FhstAndFss,
+            )
+            .ok()?,
+            Matrix3::identity() * (FSS_FIX_FLOOR_ARCSEC / ARCSEC_PER_RAD).powi(2),
+        ),
+    };
+    // Floor for systematic errors the formal covariance ignores (residual alignment error).
+    let cov = sol.cov_acs_rad2
+        + floor
+        + Matrix3::identity() * (FIX_SIGMA_FLOOR_ARCSEC / ARCSEC_PER_RAD).powi(2);
     // A fix is an interval end only if every axis is known to FSS quality or better (the
     // paper's FSS-based ends were 0.022°); a batch with one star and the Sun nearly parallel
     // gives a formally valid but useless attitude.
     let sigma_max_rad = (0..3)
-        .map(|i| sol.cov_acs_rad2[(i, i)].max(0.0).sqrt())
+        .map(|i| cov[(i, i)].max(0.0).sqrt())
         .fold(0.0, f64::max);
     if !(sigma_max_rad * ARCSEC_PER_RAD <= MAX_FIX_SIGMA_ARCSEC) {
         return None;
     }
-    // Floor for systematic errors the formal covariance ignores (residual alignment error).
-    let floor = (FIX_SIGMA_FLOOR_ARCSEC / ARCSEC_PER_RAD).powi(2);
     Some((
         center,
         AttitudeFix {
             m_acs_from_eci: sol.m_acs_from_eci,
-            cov_acs_rad2: sol.cov_acs_rad2 + Matrix3::identity() * floor,
+            cov_acs_rad2: cov,
         },
     ))
+}
+
+/// The interval end next to a maneuver: the FHST-only fix nearest to it in the hold
+/// (`away` = +1 searching forward from `t_edge_s`, −1 backward), else the FHST + FSS fix next to
+/// the maneuver. Why: FHST-only ends are an order of magnitude better (the paper's advice), and
+/// a longer interval costs only gyro noise and bias, which IRUCAL estimates.
+#[allow(clippy::too_many_arguments)]
+fn maneuver_end_fix(
+    frames: &[FrameObservations],
+    t_edge_s: f64,
+    away: f64,
+    lo_s: f64,
+    hi_s: f64,
+    bias_at: &dyn Fn(f64) -> Vector3<f64>,
+    delta_m: &Matrix3<f64>,
+    floor_cov_rad2: &Matrix3<f64>,
+) -> Option<(usize, AttitudeFix)> {
+    let hold_s = if away > 0.0 {
+        hi_s - t_edge_s
+    } else {
+        t_edge_s - lo_s
+    };
+    let mut offset = BATCH_HALF_S;
+    while offset + BATCH_HALF_S <= hold_s.min(MAX_END_SEARCH_S) || offset == BATCH_HALF_S {
+        let t = t_edge_s + away * offset;
+        if let Some(f) = batch_fix(
+            frames,
+            t,
+            lo_s,
+            hi_s,
+            &bias_at(t),
+            delta_m,
+            floor_cov_rad2,
+            false,
+        ) {
+            return Some(f);
+        }
+        offset += END_SEARCH_STEP_S;
+    }
+    let t = t_edge_s + away * BATCH_HALF_S;
+    batch_fix(
+        frames,
+        t,
+        lo_s,
+        hi_s,
+        &bias_at(t),
+        delta_m,
+        floor_cov_rad2,
+        true,
+    )
 }
 
 fn steps_between(frames: &[FrameObservations], a: usize, b: usize) -> Vec<GyroStep> {
@@ -464,7 +713,7 @@ pub fn calibrate_telemetry(
     // visited) is left out and keeps its flown alignment (reported as not observed).
     let all: [Option<usize>; 4] = [Some(0), Some(1), Some(2), Some(3)];
     let mut seen = [0usize; 4];
-    for epoch in alignment_data(&frames, &all).epochs() {
+    for epoch in alignment_data(&frames, &all, metadata.sensors.fss_systematic_arcsec).epochs() {
         for o in epoch {
             seen[o.sensor] += 1;
         }
@@ -483,7 +732,7 @@ pub fn calibrate_telemetry(
             observed.push(k);
         }
     }
-    let data = alignment_data(&frames, &map);
+    let data = alignment_data(&frames, &map, metadata.sensors.fss_systematic_arcsec);
     summary.ffcal_epochs = data.epoch_count();
     summary.not_observed = (0..4)
         .filter(|k| seen[*k] == 0)
@@ -502,12 +751,26 @@ pub fn calibrate_telemetry(
         weighting: options.weighting,
         ..FfcalConfig::default()
     };
-    let solution = ffcal(&sensors, &data, &cfg).with_context(|| {
+    let context = || {
         format!(
             "FFCAL: {} epochs with ≥ 2 referenced vectors (stars identified per FHST: {:?}; Sun samples per FSS: {:?})",
             summary.ffcal_epochs, summary.stars_identified, summary.sun_samples
         )
-    })?;
+    };
+    // FHSTs first, from star pairs alone, when the trackers saw stars together; then the FSSs
+    // relative to that frame (`ffcal_staged`). Without simultaneous star pairs, one joint fit.
+    let fhst_data = alignment_data(
+        &frames,
+        &[Some(0), Some(1), None, None],
+        metadata.sensors.fss_systematic_arcsec,
+    );
+    let staged = options.staged_ffcal && fhst_data.epoch_count() >= MIN_FHST_STAGE_EPOCHS;
+    let solution = if staged {
+        ffcal_staged(&sensors, &fhst_data, &data, &cfg).with_context(context)?
+    } else {
+        ffcal(&sensors, &data, &cfg).with_context(context)?
+    };
+    summary.ffcal_fhst_stage_epochs = if staged { fhst_data.epoch_count() } else { 0 };
 
     // Adjustment (over all four sensors; the unobserved keep their flown alignment).
     let mut calibrated = flown.clone();
@@ -560,6 +823,14 @@ pub fn calibrate_telemetry(
             .eigenvalues_with_prior_per_arcsec2
             .clone(),
         sigma_fhst2_rel_fhst1_arcsec: [rel[(0, 0)].sqrt(), rel[(1, 1)].sqrt(), rel[(2, 2)].sqrt()],
+        crb_sigma_fhst2_rel_fhst1_all_sensors_arcsec: crb_relative_sigma(
+            &sensors, &data, &solution,
+        ),
+        crb_sigma_fhst2_rel_fhst1_fhst_only_arcsec: crb_relative_sigma(
+            sensors.get(..2).unwrap_or(&sensors),
+            &fhst_data,
+            &solution,
+        ),
     };
     let mut new_alignment = flown_alignment;
     let ortho = |m: &Matrix3<f64>| rows(&Quat::from_dcm(m).to_dcm());
@@ -592,6 +863,9 @@ pub fn calibrate_telemetry(
         .first()
         .map_or(Vector3::zeros(), |h| Vector3::from(h.bias_acs_rad_per_s));
     let zero_dm = Matrix3::zeros();
+    // A FHST-only fix may follow either tracker's frame: a quarter of the FHST1–FHST2
+    // relative alignment covariance (FFCAL, arcsec²) is added to it.
+    let fhst_floor = solution.relative_covariance_arcsec2(1, 0) * (0.25 / ARCSEC_PER_RAD.powi(2));
     // The OBC's filter bias near a time (housekeeping): the batches that give the interval end
     // attitudes carry their vectors over ±5 min with it, so the bias is not smeared into them.
     let obc_bias_at = |t_s: f64| -> Vector3<f64> {
@@ -601,6 +875,13 @@ pub fn calibrate_telemetry(
             .map_or(initial_bias, |h| Vector3::from(h.bias_acs_rad_per_s))
     };
     let mut intervals = Vec::new();
+    let mut spans: Vec<IntervalSpan> = Vec::new();
+    let span = |kind: &'static str, a: usize, b: usize| IntervalSpan {
+        kind,
+        start_s: frames_cal[a].time.seconds() - t0,
+        end_s: frames_cal[b].time.seconds() - t0,
+        rejected: false,
+    };
     let mut maneuver_reports = Vec::new();
     let mut holds: Vec<(usize, usize)> = Vec::new();
     let mut prev_end = 0usize;
@@ -630,24 +911,29 @@ pub fn calibrate_telemetry(
             .map(|g| g.dtheta_acs_rad)
             .sum::<Vector3<f64>>()
             .norm();
-        let before = batch_fix(
+        let before = maneuver_end_fix(
             &frames_cal,
-            t_start - BATCH_HALF_S,
+            t_start,
+            -1.0,
             lo_hold,
             t_start,
-            &initial_bias,
+            &obc_bias_at,
             &zero_dm,
+            &fhst_floor,
         );
-        let after = batch_fix(
+        let after = maneuver_end_fix(
             &frames_cal,
-            t_end + BATCH_HALF_S,
+            t_end,
+            1.0,
             t_end,
             hi_hold,
-            &initial_bias,
+            &obc_bias_at,
             &zero_dm,
+            &fhst_floor,
         );
         let used = match (before, after) {
             (Some((a, fa)), Some((b, fb))) if b > a => {
+                spans.push(span("maneuver", a, b));
                 intervals.push(CalibrationInterval {
                     start: fa,
                     end: fb,
@@ -676,7 +962,16 @@ pub fn calibrate_telemetry(
         let mut first_idx = None;
         let mut t = ta + BATCH_HALF_S;
         while t + BATCH_HALF_S <= tb {
-            if let Some((idx, fix)) = batch_fix(&frames_cal, t, ta, tb, &obc_bias_at(t), &zero_dm) {
+            if let Some((idx, fix)) = batch_fix(
+                &frames_cal,
+                t,
+                ta,
+                tb,
+                &obc_bias_at(t),
+                &zero_dm,
+                &fhst_floor,
+                true,
+            ) {
                 let origin = *first_idx.get_or_insert(idx);
                 let sigma = Vector3::new(
                     fix.cov_acs_rad2[(0, 0)].sqrt(),
@@ -703,6 +998,7 @@ pub fn calibrate_telemetry(
                     &f.sigma_acs_rad.component_mul(&f.sigma_acs_rad),
                 ),
             };
+            spans.push(span("hold", i0, i1));
             intervals.push(CalibrationInterval {
                 start: fix(&f0),
                 end: fix(&f1),
@@ -717,6 +1013,11 @@ pub fn calibrate_telemetry(
             ));
         }
     }
+    let all_intervals: Vec<(IntervalSpan, CalibrationInterval)> = spans
+        .iter()
+        .copied()
+        .zip(intervals.iter().cloned())
+        .collect();
     let initial_cal = GyroCalibration {
         delta_m: Matrix3::zeros(),
         bias_acs_rad_per_s: initial_bias,
@@ -753,6 +1054,9 @@ pub fn calibrate_telemetry(
                 Some((k, ratio)) if ratio > 1.0 && intervals.len() > MIN_IRUCAL_INTERVALS => {
                     rejected_intervals.push(k);
                     intervals.remove(k);
+                    if let Some(sp) = spans.iter_mut().filter(|s| !s.rejected).nth(k) {
+                        sp.rejected = true;
+                    }
                     result = irucal(&intervals, &initial_cal, &cfg);
                 }
                 _ => break,
@@ -795,6 +1099,7 @@ pub fn calibrate_telemetry(
             residual_after_arcsec: s.residual_after_arcsec.clone(),
             g_updated: significant && consistent,
             rejected_intervals: rejected_intervals.clone(),
+            interval_spans: spans.clone(),
         }
     });
     let cal_for_bias = irucal_solution
@@ -843,6 +1148,7 @@ pub fn calibrate_telemetry(
         frames: frames_cal,
         ffcal: solution,
         irucal: irucal_solution,
+        iru_intervals: all_intervals,
     })
 }
 

@@ -36,6 +36,10 @@ pub struct DeclaredNoise {
     pub fhst_sigma_arcsec: [f64; 2],
     /// FSS 1σ per axis, arcsec (calibrated accuracy, transfer-function residual included).
     pub fss_sigma_arcsec: f64,
+    /// FSS error that depends on where the Sun is in the field and so does not average down
+    /// over samples at one position (transfer-function residual), 1σ per axis, arcsec. Paper
+    /// §4.3: an inherent 0.022° remained after calibration.
+    pub fss_systematic_arcsec: f64,
     /// Gyro angle random walk, rad/√s.
     pub iru_arw_rad_per_sqrt_s: f64,
     /// Gyro rate random walk, rad/s^1.5.
@@ -47,6 +51,7 @@ impl Default for DeclaredNoise {
         Self {
             fhst_sigma_arcsec: [8.0, 24.0],
             fss_sigma_arcsec: 0.02 * 3600.0,
+            fss_systematic_arcsec: 0.022 * 3600.0,
             iru_arw_rad_per_sqrt_s: 1.5e-7,
             iru_rrw_rad_per_s_sqrt_s: 1.0e-10,
         }

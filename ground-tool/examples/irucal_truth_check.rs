@@ -1,0 +1,287 @@
+//! Developer check of IRUCAL against a simulation's truth: flies a scenario, runs the
+//! calibration chain on its telemetry, and prints for every interval the error of its end
+//! attitudes against the true attitude, and the interval residual with the true gyro
+//! calibration (what the fit would see if δM and b were perfect).
+//!
+//! ```text
+//! cargo run --release -p ground-tool --example irucal_truth_check -- [SCENARIO] [SEED]
+//! ```
+use fsw_core::attitude::rotvec_from_rot;
+use fsw_core::units::ARCSEC_PER_RAD;
+use ground_tool::calibration::iru::{irucal, GyroCalibration, GyroNoise, IrucalConfig};
+use ground_tool::pipeline::calibrate::{calibrate_run, CalibrateOptions};
+use nalgebra::{Matrix3, Vector3};
+use sim_harness::closed_loop::Simulation;
+use sim_harness::run::{run, RunOptions};
+
+fn main() -> anyhow::Result<()> {
+    let args: Vec<String> = std::env::args().collect();
+    let name = args.get(1).map_or("gro-early-mission", String::as_str);
+    let mut scenario = sim_harness::scenario::resolve(name)?;
+    if let Some(seed) = args.get(2) {
+        scenario.seed = seed.parse()?;
+    }
+    let dir = std::env::temp_dir().join(format!("irucal-truth-{}", std::process::id()));
+    run(
+        scenario.clone(),
+        &RunOptions {
+            out_dir: Some(dir.join("run")),
+            ..RunOptions::default()
+        },
+    )?;
+    // The same scenario and seed again, keeping the true attitude of every cycle.
+    let mut sim = Simulation::new(scenario, None)?;
+    let mut truth: Vec<(f64, Matrix3<f64>)> = Vec::new();
+    while let Some(rec) = sim.step() {
+        truth.push((rec.truth.t_s, rec.truth.m_acs_from_eci));
+    }
+    let a_true = |t: f64| {
+        let i = truth.partition_point(|(ti, _)| *ti < t - 1e-6);
+        truth[i.min(truth.len() - 1)].1
+    };
+    let out = calibrate_run(
+        &dir.join("run"),
+        &dir.join("cal"),
+        &CalibrateOptions::default(),
+    )?;
+    let t: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("run").join("truth.json"))?)?;
+    let dm: Vec<f64> = t["iru"]["primary"]["delta_m"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .flat_map(|r| {
+            r.as_array()
+                .into_iter()
+                .flatten()
+                .filter_map(|x| x.as_f64())
+        })
+        .collect();
+    let delta_m_true = Matrix3::from_row_slice(&dm);
+    let samples = t["bias_history"]["samples"]
+        .as_array()
+        .cloned()
+        .unwrap_or_default();
+    let mut b = Vector3::zeros();
+    for s in &samples {
+        for k in 0..3 {
+            b[k] += s["bias_acs_rad_per_s"][k].as_f64().unwrap_or(0.0) / samples.len() as f64;
+        }
+    }
+    let names = ["FHST1", "FHST2", "FSS1", "FSS2"];
+    let m_true: Vec<Matrix3<f64>> = names
+        .iter()
+        .map(|n| {
+            let v: Vec<f64> = t["alignments"][n]
+                .as_array()
+                .into_iter()
+                .flatten()
+                .flat_map(|r| {
+                    r.as_array()
+                        .into_iter()
+                        .flatten()
+                        .filter_map(|x| x.as_f64())
+                })
+                .collect();
+            Matrix3::from_row_slice(&v)
+        })
+        .collect();
+    let est = out
+        .alignment
+        .matrices()
+        .map(fsw_core::tables::types::matrix_from_rows);
+    let r: Vec<Matrix3<f64>> = (0..4).map(|k| est[k] * m_true[k].transpose()).collect();
+    for (i, j) in [(0, 1), (0, 2), (0, 3)] {
+        let e = rotvec_from_rot(&(r[i].transpose() * r[j])) * ARCSEC_PER_RAD;
+        println!(
+            "relative error {}-{}: [{:.1}, {:.1}, {:.1}] |{:.1}|″",
+            names[i],
+            names[j],
+            e.x,
+            e.y,
+            e.z,
+            e.norm()
+        );
+    }
+    println!(
+        "FFCAL σ FHST2 rel FHST1: {:?}",
+        out.report.ffcal.sigma_fhst2_rel_fhst1_arcsec
+    );
+    println!("true δM (ppm):\n{}", delta_m_true * 1e6);
+    if let Some(r) = &out.report.iru {
+        println!(
+            "fitted δM (ppm):\n{}",
+            Matrix3::from_row_slice(&r.delta_m.concat()) * 1e6
+        );
+    }
+    let truth_cal = GyroCalibration {
+        delta_m: delta_m_true,
+        bias_acs_rad_per_s: b,
+    };
+    println!("kind      start_s    end_s  rej  err_start(″ acs)          σ_start           err_end(″ acs)            σ_end            resid@truth(″)");
+    for (span, iv) in &out.iru_intervals {
+        let err = |fix: &ground_tool::calibration::iru::AttitudeFix, t: f64| {
+            rotvec_from_rot(&(a_true(t) * fix.m_acs_from_eci.transpose())) * ARCSEC_PER_RAD
+        };
+        let sig = |fix: &ground_tool::calibration::iru::AttitudeFix| {
+            Vector3::from_fn(|i, _| fix.cov_acs_rad2[(i, i)].sqrt() * ARCSEC_PER_RAD)
+        };
+        let e0 = err(&iv.start, span.start_s);
+        let e1 = err(&iv.end, span.end_s);
+        let cfg = IrucalConfig {
+            noise: GyroNoise::default(),
+            prior_sigma_ppm_and_arcsec_per_s: Some((3000.0, 1.0)),
+            max_iterations: 1,
+            ..IrucalConfig::default()
+        };
+        let r = irucal(std::slice::from_ref(iv), &truth_cal, &cfg)
+            .map(|s| s.residual_before_arcsec[0])
+            .unwrap_or(f64::NAN);
+        println!(
+            "{:8} {:8.0} {:8.0} {:>4} [{:7.1},{:7.1},{:7.1}] [{:5.1},{:5.1},{:5.1}] [{:7.1},{:7.1},{:7.1}] [{:5.1},{:5.1},{:5.1}] {:8.1}",
+            span.kind,
+            span.start_s,
+            span.end_s,
+            span.rejected,
+            e0.x, e0.y, e0.z,
+            sig(&iv.start).x, sig(&iv.start).y, sig(&iv.start).z,
+            e1.x, e1.y, e1.z,
+            sig(&iv.end).x, sig(&iv.end).y, sig(&iv.end).z,
+            r
+        );
+    }
+    // Per-star residual against the truth (flown = calibrated alignments, so tens of arcsec
+    // of alignment error remain): how many identified stars are far off, per 100-s block.
+    let t0 = out.frames.first().map_or(0.0, |f| f.time.seconds());
+    let mut block = (0usize, 0usize, 0.0f64, -1i64);
+    for f in &out.frames {
+        let t = f.time.seconds() - t0;
+        let b = (t / 100.0) as i64;
+        if b != block.3 {
+            if block.0 > 0 && block.1 > 0 {
+                println!(
+                    "t {:6}..: stars {:4}, > 60″ off: {:4}, max {:8.1}″",
+                    block.3 * 100,
+                    block.0,
+                    block.1,
+                    block.2
+                );
+            }
+            block = (0, 0, 0.0, b);
+        }
+        for s in f.stars.iter().flatten() {
+            if let Some((_, dir_eci)) = s.identified {
+                let r = (a_true(t) * dir_eci).angle(&s.meas.dir_acs) * ARCSEC_PER_RAD;
+                block.0 += 1;
+                if r > 60.0 {
+                    block.1 += 1;
+                }
+                block.2 = block.2.max(r);
+            }
+        }
+    }
+    // Sub-batches of every start/end fix: which part of the data pulls a fix off.
+    {
+        use ground_tool::pipeline::observations::{fine_attitude, AttitudeSensors};
+        let idx = |t: f64| out.frames.partition_point(|f| f.time.seconds() - t0 < t);
+        for (span, _) in &out.iru_intervals {
+            for tc in [span.start_s, span.end_s] {
+                let c = idx(tc);
+                let mut line = format!("fix at {tc:6.0}:");
+                for (lo, hi, label) in [
+                    (c.saturating_sub(300), c + 300, "all"),
+                    (c.saturating_sub(300), c, "1st"),
+                    (c, c + 300, "2nd"),
+                ] {
+                    let hi = hi.min(out.frames.len());
+                    for tracker in [None, Some(0usize), Some(1)] {
+                        let mut fr: Vec<_> = out.frames.clone();
+                        if let Some(k) = tracker {
+                            for f in &mut fr[lo..hi] {
+                                f.stars[1 - k] = None;
+                            }
+                        }
+                        let b = Vector3::zeros();
+                        let r = fine_attitude(
+                            &fr,
+                            lo..hi,
+                            c.min(hi - 1).max(lo),
+                            &b,
+                            &Matrix3::zeros(),
+                            AttitudeSensors::FhstOnly,
+                        );
+                        let txt = match r {
+                            Ok(sol) => {
+                                let e = rotvec_from_rot(
+                                    &(a_true(
+                                        out.frames[c.min(hi - 1).max(lo)].time.seconds() - t0,
+                                    ) * sol.m_acs_from_eci.transpose()),
+                                ) * ARCSEC_PER_RAD;
+                                format!("{:.0}", e.norm())
+                            }
+                            Err(_) => "-".into(),
+                        };
+                        line += &format!(
+                            " {label}/{}={txt}",
+                            tracker.map_or("both".to_string(), |k| format!("T{}", k + 1))
+                        );
+                    }
+                }
+                println!("{line}");
+            }
+        }
+    }
+    // Identified stars per tracker per 100-s block, with the number of distinct stars.
+    if std::env::var("IRUCAL_CHECK_STARS").is_ok() {
+        let mut b = -1i64;
+        let mut counts = [0usize; 2];
+        let mut hips: [std::collections::BTreeSet<u32>; 2] = Default::default();
+        for f in &out.frames {
+            let blk = ((f.time.seconds() - t0) / 100.0) as i64;
+            if blk != b {
+                if b >= 0 {
+                    println!(
+                        "stars {:6}: T1 {:3} ({:?}) T2 {:3} ({:?}) high_rate {}",
+                        b * 100,
+                        counts[0],
+                        hips[0],
+                        counts[1],
+                        hips[1],
+                        f.high_rate
+                    );
+                }
+                b = blk;
+                counts = [0; 2];
+                hips = Default::default();
+            }
+            for k in 0..2 {
+                if let Some(s) = &f.stars[k] {
+                    if let Some((hip, _)) = s.identified {
+                        counts[k] += 1;
+                        hips[k].insert(hip);
+                    }
+                }
+            }
+        }
+    }
+    // OBC bias error against the truth every 300 s (″/s).
+    let tm = ground_tool::tp::read_file(&dir.join("run").join("telemetry.bin"))?;
+    for s in samples.iter().step_by(5) {
+        let ts = s["t_s"].as_f64().unwrap_or(0.0);
+        let i = tm
+            .housekeeping
+            .partition_point(|h| h.time.seconds() - t0 < ts);
+        if let Some(h) = tm.housekeeping.get(i) {
+            let e = Vector3::from_fn(|k, _| {
+                (h.bias_acs_rad_per_s[k] - s["bias_acs_rad_per_s"][k].as_f64().unwrap_or(0.0))
+                    * ARCSEC_PER_RAD
+            });
+            println!(
+                "bias err t {ts:6.0}: [{:6.3}, {:6.3}, {:6.3}] ″/s",
+                e.x, e.y, e.z
+            );
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+    Ok(())
+}

@@ -1,0 +1,299 @@
+//! `calibration-mc`: Monte Carlo of the ground calibration over seeds (issue 4's must-show).
+//!
+//! For each seed: fly the scenario with the prelaunch tables, run `ground-tool`'s chain on the
+//! telemetry, and score against the truth: the relative alignment errors of FHST2, FSS1 and
+//! FSS2 with respect to FHST1 normalised by the stated covariance (NEES, 3 degrees of freedom:
+//! mean 3 when the covariance is right), the FHST1–FHST2 error against 5″, the stated σ against
+//! the Cramér–Rao bound of the same data, and δM normalised by its σ (mean square 1).
+//!
+//! ```text
+//! cargo run --release -p tests --bin calibration-mc -- -n 20 --first-seed 1 [--json]
+//! ```
+
+use anyhow::Context;
+use clap::Parser;
+use fsw_core::attitude::rotvec_from_rot;
+use fsw_core::units::ARCSEC_PER_RAD;
+use ground_tool::pipeline::calibrate::{calibrate_run, CalibrateOptions};
+use nalgebra::{Matrix3, Vector3};
+use serde::Serialize;
+use sim_harness::run::{run, RunOptions};
+use sim_harness::scenario::resolve;
+use std::path::PathBuf;
+
+#[derive(Parser)]
+#[command(
+    name = "calibration-mc",
+    about = "Monte Carlo of the alignment and IRU calibration over seeds: normalised errors against the stated covariance and the Cramér–Rao bound",
+    long_about = "Flies SCENARIO with the prelaunch tables for N seeds, calibrates each run from its \
+telemetry alone (ground-tool's chain), and scores against truth.json.\n\n\
+Per seed it prints the relative alignment error of FHST2, FSS1 and FSS2 w.r.t. FHST1 (arcsec) and \
+its NEES e'P^-1 e with the stated covariance P (3 dof: mean 3 if P is right), and the δM errors \
+normalised by their σ. The summary gives the mean NEES, the fraction of seeds with FHST1-FHST2 \
+within 5 arcsec, the RMS error per axis against the mean stated σ and the mean Cramér–Rao bound \
+of the same data, and the fraction of δM elements within 3σ.\n\n\
+Example: calibration-mc -n 20 --first-seed 1 --json > mc.json"
+)]
+struct Args {
+    /// Scenario name or TOML path.
+    #[arg(long, default_value = "gro-early-mission")]
+    scenario: String,
+    /// Number of seeds.
+    #[arg(short = 'n', long, default_value_t = 20)]
+    runs: u64,
+    /// First seed.
+    #[arg(long, default_value_t = 1)]
+    first_seed: u64,
+    /// Work folder (run folders are written here and removed after scoring).
+    #[arg(long, default_value = "runs/mc")]
+    work: PathBuf,
+    /// Print the result as JSON.
+    #[arg(long)]
+    json: bool,
+}
+
+/// One seed's scores.
+#[derive(Serialize)]
+struct SeedResult {
+    seed: u64,
+    /// Relative error w.r.t. FHST1 per sensor (FHST2, FSS1, FSS2), ACS, arcsec.
+    relative_error_arcsec: Vec<(String, [f64; 3])>,
+    /// NEES per sensor.
+    nees: Vec<(String, f64)>,
+    /// Stated 1σ of FHST2 rel FHST1, arcsec.
+    sigma_fhst2_rel_fhst1_arcsec: [f64; 3],
+    /// Cramér–Rao 1σ of FHST2 rel FHST1 from the star pairs, arcsec.
+    crb_fhst2_rel_fhst1_arcsec: [f64; 3],
+    /// δM error / σ, row-major (absent when IRUCAL did not run).
+    delta_m_normalised: Option<[f64; 9]>,
+}
+
+#[derive(Serialize)]
+struct McSummary {
+    scenario: String,
+    runs: usize,
+    mean_nees: Vec<(String, f64)>,
+    fhst1_fhst2_within_5_arcsec_fraction: f64,
+    fhst1_fhst2_error_rms_per_axis_arcsec: [f64; 3],
+    fhst1_fhst2_mean_stated_sigma_arcsec: [f64; 3],
+    fhst1_fhst2_mean_crb_sigma_arcsec: [f64; 3],
+    delta_m_mean_square_normalised: Option<f64>,
+    delta_m_within_3sigma_fraction: Option<f64>,
+    seeds: Vec<SeedResult>,
+}
+
+fn matrix(v: &serde_json::Value) -> anyhow::Result<Matrix3<f64>> {
+    let mut m = Matrix3::zeros();
+    for i in 0..3 {
+        for j in 0..3 {
+            m[(i, j)] = v[i][j].as_f64().context("matrix element")?;
+        }
+    }
+    Ok(m)
+}
+
+fn one_seed(args: &Args, seed: u64) -> anyhow::Result<SeedResult> {
+    let mut scenario = resolve(&args.scenario)?;
+    scenario.seed = seed;
+    let dir = args.work.join(format!("seed-{seed}"));
+    run(
+        scenario,
+        &RunOptions {
+            out_dir: Some(dir.join("run")),
+            ..RunOptions::default()
+        },
+    )?;
+    let cal = calibrate_run(
+        &dir.join("run"),
+        &dir.join("cal"),
+        &CalibrateOptions::default(),
+    )?;
+    let truth: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("run").join("truth.json"))?)?;
+    let sol = &cal.ffcal;
+    let err_of = |j: usize| -> anyhow::Result<Vector3<f64>> {
+        let r = |k: usize| -> anyhow::Result<Matrix3<f64>> {
+            let s = &sol.sensors[k];
+            let t = matrix(&truth["alignments"][&s.id])?;
+            Ok(s.m_acs_from_sensor_calibrated * t.transpose())
+        };
+        Ok(rotvec_from_rot(&(r(j)? * r(0)?.transpose())) * ARCSEC_PER_RAD)
+    };
+    let mut relative = Vec::new();
+    let mut nees = Vec::new();
+    for j in 1..sol.sensors.len() {
+        let e = err_of(j)?;
+        let p = sol.relative_covariance_arcsec2(j, 0);
+        let n = p
+            .try_inverse()
+            .map_or(f64::NAN, |pi| (e.transpose() * pi * e)[(0, 0)]);
+        relative.push((sol.sensors[j].id.clone(), [e.x, e.y, e.z]));
+        nees.push((sol.sensors[j].id.clone(), n));
+    }
+    let delta_m_normalised = match (&cal.irucal, truth["iru"]["primary"]["delta_m"].is_array()) {
+        (Some(s), true) => {
+            let t = matrix(&truth["iru"]["primary"]["delta_m"])?;
+            let d = (s.calibration.delta_m - t).component_div(&s.sigma_delta_m);
+            let mut out = [0.0; 9];
+            for i in 0..3 {
+                for j in 0..3 {
+                    out[3 * i + j] = d[(i, j)];
+                }
+            }
+            Some(out)
+        }
+        _ => None,
+    };
+    let _ = std::fs::remove_dir_all(&dir);
+    Ok(SeedResult {
+        seed,
+        relative_error_arcsec: relative,
+        nees,
+        sigma_fhst2_rel_fhst1_arcsec: cal.report.ffcal.sigma_fhst2_rel_fhst1_arcsec,
+        crb_fhst2_rel_fhst1_arcsec: cal.report.ffcal.crb_sigma_fhst2_rel_fhst1_fhst_only_arcsec,
+        delta_m_normalised,
+    })
+}
+
+fn main() {
+    let args = Args::parse();
+    match monte_carlo(&args) {
+        Ok(s) => {
+            if args.json {
+                match serde_json::to_string_pretty(&s) {
+                    Ok(j) => println!("{j}"),
+                    Err(e) => {
+                        eprintln!("error: {e}");
+                        std::process::exit(1);
+                    }
+                }
+            } else {
+                print_table(&s);
+            }
+        }
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            std::process::exit(1);
+        }
+    }
+}
+
+fn monte_carlo(args: &Args) -> anyhow::Result<McSummary> {
+    std::fs::create_dir_all(&args.work)
+        .with_context(|| format!("creating {}", args.work.display()))?;
+    let mut seeds = Vec::new();
+    for k in 0..args.runs {
+        let seed = args.first_seed + k;
+        eprintln!("[{}/{}] seed {seed} ...", k + 1, args.runs);
+        seeds.push(one_seed(args, seed).with_context(|| format!("seed {seed}"))?);
+    }
+    let n = seeds.len().max(1) as f64;
+    let mut mean_nees: Vec<(String, f64)> = Vec::new();
+    for s in &seeds {
+        for (id, v) in &s.nees {
+            match mean_nees.iter_mut().find(|(i, _)| i == id) {
+                Some((_, m)) => *m += v / n,
+                None => mean_nees.push((id.clone(), v / n)),
+            }
+        }
+    }
+    let fhst2 = |s: &SeedResult| {
+        s.relative_error_arcsec
+            .iter()
+            .find(|(id, _)| id == "FHST2")
+            .map_or([f64::NAN; 3], |(_, e)| *e)
+    };
+    let within = seeds
+        .iter()
+        .filter(|s| Vector3::from(fhst2(s)).norm() <= 5.0)
+        .count() as f64
+        / n;
+    let per_axis = |f: &dyn Fn(&SeedResult) -> [f64; 3], square: bool| -> [f64; 3] {
+        let mut a = [0.0; 3];
+        for s in &seeds {
+            let v = f(s);
+            for i in 0..3 {
+                a[i] += if square { v[i] * v[i] } else { v[i] } / n;
+            }
+        }
+        if square {
+            a.map(f64::sqrt)
+        } else {
+            a
+        }
+    };
+    let dm: Vec<[f64; 9]> = seeds.iter().filter_map(|s| s.delta_m_normalised).collect();
+    let (dm_ms, dm_within) = if dm.is_empty() {
+        (None, None)
+    } else {
+        let all: Vec<f64> = dm.iter().flatten().copied().collect();
+        let k = all.len() as f64;
+        (
+            Some(all.iter().map(|x| x * x).sum::<f64>() / k),
+            Some(all.iter().filter(|x| x.abs() <= 3.0).count() as f64 / k),
+        )
+    };
+    Ok(McSummary {
+        scenario: args.scenario.clone(),
+        runs: seeds.len(),
+        mean_nees,
+        fhst1_fhst2_within_5_arcsec_fraction: within,
+        fhst1_fhst2_error_rms_per_axis_arcsec: per_axis(&fhst2, true),
+        fhst1_fhst2_mean_stated_sigma_arcsec: per_axis(&|s| s.sigma_fhst2_rel_fhst1_arcsec, false),
+        fhst1_fhst2_mean_crb_sigma_arcsec: per_axis(&|s| s.crb_fhst2_rel_fhst1_arcsec, false),
+        delta_m_mean_square_normalised: dm_ms,
+        delta_m_within_3sigma_fraction: dm_within,
+        seeds,
+    })
+}
+
+fn print_table(s: &McSummary) {
+    println!(
+        "| seed | FHST2 rel FHST1 error (″, ACS) | NEES FHST2 / FSS1 / FSS2 | max |δM err|/σ |"
+    );
+    println!("|---|---|---|---|");
+    for r in &s.seeds {
+        let e = r
+            .relative_error_arcsec
+            .first()
+            .map_or([f64::NAN; 3], |(_, e)| *e);
+        let nees: Vec<String> = r.nees.iter().map(|(_, v)| format!("{v:.1}")).collect();
+        let dm = r.delta_m_normalised.map_or("-".to_owned(), |d| {
+            format!("{:.1}", d.iter().fold(0.0_f64, |m, x| m.max(x.abs())))
+        });
+        println!(
+            "| {} | [{:.1}, {:.1}, {:.1}] | {} | {} |",
+            r.seed,
+            e[0],
+            e[1],
+            e[2],
+            nees.join(" / "),
+            dm
+        );
+    }
+    println!();
+    println!("runs: {}", s.runs);
+    for (id, v) in &s.mean_nees {
+        println!("mean NEES {id} rel FHST1: {v:.2} (3 = covariance right)");
+    }
+    println!(
+        "FHST1-FHST2 within 5″: {:.0} % of seeds",
+        100.0 * s.fhst1_fhst2_within_5_arcsec_fraction
+    );
+    let f = |a: [f64; 3]| format!("[{:.1}, {:.1}, {:.1}]", a[0], a[1], a[2]);
+    println!(
+        "FHST1-FHST2 per axis: RMS error {} ″, mean stated σ {} ″, mean Cramér–Rao σ {} ″",
+        f(s.fhst1_fhst2_error_rms_per_axis_arcsec),
+        f(s.fhst1_fhst2_mean_stated_sigma_arcsec),
+        f(s.fhst1_fhst2_mean_crb_sigma_arcsec)
+    );
+    if let (Some(ms), Some(w)) = (
+        s.delta_m_mean_square_normalised,
+        s.delta_m_within_3sigma_fraction,
+    ) {
+        println!(
+            "δM: mean (error/σ)² = {ms:.2} (1 = σ right); {:.0} % of elements within 3σ",
+            100.0 * w
+        );
+    }
+}
