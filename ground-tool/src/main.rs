@@ -37,6 +37,14 @@ enum Command {
         /// Use Shuster's 1982 scalar weights instead of the optimal (1990) weighting.
         #[arg(long)]
         shuster1982: bool,
+        /// One joint FFCAL of all sensors instead of FHSTs first, then FSSs relative to them.
+        #[arg(long)]
+        single_stage: bool,
+        /// IRU calibration maneuver START:END in seconds since the first raw frame (repeat
+        /// for each); replaces the maneuvers found as runs of high-rate frames. Each end
+        /// attitude is still solved from the holds around it.
+        #[arg(long = "maneuver", value_name = "START:END", value_parser = parse_span)]
+        maneuvers: Vec<(f64, f64)>,
         /// Print report.json to stdout.
         #[arg(long)]
         json: bool,
@@ -240,11 +248,27 @@ fn read_flown_tables(
     Ok((alignment, iru))
 }
 
+/// `START:END` (seconds) for `--maneuver`.
+fn parse_span(s: &str) -> std::result::Result<(f64, f64), String> {
+    let (a, b) = s
+        .split_once(':')
+        .ok_or_else(|| format!("`{s}`: expected START:END in seconds, e.g. 10515:11700"))?;
+    let a: f64 = a.trim().parse().map_err(|e| format!("`{a}`: {e}"))?;
+    let b: f64 = b.trim().parse().map_err(|e| format!("`{b}`: {e}"))?;
+    if !(a.is_finite() && b.is_finite() && b > a && a >= 0.0) {
+        return Err(format!("`{s}`: need 0 ≤ START < END"));
+    }
+    Ok((a, b))
+}
+
+#[allow(clippy::too_many_arguments)]
 fn run_calibrate(
     run_dir: &std::path::Path,
     out: &std::path::Path,
     tables: Option<&std::path::Path>,
     shuster1982: bool,
+    single_stage: bool,
+    maneuvers: Vec<(f64, f64)>,
     json: bool,
 ) -> Result<()> {
     use ground_tool::calibration::alignment::Weighting;
@@ -258,6 +282,8 @@ fn run_calibrate(
         } else {
             Weighting::Optimal1990
         },
+        staged_ffcal: !single_stage,
+        maneuvers_s: (!maneuvers.is_empty()).then_some(maneuvers),
         ..CalibrateOptions::default()
     };
     let result = calibrate_run(run_dir, out, &options)?;
@@ -318,6 +344,8 @@ fn main() {
             "only ",
             "cannot read",
             "FFCAL:",
+            "outside the telemetry",
+            "overlaps the previous",
         ]
         .iter()
         .any(|k| text.contains(k));
@@ -332,8 +360,18 @@ fn run(cli: Cli) -> Result<()> {
             out,
             tables,
             shuster1982,
+            single_stage,
+            maneuvers,
             json,
-        } => run_calibrate(&run_dir, &out, tables.as_deref(), shuster1982, json)?,
+        } => run_calibrate(
+            &run_dir,
+            &out,
+            tables.as_deref(),
+            shuster1982,
+            single_stage,
+            maneuvers,
+            json,
+        )?,
         Command::Diagnose {
             run_dir,
             out,

@@ -105,6 +105,9 @@ pub struct CalibrateOptions {
     /// FFCAL in two stages (FHSTs from star pairs, then the FSSs relative to them; default)
     /// instead of one joint fit of all four sensors.
     pub staged_ffcal: bool,
+    /// IRU calibration maneuvers given by the user as (start, end) in seconds since the first
+    /// raw frame; `None` = found in the telemetry as runs of high-rate frames.
+    pub maneuvers_s: Option<Vec<(f64, f64)>>,
 }
 
 impl Default for CalibrateOptions {
@@ -115,6 +118,7 @@ impl Default for CalibrateOptions {
             weighting: Weighting::Optimal1990,
             identify: IdentifyOptions::default(),
             staged_ffcal: true,
+            maneuvers_s: None,
         }
     }
 }
@@ -637,6 +641,38 @@ fn steps_between(frames: &[FrameObservations], a: usize, b: usize) -> Vec<GyroSt
         .collect()
 }
 
+/// User-given maneuvers (seconds since the first frame) as frame index pairs, in time order.
+///
+/// # Errors
+/// A span outside the telemetry, or spans that overlap.
+fn user_maneuvers(
+    frames: &[FrameObservations],
+    spans_s: &[(f64, f64)],
+) -> anyhow::Result<Vec<(usize, usize)>> {
+    let (Some(first), Some(last)) = (frames.first(), frames.last()) else {
+        bail!("no frames for the given maneuvers");
+    };
+    let t0 = first.time.seconds();
+    let span_s = last.time.seconds() - t0;
+    let mut sorted = spans_s.to_vec();
+    sorted.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut out: Vec<(usize, usize)> = Vec::new();
+    for &(a, b) in &sorted {
+        if !(a >= 0.0 && b > a && b <= span_s) {
+            bail!(
+                "maneuver {a}:{b} s is outside the telemetry (0 to {span_s:.0} s after the first raw frame)"
+            );
+        }
+        let ia = frame_index_at(frames, t0 + a);
+        let ib = frame_index_at(frames, t0 + b);
+        if out.last().is_some_and(|&(_, e)| ia <= e) {
+            bail!("maneuver {a}:{b} s overlaps the previous one: give disjoint spans");
+        }
+        out.push((ia, ib));
+    }
+    Ok(out)
+}
+
 /// Maneuvers as runs of high-rate frames: (first index, last index).
 fn find_maneuvers(frames: &[FrameObservations]) -> Vec<(usize, usize)> {
     let mut out = Vec::new();
@@ -857,7 +893,10 @@ pub fn calibrate_telemetry(
         sigma_v_rad_per_sqrt_s: metadata.sensors.iru_arw_rad_per_sqrt_s,
         sigma_u_rad_per_s_1p5: metadata.sensors.iru_rrw_rad_per_s_sqrt_s,
     };
-    let maneuvers = find_maneuvers(&frames_cal);
+    let maneuvers = match &options.maneuvers_s {
+        Some(spans) => user_maneuvers(&frames_cal, spans)?,
+        None => find_maneuvers(&frames_cal),
+    };
     let initial_bias = tm
         .housekeeping
         .first()
