@@ -6,10 +6,12 @@
 //! * **Attitude matrix** `A = m_acs_from_eci` maps inertial (J2000/ICRS) components to ACS
 //!   (body) components: `b = A r`. Kinematics `dA/dt = -[ω×] A`, ω the body rate in ACS.
 //! * **Alignment matrix** `M_AS = m_acs_from_<sensor>` maps sensor components to ACS; its
-//!   columns are the sensor axes in ACS and the sensor boresight is its z axis (paper §3.1).
-//! * **Rotation vector** θ (rad): the paper's eq. 3,
+//!   columns are the sensor axes in ACS and the sensor boresight is its z axis (paper
+//!   appendix, `M_AS`; Table 1).
+//! * **Rotation vector** θ (rad): the paper's `Rot(θ)` (algorithms.md §1),
 //!   `Rot(θ) = cos θ I + (1 − cos θ) e eᵀ − sin θ [e×] = exp(−[θ×])`, i.e. the *passive*
-//!   matrix of a frame rotated by +θ. Corrections are applied on the left in ACS (eq. 4):
+//!   matrix of a frame rotated by +θ. Corrections are applied on the left in ACS, as the paper
+//!   writes them:
 //!   `M_AS' = Rot(θ) M_AS`.
 //! * **Quaternion**: scalar-last Shuster/Markley `q = [q_v; q_4]`, `q_v = e sin(θ/2)`,
 //!   `q_4 = cos(θ/2)`, with `A(q) = Rot(θ e)` and the natural-order product
@@ -27,12 +29,13 @@ use serde::{Deserialize, Serialize};
 const SMALL_ANGLE_RAD: f64 = 1.0e-8;
 
 /// Cross-product matrix `[v×]`, so that `[v×] w = v × w`.
+/// algorithms.md §1 (`[v×]`, Markley & Crassidis 2014).
 #[must_use]
 pub fn skew(v: &Vector3<f64>) -> Matrix3<f64> {
     Matrix3::new(0.0, -v.z, v.y, v.z, 0.0, -v.x, -v.y, v.x, 0.0)
 }
 
-/// The paper's `Rot(θ)` (eq. 3): `exp(−[θ×])`, the passive rotation of a frame by +θ (rad).
+/// The paper's `Rot(θ)` (algorithms.md §1): `exp(−[θ×])`, the passive rotation of a frame by +θ (rad).
 #[must_use]
 pub fn rot(theta_rad: &Vector3<f64>) -> Matrix3<f64> {
     let angle = theta_rad.norm();
@@ -61,17 +64,22 @@ pub fn rotvec_from_rot(m: &Matrix3<f64>) -> Vector3<f64> {
 /// Scalar-last attitude quaternion `[x, y, z, w]` with `A(q) = Rot(θ e)`.
 ///
 /// The layout is fixed (`#[repr(C)]`, four `f64`), so it is also the telemetry layout.
+/// Shuster/Markley convention: algorithms.md §1, docs/conventions.md; wire layout docs/icd.md §3.2.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[repr(C)]
 pub struct Quat {
     /// Vector part, x.
+    /// `e_x sin(θ/2)` (algorithms.md §1).
     pub x: f64,
     /// Vector part, y.
+    /// `e_y sin(θ/2)` (algorithms.md §1).
     pub y: f64,
     /// Vector part, z.
+    /// `e_z sin(θ/2)` (algorithms.md §1).
     pub z: f64,
     /// Scalar part `cos(θ/2)`.
+    /// algorithms.md §1.
     pub w: f64,
 }
 
@@ -83,6 +91,7 @@ impl Default for Quat {
 
 impl Quat {
     /// The identity attitude.
+    /// `A = I` (algorithms.md §1).
     pub const IDENTITY: Quat = Quat {
         x: 0.0,
         y: 0.0,
@@ -91,18 +100,21 @@ impl Quat {
     };
 
     /// Build from a vector part and a scalar part (no normalisation).
+    /// Project choice (not in the paper): a `const` constructor for tables and tests.
     #[must_use]
     pub const fn new(x: f64, y: f64, z: f64, w: f64) -> Self {
         Self { x, y, z, w }
     }
 
     /// Vector part.
+    /// `q_v` of algorithms.md §1.
     #[must_use]
     pub fn vector(&self) -> Vector3<f64> {
         Vector3::new(self.x, self.y, self.z)
     }
 
     /// The quaternion of `Rot(θ)` for a rotation vector θ (rad). Exact for any angle.
+    /// `q = [e sin(θ/2); cos(θ/2)]` (algorithms.md §1); a series below 1e-8 rad (algorithms.md §2).
     #[must_use]
     pub fn from_rotation_vector(theta_rad: &Vector3<f64>) -> Self {
         let angle = theta_rad.norm();
@@ -121,6 +133,7 @@ impl Quat {
     }
 
     /// Rotation vector θ (rad) of this quaternion, `|θ| ≤ π` (the `q_4 ≥ 0` representative).
+    /// The "rotvec" inverse of algorithms.md §1: `2 atan2(|q_v|, q_4) q_v/|q_v|`.
     #[must_use]
     pub fn rotation_vector_rad(&self) -> Vector3<f64> {
         let q = self.canonical();
@@ -135,12 +148,14 @@ impl Quat {
     }
 
     /// Norm `|q|`.
+    /// Project choice (not in the paper): used to renormalise after composition.
     #[must_use]
     pub fn norm(&self) -> f64 {
         libm::sqrt(self.x * self.x + self.y * self.y + self.z * self.z + self.w * self.w)
     }
 
     /// Unit-norm copy with `w ≥ 0`; the identity if the norm is zero or not finite.
+    /// Forcing `q_4 ≥ 0` follows algorithms.md §1 ("Treat q and −q as equal").
     #[must_use]
     pub fn normalized(&self) -> Self {
         let n = self.norm();
@@ -151,6 +166,7 @@ impl Quat {
     }
 
     /// The same attitude with `w ≥ 0`.
+    /// algorithms.md §1: `q` and `−q` are the same attitude.
     #[must_use]
     pub fn canonical(&self) -> Self {
         if self.w < 0.0 {
@@ -161,12 +177,14 @@ impl Quat {
     }
 
     /// Inverse (conjugate) of a unit quaternion: `A(q⁻¹) = A(q)ᵀ`.
+    /// algorithms.md §1 (Shuster/Markley quaternion algebra).
     #[must_use]
     pub fn conjugate(&self) -> Self {
         Self::new(-self.x, -self.y, -self.z, self.w)
     }
 
     /// Natural-order product `self ⊗ rhs`, with `A(p ⊗ q) = A(p) A(q)`.
+    /// algorithms.md §1 ("natural-order" product, Shuster 1993 / Lefferts, Markley & Shuster 1982).
     #[must_use]
     pub fn compose(&self, rhs: &Quat) -> Self {
         let pv = self.vector();
@@ -176,6 +194,7 @@ impl Quat {
     }
 
     /// Attitude matrix `A(q) = (q₄² − |q_v|²) I + 2 q_v q_vᵀ − 2 q₄ [q_v×]`.
+    /// algorithms.md §1 (equals the paper's `Rot(θ e)`).
     #[must_use]
     pub fn to_dcm(&self) -> Matrix3<f64> {
         let v = self.vector();
@@ -228,12 +247,14 @@ impl Quat {
     }
 
     /// Every component finite.
+    /// Project choice (not in the paper): the input validation of every sensor rejects NaN.
     #[must_use]
     pub fn is_finite(&self) -> bool {
         self.x.is_finite() && self.y.is_finite() && self.z.is_finite() && self.w.is_finite()
     }
 
     /// Angle (rad) of the rotation taking `other` to `self` (0..π).
+    /// Project choice (not in the paper): the slew-completion and test metric.
     #[must_use]
     pub fn angle_to_rad(&self, other: &Quat) -> f64 {
         self.compose(&other.conjugate())
@@ -243,12 +264,14 @@ impl Quat {
 }
 
 /// Small-angle error vector δθ (rad) with `A_true = Rot(δθ) A_est` (the filter's error state).
+/// The error-state convention of algorithms.md §1 and docs/conventions.md ("Attitude errors").
 #[must_use]
 pub fn attitude_error_rad(q_true: &Quat, q_est: &Quat) -> Vector3<f64> {
     q_true.compose(&q_est.conjugate()).rotation_vector_rad()
 }
 
 /// Matrix is orthonormal within `tol` (max-abs of `MᵀM − I`) with determinant within `tol` of +1.
+/// The table check of docs/tables.md (Table 1 alignment: orthonormal to 1e-6, det +1).
 #[must_use]
 pub fn is_proper_rotation(m: &Matrix3<f64>, tol: f64) -> bool {
     let e = m.transpose() * m - Matrix3::identity();

@@ -26,57 +26,80 @@
 //!   same target and reports `slew_complete` once.
 //!
 //! Deterministic, allocation-free, constant work per call (two `sqrt`, one rotation vector).
+//!
+//! Sources: the paper gives the IRU rate modes (0.8″/pulse for maneuvers, 0.05″/pulse for
+//! inertial pointing) and the calibration maneuvers; the control law is a project choice (not
+//! in the paper): the quaternion-feedback eigen-axis slew of Wie, Weiss & Arapostathis
+//! (JGCD 12(3), 1989) with a rate limit.
 
 use crate::attitude::Quat;
 use crate::tables::types::FilterTable;
 use nalgebra::{Matrix3, Vector3};
 
 /// Fraction of the weakest axis's torque-limited acceleration used to brake a slew.
+/// Project choice (not in the paper): braking margin against wheel-torque uncertainty.
 pub const DECELERATION_MARGIN: f64 = 0.5;
 /// Slew completion rate threshold, as a multiple of `slew_complete_rad · ω_n` (rad/s).
+/// Project choice (not in the paper): rate and angle thresholds of one time constant.
 pub const SLEW_COMPLETE_RATE_FACTOR: f64 = 1.0;
 
 /// Control mode.
+/// Paper: GRO holds inertial attitudes and maneuvers between them; codes docs/icd.md §3.2.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum ControlMode {
     /// Inertial hold at the target.
+    /// Paper: low-rate IRU mode for inertial pointing.
     #[default]
     Hold,
     /// Rate-limited eigen-axis slew to the target.
+    /// Paper: high-rate IRU mode for maneuvers; eigen-axis law per the module docs.
     Slew,
 }
 
 /// Why a command or a step was refused.
+/// Project choice (not in the paper): errors instead of panics in the flight core.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum ControlError {
     /// Target quaternion not finite or not near unit norm.
+    /// Project choice (not in the paper): NaN input is refused.
     InvalidTarget,
     /// Attitude or rate estimate not finite; no torque computed.
+    /// Project choice (not in the paper): NaN input is refused.
     InvalidEstimate,
     /// Table values unusable (non-positive inertia, limits, gains).
+    /// docs/tables.md (filter table: inertia, limits, gains).
     InvalidTable,
 }
 
 /// One control cycle's output.
+/// Project choice (not in the paper); telemetry docs/icd.md §3.2.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct ControlOutput {
     /// Wheel torque command, ACS, N·m, each axis within ±`torque_limit_nm`.
+    /// docs/icd.md §3.2 (offset 108); limit from docs/tables.md (filter table).
     pub torque_acs_nm: Vector3<f64>,
     /// Command the IRU high-rate mode for the next interval.
+    /// Paper: high rate (0.8″/pulse) in maneuvers, low rate (0.05″/pulse) inertial.
     pub high_rate_iru: bool,
     /// Mode after this step.
+    /// docs/icd.md §3.2 (offset 105).
     pub mode: ControlMode,
     /// Attitude error to the target `θ_e` (ACS, rad).
+    /// Error convention of algorithms.md §1 (`Rot(θ_e)` on the left).
     pub attitude_error_rad: Vector3<f64>,
     /// Commanded body rate (ACS, rad/s).
+    /// Project choice (not in the paper): see the module docs.
     pub rate_cmd_rad_per_s: Vector3<f64>,
     /// The torque was scaled down to the limit.
+    /// Project choice (not in the paper): direction-preserving limit.
     pub torque_limited: bool,
     /// A slew completed in this step (mode is now Hold).
+    /// docs/icd.md §3.3 (event 0x0602).
     pub slew_complete: bool,
     /// The step could not compute a torque (zero commanded, mode unchanged).
+    /// Project choice (not in the paper): a fault commands zero torque.
     pub fault: Option<ControlError>,
 }
 
@@ -102,6 +125,7 @@ impl defmt::Format for ControlOutput {
 }
 
 /// The attitude controller.
+/// Project choice (not in the paper): the paper does not describe the OBC control law.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Controller {
@@ -122,6 +146,7 @@ fn valid_target(q: &Quat) -> Option<Quat> {
 
 impl Controller {
     /// Hold at the identity attitude until told otherwise.
+    /// Project choice (not in the paper): a defined state before the first command.
     #[must_use]
     pub const fn new() -> Self {
         Self {
@@ -131,18 +156,21 @@ impl Controller {
     }
 
     /// Current mode.
+    /// docs/icd.md §3.2 (control mode).
     #[must_use]
     pub const fn mode(&self) -> ControlMode {
         self.mode
     }
 
     /// Current target (ACS from ECI).
+    /// Convention of algorithms.md §1.
     #[must_use]
     pub const fn target(&self) -> Quat {
         self.target
     }
 
     /// Inertial hold at `target`.
+    /// Paper: inertial pointing between maneuvers.
     ///
     /// # Errors
     /// [`ControlError::InvalidTarget`] (mode and target unchanged).
@@ -153,6 +181,7 @@ impl Controller {
     }
 
     /// Slew to `target`, then hold there.
+    /// Paper: calibration maneuvers (X 60°, Z −28°, Y 31°, Y −60°).
     ///
     /// # Errors
     /// [`ControlError::InvalidTarget`] (mode and target unchanged).
@@ -163,6 +192,7 @@ impl Controller {
     }
 
     /// One control cycle from the attitude estimate and the bias-corrected rate.
+    /// Project choice (not in the paper): PD law of the module docs.
     ///
     /// On invalid input ([`ControlError::InvalidEstimate`], [`ControlError::InvalidTable`])
     /// the output has zero torque, `fault` set, and the mode is unchanged.

@@ -9,54 +9,76 @@ use serde::{Deserialize, Serialize};
 
 /// Maximum events reported by one cycle (further events in the same cycle are counted in
 /// [`Counters::events_dropped`]).
+/// Project choice (not in the paper): a fixed bound keeps the cycle output allocation-free.
 pub const MAX_EVENTS_PER_CYCLE: usize = 8;
 
 /// Event identifiers. The discriminant is the on-wire code.
+/// Codes and parameters: docs/icd.md §3.3.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[repr(u16)]
 pub enum EventId {
     /// A table image was loaded and validated into the inactive buffer. p1 = table id.
+    /// docs/icd.md §3.3.
     TableLoaded = 0x0101,
     /// A table image was rejected. p1 = table id (0 if unreadable), p2 = reason code.
+    /// docs/icd.md §3.3; reason codes in docs/tables.md.
     TableRejected = 0x0102,
     /// A table was activated. p1 = table id, p2 = CRC of its image.
+    /// docs/icd.md §3.3.
     TableActivated = 0x0103,
     /// Activation refused. p1 = table id, p2 = reason code (0 = nothing pending).
+    /// docs/icd.md §3.3; reason codes in docs/tables.md.
     TableActivateFailed = 0x0104,
     /// Inactive buffer cleared by command. p1 = table id, p2 = 1 if something was pending.
+    /// docs/icd.md §3.3.
     TableAborted = 0x0105,
     /// IRU channel excluded. p1 = channel 0..5 (X1..Z2), p2 = reason bits (1 failed,
     /// 2 saturated, 4 stuck; e.g. 5 = failed and stuck), [`crate::iru::EXCLUDED_FAILED`] …
+    /// docs/icd.md §3.3.
     IruChannelExcluded = 0x0201,
     /// IRU configuration switched. p1 = 0 primary, 1 backup; p2 = 1 if automatic.
+    /// docs/icd.md §3.3.
     IruConfigSwitched = 0x0202,
     /// IRU rate mode command changed. p1 = 1 high rate, 0 low rate.
+    /// docs/icd.md §3.3.
     IruRateModeChanged = 0x0203,
     /// IRU data unusable this cycle (attitude propagated without gyro). p1 = channel mask.
+    /// docs/icd.md §3.3.
     IruDataUnusable = 0x0204,
     /// Filter initialised. p1 = 1 by command, 2 from two vectors.
+    /// docs/icd.md §3.3.
     FilterInitialized = 0x0301,
     /// Filter reset by command (attitude kept, covariance reopened).
+    /// docs/icd.md §3.3.
     FilterReset = 0x0302,
     /// Filter mode changed. p1 = new mode ([`crate::executive::FilterMode`] code).
+    /// docs/icd.md §3.3.
     FilterModeChanged = 0x0303,
     /// A star was identified. p1 = tracker 0/1, p2 = catalog id.
+    /// docs/icd.md §3.3.
     StarIdentified = 0x0401,
     /// Star identification failed. p1 = tracker, p2 = 1 no match, 2 ambiguous, 3 no catalog.
+    /// docs/icd.md §3.3.
     StarIdFailed = 0x0402,
     /// A sensor's innovations are being gated out (first of a run). p1 = sensor 0..3.
+    /// docs/icd.md §3.3.
     MeasurementGated = 0x0403,
     /// A sensor sample failed input validation (first of a run). p1 = sensor 0..4 (4 = IRU),
     /// p2 = reason code.
+    /// docs/icd.md §3.3.
     InputRejected = 0x0404,
     /// Frame time not after the previous one, or a jump. p1 = previous coarse s, p2 = new.
+    /// docs/icd.md §3.3.
     TimeTagAnomaly = 0x0501,
     /// A slew started. p1 = slew number.
+    /// docs/icd.md §3.3.
     SlewStarted = 0x0601,
     /// A slew completed (error below the table threshold). p1 = slew number.
+    /// docs/icd.md §3.3.
     SlewCompleted = 0x0602,
     /// A command was refused. p1 = command code, p2 = reason.
+    /// docs/icd.md §3.3.
     CommandRejected = 0x0701,
 }
 
@@ -86,12 +108,14 @@ impl EventId {
     ];
 
     /// On-wire code.
+    /// docs/icd.md §3.3.
     #[must_use]
     pub fn code(self) -> u16 {
         self as u16
     }
 
     /// From the on-wire code.
+    /// `None` for a code not in docs/icd.md §3.3.
     #[must_use]
     pub fn from_code(code: u16) -> Option<Self> {
         Self::ALL.iter().copied().find(|e| e.code() == code)
@@ -99,44 +123,60 @@ impl EventId {
 }
 
 /// One event with two parameters.
+/// APID 0x012 record, docs/icd.md §3.3.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Event {
     /// What happened.
+    /// docs/icd.md §3.3 (event code).
     pub id: EventId,
     /// First parameter (meaning per [`EventId`]).
+    /// docs/icd.md §3.3.
     pub p1: u32,
     /// Second parameter.
+    /// docs/icd.md §3.3.
     pub p2: u32,
 }
 
 /// Cumulative counters since boot (saturating).
+/// Housekeeping offset 173, docs/icd.md §3.2.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Counters {
     /// Cycles executed.
+    /// docs/icd.md §3.2.
     pub cycles: u32,
     /// Sensor samples refused by input validation (bad flags, range, NaN).
+    /// docs/icd.md §3.2.
     pub rejected_inputs: u32,
     /// Measurements refused by the χ² gate.
+    /// docs/icd.md §3.2.
     pub gated_measurements: u32,
     /// Measurements accepted by the filter.
+    /// docs/icd.md §3.2.
     pub accepted_measurements: u32,
     /// Star identifications that succeeded.
+    /// docs/icd.md §3.2.
     pub stars_identified: u32,
     /// Star identifications that found no candidate.
+    /// docs/icd.md §3.2.
     pub star_id_unmatched: u32,
     /// Star identifications with more than one candidate (rejected).
+    /// docs/icd.md §3.2.
     pub star_id_ambiguous: u32,
     /// Frames whose time tag was not after the previous one.
+    /// docs/icd.md §3.2.
     pub time_tag_anomalies: u32,
     /// Cycles without usable gyro data.
+    /// docs/icd.md §3.2.
     pub iru_unusable_cycles: u32,
     /// Events that did not fit in a cycle's output.
+    /// docs/icd.md §3.2.
     pub events_dropped: u32,
 }
 
 /// Push an event into a cycle's list, counting it if the list is full.
+/// Project choice (not in the paper): events never block the cycle; overflow is counted.
 pub fn raise(
     events: &mut heapless::Vec<Event, MAX_EVENTS_PER_CYCLE>,
     counters: &mut Counters,

@@ -9,7 +9,7 @@
 //! 2. **Commands** in the order given (at most [`MAX_COMMANDS_PER_CYCLE`]): table
 //!    load/activate/abort (activation therefore always happens at a cycle boundary, before
 //!    any table is used in the cycle), IRU configuration, filter init/reset, slew/hold.
-//! 3. **IRU**: pulse integration (paper eq. 5); a failed selected channel switches to the
+//! 3. **IRU**: pulse integration (paper `G`; algorithms.md §5); a failed selected channel switches to the
 //!    backup configuration automatically. Any configuration change (automatic or commanded)
 //!    reopens the filter's bias covariance: the new channels have their own biases.
 //! 4. **Propagation** of the MEKF with the exact rotation-vector update.
@@ -42,6 +42,7 @@ use crate::units::ARCSEC_PER_RAD;
 use nalgebra::{Matrix3, Vector3};
 
 /// Largest number of commands processed in one cycle (further ones are refused).
+/// Project choice (not in the paper): bounds the work of one cycle.
 pub const MAX_COMMANDS_PER_CYCLE: usize = 8;
 
 /// Cycles without an accepted FHST measurement after which fine mode drops to coarse.
@@ -54,54 +55,72 @@ const SUN_REFRESH_S: f64 = 10.0;
 const MAX_GAP_PERIODS: f64 = 10.0;
 
 /// Filter mode, telemetry code in brackets.
+/// Paper requirements: coarse attitude (FSS + TAM + IRU, 2° 3σ), fine (FHST + IRU, 0.024° 3σ).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[repr(u8)]
 pub enum FilterMode {
     /// No attitude yet (0).
+    /// docs/icd.md §3.2 (filter mode 0).
     Uninitialized = 0,
     /// Attitude from propagation and FSS only (1).
+    /// Paper: coarse attitude from FSS + IRU (the TAM is not modelled; project choice).
     Coarse = 1,
     /// FHST stars identified and used (2).
+    /// Paper: fine attitude from FHST + IRU, 0.024° 3σ per axis.
     Fine = 2,
 }
 
 /// Control mode, telemetry code in brackets.
+/// docs/icd.md §3.2 (control mode, offset 105).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[repr(u8)]
 pub enum ControlMode {
     /// No attitude, no control (0).
+    /// docs/icd.md §3.2 (control mode 0).
     Idle = 0,
     /// Inertial hold (1).
+    /// Paper: inertial pointing (low-rate IRU); docs/icd.md §3.2.
     Hold = 1,
     /// Slew to a target (2).
+    /// Paper: maneuvers (high-rate IRU); docs/icd.md §3.2.
     Slew = 2,
 }
 
 /// A ground command for this cycle.
+/// Project choice (not in the paper): the ground commands the emulation needs.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Command<'a> {
     /// Slew to the target attitude `q_acs_from_eci`, then hold it.
+    /// Paper: calibration maneuvers between inertial attitudes.
     SlewTo(Quat),
     /// Hold the current estimated attitude.
+    /// Paper: inertial pointing.
     Hold,
     /// Select the IRU configuration.
+    /// Paper: primary X2, Y1, Z1 or backup X1, Y2, Z2.
     SelectIruConfig(IruConfiguration),
     /// Load a table image into its inactive buffer.
+    /// docs/tables.md ("Lifecycle", cFE Table Services style).
     TableLoad(&'a [u8]),
     /// Activate the validated inactive buffer of a table.
+    /// docs/tables.md ("Lifecycle", cFE Table Services style).
     TableActivate(TableId),
     /// Clear the inactive buffer of a table.
+    /// docs/tables.md ("Lifecycle", cFE Table Services style).
     TableAbort(TableId),
     /// Initialise the filter at this attitude with the table's initial covariance.
+    /// algorithms.md §2 (reference state and initial `P`).
     FilterInitialize(Quat),
     /// Reset the filter: keep the estimate, reopen the covariance to its initial values.
+    /// docs/icd.md §3.3 (event 0x0302).
     FilterReset,
 }
 
 impl Command<'_> {
     /// Command code used in `CommandRejected` events.
+    /// docs/icd.md §3.3 (event 0x0701, p1).
     #[must_use]
     pub fn code(&self) -> u32 {
         match self {
@@ -118,11 +137,14 @@ impl Command<'_> {
 }
 
 /// Everything a cycle produces (postcard-serializable: fixed field order, no maps).
+/// docs/icd.md §3.2 and §3.3.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct CycleOutput {
     /// The housekeeping record (downlinked every cycle).
+    /// APID 0x011, docs/icd.md §3.2.
     pub housekeeping: ObcHousekeeping,
     /// Events raised in this cycle.
+    /// APID 0x012, docs/icd.md §3.3.
     pub events: heapless::Vec<Event, MAX_EVENTS_PER_CYCLE>,
 }
 
@@ -178,6 +200,7 @@ impl FlightCore {
     }
 
     /// Boot with a given table set.
+    /// docs/tables.md (boot tables and validation).
     #[must_use]
     pub fn with_tables(tables: TableSet) -> Self {
         Self {
@@ -204,18 +227,21 @@ impl FlightCore {
     }
 
     /// The tables (active copies and status).
+    /// docs/tables.md ("Lifecycle").
     #[must_use]
     pub fn tables(&self) -> &TableSet {
         &self.tables
     }
 
     /// Current filter mode.
+    /// docs/icd.md §3.2 (filter mode).
     #[must_use]
     pub fn filter_mode(&self) -> FilterMode {
         self.filter_mode
     }
 
     /// Current attitude estimate `q_acs_from_eci`.
+    /// docs/icd.md §3.2 (offset 0); convention algorithms.md §1.
     #[must_use]
     pub fn attitude(&self) -> Quat {
         self.filter.q_acs_from_eci
@@ -223,12 +249,14 @@ impl FlightCore {
 
     /// The attitude filter (estimate and full covariance), read-only: for test harnesses
     /// that score consistency (NEES needs the off-diagonal `P_θθ`).
+    /// Project choice (not in the paper): test access; NEES per algorithms.md §2.
     #[must_use]
     pub fn filter(&self) -> &Mekf {
         &self.filter
     }
 
     /// Run one cycle.
+    /// Phase order of the module docs (docs/icd.md §4 packet order).
     pub fn step(&mut self, frame: &RawSensorFrame, commands: &[Command<'_>]) -> CycleOutput {
         let mut events = heapless::Vec::new();
         let mut residuals = [SensorResidual::default(); 4];
@@ -960,12 +988,14 @@ impl FlightCore {
     }
 
     /// The IRU high-rate command the hardware should apply from the next interval.
+    /// Paper: IRU high rate for maneuvers, low rate inertial; docs/icd.md §3.2 (offset 107).
     #[must_use]
     pub fn iru_high_rate_command(&self) -> bool {
         self.iru_high_rate_cmd
     }
 
     /// The wheel torque command of the last cycle in ACS, N m.
+    /// docs/icd.md §3.2 (offset 108).
     #[must_use]
     pub fn wheel_torque_command_nm(&self) -> Vector3<f64> {
         self.wheel_torque_cmd_nm

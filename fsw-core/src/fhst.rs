@@ -1,4 +1,4 @@
-//! # Fixed-head star tracker measurement model (paper §3.1; algorithms.md §3.1)
+//! # Fixed-head star tracker measurement model (paper: FHST specifications; algorithms.md §3.1)
 //!
 //! The NASA Standard FHST tracks one star at a time in a 8°×8° field and reports two
 //! focal-plane coordinates (7.78″/count), an instrument magnitude and status flags
@@ -27,7 +27,7 @@
 //!
 //! ## Noise
 //! [`measurement_sigma_rad`] adds the count quantization (`q/√12` = 2.2″) in quadrature to the
-//! table's magnitude-dependent σ (8–24″, paper §2).
+//! table's magnitude-dependent σ (paper: FHST random error 8–24″ 1σ).
 
 use crate::raw::{FhstSample, FHST_FLAG_NEW_STAR, FHST_FLAG_TRACKING, FHST_FLAG_VALID};
 use crate::tables::types::{
@@ -37,33 +37,43 @@ use crate::units::{RAD_PER_ARCSEC, RAD_PER_DEG};
 use nalgebra::{Matrix2x3, Matrix3, Vector3};
 
 /// FHST resolution, rad per count (7.78″).
+/// Paper: FHST resolution 7.78″/count.
 pub const FHST_RAD_PER_COUNT: f64 = 7.78 * RAD_PER_ARCSEC;
 /// Half-width of the square field of view, rad (4°).
+/// Paper: FHST FOV 8° square.
 pub const FHST_HALF_FIELD_RAD: f64 = 4.0 * RAD_PER_DEG;
 /// Brightest magnitude the tracker acquires.
+/// Paper: FHST magnitude range 2.0–5.7.
 pub const FHST_MAGNITUDE_MIN: f64 = 2.0;
 /// Faintest magnitude the tracker acquires.
+/// Paper: FHST magnitude range 2.0–5.7.
 pub const FHST_MAGNITUDE_MAX: f64 = 5.7;
 /// Margin accepted around the magnitude window, mag (instrument magnitude noise).
+/// Project choice (not in the paper): about 3σ of a 0.1 mag instrument-magnitude error.
 pub const FHST_MAGNITUDE_MARGIN: f64 = 0.3;
 /// Fixed-point iterations of [`apply_distortion`] (each gains a factor ≈ 3·d0·ρ² + 2·|d1,2|·ρ).
 const DISTORTION_ITERATIONS: usize = 8;
 
 /// Which tracker.
+/// Paper: two FHSTs.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum FhstId {
     /// FHST1.
+    /// Paper Table 1 (FHST1).
     Fhst1,
     /// FHST2.
+    /// Paper Table 1 (FHST2).
     Fhst2,
 }
 
 impl FhstId {
     /// Both trackers, in order.
+    /// Paper: two FHSTs.
     pub const ALL: [FhstId; 2] = [FhstId::Fhst1, FhstId::Fhst2];
 
     /// Index 0 or 1 (raw frame, correction arrays).
+    /// Order of docs/icd.md §3.1 and docs/tables.md.
     #[must_use]
     pub const fn index(self) -> usize {
         match self {
@@ -73,6 +83,7 @@ impl FhstId {
     }
 
     /// Active `M_AS` (sensor → ACS).
+    /// Paper: `M_AS`, Table 1 at boot (docs/tables.md Table 1: alignment).
     #[must_use]
     pub fn m_acs_from_sensor(self, alignment: &AlignmentTable) -> Matrix3<f64> {
         match self {
@@ -82,6 +93,7 @@ impl FhstId {
     }
 
     /// Distortion coefficients `[d0, d1, d2]` of this tracker.
+    /// docs/tables.md (alignment table, `fhst_distortion`); effect 4 of algorithms.md §9.
     #[must_use]
     pub fn distortion(self, corrections: &SensorCorrections) -> [f64; 3] {
         let [d1, d2] = corrections.fhst_distortion;
@@ -93,19 +105,26 @@ impl FhstId {
 }
 
 /// A validated, corrected FHST measurement.
+/// algorithms.md §3.1.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FhstMeasurement {
     /// Corrected horizontal focal-plane angle, rad.
+    /// algorithms.md §3.1 (`H`).
     pub h_rad: f64,
     /// Corrected vertical focal-plane angle, rad.
+    /// algorithms.md §3.1 (`V`).
     pub v_rad: f64,
     /// Star direction in sensor axes (unit).
+    /// algorithms.md §3.1 (tangent-plane `s`).
     pub dir_sensor: Vector3<f64>,
     /// Star direction in ACS axes (unit), through the active alignment.
+    /// `b = M_AS s` (paper `M_AS`; algorithms.md §1).
     pub dir_acs: Vector3<f64>,
     /// Instrument magnitude, mag.
+    /// docs/icd.md §3.1; paper range 2.0–5.7.
     pub magnitude: f64,
     /// The tracker reports a new acquisition (star identification needed).
+    /// docs/icd.md §3.1 (FHST new-star flag); star ID per algorithms.md §3.2.
     pub new_star: bool,
 }
 
@@ -125,23 +144,30 @@ impl defmt::Format for FhstMeasurement {
 }
 
 /// Why a sample was not used.
+/// Checks of algorithms.md §3.1 ("Validity checks").
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum FhstReject {
     /// VALID flag clear.
+    /// docs/icd.md §3.1 (FHST flags bit0).
     NotValid,
     /// TRACKING flag clear (searching).
+    /// docs/icd.md §3.1 (FHST flags bit1).
     NotTracking,
     /// A computed value is not finite (corrupt corrections).
+    /// Project choice (not in the paper): a corrupt table must not reach the filter.
     NotFinite,
     /// Outside the ±4° field.
+    /// Paper: FHST FOV 8° square; algorithms.md §3.1.
     OutOfField,
     /// Magnitude outside the acquisition window plus margin.
+    /// Paper: FHST magnitude range 2.0–5.7; algorithms.md §3.1.
     MagnitudeOutOfRange,
 }
 
 impl FhstReject {
     /// The tracker simply has no star (not valid / not tracking): not an anomaly.
+    /// Project choice (not in the paper): only anomalies raise an event.
     #[must_use]
     pub const fn is_no_data(self) -> bool {
         matches!(self, Self::NotValid | Self::NotTracking)
@@ -149,6 +175,7 @@ impl FhstReject {
 
     /// Event/telemetry code: 1 not valid, 2 not tracking, 3 not finite, 4 out of field,
     /// 5 magnitude.
+    /// Reason code of event 0x0404, docs/icd.md §3.3.
     #[must_use]
     pub const fn code(self) -> u8 {
         match self {
@@ -162,6 +189,7 @@ impl FhstReject {
 }
 
 /// Distortion correction: measured angles → true angles (rad), see the module docs.
+/// docs/tables.md (alignment table, `fhst_distortion`); algorithms.md §9 effect 4.
 #[must_use]
 pub fn correct_distortion(h_m: f64, v_m: f64, d: &[f64; 3]) -> (f64, f64) {
     let [d0, d1, d2] = *d;
@@ -175,6 +203,7 @@ pub fn correct_distortion(h_m: f64, v_m: f64, d: &[f64; 3]) -> (f64, f64) {
 
 /// Inverse of [`correct_distortion`]: true angles → measured angles (rad), by fixed-point
 /// iteration (converges geometrically inside the field for table-valid `|d| ≤ 1`).
+/// docs/tables.md (alignment table, `fhst_distortion`).
 #[must_use]
 pub fn apply_distortion(h: f64, v: f64, d: &[f64; 3]) -> (f64, f64) {
     let (mut h_m, mut v_m) = (h, v);
@@ -187,12 +216,14 @@ pub fn apply_distortion(h: f64, v: f64, d: &[f64; 3]) -> (f64, f64) {
 }
 
 /// Unit vector in sensor axes from tangent-plane angles (rad).
+/// algorithms.md §3.1 (tangent-plane form; docs/conventions.md "Sensor geometry").
 #[must_use]
 pub fn dir_from_hv(h_rad: f64, v_rad: f64) -> Vector3<f64> {
     Vector3::new(libm::tan(h_rad), libm::tan(v_rad), 1.0).normalize()
 }
 
 /// Tangent-plane angles (rad) of a sensor-frame direction; `None` unless `s_z > 0` and finite.
+/// algorithms.md §3.1 (tangent-plane form).
 #[must_use]
 pub fn hv_from_dir(s: &Vector3<f64>) -> Option<(f64, f64)> {
     if !(s.z > 0.0) || !s.iter().all(|x| x.is_finite()) {
@@ -202,6 +233,7 @@ pub fn hv_from_dir(s: &Vector3<f64>) -> Option<(f64, f64)> {
 }
 
 /// `∂(H, V)/∂s` (2×3, rad per unit) at a sensor-frame direction (any length; `s_z ≠ 0`).
+/// algorithms.md §3.1 ("Jacobians").
 #[must_use]
 pub fn hv_jacobian(s: &Vector3<f64>) -> Matrix2x3<f64> {
     let dh = s.x * s.x + s.z * s.z;
@@ -211,6 +243,7 @@ pub fn hv_jacobian(s: &Vector3<f64>) -> Matrix2x3<f64> {
 
 /// Predicted (corrected) focal-plane angles of an ACS direction seen through `M_AS`; `None`
 /// if behind the sensor.
+/// algorithms.md §3.1 with the paper's `M_AS`.
 #[must_use]
 pub fn predict_hv(dir_acs: &Vector3<f64>, m_acs_from_sensor: &Matrix3<f64>) -> Option<(f64, f64)> {
     hv_from_dir(&(m_acs_from_sensor.transpose() * dir_acs))
@@ -218,6 +251,7 @@ pub fn predict_hv(dir_acs: &Vector3<f64>, m_acs_from_sensor: &Matrix3<f64>) -> O
 
 /// Measurement σ per axis (rad) for a star of `magnitude`: the table's σ(m) and the count
 /// quantization `q/√12` in quadrature.
+/// Paper: FHST random error 8–24″ 1σ; quantization per algorithms.md §3.1.
 #[must_use]
 pub fn measurement_sigma_rad(magnitude: f64, filter: &FilterTable) -> f64 {
     let s = filter.fhst_sigma_rad(magnitude);
@@ -226,6 +260,7 @@ pub fn measurement_sigma_rad(magnitude: f64, filter: &FilterTable) -> f64 {
 }
 
 /// [`measure`] with the tracker's active alignment and distortion from the alignment table.
+/// docs/tables.md (alignment table).
 ///
 /// # Errors
 /// As [`measure`].
@@ -243,6 +278,7 @@ pub fn measure_tracker(
 
 /// Convert and validate one tracker sample with the tracker's `M_AS` (table rows) and
 /// distortion coefficients `[d0, d1, d2]`.
+/// algorithms.md §3.1.
 ///
 /// # Errors
 /// The first failed check, see [`FhstReject`].

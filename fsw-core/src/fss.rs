@@ -1,4 +1,4 @@
-//! # Fine Sun sensor measurement model (paper §2; algorithms.md §4)
+//! # Fine Sun sensor measurement model (paper: FSS specifications; algorithms.md §4)
 //!
 //! Each Adcole FSS has two orthogonal single-axis heads sharing a boresight `+z_s`, 64°×64°
 //! field, 0.004°/count ([`FssSample`]).
@@ -29,27 +29,34 @@ use crate::units::RAD_PER_DEG;
 use nalgebra::{Matrix3, Vector3};
 
 /// FSS resolution, rad per count (0.004°).
+/// Paper: FSS resolution about 0.004°/count.
 pub const FSS_RAD_PER_COUNT: f64 = 0.004 * RAD_PER_DEG;
 /// Half-width of the field of view per head, rad (32°).
+/// Paper: FSS FOV 64° × 64°; algorithms.md §4.
 pub const FSS_HALF_FIELD_RAD: f64 = 32.0 * RAD_PER_DEG;
 /// Fixed-point iterations of [`apply_transfer`].
 const TRANSFER_ITERATIONS: usize = 6;
 
 /// Which Sun sensor.
+/// Paper: two FSSs.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum FssId {
     /// FSS1.
+    /// Paper Table 1 (FSS1).
     Fss1,
     /// FSS2.
+    /// Paper Table 1 (FSS2).
     Fss2,
 }
 
 impl FssId {
     /// Both sensors, in order.
+    /// Paper: two FSSs.
     pub const ALL: [FssId; 2] = [FssId::Fss1, FssId::Fss2];
 
     /// Index 0 or 1 (raw frame, correction arrays).
+    /// Order of docs/icd.md §3.1 and docs/tables.md.
     #[must_use]
     pub const fn index(self) -> usize {
         match self {
@@ -59,6 +66,7 @@ impl FssId {
     }
 
     /// Active `M_AS` (sensor → ACS).
+    /// Paper: `M_AS`, Table 1 at boot (docs/tables.md Table 1: alignment).
     #[must_use]
     pub fn m_acs_from_sensor(self, alignment: &AlignmentTable) -> Matrix3<f64> {
         match self {
@@ -68,6 +76,7 @@ impl FssId {
     }
 
     /// Transfer-function coefficients `[c0..c5]` of this sensor.
+    /// docs/tables.md (alignment table, `fss_transfer`); algorithms.md §4.
     #[must_use]
     pub fn transfer(self, corrections: &SensorCorrections) -> [f64; 6] {
         let [c1, c2] = corrections.fss_transfer;
@@ -79,15 +88,20 @@ impl FssId {
 }
 
 /// A validated, corrected Sun measurement.
+/// algorithms.md §4.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FssMeasurement {
     /// Corrected α head angle, rad.
+    /// algorithms.md §4 (α).
     pub alpha_rad: f64,
     /// Corrected β head angle, rad.
+    /// algorithms.md §4 (β).
     pub beta_rad: f64,
     /// Sun direction in sensor axes (unit).
+    /// algorithms.md §4 ("Unit vector").
     pub dir_sensor: Vector3<f64>,
     /// Sun direction in ACS axes (unit), through the active alignment.
+    /// `b = M_AS s` (paper `M_AS`; algorithms.md §1).
     pub dir_acs: Vector3<f64>,
 }
 
@@ -105,30 +119,38 @@ impl defmt::Format for FssMeasurement {
 }
 
 /// Why a sample was not used.
+/// Checks of algorithms.md §4 ("When the data are valid").
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum FssReject {
     /// A head reports no Sun.
+    /// docs/icd.md §3.1 (FSS flags); algorithms.md §4.
     NoSun {
         /// α head sees the Sun.
+        /// docs/icd.md §3.1 (bit0).
         alpha: bool,
         /// β head sees the Sun.
+        /// docs/icd.md §3.1 (bit1).
         beta: bool,
     },
     /// A computed value is not finite (corrupt corrections).
+    /// Project choice (not in the paper): a corrupt table must not reach the filter.
     NotFinite,
     /// Outside the ±32° field.
+    /// Paper: FSS FOV 64° × 64°; algorithms.md §4.
     OutOfField,
 }
 
 impl FssReject {
     /// No Sun on a head (eclipse, Sun outside the field): not an anomaly.
+    /// Project choice (not in the paper): only anomalies raise an event.
     #[must_use]
     pub const fn is_no_data(self) -> bool {
         matches!(self, Self::NoSun { .. })
     }
 
     /// Event/telemetry code: 1 no Sun, 2 not finite, 3 out of field.
+    /// Reason code of event 0x0404, docs/icd.md §3.3.
     #[must_use]
     pub const fn code(self) -> u8 {
         match self {
@@ -140,6 +162,7 @@ impl FssReject {
 }
 
 /// Transfer-function correction: measured head angles → true head angles (rad).
+/// docs/tables.md (alignment table, `fss_transfer`); form per algorithms.md §4 (cross-axis term).
 #[must_use]
 pub fn correct_transfer(alpha_m: f64, beta_m: f64, c: &[f64; 6]) -> (f64, f64) {
     let [c0, c1, c2, c3, c4, c5] = *c;
@@ -151,6 +174,7 @@ pub fn correct_transfer(alpha_m: f64, beta_m: f64, c: &[f64; 6]) -> (f64, f64) {
 
 /// Inverse of [`correct_transfer`]: true angles → measured angles (rad), fixed-point
 /// iteration (for simulators and ground checks; converges for calibration-sized `c`).
+/// docs/tables.md (alignment table, `fss_transfer`).
 #[must_use]
 pub fn apply_transfer(alpha: f64, beta: f64, c: &[f64; 6]) -> (f64, f64) {
     let (mut a_m, mut b_m) = (alpha, beta);
@@ -163,12 +187,14 @@ pub fn apply_transfer(alpha: f64, beta: f64, c: &[f64; 6]) -> (f64, f64) {
 }
 
 /// Unit vector in sensor axes from head angles (rad).
+/// algorithms.md §4 ("Unit vector").
 #[must_use]
 pub fn dir_from_angles(alpha_rad: f64, beta_rad: f64) -> Vector3<f64> {
     Vector3::new(libm::tan(alpha_rad), libm::tan(beta_rad), 1.0).normalize()
 }
 
 /// Head angles (rad) of a sensor-frame direction; `None` unless `s_z > 0` and finite.
+/// algorithms.md §4 ("Measured angles").
 #[must_use]
 pub fn angles_from_dir(s: &Vector3<f64>) -> Option<(f64, f64)> {
     if !(s.z > 0.0) || !s.iter().all(|x| x.is_finite()) {
@@ -178,6 +204,7 @@ pub fn angles_from_dir(s: &Vector3<f64>) -> Option<(f64, f64)> {
 }
 
 /// [`measure`] with the sensor's active alignment and transfer function from the table.
+/// docs/tables.md (alignment table).
 ///
 /// # Errors
 /// As [`measure`].
@@ -195,6 +222,7 @@ pub fn measure_sensor(
 
 /// Convert and validate one Sun sensor sample with the sensor's `M_AS` (table rows) and
 /// transfer coefficients `[c0..c5]`.
+/// algorithms.md §4.
 ///
 /// # Errors
 /// The first failed check, see [`FssReject`].

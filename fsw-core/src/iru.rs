@@ -1,4 +1,4 @@
-//! # DRIRU II pulse integration (paper eq. 5; algorithms.md §5)
+//! # DRIRU II pulse integration (paper: DRIRU II and `G`; algorithms.md §5)
 //!
 //! The DRIRU II has three dual-axis gyros, i.e. six rate-integrating channels X1, X2, Y1, Y2,
 //! Z1, Z2 (channel indices 0..=5, [`crate::raw::IRU_CHANNEL_NAMES`]). Each channel emits one
@@ -12,15 +12,15 @@
 //!
 //! ## Equations
 //!
-//! * Count difference with 16-bit wrap (algorithms.md §5.2):
+//! * Count difference with 16-bit wrap (algorithms.md §5 item 2):
 //!   `ΔN = (N_k − N_{k−1}) mod 2¹⁶` read as `i16`, valid while `|ΔN_true| < 2¹⁵` per cycle
 //!   (0.45 °/s at 0.05″/pulse, 7.3 °/s at 0.8″/pulse for a 1-s cycle).
-//! * Angle increment in ACS (paper eq. 5, algorithms.md §5.3):
+//! * Angle increment in ACS (paper `G` and pulse weights; algorithms.md §5 item 3):
 //!   `Δθ_acs = G · diag(k) · w · ΔN` with `G` and `k` of the active configuration
 //!   ([`IruTable`]) and `w` the pulse weight of the rate mode **of the interval that ended**
 //!   ([`IruSample::high_rate`]). Because the hardware reports the mode of the interval that
 //!   produced the pulses, a mode switch commanded in cycle `k` is applied to exactly the
-//!   pulses it affected and adds no error (§5.4); no sample straddles a switch.
+//!   pulses it affected and adds no error (algorithms.md §5 item 4); no sample straddles a switch.
 //! * The calibrated increment `(I + ΔM)Δθ − b̂Δt` is formed by the filter
 //!   ([`crate::mekf::Mekf::propagate`]); this module only converts counts.
 //!
@@ -38,7 +38,7 @@
 //! [`IruOutput::delta_theta_acs_rad`] is `None` and the executive decides (propagate with
 //! the bias only, or switch configuration). Unwrapped `i64` running totals are kept per
 //! channel (pulses, whatever the mode) for telemetry and for interval-based calibration
-//! (§5.5: quantization then enters only at the interval ends).
+//! (algorithms.md §5 item 5: quantization then enters only at the interval ends).
 
 use crate::raw::{IruSample, IRU_CHANNELS};
 use crate::tables::types::{matrix_from_rows, IruTable};
@@ -46,6 +46,7 @@ use crate::units::RAD_PER_ARCSEC;
 use nalgebra::{Matrix3, Vector3};
 
 /// The two channels of each axis (X1/X2, Y1/Y2, Z1/Z2): one of each triad, same input axis.
+/// Paper: DRIRU II, three dual-axis gyros.
 pub const AXIS_PAIRS: [(usize, usize); 3] = [(0, 1), (2, 3), (4, 5)];
 
 /// Pair cross-check threshold, arcsec per cycle: a channel whose counter did not move while
@@ -57,26 +58,33 @@ pub const AXIS_PAIRS: [(usize, usize); 3] = [(0, 1), (2, 3), (4, 5)];
 /// found after `stuck_cycles` (120 s): 3° of attitude error, outside the star
 /// identification window, from which the OBC does not recover (issue 7,
 /// `scenarios/faults/iru-stuck-channel-mid-slew.toml`).
+/// Project choice (not in the paper); bias size from the paper's high-rate biases (~1e-4 °/s).
 pub const PAIR_STUCK_ARCSEC: f64 = 20.0;
 
 /// Bit of each channel in the health masks, channel order X1, X2, Y1, Y2, Z1, Z2.
+/// docs/icd.md §3.2 (offset 172) and §3.3 (event 0x0204).
 pub const CHANNEL_BITS: [u8; IRU_CHANNELS] = [0x01, 0x02, 0x04, 0x08, 0x10, 0x20];
 /// All six channel bits.
+/// docs/icd.md §3.2 (offset 172).
 pub const ALL_CHANNELS_MASK: u8 = 0x3F;
 
 /// Which three DRIRU II channels feed the attitude.
+/// Paper: primary X2, Y1, Z1; backup X1, Y2, Z2.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum IruConfiguration {
     /// X2, Y1, Z1 (channel indices 1, 2, 4).
+    /// Paper: primary configuration.
     #[default]
     Primary,
     /// X1, Y2, Z2 (channel indices 0, 3, 5).
+    /// Paper: backup configuration.
     Backup,
 }
 
 impl IruConfiguration {
     /// Channel indices of the X, Y, Z inputs.
+    /// Paper: primary X2, Y1, Z1; backup X1, Y2, Z2 (docs/icd.md §3.1 order).
     #[must_use]
     pub const fn channels(self) -> [usize; 3] {
         match self {
@@ -86,6 +94,7 @@ impl IruConfiguration {
     }
 
     /// Telemetry/event code: 0 primary, 1 backup.
+    /// docs/icd.md §3.2 (offset 106) and §3.3 (event 0x0202).
     #[must_use]
     pub const fn code(self) -> u32 {
         match self {
@@ -95,6 +104,7 @@ impl IruConfiguration {
     }
 
     /// Health-mask bits of the three selected channels.
+    /// docs/icd.md §3.2 (offset 172).
     #[must_use]
     pub const fn channel_mask(self) -> u8 {
         match self {
@@ -104,6 +114,7 @@ impl IruConfiguration {
     }
 
     /// `G` of this configuration (unitless).
+    /// Paper: `G`, the prelaunch IRU alignment/scale-factor matrix (docs/tables.md Table 2: IRU).
     #[must_use]
     pub fn g(self, table: &IruTable) -> Matrix3<f64> {
         match self {
@@ -113,6 +124,7 @@ impl IruConfiguration {
     }
 
     /// Scale factors `k` of this configuration's X, Y, Z channels (unitless).
+    /// docs/tables.md (IRU table, `k`); project choice (not in the paper): 1 at boot.
     #[must_use]
     pub fn scale_factors(self, table: &IruTable) -> [f64; 3] {
         match self {
@@ -123,6 +135,7 @@ impl IruConfiguration {
 }
 
 /// Pulse weight (rad per pulse) of a rate mode.
+/// Paper: DRIRU II 0.05″/pulse low rate, 0.8″/pulse high rate.
 #[must_use]
 pub fn pulse_weight_rad(high_rate: bool, table: &IruTable) -> f64 {
     let arcsec = if high_rate {
@@ -134,7 +147,7 @@ pub fn pulse_weight_rad(high_rate: bool, table: &IruTable) -> f64 {
 }
 
 /// `Δθ_acs = G · diag(k) · w · ΔN` (rad) for count differences of the X, Y, Z channels of
-/// `config`, all taken in one rate mode. Also usable for interval totals (§5.5).
+/// `config`, all taken in one rate mode. Also usable for interval totals (algorithms.md §5 item 5).
 #[must_use]
 pub fn delta_theta_from_pulses(
     delta_pulses_xyz: &[f64; 3],
@@ -150,19 +163,24 @@ pub fn delta_theta_from_pulses(
 }
 
 /// Per-channel health, bit `i` = channel `i` (X1, X2, Y1, Y2, Z1, Z2).
+/// docs/icd.md §3.3 (event 0x0201 reason bits).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct ChannelHealth {
     /// Built-in-test failure reported by the hardware.
+    /// docs/icd.md §3.1 (IRU BIT bits, offset 12).
     pub failed: u8,
     /// `|ΔN|` above the table's saturation threshold this cycle.
+    /// docs/tables.md (IRU table, `saturation_pulses_per_cycle`).
     pub saturated: u8,
     /// Counter unchanged for at least the table's stuck-cycle count.
+    /// docs/tables.md (IRU table, `stuck_cycles`); see also [`PAIR_STUCK_ARCSEC`].
     pub stuck: u8,
 }
 
 impl ChannelHealth {
     /// Channels that must not be used this cycle.
+    /// Project choice (not in the paper): failed, saturated or stuck.
     #[must_use]
     pub const fn unusable(&self) -> u8 {
         self.failed | self.saturated | self.stuck
@@ -170,22 +188,29 @@ impl ChannelHealth {
 }
 
 /// Result of one IRU cycle.
+/// algorithms.md §5.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct IruOutput {
     /// Angle increment over the interval that ended, ACS axes (rad). `None` on the first
     /// sample after (re)initialisation, when a selected channel is unusable, or when the
     /// result is not finite.
+    /// Paper `G`; algorithms.md §5 item 3.
     pub delta_theta_acs_rad: Option<Vector3<f64>>,
     /// Count differences of all six channels this cycle (0 on the first sample).
+    /// algorithms.md §5 item 2.
     pub delta_counts: [i16; IRU_CHANNELS],
     /// Health of all six channels.
+    /// docs/icd.md §3.3 (event 0x0201).
     pub health: ChannelHealth,
     /// All three selected channels usable (health only: also true on the first sample, whose
     /// increment is `None` for lack of a previous count).
+    /// Project choice (not in the paper): lets the executive switch configuration.
     pub selected_usable: bool,
     /// Rate mode of the interval that ended (copied from the sample).
+    /// docs/icd.md §3.1 (offset 13); algorithms.md §5 item 4.
     pub high_rate: bool,
     /// Configuration used.
+    /// Paper: primary or backup configuration.
     pub configuration: IruConfiguration,
 }
 
@@ -207,10 +232,13 @@ impl defmt::Format for IruOutput {
 }
 
 /// Exclusion reason bit: built-in-test failure.
+/// docs/icd.md §3.3 (event 0x0201, p2 bit 1).
 pub const EXCLUDED_FAILED: u32 = 0x1;
 /// Exclusion reason bit: saturated this cycle.
+/// docs/icd.md §3.3 (event 0x0201, p2 bit 2).
 pub const EXCLUDED_SATURATED: u32 = 0x2;
 /// Exclusion reason bit: stuck.
+/// docs/icd.md §3.3 (event 0x0201, p2 bit 4).
 pub const EXCLUDED_STUCK: u32 = 0x4;
 
 /// What the last processed sample produced (for [`IruIntegrator::reprocess`]).
@@ -224,6 +252,7 @@ struct LastCycle {
 }
 
 /// Pulse-count integrator: remembers the previous counters and per-channel state.
+/// algorithms.md §5 (items 1, 2, 5).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct IruIntegrator {
@@ -262,6 +291,7 @@ fn output_for(last: &LastCycle, config: IruConfiguration, table: &IruTable) -> I
 
 impl IruIntegrator {
     /// A fresh integrator: the next sample only initialises it.
+    /// Project choice (not in the paper): no increment until two samples exist.
     #[must_use]
     pub const fn new() -> Self {
         Self {
@@ -283,6 +313,7 @@ impl IruIntegrator {
     }
 
     /// Forget the previous sample (e.g. after an IRU power cycle); totals are kept.
+    /// Project choice (not in the paper): totals stay continuous for ground calibration.
     pub fn reset(&mut self) {
         self.initialised = false;
         self.unchanged_cycles = [0; IRU_CHANNELS];
@@ -290,12 +321,14 @@ impl IruIntegrator {
     }
 
     /// Has a previous sample.
+    /// algorithms.md §5 item 2 (a difference needs two samples).
     #[must_use]
     pub const fn is_initialized(&self) -> bool {
         self.initialised
     }
 
     /// Channels unusable in the last processed sample (bit `i` = channel `i`).
+    /// docs/icd.md §3.2 (offset 172).
     #[must_use]
     pub const fn excluded_mask(&self) -> u8 {
         self.last.health.unusable()
@@ -304,6 +337,7 @@ impl IruIntegrator {
     /// Why channel `channel` was unusable in the last sample: a combination of
     /// [`EXCLUDED_FAILED`], [`EXCLUDED_SATURATED`], [`EXCLUDED_STUCK`] (0 = usable or no such
     /// channel).
+    /// docs/icd.md §3.3 (event 0x0201, p2).
     #[must_use]
     pub fn exclusion_reason(&self, channel: usize) -> u32 {
         let Some(&bit) = CHANNEL_BITS.get(channel) else {
@@ -325,12 +359,14 @@ impl IruIntegrator {
 
     /// The last sample's output again, for another configuration (all six counters are
     /// tracked every cycle, so switching to the backup channels loses no interval).
+    /// Paper: primary/backup configurations; project choice: no lost interval on a switch.
     #[must_use]
     pub fn reprocess(&self, config: IruConfiguration, table: &IruTable) -> IruOutput {
         output_for(&self.last, config, table)
     }
 
     /// Unwrapped running totals of pulses per channel (any mode) since construction.
+    /// algorithms.md §5 item 2 (unwrapped `i64` totals).
     #[must_use]
     pub const fn totals_pulses(&self) -> [i64; IRU_CHANNELS] {
         self.totals_pulses
@@ -338,6 +374,7 @@ impl IruIntegrator {
 
     /// Process one sample: count differences, channel health, and the ACS angle increment
     /// of the selected configuration over the interval that ended at this sample.
+    /// algorithms.md §5 items 2–4.
     pub fn process(
         &mut self,
         sample: &IruSample,

@@ -9,7 +9,7 @@
 //! * `φ = Δθ − b̂ Δt` (Δθ from [`crate::iru`]; the ground calibration `(I + ΔM)` is already in
 //!   the table's `G`).
 //! * `q̂ ← δq(φ) ⊗ q̂`, `δq(φ) = [sin(φ/2) φ/|φ|; cos(φ/2)]`: the exact rotation-vector update
-//!   (§5.6). `b̂` is constant.
+//!   (algorithms.md §5 item 6). `b̂` is constant.
 //! * With `K = [φ×]`: `Φ₁₁ = Rot(φ) = I − (sin φ/φ) K + ((1 − cos φ)/φ²) K²`,
 //!   `Φ₁₂ = −Δt (I − ((1 − cos φ)/φ²) K + ((φ − sin φ)/φ³) K²)`, `Φ₂₁ = 0`, `Φ₂₂ = I`
 //!   (algorithms.md §2, rewritten in `φ = ω̂Δt`).
@@ -62,60 +62,81 @@ const SERIES_LIMIT_RAD: f64 = 0.01;
 /// sensor is far inside this (a 1° prior and a 0.1″ star give 1.3e9), but a near-zero σ
 /// would push an eigenvalue of `P` below the rounding level of its largest one (ε‖P‖) and
 /// `P` would lose definiteness; `R` is raised to the floor instead.
+/// Project choice (not in the paper): a numerical floor, not a sensor model.
 pub const MAX_VARIANCE_REDUCTION: f64 = 1.0e10;
 /// Longest accepted propagation step, s.
+/// Project choice (not in the paper): bounds the first-order `Q` of algorithms.md §2.
 pub const MAX_PROPAGATION_STEP_S: f64 = 10.0;
 /// Largest accepted gyro increment in one step, rad (well above 2¹⁵ high-rate pulses).
+/// Project choice (not in the paper): above any rate of the paper's 0.8″/pulse high-rate mode.
 pub const MAX_DELTA_THETA_RAD: f64 = 0.5;
 /// TRIAD: smallest accepted angle between the two vectors of a pair, rad (2°).
+/// Project choice (not in the paper): TRIAD (Shuster & Oh 1981) degrades as sin of the angle.
 pub const TRIAD_MIN_SEPARATION_RAD: f64 = 2.0 * crate::units::RAD_PER_DEG;
 /// TRIAD: largest accepted difference between the body and reference separations, rad (0.5°).
+/// Project choice (not in the paper): catches a misidentified pair before it seeds the filter.
 pub const TRIAD_CONSISTENCY_RAD: f64 = 0.5 * crate::units::RAD_PER_DEG;
 
 /// Why a filter operation did not change the state.
+/// Project choice (not in the paper): errors instead of panics in the flight core.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum MekfError {
     /// An input is not finite or out of its range.
+    /// Project choice (not in the paper): NaN input is refused.
     InvalidInput,
     /// TRIAD: a pair of vectors is (nearly) collinear.
+    /// TRIAD needs two non-parallel vectors (Shuster & Oh 1981).
     Collinear,
     /// TRIAD: the body and reference separations disagree by more than
     /// [`TRIAD_CONSISTENCY_RAD`].
+    /// Project choice (not in the paper): the angle between two vectors is attitude-independent (algorithms.md §6).
     Inconsistent,
     /// The covariance became non-finite or lost a positive diagonal (state unchanged).
+    /// Joseph-form checks of algorithms.md §2.
     NumericalFault,
 }
 
 /// Why a measurement update was not applied.
+/// docs/icd.md §3.2 (residual status).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum UpdateRejection {
     /// A measurement, reference, σ or gate is not finite / out of range.
+    /// docs/icd.md §3.2 (status 3).
     InvalidInput,
     /// The prediction is unusable: behind the sensor, or more than 90° from the measurement.
+    /// Project choice (not in the paper): the linearisation of algorithms.md §2 is invalid there.
     Geometry,
     /// `νᵀS⁻¹ν` above the gate.
+    /// docs/icd.md §3.2 (status 2); gate per algorithms.md §2.
     Gated,
     /// `S` not positive definite.
+    /// algorithms.md §2 (`S = HPHᵀ + R`).
     Singular,
     /// The updated covariance failed its checks.
+    /// Joseph-form checks of algorithms.md §2.
     NumericalFault,
 }
 
 /// Result of one measurement update.
+/// algorithms.md §2 (vector measurement update).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct UpdateOutcome {
     /// The update was applied.
+    /// docs/icd.md §3.2 (status 1).
     pub accepted: bool,
     /// Innovation, rad: the two components perpendicular to the predicted vector
     /// ([`Mekf::update_vector`]) or `(H − Ĥ, V − V̂)` ([`Mekf::update_focal_plane`]).
     /// Zero if the input was invalid.
+    /// `ν` of algorithms.md §2; telemetry docs/icd.md §3.2.
     pub innovation_rad: [f64; 2],
     /// Normalised innovation squared `νᵀS⁻¹ν` (NaN if not computed).
+    /// algorithms.md §2 (`S` and `ν`).
     pub nis: f64,
     /// Why it was not applied.
+    /// docs/icd.md §3.2 (residual status).
     pub rejection: Option<UpdateRejection>,
 }
 
@@ -131,27 +152,36 @@ impl UpdateOutcome {
 }
 
 /// Update statistics (saturating counters).
+/// docs/icd.md §3.2 (counters).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct UpdateCounters {
     /// Updates applied.
+    /// docs/icd.md §3.2 (accepted measurements).
     pub accepted: u32,
     /// Updates rejected by the χ² gate.
+    /// docs/icd.md §3.2 (gated measurements).
     pub gated: u32,
     /// Updates rejected for any other reason.
+    /// docs/icd.md §3.2 (rejected inputs).
     pub other_rejections: u32,
 }
 
 /// The filter state.
+/// Lefferts, Markley & Shuster 1982 MEKF as in algorithms.md §2.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Mekf {
     /// Attitude estimate, ACS from ECI.
+    /// `q̂` of algorithms.md §2 (docs/conventions.md).
     pub q_acs_from_eci: Quat,
     /// Gyro bias estimate, ACS, rad/s.
+    /// `b̂` of algorithms.md §2.
     pub bias_rad_per_s: Vector3<f64>,
     /// Error-state covariance, `[δθ (rad); δb (rad/s)]`.
+    /// `P` of algorithms.md §2.
     pub covariance: Matrix6<f64>,
     /// Update statistics.
+    /// docs/icd.md §3.2 (counters).
     pub counters: UpdateCounters,
 }
 
@@ -204,6 +234,7 @@ fn rotation_coefficients(angle: f64) -> (f64, f64, f64, f64, f64) {
 }
 
 /// Quaternion of `Rot(v)` (series for small angles, no trig below 0.01 rad).
+/// `δq(φ)` of algorithms.md §2 (series below 1e-8 rad there; this cut is a project choice).
 #[must_use]
 pub fn quat_from_small_rotation(v: &Vector3<f64>) -> Quat {
     let a2 = v.norm_squared();
@@ -242,6 +273,7 @@ fn columns(a: &Vector3<f64>, b: &Vector3<f64>, c: &Vector3<f64>) -> Matrix3<f64>
 
 /// TRIAD attitude (ACS from ECI) from two body/reference pairs; the first pair is matched
 /// exactly, the second only fixes the rotation about it.
+/// TRIAD (Shuster & Oh 1981; Markley & Crassidis 2014).
 ///
 /// # Errors
 /// [`MekfError::InvalidInput`] (not finite / zero), [`MekfError::Collinear`] (pair closer than
@@ -282,6 +314,7 @@ pub fn triad(
 /// Direction measured `offset_s` seconds before the filter time, moved to the filter time
 /// with the body rate: `b(t) = Rot(ω τ) b(t − τ)` (for [`crate::tables::SensorCorrections`]
 /// `time_offset_s`).
+/// Latency effect 1 of algorithms.md §9; `time_offset_s` of docs/tables.md (alignment table).
 #[must_use]
 pub fn compensate_time_offset(
     dir_acs: &Vector3<f64>,
@@ -309,6 +342,7 @@ fn initial_covariance(attitude_sigma_rad: f64, bias_sigma_rad_per_s: f64) -> Mat
 impl Mekf {
     /// Identity attitude, zero bias, the boot table's initial covariance: a placeholder until
     /// one of the `initialize*` methods is called.
+    /// Project choice (not in the paper): a defined state before initialisation.
     #[must_use]
     pub fn new() -> Self {
         let t = FilterTable::default_boot();
@@ -324,6 +358,7 @@ impl Mekf {
     }
 
     /// Start from a known attitude with zero bias and the table's initial σ.
+    /// algorithms.md §2 ("Reference state").
     ///
     /// # Errors
     /// [`MekfError::InvalidInput`] (state unchanged) for a non-finite or zero quaternion or
@@ -337,6 +372,7 @@ impl Mekf {
     }
 
     /// Start from a known attitude and bias (e.g. the last good bias before a reset).
+    /// algorithms.md §2 ("Reference state").
     ///
     /// # Errors
     /// [`MekfError::InvalidInput`] (state unchanged) for a non-finite or zero quaternion,
@@ -370,6 +406,7 @@ impl Mekf {
     /// Start with no prior attitude from two simultaneous vector pairs (TRIAD, [`triad`]):
     /// body (ACS) measurements `b1`, `b2` of reference (ECI) directions `r1`, `r2`. Put the more
     /// accurate pair first (e.g. a star, then the Sun). The bias is reset to zero.
+    /// TRIAD (Shuster & Oh 1981) when no attitude is known.
     ///
     /// # Errors
     /// As [`triad`] and [`Mekf::initialize`] (state unchanged).
@@ -386,6 +423,7 @@ impl Mekf {
     }
 
     /// Keep the estimate, reopen the covariance to the table's initial values.
+    /// Project choice (not in the paper): the ground's "filter reset" command (docs/icd.md §3.3).
     ///
     /// # Errors
     /// [`MekfError::InvalidInput`] (state unchanged) for invalid table σ.
@@ -408,6 +446,7 @@ impl Mekf {
     /// `scenarios/faults/iru-channel-failure-mid-slew.toml`). Reopened, `P_bb` grows `P_θθ`
     /// through propagation at the rate the bias error can move the attitude, so the next star
     /// updates are accepted and re-estimate the bias.
+    /// Project choice (not in the paper): bias jumps after an IRU switch (algorithms.md §2 `P`).
     ///
     /// # Errors
     /// [`MekfError::InvalidInput`] (state unchanged) for an invalid table σ.
@@ -429,6 +468,7 @@ impl Mekf {
     }
 
     /// Attitude 1σ per axis, rad.
+    /// `√diag P₁₁` of algorithms.md §2.
     #[must_use]
     pub fn attitude_sigma_rad(&self) -> Vector3<f64> {
         let p = &self.covariance;
@@ -440,6 +480,7 @@ impl Mekf {
     }
 
     /// Bias 1σ per axis, rad/s.
+    /// `√diag P₂₂` of algorithms.md §2.
     #[must_use]
     pub fn bias_sigma_rad_per_s(&self) -> Vector3<f64> {
         let p = &self.covariance;
@@ -452,6 +493,7 @@ impl Mekf {
 
     /// Bias-corrected body rate over a step, `Δθ/Δt − b̂` (rad/s), for the controller;
     /// `None` for a non-positive or non-finite step.
+    /// `ω̂ = φ/Δt` of algorithms.md §2.
     #[must_use]
     pub fn corrected_rate_rad_per_s(
         &self,
@@ -466,6 +508,7 @@ impl Mekf {
     }
 
     /// Propagate over one step with the gyro increment `Δθ` (ACS, rad) measured over `dt_s`.
+    /// algorithms.md §2 ("Propagation with gyro increments"; Farrenkopf `Q`).
     ///
     /// # Errors
     /// [`MekfError::InvalidInput`] (state unchanged) for non-finite input, `dt_s` outside
@@ -532,6 +575,7 @@ impl Mekf {
 
     /// Unit-vector update (drops the along-vector component): measured direction in ACS,
     /// reference direction in ECI, σ per perpendicular axis (rad), χ² gate.
+    /// algorithms.md §2 ("Vector measurement update"; Joseph form).
     pub fn update_vector(
         &mut self,
         meas_dir_acs: &Vector3<f64>,
@@ -564,6 +608,7 @@ impl Mekf {
 
     /// FHST focal-plane update: corrected measured angles `(H, V)` (rad), reference star
     /// direction (ECI), the tracker's `M_AS`, σ per axis (rad), χ² gate.
+    /// algorithms.md §2 with the focal-plane form of algorithms.md §3.1.
     pub fn update_focal_plane(
         &mut self,
         h_rad: f64,

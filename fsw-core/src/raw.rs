@@ -12,10 +12,13 @@
 use serde::{Deserialize, Serialize};
 
 /// Number of DRIRU II channels.
+/// Paper: DRIRU II, three dual-axis gyros = 6 channels.
 pub const IRU_CHANNELS: usize = 6;
 /// Channel order used everywhere (arrays, telemetry): X1, X2, Y1, Y2, Z1, Z2.
+/// Paper channel names; order per docs/icd.md §3.1.
 pub const IRU_CHANNEL_NAMES: [&str; IRU_CHANNELS] = ["X1", "X2", "Y1", "Y2", "Z1", "Z2"];
 /// Number of temperature sensors in the raw frame: FHST1, FHST2, FSS1, FSS2, IRU baseplate.
+/// docs/icd.md §3.1 (offset 38); the paper gives no temperatures (project choice, for thermal-drift studies).
 pub const TEMPERATURE_SENSORS: usize = 5;
 
 /// Spacecraft time: CCSDS unsegmented time code (CUC), 4 octets of seconds and 2 of
@@ -24,6 +27,7 @@ pub const TEMPERATURE_SENSORS: usize = 5;
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct TimeTag {
     /// Whole seconds since 1958-01-01 TAI.
+    /// CCSDS 301.0-B-4 CUC, 4 octets coarse (docs/icd.md §2).
     pub coarse_s: u32,
     /// Fraction of a second in units of 2⁻¹⁶ s.
     pub fine: u16,
@@ -35,12 +39,14 @@ pub const TAI1958_S_AT_J2000_TT: f64 = 15_340.0 * 86_400.0 + 43_200.0 - 32.184;
 
 impl TimeTag {
     /// Seconds since 1958-01-01 TAI as `f64` (exact to 2⁻¹⁶ s for the next century).
+    /// CCSDS 301.0-B-4 CUC epoch 1958 TAI (docs/conventions.md "Time").
     #[must_use]
     pub fn seconds(&self) -> f64 {
         f64::from(self.coarse_s) + f64::from(self.fine) / 65_536.0
     }
 
     /// The time tag nearest to `seconds` since 1958-01-01 TAI; `None` if out of range or not finite.
+    /// CCSDS 301.0-B-4 CUC, fine part 2⁻¹⁶ s (docs/icd.md §2).
     #[must_use]
     pub fn from_seconds(seconds: f64) -> Option<Self> {
         if !(0.0..4_294_967_295.0).contains(&seconds) {
@@ -58,6 +64,7 @@ impl TimeTag {
     }
 
     /// Seconds since J2000.0 TT (the argument of the onboard Sun ephemeris).
+    /// docs/conventions.md "Time"; J2000.0 = 1958 epoch + 42 years less 32.184 s TT−TAI (IAU).
     #[must_use]
     pub fn seconds_since_j2000_tt(&self) -> f64 {
         self.seconds() - TAI1958_S_AT_J2000_TT
@@ -65,69 +72,93 @@ impl TimeTag {
 }
 
 /// One DRIRU II sample: the six accumulated pulse counters, read at the cycle boundary.
+/// Paper: DRIRU II; word layout docs/icd.md §3.1.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct IruSample {
     /// Accumulated pulse counters (16-bit, wrapping), channel order X1, X2, Y1, Y2, Z1, Z2.
+    /// docs/icd.md §3.1 (16-bit counter width is a project choice; the paper does not give it).
     pub counts: [u16; IRU_CHANNELS],
     /// Built-in-test failure bits, bit `i` = channel `i` reports a failure.
+    /// docs/icd.md §3.1 (offset 12).
     pub channel_failed: u8,
     /// Rate mode in effect during the interval that *ended* at this sample:
     /// `true` = high rate (0.8 arcsec/pulse), `false` = low rate (0.05 arcsec/pulse).
+    /// Paper: DRIRU II 0.05″/pulse low rate, 0.8″/pulse high rate; docs/icd.md §3.1.
     pub high_rate: bool,
 }
 
 /// FHST status flag: the data words hold a valid star measurement.
+/// docs/icd.md §3.1 (offset 20, bit0).
 pub const FHST_FLAG_VALID: u8 = 0x01;
 /// FHST status flag: the tracker is in track (not searching).
+/// docs/icd.md §3.1 (offset 20, bit1).
 pub const FHST_FLAG_TRACKING: u8 = 0x02;
 /// FHST status flag: the star tracked now is a different star from the previous sample
 /// (a new acquisition).
+/// docs/icd.md §3.1 (bit2); the paper: an FHST tracks one star at a time.
 pub const FHST_FLAG_NEW_STAR: u8 = 0x04;
 
 /// One fixed-head star tracker sample (one star at a time).
+/// Paper: NASA standard FHST, two units, 8° FOV; layout docs/icd.md §3.1.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct FhstSample {
     /// Horizontal focal-plane coordinate, 7.78 arcsec per count, 0 at the boresight.
+    /// Paper: FHST resolution 7.78″/count.
     pub h_counts: i16,
     /// Vertical focal-plane coordinate, 7.78 arcsec per count, 0 at the boresight.
+    /// Paper: FHST resolution 7.78″/count.
     pub v_counts: i16,
     /// Instrument magnitude in units of 0.01 mag.
+    /// docs/icd.md §3.1 (Hp-like instrument magnitude, docs/conventions.md); paper range 2.0–5.7.
     pub magnitude_centimag: i16,
     /// Status bits `FHST_FLAG_*`.
+    /// docs/icd.md §3.1.
     pub flags: u8,
 }
 
 /// FSS status flag: Sun presence on the α head.
+/// docs/icd.md §3.1 (offset 32, bit0).
 pub const FSS_FLAG_SUN_ALPHA: u8 = 0x01;
 /// FSS status flag: Sun presence on the β head.
+/// docs/icd.md §3.1 (offset 32, bit1).
 pub const FSS_FLAG_SUN_BETA: u8 = 0x02;
 
 /// One fine Sun sensor sample: two orthogonal single-axis heads.
+/// Paper: Adcole FSS, two units with two orthogonal heads each; layout docs/icd.md §3.1.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct FssSample {
     /// α head angle, 0.004° per count, 0 at the boresight: α = atan2(s_x, s_z).
+    /// Paper: FSS resolution about 0.004°/count; geometry algorithms.md §4.
     pub alpha_counts: i16,
     /// β head angle, 0.004° per count, 0 at the boresight: β = atan2(s_y, s_z).
+    /// Paper: FSS resolution about 0.004°/count; geometry algorithms.md §4.
     pub beta_counts: i16,
     /// Status bits `FSS_FLAG_*`.
+    /// docs/icd.md §3.1.
     pub flags: u8,
 }
 
 /// Everything the OBC reads from its sensors in one cycle.
+/// APID 0x010, docs/icd.md §3.1.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct RawSensorFrame {
     /// Time at which all sensors were sampled.
+    /// docs/icd.md §3.1 (the packet's CUC time code).
     pub time: TimeTag,
     /// Gyro counters.
+    /// docs/icd.md §3.1.
     pub iru: IruSample,
     /// FHST1, FHST2.
+    /// Paper: two FHSTs; docs/icd.md §3.1.
     pub fhst: [FhstSample; 2],
     /// FSS1, FSS2.
+    /// Paper: two FSSs; docs/icd.md §3.1.
     pub fss: [FssSample; 2],
     /// Temperatures in 0.01 °C: FHST1, FHST2, FSS1, FSS2, IRU baseplate.
+    /// docs/icd.md §3.1 (offset 38).
     pub temperatures_centi_c: [i16; TEMPERATURE_SENSORS],
 }

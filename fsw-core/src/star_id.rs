@@ -31,38 +31,50 @@ use crate::units::RAD_PER_ARCSEC;
 use nalgebra::Vector3;
 
 /// An identified star.
+/// algorithms.md §3.2 step 5.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct StarMatch {
     /// The catalog entry (mean direction; the caller applies aberration for the reference).
+    /// docs/tables.md (star catalog table); aberration per algorithms.md §3.3.
     pub star: CatalogStar,
     /// Index in the catalog table.
+    /// docs/tables.md (star catalog table); telemetry docs/icd.md §3.2.
     pub catalog_index: u16,
     /// Angle between the observation (in inertial axes) and the catalog star, rad.
+    /// algorithms.md §3.2 step 4 (`∠(r_obs, r_c)`).
     pub separation_rad: f64,
     /// Observed minus catalog magnitude, mag.
+    /// algorithms.md §3.2 step 4 (`|m_obs − m_c|`).
     pub magnitude_difference: f64,
 }
 
 /// Why no star was identified.
+/// algorithms.md §3.2.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum StarIdError {
     /// The catalog table is empty.
+    /// docs/icd.md §3.3 (event 0x0402, p2 = 3).
     NoCatalog,
     /// Observation, magnitude, attitude or window not finite / not usable.
+    /// Project choice (not in the paper): NaN input is refused.
     InvalidInput,
     /// No catalog star in the window.
+    /// algorithms.md §3.2 step 5; docs/icd.md §3.3 (event 0x0402, p2 = 1).
     NoMatch,
     /// More than one candidate.
+    /// algorithms.md §3.2 step 5 ("exactly one"); docs/icd.md §3.3 (p2 = 2).
     Ambiguous {
         /// Number of candidates (saturating at 255).
+        /// Project choice (not in the paper): evidence for the event log.
         candidates: u8,
     },
 }
 
 impl StarIdError {
     /// Event/telemetry code: 1 no match, 2 ambiguous, 3 no catalog, 4 invalid input.
+    /// docs/icd.md §3.3 (event 0x0402).
     #[must_use]
     pub const fn code(self) -> u8 {
         match self {
@@ -75,17 +87,21 @@ impl StarIdError {
 }
 
 /// Window and magnitude tolerance of the identification.
+/// algorithms.md §3.2 step 4.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct StarIdWindow {
     /// Match window ε, rad (0 < ε < 0.5).
+    /// algorithms.md §3.2 step 4 (`ε = k √(σ_st² + λ_max(P_θ))`, here a table constant).
     pub window_rad: f64,
     /// Magnitude tolerance Δm, mag.
+    /// algorithms.md §3.2 step 4 (Δm, typically 0.5–1 mag).
     pub magnitude_tolerance: f64,
 }
 
 impl StarIdWindow {
     /// From the filter table.
+    /// docs/tables.md (filter table: `star_id_window_arcsec`, `star_id_magnitude_tolerance`).
     #[must_use]
     pub fn from_table(filter: &FilterTable) -> Self {
         Self {
@@ -96,6 +112,7 @@ impl StarIdWindow {
 }
 
 /// Identify an observed star with the table's window and magnitude tolerance.
+/// algorithms.md §3.2 (direct match).
 ///
 /// * `obs_dir_acs`: measured direction in ACS (unit or near-unit).
 /// * `obs_magnitude`: instrument magnitude.
@@ -120,6 +137,7 @@ pub fn identify(
 }
 
 /// [`identify`] with an explicit window.
+/// algorithms.md §3.2 (direct match).
 ///
 /// # Errors
 /// [`StarIdError`].

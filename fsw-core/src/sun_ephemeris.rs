@@ -59,15 +59,20 @@ const GEOCENTRE_OFFSET_AU: f64 = 4671.0 / 149_597_870.7;
 const PRECESSION_RAD_PER_CENTURY: f64 = 5_028.796_195 * RAD_PER_ARCSEC;
 
 /// Sun ephemeris result, J2000/ICRS axes.
+/// Standish JPL mean elements (module docs); algorithms.md §3.3 ("Sun vector").
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SunState {
     /// Apparent geocentric Sun direction (unit; annual aberration applied).
+    /// Aberration per algorithms.md §3.3 (annual ≤ 20.5″).
     pub dir_eci: Vector3<f64>,
     /// Geometric geocentric Sun direction (unit).
+    /// Standish JPL mean elements (module docs).
     pub geometric_dir_eci: Vector3<f64>,
     /// Earth–Sun distance, au.
+    /// Standish JPL mean elements (module docs).
     pub distance_au: f64,
     /// Earth's heliocentric velocity over c (≈ barycentric to 0.01″), unitless.
+    /// `β` of algorithms.md §3.3.
     pub earth_velocity_over_c: Vector3<f64>,
 }
 
@@ -89,12 +94,15 @@ impl defmt::Format for SunState {
 }
 
 /// Why no ephemeris was produced.
+/// Project choice (not in the paper): errors instead of panics in the flight core.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum EphemerisError {
     /// Time not finite.
+    /// Project choice (not in the paper): NaN input is refused.
     NotFinite,
     /// Time outside 1950–2050, where the mean elements are not valid.
+    /// Validity span of the Standish JPL table 1 elements (module docs).
     OutOfRange,
 }
 
@@ -112,6 +120,7 @@ fn ecliptic_to_equatorial(v: &Vector3<f64>) -> Vector3<f64> {
 }
 
 /// Sun state at `t_s` seconds since J2000.0 TT.
+/// Standish JPL mean elements; algorithms.md §3.3.
 ///
 /// # Errors
 /// [`EphemerisError`] for a non-finite time or one outside 1950–2050.
@@ -172,6 +181,7 @@ pub fn sun_state(t_s_since_j2000_tt: f64) -> Result<SunState, EphemerisError> {
 }
 
 /// Apparent geocentric Sun direction (unit, J2000/ICRS) at `t_s` seconds since J2000 TT.
+/// algorithms.md §3.3 ("Sun vector": apparent direction).
 ///
 /// # Errors
 /// As [`sun_state`].
@@ -180,6 +190,7 @@ pub fn sun_dir_eci(t_s_since_j2000_tt: f64) -> Result<Vector3<f64>, EphemerisErr
 }
 
 /// Earth velocity over c (J2000/ICRS) at `t_s` seconds since J2000 TT, for annual aberration.
+/// algorithms.md §3.3 (`β = v/c`).
 ///
 /// # Errors
 /// As [`sun_state`].
@@ -190,6 +201,7 @@ pub fn earth_velocity_over_c(t_s_since_j2000_tt: f64) -> Result<Vector3<f64>, Ep
 /// Aberrate a unit direction by the observer velocity `β = v/c`:
 /// `u_app = (u + β)/|u + β|` (classical; first order `u + β − u(u·β)`, error O(β²) ≈ 2 mas).
 /// Returns `u` unchanged if the result is not finite.
+/// algorithms.md §3.3 ("First order" and relativistic forms).
 #[must_use]
 pub fn aberrate(u: &Vector3<f64>, beta: &Vector3<f64>) -> Vector3<f64> {
     let w = u + beta;
@@ -203,6 +215,7 @@ pub fn aberrate(u: &Vector3<f64>, beta: &Vector3<f64>) -> Vector3<f64> {
 
 /// Inverse of [`aberrate`] to first order: the mean direction whose apparent direction is
 /// `u_app`, `(u_app − β)/|u_app − β|` (error O(β²)).
+/// algorithms.md §3.3 (first-order form).
 #[must_use]
 pub fn unaberrate(u_app: &Vector3<f64>, beta: &Vector3<f64>) -> Vector3<f64> {
     aberrate(u_app, &(-beta))

@@ -20,62 +20,85 @@ use crate::raw::{FhstSample, FssSample, IruSample, RawSensorFrame, TimeTag};
 use serde::{Deserialize, Serialize};
 
 /// APID of the raw sensor frame.
+/// docs/icd.md §3.1.
 pub const APID_RAW_SENSORS: u16 = 0x010;
 /// APID of the OBC housekeeping (estimates, residuals, status).
+/// docs/icd.md §3.2.
 pub const APID_HOUSEKEEPING: u16 = 0x011;
 /// APID of event packets.
+/// docs/icd.md §3.3.
 pub const APID_EVENT: u16 = 0x012;
 /// APID of the definitive-orbit ephemeris record.
+/// docs/icd.md §3.4.
 pub const APID_EPHEMERIS: u16 = 0x020;
 
 /// CUC time code length (secondary header).
+/// CCSDS 301.0-B-4 CUC 4+2 octets (docs/icd.md §2).
 pub const TIME_CODE_LEN: usize = 6;
 /// Raw frame user data length (after the time code).
+/// docs/icd.md §3.1.
 pub const RAW_FRAME_LEN: usize = 48;
 /// Housekeeping user data length.
+/// docs/icd.md §3.2.
 pub const HOUSEKEEPING_LEN: usize = 230;
 /// Event user data length.
+/// docs/icd.md §3.3.
 pub const EVENT_LEN: usize = 10;
 /// Ephemeris user data length.
+/// docs/icd.md §3.4.
 pub const EPHEMERIS_LEN: usize = 48;
 
 /// Why a record could not be decoded or encoded.
+/// Project choice (not in the paper): decoding errors carry evidence (docs/icd.md §2).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum RecordError {
     /// Wrong length for the record.
+    /// docs/icd.md §2 (fixed user-data length per APID).
     Length {
         /// Octets expected.
+        /// docs/icd.md §3.
         expected: usize,
         /// Octets found.
+        /// docs/icd.md §3.
         found: usize,
     },
     /// An enumerated field holds an unknown value. `offset` is within the user data.
+    /// docs/icd.md §3 (enumerated octets).
     BadEnum {
         /// Octet offset of the field.
+        /// docs/icd.md §3.
         offset: usize,
     },
     /// The output buffer is too small.
+    /// Project choice (not in the paper): encoders never write past `out`.
     BufferTooSmall,
 }
 
 /// Status of one sensor's measurement in a cycle.
+/// Residual-block status, docs/icd.md §3.2.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[repr(u8)]
 pub enum MeasurementStatus {
     /// No measurement this cycle (sensor not valid / not present).
+    /// docs/icd.md §3.2 (status 0).
     #[default]
     None = 0,
     /// Used by the filter.
+    /// docs/icd.md §3.2 (status 1).
     Accepted = 1,
     /// Refused by the χ² gate.
+    /// docs/icd.md §3.2 (status 2); gate per algorithms.md §2.
     Gated = 2,
     /// Refused by input validation.
+    /// docs/icd.md §3.2 (status 3).
     Rejected = 3,
     /// FHST star not identified (unmatched or ambiguous), not used.
+    /// docs/icd.md §3.2 (status 4); star ID per algorithms.md §3.2.
     Unidentified = 4,
     /// Valid but not used (filter not initialised or no reference).
+    /// docs/icd.md §3.2 (status 5).
     NotUsed = 5,
 }
 
@@ -95,60 +118,83 @@ impl MeasurementStatus {
 
 /// One sensor's residual report: innovation before the update, in the sensor's two
 /// measured axes (FHST: H, V; FSS: α, β), arcsec, measured − predicted.
+/// Residual block of docs/icd.md §3.2.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct SensorResidual {
     /// What happened to the measurement.
+    /// docs/icd.md §3.2.
     pub status: MeasurementStatus,
     /// Innovation, arcsec (0 when no measurement).
+    /// docs/icd.md §3.2.
     pub innovation_arcsec: [f32; 2],
     /// Catalog id of the identified star (FHST), 0 otherwise.
+    /// docs/icd.md §3.2 (HIP number of the Hipparcos catalog).
     pub star_id: u32,
 }
 
 /// The OBC housekeeping record downlinked every cycle.
+/// APID 0x011, docs/icd.md §3.2.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct ObcHousekeeping {
     /// Cycle time.
+    /// docs/icd.md §3.2 (the packet's CUC time code).
     pub time: TimeTag,
     /// Estimated attitude `q_acs_from_eci` (scalar last).
+    /// docs/icd.md §3.2 (offset 0); convention algorithms.md §1.
     pub q_acs_from_eci: Quat,
     /// Estimated gyro bias in ACS, rad/s.
+    /// docs/icd.md §3.2 (offset 32); b of algorithms.md §2.
     pub bias_acs_rad_per_s: [f64; 3],
     /// Diagonal of the error covariance: δθ (rad²) then δb ((rad/s)²).
+    /// docs/icd.md §3.2 (offset 56); P of algorithms.md §2.
     pub covariance_diag: [f64; 6],
     /// Filter mode code ([`crate::executive::FilterMode`]).
+    /// docs/icd.md §3.2 (offset 104).
     pub filter_mode: u8,
     /// Control mode code ([`crate::executive::ControlMode`]).
+    /// docs/icd.md §3.2 (offset 105).
     pub control_mode: u8,
     /// IRU configuration: 0 primary, 1 backup.
+    /// docs/icd.md §3.2 (offset 106); paper: primary X2, Y1, Z1, backup X1, Y2, Z2.
     pub iru_config: u8,
     /// IRU rate mode commanded for the next interval: 1 high, 0 low.
+    /// docs/icd.md §3.2 (offset 107).
     pub iru_high_rate_cmd: u8,
     /// Wheel torque command in ACS, N m.
+    /// docs/icd.md §3.2 (offset 108).
     pub wheel_torque_cmd_nm: [f32; 3],
     /// Residuals of FHST1, FHST2, FSS1, FSS2.
+    /// docs/icd.md §3.2 (offset 120).
     pub residuals: [SensorResidual; 4],
     /// IRU channels currently excluded, bit i = channel i.
+    /// docs/icd.md §3.2 (offset 172).
     pub iru_excluded_mask: u8,
     /// Cumulative counters.
+    /// docs/icd.md §3.2 (offset 173).
     pub counters: Counters,
     /// CRC of each active table image (0 = boot table), id order.
+    /// docs/icd.md §3.2 (offset 213); CRC per docs/tables.md.
     pub table_crc: [u32; 4],
     /// Bit i set = table id i+1 has a validated image pending.
+    /// docs/icd.md §3.2 (offset 229).
     pub table_pending_mask: u8,
 }
 
 /// Definitive orbit record (provided by orbit determination on the ground, or by the harness),
 /// J2000/GCRS axes.
+/// APID 0x020, docs/icd.md §3.4.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct EphemerisRecord {
     /// Epoch of the state.
+    /// docs/icd.md §3.4 (the packet's CUC time code).
     pub time: TimeTag,
     /// Position, km.
+    /// docs/icd.md §3.4.
     pub pos_eci_km: [f64; 3],
     /// Velocity, km/s.
+    /// docs/icd.md §3.4.
     pub vel_eci_km_per_s: [f64; 3],
 }
 
@@ -267,6 +313,7 @@ fn check_len(data: &[u8], expected: usize) -> Result<(), RecordError> {
 }
 
 /// Write the 6-octet CUC time code.
+/// docs/icd.md §2.
 ///
 /// # Errors
 /// [`RecordError::BufferTooSmall`].
@@ -277,6 +324,7 @@ pub fn encode_time_code(t: TimeTag, out: &mut [u8]) -> Result<usize, RecordError
 }
 
 /// Read the 6-octet CUC time code from the start of a packet data field.
+/// docs/icd.md §2.
 ///
 /// # Errors
 /// [`RecordError::Length`] when fewer than 6 octets are present.
@@ -289,6 +337,7 @@ pub fn decode_time_code(data: &[u8]) -> Result<TimeTag, RecordError> {
 }
 
 /// Encode a raw frame's user data (without its time, which is the secondary header).
+/// docs/icd.md §3.1.
 ///
 /// # Errors
 /// [`RecordError::BufferTooSmall`].
@@ -317,6 +366,7 @@ pub fn encode_raw_frame(f: &RawSensorFrame, out: &mut [u8]) -> Result<usize, Rec
 }
 
 /// Decode a raw frame's user data; `time` comes from the secondary header.
+/// docs/icd.md §3.1.
 ///
 /// # Errors
 /// [`RecordError::Length`] or [`RecordError::BadEnum`] (rate-mode octet not 0/1).
@@ -364,6 +414,7 @@ pub fn decode_raw_frame(time: TimeTag, data: &[u8]) -> Result<RawSensorFrame, Re
 }
 
 /// Encode the housekeeping user data (without its time).
+/// docs/icd.md §3.2.
 ///
 /// # Errors
 /// [`RecordError::BufferTooSmall`].
@@ -420,6 +471,7 @@ pub fn encode_housekeeping(h: &ObcHousekeeping, out: &mut [u8]) -> Result<usize,
 }
 
 /// Decode the housekeeping user data; `time` comes from the secondary header.
+/// docs/icd.md §3.2.
 ///
 /// # Errors
 /// [`RecordError::Length`] or [`RecordError::BadEnum`] (residual status).
@@ -475,6 +527,7 @@ pub fn decode_housekeeping(time: TimeTag, data: &[u8]) -> Result<ObcHousekeeping
 }
 
 /// Encode an event's user data.
+/// docs/icd.md §3.3.
 ///
 /// # Errors
 /// [`RecordError::BufferTooSmall`].
@@ -487,6 +540,7 @@ pub fn encode_event(e: &Event, out: &mut [u8]) -> Result<usize, RecordError> {
 }
 
 /// Decode an event's user data.
+/// docs/icd.md §3.3.
 ///
 /// # Errors
 /// [`RecordError::Length`] or [`RecordError::BadEnum`] for an unknown event code.
@@ -502,6 +556,7 @@ pub fn decode_event(data: &[u8]) -> Result<Event, RecordError> {
 }
 
 /// Encode an ephemeris record's user data (without its time).
+/// docs/icd.md §3.4.
 ///
 /// # Errors
 /// [`RecordError::BufferTooSmall`].
@@ -514,6 +569,7 @@ pub fn encode_ephemeris(e: &EphemerisRecord, out: &mut [u8]) -> Result<usize, Re
 }
 
 /// Decode an ephemeris record's user data; `time` comes from the secondary header.
+/// docs/icd.md §3.4.
 ///
 /// # Errors
 /// [`RecordError::Length`].

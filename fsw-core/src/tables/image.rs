@@ -19,17 +19,23 @@ use crate::raw::TimeTag;
 use serde::{de::DeserializeOwned, Serialize};
 
 /// Image magic, "GROT".
+/// docs/tables.md ("Image = header + payload + CRC", offset 0).
 pub const MAGIC: u32 = 0x4752_4F54;
 /// Current image format version.
+/// docs/tables.md (offset 5).
 pub const FORMAT_VERSION: u8 = 1;
 /// Header length in bytes.
+/// docs/tables.md (octets 0..20).
 pub const HEADER_LEN: usize = 20;
 /// CRC trailer length in bytes.
+/// docs/tables.md (trailer).
 pub const CRC_LEN: usize = 4;
 /// The CRC used for images: CRC-32/ISO-HDLC (the zlib/PNG CRC).
+/// docs/tables.md; the CRC-32 of ISO/IEC 13239 HDLC, as zlib.
 pub const IMAGE_CRC: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
 
 /// Which table an image holds. Discriminants are the on-wire ids.
+/// docs/tables.md (offset 4); project choice (not in the paper): four tables.
 #[derive(
     Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, serde::Serialize, serde::Deserialize,
 )]
@@ -37,17 +43,22 @@ pub const IMAGE_CRC: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC)
 #[repr(u8)]
 pub enum TableId {
     /// Sensor alignments M_AS (FHST1, FHST2, FSS1, FSS2) and sensor corrections.
+    /// docs/tables.md (Table 1: alignment); paper Table 1 at boot, Table 3 after calibration.
     Alignment = 1,
     /// DRIRU II alignment/scale factors G, k and pulse weights.
+    /// docs/tables.md (Table 2: IRU); paper: DRIRU II and prelaunch `G`.
     Iru = 2,
     /// Kalman filter, star identification and control settings.
+    /// docs/tables.md (Table 3: filter); project choice (not in the paper).
     Filter = 3,
     /// The onboard star catalog.
+    /// docs/tables.md (Table 4: star catalog); Hipparcos subset.
     StarCatalog = 4,
 }
 
 impl TableId {
     /// All table ids, in id order.
+    /// docs/tables.md (table ids 1–4).
     pub const ALL: [TableId; 4] = [
         TableId::Alignment,
         TableId::Iru,
@@ -56,6 +67,7 @@ impl TableId {
     ];
 
     /// From the on-wire id.
+    /// docs/tables.md (offset 4).
     #[must_use]
     pub fn from_u8(id: u8) -> Option<Self> {
         match id {
@@ -68,6 +80,7 @@ impl TableId {
     }
 
     /// Index 0..4 for per-table arrays.
+    /// Project choice (not in the paper): dense arrays indexed by id − 1.
     #[must_use]
     pub fn index(self) -> usize {
         match self {
@@ -79,6 +92,7 @@ impl TableId {
     }
 
     /// Human name.
+    /// docs/tables.md section names.
     #[must_use]
     pub fn name(self) -> &'static str {
         match self {
@@ -91,85 +105,117 @@ impl TableId {
 }
 
 /// Why an image or a table was refused. Every variant carries the evidence an operator needs.
+/// Reason codes of docs/tables.md (event 0x0102 p2, 0x0104 p2).
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum TableError {
     /// Fewer bytes than a header and a CRC.
+    /// docs/tables.md (header 20 + CRC 4 octets).
     TooShort {
         /// Bytes received.
+        /// docs/tables.md ("Reason codes").
         len: usize,
     },
     /// Image larger than the load buffer.
+    /// Project choice (not in the paper): a fixed load buffer, no heap.
     TooLong {
         /// Bytes received.
+        /// docs/tables.md ("Reason codes").
         len: usize,
         /// Capacity.
+        /// docs/tables.md ("Reason codes").
         max: usize,
     },
     /// The magic word is wrong.
+    /// docs/tables.md (offset 0, "GROT").
     BadMagic {
         /// Magic found.
+        /// docs/tables.md ("Reason codes").
         found: u32,
     },
     /// Unknown table id byte.
+    /// docs/tables.md (offset 4).
     UnknownTableId {
         /// Id found.
+        /// docs/tables.md ("Reason codes").
         found: u8,
     },
     /// The image is for another table than the one expected.
+    /// docs/tables.md ("Lifecycle").
     WrongTableId {
         /// Id expected.
+        /// docs/tables.md ("Reason codes").
         expected: TableId,
         /// Id found.
+        /// docs/tables.md ("Reason codes").
         found: TableId,
     },
     /// Unsupported format version.
+    /// docs/tables.md (offset 5).
     UnsupportedVersion {
         /// Version found.
+        /// docs/tables.md ("Reason codes").
         found: u8,
     },
     /// Reserved header bytes not zero.
+    /// docs/tables.md (offsets 6 and 18).
     ReservedNotZero,
     /// Declared payload length disagrees with the image length.
+    /// docs/tables.md (offset 8).
     LengthMismatch {
         /// Payload length in the header.
+        /// docs/tables.md ("Reason codes").
         declared: u32,
         /// Payload bytes actually present.
+        /// docs/tables.md ("Reason codes").
         actual: usize,
     },
     /// CRC-32 check failed.
+    /// docs/tables.md (CRC-32 trailer).
     CrcMismatch {
         /// CRC computed over the image.
+        /// docs/tables.md ("Reason codes").
         computed: u32,
         /// CRC stored in the image.
+        /// docs/tables.md ("Reason codes").
         stored: u32,
     },
     /// The payload does not decode as the table (or has trailing bytes).
+    /// docs/tables.md ("Postcard payload rules").
     PayloadDecode,
     /// The payload does not fit the output buffer when encoding.
+    /// Project choice (not in the paper): encoders never write past `out`.
     BufferTooSmall,
     /// A value is NaN or infinite.
+    /// docs/tables.md ("Reason codes").
     NotFinite {
         /// Field index (table-specific, see `docs/tables.md`).
         field: u8,
     },
     /// An alignment matrix is not a proper rotation (orthonormal to 1e-6, det +1).
+    /// docs/tables.md (Table 1: alignment, "proper rotation").
     NotRotation {
         /// Sensor index: 0 FHST1, 1 FHST2, 2 FSS1, 3 FSS2.
+        /// docs/tables.md ("Reason codes").
         sensor: u8,
     },
     /// A value is outside its documented range.
+    /// docs/tables.md (field ranges of each table).
     OutOfRange {
         /// Field index (table-specific, see `docs/tables.md`).
         field: u8,
     },
     /// The change from the active table exceeds the FilterTable bound.
+    /// docs/tables.md (`max_alignment_change_arcsec`, `max_iru_change_ppm`).
     ChangeTooLarge {
         /// Field index (table-specific).
+        /// docs/tables.md ("Reason codes").
         field: u8,
         /// The change (arcsec for rotations, ppm for G elements).
+        /// docs/tables.md ("Reason codes").
         change: f32,
         /// The allowed change, same unit.
+        /// docs/tables.md ("Reason codes").
         limit: f32,
     },
 }
@@ -199,16 +245,21 @@ impl TableError {
 }
 
 /// The parsed, CRC-checked header of an image.
+/// docs/tables.md ("Image = header + payload + CRC").
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct ImageHeader {
     /// Which table.
+    /// docs/tables.md (offset 4).
     pub table_id: TableId,
     /// Format version.
+    /// docs/tables.md (offset 5).
     pub format_version: u8,
     /// Payload length in bytes.
+    /// docs/tables.md (offset 8).
     pub payload_len: u32,
     /// Creation time tag.
+    /// docs/tables.md (offsets 12–17, CUC; CCSDS 301.0-B-4).
     pub created: TimeTag,
 }
 
@@ -227,6 +278,7 @@ fn be_u16(bytes: &[u8], at: usize) -> Option<u16> {
 }
 
 /// Check magic, id, version, reserved bytes, length and CRC; return the header and the payload.
+/// docs/tables.md ("Image = header + payload + CRC").
 ///
 /// # Errors
 /// The first check that fails, as a [`TableError`].
@@ -290,6 +342,7 @@ pub fn parse_image(bytes: &[u8]) -> Result<(ImageHeader, &[u8]), TableError> {
 /// `85 00` for 5): otherwise the dump of the activated table would differ from the image the
 /// ground uplinked and telemetered (TBL-002). The check re-encodes without a buffer, comparing
 /// each octet with the payload ([`CompareFlavor`]).
+/// docs/tables.md ("Postcard payload rules"); project choice: one image per table.
 ///
 /// # Errors
 /// [`TableError::PayloadDecode`].
@@ -315,6 +368,7 @@ fn is_canonical<T: Serialize>(value: &T, payload: &[u8]) -> bool {
 
 /// A postcard output "flavor" that stores nothing: it compares every octet the serializer
 /// produces with the expected payload and fails at the first difference.
+/// Project choice (not in the paper): canonical-encoding check without a heap buffer.
 pub struct CompareFlavor<'a> {
     expected: &'a [u8],
     at: usize,
@@ -339,6 +393,7 @@ impl postcard::ser_flavors::Flavor for CompareFlavor<'_> {
 }
 
 /// Write header + postcard payload + CRC into `out`; returns the image length.
+/// docs/tables.md ("Image = header + payload + CRC").
 ///
 /// # Errors
 /// [`TableError::BufferTooSmall`] when `out` cannot hold the image.

@@ -1,7 +1,7 @@
-//! # Uplinkable tables (paper §3.3: alignments and IRU calibration uplinked to the OBC)
+//! # Uplinkable tables (paper: calibrated alignments uplinked to the OBC on 1991-05-14)
 //!
 //! [`image`] is the binary format, [`types`] the four tables and their validation,
-//! [`manager`] the load/validate/activate services.
+//! [`manager`] the load/validate/activate services. Byte layout: `docs/tables.md`.
 
 pub mod image;
 pub mod manager;
