@@ -35,7 +35,8 @@ pub fn skew(v: &Vector3<f64>) -> Matrix3<f64> {
     Matrix3::new(0.0, -v.z, v.y, v.z, 0.0, -v.x, -v.y, v.x, 0.0)
 }
 
-/// The paper's `Rot(θ)` (algorithms.md §1): `exp(−[θ×])`, the passive rotation of a frame by +θ (rad).
+/// The paper's `Rot(θ)` (algorithms.md §1): `exp(−[θ×])`, the passive rotation of a frame by +θ
+/// (rad).
 #[must_use]
 pub fn rot(theta_rad: &Vector3<f64>) -> Matrix3<f64> {
     let angle = theta_rad.norm();

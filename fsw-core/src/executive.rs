@@ -1,17 +1,18 @@
 //! # The executive: one fixed-period cycle of the OBC attitude software
 //!
 //! [`FlightCore::step`] takes one cycle of raw sensor words and ground commands and returns
-//! the housekeeping record and the events of that cycle. The phase order is fixed
-//! (documented in `docs/icd.md` §3.2 and here) and every phase is bounded:
+//! the housekeeping record and the events of that cycle (their packet order is
+//! `docs/icd.md` §4). The phase order is fixed (documented here) and every phase is bounded:
 //!
 //! 1. **Time**: check the frame time is after the previous one and within 10 periods
 //!    (otherwise count, raise `TimeTagAnomaly`, and use the nominal period).
 //! 2. **Commands** in the order given (at most [`MAX_COMMANDS_PER_CYCLE`]): table
 //!    load/activate/abort (activation therefore always happens at a cycle boundary, before
 //!    any table is used in the cycle), IRU configuration, filter init/reset, slew/hold.
-//! 3. **IRU**: pulse integration (paper `G`; algorithms.md §5); a failed selected channel switches to the
-//!    backup configuration automatically. Any configuration change (automatic or commanded)
-//!    reopens the filter's bias covariance: the new channels have their own biases.
+//! 3. **IRU**: pulse integration (paper `G`; algorithms.md §5); a failed selected channel
+//!    switches to the backup configuration automatically. Any configuration change
+//!    (automatic or commanded) reopens the filter's bias covariance: the new channels have
+//!    their own biases.
 //! 4. **Propagation** of the MEKF with the exact rotation-vector update.
 //! 5. **FHST1, FHST2** (not during slews: gyro-only propagation, as on GRO): counts → unit
 //!    vector in ACS; star identification on a new acquisition; sequential vector update with

@@ -18,15 +18,15 @@
 //! * `P⁻ = Φ P Φᵀ + Q` using the block structure (four 3×3 products, no 6×6 product):
 //!   `A = Φ₁₁P₁₁ + Φ₁₂P₂₁`, `B = Φ₁₁P₁₂ + Φ₁₂P₂₂`, `P₁₁⁻ = AΦ₁₁ᵀ + BΦ₁₂ᵀ`, `P₁₂⁻ = B`,
 //!   `P₂₂⁻ = P₂₂`; `Q₁₁ = (σ_v²Δt + σ_u²Δt³/3) I`, `Q₁₂ = −σ_u²Δt²/2 I`, `Q₂₂ = σ_u²Δt I`.
-//!   Pulse quantization is *not* added to Q (it telescopes; §2).
+//!   Pulse quantization is *not* added to Q (it telescopes; algorithms.md §2).
 //!
 //! ## Measurement updates (2 components, sequential, reset after each)
 //! Every update has the form `ν ≈ [h 0] x + v`, `h` 2×3, `R = σ² I₂`:
 //! * [`Mekf::update_vector`] (FSS, any unit vector): `ẑ = Â r`; with an orthonormal pair
 //!   `e₁, e₂ ⟂ ẑ` (`e₁ × e₂ = ẑ`) the along-`ẑ` component, which carries no information, is
 //!   dropped: `ν = [e₁·z, e₂·z]`, and from `z ≈ ẑ + [ẑ×]δθ`, `h = [−e₂ᵀ; e₁ᵀ]`.
-//! * [`Mekf::update_focal_plane`] (FHST, §3.1): `ŝ = M_ASᵀ Â r`, `ν = (H − Ĥ, V − V̂)`,
-//!   `h = ∂(H,V)/∂s · M_ASᵀ [b̂×]` ([`crate::fhst::hv_jacobian`]).
+//! * [`Mekf::update_focal_plane`] (FHST, algorithms.md §3.1): `ŝ = M_ASᵀ Â r`,
+//!   `ν = (H − Ĥ, V − V̂)`, `h = ∂(H,V)/∂s · M_ASᵀ [b̂×]` ([`crate::fhst::hv_jacobian`]).
 //! * `S = h P₁₁ hᵀ + R` (2×2, inverted in closed form only if `det S > 0` and finite);
 //!   `R` is floored so that one update reduces the variance by at most
 //!   [`MAX_VARIANCE_REDUCTION`] (keeps `P` positive definite in double precision),
@@ -90,7 +90,8 @@ pub enum MekfError {
     Collinear,
     /// TRIAD: the body and reference separations disagree by more than
     /// [`TRIAD_CONSISTENCY_RAD`].
-    /// Project choice (not in the paper): the angle between two vectors is attitude-independent (algorithms.md §6).
+    /// Project choice (not in the paper): the angle between two vectors is attitude-independent
+    /// (algorithms.md §6).
     Inconsistent,
     /// The covariance became non-finite or lost a positive diagonal (state unchanged).
     /// Joseph-form checks of algorithms.md §2.

@@ -18,7 +18,8 @@ pub const IRU_CHANNELS: usize = 6;
 /// Paper channel names; order per docs/icd.md §3.1.
 pub const IRU_CHANNEL_NAMES: [&str; IRU_CHANNELS] = ["X1", "X2", "Y1", "Y2", "Z1", "Z2"];
 /// Number of temperature sensors in the raw frame: FHST1, FHST2, FSS1, FSS2, IRU baseplate.
-/// docs/icd.md §3.1 (offset 38); the paper gives no temperatures (project choice, for thermal-drift studies).
+/// docs/icd.md §3.1 (offset 38); the paper gives no temperatures (project choice, for
+/// thermal-drift studies).
 pub const TEMPERATURE_SENSORS: usize = 5;
 
 /// Spacecraft time: CCSDS unsegmented time code (CUC), 4 octets of seconds and 2 of
@@ -30,6 +31,7 @@ pub struct TimeTag {
     /// CCSDS 301.0-B-4 CUC, 4 octets coarse (docs/icd.md §2).
     pub coarse_s: u32,
     /// Fraction of a second in units of 2⁻¹⁶ s.
+    /// CCSDS 301.0-B-4 CUC fine octets (docs/icd.md §2).
     pub fine: u16,
 }
 

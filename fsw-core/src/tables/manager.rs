@@ -20,28 +20,37 @@ use super::types::{
 use crate::raw::TimeTag;
 
 /// State of a table's inactive buffer.
+/// docs/tables.md ("Lifecycle", cFE Table Services style).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum BufferState {
     /// Nothing loaded.
+    /// docs/tables.md ("Lifecycle").
     Empty,
     /// A validated table waits for activation.
+    /// docs/tables.md ("Lifecycle").
     Validated,
 }
 
 /// Status of one table for telemetry.
+/// docs/icd.md §3.2 (table CRCs, pending mask).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct TableStatus {
     /// CRC-32 of the active table's image (0 for a boot table never loaded).
+    /// docs/icd.md §3.2 (offset 213); CRC per docs/tables.md.
     pub active_crc: u32,
     /// Creation time of the active table's image (zero for the boot table).
+    /// docs/tables.md (offsets 12–17).
     pub active_created: TimeTag,
     /// Whether a validated table waits in the inactive buffer.
+    /// docs/icd.md §3.2 (offset 229).
     pub pending: bool,
     /// Number of successful activations since boot.
+    /// Project choice (not in the paper): operator evidence (cFE Table Services keeps the same).
     pub activations: u16,
     /// Number of rejected loads since boot.
+    /// Project choice (not in the paper): operator evidence (cFE Table Services keeps the same).
     pub rejections: u16,
 }
 
@@ -93,6 +102,7 @@ impl<T: Clone> Slot<T> {
 }
 
 /// The four tables with their double buffers.
+/// docs/tables.md (tables 1–4, "Lifecycle").
 #[derive(Clone, Debug, PartialEq)]
 pub struct TableSet {
     alignment: Slot<AlignmentTable>,
@@ -133,27 +143,32 @@ impl TableSet {
     }
 
     /// Active alignment table.
+    /// docs/tables.md (Table 1: alignment); paper Table 1 at boot.
     #[must_use]
     pub fn alignment(&self) -> &AlignmentTable {
         &self.alignment.active
     }
     /// Active IRU table.
+    /// docs/tables.md (Table 2: IRU); paper prelaunch `G` at boot.
     #[must_use]
     pub fn iru(&self) -> &IruTable {
         &self.iru.active
     }
     /// Active filter table.
+    /// docs/tables.md (Table 3: filter).
     #[must_use]
     pub fn filter(&self) -> &FilterTable {
         &self.filter.active
     }
     /// Active star catalog.
+    /// docs/tables.md (Table 4: star catalog).
     #[must_use]
     pub fn catalog(&self) -> &StarCatalogTable {
         &self.catalog.active
     }
 
     /// Status of every table, in [`TableId::ALL`] order.
+    /// docs/icd.md §3.2 (table CRCs, pending mask).
     #[must_use]
     pub fn status(&self) -> [TableStatus; 4] {
         [
@@ -165,6 +180,7 @@ impl TableSet {
     }
 
     /// Load an image into its table's inactive buffer after full validation.
+    /// docs/tables.md ("Lifecycle"; event 0x0102 reason codes).
     ///
     /// On any error the inactive buffer of the addressed table (when the id is readable) is
     /// cleared and the active table is unchanged.
@@ -254,6 +270,7 @@ impl TableSet {
 
     /// Activate the validated inactive buffer of `id`. The change bound is checked again
     /// against the table active *now*.
+    /// docs/tables.md ("Lifecycle"; event 0x0104 reason codes).
     ///
     /// # Errors
     /// `None` in the inner option means nothing was pending; `Some(e)` a re-check failed (the
@@ -293,6 +310,7 @@ impl TableSet {
     }
 
     /// Clear the inactive buffer of `id`; returns whether something was pending.
+    /// docs/tables.md ("Lifecycle"); docs/icd.md §3.3 (event 0x0105).
     pub fn abort(&mut self, id: TableId) -> bool {
         match id {
             TableId::Alignment => self.alignment.inactive.take().is_some(),
@@ -304,6 +322,7 @@ impl TableSet {
 
     /// Encode the active table `id` as an image into `out` (same bytes as the image that
     /// was activated; boot tables carry a zero creation time).
+    /// docs/tables.md ("Image = header + payload + CRC"); TBL-002.
     ///
     /// # Errors
     /// [`TableError::BufferTooSmall`].

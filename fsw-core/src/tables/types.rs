@@ -13,12 +13,16 @@ use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
 
 /// Row-major 3×3 matrix as stored in tables.
+/// The paper prints matrices row-major, `m[row][col]` (docs/tables.md).
 pub type Mat3Rows = [[f64; 3]; 3];
 
 /// Tolerance on orthonormality and determinant of alignment matrices (issue TBL-005).
+/// docs/tables.md (Table 1: alignment, "orthonormal to 1e-6, det +1"); the paper's Table 1 rows
+/// meet it.
 pub const ROTATION_TOLERANCE: f64 = 1.0e-6;
 
 /// Convert stored rows to a nalgebra matrix.
+/// docs/tables.md (row-major storage, as the paper prints them).
 #[must_use]
 pub fn matrix_from_rows(m: &Mat3Rows) -> Matrix3<f64> {
     let [r0, r1, r2] = m;
@@ -28,6 +32,7 @@ pub fn matrix_from_rows(m: &Mat3Rows) -> Matrix3<f64> {
 }
 
 /// Convert a nalgebra matrix to stored rows.
+/// docs/tables.md (row-major storage, as the paper prints them).
 #[must_use]
 pub fn rows_from_matrix(m: &Matrix3<f64>) -> Mat3Rows {
     [
@@ -66,19 +71,23 @@ fn check_range(value: f64, lo: f64, hi: f64, field: u8) -> Result<(), TableError
 
 /// Corrections for effects beyond a rigid alignment, applied by the OBC when non-zero
 /// (issue 5: effects found on the ground become table data). All default to zero (off).
+/// docs/tables.md (Table 1: alignment, fields 4–6); effects 1, 4, 15 of algorithms.md §9.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct SensorCorrections {
     /// Time-tag offset per sensor (FHST1, FHST2, FSS1, FSS2), s: the measurement refers to
     /// `frame time − offset`. Range ±2 s.
+    /// docs/tables.md (field 4); latency effect 1 of algorithms.md §9.
     pub time_offset_s: [f64; 4],
     /// FHST focal-plane distortion per tracker, rad: the true angles are
     /// `H = H_m − (d0 ρ² H_m + d1 H_m V_m)`, `V = V_m − (d0 ρ² V_m + d2 H_m V_m)` with
     /// `ρ² = H_m² + V_m²` (angles in rad; d0 in rad⁻², d1 and d2 in rad⁻¹). Range |d| ≤ 1.
+    /// docs/tables.md (field 5); distortion effect 4 of algorithms.md §9.
     pub fhst_distortion: [[f64; 3]; 2],
     /// FSS transfer-function correction per sensor: the true head angles are
     /// `α = α_m − (c0 α_m + c1 α_m β_m² + c2)`, `β = β_m − (c3 β_m + c4 β_m α_m² + c5)`
     /// (rad; c0, c3 unitless scale errors, c1, c4 rad⁻², c2, c5 rad offsets). Range |c| ≤ 1.
+    /// docs/tables.md (field 6); transfer-function errors of algorithms.md §4.
     pub fss_transfer: [[f64; 6]; 2],
 }
 
@@ -87,19 +96,25 @@ pub struct SensorCorrections {
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct AlignmentTable {
     /// `M_AS` of FHST1 (unitless, proper rotation).
+    /// Paper Table 1 (prelaunch) at boot, Table 3 after calibration; docs/tables.md field 0.
     pub m_acs_from_fhst1: Mat3Rows,
     /// `M_AS` of FHST2.
+    /// Paper Table 1 / Table 3; docs/tables.md field 1.
     pub m_acs_from_fhst2: Mat3Rows,
     /// `M_AS` of FSS1.
+    /// Paper Table 1 (Table 3's FSS rows are illegible: Table 1 × Table 2); docs/tables.md field 2.
     pub m_acs_from_fss1: Mat3Rows,
     /// `M_AS` of FSS2.
+    /// Paper Table 1 (Table 3's FSS rows are illegible: Table 1 × Table 2); docs/tables.md field 3.
     pub m_acs_from_fss2: Mat3Rows,
     /// Corrections for non-rigid effects (zero = off).
+    /// docs/tables.md (fields 4–6); project choice (not in the paper): zero at boot.
     pub corrections: SensorCorrections,
 }
 
 impl AlignmentTable {
     /// The four alignment matrices in sensor order FHST1, FHST2, FSS1, FSS2.
+    /// docs/tables.md (fields 0–3 in this order).
     #[must_use]
     pub fn matrices(&self) -> [&Mat3Rows; 4] {
         [
@@ -139,6 +154,7 @@ impl AlignmentTable {
     }
 
     /// Content checks: finite, proper rotations, corrections in range.
+    /// docs/tables.md (Table 1: alignment, ranges).
     ///
     /// Field numbers: 0–3 the matrices, 4 time offsets, 5 FHST distortion, 6 FSS transfer.
     ///
@@ -169,6 +185,7 @@ impl AlignmentTable {
 
     /// Largest rotation (arcsec) between this table's alignments and `other`'s, and the
     /// index of the sensor where it occurs.
+    /// As the magnitudes of the paper's published rotation vectors; `rotvec` of algorithms.md §1.
     #[must_use]
     pub fn max_rotation_from_arcsec(&self, other: &AlignmentTable) -> (f64, u8) {
         let mut worst = (0.0, 0u8);
@@ -187,26 +204,34 @@ impl AlignmentTable {
 // IRU table
 // ------------------------------------------------------------------------------------------
 
-/// DRIRU II calibration (paper eq. 5): `Δθ_acs = G · diag(k) · w · ΔN` for the three selected
-/// channels in X, Y, Z order, `w` the pulse weight of the rate mode.
+/// DRIRU II calibration (paper: `G`; algorithms.md §5): `Δθ_acs = G · diag(k) · w · ΔN` for
+/// the three selected channels in X, Y, Z order, `w` the pulse weight of the rate mode.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct IruTable {
     /// G of the primary configuration (X2, Y1, Z1), unitless, non-orthogonal.
+    /// Paper: prelaunch `G` (used by OBC and ground); docs/tables.md (Table 2: IRU) field 0.
     pub g_primary: Mat3Rows,
     /// G of the backup configuration (X1, Y2, Z2).
+    /// Paper: primary/backup configurations; the paper publishes one `G`; docs/tables.md field 1.
     pub g_backup: Mat3Rows,
     /// Scale factors k of the primary channels (X2, Y1, Z1), unitless, near 1.
+    /// docs/tables.md field 2; project choice (not in the paper): 1 at boot.
     pub scale_factor_primary: [f64; 3],
     /// Scale factors k of the backup channels (X1, Y2, Z2).
+    /// docs/tables.md field 3; project choice (not in the paper): 1 at boot.
     pub scale_factor_backup: [f64; 3],
     /// Low-rate pulse weight, arcsec per pulse (0.05 on GRO).
+    /// Paper: DRIRU II low rate 0.05″/pulse; docs/tables.md field 4.
     pub low_rate_arcsec_per_pulse: f64,
     /// High-rate pulse weight, arcsec per pulse (0.8 on GRO).
+    /// Paper: DRIRU II high rate 0.8″/pulse; docs/tables.md field 5.
     pub high_rate_arcsec_per_pulse: f64,
     /// A channel whose count changes by more than this in one cycle is flagged saturated.
+    /// docs/tables.md field 6; project choice (not in the paper).
     pub saturation_pulses_per_cycle: u16,
     /// A channel whose count does not change for this many cycles is flagged stuck.
+    /// docs/tables.md field 7; project choice (not in the paper).
     pub stuck_cycles: u16,
 }
 
@@ -234,6 +259,7 @@ impl IruTable {
 
     /// Content checks. Fields: 0 g_primary, 1 g_backup, 2/3 scale factors, 4/5 pulse weights,
     /// 6 saturation, 7 stuck cycles.
+    /// docs/tables.md (Table 2: IRU, ranges).
     ///
     /// # Errors
     /// The first failed check.
@@ -268,6 +294,7 @@ impl IruTable {
     }
 
     /// Largest element change of G (ppm) against another table, both configurations.
+    /// docs/tables.md (`max_iru_change_ppm`).
     #[must_use]
     pub fn max_g_change_ppm(&self, other: &IruTable) -> f64 {
         let a = matrix_from_rows(&self.g_primary) - matrix_from_rows(&other.g_primary);
@@ -298,53 +325,76 @@ impl IruTable {
 // ------------------------------------------------------------------------------------------
 
 /// Kalman filter, star identification and attitude control settings.
+/// docs/tables.md (Table 3: filter); mostly project choices, sources per field.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct FilterTable {
     /// Cycle period of the executive, s (0.125 ..= 2.0).
+    /// docs/tables.md field 0; project choice (not in the paper).
     pub cycle_period_s: f64,
     /// Gyro angle random walk σ_v, rad/s^½ (Farrenkopf).
     pub arw_rad_per_sqrt_s: f64,
     /// Gyro rate random walk σ_u, rad/s^3/2 (Farrenkopf).
     pub rrw_rad_per_s_sqrt_s: f64,
     /// FHST measurement σ for a magnitude-2.0 star, arcsec per axis.
+    /// Paper: FHST random error 8–24″ 1σ (boot 8); docs/tables.md field 3.
     pub fhst_sigma_bright_arcsec: f64,
     /// FHST measurement σ for a magnitude-5.7 star, arcsec per axis (linear in between).
+    /// Paper: FHST random error 8–24″ 1σ (boot 24); docs/tables.md field 4.
     pub fhst_sigma_faint_arcsec: f64,
     /// FSS measurement σ per axis, arcsec (includes its transfer-function error).
+    /// Paper: FSS calibrated accuracy 0.02°, inherent error 0.022° (boot 60″); docs/tables.md
+    /// field 5.
     pub fss_sigma_arcsec: f64,
     /// χ² gate on the 2-component innovation (11.83 = 99.73 %).
+    /// χ² with 2 degrees of freedom (algorithms.md §2 gating); docs/tables.md field 6.
     pub gate_chi2: f64,
     /// Initial attitude σ per axis after an initialisation, rad.
+    /// docs/tables.md field 7; the paper's 0.5° post-maneuver requirement sits inside the 1° boot
+    /// value.
     pub initial_attitude_sigma_rad: f64,
     /// Initial bias σ per axis, rad/s.
+    /// docs/tables.md field 8; project choice (not in the paper).
     pub initial_bias_sigma_rad_per_s: f64,
     /// Star identification: catalog match window, arcsec (≥ the 0.5° requirement).
+    /// Paper: post-maneuver error ≤ 0.5° so that the OBC can identify stars; docs/tables.md field
+    /// 9.
     pub star_id_window_arcsec: f64,
     /// Star identification: magnitude tolerance, mag.
+    /// algorithms.md §3.2 step 4 (Δm 0.5–1 mag); docs/tables.md field 10.
     pub star_id_magnitude_tolerance: f64,
     /// Apply annual velocity aberration to catalog stars (and the Sun) on board.
+    /// algorithms.md §3.3; docs/tables.md field 11.
     pub aberration_correction: bool,
     /// Largest accepted change of any alignment per load, arcsec.
+    /// docs/tables.md field 12; project choice: well above the paper's largest shift (FSS1, 733″).
     pub max_alignment_change_arcsec: f64,
     /// Largest accepted change of any G element or scale factor per load, ppm.
+    /// docs/tables.md field 13; project choice (not in the paper).
     pub max_iru_change_ppm: f64,
     /// Slew rate limit, rad/s.
+    /// docs/tables.md field 14; project choice (not in the paper).
     pub slew_rate_limit_rad_per_s: f64,
     /// Spacecraft inertia diagonal used by the control law, kg m².
+    /// docs/tables.md field 15 (the harness spacecraft's values; the paper gives only 18 000 kg).
     pub inertia_kg_m2: [f64; 3],
     /// Control bandwidth (natural frequency), rad/s.
+    /// docs/tables.md field 16; project choice (not in the paper).
     pub control_bandwidth_rad_per_s: f64,
     /// Control damping ratio.
+    /// docs/tables.md field 17; project choice (not in the paper).
     pub control_damping: f64,
     /// Wheel torque command limit per axis, N m.
+    /// docs/tables.md field 18; project choice (not in the paper).
     pub torque_limit_nm: f64,
     /// Attitude error below which a slew is complete and the IRU returns to low rate, rad.
+    /// docs/tables.md field 19; paper: high rate only for maneuvers.
     pub slew_complete_rad: f64,
     /// Relative uncertainty of the gyro scale factors and misalignments (unitless, e.g. 1e-3
     /// before IRU calibration): during slews the attitude covariance grows coherently by this
     /// fraction of the angle turned, so that the filter accepts the post-maneuver star
     /// updates instead of gating them out.
+    /// docs/tables.md field 20; effects 9–10 of algorithms.md §9 (gyro scale errors).
     pub gyro_scale_uncertainty: f64,
 }
 
@@ -378,6 +428,7 @@ impl FilterTable {
     }
 
     /// Content checks; field numbers are the declaration order 0..=20.
+    /// docs/tables.md (Table 3: filter, ranges).
     ///
     /// # Errors
     /// The first failed check.
@@ -408,6 +459,7 @@ impl FilterTable {
     }
 
     /// FHST σ (rad) for a star of the given magnitude, clamped to the 2.0–5.7 window.
+    /// Paper: FHST random error 8–24″ 1σ, magnitudes 2.0–5.7.
     #[must_use]
     pub fn fhst_sigma_rad(&self, magnitude: f64) -> f64 {
         let t = ((magnitude - 2.0) / 3.7).clamp(0.0, 1.0);
@@ -426,20 +478,25 @@ impl FilterTable {
 pub const MAX_CATALOG_STARS: usize = 4096;
 
 /// One onboard catalog star.
+/// docs/tables.md (Table 4: star catalog).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct CatalogStar {
     /// Catalog number (HIP).
+    /// docs/tables.md (Table 4); Hipparcos HIP number.
     pub id: u32,
     /// Unit direction in J2000/ICRS at the catalog epoch of the table (proper motion applied
     /// on the ground), `f32` (7e-8 rad resolution, 0.015 arcsec).
+    /// docs/tables.md (Table 4).
     pub dir_eci: [f32; 3],
     /// Magnitude in the FHST's instrument system, 0.01 mag.
+    /// docs/tables.md (Table 4); Hp-like instrument magnitude (docs/conventions.md).
     pub magnitude_centimag: i16,
 }
 
 impl CatalogStar {
     /// Direction as an `f64` vector.
+    /// docs/tables.md (Table 4: `f32` storage, `f64` use).
     #[must_use]
     pub fn dir(&self) -> Vector3<f64> {
         let [x, y, z] = self.dir_eci;
@@ -448,17 +505,21 @@ impl CatalogStar {
 }
 
 /// The onboard star catalog.
+/// docs/tables.md (Table 4: star catalog); Hipparcos subset built on the ground.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct StarCatalogTable {
     /// Catalog epoch (proper motion applied to it), years since J2000.0.
+    /// docs/tables.md (Table 4); catalog error effect 6 of algorithms.md §9.
     pub epoch_years_since_j2000: f64,
     /// Stars, any order.
+    /// docs/tables.md (Table 4, at most `MAX_CATALOG_STARS`).
     pub stars: heapless::Vec<CatalogStar, MAX_CATALOG_STARS>,
 }
 
 impl StarCatalogTable {
     /// Content checks: finite epoch within ±100 years, unit directions (±1e-6), magnitudes
     /// −2..=9. Fields: 0 epoch, 1 direction, 2 magnitude.
+    /// docs/tables.md (Table 4: ranges).
     ///
     /// # Errors
     /// The first failed check.
@@ -481,6 +542,7 @@ impl StarCatalogTable {
 }
 
 /// Largest rotation bound check used at load and at activation.
+/// docs/tables.md (`max_alignment_change_arcsec`, "Lifecycle").
 ///
 /// # Errors
 /// [`TableError::ChangeTooLarge`] when an alignment moves by more than the bound.
@@ -502,6 +564,7 @@ pub fn check_alignment_change(
 }
 
 /// IRU change bound check used at load and at activation.
+/// docs/tables.md (`max_iru_change_ppm`, "Lifecycle").
 ///
 /// # Errors
 /// [`TableError::ChangeTooLarge`] when G or k move by more than the bound.
