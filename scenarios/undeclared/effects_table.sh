@@ -117,4 +117,22 @@ for d in rows:
     print(f"| {d['scenario']} | {d['seed']} | {', '.join(d['expected'])} | {det} | {named} | {ps} | {rms} | {cal} | {d['att'][0]:.1f} → {d['att'][1]:.1f} |")
     ok += d["named"] and not d["extra"]
 print(f"\nnamed right (and nothing else) in {ok} of {len(rows)} runs")
+# Per scenario over the seeds.
+print("\n| scenario | runs | named (nothing else) | params within 3σ | RMS after / floor, worst | cal err before → after, mean (″) | att err before → after, mean (″) |")
+print("|---|---|---|---|---|---|---|")
+by = {}
+for d in rows:
+    by.setdefault(d["scenario"], []).append(d)
+mean = lambda xs: sum(xs) / len(xs) if xs else float("nan")
+for name, ds in by.items():
+    good = [d for d in ds if "error" not in d]
+    named = sum(d["named"] and not d["extra"] for d in good)
+    pn = sum(d["params"][0] + d["stars"][0] for d in good)
+    pm = sum(d["params"][1] + d["stars"][1] for d in good)
+    ratios = [v[1] / v[2] for d in good for v in d["rms"].values() if v[1] and v[2]]
+    cb = [v[0] for d in good for v in d["cal"].values() if v[0] is not None]
+    ca = [v[1] for d in good for v in d["cal"].values() if v[1] is not None]
+    ab = [d["att"][0] for d in good]
+    aa = [d["att"][1] for d in good]
+    print(f"| {name} | {len(ds)} | {named}/{len(ds)} | {pn}/{pm} | {max(ratios):.3f} | {mean(cb):.1f} → {mean(ca):.1f} | {mean(ab):.1f} → {mean(aa):.1f} |")
 PY

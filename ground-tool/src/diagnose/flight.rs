@@ -7,7 +7,7 @@
 //! | `fhst_distortion` | `corrections.fhst_distortion[i] += [d0, d1, d2]` with `d0 = Δρ(4°)/F³`, `d1,2 = c/F²` (rad) | `fhst::correct_distortion`: `H = H_m − (d0 ρ² H_m + d1 H_m V_m)` |
 //! | `fss_transfer_function` | `corrections.fss_transfer[i] += [scale, cross/E³, 0, scale, cross/E³, 0]` | `fss::correct_transfer`: `α = α_m − (c0 α_m + c1 α_m β_m² + c2)` |
 //! | `aberration_annual` | `FilterTable.aberration_correction = true` | annual aberration of catalog stars and the Sun |
-//! | `catalog_proper_motion_error` | the flown `StarCatalogTable`, each star the data determine moved by its offset (net rotation removed), `u' = u + x_E e_E + x_N e_N` | the onboard catalog (identification and reference directions) |
+//! | `catalog_proper_motion_error` | the flown `StarCatalogTable`, each star the data determine moved by its offset (net rotation removed, shrunk by τ²/(τ² + σ²)), `u' = u + x_E e_E + x_N e_N` | the onboard catalog (identification and reference directions) |
 //!
 //! Only terms whose estimate exceeds 3σ are written (the others stay as flown); catalog offsets
 //! go up for every star the data determine (their σ carries the gauge, see
@@ -145,7 +145,7 @@ pub fn flight_update(
                 Some(flown) => {
                     let (c, n) = corrected_catalog(flown, e, r.start, &flight_fit);
                     applied.push(format!(
-                        "{label}: star_catalog: {n} of {} stars moved by their offsets (net rotation removed)",
+                        "{label}: star_catalog: {n} of {} stars moved by their offsets (net rotation removed, shrunk to the minimum-variance estimate)",
                         e.stars.len()
                     ));
                     catalog = Some(c);
@@ -260,6 +260,26 @@ fn corrected_catalog(
         }
     }
     let x = super::effects::remove_net_rotation(&e.star_dirs, &x, &var);
+    // Each offset is known to about its σ (≈ the size of the offsets themselves in a few
+    // hours of data): the table gets the linear minimum-variance estimate given the spread
+    // of the offsets over the stars, τ² = mean(x² − σ²) (empirical Bayes), i.e. each offset
+    // shrunk by τ²/(τ² + σ²). A noisy offset then moves its star little, and on average the
+    // catalog gets closer to the sky, never farther.
+    let comps: Vec<usize> = (0..2 * n).filter(|&i| var[i].is_finite()).collect();
+    let tau2 = if comps.is_empty() {
+        0.0
+    } else {
+        (comps.iter().map(|&i| x[i] * x[i] - var[i]).sum::<f64>() / comps.len() as f64).max(0.0)
+    };
+    let x: Vec<f64> = (0..2 * n)
+        .map(|i| {
+            if var[i].is_finite() {
+                x[i] * tau2 / (tau2 + var[i])
+            } else {
+                0.0
+            }
+        })
+        .collect();
     let mut out = flown.clone();
     let mut moved = 0;
     for (k, hip) in e.stars.iter().enumerate() {
