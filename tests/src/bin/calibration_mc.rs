@@ -14,6 +14,7 @@ use anyhow::Context;
 use clap::Parser;
 use fsw_core::attitude::rotvec_from_rot;
 use fsw_core::units::ARCSEC_PER_RAD;
+use ground_tool::calibration::alignment::Weighting;
 use ground_tool::pipeline::calibrate::{calibrate_run, CalibrateOptions};
 use nalgebra::{Matrix3, Vector3};
 use serde::Serialize;
@@ -47,6 +48,13 @@ struct Args {
     /// Work folder (run folders are written here and removed after scoring).
     #[arg(long, default_value = "runs/mc")]
     work: PathBuf,
+    /// FFCAL with Shuster's 1982 scalar weights (covariance by the sandwich formula) instead of
+    /// the optimal 1990 weighting.
+    #[arg(long)]
+    shuster1982: bool,
+    /// One joint FFCAL of all sensors instead of the staged one.
+    #[arg(long)]
+    single_stage: bool,
     /// Print the result as JSON.
     #[arg(long)]
     json: bool,
@@ -103,11 +111,16 @@ fn one_seed(args: &Args, seed: u64) -> anyhow::Result<SeedResult> {
             ..RunOptions::default()
         },
     )?;
-    let cal = calibrate_run(
-        &dir.join("run"),
-        &dir.join("cal"),
-        &CalibrateOptions::default(),
-    )?;
+    let options = CalibrateOptions {
+        weighting: if args.shuster1982 {
+            Weighting::Shuster1982
+        } else {
+            Weighting::Optimal1990
+        },
+        staged_ffcal: !args.single_stage,
+        ..CalibrateOptions::default()
+    };
+    let cal = calibrate_run(&dir.join("run"), &dir.join("cal"), &options)?;
     let truth: serde_json::Value =
         serde_json::from_slice(&std::fs::read(dir.join("run").join("truth.json"))?)?;
     let sol = &cal.ffcal;
