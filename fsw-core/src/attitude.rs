@@ -185,7 +185,8 @@ impl Quat {
     }
 
     /// Natural-order product `self ⊗ rhs`, with `A(p ⊗ q) = A(p) A(q)`.
-    /// algorithms.md §1 ("natural-order" product, Shuster 1993 / Lefferts, Markley & Shuster 1982).
+    /// algorithms.md §1 ("natural-order" product; Markley & Crassidis 2014, Lefferts, Markley &
+    /// Shuster 1982).
     #[must_use]
     pub fn compose(&self, rhs: &Quat) -> Self {
         let pv = self.vector();

