@@ -65,6 +65,9 @@ const MIN_FHST_STAGE_EPOCHS: usize = 100;
 /// Prior variance that holds the FHST alignments at their stage-1 values in stage 2 (arcsec²).
 const HELD_PRIOR_ARCSEC2: f64 = 1e-6;
 
+/// Largest per-axis σ of a coarse attitude reported (deg).
+const COARSE_MAX_SIGMA_DEG: f64 = 2.0;
+
 /// Size of the FSS field cells within which the systematic error counts as one (deg).
 const FSS_CELL_DEG: f64 = 1.0;
 
@@ -184,6 +187,23 @@ pub struct ManeuverReport {
     pub angle_deg: f64,
     /// Used for IRUCAL (ends had attitude solutions).
     pub used: bool,
+    /// Coarse attitude at the maneuver end from the FSSs alone (the Sun moving in the body
+    /// during the slew, tied by the gyro), when determined.
+    pub coarse_attitude: Option<CoarseAttitude>,
+}
+
+/// A coarse (FSS + IRU) attitude, checked against the FHST fine attitude at the same time.
+#[derive(Clone, Debug, Serialize)]
+pub struct CoarseAttitude {
+    /// Time, s since the first frame.
+    pub t_s: f64,
+    /// `A` as a scalar-last quaternion.
+    pub q_acs_from_eci: [f64; 4],
+    /// 1σ per ACS axis from the batch covariance, deg (FSS inherent error not included).
+    pub sigma_deg: [f64; 3],
+    /// Angle to the FHST-only fine attitude at the same time, deg (paper's coarse
+    /// requirement: 2° 3σ per axis), when the trackers give one.
+    pub difference_to_fine_deg: Option<f64>,
 }
 
 /// The whole result.
@@ -641,6 +661,54 @@ fn steps_between(frames: &[FrameObservations], a: usize, b: usize) -> Vec<GyroSt
         .collect()
 }
 
+/// The coarse attitude at the end `e` of the maneuver `s..=e`: FSS vectors over the maneuver
+/// carried to its end by the gyro. Why: the OBC's coarse mode (FSS + TAM + IRU) must be
+/// within 2° for star identification; on the ground it checks the FSS alignments and the
+/// gyro independently of the trackers.
+fn coarse_attitude(
+    frames: &[FrameObservations],
+    s: usize,
+    e: usize,
+    bias: &Vector3<f64>,
+    t0: f64,
+) -> Option<CoarseAttitude> {
+    let sol = fine_attitude(
+        frames,
+        s..e + 1,
+        e,
+        bias,
+        &Matrix3::zeros(),
+        AttitudeSensors::FssOnly,
+    )
+    .ok()?;
+    let sigma_deg = [0, 1, 2].map(|i| sol.cov_acs_rad2[(i, i)].max(0.0).sqrt().to_degrees());
+    // Undetermined about the Sun line when the Sun hardly moved in the body.
+    if sigma_deg.iter().any(|x| !(*x <= COARSE_MAX_SIGMA_DEG)) {
+        return None;
+    }
+    let hi = frame_index_at(frames, frames[e].time.seconds() + 2.0 * BATCH_HALF_S);
+    let fine = fine_attitude(
+        frames,
+        e..hi.max(e + 1),
+        e,
+        bias,
+        &Matrix3::zeros(),
+        AttitudeSensors::FhstOnly,
+    )
+    .ok();
+    let q = sol.q_acs_from_eci;
+    Some(CoarseAttitude {
+        t_s: frames[e].time.seconds() - t0,
+        q_acs_from_eci: [q.x, q.y, q.z, q.w],
+        sigma_deg,
+        difference_to_fine_deg: fine.map(|f| {
+            rotvec_from_rot(&(f.m_acs_from_eci * sol.m_acs_from_eci.transpose()))
+                .norm()
+                .to_degrees()
+        }),
+    })
+}
+
 /// User-given maneuvers (seconds since the first frame) as frame index pairs, in time order.
 ///
 /// # Errors
@@ -982,11 +1050,13 @@ pub fn calibrate_telemetry(
             }
             _ => false,
         };
+        let coarse = coarse_attitude(&frames_cal, s, e, &obc_bias_at(t_end), t0);
         maneuver_reports.push(ManeuverReport {
             start_s: t_start - t0,
             end_s: t_end - t0,
             angle_deg: angle.to_degrees(),
             used,
+            coarse_attitude: coarse,
         });
     }
     // Holds long enough for two disjoint batches give bias intervals and the bias history.

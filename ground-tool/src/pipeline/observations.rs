@@ -314,6 +314,9 @@ pub enum AttitudeSensors {
     FhstOnly,
     /// FHSTs and FSSs.
     FhstAndFss,
+    /// FSSs only: a coarse attitude, determined when the Sun moves in the body during the
+    /// batch (a slew) or both FSSs see it; the paper's coarse attitude used FSS + TAM + IRU.
+    FssOnly,
 }
 
 /// Fine attitude at the centre frame `center` from the frames `range` (indices into
@@ -357,7 +360,12 @@ pub fn fine_attitude(
     for k in range.start.max(lo)..range.end.min(hi) {
         let f = &frames[k];
         let m = to_center[k - lo];
-        for s in f.stars.iter().flatten() {
+        for s in f
+            .stars
+            .iter()
+            .flatten()
+            .filter(|_| sensors != AttitudeSensors::FssOnly)
+        {
             if let Some((_, dir_eci)) = s.identified {
                 pairs.push(VectorPair {
                     dir_acs: m * s.meas.dir_acs,
@@ -366,7 +374,7 @@ pub fn fine_attitude(
                 });
             }
         }
-        if sensors == AttitudeSensors::FhstAndFss {
+        if sensors != AttitudeSensors::FhstOnly {
             for s in f.suns.iter().flatten() {
                 pairs.push(VectorPair {
                     dir_acs: m * s.meas.dir_acs,
