@@ -7,11 +7,11 @@
 //! Every public item cites its source (checked by `fsw-core/tests/doc_citations.rs`):
 //! * **Paper**: Davis, Eudell, Kulp, Lindrose and Harman, "The Results of the In-Flight
 //!   Attitude Sensor Calibration for the Arthur Holly Compton Gamma Ray Observatory"; its
-//!   figures are transcribed in `../shared/data/gro_paper.toml`. Cited by table (Table 1
+//!   figures are transcribed in `data/gro_paper.toml`. Cited by table (Table 1
 //!   prelaunch `M_AS`, Table 2 `M_SS''`, Table 3 adjusted `M_AS''`) or by the quantity's name
 //!   ("Paper: FHST resolution 7.78″/count"), not by equation or section numbers, which that
 //!   transcription does not give.
-//! * **algorithms.md §n**: `../shared/docs/algorithms.md`, with its literature (Lefferts,
+//! * **algorithms.md §n**: `docs/algorithms.md`, with its literature (Lefferts,
 //!   Markley & Shuster 1982 MEKF; Farrenkopf 1978; Shuster 1982/1990 alignment; Davenport /
 //!   Keat IRU calibration).
 //! * **`docs/icd.md`, `docs/tables.md`, `docs/conventions.md`**: this repository's interface
