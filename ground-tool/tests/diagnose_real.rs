@@ -71,9 +71,11 @@ fn clean_run_reports_nothing() {
 }
 
 /// An effect outside the library, added to the raw FHST2 counts of the clean run, is reported
-/// as unexplained structure against the regressor it follows, on the tracker it is on (only
-/// the trackers' relative alignment is observable, so FHST1 may show it too), and is not
-/// forced onto a library effect.
+/// as unexplained structure on FHST2 against the regressor it follows, and is not forced onto
+/// a library effect. Only the trackers' relative alignment is observable, so FHST1 may show
+/// it too; there the structure may follow a correlated regressor first (in an inertial hold
+/// orbit phase, velocity direction and temperature move together), with the right one
+/// among `also_follows`.
 fn non_library(name: &str, effect: Injected, regressor: &str) {
     let run = work_dir(&format!("inject-{name}"));
     inject_run(clean_run(), &run, effect).unwrap();
@@ -83,13 +85,16 @@ fn non_library(name: &str, effect: Injected, regressor: &str) {
     assert!(
         u.iter()
             .any(|x| x.sensor == "FHST2" && x.regressor == regressor),
-        "{name}: no unexplained FHST2 structure against {regressor}: {u:?}"
+        "{name}: FHST2 structure not reported against {regressor}: {u:?}"
     );
-    assert!(
-        u.iter()
-            .all(|x| x.sensor.starts_with("FHST") && x.regressor == regressor),
-        "{name}: unexplained structure against another regressor or sensor: {u:?}"
-    );
+    for x in u {
+        assert!(
+            x.sensor.starts_with("FHST")
+                && (x.regressor == regressor || x.also_follows.iter().any(|r| r == regressor)),
+            "{name}: structure on {} not against {regressor}: {x:?}",
+            x.sensor
+        );
+    }
 }
 
 #[test]

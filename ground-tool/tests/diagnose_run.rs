@@ -382,8 +382,8 @@ fn inject_non_library_effects() {
         }
         for u in &o.report.unexplained {
             eprintln!(
-                "   UNEXPLAINED {} {} vs {} ({}) size {:.2} p {:.1e}",
-                u.sensor, u.axis, u.regressor, u.method, u.size, u.p_value
+                "   UNEXPLAINED {} {} vs {} ({}) size {:.2} p {:.1e}; also {:?}",
+                u.sensor, u.axis, u.regressor, u.method, u.size, u.p_value, u.also_follows
             );
         }
     }

@@ -79,6 +79,9 @@ pub struct Unexplained {
     pub p_value: f64,
     /// Raw p-value.
     pub p_raw: f64,
+    /// Other regressors with significant structure on this sensor (correlated with
+    /// `regressor` or a second structure), strongest first.
+    pub also_follows: Vec<String>,
 }
 
 /// Result of the sensor-side analysis.
@@ -127,16 +130,34 @@ pub fn effect_parameters(
 }
 
 /// Unexplained structure from a family of tests: per sensor, the most significant test
-/// (Holm-adjusted p below `alpha`).
+/// (smallest p-value: F statistics of tests with different degrees of freedom do not
+/// compare; ties broken by F), with the other regressors that also show significant
+/// structure (Holm-adjusted p below `alpha`) in `also_follows`, strongest first. Structure
+/// often follows several correlated regressors at once (in an inertial hold a twice-per-orbit
+/// term is also a function of the velocity direction and of the orbit-driven temperature);
+/// all are listed so the one that names the cause is not hidden behind a proxy.
 #[must_use]
 pub fn unexplained_from(tests: &[structure::StructureTest], alpha: f64) -> Vec<Unexplained> {
-    let mut out: Vec<Unexplained> = Vec::new();
+    let stronger = |a: &structure::StructureTest, b: &structure::StructureTest| {
+        a.p_value
+            .total_cmp(&b.p_value)
+            .then_with(|| b.f.total_cmp(&a.f))
+    };
+    let mut out = Vec::new();
     for sensor in 0..4 {
-        let best = tests
+        let mut best: BTreeMap<&str, &structure::StructureTest> = BTreeMap::new();
+        for t in tests
             .iter()
             .filter(|t| t.sensor == sensor && t.p_holm < alpha)
-            .max_by(|a, b| a.f.total_cmp(&b.f));
-        if let Some(t) = best {
+        {
+            let e = best.entry(t.regressor.name()).or_insert(t);
+            if stronger(t, e).is_lt() {
+                *e = t;
+            }
+        }
+        let mut v: Vec<&structure::StructureTest> = best.into_values().collect();
+        v.sort_by(|a, b| stronger(a, b));
+        if let Some(t) = v.first() {
             out.push(Unexplained {
                 sensor: SENSOR_NAMES[sensor].to_owned(),
                 regressor: t.regressor.name().to_owned(),
@@ -145,6 +166,10 @@ pub fn unexplained_from(tests: &[structure::StructureTest], alpha: f64) -> Vec<U
                 size: t.size_arcsec,
                 p_value: t.p_holm,
                 p_raw: t.p_value,
+                also_follows: v[1..]
+                    .iter()
+                    .map(|t| t.regressor.name().to_owned())
+                    .collect(),
             });
         }
     }

@@ -1,7 +1,7 @@
 //! # `report.json` and `report.md` of `ground-tool diagnose`, with before/after plots
 //!
 //! `report.json` carries `detected` (list of `{effect, sensor, parameters, sigma, units,
-//! evidence}`), `unexplained` (list of `{sensor, regressor, axis, method, size, p_value}`),
+//! evidence}`), `unexplained` (list of `{sensor, regressor, axis, method, size, p_value, also_follows}`),
 //! `residual_rms_arcsec.before/.after` per sensor, `iterations`, and — only when the run
 //! folder has a `truth.json`, labelled as scoring — `calibration_error_arcsec.before/.after`
 //! and a parameter check against the scenario.
@@ -400,13 +400,19 @@ pub fn markdown(r: &DiagnoseReport) -> String {
     } else {
         let _ = writeln!(
             s,
-            "| sensor | axis | regressor | test | size (″) | p (Holm) |\n|---|---|---|---|---|---|"
+            "| sensor | axis | regressor | test | size (″) | p (Holm) | also follows |\n|---|---|---|---|---|---|---|"
         );
         for u in &r.unexplained {
             let _ = writeln!(
                 s,
-                "| {} | {} | {} | {} | {:.2} | {:.2e} |",
-                u.sensor, u.axis, u.regressor, u.method, u.size, u.p_value
+                "| {} | {} | {} | {} | {:.2} | {:.2e} | {} |",
+                u.sensor,
+                u.axis,
+                u.regressor,
+                u.method,
+                u.size,
+                u.p_value,
+                u.also_follows.join(", ")
             );
         }
         s.push('\n');
