@@ -31,6 +31,21 @@ use fsw_core::units::{ARCSEC_PER_RAD, RAD_PER_ARCSEC};
 use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
 use std::collections::BTreeMap;
 
+/// BIC improvement of a candidate with `k` parameters over `n` rows, χ² from `c0` to `c1`,
+/// with the same noise scale as the F test: the residual scale `s2 = c1/dof` when it is above
+/// the declared noise (unknown σ: `n ln(c0/c1)`), the declared noise otherwise (known σ:
+/// `c0 − c1`). With few rows and residuals quieter than declared, `n ln(c0/c1)` would
+/// inflate a change the F test calls noise (ΔBIC 31 at LR p = 0.03 on clean data).
+fn delta_bic(c0: f64, c1: f64, s2: f64, n: usize, k: usize) -> f64 {
+    let n = n as f64;
+    let gain = if s2 >= 1.0 {
+        n * (c0 / c1.max(1e-9)).ln()
+    } else {
+        c0 - c1
+    };
+    gain - k as f64 * n.ln()
+}
+
 /// Settings of the gyro analysis.
 #[derive(Clone, Copy, Debug)]
 pub struct GyroConfig {
@@ -354,7 +369,7 @@ pub fn analyse(
                 let s2 = (c1 / dof).max(1e-9);
                 let f = ((c0 - c1) / k as f64) / s2.max(1.0);
                 let p = f_sf(f, k as f64, dof);
-                let dbic = n as f64 * (c0 / c1).ln() - (k + cand.extra) as f64 * (n as f64).ln();
+                let dbic = delta_bic(c0, c1, s2, n, k + cand.extra);
                 let j = ms.len();
                 let est: Vec<f64> = betas.iter().map(|b| b[j]).collect();
                 let sig: Vec<f64> = covs
@@ -655,7 +670,7 @@ fn asymmetry(
     let s2 = if dof > 0.0 { (c1 / dof).max(1e-9) } else { 1.0 };
     let f = ((c0 - c1) / 3.0) / s2.max(1.0);
     let p = if dof > 0.0 { f_sf(f, 3.0, dof) } else { 1.0 };
-    let dbic = m as f64 * (c0 / c1.max(1e-9)).ln() - 3.0 * (m as f64).ln();
+    let dbic = delta_bic(c0, c1, s2, m, 3);
     let half = rows.len() / 2;
     // Halves: interleaved (slews alternate axes and signs, so consecutive halves would lose
     // observability).
