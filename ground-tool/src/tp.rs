@@ -153,12 +153,38 @@ fn confirmed_start_before(bytes: &[u8], from: usize, before: usize) -> Option<us
     })
 }
 
+/// Whether the whole packet at `at` (header `h`) is in the file and decodes: time code and
+/// record fields valid.
+fn decodes_at(bytes: &[u8], at: usize, h: &Header) -> bool {
+    let Some(data) = bytes.get(at + PRIMARY_HEADER_LEN..at + h.total_len) else {
+        return false;
+    };
+    let Ok(time) = decode_time_code(data) else {
+        return false;
+    };
+    let user = &data[TIME_CODE_LEN..];
+    match h.apid {
+        APID_RAW_SENSORS => decode_raw_frame(time, user).is_ok(),
+        APID_HOUSEKEEPING => decode_housekeeping(time, user).is_ok(),
+        APID_EVENT => decode_event(user).is_ok(),
+        APID_EPHEMERIS => decode_ephemeris(time, user).is_ok(),
+        _ => false,
+    }
+}
+
+/// Next packet start at or after `from` once the stream is known to be damaged: a plausible
+/// header followed by another plausible header or the end of the file, or a plausible header
+/// whose whole packet decodes (so that an intact packet between two damaged regions is not
+/// lost for want of a second header).
 fn resync(bytes: &[u8], from: usize) -> usize {
     let mut at = from;
     while at < bytes.len() {
         if let Some(h) = plausible_at(bytes, at) {
             let next = at + h.total_len;
-            if next == bytes.len() || (next < bytes.len() && plausible_at(bytes, next).is_some()) {
+            if next == bytes.len()
+                || (next < bytes.len() && plausible_at(bytes, next).is_some())
+                || decodes_at(bytes, at, &h)
+            {
                 return at;
             }
         }
@@ -238,9 +264,12 @@ pub fn decode(bytes: &[u8]) -> Telemetry {
             continue;
         }
         if at + h.total_len > bytes.len() {
+            // Cut by the end of the file, or by a drop-out before packets that end it: those
+            // packets start inside the claimed length.
+            let next = resync(bytes, at + 1);
             tm.report.skipped.push(Skipped {
                 offset: at,
-                len: bytes.len() - at,
+                len: next - at,
                 reason: format!(
                     "APID 0x{:03x}: truncated packet ({} of {} octets)",
                     h.apid,
@@ -248,12 +277,15 @@ pub fn decode(bytes: &[u8]) -> Telemetry {
                     h.total_len
                 ),
             });
-            break;
+            at = next;
+            continue;
         }
         // A packet cut short by a drop-out or splice would swallow the packets after it:
         // when its end is not a packet boundary, look for a confirmed packet start inside it.
+        // Even when its end lands on a packet boundary or the end of the file (a splice can
+        // do that), a confirmed packet start inside it means it was cut.
         let end = at + h.total_len;
-        if end < bytes.len() && plausible_at(bytes, end).is_none() {
+        if end <= bytes.len() {
             if let Some(q) = confirmed_start_before(bytes, at + 1, end) {
                 tm.report.skipped.push(Skipped {
                     offset: at,
