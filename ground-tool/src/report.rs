@@ -297,6 +297,20 @@ pub fn write_calibration_report(
             );
         }
     }
+    let f = |a: [f64; 3]| format!("[{:.1}, {:.1}, {:.1}]", a[0], a[1], a[2]);
+    let _ = writeln!(
+        md,
+        "\nFHST2 relative to FHST1, 1σ per ACS axis: stated {}″; Cramér–Rao bound of the star pairs {}″ ({} simultaneous epochs; with the FSS epochs as well, as weighted here: {}″). FFCAL stages: {}.",
+        f(r.ffcal.sigma_fhst2_rel_fhst1_arcsec),
+        f(r.ffcal.crb_sigma_fhst2_rel_fhst1_fhst_only_arcsec),
+        r.data.ffcal_fhst_stage_epochs,
+        f(r.ffcal.crb_sigma_fhst2_rel_fhst1_all_sensors_arcsec),
+        if r.data.ffcal_fhst_stage_epochs > 0 {
+            "FHSTs from star pairs, then the FSSs relative to them"
+        } else {
+            "one joint fit"
+        }
+    );
     let _ = writeln!(
         md,
         "\nAdjustment (paper appendix): common rotation removed [{:.1}, {:.1}, {:.1}]″ so that the OBC's two-tracker attitude frame M_AN is unchanged.\n",
@@ -316,6 +330,19 @@ pub fn write_calibration_report(
                 "(ends lack attitude solutions: not used)"
             }
         );
+        if let Some(c) = &m.coarse_attitude {
+            let _ = writeln!(
+                md,
+                "  - coarse FSS + IRU attitude at its end: σ [{:.2}, {:.2}, {:.2}]°, {}",
+                c.sigma_deg[0],
+                c.sigma_deg[1],
+                c.sigma_deg[2],
+                c.difference_to_fine_deg
+                    .map_or("no FHST attitude to compare".to_owned(), |d| {
+                        format!("{d:.3}° from the FHST attitude")
+                    })
+            );
+        }
     }
     match (&r.iru, &r.iru_skipped) {
         (Some(iru), _) => {

@@ -277,8 +277,8 @@ pub struct FfcalSummary {
     pub eigenvalues: Vec<f64>,
     /// Relative alignment FHST2 w.r.t. FHST1, 1σ per axis, arcsec.
     pub sigma_fhst2_rel_fhst1_arcsec: [f64; 3],
-    /// Cramér–Rao bound of the same quantity from every FFCAL epoch (all sensors, declared
-    /// noise taken as the whole error), 1σ per axis, arcsec: what a joint fit would claim.
+    /// Cramér–Rao bound of the same quantity from every FFCAL epoch (all sensors, FSS samples
+    /// weighted as FFCAL weights them), 1σ per axis, arcsec.
     pub crb_sigma_fhst2_rel_fhst1_all_sensors_arcsec: [f64; 3],
     /// The bound from the FHST star pairs alone (the data stage 1 uses), arcsec.
     pub crb_sigma_fhst2_rel_fhst1_fhst_only_arcsec: [f64; 3],
