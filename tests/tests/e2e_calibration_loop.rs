@@ -108,3 +108,43 @@ fn e2e_calibration_loop_gro_early_mission() {
     assert!(pa < pb, "post-maneuver RMS {pb:.4}° → {pa:.4}°");
     let _ = std::fs::remove_dir_all(&out);
 }
+
+/// Determinism of the ground side (issue 7): the same telemetry calibrated twice gives
+/// byte-identical tables and the same report (up to the output paths it names).
+#[test]
+fn calibration_is_deterministic() {
+    let out = std::env::temp_dir().join(format!("gro-e2e-determinism-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&out);
+    let fly = out.join("run");
+    run(
+        resolve("gro-early-mission").unwrap(),
+        &RunOptions {
+            out_dir: Some(fly.clone()),
+            tables_dir: None,
+            progress: false,
+        },
+    )
+    .unwrap();
+    let mut reports = Vec::new();
+    let mut tables = Vec::new();
+    for k in 0..2 {
+        let dir = out.join(format!("cal-{k}"));
+        let c = calibrate_run(&fly, &dir, &CalibrateOptions::default()).unwrap();
+        let mut json = serde_json::to_value(&c.report).unwrap();
+        json["tables"] = serde_json::Value::Null;
+        reports.push(json.to_string());
+        tables.push([
+            std::fs::read(dir.join("tables/alignment.tbl")).unwrap(),
+            std::fs::read(dir.join("tables/iru.tbl")).unwrap(),
+        ]);
+    }
+    assert!(
+        reports[0] == reports[1],
+        "report.json differs between two runs"
+    );
+    assert!(
+        tables[0] == tables[1],
+        "table images differ between two runs"
+    );
+    let _ = std::fs::remove_dir_all(&out);
+}
