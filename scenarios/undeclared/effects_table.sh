@@ -43,27 +43,36 @@ for f in "$ROOT"/scenarios/undeclared/*.toml; do
     python3 - "$f" "$name" "$seed" "$run" >>"$WORK/lines.jsonl" <<'PY'
 import json, math, re, sys
 scen, name, seed, run = sys.argv[1:5]
-# The effect each scenario switches on (alternatives that name the same physics after "|").
+# The effects each scenario switches on: a list of effects, each a list of alternatives
+# that name the same physics.
 EXPECT = {
-    "aberration": [("aberration", "all"), ("aberration_annual", "all")],
-    "catalog": [("catalog_proper_motion_error", "all")],
-    "fhst1-distortion": [("fhst_distortion", "FHST1")],
-    "fhst1-magnitude": [("magnitude_bias", "FHST1")],
-    "fhst1-time-tag": [("time_tag_offset", "FHST1")],
-    "fhst2-thermal": [("thermal_alignment_drift", "FHST2"), ("orbit_periodic_alignment", "FHST2")],
-    "fss-transfer": [("fss_transfer_function", "FSS2")],
-    "fss2-time-tag": [("time_tag_offset", "FSS2")],
-    "iru-asymmetry": [("gyro_scale_asymmetry", "IRU")],
-    "iru-thermal-bias": [("gyro_thermal_bias", "IRU")],
-    "iru-bias-drift": [("gyro_bias_transient", "IRU"), ("gyro_bias_ramp", "IRU")],
+    "aberration": [[("aberration", "all"), ("aberration_annual", "all")]],
+    "catalog": [[("catalog_proper_motion_error", "all")]],
+    "fhst1-distortion": [[("fhst_distortion", "FHST1")]],
+    "fhst1-magnitude": [[("magnitude_bias", "FHST1")]],
+    "fhst1-time-tag": [[("time_tag_offset", "FHST1")]],
+    "fhst2-thermal": [[("thermal_alignment_drift", "FHST2"), ("orbit_periodic_alignment", "FHST2")]],
+    "fss-transfer": [[("fss_transfer_function", "FSS2")]],
+    "fss2-time-tag": [[("time_tag_offset", "FSS2")]],
+    "iru-asymmetry": [[("gyro_scale_asymmetry", "IRU")]],
+    "iru-thermal-bias": [[("gyro_thermal_bias", "IRU")]],
+    "iru-bias-drift": [[("gyro_bias_transient", "IRU"), ("gyro_bias_ramp", "IRU")]],
+    "combo": [
+        [("time_tag_offset", "FHST1")],
+        [("fhst_distortion", "FHST1")],
+        [("thermal_alignment_drift", "FHST2"), ("orbit_periodic_alignment", "FHST2")],
+        [("time_tag_offset", "FSS2")],
+    ],
 }
-exp = EXPECT.get(name, [])
+groups = EXPECT.get(name, [])
+exp = [a for g in groups for a in g]
 r = json.load(open(run + "-diag.json"))
 sc = r.get("scoring") or {}
 det = [(d["effect"], d["sensor"]) for d in r["detected"]]
 inside = {(e, s): ok for e, s, ok in sc.get("detections_in_truth", [])}
 exp_names = {e for e, _ in exp}
-named = any((e, s) in exp for e, s in det)
+found = sum(any((e, s) in g for e, s in det) for g in groups)
+named = bool(groups) and found == len(groups)
 extra = [f"{e}[{s}]" for e, s in det if not inside.get((e, s), False)]
 params = [p for p in sc.get("parameters", []) if not p["parameter"].startswith("HIP")]
 stars = [p for p in sc.get("parameters", []) if p["parameter"].startswith("HIP")]
@@ -78,7 +87,8 @@ def att(d):
     return math.sqrt(sum(x * x for x in s))
 out = {
     "scenario": name, "seed": int(seed),
-    "expected": [" or ".join(f"{e}[{s}]" for e, s in exp)],
+    "expected": [" or ".join(f"{e}[{s}]" for e, s in g) for g in groups],
+    "found": [found, len(groups)],
     "detected": [f"{e}[{s}]" for e, s in det],
     "named": named, "extra": extra,
     "params": pz(params), "stars": pz(stars),
@@ -110,7 +120,7 @@ for d in rows:
         ps += f"; stars {sn}/{sm}"
     rms = ", ".join(f"{s} {f(v[1])}/{f(v[2])}" for s, v in d["rms"].items())
     cal = ", ".join(f"{s} {f(v[0])} → {f(v[1])}" for s, v in d["cal"].items())
-    named = ("yes" if d["named"] else "no") + (" +" + ",".join(d["extra"]) if d["extra"] else "")
+    named = ("yes" if d["named"] else "no") + (f" ({d['found'][0]}/{d['found'][1]})" if d["found"][1] > 1 else "") + (" +" + ",".join(d["extra"]) if d["extra"] else "")
     det = ", ".join(d["detected"]) or "none"
     if d["unexplained"]:
         det += "; unexplained " + ", ".join(d["unexplained"])

@@ -329,8 +329,10 @@ impl Effect {
     pub fn signature(&self) -> &'static [super::structure::Regressor] {
         use super::structure::Regressor as R;
         match self.kind {
-            EffectKind::AberrationAnnual | EffectKind::Aberration => &[],
-            EffectKind::AberrationOrbital => &[R::OrbitPhase],
+            EffectKind::AberrationAnnual => &[],
+            // The combined candidate's orbital part is once per orbit: orbit-phase structure it
+            // leaves (a twice-per-orbit term) is not its to explain.
+            EffectKind::AberrationOrbital | EffectKind::Aberration => &[R::OrbitPhase],
             EffectKind::TimeTagOffset => &[R::RateX, R::RateY, R::RateZ],
             EffectKind::ThermalAlignmentDrift | EffectKind::OrbitPeriodicAlignment => {
                 &[R::Temperature, R::OrbitPhase, R::Time]

@@ -94,6 +94,28 @@ pub struct Evidence {
     pub rejected_because: Option<String>,
 }
 
+impl Evidence {
+    /// Evidence of an effect whose own fit failed (singular sub-model).
+    fn placeholder(effect: String) -> Self {
+        Self {
+            effect,
+            k: 0,
+            delta_chi2: f64::NAN,
+            f: f64::NAN,
+            p_value: f64::NAN,
+            p_holm: f64::NAN,
+            delta_bic: f64::NAN,
+            halves_chi2: f64::NAN,
+            halves_p: f64::NAN,
+            halves_estimates: (Vec::new(), Vec::new()),
+            signature_excess: (f64::NAN, f64::NAN),
+            adequate: false,
+            accepted: true,
+            rejected_because: None,
+        }
+    }
+}
+
 /// One iteration of the loop.
 #[derive(Clone, Debug, Serialize)]
 pub struct Iteration {
@@ -356,14 +378,19 @@ fn search_with_pitch(
     let mut iterations = Vec::new();
     let mut evidence_added = Vec::new();
     let mut added = Vec::new();
-    for number in 1..=config.max_iterations {
-        let candidates: Vec<usize> = (0..layout.effects.len())
-            .filter(|&i| !model.contains(&i) && !layout.effects[i].hidden)
-            .collect();
+    // Evidence of every candidate against `model` (fit `current`, residuals `current_post`);
+    // `full`: the halves, indication, adequacy and lack-of-fit checks too, else only the
+    // likelihood ratio and BIC. Returns the evidence and the best passing candidate.
+    let evaluate = |model: &[usize],
+                    current: &SubFit,
+                    current_post: &PostFit,
+                    candidates: &[usize],
+                    full: bool|
+     -> (Vec<(usize, Evidence, Option<SubFit>)>, Option<(usize, f64)>) {
         let mut evs: Vec<(usize, Evidence, Option<SubFit>)> = Vec::new();
-        for &c in &candidates {
+        for &c in candidates {
             let effect = &layout.effects[c];
-            let mut with = model.clone();
+            let mut with = model.to_vec();
             with.push(c);
             let Some(big) = fit_model(&systems.full, &with) else {
                 continue;
@@ -509,20 +536,20 @@ fn search_with_pitch(
                     e.delta_bic, config.min_delta_bic
                 ));
             }
-            if !(e.halves_p > halves_p_min) {
+            if full && !(e.halves_p > halves_p_min) {
                 why.push(format!(
                     "halves differ (χ² {:.1}, p {:.2e})",
                     e.halves_chi2, e.halves_p
                 ));
             }
-            if why.is_empty() {
+            if full && why.is_empty() {
                 let effect = &layout.effects[*c];
                 let sig: &[Regressor] = effect.signature();
                 if sig.is_empty() {
                     e.adequate = true;
                 } else if let Some(big) = big.as_ref() {
                     let sensors = sensors_of(effect);
-                    let pre = run_tests(set, &current_post, Some(&sensors), Some(sig));
+                    let pre = run_tests(set, current_post, Some(&sensors), Some(sig));
                     let post = post_fit(set, &layout, &big.expand(layout.total));
                     let after = run_tests(set, &post, Some(&sensors), Some(sig));
                     let (x0, x1) = (max_excess(&pre), max_excess(&after));
@@ -552,7 +579,7 @@ fn search_with_pitch(
                         if let Some(ext) =
                             layout.find(EffectKind::GenericAlignmentExtension, effect.sensor)
                         {
-                            let mut with_ext = model.clone();
+                            let mut with_ext = model.to_vec();
                             with_ext.push(*c);
                             with_ext.push(ext);
                             if let Some(fe) = fit_model(&systems.full, &with_ext) {
@@ -583,6 +610,215 @@ fn search_with_pitch(
                 e.rejected_because = Some(why.join("; "));
             }
         }
+        (evs, best)
+    };
+    // Phase 1, forward on the likelihood alone: with several effects present, each one's
+    // halves and adequacy checks are spoiled by the others' structure, and a flexible
+    // candidate (per-star catalog offsets) can take the first place and absorb them. So the
+    // model first takes, by ΔBIC, every candidate the LR test and BIC support; then
+    // (phase 2, backward with every check) each effect is tested against the model without
+    // it (its LR p Bonferroni-corrected over the library) and the weakest failing one leaves
+    // and is not offered again in these phases; the forward step then runs again (what the
+    // removed effect absorbed may now show), until no effect fails.
+    let n_library = (0..layout.effects.len())
+        .filter(|&i| !model.contains(&i) && !layout.effects[i].hidden)
+        .count()
+        .max(1) as f64;
+    let mut excluded: Vec<usize> = Vec::new();
+    // (Aberration has a fixed physical form and one parameter: a lack of fit elsewhere does
+    // not implicate it.)
+    let varying = |k: EffectKind| {
+        matches!(
+            k,
+            EffectKind::ThermalAlignmentDrift | EffectKind::OrbitPeriodicAlignment
+        )
+    };
+    let joint_lack_of_fit = |model: &[usize], added: &[usize], current: &SubFit| {
+        for s in 0..4 {
+            let Some(ext) = layout.find(EffectKind::GenericAlignmentExtension, Some(s)) else {
+                continue;
+            };
+            if std::env::var_os("DIAGNOSE_DEBUG").is_some() {
+                let mut w = model.to_vec();
+                w.push(ext);
+                if let Some(fe) = fit_model(&systems.full, &w) {
+                    let k_ext = layout.effects[ext].len() as f64;
+                    let d = current.chi2 - fe.chi2;
+                    eprintln!(
+                        "joint lack of fit sensor {s}: Δχ² {d:.1}, p {:.2e}",
+                        f_sf((d / k_ext) / fe.s2(), k_ext, fe.dof)
+                    );
+                }
+            }
+            let suspects: Vec<usize> = (0..added.len())
+                .filter(|&k| {
+                    let e = &layout.effects[added[k]];
+                    varying(e.kind) && overlapping(&sensors_of(e), &[s])
+                })
+                .collect();
+            if suspects.is_empty() {
+                continue;
+            }
+            let mut with_ext = model.to_vec();
+            with_ext.push(ext);
+            let Some(fe) = fit_model(&systems.full, &with_ext) else {
+                continue;
+            };
+            let k_ext = layout.effects[ext].len() as f64;
+            let d = current.chi2 - fe.chi2;
+            let p_ext = f_sf((d / k_ext) / fe.s2(), k_ext, fe.dof);
+            if p_ext >= config.alpha {
+                continue;
+            }
+            // The weakest suspect: the smallest χ² increase when it alone is taken out.
+            let weakest = suspects
+                .iter()
+                .filter_map(|&k| {
+                    let without: Vec<usize> =
+                        model.iter().copied().filter(|&i| i != added[k]).collect();
+                    fit_model(&systems.full, &without).map(|f| (k, f.chi2 - current.chi2))
+                })
+                .min_by(|a, b| a.1.total_cmp(&b.1));
+            if let Some((k, dchi2)) = weakest {
+                let mut e = Evidence::placeholder(layout.effects[added[k]].label());
+                e.delta_chi2 = dchi2;
+                e.accepted = false;
+                e.rejected_because = Some(format!(
+                    "joint lack of fit on {}: a generic extension (orbit harmonics 2–3, ΔT²) still explains Δχ² {d:.1} (p {p_ext:.1e}) with it in the model",
+                    super::measurements::SENSOR_NAMES[s]
+                ));
+                return Some((k, e));
+            }
+        }
+        None
+    };
+    loop {
+        for _ in 0..config.max_iterations {
+            let candidates: Vec<usize> = (0..layout.effects.len())
+                .filter(|&i| {
+                    !model.contains(&i) && !excluded.contains(&i) && !layout.effects[i].hidden
+                })
+                .collect();
+            let (mut evs, best) = evaluate(&model, &current, &current_post, &candidates, false);
+            let Some((bi, _)) = best else { break };
+            let c = evs[bi].0;
+            let Some(big) = evs[bi].2.take() else { break };
+            model.push(c);
+            added.push(c);
+            current_post = post_fit(set, &layout, &big.expand(layout.total));
+            current = big;
+            iterations.push(Iteration {
+                number: iterations.len() + 1,
+                added: Some(format!(
+                    "{} (forward, on the likelihood)",
+                    layout.effects[c].label()
+                )),
+                candidates: evs.into_iter().map(|e| e.1).collect(),
+            });
+        }
+        let mut worst: Option<(usize, Evidence)> = None;
+        for (k, &c) in added.iter().enumerate() {
+            let without: Vec<usize> = model.iter().copied().filter(|&i| i != c).collect();
+            let Some(fit) = fit_model(&systems.full, &without) else {
+                continue;
+            };
+            let post = post_fit(set, &layout, &fit.expand(layout.total));
+            let (mut evs, _) = evaluate(&without, &fit, &post, &[c], true);
+            let Some((_, mut e, _)) = evs.pop() else {
+                continue;
+            };
+            if e.p_value * n_library >= config.alpha {
+                let why = format!(
+                    "LR p {:.2e} × {n_library} candidates ≥ {}",
+                    e.p_value, config.alpha
+                );
+                e.rejected_because = Some(match e.rejected_because.take() {
+                    Some(w) => format!("{why}; {w}"),
+                    None => why,
+                });
+            }
+            // The veto of the forward loop: an effect already removed for failing its checks
+            // that explains the same sensors much better (against the same model) means the
+            // structure is not this effect's either.
+            if e.rejected_because.is_none() && !excluded.is_empty() {
+                let (others, _) = evaluate(&without, &fit, &post, &excluded, false);
+                let mine = sensors_of(&layout.effects[c]);
+                if let Some((_, v, _)) = others.iter().find(|(o, v, _)| {
+                    v.p_holm < config.alpha
+                        && v.delta_bic > e.delta_bic + config.min_delta_bic
+                        && overlapping(&sensors_of(&layout.effects[*o]), &mine)
+                }) {
+                    e.rejected_because = Some(format!(
+                        "vetoed: {} explains the same sensor better (ΔBIC {:.1}) but failed its checks",
+                        v.effect, v.delta_bic
+                    ));
+                }
+            }
+            if e.rejected_because.is_some()
+                && worst
+                    .as_ref()
+                    .is_none_or(|(_, w)| e.delta_bic < w.delta_bic)
+            {
+                worst = Some((k, e));
+            }
+        }
+        // Joint lack of fit: when no effect fails on its own, a generic extension (orbit
+        // harmonics 2–3, ΔT²) must not still explain something on a sensor whose
+        // alignment-variation terms are in the model; otherwise effects are sharing a
+        // structure none of them describes, and the weakest alignment-variation term leaves.
+        let worst = worst.or_else(|| joint_lack_of_fit(&model, &added, &current));
+        let Some((k, e)) = worst else { break };
+        let c = added.remove(k);
+        model.retain(|&i| i != c);
+        excluded.push(c);
+        // Only the trackers' relative alignment is observable: an alignment variation of one
+        // FHST is the opposite variation of the other plus an attitude change, so the form
+        // rejected on one tracker is rejected on both.
+        let removed = &layout.effects[c];
+        if varying(removed.kind) {
+            if let Some(s @ 0..=1) = removed.sensor {
+                if let Some(mirror) = layout.find(removed.kind, Some(1 - s)) {
+                    if !model.contains(&mirror) && !excluded.contains(&mirror) {
+                        excluded.push(mirror);
+                    }
+                }
+            }
+        }
+        current = fit_model(&systems.full, &model)
+            .ok_or_else(|| anyhow::anyhow!("diagnose: a sub-model fit is singular"))?;
+        current_post = post_fit(set, &layout, &current.expand(layout.total));
+        iterations.push(Iteration {
+            number: iterations.len() + 1,
+            added: Some(format!(
+                "removed {} (backward: {})",
+                layout.effects[c].label(),
+                e.rejected_because.clone().unwrap_or_default()
+            )),
+            candidates: vec![e],
+        });
+    }
+    // The evidence of the effects kept, each against the model without it.
+    for &c in &added {
+        let without: Vec<usize> = model.iter().copied().filter(|&i| i != c).collect();
+        if let Some(fit) = fit_model(&systems.full, &without) {
+            let post = post_fit(set, &layout, &fit.expand(layout.total));
+            let (mut evs, _) = evaluate(&without, &fit, &post, &[c], true);
+            if let Some((_, mut e, _)) = evs.pop() {
+                e.accepted = true;
+                evidence_added.push(e);
+                continue;
+            }
+        }
+        evidence_added.push(Evidence::placeholder(layout.effects[c].label()));
+    }
+    // Phase 3, the forward loop with every check, from there (whatever is still missing;
+    // an effect the backward step removed is not offered again).
+    for _ in 1..=config.max_iterations {
+        let number = iterations.len() + 1;
+        let candidates: Vec<usize> = (0..layout.effects.len())
+            .filter(|&i| !model.contains(&i) && !excluded.contains(&i) && !layout.effects[i].hidden)
+            .collect();
+        let (mut evs, mut best) = evaluate(&model, &current, &current_post, &candidates, true);
         // A stronger explanation that failed only on halves or adequacy vetoes a weaker one on
         // the same sensors: the structure is then not forced onto the weaker candidate.
         if let Some((bi, b_bic)) = best {
