@@ -21,6 +21,20 @@
 //!
 //! Among the passing candidates the one with the largest ΔBIC is added. The loop ends when
 //! none passes; whatever structure the final residuals still show is reported as unexplained.
+//!
+//! With several effects present at once, checks 3–4 of one candidate are spoiled by the
+//! structure of the others, and a flexible candidate (per-star catalog offsets) can take the
+//! first place and absorb them all. So the loop above is phase 3 of three:
+//!
+//! 1. **forward on the likelihood**: add, by ΔBIC, every candidate that passes 1–2;
+//! 2. **backward with every check**: test each added effect against the model without it
+//!    (1 with its p Bonferroni-corrected over the library, 2–4, the veto by an effect already
+//!    removed that explains the same sensors better, and a joint lack of fit: the generic
+//!    extension must not still explain something on a sensor with an alignment-variation
+//!    term); the weakest failing effect leaves and is not offered again (an FHST
+//!    alignment-variation term takes its twin on the other tracker with it: only the relative
+//!    alignment is observable); back to 1 until none fails;
+//! 3. the forward loop with every check, from that model.
 
 use super::effects::{Effect, EffectKind};
 use super::fit::{accumulate_halves, indices, post_fit, solve, Layout, PostFit, SubFit, Systems};
