@@ -148,3 +148,62 @@ fn calibration_is_deterministic() {
     );
     let _ = std::fs::remove_dir_all(&out);
 }
+
+/// Raw frames and ephemeris only (no OBC housekeeping, as an outside program may write per
+/// `docs/icd.md`): the ground bootstraps its own attitude for star identification (Sun and
+/// both trackers, then the gyro and every identified star), calibrates, and its FHST2
+/// relative alignment is consistent with its stated covariance.
+#[test]
+fn calibration_without_housekeeping() {
+    let out = std::env::temp_dir().join(format!("gro-e2e-nohk-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&out);
+    let fly = out.join("run");
+    run(
+        resolve("gro-early-mission").unwrap(),
+        &RunOptions {
+            out_dir: Some(fly.clone()),
+            tables_dir: None,
+            progress: false,
+        },
+    )
+    .unwrap();
+    // Drop every APID 0x011 packet (CCSDS primary header: APID in the low 11 bits of octets
+    // 0-1, data length - 1 in octets 4-5).
+    let bytes = std::fs::read(fly.join("telemetry.bin")).unwrap();
+    let mut raw_only = Vec::new();
+    let mut at = 0;
+    while at + 6 <= bytes.len() {
+        let apid = u16::from_be_bytes([bytes[at], bytes[at + 1]]) & 0x07ff;
+        let len = usize::from(u16::from_be_bytes([bytes[at + 4], bytes[at + 5]])) + 7;
+        if apid != 0x011 {
+            raw_only.extend_from_slice(&bytes[at..at + len]);
+        }
+        at += len;
+    }
+    let nohk = out.join("nohk");
+    std::fs::create_dir_all(&nohk).unwrap();
+    std::fs::write(nohk.join("telemetry.bin"), &raw_only).unwrap();
+    std::fs::copy(fly.join("metadata.json"), nohk.join("metadata.json")).unwrap();
+    let c = calibrate_run(&nohk, &out.join("cal"), &CalibrateOptions::default()).unwrap();
+    assert_eq!(c.report.telemetry.packets_housekeeping, 0);
+    assert!(
+        c.report.data.stars_identified.iter().all(|&n| n > 1000),
+        "identified {:?}",
+        c.report.data.stars_identified
+    );
+    let truth: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(fly.join("truth.json")).unwrap()).unwrap();
+    let sol = &c.ffcal;
+    let r_of = |k: usize| {
+        let s = &sol.sensors[k];
+        let t = &truth["alignments"][&s.id];
+        let t = nalgebra::Matrix3::from_fn(|i, j| t[i][j].as_f64().unwrap());
+        s.m_acs_from_sensor_calibrated * t.transpose()
+    };
+    let e = fsw_core::attitude::rotvec_from_rot(&(r_of(1) * r_of(0).transpose()))
+        * fsw_core::units::ARCSEC_PER_RAD;
+    let p = sol.relative_covariance_arcsec2(1, 0);
+    let nees = (e.transpose() * p.try_inverse().unwrap() * e)[(0, 0)];
+    assert!(nees < 16.27, "FHST2 rel FHST1 error {e:?}″, NEES {nees:.1}");
+    let _ = std::fs::remove_dir_all(&out);
+}

@@ -442,7 +442,14 @@ fn ffcal_staged(
         spec.m_acs_from_sensor = s1.m_acs_from_sensor_calibrated;
         spec.prior_cov_acs_arcsec2 = Matrix3::identity() * HELD_PRIOR_ARCSEC2;
     }
-    let mut sol = ffcal(&held, data, cfg).context("FFCAL stage 2 (FSSs relative to the FHSTs)")?;
+    // An FSS that saw the Sun at one place only cannot have its rotation about the Sun line
+    // determined: the prior keeps it there (and its σ says so) rather than failing the run.
+    let stage2_cfg = FfcalConfig {
+        require_relative_observability: false,
+        ..*cfg
+    };
+    let mut sol =
+        ffcal(&held, data, &stage2_cfg).context("FFCAL stage 2 (FSSs relative to the FHSTs)")?;
     // Before-residuals and corrections relative to the flown alignments.
     let before = ffcal(
         sensors,

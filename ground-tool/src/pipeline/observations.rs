@@ -194,6 +194,10 @@ pub fn build_observations(
     let mut sun_ephemeris: Option<SunEphemeris> = None;
     let mut previous_time: Option<f64> = None;
     let mut frames = Vec::with_capacity(tm.raw.len());
+    // The ground's own attitude, for identification where no OBC attitude was downlinked:
+    // bootstrapped from the Sun and two trackers' stars, refreshed from every frame with two
+    // identified stars, carried by the gyro in between (`OwnAttitude`).
+    let mut own = OwnAttitude::default();
     for raw in &tm.raw {
         let t_s = raw.time.seconds();
         let j2000_tt_s = raw.time.seconds_since_j2000_tt();
@@ -230,6 +234,23 @@ pub fn build_observations(
             Vector3::zeros()
         };
         let obc_q = hk.map(|h| h.q_acs_from_eci);
+        if let Some(g) = gyro {
+            own.propagate(&g);
+        }
+        let sun_eci = if options.aberration {
+            sun_state.apparent_dir_from_sc_eci(&pos, &vel)
+        } else {
+            sun_state.astrometric_from_km(&pos).normalize()
+        };
+        if obc_q.is_none() {
+            own.note_stars(raw, alignment, t_s);
+        }
+        let id_q = obc_q.or_else(|| {
+            if own.usable(t_s) {
+                return own.q();
+            }
+            own.bootstrap(sky, &sun_eci, j2000_tt_s, &observer_bary_km, t_s, options)
+        });
         let mut stars = [None, None];
         for id in FhstId::ALL {
             let Some(sample) = raw.fhst.get(id.index()) else {
@@ -244,7 +265,7 @@ pub fn build_observations(
                 catalog_magnitude: f64::NAN,
                 sigma_rad: noise.fhst_sigma_rad(meas.magnitude),
             };
-            if let Some(q) = obc_q {
+            if let Some(q) = id_q {
                 let r_obs = q.to_dcm().transpose() * meas.dir_acs;
                 let mut found: Option<(u32, Vector3<f64>, f64)> = None;
                 let mut count = 0usize;
@@ -272,11 +293,6 @@ pub fn build_observations(
             stars[id.index()] = Some(obs);
         }
         let mut suns = [None, None];
-        let sun_eci = if options.aberration {
-            sun_state.apparent_dir_from_sc_eci(&pos, &vel)
-        } else {
-            sun_state.astrometric_from_km(&pos).normalize()
-        };
         for id in FssId::ALL {
             let Some(sample) = raw.fss.get(id.index()) else {
                 continue;
@@ -288,6 +304,9 @@ pub fn build_observations(
                     sigma_rad: noise.fss_sigma_arcsec * RAD_PER_ARCSEC,
                 });
             }
+        }
+        if obc_q.is_none() {
+            own.refresh(&stars, &suns, t_s);
         }
         let mut temperatures_c = [0.0; 5];
         for (t, raw_t) in temperatures_c.iter_mut().zip(raw.temperatures_centi_c) {
@@ -305,6 +324,216 @@ pub fn build_observations(
         });
     }
     frames
+}
+
+/// Largest age of the ground's own attitude used for identification, s: the gyro bias
+/// (≈ 0.6″/s uncorrected) keeps it inside the 0.3° window for about this long.
+const OWN_ATTITUDE_MAX_AGE_S: f64 = 900.0;
+
+/// Tolerance of the bootstrap's angle and direction matches, rad: FSS alignment errors of the
+/// paper's size (0.2°) plus the FHST's.
+const BOOTSTRAP_TOLERANCE_RAD: f64 = 0.4 * RAD_PER_DEG;
+
+/// Oldest tracker star used by the bootstrap, s (gyro drift ≤ 0.1° over it).
+const BOOTSTRAP_STAR_AGE_S: f64 = 600.0;
+
+/// A star seen by a tracker: body direction and magnitude.
+#[derive(Clone, Copy, Debug)]
+struct StarSighting {
+    dir_acs: Vector3<f64>,
+    magnitude: f64,
+}
+
+/// The ground's own attitude estimate `A` where the telemetry has no OBC attitude.
+#[derive(Clone, Copy, Debug, Default)]
+struct OwnAttitude {
+    m_acs_from_eci: Option<Matrix3<f64>>,
+    refreshed_s: f64,
+    /// Each tracker's last star: body direction carried to the current frame by the gyro,
+    /// magnitude, time seen (the trackers rarely see stars together with the Sun in view).
+    last_star: [Option<(Vector3<f64>, f64, f64)>; 2],
+    /// The Sun's last body direction from an FSS, carried the same way, and its time.
+    last_sun: Option<(Vector3<f64>, f64)>,
+}
+
+impl OwnAttitude {
+    fn propagate(&mut self, g: &GyroStep) {
+        let r = rot(&g.dtheta_acs_rad);
+        if let Some(a) = self.m_acs_from_eci.as_mut() {
+            *a = r * *a;
+        }
+        for (b, _, _) in self.last_star.iter_mut().flatten() {
+            *b = r * *b;
+        }
+        if let Some((b, _)) = self.last_sun.as_mut() {
+            *b = r * *b;
+        }
+    }
+
+    fn usable(&self, t_s: f64) -> bool {
+        self.m_acs_from_eci.is_some() && t_s - self.refreshed_s <= OWN_ATTITUDE_MAX_AGE_S
+    }
+
+    fn q(&self) -> Option<Quat> {
+        self.m_acs_from_eci.map(|a| Quat::from_dcm(&a))
+    }
+
+    /// Remember each tracker's star and the Sun of this frame (for the bootstrap).
+    fn note_stars(
+        &mut self,
+        raw: &fsw_core::raw::RawSensorFrame,
+        alignment: &AlignmentTable,
+        t_s: f64,
+    ) {
+        if let Some(sun) = FssId::ALL.iter().find_map(|&id| {
+            let sample = raw.fss.get(id.index())?;
+            fss::measure_sensor(sample, id, alignment)
+                .ok()
+                .map(|m| m.dir_acs)
+        }) {
+            self.last_sun = Some((sun, t_s));
+        }
+        for id in FhstId::ALL {
+            if let Some(m) = raw
+                .fhst
+                .get(id.index())
+                .and_then(|sample| fhst::measure_tracker(sample, id, alignment).ok())
+            {
+                if let Some(slot) = self.last_star.get_mut(id.index()) {
+                    *slot = Some((m.dir_acs, m.magnitude, t_s));
+                }
+            }
+        }
+    }
+
+    /// From this frame's identified stars: TRIAD from two stars (both trackers), or from one
+    /// star and the Sun (the FSS's ≤ 0.2° alignment error only reaches the roll about the
+    /// star); one star alone re-points the estimate onto it (two axes) without renewing it.
+    fn refresh(
+        &mut self,
+        stars: &[Option<StarObservation>; 2],
+        suns: &[Option<SunObservation>; 2],
+        t_s: f64,
+    ) {
+        let ids: Vec<(Vector3<f64>, Vector3<f64>)> = stars
+            .iter()
+            .flatten()
+            .filter_map(|s| s.identified.map(|(_, r)| (s.meas.dir_acs, r)))
+            .collect();
+        let sun = suns
+            .iter()
+            .flatten()
+            .next()
+            .map(|s| (s.meas.dir_acs, s.sun_eci));
+        let second = ids.get(1).copied().or(sun);
+        match (ids.first(), second) {
+            (Some(&(b1, r1)), Some((b2, r2))) => {
+                if let Some(m) = triad(&b1, &r1, &b2, &r2) {
+                    self.m_acs_from_eci = Some(m);
+                    self.refreshed_s = t_s;
+                }
+            }
+            (Some(&(b1, r1)), None) => {
+                if let Some(a) = self.m_acs_from_eci.as_mut() {
+                    // Smallest rotation taking the predicted body vector onto the measured one.
+                    let predicted = *a * r1;
+                    let axis = predicted.cross(&b1);
+                    let angle = axis.norm().atan2(predicted.dot(&b1));
+                    if let Some(u) = axis.try_normalize(1e-15) {
+                        *a = rot(&(-u * angle)) * *a;
+                    }
+                }
+            }
+            _ => {}
+        }
+    }
+
+    /// Lost-in-space start: the Sun (in an FSS) and one star per tracker. Every catalog star
+    /// at the measured Sun–star angle with the measured magnitude gives an attitude (TRIAD
+    /// with the Sun); it is kept only if exactly one of them also puts a catalog star of the
+    /// right magnitude where the other tracker sees one.
+    #[allow(clippy::too_many_arguments)]
+    fn bootstrap(
+        &mut self,
+        sky: &Sky,
+        sun_eci: &Vector3<f64>,
+        j2000_tt_s: f64,
+        observer_bary_km: &Vector3<f64>,
+        t_s: f64,
+        options: &IdentifyOptions,
+    ) -> Option<Quat> {
+        let sun_acs = self
+            .last_sun
+            .filter(|(_, t)| t_s - t <= BOOTSTRAP_STAR_AGE_S)
+            .map(|(b, _)| b)?;
+        let fresh = |s: Option<(Vector3<f64>, f64, f64)>| {
+            s.filter(|(_, _, t)| t_s - t <= BOOTSTRAP_STAR_AGE_S)
+        };
+        let (Some(m1), Some(m2)) = (fresh(self.last_star[0]), fresh(self.last_star[1])) else {
+            return None;
+        };
+        let (m1, m2) = (
+            StarSighting {
+                dir_acs: m1.0,
+                magnitude: m1.1,
+            },
+            StarSighting {
+                dir_acs: m2.0,
+                magnitude: m2.1,
+            },
+        );
+        let angle1 = sun_acs.angle(&m1.dir_acs);
+        let mut found: Option<Matrix3<f64>> = None;
+        let mut count = 0usize;
+        for star in sky.stars() {
+            if (star.magnitude - m1.magnitude).abs() > options.magnitude_tolerance {
+                continue;
+            }
+            let r1 = star.astrometric_dir_eci(j2000_tt_s, observer_bary_km);
+            if (sun_eci.angle(&r1) - angle1).abs() > BOOTSTRAP_TOLERANCE_RAD {
+                continue;
+            }
+            let Some(a) = triad(&sun_acs, sun_eci, &m1.dir_acs, &r1) else {
+                continue;
+            };
+            let predicted = a.transpose() * m2.dir_acs;
+            sky.for_each_in_cone(&predicted, BOOTSTRAP_TOLERANCE_RAD, |_, s2| {
+                if (s2.magnitude - m2.magnitude).abs() <= options.magnitude_tolerance
+                    && s2
+                        .astrometric_dir_eci(j2000_tt_s, observer_bary_km)
+                        .angle(&predicted)
+                        <= BOOTSTRAP_TOLERANCE_RAD
+                {
+                    count += 1;
+                    found = Some(a);
+                }
+            });
+            if count > 1 {
+                return None;
+            }
+        }
+        if count != 1 {
+            return None;
+        }
+        self.m_acs_from_eci = found;
+        self.refreshed_s = t_s;
+        self.q()
+    }
+}
+
+/// TRIAD `A` (ACS from ECI) from two body/reference pairs; `None` when nearly parallel.
+fn triad(
+    b1: &Vector3<f64>,
+    r1: &Vector3<f64>,
+    b2: &Vector3<f64>,
+    r2: &Vector3<f64>,
+) -> Option<Matrix3<f64>> {
+    let frame = |v1: &Vector3<f64>, v2: &Vector3<f64>| -> Option<Matrix3<f64>> {
+        let e1 = v1.try_normalize(1e-12)?;
+        let e2 = e1.cross(v2).try_normalize(1e-3)?;
+        Some(Matrix3::from_columns(&[e1, e2, e1.cross(&e2)]))
+    };
+    Some(frame(b1, b2)? * frame(r1, r2)?.transpose())
 }
 
 /// Which sensors a fine attitude may use.
