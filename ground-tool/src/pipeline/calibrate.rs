@@ -156,6 +156,8 @@ pub struct IruReport {
     pub residual_after_arcsec: Vec<f64>,
     /// Whether the new G was written (δM significant at 3σ somewhere).
     pub g_updated: bool,
+    /// The δM applied to G: the elements determined at 3σ, others 0 (all 0 without an update).
+    pub delta_m_uplinked: [[f64; 3]; 3],
     /// Intervals dropped as outliers (index in the order they were built, after earlier drops).
     pub rejected_intervals: Vec<usize>,
     /// Every interval built from the telemetry, in build order, with its use.
@@ -1197,12 +1199,21 @@ pub fn calibrate_telemetry(
     let iru_report = irucal_solution.as_ref().map(|s| {
         let dm = s.calibration.delta_m;
         let sig = s.sigma_delta_m;
-        let significant = (0..9).any(|k| dm[k].abs() > 3.0 * sig[k]);
+        // Only the elements determined at 3σ go up; the others stay at the flown G (an element
+        // of an axis no maneuver turned about is the prior, not information).
+        let dm_uplink = Matrix3::from_fn(|i, j| {
+            if dm[(i, j)].abs() > 3.0 * sig[(i, j)] {
+                dm[(i, j)]
+            } else {
+                0.0
+            }
+        });
+        let significant = dm_uplink.iter().any(|x| *x != 0.0);
         // Uplink a new G only from a redundant, self-consistent fit: enough intervals, none
         // rejected as outliers. Otherwise the prelaunch G stays (and the report says why).
         let consistent = intervals.len() >= MIN_IRUCAL_INTERVALS && rejected_intervals.is_empty();
         if significant && consistent {
-            let g = (Matrix3::identity() + dm) * matrix_from_rows(&flown_iru.g_primary);
+            let g = (Matrix3::identity() + dm_uplink) * matrix_from_rows(&flown_iru.g_primary);
             new_iru.g_primary = rows(&g);
         }
         IruReport {
@@ -1214,6 +1225,11 @@ pub fn calibrate_telemetry(
             residual_before_arcsec: s.residual_before_arcsec.clone(),
             residual_after_arcsec: s.residual_after_arcsec.clone(),
             g_updated: significant && consistent,
+            delta_m_uplinked: rows(&if significant && consistent {
+                dm_uplink
+            } else {
+                Matrix3::zeros()
+            }),
             rejected_intervals: rejected_intervals.clone(),
             interval_spans: spans.clone(),
         }
