@@ -51,9 +51,16 @@ const MAX_FIX_SIGMA_ARCSEC: f64 = 120.0;
 /// σ floor added to every fine attitude per axis (residual alignment error), arcsec.
 const FIX_SIGMA_FLOOR_ARCSEC: f64 = 3.0;
 
-/// Inherent error of an FSS-based attitude per axis after alignment calibration, arcsec: the
-/// paper's 0.022° (§5; the FSS transfer-function error that dominated its IRU calibration).
-const FSS_FIX_FLOOR_ARCSEC: f64 = 0.022 * 3600.0;
+/// What a fine attitude's formal covariance leaves out, added before it is used as an
+/// IRUCAL interval end.
+#[derive(Clone, Copy, Debug)]
+struct FixFloors {
+    /// For a FHST-only fix (rad²): a quarter of the FHST1–FHST2 relative alignment covariance.
+    fhst_cov_rad2: Matrix3<f64>,
+    /// For a fix that needed the Sun, per axis (arcsec): the FSS error that does not average
+    /// down (`DeclaredNoise::fss_systematic_arcsec`, default the paper's inherent 0.022°).
+    fss_arcsec: f64,
+}
 
 /// Fewest intervals kept by the outlier loop, and needed before a new G is uplinked: 12
 /// unknowns need redundancy (≥ 18 equations) for the residuals to vouch for the solution.
@@ -176,6 +183,9 @@ pub struct IntervalSpan {
     pub end_s: f64,
     /// Rejected by the outlier loop.
     pub rejected: bool,
+    /// 1σ per ACS axis of the start and end attitudes as IRUCAL weights them (floors
+    /// included), arcsec.
+    pub end_sigma_arcsec: [[f64; 3]; 2],
 }
 
 /// A maneuver found in the telemetry.
@@ -537,9 +547,9 @@ fn frame_index_at(frames: &[FrameObservations], t_s: f64) -> usize {
 /// A fine attitude centred at `t_center_s` from frames within ±`BATCH_HALF_S` restricted to
 /// `[lo_s, hi_s]`: FHST-only when the trackers give it, else FHST + FSS.
 ///
-/// The covariance adds what the formal one ignores: `floor_cov_rad2` for a FHST-only fix
+/// The covariance adds what the formal one ignores: `FixFloors::fhst_cov_rad2` for a FHST-only fix
 /// (the FHST1–FHST2 relative alignment uncertainty: a fix may follow either tracker's frame),
-/// and the FSS's inherent error ([`FSS_FIX_FLOOR_ARCSEC`] per axis) for a fix that needed the
+/// and the FSS's inherent error (`FixFloors::fss_arcsec` per axis) for a fix that needed the
 /// Sun, which otherwise would claim arcsec accuracy from hundreds of samples of a sensor
 /// whose error is systematic.
 #[allow(clippy::too_many_arguments)]
@@ -550,7 +560,7 @@ fn batch_fix(
     hi_s: f64,
     bias: &Vector3<f64>,
     delta_m: &Matrix3<f64>,
-    floor_cov_rad2: &Matrix3<f64>,
+    floors: &FixFloors,
     allow_fss: bool,
 ) -> Option<(usize, AttitudeFix)> {
     let lo = frame_index_at(frames, (t_center_s - BATCH_HALF_S).max(lo_s));
@@ -571,7 +581,7 @@ fn batch_fix(
         AttitudeSensors::FhstOnly,
     );
     let (sol, floor) = match fhst_only {
-        Ok(sol) => (sol, *floor_cov_rad2),
+        Ok(sol) => (sol, floors.fhst_cov_rad2),
         Err(_) if !allow_fss => return None,
         Err(_) => (
             fine_attitude(
@@ -583,7 +593,7 @@ fn batch_fix(
                 AttitudeSensors::FhstAndFss,
             )
             .ok()?,
-            Matrix3::identity() * (FSS_FIX_FLOOR_ARCSEC / ARCSEC_PER_RAD).powi(2),
+            Matrix3::identity() * (floors.fss_arcsec / ARCSEC_PER_RAD).powi(2),
         ),
     };
     // Floor for systematic errors the formal covariance ignores (residual alignment error).
@@ -621,7 +631,7 @@ fn maneuver_end_fix(
     hi_s: f64,
     bias_at: &dyn Fn(f64) -> Vector3<f64>,
     delta_m: &Matrix3<f64>,
-    floor_cov_rad2: &Matrix3<f64>,
+    floors: &FixFloors,
 ) -> Option<(usize, AttitudeFix)> {
     let hold_s = if away > 0.0 {
         hi_s - t_edge_s
@@ -631,31 +641,13 @@ fn maneuver_end_fix(
     let mut offset = BATCH_HALF_S;
     while offset + BATCH_HALF_S <= hold_s.min(MAX_END_SEARCH_S) || offset == BATCH_HALF_S {
         let t = t_edge_s + away * offset;
-        if let Some(f) = batch_fix(
-            frames,
-            t,
-            lo_s,
-            hi_s,
-            &bias_at(t),
-            delta_m,
-            floor_cov_rad2,
-            false,
-        ) {
+        if let Some(f) = batch_fix(frames, t, lo_s, hi_s, &bias_at(t), delta_m, floors, false) {
             return Some(f);
         }
         offset += END_SEARCH_STEP_S;
     }
     let t = t_edge_s + away * BATCH_HALF_S;
-    batch_fix(
-        frames,
-        t,
-        lo_s,
-        hi_s,
-        &bias_at(t),
-        delta_m,
-        floor_cov_rad2,
-        true,
-    )
+    batch_fix(frames, t, lo_s, hi_s, &bias_at(t), delta_m, floors, true)
 }
 
 fn steps_between(frames: &[FrameObservations], a: usize, b: usize) -> Vec<GyroStep> {
@@ -981,7 +973,10 @@ pub fn calibrate_telemetry(
     let zero_dm = Matrix3::zeros();
     // A FHST-only fix may follow either tracker's frame: a quarter of the FHST1–FHST2
     // relative alignment covariance (FFCAL, arcsec²) is added to it.
-    let fhst_floor = solution.relative_covariance_arcsec2(1, 0) * (0.25 / ARCSEC_PER_RAD.powi(2));
+    let fhst_floor = FixFloors {
+        fhst_cov_rad2: solution.relative_covariance_arcsec2(1, 0) * (0.25 / ARCSEC_PER_RAD.powi(2)),
+        fss_arcsec: metadata.sensors.fss_systematic_arcsec,
+    };
     // The OBC's filter bias near a time (housekeeping): the batches that give the interval end
     // attitudes carry their vectors over ±5 min with it, so the bias is not smeared into them.
     let obc_bias_at = |t_s: f64| -> Vector3<f64> {
@@ -992,11 +987,16 @@ pub fn calibrate_telemetry(
     };
     let mut intervals = Vec::new();
     let mut spans: Vec<IntervalSpan> = Vec::new();
-    let span = |kind: &'static str, a: usize, b: usize| IntervalSpan {
-        kind,
-        start_s: frames_cal[a].time.seconds() - t0,
-        end_s: frames_cal[b].time.seconds() - t0,
-        rejected: false,
+    let span = |kind: &'static str, a: usize, b: usize, ca: &Matrix3<f64>, cb: &Matrix3<f64>| {
+        let sigma =
+            |c: &Matrix3<f64>| [0, 1, 2].map(|i| c[(i, i)].max(0.0).sqrt() * ARCSEC_PER_RAD);
+        IntervalSpan {
+            kind,
+            start_s: frames_cal[a].time.seconds() - t0,
+            end_s: frames_cal[b].time.seconds() - t0,
+            rejected: false,
+            end_sigma_arcsec: [sigma(ca), sigma(cb)],
+        }
     };
     let mut maneuver_reports = Vec::new();
     let mut holds: Vec<(usize, usize)> = Vec::new();
@@ -1049,7 +1049,7 @@ pub fn calibrate_telemetry(
         );
         let used = match (before, after) {
             (Some((a, fa)), Some((b, fb))) if b > a => {
-                spans.push(span("maneuver", a, b));
+                spans.push(span("maneuver", a, b, &fa.cov_acs_rad2, &fb.cov_acs_rad2));
                 intervals.push(CalibrationInterval {
                     start: fa,
                     end: fb,
@@ -1116,7 +1116,13 @@ pub fn calibrate_telemetry(
                     &f.sigma_acs_rad.component_mul(&f.sigma_acs_rad),
                 ),
             };
-            spans.push(span("hold", i0, i1));
+            spans.push(span(
+                "hold",
+                i0,
+                i1,
+                &fix(&f0).cov_acs_rad2,
+                &fix(&f1).cov_acs_rad2,
+            ));
             intervals.push(CalibrationInterval {
                 start: fix(&f0),
                 end: fix(&f1),
