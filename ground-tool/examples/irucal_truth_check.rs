@@ -1,14 +1,13 @@
 //! Developer check of IRUCAL against a simulation's truth: flies a scenario, runs the
 //! calibration chain on its telemetry, and prints for every interval the error of its end
-//! attitudes against the true attitude, and the interval residual with the true gyro
-//! calibration (what the fit would see if δM and b were perfect).
+//! attitudes against the true attitude (with the σ IRUCAL gives them), the relative alignment
+//! errors, the stars far from the truth, and the OBC's bias error.
 //!
 //! ```text
 //! cargo run --release -p ground-tool --example irucal_truth_check -- [SCENARIO] [SEED]
 //! ```
 use fsw_core::attitude::rotvec_from_rot;
 use fsw_core::units::ARCSEC_PER_RAD;
-use ground_tool::calibration::iru::{irucal, GyroCalibration, GyroNoise, IrucalConfig};
 use ground_tool::pipeline::calibrate::{calibrate_run, CalibrateOptions};
 use nalgebra::{Matrix3, Vector3};
 use sim_harness::closed_loop::Simulation;
@@ -46,46 +45,13 @@ fn main() -> anyhow::Result<()> {
     )?;
     let t: serde_json::Value =
         serde_json::from_slice(&std::fs::read(dir.join("run").join("truth.json"))?)?;
-    let dm: Vec<f64> = t["iru"]["primary"]["delta_m"]
-        .as_array()
-        .into_iter()
-        .flatten()
-        .flat_map(|r| {
-            r.as_array()
-                .into_iter()
-                .flatten()
-                .filter_map(|x| x.as_f64())
-        })
-        .collect();
-    let delta_m_true = Matrix3::from_row_slice(&dm);
+    let delta_m_true = matrix(&t["iru"]["primary"]["delta_m"]);
     let samples = t["bias_history"]["samples"]
         .as_array()
         .cloned()
         .unwrap_or_default();
-    let mut b = Vector3::zeros();
-    for s in &samples {
-        for k in 0..3 {
-            b[k] += s["bias_acs_rad_per_s"][k].as_f64().unwrap_or(0.0) / samples.len() as f64;
-        }
-    }
     let names = ["FHST1", "FHST2", "FSS1", "FSS2"];
-    let m_true: Vec<Matrix3<f64>> = names
-        .iter()
-        .map(|n| {
-            let v: Vec<f64> = t["alignments"][n]
-                .as_array()
-                .into_iter()
-                .flatten()
-                .flat_map(|r| {
-                    r.as_array()
-                        .into_iter()
-                        .flatten()
-                        .filter_map(|x| x.as_f64())
-                })
-                .collect();
-            Matrix3::from_row_slice(&v)
-        })
-        .collect();
+    let m_true: Vec<Matrix3<f64>> = names.iter().map(|n| matrix(&t["alignments"][n])).collect();
     let est = out
         .alignment
         .matrices()
@@ -114,40 +80,18 @@ fn main() -> anyhow::Result<()> {
             Matrix3::from_row_slice(&r.delta_m.concat()) * 1e6
         );
     }
-    let truth_cal = GyroCalibration {
-        delta_m: delta_m_true,
-        bias_acs_rad_per_s: b,
-    };
-    println!("kind      start_s    end_s  rej  err_start(″ acs)          σ_start           err_end(″ acs)            σ_end            resid@truth(″)");
+    println!("kind      start_s    end_s  rej  err_start(″ acs)          σ_start           err_end(″ acs)            σ_end");
     for (span, iv) in &out.iru_intervals {
         let err = |fix: &ground_tool::calibration::iru::AttitudeFix, t: f64| {
             rotvec_from_rot(&(a_true(t) * fix.m_acs_from_eci.transpose())) * ARCSEC_PER_RAD
         };
-        let sig = |fix: &ground_tool::calibration::iru::AttitudeFix| {
-            Vector3::from_fn(|i, _| fix.cov_acs_rad2[(i, i)].sqrt() * ARCSEC_PER_RAD)
-        };
-        let e0 = err(&iv.start, span.start_s);
-        let e1 = err(&iv.end, span.end_s);
-        let cfg = IrucalConfig {
-            noise: GyroNoise::default(),
-            prior_sigma_ppm_and_arcsec_per_s: Some((3000.0, 1.0)),
-            max_iterations: 1,
-            ..IrucalConfig::default()
-        };
-        let r = irucal(std::slice::from_ref(iv), &truth_cal, &cfg)
-            .map(|s| s.residual_before_arcsec[0])
-            .unwrap_or(f64::NAN);
+        let (e0, e1) = (err(&iv.start, span.start_s), err(&iv.end, span.end_s));
+        let [s0, s1] = span.end_sigma_arcsec;
         println!(
-            "{:8} {:8.0} {:8.0} {:>4} [{:7.1},{:7.1},{:7.1}] [{:5.1},{:5.1},{:5.1}] [{:7.1},{:7.1},{:7.1}] [{:5.1},{:5.1},{:5.1}] {:8.1}",
-            span.kind,
-            span.start_s,
-            span.end_s,
-            span.rejected,
-            e0.x, e0.y, e0.z,
-            sig(&iv.start).x, sig(&iv.start).y, sig(&iv.start).z,
-            e1.x, e1.y, e1.z,
-            sig(&iv.end).x, sig(&iv.end).y, sig(&iv.end).z,
-            r
+            "{:8} {:8.0} {:8.0} {:>4} [{:7.1},{:7.1},{:7.1}] [{:5.1},{:5.1},{:5.1}] [{:7.1},{:7.1},{:7.1}] [{:5.1},{:5.1},{:5.1}]",
+            span.kind, span.start_s, span.end_s, span.rejected,
+            e0.x, e0.y, e0.z, s0[0], s0[1], s0[2],
+            e1.x, e1.y, e1.z, s1[0], s1[1], s1[2],
         );
     }
     // Per-star residual against the truth (flown = calibrated alignments, so tens of arcsec
@@ -177,57 +121,6 @@ fn main() -> anyhow::Result<()> {
                     block.1 += 1;
                 }
                 block.2 = block.2.max(r);
-            }
-        }
-    }
-    // Sub-batches of every start/end fix: which part of the data pulls a fix off.
-    {
-        use ground_tool::pipeline::observations::{fine_attitude, AttitudeSensors};
-        let idx = |t: f64| out.frames.partition_point(|f| f.time.seconds() - t0 < t);
-        for (span, _) in &out.iru_intervals {
-            for tc in [span.start_s, span.end_s] {
-                let c = idx(tc);
-                let mut line = format!("fix at {tc:6.0}:");
-                for (lo, hi, label) in [
-                    (c.saturating_sub(300), c + 300, "all"),
-                    (c.saturating_sub(300), c, "1st"),
-                    (c, c + 300, "2nd"),
-                ] {
-                    let hi = hi.min(out.frames.len());
-                    for tracker in [None, Some(0usize), Some(1)] {
-                        let mut fr: Vec<_> = out.frames.clone();
-                        if let Some(k) = tracker {
-                            for f in &mut fr[lo..hi] {
-                                f.stars[1 - k] = None;
-                            }
-                        }
-                        let b = Vector3::zeros();
-                        let r = fine_attitude(
-                            &fr,
-                            lo..hi,
-                            c.min(hi - 1).max(lo),
-                            &b,
-                            &Matrix3::zeros(),
-                            AttitudeSensors::FhstOnly,
-                        );
-                        let txt = match r {
-                            Ok(sol) => {
-                                let e = rotvec_from_rot(
-                                    &(a_true(
-                                        out.frames[c.min(hi - 1).max(lo)].time.seconds() - t0,
-                                    ) * sol.m_acs_from_eci.transpose()),
-                                ) * ARCSEC_PER_RAD;
-                                format!("{:.0}", e.norm())
-                            }
-                            Err(_) => "-".into(),
-                        };
-                        line += &format!(
-                            " {label}/{}={txt}",
-                            tracker.map_or("both".to_string(), |k| format!("T{}", k + 1))
-                        );
-                    }
-                }
-                println!("{line}");
             }
         }
     }
@@ -284,4 +177,9 @@ fn main() -> anyhow::Result<()> {
     }
     let _ = std::fs::remove_dir_all(&dir);
     Ok(())
+}
+
+/// A row-major 3×3 matrix from `truth.json` (missing elements read as 0).
+fn matrix(v: &serde_json::Value) -> Matrix3<f64> {
+    Matrix3::from_fn(|i, j| v[i][j].as_f64().unwrap_or(0.0))
 }

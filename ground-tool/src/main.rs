@@ -218,33 +218,17 @@ fn read_flown_tables(
     Option<fsw_core::tables::AlignmentTable>,
     Option<fsw_core::tables::IruTable>,
 )> {
-    use fsw_core::tables::image::{decode_payload, parse_image};
+    use ground_tool::pipeline::calibrate::read_table_image;
     let Some(dir) = dir else {
         return Ok((None, None));
     };
-    let read = |name: &str| -> Result<Option<Vec<u8>>> {
-        let p = dir.join(name);
-        if p.exists() {
-            Ok(Some(std::fs::read(&p)?))
-        } else {
-            Ok(None)
-        }
-    };
-    let alignment = match read("alignment.tbl")? {
-        Some(b) => {
-            let (_, payload) =
-                parse_image(&b).map_err(|e| anyhow::anyhow!("alignment.tbl: {e:?}"))?;
-            Some(decode_payload(payload).map_err(|e| anyhow::anyhow!("alignment.tbl: {e:?}"))?)
-        }
-        None => None,
-    };
-    let iru = match read("iru.tbl")? {
-        Some(b) => {
-            let (_, payload) = parse_image(&b).map_err(|e| anyhow::anyhow!("iru.tbl: {e:?}"))?;
-            Some(decode_payload(payload).map_err(|e| anyhow::anyhow!("iru.tbl: {e:?}"))?)
-        }
-        None => None,
-    };
+    let existing = |name: &str| Some(dir.join(name)).filter(|p| p.exists());
+    let alignment = existing("alignment.tbl")
+        .map(|p| read_table_image(&p))
+        .transpose()?;
+    let iru = existing("iru.tbl")
+        .map(|p| read_table_image(&p))
+        .transpose()?;
     Ok((alignment, iru))
 }
 

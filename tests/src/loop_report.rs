@@ -7,8 +7,9 @@ use fsw_core::attitude::rotvec_from_rot;
 use fsw_core::tables::types::matrix_from_rows;
 use fsw_core::tables::AlignmentTable;
 use fsw_core::units::ARCSEC_PER_RAD;
+use ground_tool::calibration::alignment::FfcalSolution;
 use ground_tool::pipeline::calibrate::{CalibrationOutput, SENSOR_NAMES};
-use nalgebra::Matrix3;
+use nalgebra::{Matrix3, Vector3};
 use serde::Serialize;
 use sim_harness::run::Summary;
 use std::collections::BTreeMap;
@@ -54,7 +55,11 @@ pub struct LoopReport {
     pub wall_seconds: f64,
 }
 
-fn matrix_from_json(v: &serde_json::Value) -> anyhow::Result<Matrix3<f64>> {
+/// A 3×3 matrix from `truth.json` (row-major nested arrays).
+///
+/// # Errors
+/// A missing or non-numeric element.
+pub fn matrix_from_json(v: &serde_json::Value) -> anyhow::Result<Matrix3<f64>> {
     let mut rows = [[0.0; 3]; 3];
     for (i, row) in rows.iter_mut().enumerate() {
         for (j, x) in row.iter_mut().enumerate() {
@@ -62,6 +67,31 @@ fn matrix_from_json(v: &serde_json::Value) -> anyhow::Result<Matrix3<f64>> {
         }
     }
     Ok(matrix_from_rows(&rows))
+}
+
+/// Error of FFCAL sensor `j`'s alignment relative to sensor 0 (FHST1) against the truth, ACS,
+/// arcsec (`rotvec(R_j R_0ᵀ)`, `R_k = M_k,calibrated M_k,trueᵀ`), and its NEES with the stated
+/// relative covariance (3 degrees of freedom).
+///
+/// # Errors
+/// A malformed `truth.json`, a sensor index out of range, or a singular covariance.
+pub fn relative_error_and_nees(
+    solution: &FfcalSolution,
+    truth: &serde_json::Value,
+    j: usize,
+) -> anyhow::Result<(Vector3<f64>, f64)> {
+    let r = |k: usize| -> anyhow::Result<Matrix3<f64>> {
+        let s = solution.sensors.get(k).context("sensor index")?;
+        let t = matrix_from_json(&truth["alignments"][&s.id])
+            .with_context(|| format!("truth.json alignments.{}", s.id))?;
+        Ok(s.m_acs_from_sensor_calibrated * t.transpose())
+    };
+    let e = rotvec_from_rot(&(r(j)? * r(0)?.transpose())) * ARCSEC_PER_RAD;
+    let p_inv = solution
+        .relative_covariance_arcsec2(j, 0)
+        .try_inverse()
+        .context("singular relative covariance")?;
+    Ok((e, (e.transpose() * p_inv * e)[(0, 0)]))
 }
 
 fn alignment_errors(

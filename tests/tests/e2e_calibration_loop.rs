@@ -8,7 +8,7 @@
 //! FHST1–FHST2 5″ aim is *not* asserted: its Cramér–Rao bound on this data is ≈ 9″ on two
 //! axes (README "Known gaps"; `calibration-mc` measures it over seeds).
 
-use gro_tests::loop_report::compare;
+use gro_tests::loop_report::{compare, relative_error_and_nees};
 use ground_tool::pipeline::calibrate::{calibrate_run, CalibrateOptions};
 use sim_harness::run::{run, RunOptions};
 use sim_harness::scenario::resolve;
@@ -59,16 +59,7 @@ fn e2e_calibration_loop_gro_early_mission() {
     }
     // FHST2 relative to FHST1: error consistent with the stated covariance (χ²₃ at 99.9 %).
     let sol = &calibration.ffcal;
-    let r_of = |k: usize| {
-        let s = &sol.sensors[k];
-        let t = &truth["alignments"][&s.id];
-        let t = nalgebra::Matrix3::from_fn(|i, j| t[i][j].as_f64().unwrap());
-        s.m_acs_from_sensor_calibrated * t.transpose()
-    };
-    let e = fsw_core::attitude::rotvec_from_rot(&(r_of(1) * r_of(0).transpose()))
-        * fsw_core::units::ARCSEC_PER_RAD;
-    let p = sol.relative_covariance_arcsec2(1, 0);
-    let nees = (e.transpose() * p.try_inverse().unwrap() * e)[(0, 0)];
+    let (e, nees) = relative_error_and_nees(sol, &truth, 1).unwrap();
     assert!(nees < 16.27, "FHST2 rel FHST1 error {e:?}″, NEES {nees:.1}");
     // IRU: every δM element within 3σ of truth.
     assert_eq!(r.iru_delta_m_within_3sigma, Some(true), "δM vs truth");
@@ -116,15 +107,7 @@ fn calibration_is_deterministic() {
     let out = std::env::temp_dir().join(format!("gro-e2e-determinism-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&out);
     let fly = out.join("run");
-    run(
-        resolve("gro-early-mission").unwrap(),
-        &RunOptions {
-            out_dir: Some(fly.clone()),
-            tables_dir: None,
-            progress: false,
-        },
-    )
-    .unwrap();
+    fly_prelaunch(&fly);
     let mut reports = Vec::new();
     let mut tables = Vec::new();
     for k in 0..2 {
@@ -158,15 +141,7 @@ fn calibration_without_housekeeping() {
     let out = std::env::temp_dir().join(format!("gro-e2e-nohk-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&out);
     let fly = out.join("run");
-    run(
-        resolve("gro-early-mission").unwrap(),
-        &RunOptions {
-            out_dir: Some(fly.clone()),
-            tables_dir: None,
-            progress: false,
-        },
-    )
-    .unwrap();
+    fly_prelaunch(&fly);
     // Drop every APID 0x011 packet (CCSDS primary header: APID in the low 11 bits of octets
     // 0-1, data length - 1 in octets 4-5).
     let bytes = std::fs::read(fly.join("telemetry.bin")).unwrap();
@@ -194,16 +169,20 @@ fn calibration_without_housekeeping() {
     let truth: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(fly.join("truth.json")).unwrap()).unwrap();
     let sol = &c.ffcal;
-    let r_of = |k: usize| {
-        let s = &sol.sensors[k];
-        let t = &truth["alignments"][&s.id];
-        let t = nalgebra::Matrix3::from_fn(|i, j| t[i][j].as_f64().unwrap());
-        s.m_acs_from_sensor_calibrated * t.transpose()
-    };
-    let e = fsw_core::attitude::rotvec_from_rot(&(r_of(1) * r_of(0).transpose()))
-        * fsw_core::units::ARCSEC_PER_RAD;
-    let p = sol.relative_covariance_arcsec2(1, 0);
-    let nees = (e.transpose() * p.try_inverse().unwrap() * e)[(0, 0)];
+    let (e, nees) = relative_error_and_nees(sol, &truth, 1).unwrap();
     assert!(nees < 16.27, "FHST2 rel FHST1 error {e:?}″, NEES {nees:.1}");
     let _ = std::fs::remove_dir_all(&out);
+}
+
+/// Fly `gro-early-mission` with the prelaunch tables into the run folder `dir`.
+fn fly_prelaunch(dir: &std::path::Path) {
+    run(
+        resolve("gro-early-mission").unwrap(),
+        &RunOptions {
+            out_dir: Some(dir.to_path_buf()),
+            tables_dir: None,
+            progress: false,
+        },
+    )
+    .unwrap();
 }

@@ -22,11 +22,11 @@ use super::search::SearchConfig;
 use super::{analyse, Analysis};
 use crate::calibration::iru::GyroCalibration;
 use crate::pipeline::calibrate::{
-    calibrate_telemetry, read_metadata, write_table, CalibrateOptions, CalibrationOutput,
+    calibrate_telemetry, read_run, read_table_image, write_table, CalibrateOptions,
+    CalibrationOutput,
 };
 use crate::tp;
-use anyhow::{bail, Context};
-use fsw_core::tables::image::{decode_payload, parse_image};
+use anyhow::Context;
 use fsw_core::tables::{AlignmentTable, FilterTable, IruTable, StarCatalogTable, TableId};
 use nalgebra::{Matrix3, Vector3};
 use std::collections::BTreeMap;
@@ -65,14 +65,6 @@ pub struct DiagnoseOutput {
     pub filter: Option<FilterTable>,
 }
 
-fn read_image<T: serde::de::DeserializeOwned + serde::Serialize>(path: &Path) -> anyhow::Result<T> {
-    let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
-    let (_, payload) = parse_image(&bytes)
-        .map_err(|e| anyhow::anyhow!("{} is not valid (table image): {e:?}", path.display()))?;
-    decode_payload(payload)
-        .map_err(|e| anyhow::anyhow!("{} is not valid (payload): {e:?}", path.display()))
-}
-
 /// Tables flown: from `--tables`, else the run's activated uploads (last one per table).
 fn flown_tables(
     run_dir: &Path,
@@ -88,9 +80,13 @@ fn flown_tables(
             let p = dir.join(name);
             p.exists().then_some(p)
         };
-        let a = get("alignment.tbl").map(|p| read_image(&p)).transpose()?;
-        let i = get("iru.tbl").map(|p| read_image(&p)).transpose()?;
-        let f = get("filter.tbl").map(|p| read_image(&p)).transpose()?;
+        let a = get("alignment.tbl")
+            .map(|p| read_table_image(&p))
+            .transpose()?;
+        let i = get("iru.tbl").map(|p| read_table_image(&p)).transpose()?;
+        let f = get("filter.tbl")
+            .map(|p| read_table_image(&p))
+            .transpose()?;
         return Ok((a, i, f));
     }
     let mut a = None;
@@ -109,9 +105,9 @@ fn flown_tables(
                 continue;
             }
             match u["table"].as_str() {
-                Some("alignment") => a = Some(read_image(&p)?),
-                Some("iru") => i = Some(read_image(&p)?),
-                Some("filter") => f = Some(read_image(&p)?),
+                Some("alignment") => a = Some(read_table_image(&p)?),
+                Some("iru") => i = Some(read_table_image(&p)?),
+                Some("filter") => f = Some(read_table_image(&p)?),
                 _ => {}
             }
         }
@@ -130,7 +126,7 @@ fn flown_catalog(
         .map(|d| d.join("star_catalog.tbl"))
         .filter(|p| p.exists())
     {
-        return Ok(Some(read_image(&p)?));
+        return Ok(Some(read_table_image(&p)?));
     }
     let mut out = None;
     for u in meta["uploads"].as_array().into_iter().flatten() {
@@ -145,7 +141,7 @@ fn flown_catalog(
             .map(|f| run_dir.join(f))
             .filter(|p| p.exists())
         {
-            out = Some(read_image(&p)?);
+            out = Some(read_table_image(&p)?);
         }
     }
     Ok(out)
@@ -250,16 +246,7 @@ pub fn diagnose_run(
     out_dir: &Path,
     opts: &DiagnoseOptions,
 ) -> anyhow::Result<DiagnoseOutput> {
-    let telemetry_path = run_dir.join("telemetry.bin");
-    if !telemetry_path.exists() {
-        bail!(
-            "{} not found: a run folder needs telemetry.bin (docs/icd.md); run `sim-harness run SCENARIO --out {}` first",
-            telemetry_path.display(),
-            run_dir.display()
-        );
-    }
-    let tm = tp::read_file(&telemetry_path)?;
-    let metadata = read_metadata(run_dir)?;
+    let (tm, metadata) = read_run(run_dir)?;
     let meta_raw: serde_json::Value = match std::fs::read_to_string(run_dir.join("metadata.json")) {
         Ok(t) => serde_json::from_str(&t).unwrap_or(serde_json::Value::Null),
         Err(_) => serde_json::Value::Null,

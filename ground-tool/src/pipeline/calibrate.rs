@@ -1307,6 +1307,37 @@ pub fn write_table<T: serde::Serialize>(
     std::fs::write(path, &buf[..n]).with_context(|| format!("writing {}", path.display()))
 }
 
+/// A run folder's telemetry (decoded, damage reported) and declared metadata.
+///
+/// # Errors
+/// No `telemetry.bin` (the message says how to make one), unreadable files, bad metadata.
+pub fn read_run(run_dir: &Path) -> anyhow::Result<(Telemetry, Metadata)> {
+    let telemetry_path = run_dir.join("telemetry.bin");
+    if !telemetry_path.exists() {
+        bail!(
+            "{} not found: a run folder needs telemetry.bin (docs/icd.md); run `sim-harness run SCENARIO --out {}` first",
+            telemetry_path.display(),
+            run_dir.display()
+        );
+    }
+    Ok((tp::read_file(&telemetry_path)?, read_metadata(run_dir)?))
+}
+
+/// A table from its binary image file (header, CRC and canonical payload checked).
+///
+/// # Errors
+/// Unreadable file, or an image that does not parse or decode (the message names the file).
+pub fn read_table_image<T: serde::de::DeserializeOwned + serde::Serialize>(
+    path: &Path,
+) -> anyhow::Result<T> {
+    use fsw_core::tables::image::{decode_payload, parse_image};
+    let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let (_, payload) = parse_image(&bytes)
+        .map_err(|e| anyhow::anyhow!("{} is not valid (table image): {e:?}", path.display()))?;
+    decode_payload(payload)
+        .map_err(|e| anyhow::anyhow!("{} is not valid (payload): {e:?}", path.display()))
+}
+
 /// `ground-tool calibrate RUN_DIR --out DIR`: run the chain and write tables and reports.
 ///
 /// # Errors
@@ -1316,16 +1347,7 @@ pub fn calibrate_run(
     out_dir: &Path,
     options: &CalibrateOptions,
 ) -> anyhow::Result<CalibrationOutput> {
-    let telemetry_path = run_dir.join("telemetry.bin");
-    if !telemetry_path.exists() {
-        bail!(
-            "{} not found: a run folder needs telemetry.bin (docs/icd.md); run `sim-harness run SCENARIO --out {}` first",
-            telemetry_path.display(),
-            run_dir.display()
-        );
-    }
-    let tm = tp::read_file(&telemetry_path)?;
-    let metadata = read_metadata(run_dir)?;
+    let (tm, metadata) = read_run(run_dir)?;
     let mut out = calibrate_telemetry(&tm, &metadata, options)?;
     let tables_dir = out_dir.join("tables");
     std::fs::create_dir_all(&tables_dir)

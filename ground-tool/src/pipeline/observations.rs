@@ -242,8 +242,19 @@ pub fn build_observations(
         } else {
             sun_state.astrometric_from_km(&pos).normalize()
         };
+        // DA: each sensor's measurement through the flown tables, once per frame.
+        let fhst_meas: [Option<FhstMeasurement>; 2] = FhstId::ALL.map(|id| {
+            raw.fhst
+                .get(id.index())
+                .and_then(|sample| fhst::measure_tracker(sample, id, alignment).ok())
+        });
+        let fss_meas: [Option<FssMeasurement>; 2] = FssId::ALL.map(|id| {
+            raw.fss
+                .get(id.index())
+                .and_then(|sample| fss::measure_sensor(sample, id, alignment).ok())
+        });
         if obc_q.is_none() {
-            own.note_stars(raw, alignment, t_s);
+            own.note_stars(&fhst_meas, &fss_meas, t_s);
         }
         let id_q = obc_q.or_else(|| {
             if own.usable(t_s) {
@@ -252,11 +263,8 @@ pub fn build_observations(
             own.bootstrap(sky, &sun_eci, j2000_tt_s, &observer_bary_km, t_s, options)
         });
         let mut stars = [None, None];
-        for id in FhstId::ALL {
-            let Some(sample) = raw.fhst.get(id.index()) else {
-                continue;
-            };
-            let Ok(meas) = fhst::measure_tracker(sample, id, alignment) else {
+        for (slot, meas) in stars.iter_mut().zip(fhst_meas) {
+            let Some(meas) = meas else {
                 continue;
             };
             let mut obs = StarObservation {
@@ -290,21 +298,15 @@ pub fn build_observations(
                     }
                 }
             }
-            stars[id.index()] = Some(obs);
+            *slot = Some(obs);
         }
-        let mut suns = [None, None];
-        for id in FssId::ALL {
-            let Some(sample) = raw.fss.get(id.index()) else {
-                continue;
-            };
-            if let Ok(meas) = fss::measure_sensor(sample, id, alignment) {
-                suns[id.index()] = Some(SunObservation {
-                    meas,
-                    sun_eci,
-                    sigma_rad: noise.fss_sigma_arcsec * RAD_PER_ARCSEC,
-                });
-            }
-        }
+        let suns = fss_meas.map(|m| {
+            m.map(|meas| SunObservation {
+                meas,
+                sun_eci,
+                sigma_rad: noise.fss_sigma_arcsec * RAD_PER_ARCSEC,
+            })
+        });
         if obc_q.is_none() {
             own.refresh(&stars, &suns, t_s);
         }
@@ -381,27 +383,16 @@ impl OwnAttitude {
     /// Remember each tracker's star and the Sun of this frame (for the bootstrap).
     fn note_stars(
         &mut self,
-        raw: &fsw_core::raw::RawSensorFrame,
-        alignment: &AlignmentTable,
+        fhst: &[Option<FhstMeasurement>; 2],
+        fss: &[Option<FssMeasurement>; 2],
         t_s: f64,
     ) {
-        if let Some(sun) = FssId::ALL.iter().find_map(|&id| {
-            let sample = raw.fss.get(id.index())?;
-            fss::measure_sensor(sample, id, alignment)
-                .ok()
-                .map(|m| m.dir_acs)
-        }) {
-            self.last_sun = Some((sun, t_s));
+        if let Some(sun) = fss.iter().flatten().next() {
+            self.last_sun = Some((sun.dir_acs, t_s));
         }
-        for id in FhstId::ALL {
-            if let Some(m) = raw
-                .fhst
-                .get(id.index())
-                .and_then(|sample| fhst::measure_tracker(sample, id, alignment).ok())
-            {
-                if let Some(slot) = self.last_star.get_mut(id.index()) {
-                    *slot = Some((m.dir_acs, m.magnitude, t_s));
-                }
+        for (slot, m) in self.last_star.iter_mut().zip(fhst) {
+            if let Some(m) = m {
+                *slot = Some((m.dir_acs, m.magnitude, t_s));
             }
         }
     }

@@ -12,11 +12,10 @@
 
 use anyhow::Context;
 use clap::Parser;
-use fsw_core::attitude::rotvec_from_rot;
-use fsw_core::units::ARCSEC_PER_RAD;
+use gro_tests::loop_report::{matrix_from_json, relative_error_and_nees};
 use ground_tool::calibration::alignment::Weighting;
 use ground_tool::pipeline::calibrate::{calibrate_run, CalibrateOptions};
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::Vector3;
 use serde::Serialize;
 use sim_harness::run::{run, RunOptions};
 use sim_harness::scenario::resolve;
@@ -90,16 +89,6 @@ struct McSummary {
     seeds: Vec<SeedResult>,
 }
 
-fn matrix(v: &serde_json::Value) -> anyhow::Result<Matrix3<f64>> {
-    let mut m = Matrix3::zeros();
-    for i in 0..3 {
-        for j in 0..3 {
-            m[(i, j)] = v[i][j].as_f64().context("matrix element")?;
-        }
-    }
-    Ok(m)
-}
-
 fn one_seed(args: &Args, seed: u64) -> anyhow::Result<SeedResult> {
     let mut scenario = resolve(&args.scenario)?;
     scenario.seed = seed;
@@ -124,28 +113,16 @@ fn one_seed(args: &Args, seed: u64) -> anyhow::Result<SeedResult> {
     let truth: serde_json::Value =
         serde_json::from_slice(&std::fs::read(dir.join("run").join("truth.json"))?)?;
     let sol = &cal.ffcal;
-    let err_of = |j: usize| -> anyhow::Result<Vector3<f64>> {
-        let r = |k: usize| -> anyhow::Result<Matrix3<f64>> {
-            let s = &sol.sensors[k];
-            let t = matrix(&truth["alignments"][&s.id])?;
-            Ok(s.m_acs_from_sensor_calibrated * t.transpose())
-        };
-        Ok(rotvec_from_rot(&(r(j)? * r(0)?.transpose())) * ARCSEC_PER_RAD)
-    };
     let mut relative = Vec::new();
     let mut nees = Vec::new();
     for j in 1..sol.sensors.len() {
-        let e = err_of(j)?;
-        let p = sol.relative_covariance_arcsec2(j, 0);
-        let n = p
-            .try_inverse()
-            .map_or(f64::NAN, |pi| (e.transpose() * pi * e)[(0, 0)]);
+        let (e, n) = relative_error_and_nees(sol, &truth, j)?;
         relative.push((sol.sensors[j].id.clone(), [e.x, e.y, e.z]));
         nees.push((sol.sensors[j].id.clone(), n));
     }
     let delta_m_normalised = match (&cal.irucal, truth["iru"]["primary"]["delta_m"].is_array()) {
         (Some(s), true) => {
-            let t = matrix(&truth["iru"]["primary"]["delta_m"])?;
+            let t = matrix_from_json(&truth["iru"]["primary"]["delta_m"])?;
             let d = (s.calibration.delta_m - t).component_div(&s.sigma_delta_m);
             let mut out = [0.0; 9];
             for i in 0..3 {
