@@ -40,6 +40,7 @@ pub mod linalg;
 pub mod paper;
 pub mod pipeline;
 pub mod report;
+pub mod run_check;
 pub mod synth;
 pub mod table;
 pub mod tp;

@@ -258,6 +258,7 @@ fn run_calibrate(
     use ground_tool::calibration::alignment::Weighting;
     use ground_tool::pipeline::calibrate::{calibrate_run, CalibrateOptions};
     let (flown_alignment, flown_iru) = read_flown_tables(tables)?;
+    ground_tool::run_check::check_run_dir(run_dir, out)?;
     let options = CalibrateOptions {
         flown_alignment,
         flown_iru,
@@ -292,7 +293,11 @@ fn run_diagnose(
         tables: tables.map(std::path::Path::to_path_buf),
         ..DiagnoseOptions::default()
     };
+    ground_tool::run_check::check_run_dir(run_dir, out)?;
     let result = diagnose_run(run_dir, out, &options)?;
+    for note in &result.report.notes {
+        eprintln!("note: {note}");
+    }
     if json {
         println!("{}", serde_json::to_string_pretty(&result.report)?);
     } else {
@@ -320,19 +325,20 @@ fn main() {
         eprintln!("error: {e:#}");
         // Input problems (missing or malformed files, too little data) are exit code 2.
         let text = format!("{e:#}");
-        let input = [
-            "not found",
-            "needs",
-            "malformed",
-            "not valid",
-            "only ",
-            "cannot read",
-            "FFCAL:",
-            "outside the telemetry",
-            "overlaps the previous",
-        ]
-        .iter()
-        .any(|k| text.contains(k));
+        let input = e.is::<ground_tool::run_check::InputError>()
+            || [
+                "not found",
+                "needs",
+                "malformed",
+                "not valid",
+                "only ",
+                "cannot read",
+                "FFCAL:",
+                "outside the telemetry",
+                "overlaps the previous",
+            ]
+            .iter()
+            .any(|k| text.contains(k));
         std::process::exit(if input { 2 } else { 1 });
     }
 }

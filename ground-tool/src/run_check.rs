@@ -1,0 +1,458 @@
+//! # Run-folder check against the ICD (`docs/icd.md`), before calibrate and diagnose
+//!
+//! The calibration chain takes decoded telemetry at its word: time codes are the time, a
+//! counter that does not move is a stuck gyro, a frame without an orbit has no orbital
+//! aberration. Telemetry written by another program can be well formed and still break one of
+//! the ICD's rules in a way that would give a quietly wrong answer. This module looks for those
+//! cases (`docs/icd-conformance.md` lists how each was found) and says what is wrong and what
+//! would fix it:
+//!
+//! * **errors** (exit code 2): no raw frame at all (with what the reader found instead), time
+//!   codes that are not TAI since 1958 (mission elapsed time), time codes that disagree with
+//!   `metadata.json`'s `epoch_utc`;
+//! * **warnings**: frames without an orbit, a sensor never usable (flags), an IRU channel
+//!   unchanged long enough to be declared stuck, slews without high-rate frames, gaps, damage
+//!   the reader repaired, housekeeping that matches no raw frame.
+
+use crate::pipeline::observations::interpolate_orbit;
+use crate::tp::Telemetry;
+use fsw_core::raw::{FHST_FLAG_TRACKING, FHST_FLAG_VALID, FSS_FLAG_SUN_ALPHA, FSS_FLAG_SUN_BETA};
+use fsw_core::tables::IruTable;
+use serde::Serialize;
+
+/// TAI seconds since 1958 of 1972-01-01: earlier time codes are taken for mission elapsed
+/// time (no spacecraft of this ICD flew before UTC had leap seconds).
+const EARLIEST_PLAUSIBLE_TAI1958_S: f64 = 5113.0 * 86_400.0;
+
+/// Largest |first frame − epoch_utc| accepted, after TAI − UTC (0–37 s), s. The Sun moves
+/// 0.041°/h: 600 s is 25″, the size of the FSS noise; beyond it the Sun reference is wrong.
+const EPOCH_ERROR_S: f64 = 600.0;
+
+/// |first frame − epoch_utc| beyond TAI − UTC that only earns a warning, s.
+const EPOCH_WARNING_S: f64 = 60.0;
+
+/// A gap is a step between raw frames longer than this many median cycle periods.
+const GAP_CYCLES: f64 = 3.0;
+
+/// Rotation (deg) in low-rate frames above which missing high-rate frames are reported.
+const LOW_RATE_SLEW_DEG: f64 = 5.0;
+
+/// How bad a finding is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+pub enum Severity {
+    /// The run cannot give a meaningful result: exit code 2.
+    Error,
+    /// The result is usable but something is missing or was repaired.
+    Warning,
+}
+
+/// One finding of the check.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Finding {
+    /// Error or warning.
+    pub severity: Severity,
+    /// Short stable name (tests and scripts key on it).
+    pub code: &'static str,
+    /// What is wrong and what would fix it.
+    pub message: String,
+}
+
+/// An input that breaks the ICD so that no meaningful result can be computed (exit code 2).
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct InputError(pub String);
+
+fn warn(code: &'static str, message: String) -> Finding {
+    Finding {
+        severity: Severity::Warning,
+        code,
+        message,
+    }
+}
+
+fn error(code: &'static str, message: String) -> Finding {
+    Finding {
+        severity: Severity::Error,
+        code,
+        message,
+    }
+}
+
+/// UTC date and time of TAI seconds since 1958 (leap seconds ignored: for messages only).
+fn date_of(tai1958_s: f64) -> String {
+    let days = (tai1958_s / 86_400.0).floor();
+    // Civil date from days since 1958-01-01 (= day 4383 before 1970-01-01).
+    let z = days as i64 - 4383 + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let d = doy - (153 * mp + 2) / 5 + 1;
+    let m = if mp < 10 { mp + 3 } else { mp - 9 };
+    let y = yoe + era * 400 + i64::from(m <= 2);
+    let sod = tai1958_s - days * 86_400.0;
+    format!(
+        "{y:04}-{m:02}-{d:02}T{:02}:{:02}:{:02.0}",
+        (sod / 3600.0).floor(),
+        ((sod % 3600.0) / 60.0).floor(),
+        (sod % 60.0).floor()
+    )
+}
+
+/// Seconds since 1958-01-01 of an ISO 8601 UTC date `YYYY-MM-DDTHH:MM:SS[.f][Z]`, without leap
+/// seconds (so TAI − this = TAI − UTC, 0–37 s, for a consistent file).
+fn utc_naive_1958_s(text: &str) -> Option<f64> {
+    let t = text.trim().trim_end_matches('Z').trim_end_matches(" UTC");
+    let (date, clock) = t.split_once(['T', ' '])?;
+    let mut d = date.split('-').map(str::parse::<i64>);
+    let (y, m, day) = (d.next()?.ok()?, d.next()?.ok()?, d.next()?.ok()?);
+    let mut c = clock.split(':');
+    let hh: f64 = c.next()?.parse().ok()?;
+    let mi: f64 = c.next()?.parse().ok()?;
+    let ss: f64 = c.next().unwrap_or("0").parse().ok()?;
+    if !(1..=12).contains(&m) || !(1..=31).contains(&day) {
+        return None;
+    }
+    let days_from_civil = |y: i64, m: i64, d: i64| -> i64 {
+        let y = if m <= 2 { y - 1 } else { y };
+        let era = y.div_euclid(400);
+        let yoe = y - era * 400;
+        let doy = (153 * (m + if m > 2 { -3 } else { 9 }) + 2) / 5 + d - 1;
+        era * 146_097 + yoe * 365 + yoe / 4 - yoe / 100 + doy
+    };
+    let days = days_from_civil(y, m, day) - days_from_civil(1958, 1, 1);
+    Some(days as f64 * 86_400.0 + hh * 3600.0 + mi * 60.0 + ss)
+}
+
+/// Check a decoded run (`metadata`: the parsed `metadata.json`, if any).
+#[must_use]
+pub fn check(tm: &Telemetry, metadata: Option<&serde_json::Value>) -> Vec<Finding> {
+    let mut out = Vec::new();
+    let r = &tm.report;
+    if !r.is_clean() || !r.duplicate_conflicts.is_empty() {
+        let first = r
+            .skipped
+            .first()
+            .map(|s| format!(" (first at offset {}: {})", s.offset, s.reason))
+            .unwrap_or_default();
+        out.push(warn(
+            "telemetry_repaired",
+            format!(
+                "telemetry.bin: {} region(s) skipped, {} octets{first}; {} duplicated packet(s) dropped; {} packet(s) sharing APID, sequence count and time with different content kept; {} time reversal(s), records re-sorted by time",
+                r.skipped.len(),
+                r.skipped_octets(),
+                r.duplicates.len(),
+                r.duplicate_conflicts.len(),
+                r.time_reversals.len()
+            ),
+        ));
+    }
+    let Some(first) = tm.raw.first() else {
+        let mut reasons: Vec<&str> = r.skipped.iter().map(|s| s.reason.as_str()).collect();
+        reasons.dedup();
+        reasons.truncate(3);
+        out.push(error(
+            "no_raw_frames",
+            format!(
+                "telemetry.bin ({} octets) holds no raw sensor frame (APID 0x010: a 60-octet packet, 6 octets primary header with version 0, type TM, secondary header flag 1 + 6 octets CUC time + 48 octets user data, docs/icd.md §2–3.1); the reader decoded {} housekeeping, {} event and {} ephemeris packets and skipped {} octets{}",
+                r.file_len,
+                r.packets_housekeeping,
+                r.packets_event,
+                r.packets_ephemeris,
+                r.skipped_octets(),
+                if reasons.is_empty() {
+                    String::new()
+                } else {
+                    format!(" ({})", reasons.join("; "))
+                }
+            ),
+        ));
+        return out;
+    };
+    let t0 = first.time.seconds();
+    if t0 < EARLIEST_PLAUSIBLE_TAI1958_S {
+        out.push(error(
+            "time_codes_not_tai1958",
+            format!(
+                "the first raw frame's time code is {t0:.0} s, i.e. {} TAI: time codes are TAI seconds since 1958-01-01T00:00:00 TAI (docs/icd.md §2), not seconds since the start of the run; the Sun and the stars are placed from them. Add the TAI seconds of the run start (e.g. 1991-04-09T00:00:00 UTC = 1049846426 s)",
+                date_of(t0)
+            ),
+        ));
+        return out;
+    }
+    if let Some(epoch) = metadata
+        .and_then(|m| m.get("epoch_utc"))
+        .and_then(|e| e.as_str())
+    {
+        match utc_naive_1958_s(epoch) {
+            None => out.push(warn(
+                "epoch_utc_unreadable",
+                format!("metadata.json epoch_utc `{epoch}` is not an ISO 8601 UTC time (YYYY-MM-DDTHH:MM:SSZ): not checked against the time codes"),
+            )),
+            Some(e) => {
+                // TAI − UTC is 0..37 s: the difference beyond that range is the disagreement.
+                let d = t0 - e;
+                let beyond = if d < 0.0 {
+                    -d
+                } else if d > 37.0 {
+                    d - 37.0
+                } else {
+                    0.0
+                };
+                let msg = format!(
+                    "the first raw frame is at {} TAI but metadata.json epoch_utc is {epoch} ({d:+.0} s; TAI − UTC is 0–37 s): epoch_utc is the UTC of the first raw frame and the time codes are TAI seconds since 1958 (docs/icd.md §2, §5); a time error moves the Sun by 0.041°/h. Fix the time codes or epoch_utc",
+                    date_of(t0)
+                );
+                if beyond > EPOCH_ERROR_S {
+                    out.push(error("epoch_mismatch", msg));
+                } else if beyond > EPOCH_WARNING_S {
+                    out.push(warn("epoch_mismatch", msg));
+                }
+            }
+        }
+    }
+    let n = tm.raw.len();
+    // Orbit coverage.
+    if !tm.ephemeris.is_empty() {
+        let without = tm
+            .raw
+            .iter()
+            .filter(|f| interpolate_orbit(&tm.ephemeris, f.time.seconds()).is_none())
+            .count();
+        if without > 0 {
+            let widest = tm
+                .ephemeris
+                .windows(2)
+                .map(|w| w[1].time.seconds() - w[0].time.seconds())
+                .fold(0.0_f64, f64::max);
+            out.push(warn(
+                "orbit_missing",
+                format!(
+                    "{without} of {n} raw frames have no orbit (ephemeris records up to {widest:.0} s apart; the ground interpolates between records ≤ 600 s apart and extrapolates ≤ 60 s past the last): orbital aberration (≤ 5″) and Sun parallax (≤ 9″) are not corrected there; write APID 0x020 at least every 60 s covering the whole run (docs/icd.md §3.4)"
+                ),
+            ));
+        }
+    }
+    // Sensors never usable.
+    let names = ["FHST1", "FHST2", "FSS1", "FSS2"];
+    for (i, name) in names.iter().enumerate() {
+        let (usable, partial) = tm.raw.iter().fold((0usize, 0usize), |(u, p), f| {
+            let flags = if i < 2 {
+                f.fhst.get(i).map_or(0, |s| s.flags)
+            } else {
+                f.fss.get(i - 2).map_or(0, |s| s.flags)
+            };
+            let both = if i < 2 {
+                FHST_FLAG_VALID | FHST_FLAG_TRACKING
+            } else {
+                FSS_FLAG_SUN_ALPHA | FSS_FLAG_SUN_BETA
+            };
+            let bits = flags & both;
+            (
+                u + usize::from(bits == both),
+                p + usize::from(bits != 0 && bits != both),
+            )
+        });
+        if usable == 0 {
+            let need = if i < 2 {
+                "flags bit0 (valid) and bit1 (tracking)"
+            } else {
+                "flags bit0 and bit1 (Sun present on both heads)"
+            };
+            let extra = if partial > 0 {
+                format!(" ({partial} frames have only one of the two bits)")
+            } else {
+                String::new()
+            };
+            out.push(warn(
+                "sensor_never_usable",
+                format!(
+                    "{name} has no usable sample in {n} raw frames: the ground uses a sample only with {need} set{extra} (docs/icd.md §3.1); {name} is not calibrated"
+                ),
+            ));
+        }
+    }
+    // IRU: stuck channels of the active configuration, and slews without high rate.
+    let backup = tm.housekeeping.first().is_some_and(|h| h.iru_config == 1);
+    let active: [usize; 3] = if backup { [0, 3, 5] } else { [1, 2, 4] };
+    let channel = ["X1", "X2", "Y1", "Y2", "Z1", "Z2"];
+    let stuck_cycles = usize::from(IruTable::prelaunch().stuck_cycles);
+    for &c in &active {
+        let mut run = 0usize;
+        let mut longest = (0usize, 0.0_f64);
+        for w in tm.raw.windows(2) {
+            let same = w[0].iru.counts.get(c) == w[1].iru.counts.get(c);
+            run = if same { run + 1 } else { 0 };
+            if run > longest.0 {
+                longest = (run, w[1].time.seconds() - t0);
+            }
+        }
+        if longest.0 >= stuck_cycles {
+            out.push(warn(
+                "iru_channel_unchanged",
+                format!(
+                    "IRU channel {} counter unchanged for {} consecutive frames (to t = {:.0} s): the integrator declares a channel stuck after {stuck_cycles} unchanged cycles and leaves its axis out, so gyro propagation and the bias estimate lose that axis; a real gyro's counter moves with bias and noise every few cycles (docs/icd.md §3.1, IRU)",
+                    channel[c], longest.0, longest.1
+                ),
+            ));
+        }
+    }
+    let iru = IruTable::prelaunch();
+    let high = tm.raw.iter().filter(|f| f.iru.high_rate).count();
+    if high == 0 {
+        let turned_deg: f64 = tm
+            .raw
+            .windows(2)
+            .map(|w| {
+                let d: Vec<f64> = active
+                    .iter()
+                    .map(|&c| {
+                        let a = w[0].iru.counts.get(c).copied().unwrap_or(0);
+                        let b = w[1].iru.counts.get(c).copied().unwrap_or(0);
+                        #[allow(clippy::cast_possible_wrap)]
+                        let dn = b.wrapping_sub(a) as i16;
+                        f64::from(dn) * iru.low_rate_arcsec_per_pulse
+                    })
+                    .collect();
+                d.iter().map(|x| x * x).sum::<f64>().sqrt() / 3600.0
+            })
+            .sum();
+        if turned_deg > LOW_RATE_SLEW_DEG {
+            out.push(warn(
+                "no_high_rate_frames",
+                format!(
+                    "the gyro turned {turned_deg:.0}° but no raw frame has IRU rate mode 1 (high): calibrate finds IRU calibration maneuvers as runs of high-rate frames, so IRUCAL has none; give them with `calibrate --maneuver START:END` (s since the first frame) or write the rate mode of the slews as 1 (docs/icd.md §3.1)"
+                ),
+            ));
+        }
+    }
+    // Gaps.
+    let mut steps: Vec<f64> = tm
+        .raw
+        .windows(2)
+        .map(|w| w[1].time.seconds() - w[0].time.seconds())
+        .filter(|d| *d > 0.0)
+        .collect();
+    if !steps.is_empty() {
+        steps.sort_by(f64::total_cmp);
+        let median = steps[steps.len() / 2];
+        let gaps: Vec<(f64, f64)> = tm
+            .raw
+            .windows(2)
+            .filter_map(|w| {
+                let d = w[1].time.seconds() - w[0].time.seconds();
+                (d > GAP_CYCLES * median).then_some((w[0].time.seconds() - t0, d))
+            })
+            .collect();
+        // A gap whose neighbouring frames count fast enough to pass 32767 pulses over it.
+        let pulses_per_s = |i: usize| -> f64 {
+            let (Some(a), Some(b)) = (tm.raw.get(i), tm.raw.get(i + 1)) else {
+                return 0.0;
+            };
+            let dt = b.time.seconds() - a.time.seconds();
+            active
+                .iter()
+                .map(|&c| {
+                    let (x, y) = (a.iru.counts[c], b.iru.counts[c]);
+                    #[allow(clippy::cast_possible_wrap)]
+                    let dn = y.wrapping_sub(x) as i16;
+                    f64::from(dn).abs() / dt.max(1e-9)
+                })
+                .fold(0.0, f64::max)
+        };
+        for (k, w) in tm.raw.windows(2).enumerate() {
+            let d = w[1].time.seconds() - w[0].time.seconds();
+            if d > GAP_CYCLES * median {
+                let rate = pulses_per_s(k.saturating_sub(1)).max(pulses_per_s(k + 1));
+                if rate * d > 32_767.0 {
+                    out.push(warn(
+                        "gyro_increment_ambiguous",
+                        format!(
+                            "gap of {d:.0} s after t = {:.0} s while the gyro counted {rate:.0} pulses/s: the counter difference across it has wrapped, so that gyro increment is wrong (attitude propagation, the bias estimate and any IRU maneuver across it are affected; report.json lists the maneuvers): send the frames, or give the maneuvers with --maneuver avoiding it",
+                            w[0].time.seconds() - t0
+                        ),
+                    ));
+                }
+            }
+        }
+        if let Some(&(at, len)) = gaps.iter().max_by(|a, b| a.1.total_cmp(&b.1)) {
+            out.push(warn(
+                "time_gaps",
+                format!(
+                    "{} gap(s) in the raw frames (cycle {median:.3} s; largest {len:.0} s after t = {at:.0} s): no measurements there, and the gyro increment across a gap is one 16-bit counter difference, wrong if more than 32767 pulses passed (41 s at 0.5°/s in low rate)",
+                    gaps.len()
+                ),
+            ));
+        }
+    }
+    // Housekeeping that never lines up with a raw frame.
+    if !tm.housekeeping.is_empty() {
+        let matched = tm
+            .housekeeping
+            .iter()
+            .filter(|h| {
+                let i = tm.raw.partition_point(|f| f.time < h.time);
+                tm.raw.get(i).is_some_and(|f| f.time == h.time)
+            })
+            .count();
+        if matched == 0 {
+            out.push(warn(
+                "housekeeping_unmatched",
+                format!(
+                    "none of the {} housekeeping packets has the time code of a raw frame: the OBC attitude and IRU configuration are used only at a raw frame with the same time code (docs/icd.md §4), so the ground identifies stars from its own attitude",
+                    tm.housekeeping.len()
+                ),
+            ));
+        }
+    }
+    out
+}
+
+/// Read and check a run folder; print the findings to stderr and write them to
+/// `out/input_check.json`.
+///
+/// # Errors
+/// [`InputError`] when a finding is an error; I/O errors writing the findings. A missing or
+/// unreadable `telemetry.bin` or `metadata.json` is left to the chain, which reports it.
+pub fn check_run_dir(
+    run_dir: &std::path::Path,
+    out: &std::path::Path,
+) -> anyhow::Result<Vec<Finding>> {
+    let Ok(tm) = crate::tp::read_file(&run_dir.join("telemetry.bin")) else {
+        return Ok(Vec::new());
+    };
+    let metadata: Option<serde_json::Value> =
+        std::fs::read_to_string(run_dir.join("metadata.json"))
+            .ok()
+            .and_then(|t| serde_json::from_str(&t).ok());
+    let findings = check(&tm, metadata.as_ref());
+    for f in &findings {
+        if f.severity == Severity::Warning {
+            eprintln!("warning: {}", f.message);
+        }
+    }
+    std::fs::create_dir_all(out)?;
+    std::fs::write(
+        out.join("input_check.json"),
+        serde_json::to_string_pretty(&findings)?,
+    )?;
+    if let Some(e) = findings.iter().find(|f| f.severity == Severity::Error) {
+        return Err(InputError(e.message.clone()).into());
+    }
+    Ok(findings)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn dates_round_trip() {
+        let s = utc_naive_1958_s("1991-04-09T00:00:00Z").unwrap_or(f64::NAN);
+        assert_eq!(s, 1_049_846_400.0);
+        assert_eq!(date_of(s), "1991-04-09T00:00:00");
+        assert_eq!(date_of(0.0), "1958-01-01T00:00:00");
+        assert!(utc_naive_1958_s("yesterday").is_none());
+    }
+}

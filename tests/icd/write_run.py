@@ -1,0 +1,725 @@
+#!/usr/bin/env python3
+"""Independent telemetry writer, from docs/icd.md alone (Python 3, standard library only).
+
+Writes a run folder (telemetry.bin + metadata.json + truth_icd.json) for a simple,
+physically consistent scenario: a circular orbit, inertial holds with the Sun in the FSS
+fields and slews about single body axes between them, real Hipparcos stars from
+data/hipparcos_mag6p5.csv (proper motion, parallax, annual + orbital aberration), the Sun
+from Meeus' low-precision formula (Astronomical Algorithms ch. 25) precessed to J2000 with
+parallax and aberration, and FHST / FSS / IRU counts computed with the ICD's conventions.
+
+It is deliberately written without the simulator's or the flight software's encoders: every
+byte comes from the tables of docs/icd.md (and the conventions it cites: docs/conventions.md,
+docs/tables.md, data/gro_paper.toml for the boot tables). Flags add the variations of
+docs/icd-conformance.md (missing packets, gaps, duplicates, reordering, wrap-around, a dead
+sensor, extreme values, ...).
+
+    python3 tests/icd/write_run.py --out /tmp/run            # the nominal run
+    python3 tests/icd/write_run.py --out /tmp/r2 --no-hk --eph-period 300
+
+truth_icd.json holds what was injected (alignment rotations, bias, noise), for the tests;
+the ground tool never reads it.
+"""
+
+import argparse
+import json
+import math
+import os
+import random
+import struct
+import sys
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.normpath(os.path.join(HERE, "..", ".."))
+CATALOG = os.path.join(ROOT, "data", "hipparcos_mag6p5.csv")
+
+RAD_PER_DEG = math.pi / 180.0
+RAD_PER_ARCSEC = RAD_PER_DEG / 3600.0
+AU_KM = 149597870.7
+C_KM_PER_S = 299792.458
+MU_EARTH = 398600.4418
+R_EARTH_KM = 6378.137
+
+# ICD §3.1 resolutions.
+FHST_ARCSEC_PER_COUNT = 7.78
+FSS_DEG_PER_COUNT = 0.004
+IRU_LOW_ARCSEC_PER_PULSE = 0.05
+IRU_HIGH_ARCSEC_PER_PULSE = 0.8
+
+APID_RAW, APID_HK, APID_EVENT, APID_EPH = 0x010, 0x011, 0x012, 0x020
+
+# Boot tables (docs/tables.md: the paper's Table 1 and prelaunch G; data/gro_paper.toml).
+M_PRELAUNCH = {
+    "FHST1": [[-0.707293868, 0.000641730, -0.706919372],
+              [-0.706919611, -0.000965840, 0.707293212],
+              [-0.000228880, 0.999999344, 0.001136780]],
+    "FHST2": [[-0.706911922, -0.000668710, -0.707301319],
+              [0.707300782, 0.000884930, -0.706912220],
+              [0.001098630, -0.999999404, -0.000152590]],
+    "FSS1": [[0.003753100, -0.865531862, 0.500839829],
+             [0.999986291, 0.001422380, -0.005035412],
+             [0.003645920, 0.500851870, 0.865525305]],
+    "FSS2": [[0.000871080, 0.034161031, 0.999415934],
+             [0.999991417, -0.004071418, -0.000732420],
+             [0.004044019, 0.999408066, -0.034164291]],
+}
+G_PRELAUNCH = [[1.00000, 0.00108, 0.00079],
+               [-0.00100, 1.00000, -0.00156],
+               [-0.00056, 0.00128, 1.00000]]
+
+# TAI - UTC (s) from each date on (IERS Bulletin C), enough for 1972..2035.
+LEAP = [(1972, 1, 1, 10), (1972, 7, 1, 11), (1973, 1, 1, 12), (1974, 1, 1, 13),
+        (1975, 1, 1, 14), (1976, 1, 1, 15), (1977, 1, 1, 16), (1978, 1, 1, 17),
+        (1979, 1, 1, 18), (1980, 1, 1, 19), (1981, 7, 1, 20), (1982, 7, 1, 21),
+        (1983, 7, 1, 22), (1985, 7, 1, 23), (1988, 1, 1, 24), (1990, 1, 1, 25),
+        (1991, 1, 1, 26), (1992, 7, 1, 27), (1993, 7, 1, 28), (1994, 7, 1, 29),
+        (1996, 1, 1, 30), (1997, 7, 1, 31), (1999, 1, 1, 32), (2006, 1, 1, 33),
+        (2009, 1, 1, 34), (2012, 7, 1, 35), (2015, 7, 1, 36), (2017, 1, 1, 37)]
+
+
+# ----------------------------------------------------------------------------- small math
+def add(a, b):
+    return [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
+
+
+def sub(a, b):
+    return [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+
+
+def scale(a, s):
+    return [a[0] * s, a[1] * s, a[2] * s]
+
+
+def dot(a, b):
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+def cross(a, b):
+    return [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+
+
+def norm(a):
+    return math.sqrt(dot(a, a))
+
+
+def unit(a):
+    n = norm(a)
+    return [a[0] / n, a[1] / n, a[2] / n]
+
+
+def mv(m, v):
+    return [dot(m[0], v), dot(m[1], v), dot(m[2], v)]
+
+
+def mt(m):
+    return [[m[j][i] for j in range(3)] for i in range(3)]
+
+
+def mm(a, b):
+    bt = mt(b)
+    return [[dot(a[i], bt[j]) for j in range(3)] for i in range(3)]
+
+
+def inv3(m):
+    a, b, c = m[0]
+    d, e, f = m[1]
+    g, h, i = m[2]
+    det = a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g)
+    return [[(e * i - f * h) / det, (c * h - b * i) / det, (b * f - c * e) / det],
+            [(f * g - d * i) / det, (a * i - c * g) / det, (c * d - a * f) / det],
+            [(d * h - e * g) / det, (b * g - a * h) / det, (a * e - b * d) / det]]
+
+
+def rot(theta):
+    """docs/conventions.md: Rot(θ) = exp(−[θ×]) = cos θ I + (1 − cos θ) e eᵀ − sin θ [e×]."""
+    ang = norm(theta)
+    if ang < 1e-15:
+        return [[1.0, theta[2], -theta[1]], [-theta[2], 1.0, theta[0]], [theta[1], -theta[0], 1.0]]
+    e = scale(theta, 1.0 / ang)
+    c, s = math.cos(ang), math.sin(ang)
+    m = [[c * (i == j) + (1 - c) * e[i] * e[j] for j in range(3)] for i in range(3)]
+    # − sin θ [e×]; [e×] = [[0,−e3,e2],[e3,0,−e1],[−e2,e1,0]]
+    m[0][1] += s * e[2]
+    m[0][2] -= s * e[1]
+    m[1][0] -= s * e[2]
+    m[1][2] += s * e[0]
+    m[2][0] += s * e[1]
+    m[2][1] -= s * e[0]
+    return m
+
+
+def quat_from_dcm(a):
+    """Scalar-last q with A(q) = (w² − |v|²) I + 2 v vᵀ − 2 w [v×] (docs/conventions.md)."""
+    tr = a[0][0] + a[1][1] + a[2][2]
+    # 4w² = 1 + tr; −2w[v×] off-diagonals: A01 − A10 = 4 w v2, A12 − A21 = 4 w v0, A20 − A02 = 4 w v1
+    cands = [1 + tr, 1 + 2 * a[0][0] - tr, 1 + 2 * a[1][1] - tr, 1 + 2 * a[2][2] - tr]
+    k = max(range(4), key=lambda i: cands[i])
+    if k == 0:
+        w = 0.5 * math.sqrt(cands[0])
+        x = (a[1][2] - a[2][1]) / (4 * w)
+        y = (a[2][0] - a[0][2]) / (4 * w)
+        z = (a[0][1] - a[1][0]) / (4 * w)
+    elif k == 1:
+        x = 0.5 * math.sqrt(cands[1])
+        w = (a[1][2] - a[2][1]) / (4 * x)
+        y = (a[0][1] + a[1][0]) / (4 * x)
+        z = (a[0][2] + a[2][0]) / (4 * x)
+    elif k == 2:
+        y = 0.5 * math.sqrt(cands[2])
+        w = (a[2][0] - a[0][2]) / (4 * y)
+        x = (a[0][1] + a[1][0]) / (4 * y)
+        z = (a[1][2] + a[2][1]) / (4 * y)
+    else:
+        z = 0.5 * math.sqrt(cands[3])
+        w = (a[0][1] - a[1][0]) / (4 * z)
+        x = (a[0][2] + a[2][0]) / (4 * z)
+        y = (a[1][2] + a[2][1]) / (4 * z)
+    if w < 0:
+        x, y, z, w = -x, -y, -z, -w
+    return [x, y, z, w]
+
+
+def dcm_from_quat(q):
+    x, y, z, w = q
+    v = [x, y, z]
+    s = w * w - dot(v, v)
+    m = [[s * (i == j) + 2 * v[i] * v[j] for j in range(3)] for i in range(3)]
+    m[0][1] += 2 * w * z
+    m[0][2] -= 2 * w * y
+    m[1][0] -= 2 * w * z
+    m[1][2] += 2 * w * x
+    m[2][0] += 2 * w * y
+    m[2][1] -= 2 * w * x
+    return m
+
+
+def triad(b1, r1, b2, r2):
+    def frame(v1, v2):
+        e1 = unit(v1)
+        e2 = unit(cross(e1, v2))
+        e3 = cross(e1, e2)
+        return [[e1[i], e2[i], e3[i]] for i in range(3)]  # columns e1 e2 e3
+    return mm(frame(b1, b2), mt(frame(r1, r2)))
+
+
+def aberrate(u, v_km_per_s):
+    """First-order stellar aberration: u' = normalize(u + v/c − u (u·v/c))."""
+    b = scale(v_km_per_s, 1.0 / C_KM_PER_S)
+    return unit(add(u, sub(b, scale(u, dot(u, b)))))
+
+
+# ----------------------------------------------------------------------------- time
+def days_from_civil(y, m, d):
+    y -= m <= 2
+    era = (y if y >= 0 else y - 399) // 400
+    yoe = y - era * 400
+    doy = (153 * (m + (-3 if m > 2 else 9)) + 2) // 5 + d - 1
+    doe = yoe * 365 + yoe // 4 - yoe // 100 + doy
+    return era * 146097 + doe - 719468  # days since 1970-01-01
+
+
+def tai_minus_utc(y, m, d):
+    off = 10
+    for (ly, lm, ld, val) in LEAP:
+        if (y, m, d) >= (ly, lm, ld):
+            off = val
+    return off
+
+
+def parse_epoch_utc(s):
+    """'YYYY-MM-DDTHH:MM:SSZ' -> TAI seconds since 1958-01-01T00:00:00 TAI (ICD §2)."""
+    s = s.rstrip("Z")
+    date, clock = s.split("T")
+    y, mo, d = (int(x) for x in date.split("-"))
+    hh, mi, ss = clock.split(":")
+    days = days_from_civil(y, mo, d) - days_from_civil(1958, 1, 1)
+    return days * 86400 + int(hh) * 3600 + int(mi) * 60 + float(ss) + tai_minus_utc(y, mo, d)
+
+
+# J2000.0 = 2000-01-01T12:00:00 TT = 11:59:27.816 TAI.
+J2000_TAI1958 = (days_from_civil(2000, 1, 1) - days_from_civil(1958, 1, 1)) * 86400 + 43200 - 32.184
+
+
+def sun_geocentric_km(tai1958):
+    """Meeus ch. 25 (low accuracy, 0.01°): geometric Sun, mean equinox of date, then precessed
+    to J2000 by −50.29″/yr in ecliptic longitude. Returns the J2000 position, km."""
+    t_tt = tai1958 - J2000_TAI1958
+    T = t_tt / (86400.0 * 36525.0)
+    L0 = 280.46646 + 36000.76983 * T + 0.0003032 * T * T
+    M = 357.52911 + 35999.05029 * T - 0.0001537 * T * T
+    e = 0.016708634 - 0.000042037 * T - 0.0000001267 * T * T
+    Mr = M * RAD_PER_DEG
+    C = ((1.914602 - 0.004817 * T - 0.000014 * T * T) * math.sin(Mr)
+         + (0.019993 - 0.000101 * T) * math.sin(2 * Mr) + 0.000289 * math.sin(3 * Mr))
+    lon = L0 + C
+    nu = (M + C) * RAD_PER_DEG
+    R_au = 1.000001018 * (1 - e * e) / (1 + e * math.cos(nu))
+    lon_j2000 = (lon - 0.01397 * T * 100.0) * RAD_PER_DEG
+    eps = 23.4392911 * RAD_PER_DEG
+    x = math.cos(lon_j2000)
+    y = math.sin(lon_j2000) * math.cos(eps)
+    z = math.sin(lon_j2000) * math.sin(eps)
+    return scale([x, y, z], R_au * AU_KM)
+
+
+def earth_velocity_km_per_s(tai1958):
+    """Heliocentric Earth velocity (≈ barycentric), by differencing the Sun formula."""
+    h = 60.0
+    a = sun_geocentric_km(tai1958 - h)
+    b = sun_geocentric_km(tai1958 + h)
+    return scale(sub(a, b), 1.0 / (2 * h))  # Earth = −Sun
+
+
+# ----------------------------------------------------------------------------- orbit
+class Orbit:
+    def __init__(self, a_km=6833.0, inc_deg=28.48, raan_deg=40.0, u0_deg=0.0):
+        self.a = a_km
+        self.n = math.sqrt(MU_EARTH / a_km ** 3)
+        i, o = inc_deg * RAD_PER_DEG, raan_deg * RAD_PER_DEG
+        self.P = [math.cos(o), math.sin(o), 0.0]
+        self.Q = [-math.cos(i) * math.sin(o), math.cos(i) * math.cos(o), math.sin(i)]
+        self.u0 = u0_deg * RAD_PER_DEG
+
+    def state(self, t):
+        u = self.u0 + self.n * t
+        pos = add(scale(self.P, self.a * math.cos(u)), scale(self.Q, self.a * math.sin(u)))
+        vel = add(scale(self.P, -self.a * self.n * math.sin(u)),
+                  scale(self.Q, self.a * self.n * math.cos(u)))
+        return pos, vel
+
+
+# ----------------------------------------------------------------------------- catalog
+def load_catalog(epoch_year):
+    stars = []
+    with open(CATALOG) as f:
+        header = None
+        for line in f:
+            if line.startswith("#"):
+                continue
+            cols = line.strip().split(",")
+            if header is None:
+                header = {c: i for i, c in enumerate(cols)}
+                continue
+            hp = float(cols[header["hp_mag"]])
+            if not (2.0 <= hp <= 5.7):
+                continue
+            ra = float(cols[header["ra_deg"]]) * RAD_PER_DEG
+            de = float(cols[header["dec_deg"]]) * RAD_PER_DEG
+            pmra = float(cols[header["pmra_mas_yr"]]) * RAD_PER_ARCSEC / 1000.0
+            pmde = float(cols[header["pmdec_mas_yr"]]) * RAD_PER_ARCSEC / 1000.0
+            plx = max(float(cols[header["parallax_mas"]]), 0.0) * RAD_PER_ARCSEC / 1000.0
+            u = [math.cos(de) * math.cos(ra), math.cos(de) * math.sin(ra), math.sin(de)]
+            e_ra = [-math.sin(ra), math.cos(ra), 0.0]
+            e_de = [-math.sin(de) * math.cos(ra), -math.sin(de) * math.sin(ra), math.cos(de)]
+            dt = epoch_year - 1991.25  # catalog epoch J1991.25
+            u = unit(add(u, add(scale(e_ra, pmra * dt), scale(e_de, pmde * dt))))
+            stars.append((int(cols[header["hip"]]), u, hp, plx))
+    return stars
+
+
+# ----------------------------------------------------------------------------- packets
+class Packets:
+    def __init__(self, seq_start=0, time_offset_s=0.0):
+        self.time_offset_s = time_offset_s
+        self.seq = {APID_RAW: seq_start, APID_HK: seq_start, APID_EVENT: seq_start,
+                    APID_EPH: seq_start}
+        self.out = []  # (time, apid, bytes)
+
+    def add(self, apid, tai1958, user):
+        tai1958 += self.time_offset_s
+        coarse = int(math.floor(tai1958))
+        fine = int(round((tai1958 - coarse) * 65536.0))
+        if fine == 65536:
+            coarse, fine = coarse + 1, 0
+        data = struct.pack(">IH", coarse, fine) + user
+        seq = self.seq[apid] % 16384
+        self.seq[apid] += 1
+        hdr = struct.pack(">HHH", (1 << 11) | apid, (3 << 14) | seq, len(data) - 1)
+        self.out.append((tai1958, apid, hdr + data))
+
+
+def i16(x):
+    return max(-32768, min(32767, int(round(x))))
+
+
+# ----------------------------------------------------------------------------- scenario
+def build_timeline(args):
+    """List of segments: ('hold', duration_s) or ('slew', axis_index, angle_deg)."""
+    hold = args.hold_s
+    if args.no_slews:
+        return [("hold", args.duration or 4 * hold)]
+    segs = [("hold", hold), ("slew", 0, 30.0), ("hold", hold), ("slew", 1, -45.0),
+            ("hold", hold), ("slew", 2, 20.0), ("hold", hold)]
+    return segs
+
+
+def slew_profile(angle_rad, rate, accel):
+    """Trapezoid (or triangle) angle profile: returns (duration, f(t) -> angle)."""
+    a = abs(angle_rad)
+    sgn = 1.0 if angle_rad >= 0 else -1.0
+    t_acc = rate / accel
+    if accel * t_acc * t_acc >= a:  # triangle
+        t_acc = math.sqrt(a / accel)
+        rate = accel * t_acc
+        t_cruise = 0.0
+    else:
+        t_cruise = (a - accel * t_acc * t_acc) / rate
+    total = 2 * t_acc + t_cruise
+
+    def f(t):
+        t = min(max(t, 0.0), total)
+        if t < t_acc:
+            return sgn * 0.5 * accel * t * t
+        if t < t_acc + t_cruise:
+            return sgn * (0.5 * accel * t_acc * t_acc + rate * (t - t_acc))
+        td = total - t
+        return sgn * (a - 0.5 * accel * td * td)
+    return total, f
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--out", required=True)
+    p.add_argument("--seed", type=int, default=1)
+    p.add_argument("--epoch", default="1991-04-10T00:00:00Z", help="UTC start, ISO 8601 with Z")
+    p.add_argument("--hold-s", type=float, default=900.0, help="duration of each inertial hold")
+    p.add_argument("--duration", type=float, default=None, help="cut the run after this many s")
+    p.add_argument("--cycle-s", type=float, default=1.0)
+    p.add_argument("--slew-rate-deg-s", type=float, default=0.08)
+    p.add_argument("--orbit-phase-deg", type=float, default=180.0, help="argument of latitude at t = 0")
+    p.add_argument("--raan-deg", type=float, default=160.0)
+    p.add_argument("--no-slews", action="store_true", help="one long inertial hold")
+    p.add_argument("--no-hk", action="store_true", help="no housekeeping (APID 0x011)")
+    p.add_argument("--hk-every", type=int, default=1, help="housekeeping every N cycles")
+    p.add_argument("--no-eph", action="store_true", help="no ephemeris (APID 0x020)")
+    p.add_argument("--eph-period", type=float, default=60.0, help="ephemeris period, s")
+    p.add_argument("--no-events", action="store_true")
+    p.add_argument("--missing", action="append", default=[],
+                   help="sensor absent for the whole run: FHST1, FHST2, FSS1, FSS2")
+    p.add_argument("--invalid", action="append", default=[],
+                   help="SENSOR:START:LEN: data-valid flag clear (counts still written)")
+    p.add_argument("--gap", action="append", default=[],
+                   help="START:LEN seconds from the start: no packets at all")
+    p.add_argument("--duplicate-every", type=int, default=0, help="repeat every Nth packet")
+    p.add_argument("--reorder-every", type=int, default=0,
+                   help="swap packet k and k+1 every N packets")
+    p.add_argument("--seq-start", type=int, default=0, help="first CCSDS sequence count")
+    p.add_argument("--iru-start", type=int, default=0, help="initial IRU counter value")
+    p.add_argument("--extreme", action="store_true",
+                   help="valid extremes: counters near wrap, 0.5°/s slews, temperatures −40/+70 °C, Sun at the FSS edge")
+    p.add_argument("--time-code-offset-s", type=float, default=0.0,
+                   help="add this to every time code without changing the physics (a writer error)")
+    p.add_argument("--low-rate-slews", action="store_true", help="keep the IRU in low rate during slews")
+    p.add_argument("--quiet-iru", action="store_true", help="no gyro bias and no noise")
+    p.add_argument("--backup-channels-dead", action="store_true",
+                   help="backup IRU channels X1, Y2, Z2 never move (only the primary is written)")
+    p.add_argument("--hk-offset-s", type=float, default=0.0,
+                   help="housekeeping time codes this far from the raw frame's (an ICD §4 violation)")
+    p.add_argument("--metadata", default="full", choices=["full", "empty", "none"],
+                   help="metadata.json with declared figures, '{}', or no file")
+    p.add_argument("--misalign", default="default",
+                   help="'default' (injected rotations below) or 'none' (true = prelaunch)")
+    args = p.parse_args(argv)
+
+    rng = random.Random(args.seed)
+    os.makedirs(args.out, exist_ok=True)
+    t0 = parse_epoch_utc(args.epoch)
+    epoch_year = 2000.0 + (t0 - J2000_TAI1958) / (86400.0 * 365.25)
+    stars = load_catalog(epoch_year)
+    orbit = Orbit(raan_deg=args.raan_deg, u0_deg=args.orbit_phase_deg)
+
+    if args.extreme:
+        args.slew_rate_deg_s = max(args.slew_rate_deg_s, 0.5)
+        if args.iru_start == 0:
+            args.iru_start = 65530
+
+    # ---- the truth: alignments = prelaunch rotated by known small rotations (ACS, arcsec).
+    inject = {"FHST1": [0.0, 0.0, 0.0], "FHST2": [25.0, -35.0, 40.0],
+              "FSS1": [300.0, -200.0, 150.0], "FSS2": [-120.0, 60.0, 90.0]}
+    if args.misalign == "none":
+        inject = {k: [0.0, 0.0, 0.0] for k in inject}
+    m_true = {k: mm(rot(scale(inject[k], RAD_PER_ARCSEC)), M_PRELAUNCH[k]) for k in M_PRELAUNCH}
+    # Noise (1σ per axis, before quantisation), arcsec; IRU bias rad/s, ARW rad/√s.
+    fhst_sigma = [6.0, 18.0]  # mag 2.0 and 5.7, linear between
+    fss_noise_counts = 0.5
+    bias = [0.30 * RAD_PER_ARCSEC, -0.20 * RAD_PER_ARCSEC, 0.25 * RAD_PER_ARCSEC]
+    arw = 2.0e-8
+    if args.quiet_iru:
+        bias, arw = [0.0, 0.0, 0.0], 0.0
+
+    # ---- the timeline and the attitude: A0 puts the Sun near the FSS1 boresight.
+    t_start_sun = unit(sun_geocentric_km(t0))
+    b_sun0 = mv(m_true["FSS1"], unit([math.tan(2.0 * RAD_PER_DEG), math.tan(-3.0 * RAD_PER_DEG), 1.0]))
+    if args.extreme:  # Sun 31.5° off the FSS1 boresight in α (the field is ±32°)
+        b_sun0 = mv(m_true["FSS1"], unit([math.tan(31.5 * RAD_PER_DEG), 0.0, 1.0]))
+    north = [0.0, 0.0, 1.0]
+    r2 = unit(cross(t_start_sun, north))
+    a_hold = triad(b_sun0, t_start_sun, [0.0, 1.0, 0.0], r2)
+
+    segments = []  # (t_begin, t_end, kind, A_begin, axis, profile)
+    t = 0.0
+    rate = args.slew_rate_deg_s * RAD_PER_DEG
+    for seg in build_timeline(args):
+        if seg[0] == "hold":
+            segments.append((t, t + seg[1], "hold", a_hold, None, None))
+            t += seg[1]
+        else:
+            axis = [0.0, 0.0, 0.0]
+            axis[seg[1]] = 1.0
+            dur, prof = slew_profile(seg[2] * RAD_PER_DEG, rate, rate / 40.0)
+            dur = math.ceil(dur / args.cycle_s) * args.cycle_s
+            segments.append((t, t + dur, "slew", a_hold, axis, prof))
+            a_hold = mm(rot(scale(axis, prof(dur))), a_hold)
+            t += dur
+    total = t if args.duration is None else min(t, args.duration)
+
+    def attitude(tt):
+        for (b, e, kind, a0, axis, prof) in segments:
+            if tt <= e + 1e-9:
+                if kind == "hold":
+                    return a0, 0, None
+                return mm(rot(scale(axis, prof(tt - b))), a0), 2, (b, e)
+        b, e, kind, a0, axis, prof = segments[-1]
+        return (a0 if kind == "hold" else mm(rot(scale(axis, prof(e - b))), a0)), 1, None
+
+    def in_span(spans, tt):
+        return any(s <= tt < s + n for (s, n) in spans)
+
+    gaps = [tuple(float(x) for x in g.split(":")) for g in args.gap]
+    invalid = {}
+    for spec in args.invalid:
+        name, s, n = spec.split(":")
+        invalid.setdefault(name.upper(), []).append((float(s), float(n)))
+    missing = {m.upper() for m in args.missing}
+
+    pk = Packets(args.seq_start, args.time_code_offset_s)
+    counters = [args.iru_start % 65536] * 6
+    frac = [0.0] * 6
+    g_inv = inv3(G_PRELAUNCH)
+    prev_a = None
+    tracked = [None, None]  # (hip) per tracker
+    cand = [None, None]  # (boresight eci at refresh, list of stars)
+    n_cycles = int(round(total / args.cycle_s)) + 1
+    next_eph = 0.0
+    stats = {"frames": 0, "fhst_samples": [0, 0], "fss_samples": [0, 0], "new_stars": [0, 0],
+             "high_rate_frames": 0, "hips": [set(), set()], "per_segment": []}
+    prev_mode_high = False
+    slew_no = 0
+    was_slewing = False
+    q_err = rot([4.0 * RAD_PER_ARCSEC, -3.0 * RAD_PER_ARCSEC, 5.0 * RAD_PER_ARCSEC])
+
+    for k in range(n_cycles):
+        tt = k * args.cycle_s
+        tai = t0 + tt
+        a, ctrl, slew_span = attitude(tt)
+        pos, vel = orbit.state(tt)
+        sun_geo = sun_geocentric_km(tai)
+        v_earth = earth_velocity_km_per_s(tai)
+        v_obs = add(v_earth, vel)
+        earth_helio_au = scale(sun_geo, -1.0 / AU_KM)
+        observer_au = add(earth_helio_au, scale(pos, 1.0 / AU_KM))
+        sun_dir = aberrate(unit(sub(sun_geo, pos)), v_obs)
+        # Rate mode: high from 10 s before a slew to 10 s after it (the interval ending at tt).
+        high = False
+        for (b, e, kind, _a0, _ax, _p) in segments:
+            if kind == "slew" and b - 10.0 < tt <= e + 10.0 and not args.low_rate_slews:
+                high = True
+        events = []
+        if ctrl == 2 and not was_slewing:
+            slew_no += 1
+            events.append((0x0601, slew_no, 0))
+        if ctrl != 2 and was_slewing:
+            events.append((0x0602, slew_no, 0))
+        was_slewing = ctrl == 2
+        if high != prev_mode_high:
+            events.append((0x0203, 1 if high else 0, 0))
+        # ---------------- IRU: Δθ with A_k = Rot(Δθ) A_{k−1}, plus bias and ARW, into pulses.
+        w_arcsec = IRU_HIGH_ARCSEC_PER_PULSE if high else IRU_LOW_ARCSEC_PER_PULSE
+        if prev_a is not None:
+            r = mm(a, mt(prev_a))  # Rot(Δθ) = A_k A_{k−1}ᵀ; small angle: Δθ from the skew part
+            dth = [0.5 * (r[1][2] - r[2][1]), 0.5 * (r[2][0] - r[0][2]), 0.5 * (r[0][1] - r[1][0])]
+            sn = norm(dth)
+            if sn > 1e-12:
+                dth = scale(dth, math.asin(min(sn, 1.0)) / sn)
+            for cfg, chans in ((0, (1, 2, 4)), (1, (0, 3, 5))):
+                meas = [dth[i] + bias[i] * args.cycle_s + rng.gauss(0.0, arw * math.sqrt(args.cycle_s))
+                        for i in range(3)]
+                dn = scale(mv(g_inv, meas), 1.0 / (w_arcsec * RAD_PER_ARCSEC))
+                if cfg == 1 and args.backup_channels_dead:
+                    continue
+                for ax, ch in enumerate(chans):
+                    frac[ch] += dn[ax]
+                    whole = math.floor(frac[ch])
+                    frac[ch] -= whole
+                    counters[ch] = (counters[ch] + int(whole)) % 65536
+        prev_a = a
+        # ---------------- FHSTs
+        fhst_bytes = b""
+        for i, name in enumerate(("FHST1", "FHST2")):
+            h = v = mag = 0
+            flags = 0
+            m_as = m_true[name]
+            bore_eci = mv(mt(a), mv(m_as, [0.0, 0.0, 1.0]))
+            nadir = scale(unit(pos), -1.0)
+            earth_radius = math.asin(R_EARTH_KM / norm(pos))
+            visible = (name not in missing
+                       and math.acos(max(-1.0, min(1.0, dot(bore_eci, nadir)))) > earth_radius + 10 * RAD_PER_DEG
+                       and math.acos(max(-1.0, min(1.0, dot(bore_eci, sun_dir)))) > 45 * RAD_PER_DEG)
+            if visible:
+                if cand[i] is None or dot(cand[i][0], bore_eci) < math.cos(3 * RAD_PER_DEG):
+                    c10 = math.cos(10 * RAD_PER_DEG)
+                    cand[i] = (bore_eci, [s for s in stars if dot(s[1], bore_eci) > c10])
+                m_sens_from_eci = mm(mt(m_as), a)
+                in_fov = []
+                for (hip, u, hp, plx) in cand[i][1]:
+                    app = aberrate(unit(sub(u, scale(observer_au, plx))), v_obs)
+                    s = mv(m_sens_from_eci, app)
+                    if s[2] <= 0:
+                        continue
+                    hh, vv = math.atan2(s[0], s[2]), math.atan2(s[1], s[2])
+                    if abs(hh) < 4 * RAD_PER_DEG and abs(vv) < 4 * RAD_PER_DEG:
+                        in_fov.append((hp, hip, hh, vv))
+                chosen = None
+                for c in in_fov:
+                    if c[1] == tracked[i]:
+                        chosen = c
+                if chosen is None and in_fov:
+                    chosen = min(in_fov)
+                    flags |= 4
+                    stats["new_stars"][i] += 1
+                if chosen is not None:
+                    hp, hip, hh, vv = chosen
+                    tracked[i] = hip
+                    sig = fhst_sigma[0] + (min(max(hp, 2.0), 5.7) - 2.0) / 3.7 * (fhst_sigma[1] - fhst_sigma[0])
+                    h = i16((hh / RAD_PER_ARCSEC + rng.gauss(0, sig)) / FHST_ARCSEC_PER_COUNT)
+                    v = i16((vv / RAD_PER_ARCSEC + rng.gauss(0, sig)) / FHST_ARCSEC_PER_COUNT)
+                    mag = i16(hp * 100 + rng.gauss(0, 5))
+                    flags |= 3
+                    stats["fhst_samples"][i] += 1
+                    stats["hips"][i].add(hip)
+                else:
+                    tracked[i] = None
+            else:
+                tracked[i] = None
+            if in_span(invalid.get(name, []), tt) and flags:
+                flags &= ~1
+            fhst_bytes += struct.pack(">hhhB", h, v, mag, flags)
+        # ---------------- FSSs (shadow: cylindrical Earth shadow)
+        in_shadow = dot(pos, unit(sun_geo)) < 0 and norm(cross(pos, unit(sun_geo))) < R_EARTH_KM
+        fss_bytes = b""
+        for i, name in enumerate(("FSS1", "FSS2")):
+            al = be = 0
+            flags = 0
+            s = mv(mt(m_true[name]), mv(a, sun_dir))
+            if name not in missing and not in_shadow and s[2] > 0:
+                aa, bb = math.atan2(s[0], s[2]), math.atan2(s[1], s[2])
+                if abs(aa) <= 32 * RAD_PER_DEG and abs(bb) <= 32 * RAD_PER_DEG:
+                    al = i16(aa / RAD_PER_DEG / FSS_DEG_PER_COUNT + rng.gauss(0, fss_noise_counts))
+                    be = i16(bb / RAD_PER_DEG / FSS_DEG_PER_COUNT + rng.gauss(0, fss_noise_counts))
+                    flags = 3
+                    stats["fss_samples"][i] += 1
+            if in_span(invalid.get(name, []), tt) and flags:
+                flags = 0  # "Sun present" bits clear: the FSS's only validity flags
+            fss_bytes += struct.pack(">hhB", al, be, flags)
+        seg_i = next((j for j, sg in enumerate(segments) if tt <= sg[1] + 1e-9), len(segments) - 1)
+        while len(stats["per_segment"]) <= seg_i:
+            sg = segments[len(stats["per_segment"])]
+            stats["per_segment"].append({"kind": sg[2], "begin_s": sg[0], "end_s": sg[1],
+                                         "fhst": [0, 0], "fss": [0, 0], "shadow": 0})
+        ps = stats["per_segment"][seg_i]
+        ps["shadow"] += in_shadow
+        for j in range(2):
+            ps["fhst"][j] += (fhst_bytes[7 * j + 6] & 1)
+            ps["fss"][j] += (fss_bytes[5 * j + 4] & 1)
+        if args.extreme:
+            temps = [-4000, 7000, -4000, 7000, 3276] if k % 2 else [7000, -4000, 7000, -4000, -3276]
+        else:
+            temps = [2000 + int(50 * math.sin(tt / 900.0)), 2100, 2500, 2450, 3000]
+        raw = (struct.pack(">6H", *counters) + struct.pack(">BB", 0, 1 if high else 0)
+               + fhst_bytes + fss_bytes + struct.pack(">5h", *temps))
+        assert len(raw) == 48
+        stats["frames"] += 1
+        stats["high_rate_frames"] += high
+        prev_mode_high = high
+        if in_span(gaps, tt):
+            continue
+        pk.add(APID_RAW, tai, raw)
+        if not args.no_eph and (tt + 1e-9 >= next_eph or k == n_cycles - 1):
+            pk.add(APID_EPH, tai, struct.pack(">6d", *pos, *vel))
+            next_eph += args.eph_period
+        if not args.no_hk and k % max(args.hk_every, 1) == 0:
+            q = quat_from_dcm(mm(q_err, a))
+            hk = struct.pack(">4d", *q)
+            hk += struct.pack(">3d", *bias)
+            hk += struct.pack(">6d", 1e-10, 1e-10, 1e-10, 1e-16, 1e-16, 1e-16)
+            hk += struct.pack(">BBBB", 2, ctrl, 0, 1 if high else 0)
+            hk += struct.pack(">3f", 0.0, 0.0, 0.0)
+            hk += struct.pack(">BffI", 0, 0.0, 0.0, 0) * 4
+            hk += struct.pack(">B", 0)
+            hk += struct.pack(">10I", k, 0, 0, 0, 0, 0, 0, 0, 0, 0)
+            hk += struct.pack(">4I", 0, 0, 0, 0)
+            hk += struct.pack(">B", 0)
+            assert len(hk) == 230, len(hk)
+            pk.add(APID_HK, tai + args.hk_offset_s, hk)
+        if not args.no_events:
+            for (code, p1, p2) in events:
+                pk.add(APID_EVENT, tai, struct.pack(">HII", code, p1, p2))
+
+    packets = [b for (_t, _a, b) in pk.out]
+    if args.reorder_every:
+        # Swap packet j with j + 2: with a raw frame and a housekeeping packet per cycle that
+        # is the same APID one cycle later, so time goes backwards within an APID.
+        for j in range(0, len(packets) - 2, args.reorder_every):
+            packets[j], packets[j + 2] = packets[j + 2], packets[j]
+    if args.duplicate_every:
+        packets = [x for j, x in enumerate(packets) for _ in range(2 if j % args.duplicate_every == 0 else 1)]
+    with open(os.path.join(args.out, "telemetry.bin"), "wb") as f:
+        for b in packets:
+            f.write(b)
+
+    meta = {
+        "scenario": "icd-writer",
+        "epoch_utc": args.epoch,
+        "cycle_period_s": args.cycle_s,
+        "sensors": {
+            # Declared = injected noise with the quantisation (count²/12) added.
+            "fhst_sigma_arcsec": [math.hypot(s, FHST_ARCSEC_PER_COUNT / math.sqrt(12)) for s in fhst_sigma],
+            "fss_sigma_arcsec": 3600 * FSS_DEG_PER_COUNT * math.sqrt(fss_noise_counts ** 2 + 1 / 12) + 10.0,
+            "fss_systematic_arcsec": 20.0,
+            "fss_noise_counts": fss_noise_counts,
+            "iru_arw_rad_per_sqrt_s": arw,
+            "iru_rrw_rad_per_s_sqrt_s": 1e-11,
+        },
+        "declared_effects": ["aberration", "orbital_aberration", "sun_parallax"],
+    }
+    if args.metadata == "full":
+        with open(os.path.join(args.out, "metadata.json"), "w") as f:
+            json.dump(meta, f, indent=2)
+    elif args.metadata == "empty":
+        with open(os.path.join(args.out, "metadata.json"), "w") as f:
+            f.write("{}")
+    truth = {
+        "writer": "tests/icd/write_run.py",
+        "injected_rotation_acs_arcsec": inject,
+        "bias_acs_rad_per_s": bias,
+        "fhst_sigma_arcsec_injected": fhst_sigma,
+        "duration_s": total,
+        "frames": stats["frames"],
+        "fhst_samples": stats["fhst_samples"],
+        "fhst_distinct_stars": [len(s) for s in stats["hips"]],
+        "fss_samples": stats["fss_samples"],
+        "high_rate_frames": stats["high_rate_frames"],
+        "per_segment": stats["per_segment"],
+        "packets": len(packets),
+        "args": vars(args),
+    }
+    with open(os.path.join(args.out, "truth_icd.json"), "w") as f:
+        json.dump(truth, f, indent=2)
+    print(json.dumps({k: truth[k] for k in ("duration_s", "frames", "fhst_samples",
+                                             "fhst_distinct_stars", "fss_samples",
+                                             "high_rate_frames", "packets")}))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
