@@ -189,6 +189,16 @@ impl Default for FlightCore {
     }
 }
 
+/// Temperature (°C) of raw-frame slot `slot` (0 FHST1, 1 FHST2, 2 FSS1, 3 FSS2, 4 IRU);
+/// NaN for a slot the frame does not have (no thermal correction then).
+/// docs/icd.md §3.1 (offset 38, 0.01 °C).
+fn frame_temperature_c(frame: &RawSensorFrame, slot: usize) -> f64 {
+    frame
+        .temperatures_centi_c
+        .get(slot)
+        .map_or(f64::NAN, |t| f64::from(*t) * 0.01)
+}
+
 fn to_u32(v: usize) -> u32 {
     u32::try_from(v).unwrap_or(u32::MAX)
 }
@@ -628,11 +638,9 @@ impl FlightCore {
             return SensorResidual::default();
         };
         let alignment = self.tables.alignment();
-        let m_acs_from_fhst_rows = if tracker == 0 {
-            alignment.m_acs_from_fhst1
-        } else {
-            alignment.m_acs_from_fhst2
-        };
+        // The tracker's alignment at its temperature (thermal drift, zero = the stored rows).
+        let m_acs_from_fhst_rows =
+            alignment.m_acs_from_sensor_rows_at(tracker, frame_temperature_c(frame, tracker));
         let m_acs_from_fhst = matrix_from_rows(&m_acs_from_fhst_rows);
         let distortion = alignment
             .corrections
@@ -640,13 +648,24 @@ impl FlightCore {
             .get(tracker)
             .copied()
             .unwrap_or([0.0; 3]);
+        let magnitude_bias = alignment
+            .corrections
+            .fhst_magnitude_bias_rad_per_mag
+            .get(tracker)
+            .copied()
+            .unwrap_or([0.0; 2]);
         let offset_s = alignment
             .corrections
             .time_offset_s
             .get(tracker)
             .copied()
             .unwrap_or(0.0);
-        let meas = match fhst::measure(sample, &m_acs_from_fhst_rows, &distortion) {
+        let meas = match fhst::measure_corrected(
+            sample,
+            &m_acs_from_fhst_rows,
+            &distortion,
+            &magnitude_bias,
+        ) {
             Ok(m) => {
                 if let Some(r) = self.rejected_run.get_mut(tracker) {
                     *r = false;
@@ -775,24 +794,22 @@ impl FlightCore {
         };
         let index = sensor.saturating_add(2);
         let alignment = self.tables.alignment();
-        let m_acs_from_fss_rows = if sensor == 0 {
-            alignment.m_acs_from_fss1
+        // The sensor's alignment at its temperature (thermal drift, zero = the stored rows).
+        let m_acs_from_fss_rows =
+            alignment.m_acs_from_sensor_rows_at(index, frame_temperature_c(frame, index));
+        let id = if sensor == 0 {
+            fss::FssId::Fss1
         } else {
-            alignment.m_acs_from_fss2
+            fss::FssId::Fss2
         };
-        let transfer = alignment
-            .corrections
-            .fss_transfer
-            .get(sensor)
-            .copied()
-            .unwrap_or([0.0; 6]);
+        let transfer = id.transfer_terms(&alignment.corrections);
         let offset_s = alignment
             .corrections
             .time_offset_s
             .get(index)
             .copied()
             .unwrap_or(0.0);
-        let meas = match fss::measure(sample, &m_acs_from_fss_rows, &transfer) {
+        let meas = match fss::measure_corrected(sample, &m_acs_from_fss_rows, &transfer) {
             Ok(m) => {
                 if let Some(r) = self.rejected_run.get_mut(index) {
                     *r = false;

@@ -11,6 +11,13 @@
 //!   zero = off): `H = H_m − (d0 ρ² H_m + d1 H_m V_m)`, `V = V_m − (d0 ρ² V_m + d2 H_m V_m)`,
 //!   `ρ² = H_m² + V_m²`. [`apply_distortion`] is its inverse (for simulators and prediction of
 //!   raw counts), by a bounded fixed-point iteration.
+//! * Magnitude-dependent bias ([`SensorCorrections::fhst_magnitude_bias_rad_per_mag`],
+//!   `b = [b_H, b_V]`, zero = off), after the distortion correction: `H −= b_H (m − 4)`,
+//!   `V −= b_V (m − 4)`, `m` the sample's instrument magnitude.
+//! * Thermal alignment drift ([`SensorCorrections::thermal_alignment_rad_per_c`]): the
+//!   alignment of the tracker at its raw-frame temperature `T` is
+//!   `Rot(k (T − T_ref)) M_AS` ([`AlignmentTable::m_acs_from_sensor_rows_at`],
+//!   [`measure_tracker_at`]).
 //! * Tangent-plane (gnomonic) form, boresight `+z_s`:
 //!   `H = atan2(s_x, s_z)`, `V = atan2(s_y, s_z)`, `s = [tan H, tan V, 1]ᵀ / √(1+tan²H+tan²V)`.
 //! * Sensor → ACS with the active alignment: `b = M_AS s` (columns of `M_AS` = sensor axes in
@@ -32,6 +39,7 @@
 use crate::raw::{FhstSample, FHST_FLAG_NEW_STAR, FHST_FLAG_TRACKING, FHST_FLAG_VALID};
 use crate::tables::types::{
     matrix_from_rows, AlignmentTable, FilterTable, Mat3Rows, SensorCorrections,
+    FHST_MAGNITUDE_BIAS_REFERENCE_MAG,
 };
 use crate::units::{RAD_PER_ARCSEC, RAD_PER_DEG};
 use nalgebra::{Matrix2x3, Matrix3, Vector3};
@@ -100,6 +108,18 @@ impl FhstId {
         match self {
             Self::Fhst1 => d1,
             Self::Fhst2 => d2,
+        }
+    }
+
+    /// Magnitude-bias coefficients `[b_H, b_V]` (rad/mag) of this tracker.
+    /// docs/tables.md (alignment table, `fhst_magnitude_bias_rad_per_mag`); effect 5 of
+    /// algorithms.md §9.
+    #[must_use]
+    pub fn magnitude_bias(self, corrections: &SensorCorrections) -> [f64; 2] {
+        let [b1, b2] = corrections.fhst_magnitude_bias_rad_per_mag;
+        match self {
+            Self::Fhst1 => b1,
+            Self::Fhst2 => b2,
         }
     }
 }
@@ -259,7 +279,9 @@ pub fn measurement_sigma_rad(magnitude: f64, filter: &FilterTable) -> f64 {
     libm::sqrt(s * s + q2)
 }
 
-/// [`measure`] with the tracker's active alignment and distortion from the alignment table.
+/// [`measure_corrected`] with the tracker's alignment, distortion and magnitude bias from the
+/// alignment table, without the thermal drift (the alignment at `T = T_ref`; see
+/// [`measure_tracker_at`]).
 /// docs/tables.md (alignment table).
 ///
 /// # Errors
@@ -273,11 +295,40 @@ pub fn measure_tracker(
         FhstId::Fhst1 => &alignment.m_acs_from_fhst1,
         FhstId::Fhst2 => &alignment.m_acs_from_fhst2,
     };
-    measure(sample, m, &tracker.distortion(&alignment.corrections))
+    let c = &alignment.corrections;
+    measure_corrected(
+        sample,
+        m,
+        &tracker.distortion(c),
+        &tracker.magnitude_bias(c),
+    )
+}
+
+/// [`measure_tracker`] with the tracker's alignment at its temperature `temperature_c` (°C,
+/// the raw frame's, docs/icd.md §3.1): every correction of the alignment table, as the OBC
+/// applies them.
+/// docs/tables.md (alignment table, fields 0–1, 5, 7–9).
+///
+/// # Errors
+/// As [`measure`].
+pub fn measure_tracker_at(
+    sample: &FhstSample,
+    tracker: FhstId,
+    alignment: &AlignmentTable,
+    temperature_c: f64,
+) -> Result<FhstMeasurement, FhstReject> {
+    let m = alignment.m_acs_from_sensor_rows_at(tracker.index(), temperature_c);
+    let c = &alignment.corrections;
+    measure_corrected(
+        sample,
+        &m,
+        &tracker.distortion(c),
+        &tracker.magnitude_bias(c),
+    )
 }
 
 /// Convert and validate one tracker sample with the tracker's `M_AS` (table rows) and
-/// distortion coefficients `[d0, d1, d2]`.
+/// distortion coefficients `[d0, d1, d2]` (no magnitude bias).
 /// algorithms.md §3.1.
 ///
 /// # Errors
@@ -286,6 +337,32 @@ pub fn measure(
     sample: &FhstSample,
     m_acs_from_sensor: &Mat3Rows,
     distortion: &[f64; 3],
+) -> Result<FhstMeasurement, FhstReject> {
+    measure_corrected(sample, m_acs_from_sensor, distortion, &[0.0; 2])
+}
+
+/// Magnitude-bias correction: angles (rad) with the bias `b (m − 4)` of a star of instrument
+/// magnitude `magnitude` removed, `b = [b_H, b_V]` in rad/mag.
+/// docs/tables.md (alignment table, `fhst_magnitude_bias_rad_per_mag`); effect 5 of
+/// algorithms.md §9.
+#[must_use]
+pub fn correct_magnitude_bias(h: f64, v: f64, magnitude: f64, bias: &[f64; 2]) -> (f64, f64) {
+    let [b_h, b_v] = *bias;
+    let dm = magnitude - FHST_MAGNITUDE_BIAS_REFERENCE_MAG;
+    (h - b_h * dm, v - b_v * dm)
+}
+
+/// Convert and validate one tracker sample with the tracker's `M_AS` (table rows),
+/// distortion coefficients `[d0, d1, d2]` and magnitude bias `[b_H, b_V]` (rad/mag).
+/// algorithms.md §3.1; docs/tables.md (alignment table, fields 5 and 7).
+///
+/// # Errors
+/// The first failed check, see [`FhstReject`].
+pub fn measure_corrected(
+    sample: &FhstSample,
+    m_acs_from_sensor: &Mat3Rows,
+    distortion: &[f64; 3],
+    magnitude_bias: &[f64; 2],
 ) -> Result<FhstMeasurement, FhstReject> {
     if sample.flags & FHST_FLAG_VALID == 0 {
         return Err(FhstReject::NotValid);
@@ -297,6 +374,11 @@ pub fn measure(
     let v_m = f64::from(sample.v_counts) * FHST_RAD_PER_COUNT;
     let magnitude = f64::from(sample.magnitude_centimag) * 0.01;
     let (h, v) = correct_distortion(h_m, v_m, distortion);
+    let (h, v) = if magnitude_bias.iter().all(|b| *b == 0.0) {
+        (h, v)
+    } else {
+        correct_magnitude_bias(h, v, magnitude, magnitude_bias)
+    };
     let dir_sensor = dir_from_hv(h, v);
     let dir_acs = matrix_from_rows(m_acs_from_sensor) * dir_sensor;
     if !(h.is_finite() && v.is_finite() && dir_acs.iter().all(|x| x.is_finite())) {
@@ -447,6 +529,60 @@ mod tests {
         let mut s = sample(0, 0, 400);
         s.flags |= FHST_FLAG_NEW_STAR;
         assert!(measure_tracker(&s, FhstId::Fhst2, &al).unwrap().new_star);
+    }
+
+    /// The truth model's bias (sim-harness `magnitude_bias_arcsec_per_mag`: the measured angle
+    /// is the true one plus `b (m − 4)`) is removed by the table term of the same sign.
+    #[test]
+    fn magnitude_bias_removed_with_the_truth_models_sign() {
+        let mut al = AlignmentTable::prelaunch();
+        let b = [2.5 * RAD_PER_ARCSEC, -1.5 * RAD_PER_ARCSEC];
+        al.corrections.fhst_magnitude_bias_rad_per_mag[0] = b;
+        let s = sample(200, -100, 550);
+        let plain = measure_tracker(&s, FhstId::Fhst1, &AlignmentTable::prelaunch()).unwrap();
+        let m = measure_tracker(&s, FhstId::Fhst1, &al).unwrap();
+        // m − 4 = 1.5 mag: H by −3.75″, V by +2.25″.
+        assert!((m.h_rad - (plain.h_rad - 3.75 * RAD_PER_ARCSEC)).abs() < 1e-15);
+        assert!((m.v_rad - (plain.v_rad + 2.25 * RAD_PER_ARCSEC)).abs() < 1e-15);
+        // The other tracker and the reference magnitude are unaffected.
+        assert_eq!(
+            measure_tracker(&s, FhstId::Fhst2, &al),
+            measure_tracker(&s, FhstId::Fhst2, &AlignmentTable::prelaunch())
+        );
+        let at_ref = sample(200, -100, 400);
+        assert_eq!(
+            measure_tracker(&at_ref, FhstId::Fhst1, &al),
+            measure_tracker(&at_ref, FhstId::Fhst1, &AlignmentTable::prelaunch())
+        );
+        // Truth angle + bias, read back through the correction: the truth (no quantization).
+        let (h, v) = (0.031, -0.012);
+        let (hm, vm) = (h + b[0] * (5.2 - 4.0), v + b[1] * (5.2 - 4.0));
+        let (hc, vc) = correct_magnitude_bias(hm, vm, 5.2, &b);
+        assert!((hc - h).abs() < 1e-17 && (vc - v).abs() < 1e-17);
+    }
+
+    /// The thermal drift rotates the tracker's alignment as the truth model does
+    /// (`M(T) = Rot(k ΔT) M`): a star on the boresight is seen along the rotated boresight.
+    #[test]
+    fn thermal_drift_rotates_the_tracker_alignment() {
+        let mut al = AlignmentTable::prelaunch();
+        let k = [0.0, 0.0, 4.0 * RAD_PER_ARCSEC];
+        al.corrections.thermal_alignment_rad_per_c[1] = k;
+        al.corrections.thermal_reference_c[1] = 17.0;
+        let s = sample(0, 0, 400);
+        let m = measure_tracker_at(&s, FhstId::Fhst2, &al, 19.5).unwrap();
+        let z = crate::attitude::rot(&(Vector3::from(k) * 2.5))
+            * FhstId::Fhst2.m_acs_from_sensor(&al).column(2);
+        assert!((m.dir_acs - z).norm() < 1e-15);
+        // At the reference temperature, or without a coefficient: the stored alignment.
+        assert_eq!(
+            measure_tracker_at(&s, FhstId::Fhst2, &al, 17.0),
+            measure_tracker(&s, FhstId::Fhst2, &al)
+        );
+        assert_eq!(
+            measure_tracker_at(&s, FhstId::Fhst1, &al, 40.0),
+            measure_tracker(&s, FhstId::Fhst1, &al)
+        );
     }
 
     #[test]

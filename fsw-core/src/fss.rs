@@ -9,6 +9,13 @@
 //! * Transfer-function correction ([`SensorCorrections::fss_transfer`], `c = [c0..c5]`, all
 //!   zero = off): `α = α_m − (c0 α_m + c1 α_m β_m² + c2)`,
 //!   `β = β_m − (c3 β_m + c4 β_m α_m² + c5)`. [`apply_transfer`] inverts it (fixed point).
+//! * Cubic and cyclic terms ([`SensorCorrections::fss_cubic`] `[k_α, k_β]`,
+//!   [`SensorCorrections::fss_cyclic`] `[p, s_α, c_α, s_β, c_β]`, zero = off), evaluated at
+//!   the measured angles as the terms above ([`correct_transfer_full`]):
+//!   `α −= k_α α_m³ + s_α sin(2π α_m/p) + c_α cos(2π α_m/p)`, the same for β. The cyclic term
+//!   costs one `sincos` per head and cycle, only when `p ≠ 0`.
+//! * Thermal alignment drift: `Rot(k (T − T_ref)) M_AS` at the sensor's raw-frame
+//!   temperature ([`measure_sensor_at`]).
 //! * Head angles are tangent-plane angles, `α = atan2(s_x, s_z)`, `β = atan2(s_y, s_z)`, so
 //!   `s = [tan α, tan β, 1]ᵀ / |·|` (algorithms.md §4 "Unit vector").
 //! * Sensor → ACS: `b = M_AS s`.
@@ -85,6 +92,34 @@ impl FssId {
             Self::Fss2 => c2,
         }
     }
+
+    /// Every transfer-function term of this sensor (scale/cross/offset, cubic, cyclic).
+    /// docs/tables.md (alignment table, fields 6, 10, 11); algorithms.md §4.
+    #[must_use]
+    pub fn transfer_terms(self, corrections: &SensorCorrections) -> TransferTerms {
+        let i = self.index();
+        TransferTerms {
+            coefficients: self.transfer(corrections),
+            cubic: corrections.fss_cubic.get(i).copied().unwrap_or([0.0; 2]),
+            cyclic: corrections.fss_cyclic.get(i).copied().unwrap_or([0.0; 5]),
+        }
+    }
+}
+
+/// The transfer-function correction of one FSS (the alignment table's fields 6, 10, 11).
+/// docs/tables.md (alignment table); algorithms.md §4 and effect 15 of §9.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct TransferTerms {
+    /// `[c0..c5]`: scale, cross-axis and offset terms.
+    /// docs/tables.md (field 6).
+    pub coefficients: [f64; 6],
+    /// `[k_α, k_β]`, rad⁻²: cubic terms.
+    /// docs/tables.md (field 10).
+    pub cubic: [f64; 2],
+    /// `[p, s_α, c_α, s_β, c_β]`: cyclic terms at pitch `p` (rad, 0 = off).
+    /// docs/tables.md (field 11).
+    pub cyclic: [f64; 5],
 }
 
 /// A validated, corrected Sun measurement.
@@ -177,9 +212,55 @@ pub fn correct_transfer(alpha_m: f64, beta_m: f64, c: &[f64; 6]) -> (f64, f64) {
 /// docs/tables.md (alignment table, `fss_transfer`).
 #[must_use]
 pub fn apply_transfer(alpha: f64, beta: f64, c: &[f64; 6]) -> (f64, f64) {
+    apply_transfer_full(
+        alpha,
+        beta,
+        &TransferTerms {
+            coefficients: *c,
+            ..TransferTerms::default()
+        },
+    )
+}
+
+/// The cyclic term `s sin(2π x/p) + c cos(2π x/p)` of one head (rad); 0 when `p = 0`.
+fn cyclic_term(x: f64, pitch_rad: f64, sin_rad: f64, cos_rad: f64) -> f64 {
+    if pitch_rad == 0.0 {
+        return 0.0;
+    }
+    let (s, c) = libm::sincos(core::f64::consts::TAU * x / pitch_rad);
+    sin_rad * s + cos_rad * c
+}
+
+/// The full transfer-function correction: measured head angles → true head angles (rad),
+/// [`correct_transfer`] then the cubic and cyclic terms, all at the measured angles (module
+/// docs). Zero cubic and cyclic terms give exactly [`correct_transfer`].
+/// docs/tables.md (alignment table, fields 6, 10, 11); algorithms.md §4, effect 15 of §9.
+#[must_use]
+pub fn correct_transfer_full(alpha_m: f64, beta_m: f64, t: &TransferTerms) -> (f64, f64) {
+    let (mut alpha, mut beta) = correct_transfer(alpha_m, beta_m, &t.coefficients);
+    let [k_a, k_b] = t.cubic;
+    if k_a != 0.0 || k_b != 0.0 {
+        alpha -= k_a * alpha_m * alpha_m * alpha_m;
+        beta -= k_b * beta_m * beta_m * beta_m;
+    }
+    let [pitch, s_a, c_a, s_b, c_b] = t.cyclic;
+    if pitch != 0.0 {
+        alpha -= cyclic_term(alpha_m, pitch, s_a, c_a);
+        beta -= cyclic_term(beta_m, pitch, s_b, c_b);
+    }
+    (alpha, beta)
+}
+
+/// Inverse of [`correct_transfer_full`]: true angles → measured angles (rad), fixed-point
+/// iteration (for simulators and ground checks; converges while the correction's slope is
+/// well below 1, i.e. for calibration-sized terms: a 6″ cyclic term at a 2° pitch has slope
+/// 5e-3).
+/// docs/tables.md (alignment table, fields 6, 10, 11).
+#[must_use]
+pub fn apply_transfer_full(alpha: f64, beta: f64, t: &TransferTerms) -> (f64, f64) {
     let (mut a_m, mut b_m) = (alpha, beta);
     for _ in 0..TRANSFER_ITERATIONS {
-        let (ac, bc) = correct_transfer(a_m, b_m, c);
+        let (ac, bc) = correct_transfer_full(a_m, b_m, t);
         a_m += alpha - ac;
         b_m += beta - bc;
     }
@@ -203,7 +284,9 @@ pub fn angles_from_dir(s: &Vector3<f64>) -> Option<(f64, f64)> {
     Some((libm::atan2(s.x, s.z), libm::atan2(s.y, s.z)))
 }
 
-/// [`measure`] with the sensor's active alignment and transfer function from the table.
+/// [`measure_corrected`] with the sensor's alignment and every transfer-function term from
+/// the table, without the thermal drift (the alignment at `T = T_ref`; see
+/// [`measure_sensor_at`]).
 /// docs/tables.md (alignment table).
 ///
 /// # Errors
@@ -217,11 +300,28 @@ pub fn measure_sensor(
         FssId::Fss1 => &alignment.m_acs_from_fss1,
         FssId::Fss2 => &alignment.m_acs_from_fss2,
     };
-    measure(sample, m, &sensor.transfer(&alignment.corrections))
+    measure_corrected(sample, m, &sensor.transfer_terms(&alignment.corrections))
+}
+
+/// [`measure_sensor`] with the sensor's alignment at its temperature `temperature_c` (°C, the
+/// raw frame's, docs/icd.md §3.1): every correction of the alignment table, as the OBC
+/// applies them.
+/// docs/tables.md (alignment table, fields 2–3, 6, 8–11).
+///
+/// # Errors
+/// As [`measure`].
+pub fn measure_sensor_at(
+    sample: &FssSample,
+    sensor: FssId,
+    alignment: &AlignmentTable,
+    temperature_c: f64,
+) -> Result<FssMeasurement, FssReject> {
+    let m = alignment.m_acs_from_sensor_rows_at(sensor.index().saturating_add(2), temperature_c);
+    measure_corrected(sample, &m, &sensor.transfer_terms(&alignment.corrections))
 }
 
 /// Convert and validate one Sun sensor sample with the sensor's `M_AS` (table rows) and
-/// transfer coefficients `[c0..c5]`.
+/// transfer coefficients `[c0..c5]` (no cubic or cyclic terms).
 /// algorithms.md §4.
 ///
 /// # Errors
@@ -230,6 +330,27 @@ pub fn measure(
     sample: &FssSample,
     m_acs_from_sensor: &Mat3Rows,
     transfer: &[f64; 6],
+) -> Result<FssMeasurement, FssReject> {
+    measure_corrected(
+        sample,
+        m_acs_from_sensor,
+        &TransferTerms {
+            coefficients: *transfer,
+            ..TransferTerms::default()
+        },
+    )
+}
+
+/// Convert and validate one Sun sensor sample with the sensor's `M_AS` (table rows) and its
+/// full transfer-function correction.
+/// algorithms.md §4; docs/tables.md (alignment table, fields 6, 10, 11).
+///
+/// # Errors
+/// The first failed check, see [`FssReject`].
+pub fn measure_corrected(
+    sample: &FssSample,
+    m_acs_from_sensor: &Mat3Rows,
+    transfer: &TransferTerms,
 ) -> Result<FssMeasurement, FssReject> {
     let alpha_sun = sample.flags & FSS_FLAG_SUN_ALPHA != 0;
     let beta_sun = sample.flags & FSS_FLAG_SUN_BETA != 0;
@@ -241,7 +362,7 @@ pub fn measure(
     }
     let alpha_m = f64::from(sample.alpha_counts) * FSS_RAD_PER_COUNT;
     let beta_m = f64::from(sample.beta_counts) * FSS_RAD_PER_COUNT;
-    let (alpha, beta) = correct_transfer(alpha_m, beta_m, transfer);
+    let (alpha, beta) = correct_transfer_full(alpha_m, beta_m, transfer);
     let dir_sensor = dir_from_angles(alpha, beta);
     let dir_acs = matrix_from_rows(m_acs_from_sensor) * dir_sensor;
     if !(alpha.is_finite() && beta.is_finite() && dir_acs.iter().all(|x| x.is_finite())) {
@@ -299,6 +420,95 @@ mod tests {
             assert!((ac - a).abs() < 1e-12 && (bc - b).abs() < 1e-12);
         }
         assert_eq!(correct_transfer(0.2, -0.1, &[0.0; 6]), (0.2, -0.1));
+    }
+
+    /// The harness's head error (sim-harness `FssHeadErrors::apply`: `α_m = α + cubic (α/E)³ +
+    /// cyclic sin(2π α/p)`, E = 32°) is removed by the table terms with the same signs,
+    /// `k = cubic/E³` and `s = cyclic`, to far below a count.
+    #[test]
+    fn cubic_and_cyclic_terms_remove_the_truth_models_error() {
+        use crate::units::RAD_PER_ARCSEC;
+        let e = 32.0 * RAD_PER_DEG;
+        let pitch = 2.0 * RAD_PER_DEG;
+        let (cubic_a, cubic_b, cyc_a, cyc_b) = (20.0, -15.0, 6.0, -4.0);
+        let truth = |x: f64, cubic: f64, cyc: f64| {
+            x + (cubic * (x / e).powi(3) + cyc * libm::sin(core::f64::consts::TAU * x / pitch))
+                * RAD_PER_ARCSEC
+        };
+        let t = TransferTerms {
+            coefficients: [0.0; 6],
+            cubic: [
+                cubic_a * RAD_PER_ARCSEC / (e * e * e),
+                cubic_b * RAD_PER_ARCSEC / (e * e * e),
+            ],
+            cyclic: [
+                pitch,
+                cyc_a * RAD_PER_ARCSEC,
+                0.0,
+                cyc_b * RAD_PER_ARCSEC,
+                0.0,
+            ],
+        };
+        let mut worst: f64 = 0.0;
+        for k in -30..=30 {
+            let a = f64::from(k) * 0.5 * RAD_PER_DEG + 0.0013;
+            let b = -0.7 * a + 0.002;
+            let (am, bm) = (truth(a, cubic_a, cyc_a), truth(b, cubic_b, cyc_b));
+            let (ac, bc) = correct_transfer_full(am, bm, &t);
+            worst = worst.max((ac - a).abs()).max((bc - b).abs());
+            // The inverse reproduces the measured angles.
+            let (am2, bm2) = apply_transfer_full(ac, bc, &t);
+            assert!((am2 - am).abs() < 1e-13 && (bm2 - bm).abs() < 1e-13);
+        }
+        // Evaluating the terms at the measured angle costs ≤ slope × error ≈ 0.1″ at most.
+        assert!(worst < 0.1 * RAD_PER_ARCSEC, "{}", worst / RAD_PER_ARCSEC);
+        // Without the terms the error is up to ≈ 26″.
+        let (a, b) = (30.0 * RAD_PER_DEG, 0.0);
+        let (ac, _) = correct_transfer(truth(a, cubic_a, cyc_a), b, &[0.0; 6]);
+        assert!((ac - a).abs() > 15.0 * RAD_PER_ARCSEC);
+        // Zero terms: exactly the scale/cross correction.
+        let c = [1e-3, 0.02, 2e-4, -5e-4, -0.01, -1e-4];
+        let only = TransferTerms {
+            coefficients: c,
+            ..TransferTerms::default()
+        };
+        assert_eq!(
+            correct_transfer_full(0.3, -0.2, &only),
+            correct_transfer(0.3, -0.2, &c)
+        );
+        // Through the table: FSS2's terms, FSS1 unaffected.
+        let mut al = AlignmentTable::prelaunch();
+        al.corrections.fss_cubic[1] = t.cubic;
+        al.corrections.fss_cyclic[1] = t.cyclic;
+        assert_eq!(al.validate(), Ok(()));
+        let s = sample(6000, -2000);
+        let m = measure_sensor(&s, FssId::Fss2, &al).unwrap();
+        let (a_m, b_m) = (6000.0 * FSS_RAD_PER_COUNT, -2000.0 * FSS_RAD_PER_COUNT);
+        assert_eq!(
+            (m.alpha_rad, m.beta_rad),
+            correct_transfer_full(a_m, b_m, &t)
+        );
+        assert_eq!(
+            measure_sensor(&s, FssId::Fss1, &al),
+            measure_sensor(&s, FssId::Fss1, &AlignmentTable::prelaunch())
+        );
+    }
+
+    #[test]
+    fn thermal_drift_rotates_the_sun_sensor_alignment() {
+        use crate::units::RAD_PER_ARCSEC;
+        let mut al = AlignmentTable::prelaunch();
+        let k = [3.0 * RAD_PER_ARCSEC, -RAD_PER_ARCSEC, 0.0];
+        al.corrections.thermal_alignment_rad_per_c[2] = k;
+        al.corrections.thermal_reference_c[2] = 22.0;
+        let m = measure_sensor_at(&sample(0, 0), FssId::Fss1, &al, 18.0).unwrap();
+        let z = crate::attitude::rot(&(Vector3::from(k) * -4.0))
+            * FssId::Fss1.m_acs_from_sensor(&al).column(2);
+        assert!((m.dir_acs - z).norm() < 1e-15);
+        assert_eq!(
+            measure_sensor_at(&sample(0, 0), FssId::Fss2, &al, 18.0),
+            measure_sensor(&sample(0, 0), FssId::Fss2, &al)
+        );
     }
 
     #[test]

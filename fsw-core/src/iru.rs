@@ -132,6 +132,16 @@ impl IruConfiguration {
             Self::Backup => table.scale_factor_backup,
         }
     }
+
+    /// Scale-factor asymmetries `a` of this configuration's X, Y, Z channels (unitless).
+    /// docs/tables.md (IRU table fields 8–9); effect 9 of algorithms.md §9.
+    #[must_use]
+    pub fn scale_asymmetries(self, table: &IruTable) -> [f64; 3] {
+        match self {
+            Self::Primary => table.scale_asymmetry_primary,
+            Self::Backup => table.scale_asymmetry_backup,
+        }
+    }
 }
 
 /// Pulse weight (rad per pulse) of a rate mode.
@@ -146,8 +156,10 @@ pub fn pulse_weight_rad(high_rate: bool, table: &IruTable) -> f64 {
     arcsec * RAD_PER_ARCSEC
 }
 
-/// `Δθ_acs = G · diag(k) · w · ΔN` (rad) for count differences of the X, Y, Z channels of
-/// `config`, all taken in one rate mode. Also usable for interval totals (algorithms.md §5 item 5).
+/// `Δθ_acs = G · diag(k_i (1 − a_i sgn ΔN_i)) · w · ΔN` (rad) for count differences of the
+/// X, Y, Z channels of `config`, all taken in one rate mode, with the table's scale-factor
+/// asymmetries `a` (0 = off). Also usable for interval totals (algorithms.md §5 item 5) of
+/// one rotation sense.
 #[must_use]
 pub fn delta_theta_from_pulses(
     delta_pulses_xyz: &[f64; 3],
@@ -158,8 +170,31 @@ pub fn delta_theta_from_pulses(
     let w = pulse_weight_rad(high_rate, table);
     let [kx, ky, kz] = config.scale_factors(table);
     let [nx, ny, nz] = *delta_pulses_xyz;
-    let phi = Vector3::new(kx * nx, ky * ny, kz * nz) * w;
+    let asymmetries = config.scale_asymmetries(table);
+    let phi = if asymmetries.iter().all(|a| *a == 0.0) {
+        Vector3::new(kx * nx, ky * ny, kz * nz)
+    } else {
+        let [ax, ay, az] = asymmetries;
+        Vector3::new(
+            kx * asymmetry_factor(ax, nx) * nx,
+            ky * asymmetry_factor(ay, ny) * ny,
+            kz * asymmetry_factor(az, nz) * nz,
+        )
+    } * w;
     config.g(table) * phi
+}
+
+/// `1 − a sgn ΔN`: a channel over-reading by `a |Δθ|` in both senses (scale `1 + a` for
+/// positive rates, `1 − a` for negative) is corrected to first order in `a`.
+/// docs/tables.md (IRU table fields 8–9); effect 9 of algorithms.md §9.
+fn asymmetry_factor(a: f64, delta_pulses: f64) -> f64 {
+    if delta_pulses > 0.0 {
+        1.0 - a
+    } else if delta_pulses < 0.0 {
+        1.0 + a
+    } else {
+        1.0
+    }
 }
 
 /// Per-channel health, bit `i` = channel `i` (X1, X2, Y1, Y2, Z1, Z2).
@@ -637,6 +672,39 @@ mod tests {
         s.high_rate = true;
         let wrong = integ.process(&s, cfg, &table).delta_theta_acs_rad.unwrap();
         assert!((wrong.x - 1000.0 * 0.8 * 1.0002 * RAD_PER_ARCSEC).abs() < 1e-12);
+    }
+
+    /// A channel with the truth model's asymmetry (sim-harness `scale_asymmetry_ppm`: scale
+    /// `1 + a sgn(rate)`) read through the table's `a`: both rotation senses come back to
+    /// `a²` (1.6e-7 for 400 ppm) instead of `a` (4e-4).
+    #[test]
+    fn scale_asymmetry_corrects_both_rotation_senses() {
+        let mut table = IruTable::prelaunch();
+        table.scale_asymmetry_primary = [4.0e-4, -3.0e-4, 0.0];
+        assert_eq!(table.validate(), Ok(()));
+        let cfg = IruConfiguration::Primary;
+        let plain = IruTable::prelaunch();
+        let w = pulse_weight_rad(true, &table);
+        for sign in [1.0, -1.0] {
+            // True channel angles (X, Y, Z) and the pulses the asymmetric channels emit.
+            let phi = Vector3::new(2.0e-2, -1.5e-2, 1.0e-2) * sign;
+            let a = Vector3::new(4.0e-4, -3.0e-4, 0.0);
+            let n = phi.zip_map(&a, |p: f64, a: f64| p * (1.0 + a * p.signum()) / w);
+            let pulses = [n.x, n.y, n.z];
+            let truth = cfg.g(&table) * phi;
+            let corrected = delta_theta_from_pulses(&pulses, true, cfg, &table);
+            let uncorrected = delta_theta_from_pulses(&pulses, true, cfg, &plain);
+            assert!((corrected - truth).norm() < 2.0e-7 * phi.norm(), "{sign}");
+            assert!((uncorrected - truth).norm() > 3.0e-4 * 1.0e-2);
+        }
+        // Zero count: no sign, no change; backup configuration untouched by the primary's a.
+        let zero = delta_theta_from_pulses(&[0.0, 10.0, 0.0], false, cfg, &table);
+        let zero_plain = delta_theta_from_pulses(&[0.0, 10.0, 0.0], false, cfg, &plain);
+        assert!((zero - zero_plain * (1.0 + 3.0e-4)).norm() < 1e-20);
+        assert_eq!(
+            delta_theta_from_pulses(&[5.0, -7.0, 9.0], false, IruConfiguration::Backup, &table),
+            delta_theta_from_pulses(&[5.0, -7.0, 9.0], false, IruConfiguration::Backup, &plain)
+        );
     }
 
     #[test]

@@ -102,17 +102,50 @@ fn unit_range() -> impl Strategy<Value = f64> + Clone {
     prop_oneof![1 => Just(0.0), 1 => Just(1.0), 1 => Just(-1.0), 6 => -1.0..=1.0f64]
 }
 
+/// A value in `[-max, max]`, often exactly 0 or an end.
+fn bounded(max: f64) -> impl Strategy<Value = f64> + Clone {
+    prop_oneof![1 => Just(0.0), 1 => Just(max), 1 => Just(-max), 6 => -max..=max]
+}
+
+/// A valid FSS cyclic term `[p, s_α, c_α, s_β, c_β]`: pitch 0 (off) or 1e-3..=1.2 rad.
+fn fss_cyclic() -> impl Strategy<Value = [f64; 5]> {
+    (
+        prop_oneof![Just(0.0), 1.0e-3..=1.2f64],
+        prop::array::uniform4(bounded(1.0e-3)),
+    )
+        .prop_map(|(p, [a, b, c, d])| [p, a, b, c, d])
+}
+
 fn corrections() -> impl Strategy<Value = SensorCorrections> {
     (
         prop::array::uniform4(prop_oneof![Just(0.0), -2.0..=2.0f64]),
         prop::array::uniform2(prop::array::uniform3(unit_range())),
         prop::array::uniform2(prop::array::uniform6(unit_range())),
+        prop::array::uniform2(prop::array::uniform2(bounded(1.0e-3))),
+        prop::array::uniform4(prop::array::uniform3(bounded(1.0e-3))),
+        prop::array::uniform4(-100.0..=150.0f64),
+        prop::array::uniform2(prop::array::uniform2(unit_range())),
+        prop::array::uniform2(fss_cyclic()),
     )
         .prop_map(
-            |(time_offset_s, fhst_distortion, fss_transfer)| SensorCorrections {
+            |(
                 time_offset_s,
                 fhst_distortion,
                 fss_transfer,
+                fhst_magnitude_bias_rad_per_mag,
+                thermal_alignment_rad_per_c,
+                thermal_reference_c,
+                fss_cubic,
+                fss_cyclic,
+            )| SensorCorrections {
+                time_offset_s,
+                fhst_distortion,
+                fss_transfer,
+                fhst_magnitude_bias_rad_per_mag,
+                thermal_alignment_rad_per_c,
+                thermal_reference_c,
+                fss_cubic,
+                fss_cyclic,
             },
         )
 }
@@ -169,8 +202,10 @@ fn any_iru() -> impl Strategy<Value = IruTable> {
         1e-3..=10.0f64,
         1u16..=32_000,
         2u16..=u16::MAX,
+        prop::array::uniform3(bounded(0.01)),
+        prop::array::uniform3(bounded(0.01)),
     )
-        .prop_map(|(gp, gb, kp, kb, lo, hi, sat, stuck)| IruTable {
+        .prop_map(|(gp, gb, kp, kb, lo, hi, sat, stuck, ap, ab)| IruTable {
             g_primary: gp,
             g_backup: gb,
             scale_factor_primary: kp,
@@ -179,6 +214,8 @@ fn any_iru() -> impl Strategy<Value = IruTable> {
             high_rate_arcsec_per_pulse: hi,
             saturation_pulses_per_cycle: sat,
             stuck_cycles: stuck,
+            scale_asymmetry_primary: ap,
+            scale_asymmetry_backup: ab,
         })
 }
 
@@ -341,7 +378,8 @@ proptest! {
         prop_assert_eq!(t.validate(), Ok(()));
         let image = image_of(TableId::Alignment, c, &t);
         let (_, payload) = parse_image(&image).unwrap();
-        prop_assert_eq!(payload.len(), 58 * 8);
+        // docs/tables.md: 36 + 4 + 6 + 12 + 4 + 12 + 4 + 4 + 10 = 92 f64.
+        prop_assert_eq!(payload.len(), 92 * 8);
         prop_assert_eq!(decode_payload::<AlignmentTable>(payload), Ok(t));
     }
 
@@ -947,12 +985,16 @@ fn non_canonical_payload_is_refused_or_dumps_bit_identical() {
     let mut t = IruTable::prelaunch();
     t.stuck_cycles = 5;
     let image = image_of(TableId::Iru, CREATED, &t);
-    // The last two payload octets are the varints of saturation_pulses_per_cycle (30000 =
-    // 3 octets) and stuck_cycles (5 = 1 octet): write 5 as the overlong `0x85 0x00`.
+    // Before the six f64 scale asymmetries that end the payload come the varints of
+    // saturation_pulses_per_cycle (30000 = 3 octets) and stuck_cycles (5 = 1 octet): write 5
+    // as the overlong `0x85 0x00`.
     let crc_at = image.len() - CRC_LEN;
-    assert_eq!(image[crc_at - 1], 5);
-    let mut bad = image[..crc_at - 1].to_vec();
-    bad.extend_from_slice(&[0x85, 0x00, 0, 0, 0, 0]);
+    let at = crc_at - 1 - 6 * 8;
+    assert_eq!(image[at], 5);
+    let mut bad = image[..at].to_vec();
+    bad.extend_from_slice(&[0x85, 0x00]);
+    bad.extend_from_slice(&image[at + 1..crc_at]);
+    bad.extend_from_slice(&[0, 0, 0, 0]);
     reseal(&mut bad);
     let mut set = Box::new(TableSet::boot());
     if set.load(&bad).is_ok() {

@@ -7,7 +7,7 @@
 //! Matrices are stored row-major as `[[f64; 3]; 3]` (`m[row][col]`), as in the paper.
 
 use super::image::TableError;
-use crate::attitude::{is_proper_rotation, rotvec_from_rot};
+use crate::attitude::{is_proper_rotation, rot, rotvec_from_rot};
 use crate::units::{ARCSEC_PER_RAD, RAD_PER_DEG};
 use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
@@ -71,7 +71,7 @@ fn check_range(value: f64, lo: f64, hi: f64, field: u8) -> Result<(), TableError
 
 /// Corrections for effects beyond a rigid alignment, applied by the OBC when non-zero
 /// (issue 5: effects found on the ground become table data). All default to zero (off).
-/// docs/tables.md (Table 1: alignment, fields 4–6); effects 1, 4, 15 of algorithms.md §9.
+/// docs/tables.md (Table 1: alignment, fields 4–11); effects 1, 2, 4, 5, 15 of algorithms.md §9.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct SensorCorrections {
@@ -89,6 +89,62 @@ pub struct SensorCorrections {
     /// (rad; c0, c3 unitless scale errors, c1, c4 rad⁻², c2, c5 rad offsets). Range |c| ≤ 1.
     /// docs/tables.md (field 6); transfer-function errors of algorithms.md §4.
     pub fss_transfer: [[f64; 6]; 2],
+    /// FHST magnitude-dependent bias per tracker `[b_H, b_V]`, rad per magnitude: after the
+    /// distortion correction `H −= b_H (m − 4)`, `V −= b_V (m − 4)`, `m` the sample's
+    /// instrument magnitude ([`FHST_MAGNITUDE_BIAS_REFERENCE_MAG`] = 4). Range |b| ≤ 1e-3.
+    /// docs/tables.md (field 7); magnitude-dependent FHST error, effect 5 of algorithms.md §9.
+    pub fhst_magnitude_bias_rad_per_mag: [[f64; 2]; 2],
+    /// Thermal alignment drift per sensor (FHST1, FHST2, FSS1, FSS2): rotation vector per °C,
+    /// ACS axes, rad/°C; the OBC uses `M_AS(T) = Rot(k (T − T_ref)) M_AS` with `T` the
+    /// sensor's temperature of the raw frame (docs/icd.md §3.1), `T − T_ref` clamped to
+    /// ±[`THERMAL_MAX_DEVIATION_C`]. Range |k| ≤ 1e-3.
+    /// docs/tables.md (field 8); thermal alignment drift, effect 2 of algorithms.md §9.
+    pub thermal_alignment_rad_per_c: [[f64; 3]; 4],
+    /// Reference temperature `T_ref` of the thermal drift per sensor, °C, −100..=150.
+    /// docs/tables.md (field 9); project choice: the mean temperature of the calibration data.
+    pub thermal_reference_c: [f64; 4],
+    /// FSS cubic transfer-function term per sensor `[k_α, k_β]`, rad⁻²: after the
+    /// [`Self::fss_transfer`] correction `α −= k_α α_m³`, `β −= k_β β_m³`. Range |k| ≤ 1.
+    /// docs/tables.md (field 10); edge growth of the transfer function, algorithms.md §4 and
+    /// effect 15 of §9.
+    pub fss_cubic: [[f64; 2]; 2],
+    /// FSS cyclic (reticle-pitch) transfer-function term per sensor
+    /// `[p, s_α, c_α, s_β, c_β]`: `α −= s_α sin(2π α_m/p) + c_α cos(2π α_m/p)`, the same for β
+    /// with `s_β, c_β`; `p` the pitch in rad (0 = off, else 1e-3..=1.2), amplitudes in rad,
+    /// |·| ≤ 1e-3.
+    /// docs/tables.md (field 11); cyclic reticle error, effect 15 of algorithms.md §9.
+    pub fss_cyclic: [[f64; 5]; 2],
+}
+
+/// Reference magnitude of [`SensorCorrections::fhst_magnitude_bias_rad_per_mag`], mag.
+/// docs/tables.md (field 7); project choice: mid-window of the paper's FHST range 2.0–5.7.
+pub const FHST_MAGNITUDE_BIAS_REFERENCE_MAG: f64 = 4.0;
+
+/// Largest temperature deviation `|T − T_ref|` the thermal drift correction uses, °C: a
+/// reading further off is clamped (a failed thermistor must not rotate a sensor by more than
+/// `k · 50 °C`).
+/// docs/tables.md (field 8); project choice (not in the paper).
+pub const THERMAL_MAX_DEVIATION_C: f64 = 50.0;
+
+impl SensorCorrections {
+    /// Thermal rotation vector `k (T − T_ref)` (rad, ACS) of sensor `sensor` (0 FHST1,
+    /// 1 FHST2, 2 FSS1, 3 FSS2) at temperature `temperature_c`; zero when the sensor has no
+    /// thermal coefficient, the index is out of range or the temperature is not finite.
+    /// docs/tables.md (fields 8–9); effect 2 of algorithms.md §9.
+    #[must_use]
+    pub fn thermal_rotation_rad(&self, sensor: usize, temperature_c: f64) -> Vector3<f64> {
+        let (Some(k), Some(t_ref)) = (
+            self.thermal_alignment_rad_per_c.get(sensor),
+            self.thermal_reference_c.get(sensor),
+        ) else {
+            return Vector3::zeros();
+        };
+        if k.iter().all(|x| *x == 0.0) || !temperature_c.is_finite() {
+            return Vector3::zeros();
+        }
+        let dt = (temperature_c - t_ref).clamp(-THERMAL_MAX_DEVIATION_C, THERMAL_MAX_DEVIATION_C);
+        Vector3::from(*k) * dt
+    }
 }
 
 /// Sensor alignments `M_AS` (paper Table 1 / Table 3), sensor → ACS, columns = sensor axes.
@@ -153,10 +209,32 @@ impl AlignmentTable {
         }
     }
 
+    /// `M_AS` of sensor `sensor` (0 FHST1, 1 FHST2, 2 FSS1, 3 FSS2; larger = FSS2) at the
+    /// sensor temperature `temperature_c`: `Rot(k (T − T_ref)) M_AS` with the table's thermal
+    /// drift ([`SensorCorrections::thermal_rotation_rad`]), the stored rows unchanged when the
+    /// sensor has no thermal coefficient.
+    /// docs/tables.md (fields 0–3, 8–9); paper `M_AS`; effect 2 of algorithms.md §9.
+    #[must_use]
+    pub fn m_acs_from_sensor_rows_at(&self, sensor: usize, temperature_c: f64) -> Mat3Rows {
+        let rows = match sensor {
+            0 => self.m_acs_from_fhst1,
+            1 => self.m_acs_from_fhst2,
+            2 => self.m_acs_from_fss1,
+            _ => self.m_acs_from_fss2,
+        };
+        let theta = self.corrections.thermal_rotation_rad(sensor, temperature_c);
+        if theta == Vector3::zeros() {
+            return rows;
+        }
+        rows_from_matrix(&(rot(&theta) * matrix_from_rows(&rows)))
+    }
+
     /// Content checks: finite, proper rotations, corrections in range.
     /// docs/tables.md (Table 1: alignment, ranges).
     ///
-    /// Field numbers: 0–3 the matrices, 4 time offsets, 5 FHST distortion, 6 FSS transfer.
+    /// Field numbers: 0–3 the matrices, 4 time offsets, 5 FHST distortion, 6 FSS transfer,
+    /// 7 FHST magnitude bias, 8 thermal coefficients, 9 thermal reference temperatures,
+    /// 10 FSS cubic terms, 11 FSS cyclic terms.
     ///
     /// # Errors
     /// The first failed check.
@@ -179,6 +257,26 @@ impl AlignmentTable {
         }
         for k in c.fss_transfer.iter().flatten() {
             check_range(*k, -1.0, 1.0, 6)?;
+        }
+        for b in c.fhst_magnitude_bias_rad_per_mag.iter().flatten() {
+            check_range(*b, -1.0e-3, 1.0e-3, 7)?;
+        }
+        for k in c.thermal_alignment_rad_per_c.iter().flatten() {
+            check_range(*k, -1.0e-3, 1.0e-3, 8)?;
+        }
+        for t in c.thermal_reference_c {
+            check_range(t, -100.0, 150.0, 9)?;
+        }
+        for k in c.fss_cubic.iter().flatten() {
+            check_range(*k, -1.0, 1.0, 10)?;
+        }
+        for [pitch, amplitudes @ ..] in c.fss_cyclic {
+            if pitch != 0.0 {
+                check_range(pitch, 1.0e-3, 1.2, 11)?;
+            }
+            for a in amplitudes {
+                check_range(a, -1.0e-3, 1.0e-3, 11)?;
+            }
         }
         Ok(())
     }
@@ -204,8 +302,9 @@ impl AlignmentTable {
 // IRU table
 // ------------------------------------------------------------------------------------------
 
-/// DRIRU II calibration (paper: `G`; algorithms.md §5): `Δθ_acs = G · diag(k) · w · ΔN` for
-/// the three selected channels in X, Y, Z order, `w` the pulse weight of the rate mode.
+/// DRIRU II calibration (paper: `G`; algorithms.md §5):
+/// `Δθ_acs = G · diag(k_i (1 − a_i sgn ΔN_i)) · w · ΔN` for the three selected channels in
+/// X, Y, Z order, `w` the pulse weight of the rate mode, `a` the scale-factor asymmetry.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct IruTable {
@@ -233,6 +332,16 @@ pub struct IruTable {
     /// A channel whose count does not change for this many cycles is flagged stuck.
     /// docs/tables.md field 7; project choice (not in the paper).
     pub stuck_cycles: u16,
+    /// Scale-factor asymmetry `a` of the primary channels (X2, Y1, Z1), unitless: a channel
+    /// that reads `1 + a` times the true angle for positive rates and `1 − a` for negative
+    /// ones over-reads by `a |Δθ|` both ways; the OBC scales each count difference by
+    /// `1 − a sgn ΔN`. Range |a| ≤ 0.01; 0 at boot (off).
+    /// docs/tables.md field 8; gyro scale asymmetry, effect 9 of algorithms.md §9.
+    pub scale_asymmetry_primary: [f64; 3],
+    /// Scale-factor asymmetry of the backup channels (X1, Y2, Z2), as
+    /// [`Self::scale_asymmetry_primary`].
+    /// docs/tables.md field 9; effect 9 of algorithms.md §9.
+    pub scale_asymmetry_backup: [f64; 3],
 }
 
 impl IruTable {
@@ -254,11 +363,13 @@ impl IruTable {
             high_rate_arcsec_per_pulse: 0.8,
             saturation_pulses_per_cycle: 30_000,
             stuck_cycles: 120,
+            scale_asymmetry_primary: [0.0; 3],
+            scale_asymmetry_backup: [0.0; 3],
         }
     }
 
     /// Content checks. Fields: 0 g_primary, 1 g_backup, 2/3 scale factors, 4/5 pulse weights,
-    /// 6 saturation, 7 stuck cycles.
+    /// 6 saturation, 7 stuck cycles, 8/9 scale asymmetries.
     /// docs/tables.md (Table 2: IRU, ranges).
     ///
     /// # Errors
@@ -290,10 +401,19 @@ impl IruTable {
         if self.stuck_cycles < 2 {
             return Err(TableError::OutOfRange { field: 7 });
         }
+        for (field, a) in [
+            (8u8, &self.scale_asymmetry_primary),
+            (9u8, &self.scale_asymmetry_backup),
+        ] {
+            for v in a {
+                check_range(*v, -0.01, 0.01, field)?;
+            }
+        }
         Ok(())
     }
 
-    /// Largest element change of G (ppm) against another table, both configurations.
+    /// Largest element change of G, k or the scale asymmetries (ppm) against another table,
+    /// both configurations.
     /// docs/tables.md (`max_iru_change_ppm`).
     #[must_use]
     pub fn max_g_change_ppm(&self, other: &IruTable) -> f64 {
@@ -312,6 +432,19 @@ impl IruTable {
                     .scale_factor_primary
                     .iter()
                     .chain(other.scale_factor_backup.iter()),
+            )
+        {
+            worst = worst.max((x - y).abs() * 1.0e6);
+        }
+        for (x, y) in self
+            .scale_asymmetry_primary
+            .iter()
+            .chain(self.scale_asymmetry_backup.iter())
+            .zip(
+                other
+                    .scale_asymmetry_primary
+                    .iter()
+                    .chain(other.scale_asymmetry_backup.iter()),
             )
         {
             worst = worst.max((x - y).abs() * 1.0e6);
@@ -583,4 +716,135 @@ pub fn check_iru_change(
         });
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::units::RAD_PER_ARCSEC;
+
+    #[test]
+    fn new_alignment_corrections_default_off_and_validate() {
+        let a = AlignmentTable::prelaunch();
+        assert_eq!(a.validate(), Ok(()));
+        assert_eq!(a.corrections, SensorCorrections::default());
+        for s in 0..4 {
+            // No thermal coefficient: the stored rows whatever the temperature.
+            assert_eq!(a.m_acs_from_sensor_rows_at(s, 80.0), *a.matrices()[s]);
+            assert_eq!(
+                a.corrections.thermal_rotation_rad(s, -40.0),
+                Vector3::zeros()
+            );
+        }
+    }
+
+    #[test]
+    fn new_alignment_corrections_rejected_out_of_range_or_not_finite() {
+        let base = AlignmentTable::prelaunch();
+        type Case = (fn(&mut SensorCorrections), TableError);
+        let cases: [Case; 12] = [
+            (
+                |c| c.fhst_magnitude_bias_rad_per_mag[1][0] = 1.1e-3,
+                TableError::OutOfRange { field: 7 },
+            ),
+            (
+                |c| c.fhst_magnitude_bias_rad_per_mag[0][1] = f64::NAN,
+                TableError::NotFinite { field: 7 },
+            ),
+            (
+                |c| c.thermal_alignment_rad_per_c[3][2] = -2.0e-3,
+                TableError::OutOfRange { field: 8 },
+            ),
+            (
+                |c| c.thermal_alignment_rad_per_c[0][0] = f64::INFINITY,
+                TableError::NotFinite { field: 8 },
+            ),
+            (
+                |c| c.thermal_reference_c[2] = 151.0,
+                TableError::OutOfRange { field: 9 },
+            ),
+            (
+                |c| c.thermal_reference_c[1] = f64::NAN,
+                TableError::NotFinite { field: 9 },
+            ),
+            (
+                |c| c.fss_cubic[1][1] = -1.5,
+                TableError::OutOfRange { field: 10 },
+            ),
+            (
+                |c| c.fss_cubic[0][0] = f64::NAN,
+                TableError::NotFinite { field: 10 },
+            ),
+            (
+                |c| c.fss_cyclic[0][0] = 1.0e-4,
+                TableError::OutOfRange { field: 11 },
+            ),
+            (
+                |c| c.fss_cyclic[1] = [2.0, 0.0, 0.0, 0.0, 0.0],
+                TableError::OutOfRange { field: 11 },
+            ),
+            (
+                |c| c.fss_cyclic[1][3] = 2.0e-3,
+                TableError::OutOfRange { field: 11 },
+            ),
+            (
+                |c| c.fss_cyclic[0][0] = f64::NAN,
+                TableError::NotFinite { field: 11 },
+            ),
+        ];
+        for (i, (set, err)) in cases.iter().enumerate() {
+            let mut t = base;
+            set(&mut t.corrections);
+            assert_eq!(t.validate(), Err(*err), "case {i}");
+        }
+        // Amplitudes with the cyclic term off (pitch 0) are still range-checked; in range,
+        // every new field at its limit validates.
+        let mut t = base;
+        t.corrections.fhst_magnitude_bias_rad_per_mag = [[1.0e-3, -1.0e-3]; 2];
+        t.corrections.thermal_alignment_rad_per_c = [[-1.0e-3, 0.0, 1.0e-3]; 4];
+        t.corrections.thermal_reference_c = [-100.0, 150.0, 20.0, 0.0];
+        t.corrections.fss_cubic = [[1.0, -1.0]; 2];
+        t.corrections.fss_cyclic = [[1.2, 1.0e-3, -1.0e-3, 0.0, 1.0e-3], [0.0; 5]];
+        assert_eq!(t.validate(), Ok(()));
+    }
+
+    #[test]
+    fn thermal_rotation_follows_the_temperature_and_is_clamped() {
+        let mut a = AlignmentTable::prelaunch();
+        let k = [4.0 * RAD_PER_ARCSEC, 0.0, -2.0 * RAD_PER_ARCSEC];
+        a.corrections.thermal_alignment_rad_per_c[1] = k;
+        a.corrections.thermal_reference_c[1] = 17.0;
+        let c = &a.corrections;
+        let at = |t: f64| c.thermal_rotation_rad(1, t);
+        assert!((at(20.0) - Vector3::from(k) * 3.0).norm() < 1e-18);
+        assert_eq!(at(17.0), Vector3::zeros());
+        // Clamped at ±50 °C from the reference; NaN and other sensors: none.
+        assert!((at(300.0) - Vector3::from(k) * THERMAL_MAX_DEVIATION_C).norm() < 1e-18);
+        assert!((at(-300.0) + Vector3::from(k) * THERMAL_MAX_DEVIATION_C).norm() < 1e-18);
+        assert_eq!(at(f64::NAN), Vector3::zeros());
+        assert_eq!(c.thermal_rotation_rad(0, 30.0), Vector3::zeros());
+        assert_eq!(c.thermal_rotation_rad(7, 30.0), Vector3::zeros());
+        // M_AS(T) = Rot(k ΔT) M_AS, as the truth model rotates the sensor (M' = Rot(θ) M).
+        let m = a.m_acs_from_sensor_rows_at(1, 22.0);
+        let expect = rot(&(Vector3::from(k) * 5.0)) * matrix_from_rows(&a.m_acs_from_fhst2);
+        assert!((matrix_from_rows(&m) - expect).norm() < 1e-15);
+        assert_eq!(a.m_acs_from_sensor_rows_at(0, 22.0), a.m_acs_from_fhst1);
+    }
+
+    #[test]
+    fn iru_asymmetry_validated_and_bounded_by_the_change_check() {
+        let base = IruTable::prelaunch();
+        assert_eq!(base.validate(), Ok(()));
+        let mut t = base;
+        t.scale_asymmetry_primary = [4.0e-4, -3.0e-4, 0.01];
+        t.scale_asymmetry_backup = [-0.01, 0.0, 1.0e-4];
+        assert_eq!(t.validate(), Ok(()));
+        // 0.01 = 10,000 ppm is the largest change: the load bound sees it.
+        assert!((t.max_g_change_ppm(&base) - 10_000.0).abs() < 1e-6);
+        t.scale_asymmetry_primary[1] = 0.011;
+        assert_eq!(t.validate(), Err(TableError::OutOfRange { field: 8 }));
+        let mut t = base;
+        t.scale_asymmetry_backup[2] = f64::NAN;
+        assert_eq!(t.validate(), Err(TableError::NotFinite { field: 9 }));
+    }
 }
