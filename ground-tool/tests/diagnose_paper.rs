@@ -12,16 +12,18 @@
 //! calibration chain's API (`calibrate_telemetry`) with the ground's FSS conversion
 //!
 //! * `none`: as flown (no transfer-function correction: the effect not modelled);
-//! * `diagnose`: the correction `ground-tool diagnose` writes (`alignment.corrections.fss_transfer`,
-//!   the scale and cross terms it determines at 3σ; the cubic and cyclic terms have no table
-//!   field, so the chain cannot apply them);
-//! * `truth-table`: the truth's scale and cross terms in the same fields (what the table can
-//!   carry at best);
+//! * `diagnose`: the correction `ground-tool diagnose` writes (`alignment.corrections`
+//!   `fss_transfer`, `fss_cubic`, `fss_cyclic`: the scale, cross, cubic and cyclic terms it
+//!   determines at 3σ), which the chain's DA applies to the raw counts as the OBC does;
+//! * `truth-table`: the truth's scale and cross terms only (what the table carried before the
+//!   cubic and cyclic fields);
+//! * `truth-full`: the truth's whole transfer function in the table fields (scale, cross,
+//!   cubic, cyclic at the truth's pitch);
 //!
 //! and on the second run `none` again (`no-TF truth`).
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
-use fsw_core::tables::AlignmentTable;
+use fsw_core::tables::{AlignmentTable, SensorCorrections};
 use fsw_core::units::RAD_PER_ARCSEC;
 use ground_tool::diagnose::effects::FSS_EDGE_RAD;
 use ground_tool::diagnose::run::{diagnose_run, DiagnoseOptions};
@@ -43,11 +45,21 @@ struct Irucal {
     intervals: usize,
 }
 
-fn irucal(run: &Path, transfer: [[f64; 6]; 2]) -> Option<Irucal> {
+/// The FSS transfer-function fields of `c` (the rest zero).
+fn fss_only(c: &SensorCorrections) -> SensorCorrections {
+    SensorCorrections {
+        fss_transfer: c.fss_transfer,
+        fss_cubic: c.fss_cubic,
+        fss_cyclic: c.fss_cyclic,
+        ..SensorCorrections::default()
+    }
+}
+
+fn irucal(run: &Path, corrections: SensorCorrections) -> Option<Irucal> {
     let tm = ground_tool::tp::read_file(&run.join("telemetry.bin")).unwrap();
     let md = read_metadata(run).unwrap();
     let mut a = AlignmentTable::prelaunch();
-    a.corrections.fss_transfer = transfer;
+    a.corrections = corrections;
     let copt = CalibrateOptions {
         flown_alignment: Some(a),
         ..CalibrateOptions::default()
@@ -67,17 +79,37 @@ fn irucal(run: &Path, transfer: [[f64; 6]; 2]) -> Option<Irucal> {
     })
 }
 
-/// The truth's scale and cross terms as table coefficients (FSS1, FSS2).
-fn truth_transfer(run: &Path) -> [[f64; 6]; 2] {
+/// The truth's transfer function as table coefficients (FSS1, FSS2): the scale and cross
+/// terms, and with `full` the cubic and cyclic terms too.
+fn truth_transfer(run: &Path, full: bool) -> SensorCorrections {
     let t = read_truth(run).unwrap().unwrap();
     let s = t.scenario_file.expect("truth.json names its scenario");
     let e3 = FSS_EDGE_RAD.powi(3);
-    let mut out = [[0.0; 6]; 2];
+    let mut out = SensorCorrections::default();
     for (k, f) in [&s.fss1, &s.fss2].iter().enumerate() {
-        out[k][0] = f.alpha.scale_ppm * 1e-6;
-        out[k][1] = f.alpha.cross_arcsec_at_corner * RAD_PER_ARCSEC / e3;
-        out[k][3] = f.beta.scale_ppm * 1e-6;
-        out[k][4] = f.beta.cross_arcsec_at_corner * RAD_PER_ARCSEC / e3;
+        let c = &mut out.fss_transfer[k];
+        c[0] = f.alpha.scale_ppm * 1e-6;
+        c[1] = f.alpha.cross_arcsec_at_corner * RAD_PER_ARCSEC / e3;
+        c[3] = f.beta.scale_ppm * 1e-6;
+        c[4] = f.beta.cross_arcsec_at_corner * RAD_PER_ARCSEC / e3;
+        if full {
+            out.fss_cubic[k] = [
+                f.alpha.cubic_arcsec_at_edge * RAD_PER_ARCSEC / e3,
+                f.beta.cubic_arcsec_at_edge * RAD_PER_ARCSEC / e3,
+            ];
+            // One pitch per sensor in the table (the harness's heads share theirs).
+            assert_eq!(f.alpha.cyclic_pitch_deg, f.beta.cyclic_pitch_deg);
+            let pitch = f.alpha.cyclic_pitch_deg.to_radians();
+            if f.alpha.cyclic_arcsec != 0.0 || f.beta.cyclic_arcsec != 0.0 {
+                out.fss_cyclic[k] = [
+                    pitch,
+                    f.alpha.cyclic_arcsec * RAD_PER_ARCSEC,
+                    0.0,
+                    f.beta.cyclic_arcsec * RAD_PER_ARCSEC,
+                    0.0,
+                ];
+            }
+        }
     }
     out
 }
@@ -142,18 +174,22 @@ fn paper_case_irucal() {
             &DiagnoseOptions::default(),
         )
         .unwrap();
-        let diag_tf = d.alignment.corrections.fss_transfer;
+        let diag = fss_only(&d.alignment.corrections);
+        let truth_full = truth_transfer(tf, true);
         eprintln!(
-            "   diagnose fss_transfer FSS1 {:?} FSS2 {:?}; truth-table {:?}",
-            diag_tf[0],
-            diag_tf[1],
-            truth_transfer(tf)
+            "   diagnose fss_transfer {:?} fss_cubic {:?} fss_cyclic {:?}",
+            diag.fss_transfer, diag.fss_cubic, diag.fss_cyclic
+        );
+        eprintln!(
+            "   truth    fss_transfer {:?} fss_cubic {:?} fss_cyclic {:?}",
+            truth_full.fss_transfer, truth_full.fss_cubic, truth_full.fss_cyclic
         );
         for (name, run, transfer) in [
-            ("none", tf, [[0.0; 6]; 2]),
-            ("diagnose", tf, diag_tf),
-            ("truth-table", tf, truth_transfer(tf)),
-            ("no-TF truth", notf, [[0.0; 6]; 2]),
+            ("none", tf, SensorCorrections::default()),
+            ("diagnose", tf, diag),
+            ("truth-table", tf, truth_transfer(tf, false)),
+            ("truth-full", tf, truth_full),
+            ("no-TF truth", notf, SensorCorrections::default()),
         ] {
             if let Some((e, s, c)) = line(name, irucal(run, transfer).as_ref(), &truth) {
                 let x = sums.entry(name).or_default();

@@ -5,7 +5,10 @@
 //! | alignments (joint fit) | `AlignmentTable.m_acs_from_*` (re-adjusted so the OBC's two-tracker frame is kept, paper appendix) | `M_AS` |
 //! | `time_tag_offset` | `corrections.time_offset_s[i] += τ` | `executive::time_align`: `b(t) = Rot(ω τ) b(t − τ)` |
 //! | `fhst_distortion` | `corrections.fhst_distortion[i] += [d0, d1, d2]` with `d0 = Δρ(4°)/F³`, `d1,2 = c/F²` (rad) | `fhst::correct_distortion`: `H = H_m − (d0 ρ² H_m + d1 H_m V_m)` |
-//! | `fss_transfer_function` | `corrections.fss_transfer[i] += [scale, cross/E³, 0, scale, cross/E³, 0]` | `fss::correct_transfer`: `α = α_m − (c0 α_m + c1 α_m β_m² + c2)` |
+//! | `magnitude_bias` | `corrections.fhst_magnitude_bias_rad_per_mag[i] += [b_H, b_V]` (″/mag → rad/mag, reference magnitude 4 on both sides) | `fhst::correct_magnitude_bias`: `H −= b_H (m − 4)` with the sample's instrument magnitude |
+//! | `thermal_alignment_drift` | `corrections.thermal_alignment_rad_per_c[i] += k` (″/°C → rad/°C), `thermal_reference_c[i]` = the run mean of the sensor's temperature (the regressor's reference; kept when the flown table already has a drift for the sensor, the constant `k (T_ref − T̄)` then going into the alignment) | `AlignmentTable::m_acs_from_sensor_rows_at`: `M_AS(T) = Rot(k (T − T_ref)) M_AS` at the raw frame's temperature |
+//! | `fss_transfer_function` | `corrections.fss_transfer[i] += [scale, cross/E³, 0, scale, cross/E³, 0]`, `fss_cubic[i] += [cubic/E³, cubic/E³]`, `fss_cyclic[i] = [p, s_α, c_α, s_β, c_β]` (amplitudes added when the flown pitch is the same or zero) | `fss::correct_transfer_full`: `α = α_m − (c0 α_m + c1 α_m β_m² + c2) − k_α α_m³ − s_α sin(2π α_m/p) − c_α cos(2π α_m/p)` |
+//! | `gyro_scale_asymmetry` ([`iru_update`]) | `IruTable.scale_asymmetry_{primary,backup}[j] += a_j` (ppm → unitless; ACS axis j = channel j of the configuration flown, G ≈ I) | `iru::delta_theta_from_pulses`: `Δθ = G diag(k_j (1 − a_j sgn ΔN_j)) w ΔN` |
 //! | `aberration_annual` | `FilterTable.aberration_correction = true` | annual aberration of catalog stars and the Sun |
 //! | `catalog_proper_motion_error` | the flown `StarCatalogTable`, each star the data determine moved by its offset (net rotation removed, shrunk by τ²/(τ² + σ²)), `u' = u + x_E e_E + x_N e_N` | the onboard catalog (identification and reference directions) |
 //!
@@ -13,20 +16,24 @@
 //! go up for every star the data determine (their σ carries the gauge, see
 //! [`corrected_catalog`]).
 //!
-//! Signs: every library column is the effect's addition to the *measured* angle, and the
-//! tables subtract that addition from the measurement (distortion, transfer) or carry the
-//! measurement forward by τ (time tag), so the estimate goes in with the sign it has.
-//! Effects without a flight hook (orbital aberration — the OBC has no orbit —, thermal or
-//! orbit-periodic alignment, magnitude bias, the FSS cubic and cyclic terms, catalog
-//! offsets, gyro effects) are listed as ground-only.
+//! Signs: every library column is the effect's addition to the *measured* angle (for the
+//! gyro, to the measured rotation: `+a |Δθ|`), and the tables subtract that addition from
+//! the measurement (distortion, magnitude bias, transfer function, asymmetry), rotate the
+//! alignment as the drift does (`M' = Rot(θ) M`, the alignment columns' convention) or carry
+//! the measurement forward by τ (time tag), so the estimate goes in with the sign it has (the
+//! sim-harness truth models add exactly these terms: `sensors/{fhst,fss,iru}.rs`).
+//! Effects without a flight hook are listed as ground-only: orbital aberration and
+//! orbit-periodic alignment (the OBC has no orbit), the gyro bias drift and thermal bias (the
+//! OBC estimates its bias itself), and the non-library extension terms.
 
 use super::effects::{EffectKind, FHST_REF_RAD, FSS_EDGE_RAD};
 use super::fit::align_offset;
 use super::search::SearchResult;
+use super::Detected;
 use crate::calibration::adjust::{preserve_obc_attitude, BoresightFrame};
 use fsw_core::attitude::{rot, Quat};
 use fsw_core::tables::types::{matrix_from_rows, rows_from_matrix};
-use fsw_core::tables::{AlignmentTable, FilterTable, StarCatalogTable};
+use fsw_core::tables::{AlignmentTable, FilterTable, IruTable, StarCatalogTable};
 use fsw_core::units::RAD_PER_ARCSEC;
 use nalgebra::{Matrix3, Vector3};
 use serde::Serialize;
@@ -52,7 +59,9 @@ pub struct FlightUpdate {
     pub ground_only: Vec<String>,
 }
 
-/// Build the tables from the final fit.
+/// Build the tables from the final fit. `temperature_mean_c` is the run mean of each
+/// temperature slot, the reference of the thermal parameters
+/// ([`super::measurements::MeasurementSet::temperature_mean_c`]).
 ///
 /// # Errors
 /// The adjusted table does not validate (an effect too large for the table's range).
@@ -62,37 +71,101 @@ pub fn flight_update(
     flown_filter: &FilterTable,
     flown_catalog: Option<&StarCatalogTable>,
     counts: [usize; 4],
+    temperature_mean_c: [f64; 5],
 ) -> anyhow::Result<FlightUpdate> {
     // The flight fit: the final model restricted to what the OBC can apply (alignments, time
-    // offsets, distortion, the FSS scale and cross terms, annual aberration). The alignments
-    // then absorb the rest as well as they can for the OBC's own model; taking the full
-    // model's alignments would leave the OBC with alignments that were estimated together
-    // with terms it does not have (an FSS cubic or cyclic term trades with its alignment).
+    // offsets, distortion, magnitude bias, thermal drift, the FSS transfer function, annual
+    // aberration). The alignments then absorb the rest as well as they can for the OBC's own
+    // model; taking the full model's alignments would leave the OBC with alignments that were
+    // estimated together with terms it does not have (an orbit-periodic term trades with its
+    // alignment).
     let mut effects: Vec<usize> = res.baseline.clone();
     effects.extend(&res.added);
-    let mut idx: Vec<usize> = (0..super::fit::N_ALIGN).collect();
+    // `always`: the alignments, the aberration scale (its table field is a switch) and the
+    // catalog offsets (every star goes up, shrunk); `gated`: the terms that go up only when
+    // determined at 3σ.
+    let mut always: Vec<usize> = (0..super::fit::N_ALIGN).collect();
+    let mut gated: Vec<usize> = Vec::new();
     for &i in &effects {
         let r = res.layout.range(i);
-        let keep: Vec<usize> = match res.layout.effects[i].kind {
-            EffectKind::TimeTagOffset | EffectKind::AberrationAnnual | EffectKind::Aberration => {
-                vec![0]
+        let (a, g): (Vec<usize>, Vec<usize>) = match res.layout.effects[i].kind {
+            EffectKind::AberrationAnnual | EffectKind::Aberration => (vec![0], Vec::new()),
+            EffectKind::TimeTagOffset => (Vec::new(), vec![0]),
+            EffectKind::FhstDistortion | EffectKind::ThermalAlignmentDrift => {
+                (Vec::new(), vec![0, 1, 2])
             }
-            EffectKind::FhstDistortion => vec![0, 1, 2],
-            EffectKind::FssTransferFunction => vec![0, 1, 3, 4],
+            EffectKind::MagnitudeBias => (Vec::new(), vec![0, 1]),
+            // Scale, cross, cubic and (with a pitch) the cyclic sin/cos of both heads.
+            EffectKind::FssTransferFunction => (Vec::new(), (0..r.len()).collect()),
             // The onboard catalog takes every per-star offset.
-            EffectKind::CatalogProperMotionError => (0..r.len()).collect(),
-            _ => Vec::new(),
+            EffectKind::CatalogProperMotionError => ((0..r.len()).collect(), Vec::new()),
+            _ => (Vec::new(), Vec::new()),
         };
-        idx.extend(keep.iter().map(|k| r.start + k));
+        always.extend(a.iter().map(|k| r.start + k));
+        gated.extend(g.iter().map(|k| r.start + k));
     }
-    let flight_fit = super::fit::solve(&res.systems.full, &res.layout, &idx)
-        .unwrap_or_else(|| res.final_fit.clone());
+    // Only terms determined at 3σ go up: an ill-determined polynomial term (a transfer
+    // function seen over a small part of the field) would make the OBC worse elsewhere. The
+    // fit is repeated without the terms that fail, until every term left passes, so that the
+    // alignments that go up were estimated with exactly the terms that go up (an FSS cubic
+    // term left out after a joint fit would leave its alignment wrong for the OBC). Terms only
+    // leave, so this ends within `gated.len()` fits.
+    let solve = |gated: &[usize]| {
+        let mut idx = always.clone();
+        idx.extend(gated);
+        super::fit::solve(&res.systems.full, &res.layout, &idx)
+    };
+    let mut flight_fit = res.final_fit.clone();
+    for _ in 0..=gated.len() {
+        let Some(fit) = solve(&gated) else {
+            break;
+        };
+        let before = gated.len();
+        gated.retain(|&i| matches!(fit.param(i), Some((x, s)) if x.abs() > 3.0 * s));
+        flight_fit = fit;
+        if gated.len() == before {
+            break;
+        }
+    }
     let g = flight_fit.expand(res.layout.total);
+    let p3 = |i: usize| {
+        if !gated.contains(&i) {
+            return 0.0;
+        }
+        match flight_fit.param(i) {
+            Some((x, s)) if x.abs() > 3.0 * s => x,
+            _ => 0.0,
+        }
+    };
+    // Thermal drift: the reference temperature of each drifting sensor, and the constant
+    // rotation `k (T_ref − T̄)` (arcsec, ACS) that moves the fit's reference (the run mean T̄)
+    // to it, folded into the alignment.
+    let mut thermal_reference = base.corrections.thermal_reference_c;
+    let mut thermal_constant = [Vector3::zeros(); 4];
+    for &i in &effects {
+        let e = &res.layout.effects[i];
+        if let (EffectKind::ThermalAlignmentDrift, Some(s)) = (e.kind, e.sensor) {
+            let start = res.layout.range(i).start;
+            let k = Vector3::new(p3(start), p3(start + 1), p3(start + 2));
+            if k == Vector3::zeros() {
+                continue;
+            }
+            let flown = base.corrections.thermal_alignment_rad_per_c[s];
+            if flown.iter().all(|x| *x == 0.0) {
+                thermal_reference[s] = temperature_mean_c[s];
+            }
+            thermal_constant[s] += k * (thermal_reference[s] - temperature_mean_c[s]);
+        }
+    }
     let mut applied = Vec::new();
     let mut ground_only = Vec::new();
-    let mut table = adjusted_alignment(base, &g, counts)?;
-    let ground_alignment =
-        adjusted_alignment(base, &res.final_fit.expand(res.layout.total), counts)?;
+    let mut table = adjusted_alignment(base, &g, &thermal_constant, counts)?;
+    let ground_alignment = adjusted_alignment(
+        base,
+        &res.final_fit.expand(res.layout.total),
+        &[Vector3::zeros(); 4],
+        counts,
+    )?;
     applied.push(
         "alignments re-estimated jointly with the effects (FHST frame of the OBC kept)".to_owned(),
     );
@@ -102,13 +175,7 @@ pub fn flight_update(
     for i in effects {
         let e = &res.layout.effects[i];
         let r = res.layout.range(i);
-        // Only terms determined at 3σ go up: an ill-determined polynomial term (a transfer
-        // function seen over a small part of the field) would make the OBC worse elsewhere.
-        let p = |k: usize| match flight_fit.param(r.start + k) {
-            Some((x, s)) if x.abs() > 3.0 * s => x,
-            _ => 0.0,
-        };
-        let _ = &g;
+        let p = |k: usize| p3(r.start + k);
         let label = e.label();
         match (e.kind, e.sensor) {
             (EffectKind::TimeTagOffset, Some(s)) => {
@@ -128,18 +195,79 @@ pub fn flight_update(
                     names[s], d[0], d[1], d[2]
                 ));
             }
+            (EffectKind::MagnitudeBias, Some(s)) if s < 2 => {
+                let b = &mut table.corrections.fhst_magnitude_bias_rad_per_mag[s];
+                b[0] += p(0) * RAD_PER_ARCSEC;
+                b[1] += p(1) * RAD_PER_ARCSEC;
+                applied.push(format!(
+                    "{label}: alignment.corrections.fhst_magnitude_bias_rad_per_mag[{}] = [{:.3}, {:.3}] arcsec/mag",
+                    names[s],
+                    b[0] / RAD_PER_ARCSEC,
+                    b[1] / RAD_PER_ARCSEC
+                ));
+            }
+            (EffectKind::ThermalAlignmentDrift, Some(s)) => {
+                let k = &mut table.corrections.thermal_alignment_rad_per_c[s];
+                for (ax, kx) in k.iter_mut().enumerate() {
+                    *kx += p(ax) * RAD_PER_ARCSEC;
+                }
+                table.corrections.thermal_reference_c[s] = thermal_reference[s];
+                applied.push(format!(
+                    "{label}: alignment.corrections.thermal_alignment_rad_per_c[{}] = [{:.3}, {:.3}, {:.3}] arcsec/degC about ACS x, y, z, thermal_reference_c = {:.2} degC",
+                    names[s],
+                    k[0] / RAD_PER_ARCSEC,
+                    k[1] / RAD_PER_ARCSEC,
+                    k[2] / RAD_PER_ARCSEC,
+                    thermal_reference[s]
+                ));
+            }
             (EffectKind::FssTransferFunction, Some(s)) if s >= 2 => {
-                let c = &mut table.corrections.fss_transfer[s - 2];
+                let corr = &mut table.corrections;
                 let e3 = FSS_EDGE_RAD.powi(3);
+                let c = &mut corr.fss_transfer[s - 2];
                 c[0] += p(0) * 1e-6;
                 c[1] += p(1) * RAD_PER_ARCSEC / e3;
                 c[3] += p(3) * 1e-6;
                 c[4] += p(4) * RAD_PER_ARCSEC / e3;
+                let c = *c;
+                let k = &mut corr.fss_cubic[s - 2];
+                k[0] += p(2) * RAD_PER_ARCSEC / e3;
+                k[1] += p(5) * RAD_PER_ARCSEC / e3;
+                let k = *k;
                 applied.push(format!(
-                    "{label}: alignment.corrections.fss_transfer[{}] = [{:.3e}, {:.3e}, {:.3e}, {:.3e}, {:.3e}, {:.3e}] (scale and cross terms)",
-                    names[s], c[0], c[1], c[2], c[3], c[4], c[5]
+                    "{label}: alignment.corrections.fss_transfer[{}] = [{:.3e}, {:.3e}, {:.3e}, {:.3e}, {:.3e}, {:.3e}], fss_cubic = [{:.3e}, {:.3e}]",
+                    names[s], c[0], c[1], c[2], c[3], c[4], c[5], k[0], k[1]
                 ));
-                ground_only.push(format!("{label}: cubic and cyclic terms (no table field)"));
+                if let Some(pitch) = e.pitch_rad {
+                    let amp = [p(6), p(7), p(8), p(9)].map(|a| a * RAD_PER_ARCSEC);
+                    let cyc = &mut corr.fss_cyclic[s - 2];
+                    if amp.iter().all(|a| *a == 0.0) {
+                        ground_only.push(format!(
+                            "{label}: cyclic term at pitch {:.3} deg not determined at 3 sigma",
+                            pitch.to_degrees()
+                        ));
+                    } else if cyc[0] == 0.0 || (cyc[0] - pitch).abs() < 1e-9 {
+                        cyc[0] = pitch;
+                        for (c, a) in cyc[1..].iter_mut().zip(amp) {
+                            *c += a;
+                        }
+                        applied.push(format!(
+                            "{label}: alignment.corrections.fss_cyclic[{}] = [{:.4} deg, {:.2}, {:.2}, {:.2}, {:.2} arcsec]",
+                            names[s],
+                            cyc[0].to_degrees(),
+                            cyc[1] / RAD_PER_ARCSEC,
+                            cyc[2] / RAD_PER_ARCSEC,
+                            cyc[3] / RAD_PER_ARCSEC,
+                            cyc[4] / RAD_PER_ARCSEC
+                        ));
+                    } else {
+                        ground_only.push(format!(
+                            "{label}: cyclic term at pitch {:.3} deg (the flown table has one at {:.3} deg; one pitch per sensor)",
+                            pitch.to_degrees(),
+                            cyc[0].to_degrees()
+                        ));
+                    }
+                }
             }
             (EffectKind::CatalogProperMotionError, _) => match flown_catalog {
                 Some(flown) => {
@@ -185,11 +313,66 @@ pub fn flight_update(
     })
 }
 
+/// The IRU table with the gyro-side effects: the scale-factor asymmetry (`gyro_scale_asymmetry`,
+/// ppm per ACS axis, `+` = over-reads both ways) added to the asymmetry of the configuration
+/// flown (`backup`: the backup channels flew), each axis only when determined at 3σ; ACS axis
+/// j is channel j of the configuration (X, Y, Z), as `G` is the identity to 2e-3. The bias
+/// effects are ground-only (the OBC estimates its bias). Returns the table, what was applied
+/// and what stays on the ground.
+#[must_use]
+pub fn iru_update(
+    flown: &IruTable,
+    detected: &[Detected],
+    backup: bool,
+) -> (IruTable, Vec<String>, Vec<String>) {
+    let mut out = *flown;
+    let mut applied = Vec::new();
+    let mut ground_only = Vec::new();
+    for d in detected.iter().filter(|d| d.sensor == "IRU") {
+        if d.effect != "gyro_scale_asymmetry" {
+            ground_only.push(format!(
+                "{}[IRU]: no flight-table hook (the OBC estimates its gyro bias)",
+                d.effect
+            ));
+            continue;
+        }
+        let a = if backup {
+            &mut out.scale_asymmetry_backup
+        } else {
+            &mut out.scale_asymmetry_primary
+        };
+        let mut determined = 0;
+        for (j, axis) in ["x", "y", "z"].iter().enumerate() {
+            let (Some(&x), Some(&sx)) = (d.parameters.get(*axis), d.sigma.get(*axis)) else {
+                continue;
+            };
+            if x.abs() > 3.0 * sx {
+                a[j] += x * 1e-6;
+                determined += 1;
+            }
+        }
+        if determined == 0 {
+            ground_only.push("gyro_scale_asymmetry[IRU]: no axis determined at 3 sigma".into());
+        } else {
+            applied.push(format!(
+                "gyro_scale_asymmetry[IRU]: iru.scale_asymmetry_{} = [{:.0}, {:.0}, {:.0}] ppm",
+                if backup { "backup" } else { "primary" },
+                a[0] * 1e6,
+                a[1] * 1e6,
+                a[2] * 1e6
+            ));
+        }
+    }
+    (out, applied, ground_only)
+}
+
 /// `base` with the alignment corrections of `g` (M' = Rot(θ) M for FHST2, FSS1, FSS2; FHST1
-/// is the reference), then the common rotation that keeps the OBC's FHST frame.
+/// is the reference) and the extra rotations `extra_arcsec` per sensor (ACS, arcsec), then the
+/// common rotation that keeps the OBC's FHST frame.
 fn adjusted_alignment(
     base: &AlignmentTable,
     g: &nalgebra::DVector<f64>,
+    extra_arcsec: &[Vector3<f64>; 4],
     counts: [usize; 4],
 ) -> anyhow::Result<AlignmentTable> {
     // Alignments: M' = Rot(θ) M for FHST2, FSS1, FSS2 (FHST1 is the reference), then the
@@ -201,9 +384,12 @@ fn adjusted_alignment(
         .collect();
     let mut m_new = m_base.clone();
     for (s, m) in m_new.iter_mut().enumerate() {
+        let mut theta = extra_arcsec[s];
         if let Some(o) = align_offset(s) {
-            let theta = Vector3::new(g[o], g[o + 1], g[o + 2]) * RAD_PER_ARCSEC;
-            *m = rot(&theta) * *m;
+            theta += Vector3::new(g[o], g[o + 1], g[o + 2]);
+        }
+        if theta != Vector3::zeros() {
+            *m = rot(&(theta * RAD_PER_ARCSEC)) * *m;
         }
     }
     let adj = preserve_obc_attitude(&m_base, &m_new, 0, 1, BoresightFrame::Bisector)?;
@@ -299,4 +485,73 @@ fn corrected_catalog(
         moved += 1;
     }
     (out, moved)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::diagnose::search::Evidence;
+    use std::collections::BTreeMap;
+
+    fn detected(effect: &str, values: [(f64, f64); 3]) -> Detected {
+        let mut parameters = BTreeMap::new();
+        let mut sigma = BTreeMap::new();
+        for (name, (x, s)) in ["x", "y", "z"].iter().zip(values) {
+            parameters.insert((*name).to_owned(), x);
+            sigma.insert((*name).to_owned(), s);
+        }
+        Detected {
+            effect: effect.into(),
+            sensor: "IRU".into(),
+            parameters,
+            sigma,
+            units: BTreeMap::new(),
+            evidence: Evidence {
+                effect: effect.into(),
+                k: 3,
+                delta_chi2: 0.0,
+                f: 0.0,
+                p_value: 0.0,
+                p_holm: 0.0,
+                delta_bic: 0.0,
+                halves_chi2: 0.0,
+                halves_p: 1.0,
+                halves_estimates: (Vec::new(), Vec::new()),
+                signature_excess: (0.0, 0.0),
+                adequate: true,
+                accepted: true,
+                rejected_because: None,
+            },
+            star_dirs: BTreeMap::new(),
+        }
+    }
+
+    /// The asymmetry goes into the flown configuration's channels with its sign (ppm →
+    /// unitless, `+` = over-reads both ways, as `fsw_core::iru` corrects), only the axes
+    /// determined at 3σ, added to what flew; the bias effects stay on the ground.
+    #[test]
+    fn iru_asymmetry_into_the_flown_configuration_at_3_sigma() {
+        let mut flown = IruTable::prelaunch();
+        flown.scale_asymmetry_primary = [1.0e-4, 0.0, 0.0];
+        let d = [
+            detected(
+                "gyro_scale_asymmetry",
+                [(380.0, 40.0), (-310.0, 50.0), (90.0, 45.0)],
+            ),
+            detected("gyro_bias_ramp", [(1.0, 0.1); 3]),
+        ];
+        let (t, applied, ground) = iru_update(&flown, &d, false);
+        assert_eq!(t.validate(), Ok(()));
+        let a = t.scale_asymmetry_primary;
+        assert!((a[0] - 4.8e-4).abs() < 1e-12 && (a[1] + 3.1e-4).abs() < 1e-12);
+        assert!(a[2].abs() < 1e-15, "90 ± 45 ppm is not determined at 3σ");
+        assert_eq!(t.scale_asymmetry_backup, [0.0; 3]);
+        assert_eq!(t.g_primary, flown.g_primary);
+        assert_eq!(applied.len(), 1);
+        assert_eq!(ground.len(), 1);
+        assert!(ground[0].starts_with("gyro_bias_ramp"));
+        let (t, _, _) = iru_update(&flown, &d, true);
+        assert_eq!(t.scale_asymmetry_primary, flown.scale_asymmetry_primary);
+        assert!((t.scale_asymmetry_backup[0] - 3.8e-4).abs() < 1e-12);
+    }
 }

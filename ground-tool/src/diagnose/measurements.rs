@@ -196,6 +196,9 @@ pub struct MeasurementSet {
     pub time_offset0_s: [f64; 4],
     /// Orbit period (s) estimated from the orbit, if any.
     pub orbit_period_s: Option<f64>,
+    /// Run mean of each temperature slot (°C; FHST1, FHST2, FSS1, FSS2, IRU): the reference
+    /// of [`Measurement::dtemp`] and so of the thermal effects' parameters.
+    pub temperature_mean_c: [f64; 5],
 }
 
 fn orbit_phase(pos: &Vector3<f64>, vel: &Vector3<f64>) -> f64 {
@@ -503,6 +506,7 @@ impl MeasurementSet {
             aberration_k0: k0,
             time_offset0_s: tau0,
             orbit_period_s,
+            temperature_mean_c: tmean,
         };
         set.estimate_noise();
         set.check_batches();

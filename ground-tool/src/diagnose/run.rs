@@ -354,6 +354,7 @@ pub fn diagnose_run(
         &filter_flown,
         flown_catalog.as_ref(),
         analysis.set.count_per_sensor(),
+        analysis.set.temperature_mean_c,
     )?;
     std::fs::create_dir_all(out_dir.join("tables"))
         .with_context(|| format!("creating {}", out_dir.display()))?;
@@ -366,6 +367,16 @@ pub fn diagnose_run(
         &copt.flown_iru.unwrap_or_else(IruTable::prelaunch),
         cal.output.as_ref(),
     );
+    // The gyro-side effects into the configuration that flew most of the run.
+    let backup_cycles = tm.housekeeping.iter().filter(|h| h.iru_config == 1).count();
+    let (iru_out, iru_applied, iru_ground_only) = super::flight::iru_update(
+        &iru_out,
+        &gyro_res.detected,
+        2 * backup_cycles > tm.housekeeping.len(),
+    );
+    iru_out.validate().map_err(|e| {
+        anyhow::anyhow!("diagnose: the corrected IRU table does not validate ({e:?})")
+    })?;
     let p = out_dir.join("tables").join("iru.tbl");
     write_table(&p, TableId::Iru, &iru_out, created)?;
     written.push(p.display().to_string());
@@ -493,9 +504,14 @@ pub fn diagnose_run(
             applied: {
                 let mut a = flight.applied.clone();
                 a.push(iru_note.clone());
+                a.extend(iru_applied);
                 a
             },
-            ground_only: flight.ground_only.clone(),
+            ground_only: {
+                let mut g = flight.ground_only.clone();
+                g.extend(iru_ground_only);
+                g
+            },
         },
         calibration_error_arcsec: calibration_error,
         calibration_rotation_error_arcsec: rotation_error,

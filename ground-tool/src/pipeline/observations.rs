@@ -1,9 +1,13 @@
 //! # DA and FADS: from decoded telemetry to identified, referenced observations
 //!
 //! **DA** (data adjustment, paper §3.3) applies a set of calibration tables to the raw counts
-//! with the *flight* conversion code (`fsw_core::fhst::measure`, `fsw_core::fss::measure`,
-//! `fsw_core::iru::IruIntegrator`): one definition of every conversion, so the ground and the
-//! OBC can never disagree on a count.
+//! with the *flight* conversion code (`fsw_core::fhst::measure_tracker_at`,
+//! `fsw_core::fss::measure_sensor_at`, `fsw_core::iru::IruIntegrator`): one definition of every
+//! conversion, so the ground and the OBC can never disagree on a count. Every correction of the
+//! tables goes in (FHST distortion and magnitude bias, the FSS transfer function with its
+//! cubic and cyclic terms, the thermal alignment drift at the frame's temperatures, the gyro
+//! scale asymmetry). Time-tag offsets are not applied here (they need the attitude motion:
+//! the diagnose measurement model carries them).
 //!
 //! **FADS** (fine attitude determination) identifies every tracked star against the *full*
 //! Hipparcos catalog (not the onboard subset) from the OBC's own attitude, and computes the
@@ -242,16 +246,22 @@ pub fn build_observations(
         } else {
             sun_state.astrometric_from_km(&pos).normalize()
         };
-        // DA: each sensor's measurement through the flown tables, once per frame.
+        let mut temperatures_c = [0.0; 5];
+        for (t, raw_t) in temperatures_c.iter_mut().zip(raw.temperatures_centi_c) {
+            *t = f64::from(raw_t) * 0.01;
+        }
+        // DA: each sensor's measurement through the flown tables, once per frame, with every
+        // correction the table carries as the OBC applies it (distortion, magnitude bias, the
+        // full FSS transfer function, the thermal drift at the frame's sensor temperature).
         let fhst_meas: [Option<FhstMeasurement>; 2] = FhstId::ALL.map(|id| {
-            raw.fhst
-                .get(id.index())
-                .and_then(|sample| fhst::measure_tracker(sample, id, alignment).ok())
+            raw.fhst.get(id.index()).and_then(|sample| {
+                fhst::measure_tracker_at(sample, id, alignment, temperatures_c[id.index()]).ok()
+            })
         });
         let fss_meas: [Option<FssMeasurement>; 2] = FssId::ALL.map(|id| {
-            raw.fss
-                .get(id.index())
-                .and_then(|sample| fss::measure_sensor(sample, id, alignment).ok())
+            raw.fss.get(id.index()).and_then(|sample| {
+                fss::measure_sensor_at(sample, id, alignment, temperatures_c[2 + id.index()]).ok()
+            })
         });
         if obc_q.is_none() {
             own.note_stars(&fhst_meas, &fss_meas, t_s);
@@ -309,10 +319,6 @@ pub fn build_observations(
         });
         if obc_q.is_none() {
             own.refresh(&stars, &suns, t_s);
-        }
-        let mut temperatures_c = [0.0; 5];
-        for (t, raw_t) in temperatures_c.iter_mut().zip(raw.temperatures_centi_c) {
-            *t = f64::from(raw_t) * 0.01;
         }
         frames.push(FrameObservations {
             time: raw.time,
