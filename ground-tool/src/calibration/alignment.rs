@@ -555,7 +555,7 @@ impl Accumulator {
             Weighting::Shuster1982 => {
                 for k in 0..nobs {
                     for l in (k + 1)..nobs {
-                        if obs[k].sensor != obs[l].sensor {
+                        if obs[k].sensor != obs[l].sensor && !same_object(obs, k, l) {
                             let p = self.make_pair(obs, k, l);
                             if p.c.norm() > 1e-9 {
                                 self.pairs.push(p);
@@ -576,6 +576,10 @@ impl Accumulator {
                             bb = l;
                         }
                     }
+                }
+                if same_object(obs, a, bb) {
+                    // Every vector of the epoch sees one object (the Sun in both FSSs).
+                    return;
                 }
                 let p = self.make_pair(obs, a, bb);
                 self.pairs.push(p);
@@ -602,10 +606,12 @@ impl Accumulator {
                             }
                         }
                     }
-                    let p1 = self.make_pair(obs, pi, k);
-                    let p2 = self.make_pair(obs, pj, k);
-                    self.pairs.push(p1);
-                    self.pairs.push(p2);
+                    for i in [pi, pj] {
+                        if !same_object(obs, i, k) {
+                            let p = self.make_pair(obs, i, k);
+                            self.pairs.push(p);
+                        }
+                    }
                     placed.push(k);
                 }
                 self.placed = placed;
@@ -677,6 +683,19 @@ impl Accumulator {
         self.r_cov = r_cov;
         self.w = w;
     }
+}
+
+/// Two vectors of one epoch whose reference directions are closer than this (sine) see the
+/// same object (the Sun in both FSSs, in their 2° overlap).
+const SAME_OBJECT_SIN: f64 = 0.0175;
+
+/// Whether observations `k` and `l` see the same object. Why: their dot product is
+/// `cos(small angle)`, quadratic in the alignment error — its first-order partial
+/// `b_k × b_l` and its variance both vanish, so a weighted pair adds a near-zero/near-zero
+/// row that stalls Gauss–Newton (an oscillating step was seen when the Sun stayed in the
+/// FSS overlap for an hour). Such pairs are left out; each vector is still tied to the others.
+fn same_object(obs: &[SensorObservation], k: usize, l: usize) -> bool {
+    obs[k].dir_eci.cross(&obs[l].dir_eci).norm() < SAME_OBJECT_SIN
 }
 
 /// Number of chunks the epochs are split into for the parallel pass. Fixed (not the thread

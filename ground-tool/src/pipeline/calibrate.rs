@@ -8,8 +8,12 @@
 //! 2. **DA/FADS** converts counts with the tables flown (the boot tables unless `--tables`
 //!    says otherwise), identifies stars against the full catalog and computes apparent
 //!    references ([`super::observations`]).
-//! 3. **FFCAL**: every frame with two or more referenced vectors is an epoch of Shuster's
-//!    attitude-independent alignment estimation; the flown alignments are the prior.
+//! 3. **FFCAL** in two stages: (1) FHST2 relative to FHST1 from every identified star, tied
+//!    by the gyro in batches of holds and slews ([`super::star_batches`],
+//!    [`crate::calibration::fhst_relative`]; `FhstStage::StarPairs` = Shuster's simultaneous
+//!    star pairs instead), fused with the flown alignments as the prior; (2) every frame with
+//!    two or more referenced vectors is an epoch of Shuster's attitude-independent alignment
+//!    estimation of the FSSs with the FHSTs held (`ffcal_staged`).
 //! 4. **Adjustment** (paper appendix): the common rotation that would move the OBC's
 //!    two-tracker attitude frame `M_AN` is removed, giving the uplinked `M_AS''`.
 //! 5. **IRUCAL**: maneuvers are found in the telemetry as runs of high-rate frames; each end
@@ -21,10 +25,14 @@ use super::observations::{
     build_observations, fine_attitude, AttitudeSensors, DeclaredNoise, FrameObservations,
     IdentifyOptions,
 };
+use super::star_batches::star_batch_samples;
 use crate::calibration::adjust::{preserve_obc_attitude, BoresightFrame};
 use crate::calibration::alignment::{
     cramer_rao_covariance, ffcal, AlignmentData, FfcalConfig, FfcalSolution, SensorObservation,
     SensorSpec, Weighting,
+};
+use crate::calibration::fhst_relative::{
+    estimate_relative_alignment, fuse_with_prior, FhstRelativeAlignment,
 };
 use crate::calibration::iru::{
     bias_history, irucal, AttitudeFix, BiasEstimate, CalibrationInterval, GyroCalibration,
@@ -32,11 +40,11 @@ use crate::calibration::iru::{
 };
 use crate::tp::{self, Telemetry, TpReport};
 use anyhow::{bail, Context};
-use fsw_core::attitude::{rotvec_from_rot, Quat};
+use fsw_core::attitude::{rot, rotvec_from_rot, Quat};
 use fsw_core::tables::image::encode_image;
 use fsw_core::tables::types::{matrix_from_rows, rows_from_matrix};
 use fsw_core::tables::{AlignmentTable, IruTable, TableId};
-use fsw_core::units::ARCSEC_PER_RAD;
+use fsw_core::units::{ARCSEC_PER_RAD, RAD_PER_ARCSEC};
 use nalgebra::{Matrix3, Vector3};
 use serde::Serialize;
 use sim_harness::truth::sky::{Sky, SkyParams};
@@ -65,6 +73,9 @@ struct FixFloors {
 /// Fewest intervals kept by the outlier loop, and needed before a new G is uplinked: 12
 /// unknowns need redundancy (≥ 18 equations) for the residuals to vouch for the solution.
 const MIN_IRUCAL_INTERVALS: usize = 6;
+
+/// Fewest gyro batches with both trackers for the gyro-batch FHST stage.
+const MIN_GYRO_BATCHES: usize = 3;
 
 /// Fewest simultaneous FHST1–FHST2 star epochs for the FHST stage of FFCAL.
 const MIN_FHST_STAGE_EPOCHS: usize = 100;
@@ -115,6 +126,8 @@ pub struct CalibrateOptions {
     /// FFCAL in two stages (FHSTs from star pairs, then the FSSs relative to them; default)
     /// instead of one joint fit of all four sensors.
     pub staged_ffcal: bool,
+    /// How the staged FFCAL's first stage gets the FHST1–FHST2 relative alignment.
+    pub fhst_stage: FhstStage,
     /// IRU calibration maneuvers given by the user as (start, end) in seconds since the first
     /// raw frame; `None` = found in the telemetry as runs of high-rate frames.
     pub maneuvers_s: Option<Vec<(f64, f64)>>,
@@ -128,9 +141,21 @@ impl Default for CalibrateOptions {
             weighting: Weighting::Optimal1990,
             identify: IdentifyOptions::default(),
             staged_ffcal: true,
+            fhst_stage: FhstStage::GyroBatches,
             maneuvers_s: None,
         }
     }
+}
+
+/// Data of the FHST stage of the staged FFCAL.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, clap::ValueEnum)]
+#[serde(rename_all = "snake_case")]
+pub enum FhstStage {
+    /// Every identified star, tied by the gyro within batches of holds and slews
+    /// (`calibration::fhst_relative`; default): the tracker rolls see every star offset.
+    GyroBatches,
+    /// Shuster's dot products of simultaneous star pairs only (the paper's FFCAL data).
+    StarPairs,
 }
 
 /// One sensor's alignment result for the report.
@@ -292,8 +317,35 @@ pub struct FfcalSummary {
     /// Cramér–Rao bound of the same quantity from every FFCAL epoch (all sensors, FSS samples
     /// weighted as FFCAL weights them), 1σ per axis, arcsec.
     pub crb_sigma_fhst2_rel_fhst1_all_sensors_arcsec: [f64; 3],
-    /// The bound from the FHST star pairs alone (the data stage 1 uses), arcsec.
+    /// The bound from the simultaneous FHST star pairs alone (the star-pair stage's data),
+    /// arcsec.
     pub crb_sigma_fhst2_rel_fhst1_fhst_only_arcsec: [f64; 3],
+    /// Data of the FHST stage (`gyro_batches`, `star_pairs`; absent for one joint fit).
+    pub fhst_stage: Option<FhstStage>,
+    /// The gyro-batch estimate of FHST2 relative to FHST1 (computed whenever the data allow,
+    /// used by the `gyro_batches` stage).
+    pub gyro_batches: Option<BatchAlignmentSummary>,
+}
+
+/// The gyro-batch relative FHST alignment (`calibration::fhst_relative`) for the report.
+#[derive(Clone, Debug, Serialize)]
+pub struct BatchAlignmentSummary {
+    /// θ of FHST2 relative to FHST1 from the flown alignments, ACS, arcsec.
+    pub theta_fhst2_rel_fhst1_arcsec: [f64; 3],
+    /// 1σ per axis, arcsec (the bound scaled by χ²/dof).
+    pub sigma_arcsec: [f64; 3],
+    /// Cramér–Rao bound of the batch data with the declared noise, 1σ per axis, arcsec.
+    pub crb_sigma_arcsec: [f64; 3],
+    /// χ²/dof of the fit.
+    pub variance_factor: f64,
+    /// Batches with stars in both trackers.
+    pub batches: usize,
+    /// Samples used per tracker.
+    pub samples: [usize; 2],
+    /// Samples rejected as outliers.
+    pub rejected: usize,
+    /// Residual RMS per tracker, arcsec per axis.
+    pub residual_rms_arcsec: [f64; 2],
 }
 
 /// One bias-history point.
@@ -426,11 +478,63 @@ fn alignment_data(
     data
 }
 
+/// The FHSTs after stage 1: alignments and their 6×6 covariance (arcsec², ACS).
+struct FhstStageResult {
+    m_acs_from_fhst: [Matrix3<f64>; 2],
+    covariance_arcsec2: nalgebra::Matrix6<f64>,
+    iterations: usize,
+}
+
+impl FhstStageResult {
+    /// Stage 1 by Shuster's FFCAL on the simultaneous star pairs.
+    fn star_pairs(
+        sensors: &[SensorSpec],
+        fhst_data: &AlignmentData,
+        cfg: &FfcalConfig,
+    ) -> anyhow::Result<Self> {
+        let first = sensors
+            .get(..2)
+            .context("FFCAL stage 1 needs FHST1 and FHST2")?;
+        let s1 =
+            ffcal(first, fhst_data, cfg).context("FFCAL stage 1 (FHST1 + FHST2 star pairs)")?;
+        Ok(Self {
+            m_acs_from_fhst: [
+                s1.sensors[0].m_acs_from_sensor_calibrated,
+                s1.sensors[1].m_acs_from_sensor_calibrated,
+            ],
+            covariance_arcsec2: s1.covariance_arcsec2.fixed_view::<6, 6>(0, 0).into_owned(),
+            iterations: s1.iterations,
+        })
+    }
+
+    /// Stage 1 from the gyro-batch relative alignment fused with the flown alignments'
+    /// priors (`fhst_relative::fuse_with_prior`).
+    fn gyro_batches(sensors: &[SensorSpec], rel: &FhstRelativeAlignment) -> anyhow::Result<Self> {
+        let (p1, p2) = match sensors {
+            [a, b, ..] => (a, b),
+            _ => bail!("FFCAL stage 1 needs FHST1 and FHST2"),
+        };
+        let (t1, t2, cov) =
+            fuse_with_prior(rel, &p1.prior_cov_acs_arcsec2, &p2.prior_cov_acs_arcsec2).context(
+                "gyro-batch FHST stage: prior + relative covariance not positive definite",
+            )?;
+        Ok(Self {
+            m_acs_from_fhst: [
+                rot(&(t1 * RAD_PER_ARCSEC)) * p1.m_acs_from_sensor,
+                rot(&(t2 * RAD_PER_ARCSEC)) * p2.m_acs_from_sensor,
+            ],
+            covariance_arcsec2: cov,
+            iterations: 1,
+        })
+    }
+}
+
 /// FFCAL in two stages. Why: the FSSs carry systematic errors of tens of arcsec (the paper's
 /// inherent 0.022° after calibration: transfer-function error) that their noise figure does
 /// not describe; in one joint fit these errors leak into the FHST1–FHST2 relative alignment,
 /// which the star pairs alone determine to a few arcsec. So:
-/// 1. the FHSTs (`sensors[0..2]`) from star–star epochs only (`fhst_data`);
+/// 1. the FHSTs (`sensors[0..2]`) from their stars only (`stage1`: the gyro batches, or
+///    Shuster's simultaneous star pairs);
 /// 2. every sensor from all epochs with the FHSTs held at their stage-1 values, which gives
 ///    the FSSs relative to the FHST frame.
 ///
@@ -440,18 +544,13 @@ fn alignment_data(
 /// `C_f = ¼ Σ C₁`. Residuals before are those of the flown alignments over all epochs.
 fn ffcal_staged(
     sensors: &[SensorSpec],
-    fhst_data: &AlignmentData,
+    stage1: &FhstStageResult,
     data: &AlignmentData,
     cfg: &FfcalConfig,
 ) -> anyhow::Result<FfcalSolution> {
-    let first = sensors
-        .get(..2)
-        .context("FFCAL stage 1 needs FHST1 and FHST2")?;
-    let stage1 =
-        ffcal(first, fhst_data, cfg).context("FFCAL stage 1 (FHST1 + FHST2 star pairs)")?;
     let mut held = sensors.to_vec();
-    for (spec, s1) in held.iter_mut().zip(&stage1.sensors) {
-        spec.m_acs_from_sensor = s1.m_acs_from_sensor_calibrated;
+    for (spec, m) in held.iter_mut().zip(&stage1.m_acs_from_fhst) {
+        spec.m_acs_from_sensor = *m;
         spec.prior_cov_acs_arcsec2 = Matrix3::identity() * HELD_PRIOR_ARCSEC2;
     }
     // An FSS that saw the Sun at one place only cannot have its rotation about the Sun line
@@ -814,6 +913,19 @@ pub fn calibrate_telemetry(
         eprintln!("warning: no ephemeris packets (APID 0x020): orbital aberration and Sun parallax are not corrected");
     }
 
+    let initial_bias = tm
+        .housekeeping
+        .first()
+        .map_or(Vector3::zeros(), |h| Vector3::from(h.bias_acs_rad_per_s));
+    // The OBC's filter bias near a time (housekeeping): the batches that give the interval end
+    // attitudes (and the FHST gyro batches) carry their vectors with it, so the bias is not smeared into them.
+    let obc_bias_at = |t_s: f64| -> Vector3<f64> {
+        let i = tm.housekeeping.partition_point(|h| h.time.seconds() < t_s);
+        tm.housekeeping
+            .get(i.min(tm.housekeeping.len().saturating_sub(1)))
+            .map_or(initial_bias, |h| Vector3::from(h.bias_acs_rad_per_s))
+    };
+
     // FFCAL. A sensor never seen together with another one (e.g. an FSS the Sun never
     // visited) is left out and keeps its flown alignment (reported as not observed).
     let all: [Option<usize>; 4] = [Some(0), Some(1), Some(2), Some(3)];
@@ -869,13 +981,34 @@ pub fn calibrate_telemetry(
         &[Some(0), Some(1), None, None],
         metadata.sensors.fss_systematic_arcsec,
     );
-    let staged = options.staged_ffcal && fhst_data.epoch_count() >= MIN_FHST_STAGE_EPOCHS;
-    let solution = if staged {
-        ffcal_staged(&sensors, &fhst_data, &data, &cfg).with_context(context)?
-    } else {
-        ffcal(&sensors, &data, &cfg).with_context(context)?
+    let (batch_samples, batch_count) = star_batch_samples(&frames, &obc_bias_at);
+    let batch_rel = estimate_relative_alignment(&batch_samples, batch_count, MIN_GYRO_BATCHES);
+    let fhst_stage = match (options.staged_ffcal, options.fhst_stage, &batch_rel) {
+        (false, _, _) => None,
+        (true, FhstStage::GyroBatches, Ok(rel)) => Some((
+            FhstStage::GyroBatches,
+            FhstStageResult::gyro_batches(&sensors, rel)?,
+        )),
+        // Without usable batches the star pairs still give the stage.
+        (true, _, _) if fhst_data.epoch_count() >= MIN_FHST_STAGE_EPOCHS => Some((
+            FhstStage::StarPairs,
+            FhstStageResult::star_pairs(&sensors, &fhst_data, &cfg).with_context(context)?,
+        )),
+        (true, _, _) => None,
     };
-    summary.ffcal_fhst_stage_epochs = if staged { fhst_data.epoch_count() } else { 0 };
+    if let (Some((FhstStage::StarPairs, _)), FhstStage::GyroBatches, Err(e)) =
+        (&fhst_stage, options.fhst_stage, &batch_rel)
+    {
+        eprintln!("warning: FHST stage from the simultaneous star pairs: {e}");
+    }
+    let solution = match &fhst_stage {
+        Some((_, stage1)) => ffcal_staged(&sensors, stage1, &data, &cfg).with_context(context)?,
+        None => ffcal(&sensors, &data, &cfg).with_context(context)?,
+    };
+    summary.ffcal_fhst_stage_epochs = match &fhst_stage {
+        Some((FhstStage::StarPairs, _)) => fhst_data.epoch_count(),
+        _ => 0,
+    };
 
     // Adjustment (over all four sensors; the unobserved keep their flown alignment).
     let mut calibrated = flown.clone();
@@ -936,6 +1069,20 @@ pub fn calibrate_telemetry(
             &fhst_data,
             &solution,
         ),
+        fhst_stage: fhst_stage.as_ref().map(|(k, _)| *k),
+        gyro_batches: batch_rel.as_ref().ok().map(|h| {
+            let sd = |c: &Matrix3<f64>| [0, 1, 2].map(|i| c[(i, i)].max(0.0).sqrt());
+            BatchAlignmentSummary {
+                theta_fhst2_rel_fhst1_arcsec: h.theta_acs_arcsec.into(),
+                sigma_arcsec: sd(&h.covariance_arcsec2),
+                crb_sigma_arcsec: sd(&h.crb_covariance_arcsec2),
+                variance_factor: h.variance_factor,
+                batches: h.batches,
+                samples: h.samples,
+                rejected: h.rejected,
+                residual_rms_arcsec: h.residual_rms_arcsec,
+            }
+        }),
     };
     let mut new_alignment = flown_alignment;
     let ortho = |m: &Matrix3<f64>| rows(&Quat::from_dcm(m).to_dcm());
@@ -966,24 +1113,12 @@ pub fn calibrate_telemetry(
         Some(spans) => user_maneuvers(&frames_cal, spans)?,
         None => find_maneuvers(&frames_cal),
     };
-    let initial_bias = tm
-        .housekeeping
-        .first()
-        .map_or(Vector3::zeros(), |h| Vector3::from(h.bias_acs_rad_per_s));
     let zero_dm = Matrix3::zeros();
     // A FHST-only fix may follow either tracker's frame: a quarter of the FHST1–FHST2
     // relative alignment covariance (FFCAL, arcsec²) is added to it.
     let fhst_floor = FixFloors {
         fhst_cov_rad2: solution.relative_covariance_arcsec2(1, 0) * (0.25 / ARCSEC_PER_RAD.powi(2)),
         fss_arcsec: metadata.sensors.fss_systematic_arcsec,
-    };
-    // The OBC's filter bias near a time (housekeeping): the batches that give the interval end
-    // attitudes carry their vectors over ±5 min with it, so the bias is not smeared into them.
-    let obc_bias_at = |t_s: f64| -> Vector3<f64> {
-        let i = tm.housekeeping.partition_point(|h| h.time.seconds() < t_s);
-        tm.housekeeping
-            .get(i.min(tm.housekeeping.len().saturating_sub(1)))
-            .map_or(initial_bias, |h| Vector3::from(h.bias_acs_rad_per_s))
     };
     let mut intervals = Vec::new();
     let mut spans: Vec<IntervalSpan> = Vec::new();

@@ -5,3 +5,4 @@
 
 pub mod calibrate;
 pub mod observations;
+pub mod star_batches;

@@ -1,0 +1,459 @@
+//! # FHST2 relative to FHST1 from every star, batches tied by the gyro
+//!
+//! Why: FFCAL's dot products use only the epochs at which both trackers hold a star at the
+//! same instant, and one dot product per epoch sees a tracker's roll about its boresight only
+//! through the star's offset along a single direction. The NASA Standard FHST follows one
+//! star at a time and breaks track every few minutes, so each tracker sees many stars at
+//! different places of its 8° field, most of them not at the same time as the other
+//! tracker's. `docs/algorithms.md` §6 says the epoch's vectors may be "simultaneous, or
+//! propagated to a common time with the gyro"; this module does that for batches of holds
+//! and slews (`pipeline::star_batches`), in the equivalent form of §10: the batch attitude is
+//! a nuisance parameter eliminated by its Schur complement, which equals using the complete
+//! set of independent dot products of the batch with their exact covariance [SCN82; S90; §10].
+//!
+//! ## Model (first order, workspace conventions, `docs/conventions.md`)
+//! Per sample of tracker `k` in batch `b` at time `t` (`τ = t − t_b`):
+//! * `a = A_ref(t) u`: the catalog direction `u` (ECI) in ACS with the reference attitude,
+//!   the batch centre's attitude carried to `t` by the gyro;
+//! * `m = M_k s`: the measured direction in ACS with the flown alignment;
+//! * true attitude `Rot(δ_b + δ̇_b τ) A_ref(t)`, true alignments `M_1` (the reference: its
+//!   absolute alignment cannot be told from the attitude) and `Rot(θ) M_2`;
+//! * so `m − a = a × (δ_b + δ̇_b τ − [k = 2] θ) + noise`, projected on two axes normal to `a`.
+//!
+//! The rate nuisance `δ̇_b` takes the batch's gyro bias error (a constant bias error makes
+//! the reference drift linearly), so the result does not depend on the bias used.
+//!
+//! ## Solution
+//! Weighted least squares in arcsec, the 6 nuisance parameters of each batch eliminated
+//! batch by batch (a 6×6 solve each: linear in the number of samples). Samples whose
+//! normalised residual exceeds [`OUTLIER_CHI2`] (2 degrees of freedom) are dropped and the
+//! fit repeated. The covariance is the inverse reduced normal matrix — the Cramér–Rao bound
+//! of the model with the declared noise — scaled by the a-posteriori variance factor
+//! `s² = χ²/dof`. Why scaled both ways: the declared FHST σ is a per-magnitude figure
+//! (the paper's 8–24″) while the true noise also depends on the place in the field; with
+//! 10⁴ samples `s²` is known to ≈ 1 %, and the Monte Carlo NEES is right only with it
+//! (`tests/src/bin/calibration_mc.rs`).
+
+use nalgebra::{Matrix3, Matrix6, Matrix6x3, Vector3, Vector6};
+use serde::Serialize;
+use thiserror::Error;
+
+use crate::ARCSEC_PER_RAD;
+
+/// Normalised squared residual (2 degrees of freedom) above which a sample is an outlier:
+/// 25 ⇔ p ≈ 4e-6, so a clean run of 10⁴ samples loses none on average.
+pub const OUTLIER_CHI2: f64 = 25.0;
+/// Prior 1σ of a batch attitude correction (arcsec): only keeps a batch's nuisance block
+/// invertible when a tracker saw no star in it.
+const NUISANCE_ANGLE_PRIOR_ARCSEC: f64 = 3600.0;
+/// Prior 1σ of a batch attitude drift (arcsec per [`RATE_UNIT_S`]).
+const NUISANCE_RATE_PRIOR_ARCSEC: f64 = 3600.0;
+/// Time unit of the drift nuisance (s), to keep the normal matrix well scaled.
+const RATE_UNIT_S: f64 = 100.0;
+/// Outlier passes.
+const MAX_PASSES: usize = 4;
+
+/// One identified star sample of a hold batch.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BatchStarSample {
+    /// 0 = FHST1 (the reference), 1 = FHST2.
+    pub tracker: usize,
+    /// Batch index (`0..n_batches`).
+    pub batch: usize,
+    /// Time from the batch centre (s).
+    pub dt_s: f64,
+    /// Catalog direction in ACS with the batch's reference attitude at the sample time.
+    pub ref_acs: Vector3<f64>,
+    /// Measured direction in ACS with the flown alignment.
+    pub meas_acs: Vector3<f64>,
+    /// Declared 1σ per axis (rad).
+    pub sigma_rad: f64,
+}
+
+/// Why the relative alignment could not be estimated.
+#[derive(Debug, Error, PartialEq)]
+pub enum RelativeAlignmentError {
+    /// Fewer batches with stars in both trackers than needed.
+    #[error("only {0} hold batches have identified stars in both FHSTs; at least {1} are needed (longer inertial holds with both trackers tracking)")]
+    TooFewBatches(usize, usize),
+    /// The reduced normal matrix is singular (e.g. every star at one place in the field).
+    #[error("the FHST2-relative-to-FHST1 alignment is unobservable from the hold data (reduced normal matrix singular): the trackers need stars at different places of their fields")]
+    Unobservable,
+    /// A sample's batch index is out of range or a vector is not finite.
+    #[error("malformed sample {0}: batch index out of range or non-finite vector")]
+    MalformedSample(usize),
+}
+
+/// The estimate.
+#[derive(Clone, Debug, Serialize)]
+pub struct FhstRelativeAlignment {
+    /// θ of FHST2 relative to FHST1, ACS (arcsec): `M_2,true ≈ Rot(θ) M_2` with FHST1 held.
+    pub theta_acs_arcsec: Vector3<f64>,
+    /// Covariance of θ (arcsec²): the bound scaled by `s²`.
+    pub covariance_arcsec2: Matrix3<f64>,
+    /// The bound of the model with the declared noise, unscaled (arcsec²).
+    pub crb_covariance_arcsec2: Matrix3<f64>,
+    /// A-posteriori variance factor χ²/dof.
+    pub variance_factor: f64,
+    /// Batches used (stars in both trackers).
+    pub batches: usize,
+    /// Samples used, per tracker.
+    pub samples: [usize; 2],
+    /// Samples dropped as outliers.
+    pub rejected: usize,
+    /// Residual RMS per tracker (arcsec per axis) after the fit.
+    pub residual_rms_arcsec: [f64; 2],
+}
+
+/// Accumulated normal equations of one batch.
+#[derive(Clone, Copy)]
+struct BatchNormal {
+    nbb: Matrix6<f64>,
+    nbg: Matrix6x3<f64>,
+    vb: Vector6<f64>,
+    count: [usize; 2],
+}
+
+impl BatchNormal {
+    fn new() -> Self {
+        let mut nbb = Matrix6::zeros();
+        for j in 0..3 {
+            nbb[(j, j)] = NUISANCE_ANGLE_PRIOR_ARCSEC.powi(-2);
+            nbb[(j + 3, j + 3)] = NUISANCE_RATE_PRIOR_ARCSEC.powi(-2);
+        }
+        Self {
+            nbb,
+            nbg: Matrix6x3::zeros(),
+            vb: Vector6::zeros(),
+            count: [0; 2],
+        }
+    }
+}
+
+/// Two unit vectors normal to `a` (any pair: the fit is invariant to the choice).
+fn tangent_basis(a: &Vector3<f64>) -> [Vector3<f64>; 2] {
+    let helper = if a.x.abs() < 0.9 {
+        Vector3::x()
+    } else {
+        Vector3::y()
+    };
+    let e1 = a.cross(&helper).normalize();
+    [e1, a.cross(&e1)]
+}
+
+/// Rows of one sample: (nuisance partials, θ partials, residual arcsec, weight 1/σ²).
+fn sample_rows(s: &BatchStarSample) -> [(Vector6<f64>, Vector3<f64>, f64); 2] {
+    let a = s.ref_acs;
+    let r = (s.meas_acs - a) * ARCSEC_PER_RAD;
+    let tau = s.dt_s / RATE_UNIT_S;
+    tangent_basis(&a).map(|e| {
+        // e·(a × x) = (e × a)·x
+        let g = e.cross(&a);
+        let mut hb = Vector6::zeros();
+        for j in 0..3 {
+            hb[j] = g[j];
+            hb[j + 3] = g[j] * tau;
+        }
+        let hg = if s.tracker == 1 { -g } else { Vector3::zeros() };
+        (hb, hg, e.dot(&r))
+    })
+}
+
+/// Estimate FHST2's alignment relative to FHST1 from hold batches (module doc).
+///
+/// # Errors
+/// [`RelativeAlignmentError`]: malformed samples, too few batches with both trackers
+/// (`min_batches`), or an unobservable geometry.
+pub fn estimate_relative_alignment(
+    samples: &[BatchStarSample],
+    n_batches: usize,
+    min_batches: usize,
+) -> Result<FhstRelativeAlignment, RelativeAlignmentError> {
+    for (i, s) in samples.iter().enumerate() {
+        let finite = s
+            .ref_acs
+            .iter()
+            .chain(s.meas_acs.iter())
+            .all(|x| x.is_finite())
+            && s.dt_s.is_finite()
+            && s.sigma_rad.is_finite()
+            && s.sigma_rad > 0.0;
+        if s.batch >= n_batches || s.tracker > 1 || !finite {
+            return Err(RelativeAlignmentError::MalformedSample(i));
+        }
+    }
+    let mut used = vec![true; samples.len()];
+    let mut nuisance = vec![Vector6::zeros(); n_batches];
+    for pass in 0..MAX_PASSES {
+        let mut batches = vec![BatchNormal::new(); n_batches];
+        for (s, _) in samples.iter().zip(&used).filter(|(_, u)| **u) {
+            let w = (s.sigma_rad * ARCSEC_PER_RAD).powi(-2);
+            let bn = &mut batches[s.batch];
+            bn.count[s.tracker] += 1;
+            for (hb, hg, y) in sample_rows(s) {
+                bn.nbb += hb * hb.transpose() * w;
+                bn.nbg += hb * hg.transpose() * w;
+                bn.vb += hb * (y * w);
+            }
+        }
+        // Reduced system of θ. A batch without both trackers informs θ only through the
+        // weak nuisance prior: left out.
+        let mut ngg = Matrix3::zeros();
+        let mut vg = Vector3::zeros();
+        let mut inverses = vec![None; n_batches];
+        let mut good_batches = 0;
+        for (k, bn) in batches.iter().enumerate() {
+            if bn.count[0] == 0 || bn.count[1] == 0 {
+                continue;
+            }
+            let Some(inv) = bn.nbb.try_inverse() else {
+                continue;
+            };
+            good_batches += 1;
+            // θ rows of this batch, accumulated with the nuisance eliminated:
+            // N_gg − N_gb N_bb⁻¹ N_bg, v_g − N_gb N_bb⁻¹ v_b.
+            let mut n_gg_b = Matrix3::zeros();
+            let mut v_g_b = Vector3::zeros();
+            for (s, _) in samples
+                .iter()
+                .zip(&used)
+                .filter(|(s, u)| **u && s.batch == k && s.tracker == 1)
+            {
+                let w = (s.sigma_rad * ARCSEC_PER_RAD).powi(-2);
+                for (_, hg, y) in sample_rows(s) {
+                    n_gg_b += hg * hg.transpose() * w;
+                    v_g_b += hg * (y * w);
+                }
+            }
+            ngg += n_gg_b - bn.nbg.transpose() * inv * bn.nbg;
+            vg += v_g_b - bn.nbg.transpose() * inv * bn.vb;
+            inverses[k] = Some(inv);
+        }
+        if good_batches < min_batches {
+            return Err(RelativeAlignmentError::TooFewBatches(
+                good_batches,
+                min_batches,
+            ));
+        }
+        let crb = ngg
+            .cholesky()
+            .map(|c| c.inverse())
+            .ok_or(RelativeAlignmentError::Unobservable)?;
+        let theta = crb * vg;
+        for (k, bn) in batches.iter().enumerate() {
+            nuisance[k] =
+                inverses[k].map_or(Vector6::zeros(), |inv| inv * (bn.vb - bn.nbg * theta));
+        }
+        // Residuals, variance factor, outliers.
+        let mut chi2 = 0.0;
+        let mut rows = 0usize;
+        let mut z2 = vec![0.0; samples.len()];
+        for (i, s) in samples.iter().enumerate() {
+            if inverses[s.batch].is_none() {
+                continue;
+            }
+            let w = (s.sigma_rad * ARCSEC_PER_RAD).powi(-2);
+            let mut zz = 0.0;
+            for (hb, hg, y) in sample_rows(s) {
+                let e = y - hb.dot(&nuisance[s.batch]) - hg.dot(&theta);
+                zz += e * e * w;
+            }
+            z2[i] = zz;
+            if used[i] {
+                chi2 += zz;
+                rows += 2;
+            }
+        }
+        let dof = rows.saturating_sub(6 * good_batches + 3).max(1);
+        let variance_factor = chi2 / dof as f64;
+        let cov = crb * variance_factor;
+        let keep: Vec<bool> = samples
+            .iter()
+            .zip(&z2)
+            .zip(&used)
+            .map(|((s, z), u)| {
+                if inverses[s.batch].is_none() {
+                    *u
+                } else {
+                    z / variance_factor <= OUTLIER_CHI2
+                }
+            })
+            .collect();
+        let changed = keep != used;
+        // The outlier set settles in one or two passes; the last pass is kept as it is.
+        if !changed || pass + 1 == MAX_PASSES {
+            let mut samples_used = [0usize; 2];
+            let mut sum2 = [0.0; 2];
+            for (i, s) in samples.iter().enumerate() {
+                if used[i] && inverses[s.batch].is_some() {
+                    samples_used[s.tracker] += 1;
+                    for (hb, hg, y) in sample_rows(s) {
+                        let e = y - hb.dot(&nuisance[s.batch]) - hg.dot(&theta);
+                        sum2[s.tracker] += e * e;
+                    }
+                }
+            }
+            let rms = |t: usize| (sum2[t] / (2 * samples_used[t].max(1)) as f64).sqrt();
+            return Ok(FhstRelativeAlignment {
+                theta_acs_arcsec: theta,
+                covariance_arcsec2: cov,
+                crb_covariance_arcsec2: crb,
+                variance_factor,
+                batches: good_batches,
+                samples: samples_used,
+                rejected: used.iter().filter(|u| !**u).count(),
+                residual_rms_arcsec: [rms(0), rms(1)],
+            });
+        }
+        used = keep;
+    }
+    Err(RelativeAlignmentError::Unobservable)
+}
+
+/// Fuse the relative estimate with the flown alignments' priors: `x = (θ₁, θ₂)` (ACS,
+/// arcsec, from the flown alignments) with prior `blkdiag(P₁, P₂)` and the measurement
+/// `θ₂ − θ₁ = z` (covariance `R`). Why: the prior fixes the common rotation the data cannot
+/// see, as FFCAL's does (§6), so both trackers move and the adjustment can keep the OBC's
+/// frame. Returns `(θ₁, θ₂, covariance 6×6)`.
+#[must_use]
+pub fn fuse_with_prior(
+    relative: &FhstRelativeAlignment,
+    prior1_arcsec2: &Matrix3<f64>,
+    prior2_arcsec2: &Matrix3<f64>,
+) -> Option<(Vector3<f64>, Vector3<f64>, nalgebra::Matrix6<f64>)> {
+    // S = P₁ + P₂ + R; K₁ = −P₁ S⁻¹, K₂ = P₂ S⁻¹.
+    let s = prior1_arcsec2 + prior2_arcsec2 + relative.covariance_arcsec2;
+    let s_inv = s.cholesky()?.inverse();
+    let k1 = -prior1_arcsec2 * s_inv;
+    let k2 = prior2_arcsec2 * s_inv;
+    let z = relative.theta_acs_arcsec;
+    let mut p0 = Matrix6::zeros();
+    p0.fixed_view_mut::<3, 3>(0, 0).copy_from(prior1_arcsec2);
+    p0.fixed_view_mut::<3, 3>(3, 3).copy_from(prior2_arcsec2);
+    let mut k = nalgebra::Matrix6x3::zeros();
+    k.fixed_view_mut::<3, 3>(0, 0).copy_from(&k1);
+    k.fixed_view_mut::<3, 3>(3, 0).copy_from(&k2);
+    let mut h = nalgebra::Matrix3x6::zeros();
+    h.fixed_view_mut::<3, 3>(0, 0)
+        .copy_from(&(-Matrix3::identity()));
+    h.fixed_view_mut::<3, 3>(0, 3)
+        .copy_from(&Matrix3::identity());
+    let p = (Matrix6::identity() - k * h) * p0;
+    let p = (p + p.transpose()) * 0.5;
+    Some((k1 * z, k2 * z, p))
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+mod tests {
+    use super::*;
+    use crate::synth::Rng;
+    use crate::RAD_PER_ARCSEC;
+    use fsw_core::attitude::rot;
+
+    /// Two trackers 90° apart, each seeing stars at random places of a ±4° field, hold
+    /// batches with an attitude offset and drift: θ is recovered, its covariance is right.
+    fn synth(theta_true_arcsec: Vector3<f64>, seed: u64) -> (Vec<BatchStarSample>, usize) {
+        let mut rng = Rng::new(seed);
+        let m = [
+            Matrix3::identity(),
+            // FHST2 boresight along ACS +x.
+            Matrix3::new(0.0, 0.0, 1.0, 0.0, 1.0, 0.0, -1.0, 0.0, 0.0),
+        ];
+        let m2_true = rot(&(theta_true_arcsec * RAD_PER_ARCSEC)) * m[1];
+        let n_batches = 12;
+        let sigma = 10.0 * RAD_PER_ARCSEC;
+        let mut out = Vec::new();
+        for b in 0..n_batches {
+            let d0 = Vector3::new(
+                rng.uniform_in(-60.0, 60.0),
+                rng.uniform_in(-60.0, 60.0),
+                30.0,
+            ) * RAD_PER_ARCSEC;
+            let d1 = Vector3::new(0.02, -0.01, 0.03) * RAD_PER_ARCSEC;
+            for star in 0..6 {
+                let tracker = star % 2;
+                let h: f64 = rng.uniform_in(-0.07, 0.07);
+                let v: f64 = rng.uniform_in(-0.07, 0.07);
+                let s_true = Vector3::new(h.tan(), v.tan(), 1.0).normalize();
+                let m_true = if tracker == 0 { m[0] } else { m2_true };
+                for j in 0..100 {
+                    let t = (star * 100 + j) as f64 - 300.0;
+                    let a_ref_u = m_true * s_true; // direction in the true body frame...
+                                                   // ...and its catalog direction seen with the reference attitude.
+                    let delta = d0 + d1 * t;
+                    let ref_acs = rot(&delta).transpose() * a_ref_u;
+                    let n = Vector3::new(rng.normal(), rng.normal(), 0.0) * sigma;
+                    let s_meas = (s_true + n).normalize();
+                    out.push(BatchStarSample {
+                        tracker,
+                        batch: b,
+                        dt_s: t,
+                        ref_acs,
+                        meas_acs: m[tracker] * s_meas,
+                        sigma_rad: sigma,
+                    });
+                }
+            }
+        }
+        (out, n_batches)
+    }
+
+    #[test]
+    fn recovers_relative_alignment_with_consistent_covariance() {
+        let truth = Vector3::new(40.0, -25.0, 70.0);
+        let mut nees = 0.0;
+        let runs = 20;
+        for seed in 0..runs {
+            let (s, n) = synth(truth, seed);
+            let est = estimate_relative_alignment(&s, n, 3).expect("estimate");
+            let e = est.theta_acs_arcsec - truth;
+            let c = est.covariance_arcsec2;
+            nees += (e.transpose() * c.try_inverse().expect("cov") * e)[(0, 0)];
+            assert!(est.variance_factor > 0.8 && est.variance_factor < 1.2);
+            assert!(est.rejected <= 2, "rejected {}", est.rejected);
+        }
+        let mean = nees / runs as f64;
+        // χ²₃ mean 3; over 20 runs the mean has σ ≈ 0.55.
+        assert!(mean > 1.5 && mean < 4.8, "mean NEES {mean}");
+    }
+
+    #[test]
+    fn outlier_is_dropped_and_errors_are_reported() {
+        let (mut s, n) = synth(Vector3::new(10.0, 10.0, 10.0), 7);
+        s[5].meas_acs = rot(&Vector3::new(0.0, 0.01, 0.0)) * s[5].meas_acs;
+        let est = estimate_relative_alignment(&s, n, 3).expect("estimate");
+        assert_eq!(est.rejected, 1);
+        assert_eq!(
+            estimate_relative_alignment(&s, n, 50).unwrap_err(),
+            RelativeAlignmentError::TooFewBatches(12, 50)
+        );
+        s[0].batch = n;
+        assert_eq!(
+            estimate_relative_alignment(&s, n, 3).unwrap_err(),
+            RelativeAlignmentError::MalformedSample(0)
+        );
+    }
+
+    #[test]
+    fn fusion_moves_both_trackers_by_the_measured_difference() {
+        let rel = FhstRelativeAlignment {
+            theta_acs_arcsec: Vector3::new(30.0, -12.0, 6.0),
+            covariance_arcsec2: Matrix3::identity() * 1e-4,
+            crb_covariance_arcsec2: Matrix3::identity() * 1e-4,
+            variance_factor: 1.0,
+            batches: 10,
+            samples: [1, 1],
+            rejected: 0,
+            residual_rms_arcsec: [0.0; 2],
+        };
+        let p = Matrix3::identity() * 3600.0;
+        let (t1, t2, cov) = fuse_with_prior(&rel, &p, &p).expect("fuse");
+        assert!((t2 - t1 - rel.theta_acs_arcsec).norm() < 1e-3);
+        // Equal priors: each tracker takes half.
+        assert!((t1 + t2).norm() < 1e-6);
+        // The common rotation keeps half the prior variance.
+        let c = |a: usize, b: usize| cov[(a, b)];
+        assert!(((c(0, 0) + c(3, 3) + 2.0 * c(0, 3)) / 4.0 - 1800.0).abs() < 1.0);
+    }
+}
