@@ -638,10 +638,14 @@ impl FlightCore {
             return SensorResidual::default();
         };
         let alignment = self.tables.alignment();
-        // The tracker's alignment at its temperature (thermal drift, zero = the stored rows).
-        let m_acs_from_fhst_rows =
-            alignment.m_acs_from_sensor_rows_at(tracker, frame_temperature_c(frame, tracker));
-        let m_acs_from_fhst = matrix_from_rows(&m_acs_from_fhst_rows);
+        // The tracker's alignment at its temperature (thermal drift; none = the stored rows).
+        let drifted = alignment.drifted_rows_at(tracker, frame_temperature_c(frame, tracker));
+        let m_acs_from_fhst_rows = match &drifted {
+            Some(rows) => rows,
+            None if tracker == 0 => &alignment.m_acs_from_fhst1,
+            None => &alignment.m_acs_from_fhst2,
+        };
+        let m_acs_from_fhst = matrix_from_rows(m_acs_from_fhst_rows);
         let distortion = alignment
             .corrections
             .fhst_distortion
@@ -662,7 +666,7 @@ impl FlightCore {
             .unwrap_or(0.0);
         let meas = match fhst::measure_corrected(
             sample,
-            &m_acs_from_fhst_rows,
+            m_acs_from_fhst_rows,
             &distortion,
             &magnitude_bias,
         ) {
@@ -794,9 +798,14 @@ impl FlightCore {
         };
         let index = sensor.saturating_add(2);
         let alignment = self.tables.alignment();
-        // The sensor's alignment at its temperature (thermal drift, zero = the stored rows).
-        let m_acs_from_fss_rows =
-            alignment.m_acs_from_sensor_rows_at(index, frame_temperature_c(frame, index));
+        // The sensor's alignment at its temperature (thermal drift; none = the stored rows).
+        let drifted = alignment.drifted_rows_at(index, frame_temperature_c(frame, index));
+        let m_acs_from_fss_rows = match &drifted {
+            Some(rows) => rows,
+            None if sensor == 0 => &alignment.m_acs_from_fss1,
+            None => &alignment.m_acs_from_fss2,
+        };
+        let m_acs_from_fss = matrix_from_rows(m_acs_from_fss_rows);
         let id = if sensor == 0 {
             fss::FssId::Fss1
         } else {
@@ -809,7 +818,7 @@ impl FlightCore {
             .get(index)
             .copied()
             .unwrap_or(0.0);
-        let meas = match fss::measure_corrected(sample, &m_acs_from_fss_rows, &transfer) {
+        let meas = match fss::measure_corrected(sample, m_acs_from_fss_rows, &transfer) {
             Ok(m) => {
                 if let Some(r) = self.rejected_run.get_mut(index) {
                     *r = false;
@@ -835,7 +844,6 @@ impl FlightCore {
             };
         };
         // Innovation in the sensor's own axes (α, β), reported whether or not it is used.
-        let m_acs_from_fss = matrix_from_rows(&m_acs_from_fss_rows);
         let predicted = fss::angles_from_dir(
             &(m_acs_from_fss.transpose() * (self.filter.q_acs_from_eci.to_dcm() * sun_eci)),
         );

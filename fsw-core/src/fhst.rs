@@ -374,10 +374,11 @@ pub fn measure_corrected(
     let v_m = f64::from(sample.v_counts) * FHST_RAD_PER_COUNT;
     let magnitude = f64::from(sample.magnitude_centimag) * 0.01;
     let (h, v) = correct_distortion(h_m, v_m, distortion);
-    let (h, v) = if magnitude_bias.iter().all(|b| *b == 0.0) {
-        (h, v)
-    } else {
-        correct_magnitude_bias(h, v, magnitude, magnitude_bias)
+    let (h, v) = match *magnitude_bias {
+        [b_h, b_v] if b_h != 0.0 || b_v != 0.0 => {
+            correct_magnitude_bias(h, v, magnitude, magnitude_bias)
+        }
+        _ => (h, v),
     };
     let dir_sensor = dir_from_hv(h, v);
     let dir_acs = matrix_from_rows(m_acs_from_sensor) * dir_sensor;

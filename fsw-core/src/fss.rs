@@ -236,6 +236,7 @@ fn cyclic_term(x: f64, pitch_rad: f64, sin_rad: f64, cos_rad: f64) -> f64 {
 /// docs). Zero cubic and cyclic terms give exactly [`correct_transfer`].
 /// docs/tables.md (alignment table, fields 6, 10, 11); algorithms.md §4, effect 15 of §9.
 #[must_use]
+#[inline]
 pub fn correct_transfer_full(alpha_m: f64, beta_m: f64, t: &TransferTerms) -> (f64, f64) {
     let (mut alpha, mut beta) = correct_transfer(alpha_m, beta_m, &t.coefficients);
     let [k_a, k_b] = t.cubic;

@@ -161,6 +161,7 @@ pub fn pulse_weight_rad(high_rate: bool, table: &IruTable) -> f64 {
 /// asymmetries `a` (0 = off). Also usable for interval totals (algorithms.md §5 item 5) of
 /// one rotation sense.
 #[must_use]
+#[inline]
 pub fn delta_theta_from_pulses(
     delta_pulses_xyz: &[f64; 3],
     high_rate: bool,
@@ -170,11 +171,10 @@ pub fn delta_theta_from_pulses(
     let w = pulse_weight_rad(high_rate, table);
     let [kx, ky, kz] = config.scale_factors(table);
     let [nx, ny, nz] = *delta_pulses_xyz;
-    let asymmetries = config.scale_asymmetries(table);
-    let phi = if asymmetries.iter().all(|a| *a == 0.0) {
+    let [ax, ay, az] = config.scale_asymmetries(table);
+    let phi = if ax == 0.0 && ay == 0.0 && az == 0.0 {
         Vector3::new(kx * nx, ky * ny, kz * nz)
     } else {
-        let [ax, ay, az] = asymmetries;
         Vector3::new(
             kx * asymmetry_factor(ax, nx) * nx,
             ky * asymmetry_factor(ay, ny) * ny,

@@ -139,7 +139,8 @@ impl SensorCorrections {
         ) else {
             return Vector3::zeros();
         };
-        if k.iter().all(|x| *x == 0.0) || !temperature_c.is_finite() {
+        let [kx, ky, kz] = *k;
+        if (kx == 0.0 && ky == 0.0 && kz == 0.0) || !temperature_c.is_finite() {
             return Vector3::zeros();
         }
         let dt = (temperature_c - t_ref).clamp(-THERMAL_MAX_DEVIATION_C, THERMAL_MAX_DEVIATION_C);
@@ -166,6 +167,13 @@ pub struct AlignmentTable {
     /// Corrections for non-rigid effects (zero = off).
     /// docs/tables.md (fields 4–6); project choice (not in the paper): zero at boot.
     pub corrections: SensorCorrections,
+}
+
+/// `Rot(θ) M` as rows (the thermal drift's rotation, kept out of line: most sensors have none).
+#[cold]
+#[inline(never)]
+fn drifted_rows(rows: &Mat3Rows, theta_rad: &Vector3<f64>) -> Mat3Rows {
+    rows_from_matrix(&(rot(theta_rad) * matrix_from_rows(rows)))
 }
 
 impl AlignmentTable {
@@ -216,17 +224,39 @@ impl AlignmentTable {
     /// docs/tables.md (fields 0–3, 8–9); paper `M_AS`; effect 2 of algorithms.md §9.
     #[must_use]
     pub fn m_acs_from_sensor_rows_at(&self, sensor: usize, temperature_c: f64) -> Mat3Rows {
-        let rows = match sensor {
-            0 => self.m_acs_from_fhst1,
-            1 => self.m_acs_from_fhst2,
-            2 => self.m_acs_from_fss1,
-            _ => self.m_acs_from_fss2,
-        };
-        let theta = self.corrections.thermal_rotation_rad(sensor, temperature_c);
-        if theta == Vector3::zeros() {
-            return rows;
+        match self.drifted_rows_at(sensor, temperature_c) {
+            Some(rows) => rows,
+            None => match sensor {
+                0 => self.m_acs_from_fhst1,
+                1 => self.m_acs_from_fhst2,
+                2 => self.m_acs_from_fss1,
+                _ => self.m_acs_from_fss2,
+            },
         }
-        rows_from_matrix(&(rot(&theta) * matrix_from_rows(&rows)))
+    }
+
+    /// `Some(Rot(k (T − T_ref)) M_AS)` for a sensor with a thermal drift coefficient (as
+    /// [`Self::m_acs_from_sensor_rows_at`]), `None` for one without (the stored rows apply):
+    /// the common case costs one look-up and three compares, and no copy.
+    /// docs/tables.md (fields 8–9); effect 2 of algorithms.md §9.
+    #[must_use]
+    #[inline]
+    pub fn drifted_rows_at(&self, sensor: usize, temperature_c: f64) -> Option<Mat3Rows> {
+        match self.corrections.thermal_alignment_rad_per_c.get(sensor) {
+            Some([kx, ky, kz]) if *kx != 0.0 || *ky != 0.0 || *kz != 0.0 => {
+                let rows = match sensor {
+                    0 => &self.m_acs_from_fhst1,
+                    1 => &self.m_acs_from_fhst2,
+                    2 => &self.m_acs_from_fss1,
+                    _ => &self.m_acs_from_fss2,
+                };
+                Some(drifted_rows(
+                    rows,
+                    &self.corrections.thermal_rotation_rad(sensor, temperature_c),
+                ))
+            }
+            _ => None,
+        }
     }
 
     /// Content checks: finite, proper rotations, corrections in range.
