@@ -40,6 +40,13 @@ enum Command {
         /// One joint FFCAL of all sensors instead of FHSTs first, then FSSs relative to them.
         #[arg(long)]
         single_stage: bool,
+        /// Data of FFCAL's FHST stage: `gyro-batches` = every identified star, batch
+        /// attitudes tied by the gyro (holds ≤ 20 min, slews ≤ 3 min) — the tracker rolls
+        /// see every star offset; `star-pairs` = Shuster's dot products of simultaneous
+        /// star pairs only (the paper's FFCAL data, about half the information on
+        /// gro-early-mission).
+        #[arg(long, value_enum, default_value = "gyro-batches")]
+        fhst_stage: ground_tool::pipeline::calibrate::FhstStage,
         /// IRU calibration maneuver START:END in seconds since the first raw frame (repeat
         /// for each); replaces the maneuvers found as runs of high-rate frames. Each end
         /// attitude is still solved from the holds around it.
@@ -252,6 +259,7 @@ fn run_calibrate(
     tables: Option<&std::path::Path>,
     shuster1982: bool,
     single_stage: bool,
+    fhst_stage: ground_tool::pipeline::calibrate::FhstStage,
     maneuvers: Vec<(f64, f64)>,
     json: bool,
 ) -> Result<()> {
@@ -268,6 +276,7 @@ fn run_calibrate(
             Weighting::Optimal1990
         },
         staged_ffcal: !single_stage,
+        fhst_stage,
         maneuvers_s: (!maneuvers.is_empty()).then_some(maneuvers),
         ..CalibrateOptions::default()
     };
@@ -351,6 +360,7 @@ fn run(cli: Cli) -> Result<()> {
             tables,
             shuster1982,
             single_stage,
+            fhst_stage,
             maneuvers,
             json,
         } => run_calibrate(
@@ -359,6 +369,7 @@ fn run(cli: Cli) -> Result<()> {
             tables.as_deref(),
             shuster1982,
             single_stage,
+            fhst_stage,
             maneuvers,
             json,
         )?,

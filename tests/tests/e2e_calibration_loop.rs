@@ -61,6 +61,30 @@ fn e2e_calibration_loop_gro_early_mission() {
     let sol = &calibration.ffcal;
     let (e, nees) = relative_error_and_nees(sol, &truth, 1).unwrap();
     assert!(nees < 16.27, "FHST2 rel FHST1 error {e:?}″, NEES {nees:.1}");
+    // The FHST stage used every star (gyro batches): on the two roll axes its σ is well below
+    // the Cramér–Rao bound of the simultaneous star pairs alone (5 against 9–10″ here), and it
+    // equals its own bound scaled by the fit's χ²/dof.
+    let f = &calibration.report.ffcal;
+    assert_eq!(
+        f.fhst_stage,
+        Some(ground_tool::pipeline::calibrate::FhstStage::GyroBatches)
+    );
+    let g = f.gyro_batches.as_ref().expect("gyro-batch summary");
+    for axis in 0..2 {
+        let pairs = f.crb_sigma_fhst2_rel_fhst1_fhst_only_arcsec[axis];
+        assert!(
+            f.sigma_fhst2_rel_fhst1_arcsec[axis] < 0.7 * pairs,
+            "axis {axis}: σ {:?} vs star-pair bound {pairs:.1}″",
+            f.sigma_fhst2_rel_fhst1_arcsec
+        );
+        let scaled = g.crb_sigma_arcsec[axis] * g.variance_factor.sqrt();
+        assert!((g.sigma_arcsec[axis] - scaled).abs() < 1e-9 * scaled);
+    }
+    assert!(
+        g.variance_factor > 0.3 && g.variance_factor < 3.0,
+        "χ²/dof {}",
+        g.variance_factor
+    );
     // IRU: every δM element within 3σ of truth.
     assert_eq!(r.iru_delta_m_within_3sigma, Some(true), "δM vs truth");
     // Residual RMS lower after, for every sensor.
