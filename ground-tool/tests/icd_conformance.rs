@@ -423,6 +423,22 @@ fn icd_gaps_in_time() {
     let o = ground_tool("calibrate", &run);
     assert_eq!(o.rc, 0, "{}", o.stderr);
     assert!(has_check(&o, "gyro_increment_ambiguous"), "{}", o.stderr);
+    // The slew across the gap has no gyro step there, so it is not an IRUCAL interval (before:
+    // a silently wrong bias, X −30.7″/s against the true 0.30″/s).
+    let r = o.report.clone().unwrap();
+    let maneuvers = r["maneuvers"].as_array().unwrap();
+    let gap_slew = maneuvers
+        .iter()
+        .find(|m| m["start_s"].as_f64().unwrap() < 1000.0 && m["end_s"].as_f64().unwrap() > 1000.0)
+        .expect("the slew with the gap is found");
+    assert_eq!(gap_slew["used"], serde_json::json!(false), "{gap_slew}");
+    if let Some(b) = r["iru"]["bias_rad_per_s"].as_array() {
+        let t = truth(&run);
+        for (k, x) in b.iter().enumerate() {
+            let truth_b = t["bias_acs_rad_per_s"][k].as_f64().unwrap();
+            assert!((x.as_f64().unwrap() - truth_b).abs() < 1e-7, "bias {b:?}");
+        }
+    }
 }
 
 /// Extreme but valid values: IRU counters starting 6 pulses before the wrap, 0.5°/s slews,

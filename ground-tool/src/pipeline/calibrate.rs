@@ -749,6 +749,13 @@ fn maneuver_end_fix(
     batch_fix(frames, t, lo_s, hi_s, &bias_at(t), delta_m, floors, true)
 }
 
+/// Every frame after `a` up to `b` has a gyro step (none lost to a gap or a bad count).
+fn gyro_complete(frames: &[FrameObservations], a: usize, b: usize) -> bool {
+    frames
+        .get(a + 1..=b)
+        .is_some_and(|f| f.iter().all(|f| f.gyro.is_some()))
+}
+
 fn steps_between(frames: &[FrameObservations], a: usize, b: usize) -> Vec<GyroStep> {
     frames[a + 1..=b]
         .iter()
@@ -1183,7 +1190,7 @@ pub fn calibrate_telemetry(
             &fhst_floor,
         );
         let used = match (before, after) {
-            (Some((a, fa)), Some((b, fb))) if b > a => {
+            (Some((a, fa)), Some((b, fb))) if b > a && gyro_complete(&frames_cal, a, b) => {
                 spans.push(span("maneuver", a, b, &fa.cov_acs_rad2, &fb.cov_acs_rad2));
                 intervals.push(CalibrationInterval {
                     start: fa,
@@ -1242,7 +1249,7 @@ pub fn calibrate_telemetry(
             }
             t += 2.0 * BATCH_HALF_S;
         }
-        if fixes.len() >= 2 {
+        if fixes.len() >= 2 && gyro_complete(&frames_cal, fixes[0].0, fixes[fixes.len() - 1].0) {
             let (i0, f0) = fixes[0];
             let (i1, f1) = fixes[fixes.len() - 1];
             let fix = |f: &TimedFix| AttitudeFix {

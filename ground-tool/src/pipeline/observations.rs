@@ -183,6 +183,25 @@ impl Default for IdentifyOptions {
     }
 }
 
+/// Longest frame spacing over which a gyro step is formed: 2.5 × the median spacing. Why:
+/// the IRU counters are 16-bit (docs/icd.md §3.1); over a gap the difference of two counts
+/// is known only modulo 65,536 pulses, so a step across it could be silently wrong (a 200-s
+/// gap mid-slew gave a bias 100× off, docs/icd-conformance.md). Such frames get no step,
+/// and the intervals that would need one are not used.
+fn max_gyro_step_s(raw: &[fsw_core::raw::RawSensorFrame]) -> f64 {
+    let mut dt: Vec<f64> = raw
+        .windows(2)
+        .map(|w| w[1].time.seconds() - w[0].time.seconds())
+        .filter(|d| *d > 0.0)
+        .collect();
+    if dt.is_empty() {
+        return f64::INFINITY;
+    }
+    let mid = dt.len() / 2;
+    let (_, median, _) = dt.select_nth_unstable_by(mid, f64::total_cmp);
+    2.5 * *median
+}
+
 /// DA + FADS over a whole telemetry set.
 #[must_use]
 pub fn build_observations(
@@ -202,6 +221,7 @@ pub fn build_observations(
     // bootstrapped from the Sun and two trackers' stars, refreshed from every frame with two
     // identified stars, carried by the gyro in between (`OwnAttitude`).
     let mut own = OwnAttitude::default();
+    let max_gyro_step_s = max_gyro_step_s(&tm.raw);
     for raw in &tm.raw {
         let t_s = raw.time.seconds();
         let j2000_tt_s = raw.time.seconds_since_j2000_tt();
@@ -220,7 +240,8 @@ pub fn build_observations(
         };
         let out = integrator.process(&raw.iru, config, iru);
         let gyro = match (out.delta_theta_acs_rad, previous_time) {
-            (Some(d), Some(prev)) if t_s > prev => Some(GyroStep {
+            // Across a gap the 16-bit counters may have wrapped more than once: no step.
+            (Some(d), Some(prev)) if t_s > prev && t_s - prev <= max_gyro_step_s => Some(GyroStep {
                 dtheta_acs_rad: d,
                 dt_s: t_s - prev,
             }),
