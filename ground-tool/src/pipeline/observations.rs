@@ -241,10 +241,12 @@ pub fn build_observations(
         let out = integrator.process(&raw.iru, config, iru);
         let gyro = match (out.delta_theta_acs_rad, previous_time) {
             // Across a gap the 16-bit counters may have wrapped more than once: no step.
-            (Some(d), Some(prev)) if t_s > prev && t_s - prev <= max_gyro_step_s => Some(GyroStep {
-                dtheta_acs_rad: d,
-                dt_s: t_s - prev,
-            }),
+            (Some(d), Some(prev)) if t_s > prev && t_s - prev <= max_gyro_step_s => {
+                Some(GyroStep {
+                    dtheta_acs_rad: d,
+                    dt_s: t_s - prev,
+                })
+            }
             _ => None,
         };
         previous_time = Some(t_s);
