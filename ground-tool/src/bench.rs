@@ -77,3 +77,45 @@ pub fn ffcal_timing(
         per_pass_s: ffcal_s / passes as f64,
     })
 }
+
+/// Timing of the gyro-batch FHST relative alignment (`calibration::fhst_relative`).
+#[derive(Clone, Debug, Serialize)]
+pub struct FhstRelativeTiming {
+    /// Star samples.
+    pub samples: usize,
+    /// Batches.
+    pub batches: usize,
+    /// Data generation time (s).
+    pub generate_s: f64,
+    /// Estimation wall time (s), outlier passes and covariance included.
+    pub estimate_s: f64,
+    /// Estimation time per 10⁶ samples (s).
+    pub per_million_s: f64,
+}
+
+/// Generate ≈ `samples` star samples in 1,200-sample batches and time the estimator.
+///
+/// # Errors
+/// The estimator's error (none on this data).
+pub fn fhst_relative_timing(
+    samples: usize,
+    seed: u64,
+) -> Result<FhstRelativeTiming, crate::calibration::fhst_relative::RelativeAlignmentError> {
+    let per_batch = 6 * 200;
+    let batches = samples.div_ceil(per_batch).max(3);
+    let t0 = Instant::now();
+    let data =
+        crate::synth::fhst_batch_samples(Vector3::new(40.0, -25.0, 70.0), batches, 6, 200, seed);
+    let generate_s = t0.elapsed().as_secs_f64();
+    let t1 = Instant::now();
+    let est = crate::calibration::fhst_relative::estimate_relative_alignment(&data, batches, 3)?;
+    let estimate_s = t1.elapsed().as_secs_f64();
+    std::hint::black_box(est);
+    Ok(FhstRelativeTiming {
+        samples: data.len(),
+        batches,
+        generate_s,
+        estimate_s,
+        per_million_s: estimate_s * 1e6 / data.len().max(1) as f64,
+    })
+}

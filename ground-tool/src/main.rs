@@ -101,6 +101,10 @@ enum Command {
         /// Use the 1982 scalar weights instead of the optimal (1990) ones.
         #[arg(long)]
         shuster1982: bool,
+        /// Time the gyro-batch FHST relative alignment (FFCAL's FHST stage) on this many
+        /// synthetic star samples instead of FFCAL.
+        #[arg(long, value_name = "N")]
+        fhst_samples: Option<usize>,
         /// Machine-readable JSON.
         #[arg(long)]
         json: bool,
@@ -392,9 +396,25 @@ fn run(cli: Cli) -> Result<()> {
         }
         Command::Table { action } => run_table(action)?,
         Command::Bench {
+            fhst_samples: Some(n),
+            json,
+            ..
+        } => {
+            let t = ground_tool::bench::fhst_relative_timing(n, 1)?;
+            if json {
+                println!("{}", serde_json::to_string_pretty(&t)?);
+            } else {
+                println!(
+                    "FHST relative alignment (gyro batches): {} samples in {} batches: {:.3} s ({:.3} s per 10^6 samples); data generation {:.3} s",
+                    t.samples, t.batches, t.estimate_s, t.per_million_s, t.generate_s
+                );
+            }
+        }
+        Command::Bench {
             pairs,
             shuster1982,
             json,
+            fhst_samples: None,
         } => {
             use ground_tool::calibration::alignment::Weighting;
             let weighting = if shuster1982 {

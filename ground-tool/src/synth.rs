@@ -236,3 +236,60 @@ pub fn gro_sensors(theta_true_arcsec: &[Vector3<f64>; 4]) -> Vec<SyntheticSensor
         })
         .collect()
 }
+
+/// Gyro-batch star samples (`calibration::fhst_relative`): two trackers 90° apart (FHST1
+/// along ACS +z, FHST2 along +x), `n_batches` batches, each with `stars_per_batch` stars at
+/// random places of a ±4° field (alternating trackers) tracked for `samples_per_star` 1-s
+/// samples with 10″ noise; each batch's reference attitude is off by up to 60″ and drifts
+/// (a bias error). FHST2's true alignment is rotated by `theta_true_arcsec` (ACS).
+#[must_use]
+pub fn fhst_batch_samples(
+    theta_true_arcsec: Vector3<f64>,
+    n_batches: usize,
+    stars_per_batch: usize,
+    samples_per_star: usize,
+    seed: u64,
+) -> Vec<crate::calibration::fhst_relative::BatchStarSample> {
+    use crate::RAD_PER_ARCSEC;
+    use fsw_core::attitude::rot;
+    let mut rng = Rng::new(seed);
+    let m = [
+        Matrix3::identity(),
+        Matrix3::new(0.0, 0.0, 1.0, 0.0, 1.0, 0.0, -1.0, 0.0, 0.0),
+    ];
+    let m2_true = rot(&(theta_true_arcsec * RAD_PER_ARCSEC)) * m[1];
+    let sigma = 10.0 * RAD_PER_ARCSEC;
+    let half_s = (stars_per_batch * samples_per_star) as f64 / 2.0;
+    let mut out = Vec::with_capacity(n_batches * stars_per_batch * samples_per_star);
+    for batch in 0..n_batches {
+        let d0 = Vector3::new(
+            rng.uniform_in(-60.0, 60.0),
+            rng.uniform_in(-60.0, 60.0),
+            30.0,
+        ) * RAD_PER_ARCSEC;
+        let d1 = Vector3::new(0.02, -0.01, 0.03) * RAD_PER_ARCSEC;
+        for star in 0..stars_per_batch {
+            let tracker = star % 2;
+            let h: f64 = rng.uniform_in(-0.07, 0.07);
+            let v: f64 = rng.uniform_in(-0.07, 0.07);
+            let s_true = Vector3::new(h.tan(), v.tan(), 1.0).normalize();
+            let m_true = if tracker == 0 { m[0] } else { m2_true };
+            for j in 0..samples_per_star {
+                let t = (star * samples_per_star + j) as f64 - half_s;
+                // The star in the true body frame, seen with the reference attitude
+                // (`A_true = Rot(δ) A_ref`).
+                let ref_acs = rot(&(d0 + d1 * t)).transpose() * (m_true * s_true);
+                let noise = Vector3::new(rng.normal(), rng.normal(), 0.0) * sigma;
+                out.push(crate::calibration::fhst_relative::BatchStarSample {
+                    tracker,
+                    batch,
+                    dt_s: t,
+                    ref_acs,
+                    meas_acs: m[tracker] * (s_true + noise).normalize(),
+                    sigma_rad: sigma,
+                });
+            }
+        }
+    }
+    out
+}

@@ -111,6 +111,8 @@ struct BatchNormal {
     nbb: Matrix6<f64>,
     nbg: Matrix6x3<f64>,
     vb: Vector6<f64>,
+    ngg: Matrix3<f64>,
+    vg: Vector3<f64>,
     count: [usize; 2],
 }
 
@@ -125,6 +127,8 @@ impl BatchNormal {
             nbb,
             nbg: Matrix6x3::zeros(),
             vb: Vector6::zeros(),
+            ngg: Matrix3::zeros(),
+            vg: Vector3::zeros(),
             count: [0; 2],
         }
     }
@@ -194,6 +198,8 @@ pub fn estimate_relative_alignment(
                 bn.nbb += hb * hb.transpose() * w;
                 bn.nbg += hb * hg.transpose() * w;
                 bn.vb += hb * (y * w);
+                bn.ngg += hg * hg.transpose() * w;
+                bn.vg += hg * (y * w);
             }
         }
         // Reduced system of θ. A batch without both trackers informs θ only through the
@@ -210,23 +216,10 @@ pub fn estimate_relative_alignment(
                 continue;
             };
             good_batches += 1;
-            // θ rows of this batch, accumulated with the nuisance eliminated:
+            // θ rows of this batch with the nuisance eliminated:
             // N_gg − N_gb N_bb⁻¹ N_bg, v_g − N_gb N_bb⁻¹ v_b.
-            let mut n_gg_b = Matrix3::zeros();
-            let mut v_g_b = Vector3::zeros();
-            for (s, _) in samples
-                .iter()
-                .zip(&used)
-                .filter(|(s, u)| **u && s.batch == k && s.tracker == 1)
-            {
-                let w = (s.sigma_rad * ARCSEC_PER_RAD).powi(-2);
-                for (_, hg, y) in sample_rows(s) {
-                    n_gg_b += hg * hg.transpose() * w;
-                    v_g_b += hg * (y * w);
-                }
-            }
-            ngg += n_gg_b - bn.nbg.transpose() * inv * bn.nbg;
-            vg += v_g_b - bn.nbg.transpose() * inv * bn.vb;
+            ngg += bn.ngg - bn.nbg.transpose() * inv * bn.nbg;
+            vg += bn.vg - bn.nbg.transpose() * inv * bn.vb;
             inverses[k] = Some(inv);
         }
         if good_batches < min_batches {
@@ -347,56 +340,14 @@ pub fn fuse_with_prior(
 #[allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 mod tests {
     use super::*;
-    use crate::synth::Rng;
-    use crate::RAD_PER_ARCSEC;
     use fsw_core::attitude::rot;
 
-    /// Two trackers 90° apart, each seeing stars at random places of a ±4° field, hold
-    /// batches with an attitude offset and drift: θ is recovered, its covariance is right.
     fn synth(theta_true_arcsec: Vector3<f64>, seed: u64) -> (Vec<BatchStarSample>, usize) {
-        let mut rng = Rng::new(seed);
-        let m = [
-            Matrix3::identity(),
-            // FHST2 boresight along ACS +x.
-            Matrix3::new(0.0, 0.0, 1.0, 0.0, 1.0, 0.0, -1.0, 0.0, 0.0),
-        ];
-        let m2_true = rot(&(theta_true_arcsec * RAD_PER_ARCSEC)) * m[1];
-        let n_batches = 12;
-        let sigma = 10.0 * RAD_PER_ARCSEC;
-        let mut out = Vec::new();
-        for b in 0..n_batches {
-            let d0 = Vector3::new(
-                rng.uniform_in(-60.0, 60.0),
-                rng.uniform_in(-60.0, 60.0),
-                30.0,
-            ) * RAD_PER_ARCSEC;
-            let d1 = Vector3::new(0.02, -0.01, 0.03) * RAD_PER_ARCSEC;
-            for star in 0..6 {
-                let tracker = star % 2;
-                let h: f64 = rng.uniform_in(-0.07, 0.07);
-                let v: f64 = rng.uniform_in(-0.07, 0.07);
-                let s_true = Vector3::new(h.tan(), v.tan(), 1.0).normalize();
-                let m_true = if tracker == 0 { m[0] } else { m2_true };
-                for j in 0..100 {
-                    let t = (star * 100 + j) as f64 - 300.0;
-                    let a_ref_u = m_true * s_true; // direction in the true body frame...
-                                                   // ...and its catalog direction seen with the reference attitude.
-                    let delta = d0 + d1 * t;
-                    let ref_acs = rot(&delta).transpose() * a_ref_u;
-                    let n = Vector3::new(rng.normal(), rng.normal(), 0.0) * sigma;
-                    let s_meas = (s_true + n).normalize();
-                    out.push(BatchStarSample {
-                        tracker,
-                        batch: b,
-                        dt_s: t,
-                        ref_acs,
-                        meas_acs: m[tracker] * s_meas,
-                        sigma_rad: sigma,
-                    });
-                }
-            }
-        }
-        (out, n_batches)
+        let n = 12;
+        (
+            crate::synth::fhst_batch_samples(theta_true_arcsec, n, 6, 100, seed),
+            n,
+        )
     }
 
     #[test]
