@@ -287,6 +287,7 @@ pub fn fhst_batch_samples(
                     ref_acs,
                     meas_acs: m[tracker] * (s_true + noise).normalize(),
                     sigma_rad: sigma,
+                    aberration_uncorrected: false,
                 });
             }
         }

@@ -68,7 +68,18 @@ pub struct BatchStarSample {
     pub meas_acs: Vector3<f64>,
     /// Declared 1σ per axis (rad).
     pub sigma_rad: f64,
+    /// The reference lacks the orbital aberration (no definitive orbit at this time): the
+    /// covariance then includes its effect as a consider term ([`UNCORRECTED_ORBIT_SPEED_KM_PER_S`]).
+    pub aberration_uncorrected: bool,
 }
+
+/// Orbital speed assumed for references without orbital aberration (km/s): circular LEO at
+/// the lowest altitudes. Why a consider term: without the orbit the ground cannot correct the
+/// ≤ 5.4″ shift, and where each tracker holds one star for a whole batch the fit turns it
+/// into tens of arcsec on a roll axis (`docs/investigations.md`: 38.6″ against a σ of 6″).
+pub const UNCORRECTED_ORBIT_SPEED_KM_PER_S: f64 = 7.8;
+/// Speed of light (km/s).
+const C_KM_PER_S: f64 = 299_792.458;
 
 /// Why the relative alignment could not be estimated.
 #[derive(Debug, Error, PartialEq)]
@@ -89,8 +100,14 @@ pub enum RelativeAlignmentError {
 pub struct FhstRelativeAlignment {
     /// θ of FHST2 relative to FHST1, ACS (arcsec): `M_2,true ≈ Rot(θ) M_2` with FHST1 held.
     pub theta_acs_arcsec: Vector3<f64>,
-    /// Covariance of θ (arcsec²): the bound scaled by `s²`.
+    /// Covariance of θ (arcsec²): the bound scaled by `s²`, plus the consider term of the
+    /// uncorrected orbital aberration.
     pub covariance_arcsec2: Matrix3<f64>,
+    /// Consider covariance of the orbital aberration left in the references (arcsec²): each
+    /// batch's unknown orbital velocity isotropic with speed
+    /// [`UNCORRECTED_ORBIT_SPEED_KM_PER_S`], batches independent; zero when every sample had
+    /// its orbit.
+    pub aberration_consider_arcsec2: Matrix3<f64>,
     /// The bound of the model with the declared noise, unscaled (arcsec²).
     pub crb_covariance_arcsec2: Matrix3<f64>,
     /// A-posteriori variance factor χ²/dof.
@@ -287,9 +304,11 @@ pub fn estimate_relative_alignment(
                 }
             }
             let rms = |t: usize| (sum2[t] / (2 * samples_used[t].max(1)) as f64).sqrt();
+            let consider = aberration_consider(samples, &used, &batches, &inverses, &crb);
             return Ok(FhstRelativeAlignment {
                 theta_acs_arcsec: theta,
-                covariance_arcsec2: cov,
+                covariance_arcsec2: cov + consider,
+                aberration_consider_arcsec2: consider,
                 crb_covariance_arcsec2: crb,
                 variance_factor,
                 batches: good_batches,
@@ -301,6 +320,48 @@ pub fn estimate_relative_alignment(
         used = keep;
     }
     Err(RelativeAlignmentError::Unobservable)
+}
+
+/// The consider covariance of the orbital aberration missing from flagged samples: the
+/// estimate is linear in the residuals, so an unknown velocity `v_b` per batch moves it by
+/// `K_b v_b` with `K_b = C Σ (h_g − N_gbᵀ N_bb⁻¹ h_b) w ∂y/∂v`, `∂y/∂v = e·(I − a aᵀ)/c`;
+/// `Σ_b K_b (V²/3) K_bᵀ`.
+fn aberration_consider(
+    samples: &[BatchStarSample],
+    used: &[bool],
+    batches: &[BatchNormal],
+    inverses: &[Option<Matrix6<f64>>],
+    crb: &Matrix3<f64>,
+) -> Matrix3<f64> {
+    let mut d = vec![Matrix3::zeros(); batches.len()];
+    let mut any = false;
+    for (s, _) in samples
+        .iter()
+        .zip(used)
+        .filter(|(s, u)| **u && s.aberration_uncorrected)
+    {
+        let (Some(inv), Some(bn)) = (inverses[s.batch], batches.get(s.batch)) else {
+            continue;
+        };
+        any = true;
+        let w = (s.sigma_rad * ARCSEC_PER_RAD).powi(-2);
+        let a = s.ref_acs;
+        let basis = tangent_basis(&a);
+        for ((hb, hg, _), e) in sample_rows(s).into_iter().zip(basis) {
+            let g = hg - bn.nbg.transpose() * (inv * hb);
+            // ∂y/∂v_j (arcsec per unit of V): e·(u_j − (u_j·a) a) V/c.
+            let dy_dv = (e - a * e.dot(&a)) * (UNCORRECTED_ORBIT_SPEED_KM_PER_S / C_KM_PER_S)
+                * ARCSEC_PER_RAD;
+            d[s.batch] += g * dy_dv.transpose() * w;
+        }
+    }
+    if !any {
+        return Matrix3::zeros();
+    }
+    d.iter().fold(Matrix3::zeros(), |acc, db| {
+        let k = crb * db;
+        acc + k * k.transpose() / 3.0
+    })
 }
 
 /// Fuse the relative estimate with the flown alignments' priors: `x = (θ₁, θ₂)` (ACS,
@@ -386,11 +447,47 @@ mod tests {
         );
     }
 
+    /// Without the orbit the covariance grows by the consider term, and the term bounds what
+    /// a real uncorrected aberration does to the estimate.
+    #[test]
+    fn uncorrected_aberration_enters_as_consider_covariance() {
+        let truth = Vector3::new(40.0, -25.0, 70.0);
+        let (clean, n) = synth(truth, 3);
+        let base = estimate_relative_alignment(&clean, n, 3).expect("estimate");
+        assert_eq!(base.aberration_consider_arcsec2, Matrix3::zeros());
+        // The same data with an uncorrected orbital velocity of 7.5 km/s per batch (its
+        // direction changing from batch to batch), flagged.
+        let mut flagged = clean.clone();
+        for s in &mut flagged {
+            let phi = s.batch as f64 * 0.9;
+            let v = Vector3::new(phi.cos(), phi.sin(), 0.3).normalize() * (7.5 / C_KM_PER_S);
+            s.meas_acs = (s.meas_acs + (v - s.meas_acs * v.dot(&s.meas_acs))).normalize();
+            s.aberration_uncorrected = true;
+        }
+        let est = estimate_relative_alignment(&flagged, n, 3).expect("estimate");
+        let c = est.aberration_consider_arcsec2;
+        assert!(c.trace() > 0.0);
+        assert!(
+            (est.covariance_arcsec2 - est.crb_covariance_arcsec2 * est.variance_factor - c).norm()
+                < 1e-9 * c.norm()
+        );
+        // The shift the aberration caused is within 3σ of the consider term on every axis.
+        let shift = est.theta_acs_arcsec - base.theta_acs_arcsec;
+        for i in 0..3 {
+            assert!(
+                shift[i].abs() < 3.0 * c[(i, i)].sqrt() + 1e-6,
+                "axis {i}: shift {shift:?}, consider σ {:?}",
+                c.diagonal().map(f64::sqrt)
+            );
+        }
+    }
+
     #[test]
     fn fusion_moves_both_trackers_by_the_measured_difference() {
         let rel = FhstRelativeAlignment {
             theta_acs_arcsec: Vector3::new(30.0, -12.0, 6.0),
             covariance_arcsec2: Matrix3::identity() * 1e-4,
+            aberration_consider_arcsec2: Matrix3::zeros(),
             crb_covariance_arcsec2: Matrix3::identity() * 1e-4,
             variance_factor: 1.0,
             batches: 10,

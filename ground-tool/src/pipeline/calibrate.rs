@@ -339,10 +339,13 @@ pub struct FfcalSummary {
 pub struct BatchAlignmentSummary {
     /// θ of FHST2 relative to FHST1 from the flown alignments, ACS, arcsec.
     pub theta_fhst2_rel_fhst1_arcsec: [f64; 3],
-    /// 1σ per axis, arcsec (the bound scaled by χ²/dof).
+    /// 1σ per axis, arcsec (the bound scaled by χ²/dof, plus the uncorrected aberration).
     pub sigma_arcsec: [f64; 3],
     /// Cramér–Rao bound of the batch data with the declared noise, 1σ per axis, arcsec.
     pub crb_sigma_arcsec: [f64; 3],
+    /// Part of `sigma_arcsec` from orbital aberration left uncorrected (frames without a
+    /// definitive orbit), 1σ per axis, arcsec; 0 with a full ephemeris.
+    pub aberration_consider_sigma_arcsec: [f64; 3],
     /// χ²/dof of the fit.
     pub variance_factor: f64,
     /// Batches with stars in both trackers.
@@ -1090,6 +1093,7 @@ pub fn calibrate_telemetry(
                 theta_fhst2_rel_fhst1_arcsec: h.theta_acs_arcsec.into(),
                 sigma_arcsec: sd(&h.covariance_arcsec2),
                 crb_sigma_arcsec: sd(&h.crb_covariance_arcsec2),
+                aberration_consider_sigma_arcsec: sd(&h.aberration_consider_arcsec2),
                 variance_factor: h.variance_factor,
                 batches: h.batches,
                 samples: h.samples,

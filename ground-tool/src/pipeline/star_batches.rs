@@ -119,6 +119,7 @@ pub fn star_batch_samples(
                             ref_acs: att[k - lo] * dir_eci,
                             meas_acs: s.meas.dir_acs,
                             sigma_rad: s.sigma_rad,
+                            aberration_uncorrected: f.orbit.is_none(),
                         });
                     }
                 }
