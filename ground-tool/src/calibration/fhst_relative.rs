@@ -350,7 +350,8 @@ fn aberration_consider(
         for ((hb, hg, _), e) in sample_rows(s).into_iter().zip(basis) {
             let g = hg - bn.nbg.transpose() * (inv * hb);
             // ∂y/∂v_j (arcsec per unit of V): e·(u_j − (u_j·a) a) V/c.
-            let dy_dv = (e - a * e.dot(&a)) * (UNCORRECTED_ORBIT_SPEED_KM_PER_S / C_KM_PER_S)
+            let dy_dv = (e - a * e.dot(&a))
+                * (UNCORRECTED_ORBIT_SPEED_KM_PER_S / C_KM_PER_S)
                 * ARCSEC_PER_RAD;
             d[s.batch] += g * dy_dv.transpose() * w;
         }
