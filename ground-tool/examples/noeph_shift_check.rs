@@ -28,16 +28,7 @@ fn samples(dir: &Path) -> anyhow::Result<(Vec<FrameObservations>, Vec<BatchStarS
         &sky,
         &o.identify,
     );
-    let initial_bias = tm
-        .housekeeping
-        .first()
-        .map_or(Vector3::zeros(), |h| Vector3::from(h.bias_acs_rad_per_s));
-    let bias_at = |t_s: f64| -> Vector3<f64> {
-        let i = tm.housekeeping.partition_point(|h| h.time.seconds() < t_s);
-        tm.housekeeping
-            .get(i.min(tm.housekeeping.len().saturating_sub(1)))
-            .map_or(initial_bias, |h| Vector3::from(h.bias_acs_rad_per_s))
-    };
+    let bias_at = |t_s: f64| ground_tool::pipeline::calibrate::obc_bias_at(&tm, t_s);
     let (s, n) = star_batch_samples(&frames, &bias_at);
     Ok((frames, s, n))
 }

@@ -154,6 +154,16 @@ impl Default for CalibrateOptions {
     }
 }
 
+/// The OBC's filter bias (ACS, rad/s) at the first housekeeping packet at or after `t_s` (the
+/// last one after the end); zero without housekeeping.
+#[must_use]
+pub fn obc_bias_at(tm: &Telemetry, t_s: f64) -> Vector3<f64> {
+    let i = tm.housekeeping.partition_point(|h| h.time.seconds() < t_s);
+    tm.housekeeping
+        .get(i.min(tm.housekeeping.len().saturating_sub(1)))
+        .map_or(Vector3::zeros(), |h| Vector3::from(h.bias_acs_rad_per_s))
+}
+
 /// Data of the FHST stage of the staged FFCAL.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, clap::ValueEnum)]
 #[serde(rename_all = "snake_case")]
@@ -930,18 +940,10 @@ pub fn calibrate_telemetry(
         eprintln!("warning: no ephemeris packets (APID 0x020): orbital aberration and Sun parallax are not corrected");
     }
 
-    let initial_bias = tm
-        .housekeeping
-        .first()
-        .map_or(Vector3::zeros(), |h| Vector3::from(h.bias_acs_rad_per_s));
-    // The OBC's filter bias near a time (housekeeping): the batches that give the interval end
-    // attitudes (and the FHST gyro batches) carry their vectors with it, so the bias is not smeared into them.
-    let obc_bias_at = |t_s: f64| -> Vector3<f64> {
-        let i = tm.housekeeping.partition_point(|h| h.time.seconds() < t_s);
-        tm.housekeeping
-            .get(i.min(tm.housekeeping.len().saturating_sub(1)))
-            .map_or(initial_bias, |h| Vector3::from(h.bias_acs_rad_per_s))
-    };
+    let initial_bias = obc_bias_at(tm, f64::NEG_INFINITY);
+    // The batches that give the interval end attitudes (and the FHST gyro batches) carry their
+    // vectors with the OBC's bias, so the bias is not smeared into them.
+    let obc_bias_at = |t_s: f64| obc_bias_at(tm, t_s);
 
     // FFCAL. A sensor never seen together with another one (e.g. an FSS the Sun never
     // visited) is left out and keeps its flown alignment (reported as not observed).

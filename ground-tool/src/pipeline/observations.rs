@@ -568,6 +568,38 @@ pub enum AttitudeSensors {
     FssOnly,
 }
 
+/// Rotations carrying body vectors of each frame of `range` to the frame `center`
+/// (`range` must contain `center`): `m[k − range.start] = A(center) A(k)ᵀ`, from the gyro steps
+/// corrected by `(I + δM)` and the bias, `A(k) = Rot(φ_k) A(k−1)`; a frame without a step
+/// counts as no motion. Shared by the fine attitudes and the FHST gyro batches.
+#[must_use]
+pub fn body_to_center(
+    frames: &[FrameObservations],
+    range: core::ops::Range<usize>,
+    center: usize,
+    bias_acs_rad_per_s: &Vector3<f64>,
+    delta_m: &Matrix3<f64>,
+) -> Vec<Matrix3<f64>> {
+    let (lo, hi) = (range.start, range.end);
+    let step = |k: usize| {
+        frames[k]
+            .gyro
+            .map(|g| {
+                (Matrix3::identity() + delta_m) * g.dtheta_acs_rad - bias_acs_rad_per_s * g.dt_s
+            })
+            .unwrap_or_else(Vector3::zeros)
+    };
+    let mut to_center = vec![Matrix3::identity(); hi - lo];
+    // Forward from the centre: A(k) = Rot(φ_k) A(k−1) → b_center = A(c) A(k)ᵀ b_k.
+    for k in center + 1..hi {
+        to_center[k - lo] = to_center[k - 1 - lo] * rot(&step(k)).transpose();
+    }
+    for k in (lo..center).rev() {
+        to_center[k - lo] = to_center[k + 1 - lo] * rot(&step(k + 1));
+    }
+    to_center
+}
+
 /// Fine attitude at the centre frame `center` from the frames `range` (indices into
 /// `frames`): every vector is carried to the centre time with the gyro increments corrected by
 /// `bias_acs_rad_per_s` and `delta_m`, then the batch is solved with QUEST/SVD.
@@ -582,29 +614,9 @@ pub fn fine_attitude(
     delta_m: &Matrix3<f64>,
     sensors: AttitudeSensors,
 ) -> Result<AttitudeSolution, AttitudeError> {
-    // m_center_from_frame[k]: rotation carrying body vectors of frame k to the centre frame.
     let lo = range.start.min(center);
     let hi = range.end.max(center + 1).min(frames.len());
-    let mut to_center = vec![Matrix3::identity(); hi - lo];
-    // Forward from the centre: A(k) = Rot(φ_k) A(k−1) → b_center = A(c) A(k)ᵀ b_k.
-    for k in center + 1..hi {
-        let step = frames[k]
-            .gyro
-            .map(|g| {
-                (Matrix3::identity() + delta_m) * g.dtheta_acs_rad - bias_acs_rad_per_s * g.dt_s
-            })
-            .unwrap_or_else(Vector3::zeros);
-        to_center[k - lo] = to_center[k - 1 - lo] * rot(&step).transpose();
-    }
-    for k in (lo..center).rev() {
-        let step = frames[k + 1]
-            .gyro
-            .map(|g| {
-                (Matrix3::identity() + delta_m) * g.dtheta_acs_rad - bias_acs_rad_per_s * g.dt_s
-            })
-            .unwrap_or_else(Vector3::zeros);
-        to_center[k - lo] = to_center[k + 1 - lo] * rot(&step);
-    }
+    let to_center = body_to_center(frames, lo..hi, center, bias_acs_rad_per_s, delta_m);
     let mut pairs = Vec::new();
     for k in range.start.max(lo)..range.end.min(hi) {
         let f = &frames[k];

@@ -16,9 +16,8 @@
 
 use nalgebra::{Matrix3, Vector3};
 
-use super::observations::{fine_attitude, AttitudeSensors, FrameObservations};
+use super::observations::{body_to_center, fine_attitude, AttitudeSensors, FrameObservations};
 use crate::calibration::fhst_relative::BatchStarSample;
-use fsw_core::attitude::rot;
 
 /// Longest hold batch (s): a 16-min hold is one batch.
 pub const HOLD_BATCH_MAX_S: f64 = 1200.0;
@@ -93,19 +92,12 @@ pub fn star_batch_samples(
                 None => continue,
             },
         };
-        // A(k) = Rot(φ_k) A(k−1) with φ_k the bias-corrected gyro step of frame k.
-        let step = |k: usize| {
-            frames[k]
-                .gyro
-                .map_or(Vector3::zeros(), |g| g.dtheta_acs_rad - bias * g.dt_s)
-        };
-        let mut att = vec![a_center; hi - lo];
-        for k in center + 1..hi {
-            att[k - lo] = rot(&step(k)) * att[k - 1 - lo];
-        }
-        for k in (lo..center).rev() {
-            att[k - lo] = rot(&step(k + 1)).transpose() * att[k + 1 - lo];
-        }
+        // A(k) = (A(c) A(k)ᵀ)ᵀ A(c): the centre attitude carried to frame k by the gyro.
+        let att: Vec<Matrix3<f64>> =
+            body_to_center(frames, lo..hi, center, &bias, &Matrix3::zeros())
+                .iter()
+                .map(|m| m.transpose() * a_center)
+                .collect();
         let before = out.len();
         for k in lo..hi {
             let f = &frames[k];
