@@ -300,17 +300,46 @@ pub fn write_calibration_report(
     let f = |a: [f64; 3]| format!("[{:.1}, {:.1}, {:.1}]", a[0], a[1], a[2]);
     let _ = writeln!(
         md,
-        "\nFHST2 relative to FHST1, 1σ per ACS axis: stated {}″; Cramér–Rao bound of the star pairs {}″ ({} simultaneous epochs; with the FSS epochs as well, as weighted here: {}″). FFCAL stages: {}.",
+        "\nFHST2 relative to FHST1, 1σ per ACS axis: stated {}″; Cramér–Rao bound of the simultaneous star pairs {}″ (with the FSS epochs as well, as weighted here: {}″). FFCAL stages: {}.",
         f(r.ffcal.sigma_fhst2_rel_fhst1_arcsec),
         f(r.ffcal.crb_sigma_fhst2_rel_fhst1_fhst_only_arcsec),
-        r.data.ffcal_fhst_stage_epochs,
         f(r.ffcal.crb_sigma_fhst2_rel_fhst1_all_sensors_arcsec),
-        if r.data.ffcal_fhst_stage_epochs > 0 {
-            "FHSTs from star pairs, then the FSSs relative to them"
-        } else {
-            "one joint fit"
+        match r.ffcal.fhst_stage {
+            Some(crate::pipeline::calibrate::FhstStage::GyroBatches) =>
+                "FHSTs from every star in gyro-tied batches, then the FSSs relative to them",
+            Some(crate::pipeline::calibrate::FhstStage::StarPairs) =>
+                "FHSTs from simultaneous star pairs, then the FSSs relative to them",
+            None => "one joint fit",
         }
     );
+    if let Some(b) = &r.ffcal.gyro_batches {
+        let _ = writeln!(
+            md,
+            "\nGyro-batch FHST stage: σ {}″ (Cramér–Rao bound {}″, χ²/dof {:.2}), {} batches, {} + {} star samples, {} rejected.",
+            f(b.sigma_arcsec),
+            f(b.crb_sigma_arcsec),
+            b.variance_factor,
+            b.batches,
+            b.samples[0],
+            b.samples[1],
+            b.rejected
+        );
+    }
+    if let Some(levels) = &r.ffcal.fss_systematic {
+        let level = |e: &crate::pipeline::fss_systematic::FssSystematicEstimate| {
+            e.estimated_arcsec.map_or_else(
+                || format!("not measured ({} degrees of freedom)", e.dof),
+                |x| format!("{x:.1}″ ({} cells, {} degrees of freedom)", e.cells, e.dof),
+            )
+        };
+        let _ = writeln!(
+            md,
+            "\nFSS error left per field cell after calibration (the paper's \"inherent error\"): FSS1 {}, FSS2 {}; the weights use the declared {:.1}″.",
+            level(&levels[0]),
+            level(&levels[1]),
+            levels[0].declared_arcsec
+        );
+    }
     let _ = writeln!(
         md,
         "\nAdjustment (paper appendix): common rotation removed [{:.1}, {:.1}, {:.1}]″ so that the OBC's two-tracker attitude frame M_AN is unchanged.\n",

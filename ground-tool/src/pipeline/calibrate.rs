@@ -21,6 +21,7 @@
 //!    after (the paper's recommendation); holds give bias intervals and the bias history.
 //! 6. **Tables**: binary images written with `fsw-core`'s own types.
 
+use super::fss_systematic::{estimate_fss_systematic, FssSystematicEstimate};
 use super::observations::{
     build_observations, fine_attitude, AttitudeSensors, DeclaredNoise, FrameObservations,
     IdentifyOptions,
@@ -342,6 +343,9 @@ pub struct FfcalSummary {
     /// The gyro-batch estimate of FHST2 relative to FHST1 (computed whenever the data allow,
     /// used by the `gyro_batches` stage).
     pub gyro_batches: Option<BatchAlignmentSummary>,
+    /// FSS1, FSS2: the error level left in the calibrated residuals per field cell, beside
+    /// the declared level the FSS weights use (absent without FSS data).
+    pub fss_systematic: Option<[FssSystematicEstimate; 2]>,
 }
 
 /// The gyro-batch relative FHST alignment (`calibration::fhst_relative`) for the report.
@@ -429,9 +433,13 @@ pub fn read_metadata(run_dir: &Path) -> anyhow::Result<Metadata> {
         .with_context(|| format!("{} is not valid metadata (docs/icd.md §5)", path.display()))
 }
 
-/// FFCAL input from the frames.
-/// FFCAL input from the frames; `map[k]` is the FFCAL index of table sensor `k` (FHST1,
-/// FHST2, FSS1, FSS2), `None` to leave it out.
+/// The FSS field cell of a sensor-frame Sun direction ([`FSS_CELL_DEG`] on each head angle).
+fn fss_cell(d: &Vector3<f64>) -> (i64, i64) {
+    let a = d.x.atan2(d.z).to_degrees() / FSS_CELL_DEG;
+    let b = d.y.atan2(d.z).to_degrees() / FSS_CELL_DEG;
+    (a.floor() as i64, b.floor() as i64)
+}
+
 /// FFCAL epochs from the frames (`map`: sensor → FFCAL index, `None` = left out).
 ///
 /// An FSS sample's σ grows with the number of samples that share its place in the field
@@ -443,13 +451,9 @@ pub fn read_metadata(run_dir: &Path) -> anyhow::Result<Metadata> {
 fn alignment_data(
     frames: &[FrameObservations],
     map: &[Option<usize>; 4],
-    fss_systematic_arcsec: f64,
+    fss_systematic_arcsec: [f64; 2],
 ) -> AlignmentData {
-    let cell = |d: &Vector3<f64>| -> (i64, i64) {
-        let a = d.x.atan2(d.z).to_degrees() / FSS_CELL_DEG;
-        let b = d.y.atan2(d.z).to_degrees() / FSS_CELL_DEG;
-        (a.floor() as i64, b.floor() as i64)
-    };
+    let cell = fss_cell;
     let mut per_cell: std::collections::HashMap<(usize, (i64, i64)), usize> =
         std::collections::HashMap::new();
     for f in frames {
@@ -459,7 +463,7 @@ fn alignment_data(
             }
         }
     }
-    let sys_rad = fss_systematic_arcsec / ARCSEC_PER_RAD;
+    let sys_rad = fss_systematic_arcsec.map(|s| s / ARCSEC_PER_RAD);
     let mut data = AlignmentData::with_capacity(frames.len(), 4);
     let mut obs = Vec::with_capacity(4);
     for f in frames {
@@ -486,7 +490,7 @@ fn alignment_data(
                     sensor,
                     dir_sensor: s.meas.dir_sensor,
                     dir_eci: s.sun_eci,
-                    sigma_rad: (s.sigma_rad.powi(2) + n * sys_rad * sys_rad).sqrt(),
+                    sigma_rad: (s.sigma_rad.powi(2) + n * sys_rad[i] * sys_rad[i]).sqrt(),
                 });
             }
         }
@@ -948,8 +952,9 @@ pub fn calibrate_telemetry(
     // FFCAL. A sensor never seen together with another one (e.g. an FSS the Sun never
     // visited) is left out and keeps its flown alignment (reported as not observed).
     let all: [Option<usize>; 4] = [Some(0), Some(1), Some(2), Some(3)];
+    let declared_fss_sys = metadata.sensors.fss_systematic_arcsec;
     let mut seen = [0usize; 4];
-    for epoch in alignment_data(&frames, &all, metadata.sensors.fss_systematic_arcsec).epochs() {
+    for epoch in alignment_data(&frames, &all, [declared_fss_sys; 2]).epochs() {
         for o in epoch {
             seen[o.sensor] += 1;
         }
@@ -968,7 +973,7 @@ pub fn calibrate_telemetry(
             observed.push(k);
         }
     }
-    let data = alignment_data(&frames, &map, metadata.sensors.fss_systematic_arcsec);
+    let data = alignment_data(&frames, &map, [declared_fss_sys; 2]);
     summary.ffcal_epochs = data.epoch_count();
     summary.not_observed = (0..4)
         .filter(|k| seen[*k] == 0)
@@ -998,7 +1003,7 @@ pub fn calibrate_telemetry(
     let fhst_data = alignment_data(
         &frames,
         &[Some(0), Some(1), None, None],
-        metadata.sensors.fss_systematic_arcsec,
+        [declared_fss_sys; 2],
     );
     let (batch_samples, batch_count) = star_batch_samples(&frames, &obc_bias_at);
     let batch_rel = estimate_relative_alignment(&batch_samples, batch_count, MIN_GYRO_BATCHES);
@@ -1024,6 +1029,15 @@ pub fn calibrate_telemetry(
         Some((_, stage1)) => ffcal_staged(&sensors, stage1, &data, &cfg).with_context(context)?,
         None => ffcal(&sensors, &data, &cfg).with_context(context)?,
     };
+    // The FSS error level left in the calibrated residuals (the paper's "inherent" 0.022°),
+    // reported beside the declared level the FSS weights use (`pipeline::fss_systematic`).
+    let fss_systematic = observed.iter().any(|&k| k >= 2).then(|| {
+        let mut m_acs = [flown[0], flown[1], flown[2], flown[3]];
+        for (j, &k) in observed.iter().enumerate() {
+            m_acs[k] = solution.sensors[j].m_acs_from_sensor_calibrated;
+        }
+        estimate_fss_systematic(&frames, &m_acs, declared_fss_sys, fss_cell)
+    });
     summary.ffcal_fhst_stage_epochs = match &fhst_stage {
         Some((FhstStage::StarPairs, _)) => fhst_data.epoch_count(),
         _ => 0,
@@ -1103,6 +1117,7 @@ pub fn calibrate_telemetry(
                 residual_rms_arcsec: h.residual_rms_arcsec,
             }
         }),
+        fss_systematic,
     };
     let mut new_alignment = flown_alignment;
     let ortho = |m: &Matrix3<f64>| rows(&Quat::from_dcm(m).to_dcm());

@@ -4,5 +4,6 @@
 //! [`calibrate`]: TP → FADS → FFCAL → adjustment → IRUCAL → tables.
 
 pub mod calibrate;
+pub mod fss_systematic;
 pub mod observations;
 pub mod star_batches;
