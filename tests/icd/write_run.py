@@ -270,6 +270,64 @@ def earth_velocity_km_per_s(tai1958):
     return scale(sub(a, b), 1.0 / (2 * h))  # Earth = −Sun
 
 
+# A JPL ephemeris where one is at hand: data/sun_reference.csv (DE421 via Skyfield, every
+# 33 h of 1991; data/README.md) interpolated with 4-point Lagrange polynomials (error
+# < 0.01″ at this spacing). Meeus' low-precision Sun is ≈ 3–18″ off in 1991: a real writer
+# flies a real ephemeris, and an inertial Sun error of that size moves through the FSS field
+# with every slew, which the ground rightly sees as a structure. Outside the table: Meeus.
+SUN_TABLE = os.path.join(ROOT, "data", "sun_reference.csv")
+_SUN_ROWS = None
+
+
+def _sun_rows():
+    global _SUN_ROWS
+    if _SUN_ROWS is None:
+        _SUN_ROWS = []
+        if os.path.exists(SUN_TABLE):
+            header = None
+            for line in open(SUN_TABLE):
+                if line.startswith("#"):
+                    continue
+                cols = line.strip().split(",")
+                if header is None:
+                    header = {c: i for i, c in enumerate(cols)}
+                    continue
+                g = lambda k: float(cols[header[k]])
+                tai = (g("jd_tt") - 2451545.0) * 86400.0 + J2000_TAI1958
+                d = g("sun_dist_au") * AU_KM
+                _SUN_ROWS.append((tai, [g("geo_x") * d, g("geo_y") * d, g("geo_z") * d],
+                                  [g("earth_vx_kms"), g("earth_vy_kms"), g("earth_vz_kms")]))
+    return _SUN_ROWS
+
+
+def _lagrange(tai1958, which):
+    rows = _sun_rows()
+    if len(rows) < 4 or not (rows[1][0] <= tai1958 <= rows[-2][0]):
+        return None
+    j = max(1, min(len(rows) - 3, next(i for i in range(len(rows)) if rows[i][0] > tai1958) - 1))
+    pts = rows[j - 1:j + 3]
+    out = [0.0, 0.0, 0.0]
+    for a, (ta, *va) in enumerate(pts):
+        w = 1.0
+        for b, (tb, *_vb) in enumerate(pts):
+            if a != b:
+                w *= (tai1958 - tb) / (ta - tb)
+        out = add(out, scale(va[which], w))
+    return out
+
+
+def sun_geocentric(tai1958):
+    """Geometric geocentric Sun (J2000/ICRS axes, km): DE421 table, else Meeus."""
+    v = _lagrange(tai1958, 0)
+    return v if v is not None else sun_geocentric_km(tai1958)
+
+
+def earth_velocity(tai1958):
+    """Earth's barycentric velocity (km/s): DE421 table, else differenced Meeus."""
+    v = _lagrange(tai1958, 1)
+    return v if v is not None else earth_velocity_km_per_s(tai1958)
+
+
 # ----------------------------------------------------------------------------- orbit
 class Orbit:
     def __init__(self, a_km=6833.0, inc_deg=28.48, raan_deg=40.0, u0_deg=0.0):
@@ -348,6 +406,15 @@ def build_timeline(args):
     hold = args.hold_s
     if args.no_slews:
         return [("hold", args.duration or 4 * hold)]
+    if args.plan == "long":
+        # A calibration day: out-and-back slews about every body axis in both directions,
+        # twice, between holds (≈ 5.7 h, ≈ 3.6 orbits): the signatures of time tags (rate),
+        # the gyro scale asymmetry (± slews), orbit-periodic and drift terms (time) all occur.
+        segs = [("hold", hold)]
+        for _ in range(2):
+            for axis, ang in ((0, 30.0), (1, 30.0), (2, 25.0)):
+                segs += [("slew", axis, ang), ("hold", hold), ("slew", axis, -ang), ("hold", hold)]
+        return segs
     segs = [("hold", hold), ("slew", 0, 30.0), ("hold", hold), ("slew", 1, -45.0),
             ("hold", hold), ("slew", 2, 20.0), ("hold", hold)]
     return segs
@@ -389,6 +456,33 @@ def main(argv=None):
     p.add_argument("--orbit-phase-deg", type=float, default=180.0, help="argument of latitude at t = 0")
     p.add_argument("--raan-deg", type=float, default=160.0)
     p.add_argument("--no-slews", action="store_true", help="one long inertial hold")
+    p.add_argument("--plan", default="short", choices=["short", "long"],
+                   help="short: 4 holds, 3 slews (1.4 h); long: 13 holds, 12 out-and-back slews "
+                        "about every axis (use --hold-s 1200: 5.7 h)")
+    p.add_argument("--temps", default="default", choices=["default", "flat"],
+                   help="flat: every temperature constant (no thermal information in telemetry)")
+    # ---- injected undeclared effects (recorded in truth_icd.json 'effects'; diagnose is
+    # told nothing). Sensor names FHST1, FHST2, FSS1, FSS2; angles arcsec, ACS axes, and
+    # alignment variations as M_AS(t) = Rot(θ(t)) M_AS (docs/conventions.md).
+    p.add_argument("--time-tag", action="append", default=[], metavar="SENSOR:TAU_S",
+                   help="the sensor samples TAU_S before its time code (FHST or FSS)")
+    p.add_argument("--orbit-align", action="append", default=[], metavar="SENSOR:c1x,c1y,c1z,s1x,s1y,s1z[,c2x,c2y,c2z,s2x,s2y,s2z]",
+                   help="alignment rotation c1 cos u + s1 sin u (+ c2 cos 2u + s2 sin 2u), u = argument of latitude")
+    p.add_argument("--fhst-radial", action="append", default=[], metavar="SENSOR:ARCSEC_AT_4DEG[:HV_H:HV_V]",
+                   help="FHST focal-plane distortion: ΔH = k ρ² H, ΔV = k ρ² V (k = size / (4°)³), plus H·V/(4°)² terms")
+    p.add_argument("--fss-transfer", action="append", default=[], metavar="SENSOR:name=v,...",
+                   help="FSS transfer-function error per head: alpha_scale (ppm), alpha_cross (″ at the 32° corner, x y²), "
+                        "alpha_cubic (″ at the 32° edge, x³), beta_... the same with α and β exchanged")
+    p.add_argument("--gyro-asym", default=None, metavar="AX,AY,AZ",
+                   help="gyro scale asymmetry per ACS axis, ppm: measured = Δθ + a |Δθ|")
+    p.add_argument("--gyro-ramp", default=None, metavar="RX,RY,RZ",
+                   help="gyro bias ramp per ACS axis, arcsec/s per hour (bias(t) = b0 + r t)")
+    p.add_argument("--gyro-rate2", default=None, metavar="KX,KY,KZ",
+                   help="(outside the library) gyro scale nonlinearity: measured = Δθ (1 + k (ω/1°/s)²), k in ppm")
+    p.add_argument("--ringing", action="append", default=[], metavar="SENSOR:AX,AY,AZ:PERIOD_S:DECAY_S",
+                   help="(outside the library) mount ringing after every slew: θ = a e^(−t/T) sin(2π t/P), t since the slew ended")
+    p.add_argument("--align-step", action="append", default=[], metavar="SENSOR:T_S:X,Y,Z",
+                   help="(outside the library) one-time alignment step at T_S s from the start")
     p.add_argument("--no-hk", action="store_true", help="no housekeeping (APID 0x011)")
     p.add_argument("--hk-every", type=int, default=1, help="housekeeping every N cycles")
     p.add_argument("--no-eph", action="store_true", help="no ephemeris (APID 0x020)")
@@ -447,8 +541,86 @@ def main(argv=None):
     if args.quiet_iru:
         bias, arw = [0.0, 0.0, 0.0], 0.0
 
+    # ---- injected undeclared effects, and their truth in the library's parameter names
+    # (docs/diagnose.md; the out-of-library ones with the regressor they should follow).
+    def floats(x):
+        return [float(v) for v in x.split(",")]
+
+    def sensor_of(spec, kinds=("FHST1", "FHST2", "FSS1", "FSS2")):
+        name, rest = spec.split(":", 1)
+        name = name.upper()
+        if name not in kinds:
+            p.error(f"{spec}: sensor must be one of {', '.join(kinds)}")
+        return name, rest
+
+    effects = []
+    tt_off, orbit_align, radial, fss_tf, ringing, steps = {}, {}, {}, {}, {}, {}
+    for spec in args.time_tag:
+        n, r = sensor_of(spec)
+        tt_off[n] = float(r)
+        effects.append({"effect": "time_tag_offset", "sensor": n, "in_library": True,
+                        "parameters": {"tau": float(r) * 1e3}})
+    for spec in args.orbit_align:
+        n, r = sensor_of(spec)
+        c = floats(r)
+        if len(c) not in (6, 12):
+            p.error(f"{spec}: 6 or 12 numbers")
+        c += [0.0] * (12 - len(c))
+        orbit_align[n] = c
+        heads = ("cos", "sin", "cos2u", "sin2u") if any(c[6:]) else ("cos", "sin")
+        effects.append({"effect": "orbit_periodic_alignment", "sensor": n, "in_library": True,
+                        "parameters": {f"{cs}_{ax}": c[3 * j + i] for j, cs in enumerate(heads)
+                                       for i, ax in enumerate("xyz")}})
+    for spec in args.fhst_radial:
+        n, r = sensor_of(spec, ("FHST1", "FHST2"))
+        v = [float(x) for x in r.split(":")] + [0.0, 0.0]
+        radial[n] = v[:3]
+        effects.append({"effect": "fhst_distortion", "sensor": n, "in_library": True,
+                        "parameters": {"radial_at_4deg": v[0], "hv_h_at_corner": v[1],
+                                       "hv_v_at_corner": v[2]}})
+    for spec in args.fss_transfer:
+        n, r = sensor_of(spec, ("FSS1", "FSS2"))
+        tf = {f"{h}_{k}": 0.0 for h in ("alpha", "beta") for k in ("scale", "cross", "cubic")}
+        for kv in r.split(","):
+            k, v = kv.split("=")
+            if k not in tf:
+                p.error(f"{spec}: unknown term {k}")
+            tf[k] = float(v)
+        fss_tf[n] = tf
+        names = {"scale": "scale", "cross": "cross_at_corner", "cubic": "cubic_at_edge"}
+        effects.append({"effect": "fss_transfer_function", "sensor": n, "in_library": True,
+                        "parameters": {f"{h}_{names[k]}": tf[f"{h}_{k}"] for h in ("alpha", "beta")
+                                       for k in ("scale", "cross", "cubic")}})
+    asym = floats(args.gyro_asym) if args.gyro_asym else [0.0, 0.0, 0.0]
+    if args.gyro_asym:
+        effects.append({"effect": "gyro_scale_asymmetry", "sensor": "IRU", "in_library": True,
+                        "parameters": dict(zip("xyz", asym))})
+    ramp = floats(args.gyro_ramp) if args.gyro_ramp else [0.0, 0.0, 0.0]
+    if args.gyro_ramp:
+        effects.append({"effect": "gyro_bias_ramp", "sensor": "IRU", "in_library": True,
+                        "parameters": dict(zip("xyz", ramp))})
+    rate2 = floats(args.gyro_rate2) if args.gyro_rate2 else [0.0, 0.0, 0.0]
+    if args.gyro_rate2:
+        effects.append({"effect": "gyro_rate_squared_scale", "sensor": "IRU", "in_library": False,
+                        "parameters_ppm_at_1deg_s": dict(zip("xyz", rate2)),
+                        "unexplained_should_follow": ["slew"]})
+    for spec in args.ringing:
+        n, r = sensor_of(spec)
+        amp, per, dec = r.split(":")
+        ringing[n] = (floats(amp), float(per), float(dec))
+        effects.append({"effect": "post_slew_ringing", "sensor": n, "in_library": False,
+                        "amplitude_acs_arcsec": floats(amp), "period_s": float(per), "decay_s": float(dec),
+                        "unexplained_should_follow": ["time_since_slew_s"]})
+    for spec in args.align_step:
+        n, r = sensor_of(spec)
+        ts, vec = r.split(":")
+        steps.setdefault(n, []).append((float(ts), floats(vec)))
+        effects.append({"effect": "alignment_step", "sensor": n, "in_library": False,
+                        "t_s": float(ts), "rotation_acs_arcsec": floats(vec),
+                        "unexplained_should_follow": ["time_s"]})
+
     # ---- the timeline and the attitude: A0 puts the Sun near the FSS1 boresight.
-    t_start_sun = unit(sun_geocentric_km(t0))
+    t_start_sun = unit(sun_geocentric(t0))
     b_sun0 = mv(m_true["FSS1"], unit([math.tan(2.0 * RAD_PER_DEG), math.tan(-3.0 * RAD_PER_DEG), 1.0]))
     if args.extreme:  # Sun 31.5° off the FSS1 boresight in α (the field is ±32°)
         b_sun0 = mv(m_true["FSS1"], unit([math.tan(31.5 * RAD_PER_DEG), 0.0, 1.0]))
@@ -482,6 +654,35 @@ def main(argv=None):
         b, e, kind, a0, axis, prof = segments[-1]
         return (a0 if kind == "hold" else mm(rot(scale(axis, prof(e - b))), a0)), 1, None
 
+    slew_ends = [e for (b, e, kind, _a0, _ax, _p) in segments if kind == "slew"]
+
+    def aligned(name, tt):
+        """True M_AS at tt with the injected alignment variations."""
+        th = [0.0, 0.0, 0.0]
+        if name in orbit_align:
+            c = orbit_align[name]
+            u = orbit.u0 + orbit.n * tt
+            for i in range(3):
+                th[i] += (c[i] * math.cos(u) + c[3 + i] * math.sin(u)
+                          + c[6 + i] * math.cos(2 * u) + c[9 + i] * math.sin(2 * u))
+        if name in ringing:
+            amp, per, dec = ringing[name]
+            ends = [e for e in slew_ends if e <= tt]
+            if ends:
+                d = tt - ends[-1]
+                f = math.exp(-d / dec) * math.sin(2 * math.pi * d / per)
+                th = add(th, scale(amp, f))
+        for (ts, vec) in steps.get(name, []):
+            if tt >= ts:
+                th = add(th, vec)
+        if th == [0.0, 0.0, 0.0]:
+            return m_true[name]
+        return mm(rot(scale(th, RAD_PER_ARCSEC)), m_true[name])
+
+    def sensed_attitude(name, tt, a):
+        """The attitude the sensor sees: TAU s before its time code when time-tagged late."""
+        return attitude(tt - tt_off[name])[0] if name in tt_off else a
+
     def in_span(spans, tt):
         return any(s <= tt < s + n for (s, n) in spans)
 
@@ -513,8 +714,8 @@ def main(argv=None):
         tai = t0 + tt
         a, ctrl, slew_span = attitude(tt)
         pos, vel = orbit.state(tt)
-        sun_geo = sun_geocentric_km(tai)
-        v_earth = earth_velocity_km_per_s(tai)
+        sun_geo = sun_geocentric(tai)
+        v_earth = earth_velocity(tai)
         v_obs = add(v_earth, vel)
         earth_helio_au = scale(sun_geo, -1.0 / AU_KM)
         observer_au = add(earth_helio_au, scale(pos, 1.0 / AU_KM))
@@ -541,8 +742,15 @@ def main(argv=None):
             sn = norm(dth)
             if sn > 1e-12:
                 dth = scale(dth, math.asin(min(sn, 1.0)) / sn)
+            t_mid = tt - 0.5 * args.cycle_s
+            # Scale asymmetry (over-reads by a|Δθ| both ways) and the rate² nonlinearity per
+            # ACS axis, then the bias (with its ramp) and the angle random walk.
+            dth = [dth[i] + asym[i] * 1e-6 * abs(dth[i])
+                   + rate2[i] * 1e-6 * dth[i] * (dth[i] / args.cycle_s / RAD_PER_DEG) ** 2
+                   for i in range(3)]
+            b_now = [bias[i] + ramp[i] * RAD_PER_ARCSEC * t_mid / 3600.0 for i in range(3)]
             for cfg, chans in ((0, (1, 2, 4)), (1, (0, 3, 5))):
-                meas = [dth[i] + bias[i] * args.cycle_s + rng.gauss(0.0, arw * math.sqrt(args.cycle_s))
+                meas = [dth[i] + b_now[i] * args.cycle_s + rng.gauss(0.0, arw * math.sqrt(args.cycle_s))
                         for i in range(3)]
                 dn = scale(mv(g_inv, meas), 1.0 / (w_arcsec * RAD_PER_ARCSEC))
                 if cfg == 1 and args.backup_channels_dead:
@@ -558,8 +766,9 @@ def main(argv=None):
         for i, name in enumerate(("FHST1", "FHST2")):
             h = v = mag = 0
             flags = 0
-            m_as = m_true[name]
-            bore_eci = mv(mt(a), mv(m_as, [0.0, 0.0, 1.0]))
+            m_as = aligned(name, tt)
+            a_s = sensed_attitude(name, tt, a)
+            bore_eci = mv(mt(a_s), mv(m_as, [0.0, 0.0, 1.0]))
             nadir = scale(unit(pos), -1.0)
             earth_radius = math.asin(R_EARTH_KM / norm(pos))
             visible = (name not in missing
@@ -569,7 +778,7 @@ def main(argv=None):
                 if cand[i] is None or dot(cand[i][0], bore_eci) < math.cos(3 * RAD_PER_DEG):
                     c10 = math.cos(10 * RAD_PER_DEG)
                     cand[i] = (bore_eci, [s for s in stars if dot(s[1], bore_eci) > c10])
-                m_sens_from_eci = mm(mt(m_as), a)
+                m_sens_from_eci = mm(mt(m_as), a_s)
                 in_fov = []
                 for (hip, u, hp, plx) in cand[i][1]:
                     app = aberrate(unit(sub(u, scale(observer_au, plx))), v_obs)
@@ -589,6 +798,12 @@ def main(argv=None):
                     stats["new_stars"][i] += 1
                 if chosen is not None:
                     hp, hip, hh, vv = chosen
+                    if name in radial:
+                        k3 = radial[name][0] * RAD_PER_ARCSEC / (4 * RAD_PER_DEG) ** 3
+                        hv = hh * vv / (4 * RAD_PER_DEG) ** 2
+                        rho2 = hh * hh + vv * vv
+                        hh, vv = (hh + k3 * rho2 * hh + radial[name][1] * RAD_PER_ARCSEC * hv,
+                                  vv + k3 * rho2 * vv + radial[name][2] * RAD_PER_ARCSEC * hv)
                     tracked[i] = hip
                     sig = fhst_sigma[0] + (min(max(hp, 2.0), 5.7) - 2.0) / 3.7 * (fhst_sigma[1] - fhst_sigma[0])
                     h = i16((hh / RAD_PER_ARCSEC + rng.gauss(0, sig)) / FHST_ARCSEC_PER_COUNT)
@@ -610,9 +825,17 @@ def main(argv=None):
         for i, name in enumerate(("FSS1", "FSS2")):
             al = be = 0
             flags = 0
-            s = mv(mt(m_true[name]), mv(a, sun_dir))
+            s = mv(mt(aligned(name, tt)), mv(sensed_attitude(name, tt, a), sun_dir))
             if name not in missing and not in_shadow and s[2] > 0:
                 aa, bb = math.atan2(s[0], s[2]), math.atan2(s[1], s[2])
+                if abs(aa) <= 32 * RAD_PER_DEG and abs(bb) <= 32 * RAD_PER_DEG and name in fss_tf:
+                    tf = fss_tf[name]
+                    edge = 32 * RAD_PER_DEG
+                    x, y = aa / edge, bb / edge
+                    aa, bb = (aa + tf["alpha_scale"] * 1e-6 * aa
+                              + (tf["alpha_cross"] * x * y * y + tf["alpha_cubic"] * x ** 3) * RAD_PER_ARCSEC,
+                              bb + tf["beta_scale"] * 1e-6 * bb
+                              + (tf["beta_cross"] * y * x * x + tf["beta_cubic"] * y ** 3) * RAD_PER_ARCSEC)
                 if abs(aa) <= 32 * RAD_PER_DEG and abs(bb) <= 32 * RAD_PER_DEG:
                     al = i16(aa / RAD_PER_DEG / FSS_DEG_PER_COUNT + rng.gauss(0, fss_noise_counts))
                     be = i16(bb / RAD_PER_DEG / FSS_DEG_PER_COUNT + rng.gauss(0, fss_noise_counts))
@@ -633,6 +856,8 @@ def main(argv=None):
             ps["fss"][j] += (fss_bytes[5 * j + 4] & 1)
         if args.extreme:
             temps = [-4000, 7000, -4000, 7000, 3276] if k % 2 else [7000, -4000, 7000, -4000, -3276]
+        elif args.temps == "flat":
+            temps = [2000, 2100, 2500, 2450, 3000]
         else:
             temps = [2000 + int(50 * math.sin(tt / 900.0)), 2100, 2500, 2450, 3000]
         raw = (struct.pack(">6H", *counters) + struct.pack(">BB", 0, 1 if high else 0)
@@ -700,6 +925,7 @@ def main(argv=None):
             f.write("{}")
     truth = {
         "writer": "tests/icd/write_run.py",
+        "effects": effects,
         "injected_rotation_acs_arcsec": inject,
         "bias_acs_rad_per_s": bias,
         "fhst_sigma_arcsec_injected": fhst_sigma,
