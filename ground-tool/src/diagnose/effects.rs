@@ -12,7 +12,7 @@
 //! | `aberration` | both k together (a model without aberration lacks both) | both columns | |
 //! | `time_tag_offset` | τ (ms, + = sample older than its tag) | `J Mᵀ (ω × b)` | ∝ rate, flips with slew sign |
 //! | `thermal_alignment_drift` | 3 (″/°C, ACS) | `−J Mᵀ [b×] ΔT` | follows the sensor temperature |
-//! | `orbit_periodic_alignment` | 6 (″: cos u, sin u per ACS axis) | `−J Mᵀ [b×] (cos u, sin u)` | orbit phase |
+//! | `orbit_periodic_alignment` | 6 (″: cos u, sin u per ACS axis), or 12 with the second harmonic (`cos2u_x` …) | `−J Mᵀ [b×] (cos u, sin u[, cos 2u, sin 2u])` | orbit phase |
 //! | `fhst_distortion` | radial Δρ at 4°, H·V terms at the (4°, 4°) corner (″) | `(ρ²H, ρ²V)/F³`, `(HV/F², 0)`, `(0, HV/F²)` | FOV position |
 //! | `magnitude_bias` | (″/mag in H, V) | `(m − 4)` | magnitude |
 //! | `fss_transfer_function` | scale (ppm), cross (″ at the 32° corner), cubic (″ at the edge), cyclic sin/cos (″) at a grid-searched pitch, per head | `α`, `α β²/E³`, `α³/E³`, `sin/cos(2π α / p)` | head angles |
@@ -135,6 +135,8 @@ pub struct Effect {
     pub constraints: Vec<(Vec<(usize, f64)>, f64)>,
     /// Extra (nonlinear) parameters searched on a grid (for the BIC): the cyclic pitch.
     pub extra_params: usize,
+    /// Orbit harmonics of the orbit-periodic alignment (1, or 2: once and twice per orbit).
+    pub harmonics: usize,
     /// Not a candidate (only used for lack-of-fit tests).
     #[serde(skip)]
     pub hidden: bool,
@@ -149,6 +151,7 @@ impl Effect {
             units: params.iter().map(|p| p.1).collect(),
             prior_sigma: params.iter().map(|p| p.2).collect(),
             pitch_rad: None,
+            harmonics: 1,
             stars: Vec::new(),
             star_dirs: Vec::new(),
             constraints: Vec::new(),
@@ -172,6 +175,16 @@ impl Effect {
     /// Short label, e.g. `time_tag_offset[FHST1]`.
     #[must_use]
     pub fn label(&self) -> String {
+        if self.harmonics > 1 {
+            if let Some(s) = self.sensor {
+                return format!(
+                    "{}[{}] (harmonics 1–{})",
+                    self.kind.name(),
+                    super::measurements::SENSOR_NAMES[s],
+                    self.harmonics
+                );
+            }
+        }
         match self.sensor {
             Some(s) => format!(
                 "{}[{}]",
@@ -229,11 +242,13 @@ impl Effect {
             }
             EffectKind::OrbitPeriodicAlignment => {
                 if m.orbit_phase.is_finite() {
-                    let (s, c) = m.orbit_phase.sin_cos();
-                    for ax in 0..3 {
-                        let col = alignment_col(ax);
-                        out.push((ax, v2(col * c)));
-                        out.push((3 + ax, v2(col * s)));
+                    for h in 0..self.harmonics {
+                        let (s, c) = ((h + 1) as f64 * m.orbit_phase).sin_cos();
+                        for ax in 0..3 {
+                            let col = alignment_col(ax);
+                            out.push((6 * h + ax, v2(col * c)));
+                            out.push((6 * h + 3 + ax, v2(col * s)));
+                        }
                     }
                 }
             }
@@ -438,18 +453,35 @@ pub fn library(set: &MeasurementSet, fss_pitch_rad: [Option<f64>; 2]) -> Vec<Eff
                 ("z", "arcsec/degC", 30.0),
             ],
         ));
+        let once = [
+            ("cos_x", "arcsec", 100.0),
+            ("cos_y", "arcsec", 100.0),
+            ("cos_z", "arcsec", 100.0),
+            ("sin_x", "arcsec", 100.0),
+            ("sin_y", "arcsec", 100.0),
+            ("sin_z", "arcsec", 100.0),
+        ];
         out.push(Effect::new(
             EffectKind::OrbitPeriodicAlignment,
             Some(s),
-            &[
-                ("cos_x", "arcsec", 100.0),
-                ("cos_y", "arcsec", 100.0),
-                ("cos_z", "arcsec", 100.0),
-                ("sin_x", "arcsec", 100.0),
-                ("sin_y", "arcsec", 100.0),
-                ("sin_z", "arcsec", 100.0),
-            ],
+            &once,
         ));
+        // The same with the second harmonic: a thermal orbit cycle is not a sinusoid
+        // (eclipse entry and exit, algorithms.md §9 row 2: "periodic at orbit period and
+        // harmonics"). A separate candidate, so a once-per-orbit variation is not charged six
+        // more parameters; the evidence decides between them.
+        let mut both = once.to_vec();
+        both.extend([
+            ("cos2u_x", "arcsec", 100.0),
+            ("cos2u_y", "arcsec", 100.0),
+            ("cos2u_z", "arcsec", 100.0),
+            ("sin2u_x", "arcsec", 100.0),
+            ("sin2u_y", "arcsec", 100.0),
+            ("sin2u_z", "arcsec", 100.0),
+        ]);
+        let mut e = Effect::new(EffectKind::OrbitPeriodicAlignment, Some(s), &both);
+        e.harmonics = 2;
+        out.push(e);
         {
             let mut names = Vec::new();
             for ax in ["x", "y", "z"] {

@@ -285,6 +285,13 @@ fn overlapping(a: &[usize], b: &[usize]) -> bool {
     a.iter().any(|s| b.contains(s)) || (a.iter().any(|&s| s < 2) && b.iter().any(|&s| s < 2))
 }
 
+/// Is `sub` a restriction of `full` (the same kind on the same sensor with fewer orbit
+/// harmonics)? A restriction explains less by construction, and its failing a lack-of-fit
+/// test is what the larger form is there for: it must not veto it.
+fn restricts(sub: &Effect, full: &Effect) -> bool {
+    sub.kind == full.kind && sub.sensor == full.sensor && sub.harmonics < full.harmonics
+}
+
 /// Run the loop.
 ///
 /// # Errors
@@ -761,6 +768,7 @@ fn search_with_pitch(
                     v.p_holm < config.alpha
                         && v.delta_bic > e.delta_bic + config.min_delta_bic
                         && overlapping(&sensors_of(&layout.effects[*o]), &mine)
+                        && !restricts(&layout.effects[*o], &layout.effects[c])
                 }) {
                     e.rejected_because = Some(format!(
                         "vetoed: {} explains the same sensor better (ΔBIC {:.1}) but failed its checks",
@@ -791,7 +799,11 @@ fn search_with_pitch(
         let removed = &layout.effects[c];
         if varying(removed.kind) {
             if let Some(s @ 0..=1) = removed.sensor {
-                if let Some(mirror) = layout.find(removed.kind, Some(1 - s)) {
+                if let Some(mirror) = layout.effects.iter().position(|e| {
+                    e.kind == removed.kind
+                        && e.sensor == Some(1 - s)
+                        && e.harmonics == removed.harmonics
+                }) {
                     if !model.contains(&mirror) && !excluded.contains(&mirror) {
                         excluded.push(mirror);
                     }
@@ -846,6 +858,7 @@ fn search_with_pitch(
                     && e.rejected_because.is_some()
                     && e.delta_bic > b_bic + config.min_delta_bic
                     && overlapping(&sensors_of(other), &chosen_sensors)
+                    && !restricts(other, chosen)
             });
             if let Some((_, v, _)) = veto {
                 let why = format!(
