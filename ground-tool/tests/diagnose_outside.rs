@@ -1,0 +1,111 @@
+//! `diagnose` on telemetry from an outside program: the independent ICD writer
+//! (`tests/icd/write_run.py`, Python standard library, written from `docs/icd.md` alone)
+//! with an undeclared effect injected by the writer, and the same run without it. The full
+//! table (every effect, combinations, several seeds) is `tests/icd/diagnose_cases.py`
+//! (`docs/diagnose.md` §7); this is its fast check (≈ 2 s of Python per run, the writer's
+//! 82-min plan). python3 is required (CI has it).
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .unwrap()
+        .to_path_buf()
+}
+
+/// Write a run with the writer's `flags`, diagnose it, return report.json and the truth.
+fn write_and_diagnose(case: &str, flags: &[&str]) -> (Value, Value) {
+    let dir = std::env::temp_dir().join(format!("diagnose-outside-{}-{case}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let out = Command::new("python3")
+        .arg(root().join("tests/icd/write_run.py"))
+        .arg("--out")
+        .arg(&dir)
+        .arg("--seed")
+        .arg("1")
+        .args(flags)
+        .output()
+        .expect("python3 is required for this test (CI has it)");
+    assert!(
+        out.status.success(),
+        "writer failed for {case}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let diag = dir.join("diag");
+    let out = Command::new(env!("CARGO_BIN_EXE_ground-tool"))
+        .arg("diagnose")
+        .arg(&dir)
+        .arg("--out")
+        .arg(&diag)
+        .arg("--json")
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "diagnose failed on {case}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let report: Value =
+        serde_json::from_str(&std::fs::read_to_string(diag.join("report.json")).unwrap()).unwrap();
+    let truth: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("truth_icd.json")).unwrap())
+            .unwrap();
+    let _ = std::fs::remove_dir_all(&dir);
+    (report, truth)
+}
+
+fn named(report: &Value) -> Vec<String> {
+    report["detected"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|d| {
+            format!(
+                "{}[{}]",
+                d["effect"].as_str().unwrap(),
+                d["sensor"].as_str().unwrap()
+            )
+        })
+        .collect()
+}
+
+/// The writer's FHST1 time tag (80 ms late, 23″ at its 0.08°/s slews) is named on FHST1,
+/// alone, with τ within 3σ of the writer's truth and nothing left unexplained.
+#[test]
+fn outside_writer_fhst1_time_tag_is_named_with_its_value() {
+    let (report, truth) = write_and_diagnose("fhst1-time-tag", &["--time-tag", "FHST1:0.08"]);
+    assert_eq!(named(&report), ["time_tag_offset[FHST1]"], "{report:#}");
+    let injected = &truth["effects"][0];
+    assert_eq!(injected["effect"], "time_tag_offset");
+    let tau_true = injected["parameters"]["tau"].as_f64().unwrap();
+    let d = &report["detected"][0];
+    let tau = d["parameters"]["tau"].as_f64().unwrap();
+    let sigma = d["sigma"]["tau"].as_f64().unwrap();
+    assert!(
+        (tau - tau_true).abs() <= 3.0 * sigma,
+        "τ {tau:.1} ± {sigma:.1} ms against the writer's {tau_true} ms"
+    );
+    assert!(sigma < 10.0, "σ(τ) {sigma:.1} ms: too weak to mean much");
+    assert_eq!(
+        report["unexplained"].as_array().unwrap().len(),
+        0,
+        "{report:#}"
+    );
+}
+
+/// The same writer and seed without the effect: nothing detected, nothing unexplained.
+#[test]
+fn outside_writer_clean_run_reports_nothing() {
+    let (report, truth) = write_and_diagnose("clean", &[]);
+    assert_eq!(truth["effects"].as_array().unwrap().len(), 0);
+    assert!(named(&report).is_empty(), "{report:#}");
+    assert_eq!(
+        report["unexplained"].as_array().unwrap().len(),
+        0,
+        "{report:#}"
+    );
+}
