@@ -332,6 +332,10 @@ pub struct FfcalSummary {
     pub eigenvalues: Vec<f64>,
     /// Relative alignment FHST2 w.r.t. FHST1, 1σ per axis, arcsec.
     pub sigma_fhst2_rel_fhst1_arcsec: [f64; 3],
+    /// Covariance of each sensor's alignment relative to FHST1 (`θ_k − θ_FHST1`, ACS,
+    /// arcsec², rows), the quantity that the data determine (the common rotation rests on
+    /// the priors); absent for FHST1 and for sensors not observed.
+    pub relative_covariance_to_fhst1_arcsec2: std::collections::BTreeMap<String, [[f64; 3]; 3]>,
     /// Cramér–Rao bound of the same quantity from every FFCAL epoch (all sensors, FSS samples
     /// weighted as FFCAL weights them), 1σ per axis, arcsec.
     pub crb_sigma_fhst2_rel_fhst1_all_sensors_arcsec: [f64; 3],
@@ -1094,6 +1098,20 @@ pub fn calibrate_telemetry(
             .eigenvalues_with_prior_per_arcsec2
             .clone(),
         sigma_fhst2_rel_fhst1_arcsec: [rel[(0, 0)].sqrt(), rel[(1, 1)].sqrt(), rel[(2, 2)].sqrt()],
+        relative_covariance_to_fhst1_arcsec2: match observed.iter().position(|&k| k == 0) {
+            Some(j1) => observed
+                .iter()
+                .enumerate()
+                .filter(|&(j, _)| j != j1)
+                .map(|(j, &k)| {
+                    (
+                        SENSOR_NAMES[k].to_string(),
+                        rows(&solution.relative_covariance_arcsec2(j, j1)),
+                    )
+                })
+                .collect(),
+            None => std::collections::BTreeMap::new(),
+        },
         crb_sigma_fhst2_rel_fhst1_all_sensors_arcsec: crb_relative_sigma(
             &sensors, &data, &solution,
         ),
