@@ -6,10 +6,20 @@ use sim_harness::scenario;
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     let s = scenario::resolve(&args[1]).unwrap();
-    let tables = args.get(2).filter(|a| !a.is_empty()).map(std::path::PathBuf::from);
+    let tables = args
+        .get(2)
+        .filter(|a| !a.is_empty())
+        .map(std::path::PathBuf::from);
     let window: f64 = args.get(3).map_or(600.0, |x| x.parse().unwrap());
     let mut sim = Simulation::new(s, tables.as_deref()).unwrap();
-    let mut acc = (0.0, 0usize, [0.0f64; 3], [0.0f64; 3], [0usize; 3], [0.0f64; 3]);
+    let mut acc = (
+        0.0,
+        0usize,
+        [0.0f64; 3],
+        [0.0f64; 3],
+        [0usize; 3],
+        [0.0f64; 3],
+    );
     let mut w_start = 0.0;
     let mut all_nees: Vec<f64> = Vec::new();
     while let Some(r) = sim.step() {
@@ -48,5 +58,12 @@ fn main() {
     }
     all_nees.sort_by(|a, b| a.partial_cmp(b).unwrap());
     let q = |p: f64| all_nees[((all_nees.len() - 1) as f64 * p) as usize];
-    println!("NEES cycles {} mean {:.1} median {:.1} p90 {:.1} p99 {:.1}", all_nees.len(), all_nees.iter().sum::<f64>() / all_nees.len() as f64, q(0.5), q(0.9), q(0.99));
+    println!(
+        "NEES cycles {} mean {:.1} median {:.1} p90 {:.1} p99 {:.1}",
+        all_nees.len(),
+        all_nees.iter().sum::<f64>() / all_nees.len() as f64,
+        q(0.5),
+        q(0.9),
+        q(0.99)
+    );
 }
