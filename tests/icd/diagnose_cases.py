@@ -48,8 +48,10 @@ CASES = {
     "fss1-transfer": ["--fss-transfer", "FSS1:alpha_scale=300,beta_cubic=40"],
     "gyro-asymmetry": ["--gyro-asym", "100,-80,120"],  # ppm, §9 row 9: 10–100 ppm
     "gyro-ramp": ["--gyro-ramp", "0.003,-0.002,0.004"],  # ″/s per hour (0.017–0.023″/s over the run)
+    "gyro-ramp-x3": ["--gyro-ramp", "0.009,-0.006,0.012"],  # detection-limit probe
     # --- outside the library
     "fhst2-ringing": ["--ringing", "FHST2:8,-6,10:40:120"],  # 14″ after each slew, 40 s, 120 s decay
+    "fhst2-ringing-x2": ["--ringing", "FHST2:16,-12,20:40:120"],  # detection-limit probe
     "fhst1-step": ["--align-step", "FHST1:10000:0,12,-8"],  # 14″ once, mid-run
     # --- combinations
     "combo-tt+distortion": ["--time-tag", "FHST1:0.08", "--fhst-radial", "FHST1:15"],

@@ -141,7 +141,12 @@ impl Regressor {
         match self {
             Self::OrbitPhase => &[Method::Harmonics],
             Self::StarId | Self::RateMode => &[Method::Groups],
-            Self::SinceSlew => &[Method::Binned, Method::Cubic, Method::FineBinned],
+            Self::SinceSlew => &[
+                Method::Binned,
+                Method::Cubic,
+                Method::FineBinned,
+                Method::Ringing,
+            ],
             _ => &[Method::Binned, Method::Cubic],
         }
     }
@@ -161,7 +166,22 @@ pub enum Method {
     Groups,
     /// Fixed 15-s bins over the first 900 s after a slew (oscillations after maneuvers).
     FineBinned,
+    /// A decaying sinusoid `e^{−x/T} (a cos 2πx/P + b sin 2πx/P)` over the first 900 s after
+    /// a slew, the best of a grid of periods P (5–300 s) and decay times T (60, 200, 600 s),
+    /// its p-value Bonferroni-corrected over the grid ([`RINGING_GRID`]): the matched test
+    /// for structural ringing after maneuvers (algorithms.md §9 row 16), which the 60 bins of
+    /// `FineBinned` dilute when the ringing lasts a few minutes.
+    Ringing,
 }
+
+/// Periods (s) of the ringing test.
+const RINGING_PERIODS: [f64; 16] = [
+    5.0, 6.5, 8.5, 11.0, 14.0, 18.0, 23.0, 30.0, 39.0, 50.0, 65.0, 85.0, 110.0, 140.0, 185.0, 240.0,
+];
+/// Decay times (s) of the ringing test.
+const RINGING_DECAYS: [f64; 3] = [60.0, 200.0, 600.0];
+/// Grid size of the ringing test (its Bonferroni factor).
+pub const RINGING_GRID: usize = RINGING_PERIODS.len() * RINGING_DECAYS.len();
 
 /// One structure test.
 #[derive(Clone, Debug, Serialize)]
@@ -302,6 +322,56 @@ fn run_one(samples: &[Sample], method: Method) -> Option<(f64, f64, f64, f64, Ve
                 return None;
             }
             anova(&early, &|s| (s.x / 15.0).floor() as i64)
+        }
+        Method::Ringing => {
+            let early: Vec<Sample> = samples
+                .iter()
+                .filter(|s| s.x < 900.0)
+                .map(|s| Sample {
+                    x: s.x,
+                    r: s.r,
+                    w: s.w,
+                })
+                .collect();
+            if early.len() < 100 {
+                return None;
+            }
+            let (rss0, c0) = wls_rss(&early, &|_, row: &mut [f64]| row[0] = 1.0, 1)?;
+            let mut best: Option<(f64, f64, f64, Vec<f64>)> = None;
+            for &p in &RINGING_PERIODS {
+                for &t in &RINGING_DECAYS {
+                    let basis = move |x: f64, row: &mut [f64]| {
+                        let (sn, cs) = (std::f64::consts::TAU * x / p).sin_cos();
+                        let e = (-x / t).exp();
+                        row[0] = 1.0;
+                        row[1] = e * cs;
+                        row[2] = e * sn;
+                    };
+                    if let Some((rss1, c1)) = wls_rss(&early, &basis, 3) {
+                        if best.as_ref().is_none_or(|b| rss1 < b.0) {
+                            best = Some((rss1, p, t, c1));
+                        }
+                    }
+                }
+            }
+            let (rss1, p, t, c1) = best?;
+            let d2 = early.len() as f64 - 3.0;
+            if d2 < 1.0 || rss1 <= 0.0 {
+                return None;
+            }
+            let s2 = rss1 / d2;
+            let f = ((rss0 - rss1) / 2.0) / s2;
+            let sw: f64 = early.iter().map(|s| s.w).sum();
+            let size = (((rss0 - rss1) - 2.0 * s2).max(0.0) / sw).sqrt();
+            let curve = (0..=90)
+                .map(|i| {
+                    let x = 10.0 * f64::from(i);
+                    let (sn, cs) = (std::f64::consts::TAU * x / p).sin_cos();
+                    let e = (-x / t).exp();
+                    (x, c1[0] + e * (c1[1] * cs + c1[2] * sn) - c0[0])
+                })
+                .collect();
+            Some((f, 2.0, d2, size, curve))
         }
         Method::Binned => {
             let mut xs: Vec<f64> = samples.iter().map(|s| s.x).collect();
@@ -482,7 +552,12 @@ pub fn run_tests(
                             method,
                             f,
                             dof: (d1, d2),
-                            p_value: f_sf(f, d1, d2),
+                            // The ringing test is the best of a grid: Bonferroni over it.
+                            p_value: if method == Method::Ringing {
+                                (f_sf(f, d1, d2) * RINGING_GRID as f64).min(1.0)
+                            } else {
+                                f_sf(f, d1, d2)
+                            },
                             p_holm: 1.0,
                             size_arcsec: size,
                             n: samples.len(),
