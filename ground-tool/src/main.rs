@@ -31,7 +31,8 @@ enum Command {
         /// Output folder.
         #[arg(long)]
         out: std::path::PathBuf,
-        /// Folder with the alignment.tbl / iru.tbl images that were flown (default: boot tables).
+        /// Folder with the alignment.tbl / iru.tbl / filter.tbl images that were flown; default:
+        /// the run's activated uploads (metadata.json `uploads`), else the boot tables.
         #[arg(long)]
         tables: Option<std::path::PathBuf>,
         /// Use Shuster's 1982 scalar weights instead of the optimal (1990) weighting.
@@ -222,27 +223,6 @@ fn run_table(action: TableAction) -> Result<()> {
     Ok(())
 }
 
-/// Flown tables from a folder (alignment.tbl, iru.tbl), each optional.
-fn read_flown_tables(
-    dir: Option<&std::path::Path>,
-) -> Result<(
-    Option<fsw_core::tables::AlignmentTable>,
-    Option<fsw_core::tables::IruTable>,
-)> {
-    use ground_tool::pipeline::calibrate::read_table_image;
-    let Some(dir) = dir else {
-        return Ok((None, None));
-    };
-    let existing = |name: &str| Some(dir.join(name)).filter(|p| p.exists());
-    let alignment = existing("alignment.tbl")
-        .map(|p| read_table_image(&p))
-        .transpose()?;
-    let iru = existing("iru.tbl")
-        .map(|p| read_table_image(&p))
-        .transpose()?;
-    Ok((alignment, iru))
-}
-
 /// `START:END` (seconds) for `--maneuver`.
 fn parse_span(s: &str) -> std::result::Result<(f64, f64), String> {
     let (a, b) = s
@@ -269,11 +249,14 @@ fn run_calibrate(
 ) -> Result<()> {
     use ground_tool::calibration::alignment::Weighting;
     use ground_tool::pipeline::calibrate::{calibrate_run, CalibrateOptions};
-    let (flown_alignment, flown_iru) = read_flown_tables(tables)?;
+    let meta = ground_tool::pipeline::flown::metadata_json(run_dir);
+    let (flown_alignment, flown_iru, flown_filter) =
+        ground_tool::pipeline::flown::flown_tables(run_dir, &meta, tables)?;
     ground_tool::run_check::check_run_dir(run_dir, out)?;
     let options = CalibrateOptions {
         flown_alignment,
         flown_iru,
+        flown_filter,
         weighting: if shuster1982 {
             Weighting::Shuster1982
         } else {
@@ -285,7 +268,9 @@ fn run_calibrate(
         ..CalibrateOptions::default()
     };
     let result = calibrate_run(run_dir, out, &options)?;
-    let flown = flown_alignment.unwrap_or_else(fsw_core::tables::AlignmentTable::prelaunch);
+    let flown = options
+        .flown_alignment
+        .unwrap_or_else(fsw_core::tables::AlignmentTable::prelaunch);
     ground_tool::report::write_calibration_report(out, &result, &flown)?;
     if json {
         println!("{}", serde_json::to_string_pretty(&result.report)?);

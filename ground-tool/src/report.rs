@@ -417,6 +417,9 @@ pub fn write_calibration_report(
     for (k, v) in &r.tables {
         let _ = writeln!(md, "- {k}: `{v}`");
     }
+    for c in &r.filter_changes {
+        let _ = writeln!(md, "- filter table change: {c}");
+    }
     let _ = writeln!(md, "\n## Plots\n");
     for p in &plots {
         let _ = writeln!(md, "![{p}]({p})");

@@ -22,24 +22,18 @@ use super::search::SearchConfig;
 use super::{analyse, Analysis};
 use crate::calibration::iru::GyroCalibration;
 use crate::pipeline::calibrate::{
-    calibrate_telemetry, read_run, read_table_image, write_table, CalibrateOptions,
-    CalibrationOutput,
+    calibrate_telemetry, read_run, write_table, CalibrateOptions, CalibrationOutput,
 };
+use crate::pipeline::flown::{declared_effects, flown_catalog, flown_tables, metadata_json};
 use crate::tp;
 use anyhow::Context;
-use fsw_core::tables::{AlignmentTable, FilterTable, IruTable, StarCatalogTable, TableId};
+use fsw_core::tables::{AlignmentTable, FilterTable, IruTable, TableId};
 use nalgebra::{Matrix3, Vector3};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 /// The GRO defaults of the declared effects (as `sim-harness` declares them).
-pub const DEFAULT_DECLARED: [&str; 5] = [
-    "aberration",
-    "orbital_aberration",
-    "sun_parallax",
-    "fss_transfer_function",
-    "iru_bias_transient",
-];
+pub use crate::pipeline::flown::DEFAULT_DECLARED_EFFECTS as DEFAULT_DECLARED;
 
 /// Options of a diagnose run.
 #[derive(Clone, Debug, Default)]
@@ -63,88 +57,6 @@ pub struct DiagnoseOutput {
     pub alignment: AlignmentTable,
     /// New filter table (if changed).
     pub filter: Option<FilterTable>,
-}
-
-/// Tables flown: from `--tables`, else the run's activated uploads (last one per table).
-fn flown_tables(
-    run_dir: &Path,
-    meta: &serde_json::Value,
-    tables: Option<&Path>,
-) -> anyhow::Result<(
-    Option<AlignmentTable>,
-    Option<IruTable>,
-    Option<FilterTable>,
-)> {
-    if let Some(dir) = tables {
-        let get = |name: &str| {
-            let p = dir.join(name);
-            p.exists().then_some(p)
-        };
-        let a = get("alignment.tbl")
-            .map(|p| read_table_image(&p))
-            .transpose()?;
-        let i = get("iru.tbl").map(|p| read_table_image(&p)).transpose()?;
-        let f = get("filter.tbl")
-            .map(|p| read_table_image(&p))
-            .transpose()?;
-        return Ok((a, i, f));
-    }
-    let mut a = None;
-    let mut i = None;
-    let mut f = None;
-    if let Some(ups) = meta["uploads"].as_array() {
-        for u in ups {
-            if u["activated_at_s"].is_null() || u["accepted"].as_bool() == Some(false) {
-                continue;
-            }
-            let Some(file) = u["file"].as_str() else {
-                continue;
-            };
-            let p = run_dir.join(file);
-            if !p.exists() {
-                continue;
-            }
-            match u["table"].as_str() {
-                Some("alignment") => a = Some(read_table_image(&p)?),
-                Some("iru") => i = Some(read_table_image(&p)?),
-                Some("filter") => f = Some(read_table_image(&p)?),
-                _ => {}
-            }
-        }
-    }
-    Ok((a, i, f))
-}
-
-/// The onboard star catalog flown: `--tables DIR/star_catalog.tbl`, else the run's last
-/// activated catalog upload (None when neither exists).
-fn flown_catalog(
-    run_dir: &Path,
-    meta: &serde_json::Value,
-    tables: Option<&Path>,
-) -> anyhow::Result<Option<StarCatalogTable>> {
-    if let Some(p) = tables
-        .map(|d| d.join("star_catalog.tbl"))
-        .filter(|p| p.exists())
-    {
-        return Ok(Some(read_table_image(&p)?));
-    }
-    let mut out = None;
-    for u in meta["uploads"].as_array().into_iter().flatten() {
-        if u["activated_at_s"].is_null()
-            || u["accepted"].as_bool() == Some(false)
-            || u["table"].as_str() != Some("star_catalog")
-        {
-            continue;
-        }
-        if let Some(p) = u["file"]
-            .as_str()
-            .map(|f| run_dir.join(f))
-            .filter(|p| p.exists())
-        {
-            out = Some(read_table_image(&p)?);
-        }
-    }
-    Ok(out)
 }
 
 /// What the analysis takes from the calibration chain.
@@ -247,17 +159,8 @@ pub fn diagnose_run(
     opts: &DiagnoseOptions,
 ) -> anyhow::Result<DiagnoseOutput> {
     let (tm, metadata) = read_run(run_dir)?;
-    let meta_raw: serde_json::Value = match std::fs::read_to_string(run_dir.join("metadata.json")) {
-        Ok(t) => serde_json::from_str(&t).unwrap_or(serde_json::Value::Null),
-        Err(_) => serde_json::Value::Null,
-    };
-    let declared: Vec<String> = match meta_raw.get("declared_effects").and_then(|v| v.as_array()) {
-        Some(a) => a
-            .iter()
-            .filter_map(|x| x.as_str().map(str::to_owned))
-            .collect(),
-        None => DEFAULT_DECLARED.iter().map(|s| (*s).to_owned()).collect(),
-    };
+    let meta_raw = metadata_json(run_dir);
+    let declared = declared_effects(&meta_raw);
     let flown_catalog = flown_catalog(run_dir, &meta_raw, opts.tables.as_deref())?;
     let annual = declared.iter().any(|d| d == "aberration");
     let orbital = declared.iter().any(|d| d == "orbital_aberration");

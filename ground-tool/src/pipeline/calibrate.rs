@@ -44,7 +44,7 @@ use anyhow::{bail, Context};
 use fsw_core::attitude::{rot, rotvec_from_rot, Quat};
 use fsw_core::tables::image::encode_image;
 use fsw_core::tables::types::{matrix_from_rows, rows_from_matrix};
-use fsw_core::tables::{AlignmentTable, IruTable, TableId};
+use fsw_core::tables::{AlignmentTable, FilterTable, IruTable, TableId};
 use fsw_core::units::{ARCSEC_PER_RAD, RAD_PER_ARCSEC};
 use nalgebra::{Matrix3, Vector3};
 use serde::Serialize;
@@ -116,8 +116,20 @@ pub struct Metadata {
     pub scenario: String,
     /// Declared noise figures.
     pub sensors: DeclaredNoise,
-    /// Declared effects the operator knows about.
-    pub declared_effects: Vec<String>,
+    /// Declared effects the operator's model includes; `None` (absent) = the GRO defaults
+    /// ([`super::flown::DEFAULT_DECLARED_EFFECTS`]).
+    pub declared_effects: Option<Vec<String>>,
+}
+
+impl Metadata {
+    /// Whether the operator's model includes `effect` (absent list = the GRO defaults).
+    #[must_use]
+    pub fn declares(&self, effect: &str) -> bool {
+        match &self.declared_effects {
+            Some(list) => list.iter().any(|e| e == effect),
+            None => super::flown::DEFAULT_DECLARED_EFFECTS.contains(&effect),
+        }
+    }
 }
 
 /// Options of the chain.
@@ -127,6 +139,8 @@ pub struct CalibrateOptions {
     pub flown_alignment: Option<AlignmentTable>,
     /// IRU table flown; `None` = boot.
     pub flown_iru: Option<IruTable>,
+    /// Filter table flown; `None` = boot.
+    pub flown_filter: Option<FilterTable>,
     /// FFCAL weighting.
     pub weighting: Weighting,
     /// Identification options (aberration on by default).
@@ -146,6 +160,7 @@ impl Default for CalibrateOptions {
         Self {
             flown_alignment: None,
             flown_iru: None,
+            flown_filter: None,
             weighting: Weighting::Optimal1990,
             identify: IdentifyOptions::default(),
             staged_ffcal: true,
@@ -288,6 +303,8 @@ pub struct CalibrationReport {
     pub bias_history: Vec<BiasHistoryPoint>,
     /// Table images written.
     pub tables: std::collections::BTreeMap<String, String>,
+    /// Filter-table settings changed, with why (empty = no filter table written).
+    pub filter_changes: Vec<String>,
 }
 
 /// Data counts.
@@ -398,6 +415,8 @@ pub struct CalibrationOutput {
     pub alignment: AlignmentTable,
     /// New IRU table (G updated only when significant).
     pub iru: IruTable,
+    /// New filter table, only when a setting should change ([`filter_update`]).
+    pub filter: Option<FilterTable>,
     /// The frames (for plots and residual analysis).
     pub frames: Vec<FrameObservations>,
     /// FFCAL solution.
@@ -1453,6 +1472,12 @@ pub fn calibrate_telemetry(
         })
         .collect();
 
+    let (new_filter, filter_changes) = filter_update(
+        &options
+            .flown_filter
+            .unwrap_or_else(FilterTable::default_boot),
+        metadata,
+    )?;
     let report = CalibrationReport {
         telemetry: tm.report.clone(),
         data: summary,
@@ -1466,16 +1491,49 @@ pub fn calibrate_telemetry(
         maneuvers: maneuver_reports,
         bias_history: bias_history_points,
         tables: std::collections::BTreeMap::new(),
+        filter_changes,
     };
     Ok(CalibrationOutput {
         report,
         alignment: new_alignment,
         iru: new_iru,
+        filter: new_filter,
         frames: frames_cal,
         ffcal: solution,
         irucal: irucal_solution,
         iru_intervals: all_intervals,
     })
+}
+
+/// The filter table the OBC should fly, when it differs from the flown one, and why.
+///
+/// Why: the ground corrects every effect the operator's model declares; an effect the OBC
+/// could correct but the flown table leaves off stays in the onboard attitude. Annual
+/// aberration (≈ 20″, `aberration` declared, the GRO default) is the one such setting: with
+/// it off, the OBC's attitude after calibration carries it as a bias its covariance does not
+/// know (`docs/investigations.md`, "The OBC filter's NEES after calibration").
+///
+/// # Errors
+/// The new table fails the OBC's own validation (cannot happen for a valid flown table).
+pub fn filter_update(
+    flown: &FilterTable,
+    metadata: &Metadata,
+) -> anyhow::Result<(Option<FilterTable>, Vec<String>)> {
+    let mut new = *flown;
+    let mut changes = Vec::new();
+    if metadata.declares("aberration") && !flown.aberration_correction {
+        new.aberration_correction = true;
+        changes.push(
+            "aberration_correction: false -> true (annual aberration is declared: the ground corrects it, the flown OBC table did not)"
+                .to_owned(),
+        );
+    }
+    if changes.is_empty() {
+        return Ok((None, changes));
+    }
+    new.validate()
+        .map_err(|e| anyhow::anyhow!("the new filter table does not validate ({e:?})"))?;
+    Ok((Some(new), changes))
 }
 
 /// Write a table image to `path`.
@@ -1551,5 +1609,12 @@ pub fn calibrate_run(
     out.report
         .tables
         .insert("iru".into(), iru_path.display().to_string());
+    if let Some(filter) = &out.filter {
+        let filter_path = tables_dir.join("filter.tbl");
+        write_table(&filter_path, TableId::Filter, filter, created)?;
+        out.report
+            .tables
+            .insert("filter".into(), filter_path.display().to_string());
+    }
     Ok(out)
 }

@@ -4,6 +4,7 @@
 //! [`calibrate`]: TP → FADS → FFCAL → adjustment → IRUCAL → tables.
 
 pub mod calibrate;
+pub mod flown;
 pub mod fss_systematic;
 pub mod observations;
 pub mod star_batches;

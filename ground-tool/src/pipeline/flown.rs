@@ -1,0 +1,200 @@
+//! # What the OBC flew during a run, and what the operator declares about it
+//!
+//! Why: the chain's corrections are relative to the tables the OBC actually used (the
+//! adjustment keeps the OBC's own two-tracker frame), so calibrating a run that flew uploaded
+//! tables against the boot tables would be wrong without any error. One rule for `calibrate`
+//! and `diagnose`: `--tables DIR` if given, else the run's uploads that were activated and
+//! accepted (`metadata.json` `uploads`, docs/icd.md §5), else the boot tables (`None` here).
+
+use std::path::Path;
+
+use fsw_core::tables::{AlignmentTable, FilterTable, IruTable, StarCatalogTable};
+
+use super::calibrate::read_table_image;
+
+/// The effects every GRO analyst's model includes when `metadata.json` does not list
+/// `declared_effects` (the same list `sim-harness` declares by default).
+pub const DEFAULT_DECLARED_EFFECTS: [&str; 5] = [
+    "aberration",
+    "orbital_aberration",
+    "sun_parallax",
+    "fss_transfer_function",
+    "iru_bias_transient",
+];
+
+/// `metadata.json` as JSON (`Null` when absent or unreadable: every field has a default).
+#[must_use]
+pub fn metadata_json(run_dir: &Path) -> serde_json::Value {
+    std::fs::read_to_string(run_dir.join("metadata.json"))
+        .ok()
+        .and_then(|t| serde_json::from_str(&t).ok())
+        .unwrap_or(serde_json::Value::Null)
+}
+
+/// The declared effects: the metadata's list, or [`DEFAULT_DECLARED_EFFECTS`] when it has none.
+#[must_use]
+pub fn declared_effects(meta: &serde_json::Value) -> Vec<String> {
+    match meta.get("declared_effects").and_then(|v| v.as_array()) {
+        Some(a) => a
+            .iter()
+            .filter_map(|x| x.as_str().map(str::to_owned))
+            .collect(),
+        None => DEFAULT_DECLARED_EFFECTS
+            .iter()
+            .map(|s| (*s).to_owned())
+            .collect(),
+    }
+}
+
+/// The image files of the activated, accepted uploads of `table` ("alignment", "iru",
+/// "filter", "star_catalog"), in upload order.
+fn activated_uploads<'a>(
+    run_dir: &'a Path,
+    meta: &'a serde_json::Value,
+    table: &'a str,
+) -> impl Iterator<Item = std::path::PathBuf> + 'a {
+    meta["uploads"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter(move |u| {
+            !u["activated_at_s"].is_null()
+                && u["accepted"].as_bool() != Some(false)
+                && u["table"].as_str() == Some(table)
+        })
+        .filter_map(|u| u["file"].as_str().map(|f| run_dir.join(f)))
+        .filter(|p| p.exists())
+}
+
+/// The last flown image of `table`: `tables/<file>` when `tables` is given (only that
+/// folder counts then), else the run's last activated upload; `None` = the boot table.
+fn flown<T: serde::de::DeserializeOwned + serde::Serialize>(
+    run_dir: &Path,
+    meta: &serde_json::Value,
+    tables: Option<&Path>,
+    table: &str,
+    file: &str,
+) -> anyhow::Result<Option<T>> {
+    let path = match tables {
+        Some(dir) => Some(dir.join(file)).filter(|p| p.exists()),
+        None => activated_uploads(run_dir, meta, table).last(),
+    };
+    path.map(|p| read_table_image(&p)).transpose()
+}
+
+/// Alignment, IRU and filter tables flown (`None` = boot).
+///
+/// # Errors
+/// A table image that does not parse (the message names the file).
+pub fn flown_tables(
+    run_dir: &Path,
+    meta: &serde_json::Value,
+    tables: Option<&Path>,
+) -> anyhow::Result<(
+    Option<AlignmentTable>,
+    Option<IruTable>,
+    Option<FilterTable>,
+)> {
+    Ok((
+        flown(run_dir, meta, tables, "alignment", "alignment.tbl")?,
+        flown(run_dir, meta, tables, "iru", "iru.tbl")?,
+        flown(run_dir, meta, tables, "filter", "filter.tbl")?,
+    ))
+}
+
+/// The onboard star catalog flown: `--tables DIR/star_catalog.tbl` if it exists, else the
+/// run's last activated catalog upload (`None` when neither exists).
+///
+/// # Errors
+/// A table image that does not parse.
+pub fn flown_catalog(
+    run_dir: &Path,
+    meta: &serde_json::Value,
+    tables: Option<&Path>,
+) -> anyhow::Result<Option<StarCatalogTable>> {
+    if let Some(p) = tables
+        .map(|d| d.join("star_catalog.tbl"))
+        .filter(|p| p.exists())
+    {
+        return Ok(Some(read_table_image(&p)?));
+    }
+    activated_uploads(run_dir, meta, "star_catalog")
+        .last()
+        .map(|p| read_table_image(&p))
+        .transpose()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::pipeline::calibrate::{filter_update, Metadata};
+
+    #[test]
+    fn absent_declared_effects_are_the_gro_defaults_an_empty_list_is_none() {
+        let absent = declared_effects(&serde_json::json!({}));
+        assert_eq!(absent, DEFAULT_DECLARED_EFFECTS.map(str::to_owned).to_vec());
+        let empty = declared_effects(&serde_json::json!({ "declared_effects": [] }));
+        assert!(empty.is_empty());
+        let m: Metadata = serde_json::from_value(serde_json::json!({})).unwrap_or_default();
+        assert!(m.declares("aberration"));
+        let m: Metadata =
+            serde_json::from_value(serde_json::json!({ "declared_effects": ["sun_parallax"] }))
+                .unwrap_or_default();
+        assert!(!m.declares("aberration") && m.declares("sun_parallax"));
+    }
+
+    /// The chain proposes the onboard annual-aberration correction only when the operator's
+    /// model includes aberration and the flown table leaves it off.
+    #[test]
+    fn filter_table_written_only_when_aberration_is_declared_and_off_on_board() {
+        let boot = FilterTable::default_boot();
+        assert!(!boot.aberration_correction);
+        let gro = Metadata::default();
+        let (new, why) = filter_update(&boot, &gro).unwrap_or((None, Vec::new()));
+        assert!(new.is_some_and(|f| f.aberration_correction && f.validate().is_ok()));
+        assert_eq!(why.len(), 1);
+        let on = FilterTable {
+            aberration_correction: true,
+            ..boot
+        };
+        assert!(matches!(filter_update(&on, &gro), Ok((None, _))));
+        let without: Metadata =
+            serde_json::from_value(serde_json::json!({ "declared_effects": [] }))
+                .unwrap_or_default();
+        assert!(matches!(filter_update(&boot, &without), Ok((None, _))));
+    }
+
+    /// A run with an activated alignment upload: that table is the flown one; `--tables`
+    /// overrides; a rejected or never-activated upload does not count.
+    #[test]
+    fn flown_tables_follow_the_activated_uploads() {
+        let dir = std::env::temp_dir().join(format!("flown-tables-{}", std::process::id()));
+        let _ = std::fs::create_dir_all(dir.join("uploads"));
+        let mut moved = AlignmentTable::prelaunch();
+        moved.m_acs_from_fss1[0][1] += 1e-4;
+        let write = |name: &str, t: &AlignmentTable| {
+            crate::pipeline::calibrate::write_table(
+                &dir.join(name),
+                fsw_core::tables::TableId::Alignment,
+                t,
+                0.0,
+            )
+        };
+        assert!(write("uploads/01_alignment.tbl", &moved).is_ok());
+        assert!(write("uploads/02_alignment.tbl", &AlignmentTable::prelaunch()).is_ok());
+        let meta = serde_json::json!({ "uploads": [
+            { "table": "alignment", "file": "uploads/01_alignment.tbl", "activated_at_s": 0.0, "accepted": true },
+            { "table": "alignment", "file": "uploads/02_alignment.tbl", "activated_at_s": null, "accepted": true },
+        ]});
+        let (a, i, f) = flown_tables(&dir, &meta, None).unwrap_or((None, None, None));
+        assert_eq!(a, Some(moved));
+        assert!(i.is_none() && f.is_none());
+        let (a, _, _) =
+            flown_tables(&dir, &serde_json::json!({}), None).unwrap_or((None, None, None));
+        assert!(a.is_none(), "no uploads: the boot table");
+        let (a, _, _) =
+            flown_tables(&dir, &meta, Some(&dir.join("none"))).unwrap_or((None, None, None));
+        assert!(a.is_none(), "--tables given: only that folder counts");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}
