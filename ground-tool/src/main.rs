@@ -66,8 +66,10 @@ enum Command {
     /// thermal/orbital alignment, FHST distortion and magnitude bias, FSS transfer function,
     /// catalog errors, gyro bias drift, thermal bias and scale asymmetry) jointly with the
     /// alignments and keeps an effect only on the evidence (likelihood ratio, BIC, halves).
-    /// Writes OUT/report.md, OUT/report.json, PNG plots and OUT/tables/*.tbl (alignment
-    /// corrections, filter flags) for `sim-harness run ... --tables OUT/tables`. Scores against
+    /// Writes OUT/report.md, OUT/report.json, PNG plots and OUT/tables/*.tbl for
+    /// `sim-harness run ... --tables OUT/tables`, which loads every image of the folder:
+    /// alignment.tbl and iru.tbl always, filter.tbl and star_catalog.tbl when a detected
+    /// effect changes them (report.md lists what went into each). Scores against
     /// RUN_DIR/truth.json only if it exists (labelled as scoring).
     Diagnose {
         /// Run folder with telemetry.bin.

@@ -8,7 +8,7 @@ error = (θ_k − θ_FHST1)_calibrated − (θ_k − θ_FHST1)_injected, NEES = 
 report.json `ffcal.relative_covariance_to_fhst1_arcsec2[k]` (3 = covariance right).
 
     cargo build --release -p ground-tool
-    python3 tests/icd/calibrate_seeds.py [N=10] [--work /tmp/icd-seeds] [-- writer flags ...]
+    python3 tests/icd/calibrate_seeds.py [--work /tmp/icd-seeds] [N=10] [-- writer flags ...]
 
 Standard library only.
 """
@@ -48,9 +48,9 @@ def main():
     ap.add_argument("n", type=int, nargs="?", default=10)
     ap.add_argument("--work", default="/tmp/icd-seeds")
     ap.add_argument("--bin", default=os.path.join(ROOT, "target", "release", "ground-tool"))
-    ap.add_argument("writer", nargs=argparse.REMAINDER, help="flags for write_run.py after --")
-    a = ap.parse_args()
-    extra = [x for x in a.writer if x != "--"]
+    argv = sys.argv[1:]
+    extra = argv[argv.index("--") + 1:] if "--" in argv else []
+    a = ap.parse_args(argv[:argv.index("--")] if "--" in argv else argv)
     os.makedirs(a.work, exist_ok=True)
     scores = {k: [] for k in SENSORS}
     print("| seed | " + " | ".join(f"{k}: error (″) / NEES" for k in SENSORS) + " |")
