@@ -28,7 +28,7 @@ use std::collections::BTreeMap;
 use fsw_core::attitude::{is_proper_rotation, rot, rotvec_from_rot, Quat};
 use fsw_core::raw::TimeTag;
 use fsw_core::tables::image::{
-    decode_payload, encode_image, parse_image, CRC_LEN, HEADER_LEN, IMAGE_CRC,
+    decode_catalog_into, decode_payload, encode_image, parse_image, CRC_LEN, HEADER_LEN, IMAGE_CRC,
 };
 use fsw_core::tables::types::{matrix_from_rows, rows_from_matrix, ROTATION_TOLERANCE};
 use fsw_core::tables::{
@@ -430,6 +430,49 @@ proptest! {
         }
         let mut set = Box::new(TableSet::boot());
         round_trip(&mut set, TableId::StarCatalog, c, &t, TableSet::catalog)?;
+    }
+}
+
+proptest! {
+    #![proptest_config(Config { cases: 256, failure_persistence: None, ..Config::default() })]
+
+    /// The in-place catalog decoder (`decode_catalog_into`, used by `TableSet::load` so the
+    /// ~82 KB table never passes through the stack) accepts exactly what `decode_payload`
+    /// accepts, with the same table: on the valid payload, truncated, extended, and with one
+    /// byte changed.
+    #[test]
+    fn catalog_in_place_decoder_agrees_with_decode_payload(
+        t in catalog(40),
+        cut in any::<prop::sample::Index>(),
+        flip in any::<(prop::sample::Index, u8)>(),
+        extra in any::<u8>(),
+    ) {
+        let payload = postcard::to_allocvec(&t).unwrap();
+        let mut variants = vec![payload.clone()];
+        variants.push(payload[..cut.index(payload.len())].to_vec());
+        let mut longer = payload.clone();
+        longer.push(extra);
+        variants.push(longer);
+        let mut flipped = payload.clone();
+        let i = flip.0.index(flipped.len());
+        flipped[i] ^= flip.1.max(1);
+        variants.push(flipped);
+        // A star count beyond the capacity (varint 4097) with nothing after it.
+        let mut too_many = postcard::to_allocvec(&t.epoch_years_since_j2000).unwrap();
+        too_many.extend_from_slice(&[0x81, 0x20]);
+        variants.push(too_many);
+        for v in &variants {
+            let by_value = decode_payload::<StarCatalogTable>(v);
+            let mut in_place = small_catalog();
+            let r = decode_catalog_into(v, &mut in_place);
+            match by_value {
+                Ok(expected) => {
+                    prop_assert_eq!(r, Ok(()));
+                    prop_assert_eq!(in_place, expected);
+                }
+                Err(e) => prop_assert_eq!(r, Err(e)),
+            }
+        }
     }
 }
 

@@ -353,6 +353,45 @@ pub fn decode_payload<T: DeserializeOwned + Serialize>(payload: &[u8]) -> Result
     }
 }
 
+/// Decode a star-catalog payload into `out` in place, star by star.
+/// docs/tables.md (Table 4; the same bytes as [`decode_payload`] accepts).
+///
+/// Why not [`decode_payload`]: postcard returns the ~82 KB table by value, and the moves
+/// of that value made the load path's stack frame 411 KB on the Cortex-M4
+/// (`scripts/qemu-replay.sh`). Here only one 18-byte star is on the stack at a time. The
+/// loop is bounded by `MAX_CATALOG_STARS` (a longer list is refused before any star is read).
+///
+/// # Errors
+/// [`TableError::PayloadDecode`] for anything `decode_payload` would refuse (malformed,
+/// trailing bytes, more than `MAX_CATALOG_STARS` stars, a non-canonical encoding); `out` is
+/// then in an unspecified but valid state (the caller discards it).
+pub fn decode_catalog_into(
+    payload: &[u8],
+    out: &mut crate::tables::types::StarCatalogTable,
+) -> Result<(), TableError> {
+    use crate::tables::types::{CatalogStar, MAX_CATALOG_STARS};
+    let bad = |_| TableError::PayloadDecode;
+    let (epoch, rest) = postcard::take_from_bytes::<f64>(payload).map_err(bad)?;
+    let (count, mut rest) = postcard::take_from_bytes::<usize>(rest).map_err(bad)?;
+    if count > MAX_CATALOG_STARS {
+        return Err(TableError::PayloadDecode);
+    }
+    out.epoch_years_since_j2000 = epoch;
+    out.stars.clear();
+    for _ in 0..count {
+        let (star, tail) = postcard::take_from_bytes::<CatalogStar>(rest).map_err(bad)?;
+        out.stars
+            .push(star)
+            .map_err(|_| TableError::PayloadDecode)?;
+        rest = tail;
+    }
+    if rest.is_empty() && is_canonical(&*out, payload) {
+        Ok(())
+    } else {
+        Err(TableError::PayloadDecode)
+    }
+}
+
 /// `payload` is exactly the postcard encoding of `value` (no buffer: see [`CompareFlavor`]).
 #[inline(never)]
 fn is_canonical<T: Serialize>(value: &T, payload: &[u8]) -> bool {

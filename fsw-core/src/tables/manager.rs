@@ -12,7 +12,9 @@
 //! TBL-002 a dump of the active table round-trips bit for bit; TBL-003 activation only of a
 //! validated inactive buffer.
 
-use super::image::{decode_payload, encode_image, parse_image, TableError, TableId};
+use super::image::{
+    decode_catalog_into, decode_payload, encode_image, parse_image, TableError, TableId,
+};
 use super::types::{
     check_alignment_change, check_iru_change, AlignmentTable, FilterTable, IruTable,
     StarCatalogTable,
@@ -88,16 +90,17 @@ impl<T: Clone> Slot<T> {
     }
 
     fn activate(&mut self) -> bool {
-        match self.inactive.take() {
-            Some((table, created, crc)) => {
-                self.active = table;
-                self.active_created = created;
-                self.active_crc = crc;
-                self.activations = self.activations.saturating_add(1);
-                true
-            }
-            None => false,
-        }
+        // Swap in place rather than move the table out of the option: the star catalog is
+        // ~82 KB and a move would copy it through the stack.
+        let Some((table, created, crc)) = self.inactive.as_mut() else {
+            return false;
+        };
+        core::mem::swap(&mut self.active, table);
+        self.active_created = *created;
+        self.active_crc = *crc;
+        self.activations = self.activations.saturating_add(1);
+        self.inactive = None;
+        true
     }
 }
 
@@ -260,9 +263,16 @@ impl TableSet {
                 self.filter.inactive = Some((t, created, crc));
             }
             TableId::StarCatalog => {
-                let t: StarCatalogTable = decode_payload(payload)?;
-                t.validate()?;
-                self.catalog.inactive = Some((t, created, crc));
+                // In place: the ~82 KB table never passes through the stack
+                // (`decode_catalog_into`); `load` clears the buffer on any error.
+                let slot = self
+                    .catalog
+                    .inactive
+                    .get_or_insert_with(|| (StarCatalogTable::default(), created, crc));
+                decode_catalog_into(payload, &mut slot.0)?;
+                slot.0.validate()?;
+                slot.1 = created;
+                slot.2 = crc;
             }
         }
         Ok(())
