@@ -5,8 +5,14 @@ Writes a run folder (telemetry.bin + metadata.json + truth_icd.json) for a simpl
 physically consistent scenario: a circular orbit, inertial holds with the Sun in the FSS
 fields and slews about single body axes between them, real Hipparcos stars from
 data/hipparcos_mag6p5.csv (proper motion, parallax, annual + orbital aberration), the Sun
-from Meeus' low-precision formula (Astronomical Algorithms ch. 25) precessed to J2000 with
+and the Earth's velocity interpolated in data/sun_reference.csv (JPL DE421, 1991; outside
+it Meeus' low-precision formula, Astronomical Algorithms ch. 25, precessed to J2000) with
 parallax and aberration, and FHST / FSS / IRU counts computed with the ICD's conventions.
+
+Optional undeclared effects (--time-tag, --orbit-align, --fhst-radial, --fss-transfer,
+--gyro-asym, --gyro-ramp, and outside diagnose's library --gyro-rate2, --ringing,
+--align-step) are recorded in truth_icd.json "effects" with the library's parameter names;
+--plan long is the calibration day tests/icd/diagnose_cases.py flies them on.
 
 It is deliberately written without the simulator's or the flight software's encoders: every
 byte comes from the tables of docs/icd.md (and the conventions it cites: docs/conventions.md,
