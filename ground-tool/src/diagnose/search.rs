@@ -618,6 +618,27 @@ fn search_with_pitch(
                                         "lack of fit: a generic extension (orbit harmonics 2–3, ΔT²) still explains Δχ² {d:.1} (F {f_ext:.2}, p {p_ext:.1e})"
                                     ));
                                 }
+                                // The form with the second harmonic describes a thermal orbit
+                                // cycle, which has its once-per-orbit part: given the generic
+                                // extension (which holds the 2u terms), the candidate must
+                                // still add something. A twice-per-orbit structure alone (a
+                                // geomagnetic sensitivity, algorithms.md §9 row 18, or a
+                                // ΔT² term of a sinusoidal temperature) is left unexplained.
+                                if e.adequate && effect.harmonics > 1 {
+                                    let mut only_ext = model.to_vec();
+                                    only_ext.push(ext);
+                                    if let Some(f0) = fit_model(&systems.full, &only_ext) {
+                                        let d1 = f0.chi2 - fe.chi2;
+                                        let f1 = (d1 / 6.0) / fe.s2();
+                                        let p1 = f_sf(f1, 6.0, fe.dof);
+                                        if !(p1 < config.alpha) {
+                                            e.adequate = false;
+                                            why.push(format!(
+                                                "no once-per-orbit part: given the 2u terms the candidate adds Δχ² {d1:.1} (F {f1:.2}, p {p1:.1e})"
+                                            ));
+                                        }
+                                    }
+                                }
                             }
                         }
                     }
