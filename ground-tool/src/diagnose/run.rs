@@ -251,7 +251,7 @@ pub fn diagnose_run(
 
     // Flight tables.
     let filter_flown = flown_filter.unwrap_or_else(FilterTable::default_boot);
-    let flight = super::flight::flight_update(
+    let mut flight = super::flight::flight_update(
         &analysis.search,
         &cal.alignment,
         &filter_flown,
@@ -259,6 +259,18 @@ pub fn diagnose_run(
         analysis.set.count_per_sensor(),
         analysis.set.temperature_mean_c,
     )?;
+    // What `calibrate` uplinks as well (`calibrate::filter_update`): the onboard annual-
+    // aberration correction when the model declares aberration and the flown table has it off.
+    let (chain_filter, chain_changes) = crate::pipeline::calibrate::filter_update(
+        flight.filter.as_ref().unwrap_or(&filter_flown),
+        &metadata,
+    )?;
+    if let Some(f) = chain_filter {
+        flight.filter = Some(f);
+        flight
+            .applied
+            .extend(chain_changes.iter().map(|c| format!("calibration chain: filter.{c}")));
+    }
     std::fs::create_dir_all(out_dir.join("tables"))
         .with_context(|| format!("creating {}", out_dir.display()))?;
     let created = tm.raw.last().map_or(0.0, |r| r.time.seconds());
