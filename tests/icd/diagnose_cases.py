@@ -41,6 +41,7 @@ CASES = {
     # --- single library effects
     "fhst1-time-tag": ["--time-tag", "FHST1:0.08"],  # 23″ at the 0.08°/s slew rate
     "fss1-time-tag": ["--time-tag", "FSS1:0.2"],  # 58″ at 0.08°/s
+    "fss1-time-tag-large": ["--time-tag", "FSS1:0.4"],  # 115″ at 0.08°/s: beyond the outlier cut
     "fhst2-orbit-1+2": ["--temps", "flat", "--orbit-align",
                         "FHST2:4,-3,6,-2,5,3,2,-1,3,1,2,-2"],  # once ≈ 5–7″, twice ≈ 2–3″ per axis
     "fhst2-orbit-1": ["--temps", "flat", "--orbit-align", "FHST2:4,-3,6,-2,5,3"],

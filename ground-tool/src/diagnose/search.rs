@@ -344,8 +344,18 @@ fn search_with_pitch(
     // the pitch search).
     let prelim_layout = Layout::new(super::effects::library(set, [None, None]));
     let prelim_sys = accumulate_halves(set, &prelim_layout);
+    // The per-sensor time tags are in it too: their signature grows with the rate, and a
+    // large one (an FSS 0.4 s late: 115″ at 0.08°/s) otherwise puts its slew samples beyond
+    // the outlier threshold, so that the search never sees them (censored: the estimate is
+    // biased toward zero and its halves disagree). One parameter per sensor, and only these
+    // flags and the pitch search use this fit.
     let prelim_tf: Vec<usize> = (0..prelim_layout.effects.len())
-        .filter(|&i| prelim_layout.effects[i].kind == EffectKind::FssTransferFunction)
+        .filter(|&i| {
+            matches!(
+                prelim_layout.effects[i].kind,
+                EffectKind::FssTransferFunction | EffectKind::TimeTagOffset
+            )
+        })
         .collect();
     let prelim = solve(
         &prelim_sys.full,
