@@ -267,9 +267,11 @@ pub fn diagnose_run(
     )?;
     if let Some(f) = chain_filter {
         flight.filter = Some(f);
-        flight
-            .applied
-            .extend(chain_changes.iter().map(|c| format!("calibration chain: filter.{c}")));
+        flight.applied.extend(
+            chain_changes
+                .iter()
+                .map(|c| format!("calibration chain: filter.{c}")),
+        );
     }
     std::fs::create_dir_all(out_dir.join("tables"))
         .with_context(|| format!("creating {}", out_dir.display()))?;
