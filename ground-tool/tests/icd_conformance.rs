@@ -7,7 +7,7 @@
 //!
 //! Tolerances come from what the writer injects: FHST noise 6″ (mag 2) to 18″ (mag 5.7) per
 //! axis plus 7.78″ counts; FSS noise 0.5 count of 0.004° plus quantisation; the writer's Sun
-//! (Meeus ch. 25) is within 18″ of DE421 (checked against `data/sun_reference.csv`); IRU bias
+//! (DE421, interpolated from `data/sun_reference.csv`; Meeus ch. 25 only outside it); IRU bias
 //! [0.30, −0.20, 0.25]″/s, ARW 2e-8 rad/√s.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
