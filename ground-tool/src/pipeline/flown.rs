@@ -75,11 +75,21 @@ fn flown<T: serde::de::DeserializeOwned + serde::Serialize>(
     table: &str,
     file: &str,
 ) -> anyhow::Result<Option<T>> {
-    let path = match tables {
-        Some(dir) => Some(dir.join(file)).filter(|p| p.exists()),
-        None => activated_uploads(run_dir, meta, table).last(),
+    let (path, whence) = match tables {
+        Some(dir) => (
+            Some(dir.join(file)).filter(|p| p.exists()),
+            "given with --tables",
+        ),
+        None => (
+            activated_uploads(run_dir, meta, table).last(),
+            "the last activated upload of metadata.json `uploads`; pass --tables DIR to use other tables",
+        ),
     };
-    path.map(|p| read_table_image(&p)).transpose()
+    path.map(|p| {
+        read_table_image(&p)
+            .map_err(|e| anyhow::anyhow!("{e:#} (the flown {table} table: {whence})"))
+    })
+    .transpose()
 }
 
 /// Alignment, IRU and filter tables flown (`None` = boot).
