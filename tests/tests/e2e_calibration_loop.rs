@@ -121,6 +121,50 @@ fn e2e_calibration_loop_gro_early_mission() {
         rms(&r.post_maneuver_error_deg.after),
     );
     assert!(pa < pb, "post-maneuver RMS {pb:.4}° → {pa:.4}°");
+    // The uplink carried the onboard annual-aberration correction (aberration is declared,
+    // the boot filter table had it off).
+    assert!(!calibration.report.filter_changes.is_empty());
+    assert!(cal.join("tables").join("filter.tbl").exists());
+
+    // The loop again, on the second flight, with no --tables: the chain takes the flown
+    // tables from the run's activated uploads (`pipeline::flown`), so it starts from the
+    // calibrated tables and finds nothing left to fix: residuals at the floor before as
+    // after, every correction within 3σ of zero, and no filter change. With the boot tables
+    // assumed instead, the "before" residuals would be the prelaunch ones (223″ on FHST1).
+    let fly_b = out.join("b");
+    let meta = ground_tool::pipeline::flown::metadata_json(&fly_b);
+    let (fa, fi, ff) = ground_tool::pipeline::flown::flown_tables(&fly_b, &meta, None).unwrap();
+    assert!(fa.is_some() && fi.is_some() && ff.is_some_and(|f| f.aberration_correction));
+    let again = calibrate_run(
+        &fly_b,
+        &out.join("cal2"),
+        &CalibrateOptions {
+            flown_alignment: fa,
+            flown_iru: fi,
+            flown_filter: ff,
+            ..CalibrateOptions::default()
+        },
+    )
+    .unwrap();
+    let rep = &again.report;
+    assert!(rep.filter_changes.is_empty(), "{:?}", rep.filter_changes);
+    for (sensor, before) in &rep.residual_rms_arcsec.before {
+        let after = rep.residual_rms_arcsec.after[sensor];
+        assert!(
+            *before < 1.05 * after,
+            "{sensor}: second pass residual {before:.1}″ → {after:.1}″"
+        );
+    }
+    for (sensor, a) in &rep.alignments {
+        for axis in 0..3 {
+            assert!(
+                a.theta_acs_arcsec[axis].abs() < 3.0 * a.sigma_arcsec[axis],
+                "{sensor} axis {axis}: second-pass correction {:.1}″, σ {:.1}″",
+                a.theta_acs_arcsec[axis],
+                a.sigma_arcsec[axis]
+            );
+        }
+    }
     let _ = std::fs::remove_dir_all(&out);
 }
 
