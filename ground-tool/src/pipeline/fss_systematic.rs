@@ -26,7 +26,7 @@
 //!
 //! the 3 being the FSS's own alignment, fitted to the same cells (a negative sum gives 0).
 
-use std::collections::HashMap;
+use std::collections::BTreeMap;
 
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 use serde::Serialize;
@@ -54,7 +54,8 @@ pub struct FssSystematicEstimate {
     pub dof: usize,
 }
 
-/// Per-cell normal equations of the Sun-direction error (ACS, rad).
+/// Per-cell normal equations of the Sun-direction error (ACS, rad). Kept in a `BTreeMap`:
+/// the sums over cells must run in one order for the report to be reproducible bit for bit.
 #[derive(Default)]
 struct Cell {
     normal: Matrix3<f64>,
@@ -71,7 +72,7 @@ pub fn estimate_fss_systematic(
     declared_arcsec: f64,
     cell_of: impl Fn(&Vector3<f64>) -> (i64, i64),
 ) -> [FssSystematicEstimate; 2] {
-    let mut cells: [HashMap<(i64, i64), Cell>; 2] = [HashMap::new(), HashMap::new()];
+    let mut cells: [BTreeMap<(i64, i64), Cell>; 2] = [BTreeMap::new(), BTreeMap::new()];
     for f in frames {
         for (k, sun) in f.suns.iter().enumerate() {
             let Some(sun) = sun else { continue };
