@@ -52,6 +52,16 @@ fn main() -> anyhow::Result<()> {
     println!("with eph    θ = [{:.1}, {:.1}, {:.1}]", ta.x, ta.y, ta.z);
     println!("without eph θ = [{:.1}, {:.1}, {:.1}]", tb.x, tb.y, tb.z);
     let spans = star_batches(&fa);
+    // The spans with identified stars: the batch indices of the samples count only these.
+    let with_samples: Vec<(usize, usize)> = spans
+        .iter()
+        .copied()
+        .filter(|(lo, hi)| {
+            fa[*lo..*hi]
+                .iter()
+                .any(|f| f.stars.iter().flatten().any(|s| s.identified.is_some()))
+        })
+        .collect();
     println!("batch  t0(s)  len(s)  rate  n1  n2  |Δref| max FHST1/FHST2 (″)  shift alone (″)");
     for b in 0..na {
         let mixed: Vec<BatchStarSample> = sa
@@ -68,17 +78,8 @@ fn main() -> anyhow::Result<()> {
             dmax[a.tracker] = dmax[a.tracker].max(dd);
             cnt[a.tracker] += 1;
         }
-        // Batch index b counts only batches with samples; map to spans with samples.
-        let (lo, hi) = spans
-            .iter()
-            .copied()
-            .filter(|(lo, hi)| {
-                fa[*lo..*hi]
-                    .iter()
-                    .any(|f| f.stars.iter().flatten().any(|s| s.identified.is_some()))
-            })
-            .nth(b)
-            .unwrap_or((0, 1));
+        // Batch index b counts only batches with samples.
+        let (lo, hi) = with_samples.get(b).copied().unwrap_or((0, 1));
         println!(
             "{b:5} {:7.0} {:6.0} {:5} {:4} {:4}  {:6.1} {:6.1}  [{:6.1}, {:6.1}, {:6.1}]",
             fa[lo].time.seconds() - fa[0].time.seconds(),
@@ -173,15 +174,6 @@ fn main() -> anyhow::Result<()> {
         .matrices()
         .iter()
         .map(|r| fsw_core::tables::types::matrix_from_rows(r))
-        .collect();
-    let with_samples: Vec<(usize, usize)> = spans
-        .iter()
-        .copied()
-        .filter(|(lo, hi)| {
-            fa[*lo..*hi]
-                .iter()
-                .any(|f| f.stars.iter().flatten().any(|s| s.identified.is_some()))
-        })
         .collect();
     let show: Vec<usize> = args.get(3).map_or(vec![], |s| {
         s.split(',').filter_map(|x| x.parse().ok()).collect()

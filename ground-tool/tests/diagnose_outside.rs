@@ -6,35 +6,16 @@
 //! 82-min plan). python3 is required (CI has it).
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
-use serde_json::Value;
-use std::path::{Path, PathBuf};
-use std::process::Command;
+mod support;
 
-fn root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .parent()
-        .unwrap()
-        .to_path_buf()
-}
+use serde_json::Value;
+use std::process::Command;
 
 /// Write a run with the writer's `flags`, diagnose it, return report.json and the truth.
 fn write_and_diagnose(case: &str, flags: &[&str]) -> (Value, Value) {
-    let dir = std::env::temp_dir().join(format!("diagnose-outside-{}-{case}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    let out = Command::new("python3")
-        .arg(root().join("tests/icd/write_run.py"))
-        .arg("--out")
-        .arg(&dir)
-        .arg("--seed")
-        .arg("1")
-        .args(flags)
-        .output()
-        .expect("python3 is required for this test (CI has it)");
-    assert!(
-        out.status.success(),
-        "writer failed for {case}: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let mut all = vec!["--seed", "1"];
+    all.extend_from_slice(flags);
+    let dir = support::write_run("diagnose-outside", case, &all);
     let diag = dir.join("diag");
     let out = Command::new(env!("CARGO_BIN_EXE_ground-tool"))
         .arg("diagnose")

@@ -11,34 +11,15 @@
 //! [0.30, −0.20, 0.25]″/s, ARW 2e-8 rad/√s.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
+mod support;
+
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-fn root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .parent()
-        .unwrap()
-        .to_path_buf()
-}
-
 /// Write a run with the writer's `flags` into a fresh folder named after the case.
 fn write_run(case: &str, flags: &[&str]) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("icd-conformance-{}-{case}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    let out = Command::new("python3")
-        .arg(root().join("tests/icd/write_run.py"))
-        .arg("--out")
-        .arg(&dir)
-        .args(flags)
-        .output()
-        .expect("python3 is required for the ICD conformance tests (CI has it)");
-    assert!(
-        out.status.success(),
-        "writer failed for {case}: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    dir
+    support::write_run("icd-conformance", case, flags)
 }
 
 /// Outcome of one ground-tool command.

@@ -304,38 +304,31 @@ fn anova(
     Some((f, d1, d2, size, bins))
 }
 
+/// The samples of the first 900 s after a slew (`x` = time since the slew), `None` with
+/// fewer than 100 of them.
+fn post_slew_window(samples: &[Sample]) -> Option<Vec<Sample>> {
+    let early: Vec<Sample> = samples
+        .iter()
+        .filter(|s| s.x < 900.0)
+        .map(|s| Sample {
+            x: s.x,
+            r: s.r,
+            w: s.w,
+        })
+        .collect();
+    (early.len() >= 100).then_some(early)
+}
+
 fn run_one(samples: &[Sample], method: Method) -> Option<(f64, f64, f64, f64, Vec<(f64, f64)>)> {
     let n = samples.len();
     match method {
         Method::Groups => anova(samples, &|s| s.x.round() as i64),
         Method::FineBinned => {
-            let early: Vec<Sample> = samples
-                .iter()
-                .filter(|s| s.x < 900.0)
-                .map(|s| Sample {
-                    x: s.x,
-                    r: s.r,
-                    w: s.w,
-                })
-                .collect();
-            if early.len() < 100 {
-                return None;
-            }
+            let early = post_slew_window(samples)?;
             anova(&early, &|s| (s.x / 15.0).floor() as i64)
         }
         Method::Ringing => {
-            let early: Vec<Sample> = samples
-                .iter()
-                .filter(|s| s.x < 900.0)
-                .map(|s| Sample {
-                    x: s.x,
-                    r: s.r,
-                    w: s.w,
-                })
-                .collect();
-            if early.len() < 100 {
-                return None;
-            }
+            let early = post_slew_window(samples)?;
             let (rss0, c0) = wls_rss(&early, &|_, row: &mut [f64]| row[0] = 1.0, 1)?;
             let mut best: Option<(f64, f64, f64, Vec<f64>)> = None;
             for &p in &RINGING_PERIODS {

@@ -457,7 +457,7 @@ pub fn read_metadata(run_dir: &Path) -> anyhow::Result<Metadata> {
 }
 
 /// The FSS field cell of a sensor-frame Sun direction ([`FSS_CELL_DEG`] on each head angle).
-fn fss_cell(d: &Vector3<f64>) -> (i64, i64) {
+pub(crate) fn fss_cell(d: &Vector3<f64>) -> (i64, i64) {
     let a = d.x.atan2(d.z).to_degrees() / FSS_CELL_DEG;
     let b = d.y.atan2(d.z).to_degrees() / FSS_CELL_DEG;
     (a.floor() as i64, b.floor() as i64)

@@ -13,14 +13,8 @@ use fsw_core::tables::{AlignmentTable, FilterTable, IruTable, StarCatalogTable};
 use super::calibrate::read_table_image;
 
 /// The effects every GRO analyst's model includes when `metadata.json` does not list
-/// `declared_effects` (the same list `sim-harness` declares by default).
-pub const DEFAULT_DECLARED_EFFECTS: [&str; 5] = [
-    "aberration",
-    "orbital_aberration",
-    "sun_parallax",
-    "fss_transfer_function",
-    "iru_bias_transient",
-];
+/// `declared_effects`: the list `sim-harness` declares by default (one definition).
+pub use sim_harness::scenario::DEFAULT_DECLARED_EFFECTS;
 
 /// `metadata.json` as JSON (`Null` when absent or unreadable: every field has a default).
 #[must_use]

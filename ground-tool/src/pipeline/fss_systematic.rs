@@ -129,6 +129,7 @@ pub fn estimate_fss_systematic(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::pipeline::calibrate::fss_cell as cell;
     use crate::pipeline::observations::{StarObservation, SunObservation};
     use fsw_core::fhst::FhstMeasurement;
     use fsw_core::fss::FssMeasurement;
@@ -207,12 +208,6 @@ mod tests {
             }
         }
         out
-    }
-
-    fn cell(d: &Vector3<f64>) -> (i64, i64) {
-        let a = d.x.atan2(d.z).to_degrees() / 8.0;
-        let b = d.y.atan2(d.z).to_degrees() / 8.0;
-        (a.floor() as i64, b.floor() as i64)
     }
 
     /// The level of iid per-cell errors is recovered (mean over seeds within 10 %), and white

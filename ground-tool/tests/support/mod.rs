@@ -1,0 +1,32 @@
+//! Shared by the tests that run the independent ICD writer (`tests/icd/write_run.py`).
+#![allow(dead_code, clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+/// The workspace root.
+pub fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .unwrap()
+        .to_path_buf()
+}
+
+/// Write a run with the writer's `flags` into a fresh temporary folder `<prefix>-<pid>-<case>`.
+pub fn write_run(prefix: &str, case: &str, flags: &[&str]) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("{prefix}-{}-{case}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let out = Command::new("python3")
+        .arg(root().join("tests/icd/write_run.py"))
+        .arg("--out")
+        .arg(&dir)
+        .args(flags)
+        .output()
+        .expect("python3 is required for the tests that run the ICD writer (CI has it)");
+    assert!(
+        out.status.success(),
+        "writer failed for {case}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    dir
+}
