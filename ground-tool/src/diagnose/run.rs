@@ -24,7 +24,7 @@ use crate::calibration::iru::GyroCalibration;
 use crate::pipeline::calibrate::{
     calibrate_telemetry, read_run, write_table, CalibrateOptions, CalibrationOutput,
 };
-use crate::pipeline::flown::{declared_effects, flown_catalog, flown_tables, metadata_json};
+use crate::pipeline::flown::{flown_catalog, flown_tables, metadata_json};
 use crate::tp;
 use anyhow::Context;
 use fsw_core::tables::{AlignmentTable, FilterTable, IruTable, TableId};
@@ -160,7 +160,7 @@ pub fn diagnose_run(
 ) -> anyhow::Result<DiagnoseOutput> {
     let (tm, metadata) = read_run(run_dir)?;
     let meta_raw = metadata_json(run_dir);
-    let declared = declared_effects(&meta_raw);
+    let declared = metadata.declared();
     let flown_catalog = flown_catalog(run_dir, &meta_raw, opts.tables.as_deref())?;
     let annual = declared.iter().any(|d| d == "aberration");
     let orbital = declared.iter().any(|d| d == "orbital_aberration");

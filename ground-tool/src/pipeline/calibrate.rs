@@ -122,6 +122,18 @@ pub struct Metadata {
 }
 
 impl Metadata {
+    /// The effects the operator's model includes: the list given, or the GRO defaults
+    /// ([`super::flown::DEFAULT_DECLARED_EFFECTS`]) when `declared_effects` is absent.
+    #[must_use]
+    pub fn declared(&self) -> Vec<String> {
+        self.declared_effects.clone().unwrap_or_else(|| {
+            super::flown::DEFAULT_DECLARED_EFFECTS
+                .iter()
+                .map(|s| (*s).to_owned())
+                .collect()
+        })
+    }
+
     /// Whether the operator's model includes `effect` (absent list = the GRO defaults).
     #[must_use]
     pub fn declares(&self, effect: &str) -> bool {

@@ -25,21 +25,6 @@ pub fn metadata_json(run_dir: &Path) -> serde_json::Value {
         .unwrap_or(serde_json::Value::Null)
 }
 
-/// The declared effects: the metadata's list, or [`DEFAULT_DECLARED_EFFECTS`] when it has none.
-#[must_use]
-pub fn declared_effects(meta: &serde_json::Value) -> Vec<String> {
-    match meta.get("declared_effects").and_then(|v| v.as_array()) {
-        Some(a) => a
-            .iter()
-            .filter_map(|x| x.as_str().map(str::to_owned))
-            .collect(),
-        None => DEFAULT_DECLARED_EFFECTS
-            .iter()
-            .map(|s| (*s).to_owned())
-            .collect(),
-    }
-}
-
 /// The image files of the activated, accepted uploads of `table` ("alignment", "iru",
 /// "filter", "star_catalog"), in upload order.
 fn activated_uploads<'a>(
@@ -135,9 +120,11 @@ mod tests {
 
     #[test]
     fn absent_declared_effects_are_the_gro_defaults_an_empty_list_is_none() {
-        let absent = declared_effects(&serde_json::json!({}));
+        let meta =
+            |v: serde_json::Value| -> Metadata { serde_json::from_value(v).unwrap_or_default() };
+        let absent = meta(serde_json::json!({})).declared();
         assert_eq!(absent, DEFAULT_DECLARED_EFFECTS.map(str::to_owned).to_vec());
-        let empty = declared_effects(&serde_json::json!({ "declared_effects": [] }));
+        let empty = meta(serde_json::json!({ "declared_effects": [] })).declared();
         assert!(empty.is_empty());
         let m: Metadata = serde_json::from_value(serde_json::json!({})).unwrap_or_default();
         assert!(m.declares("aberration"));
