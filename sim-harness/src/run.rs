@@ -8,7 +8,7 @@
 //! | `telemetry.bin` | CCSDS packets ([`crate::telemetry`]) |
 //! | `metadata.json` | what the operator declares: `scenario`, `epoch_utc`, `cycle_period_s`, `sensors` (declared noise from the scenario's sensor parameters), `declared_effects`, `boot_tables`, `uploads` |
 //! | `uploads/*.tbl` | every table image uplinked (catalog, `--tables`, timeline loads) |
-//! | `truth.json` | scoring only: true `alignments.{FHST1,FHST2,FSS1,FSS2}` (`M_AS`, row-major), IRU `delta_m` and `g` per configuration, `bias_history`, `undeclared_effects` |
+//! | `truth.json` | scoring only: true `alignments.{FHST1,FHST2,FSS1,FSS2}` (`M_AS`, row-major), IRU `delta_m` and `g` per configuration, `bias_history`, the flown `fss_transfer_function`, `present_effects`, `undeclared_effects` |
 //! | `summary.json` | run statistics ([`Summary`]) |
 //!
 //! Every file is written under a `.partial` name and renamed when complete; `summary.json`
@@ -36,6 +36,7 @@ use serde::{Deserialize, Serialize};
 use crate::closed_loop::{CycleRecord, Simulation};
 use crate::paper::PaperFacts;
 use crate::scenario::Scenario;
+use crate::sensors::fss::FssParams;
 use crate::sensors::iru::{BACKUP_CHANNELS, PRIMARY_CHANNELS};
 use crate::telemetry::PacketWriter;
 use crate::truth::time::utc_string;
@@ -488,28 +489,28 @@ pub fn declared_noise(s: &Scenario) -> serde_json::Value {
     let faint = (f.sigma_arcsec(f.magnitude_max, corner).powi(2) + q2).sqrt();
     let fss = &s.fss1;
     let count_arcsec = fss.resolution_deg_per_count * 3600.0;
-    let mut tf2 = 0.0;
-    let mut n = 0.0;
-    for i in -5..=5 {
-        for j in -5..=5 {
-            let a = f64::from(i) * 5.0 * RAD_PER_DEG;
-            let b = f64::from(j) * 5.0 * RAD_PER_DEG;
-            let ea = (fss.alpha.apply(a, b) - a) * ARCSEC_PER_RAD;
-            let eb = (fss.beta.apply(b, a) - b) * ARCSEC_PER_RAD;
-            tf2 += 0.5 * (ea * ea + eb * eb);
-            n += 1.0;
-        }
-    }
-    let fss_sigma =
-        ((fss.noise_counts_1sigma * count_arcsec).powi(2) + count_arcsec.powi(2) / 12.0 + tf2 / n)
-            .sqrt();
-    serde_json::json!({
+    let tf_rms = [&s.fss1, &s.fss2].map(FssParams::transfer_function_rms_arcsec);
+    let fss_sigma = ((fss.noise_counts_1sigma * count_arcsec).powi(2)
+        + count_arcsec.powi(2) / 12.0
+        + tf_rms[0].powi(2))
+    .sqrt();
+    let mut v = serde_json::json!({
         "fhst_sigma_arcsec": [bright, faint],
         "fss_noise_counts": fss.noise_counts_1sigma,
         "fss_sigma_arcsec": fss_sigma,
         "iru_arw_rad_per_sqrt_s": s.iru.angle_random_walk_arcsec_per_sqrt_s * RAD_PER_ARCSEC,
         "iru_rrw_rad_per_s_sqrt_s": s.iru.bias_random_walk_arcsec_per_s15 * RAD_PER_ARCSEC,
-    })
+    });
+    // The level of a declared transfer function is part of the declaration (an undeclared
+    // one leaves the ground at its default, the paper's 0.022°).
+    if s.declared_effects()
+        .iter()
+        .any(|e| e == "fss_transfer_function")
+    {
+        v["fss_systematic_arcsec"] =
+            serde_json::json!((0.5 * (tf_rms[0].powi(2) + tf_rms[1].powi(2))).sqrt());
+    }
+    v
 }
 
 fn metadata_json(sim: &Simulation, scorer: &Scorer) -> serde_json::Value {
@@ -597,6 +598,11 @@ fn truth_json(sim: &Simulation, bias: &BiasRecorder) -> anyhow::Result<serde_jso
             "period_s": bias.period_s,
             "note": "true gyro bias mapped to ACS through the true triad geometry; channel biases in raw channel order X1, X2, Y1, Y2, Z1, Z2",
             "samples": bias.samples,
+        },
+        "fss_transfer_function": {
+            "FSS1": { "alpha": sim.fss()[0].params().alpha, "beta": sim.fss()[0].params().beta },
+            "FSS2": { "alpha": sim.fss()[1].params().alpha, "beta": sim.fss()[1].params().beta },
+            "note": "the transfer function each FSS flew (drawn from the scenario's spreads when transfer_function_per_seed)",
         },
         "present_effects": present_effects(s),
         "undeclared_effects": undeclared_effects(s),
@@ -866,4 +872,36 @@ pub fn bench(duration_s: f64) -> anyhow::Result<serde_json::Value> {
         "cycles": sum.cycles,
         "ns_per_cycle": sum.ns_per_cycle,
     }))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The FSS systematic level is declared with a declared transfer function (the level of
+    /// the unit, or of the population when drawn per seed) and left out when the transfer
+    /// function is undeclared (the ground then uses its default).
+    #[test]
+    fn fss_systematic_declared_with_the_transfer_function() {
+        let mut s = crate::scenario::resolve("gro-early-mission").unwrap();
+        let unit = declared_noise(&s)["fss_systematic_arcsec"]
+            .as_f64()
+            .unwrap();
+        let expect = (0.5
+            * (s.fss1.transfer_function_rms_arcsec().powi(2)
+                + s.fss2.transfer_function_rms_arcsec().powi(2)))
+        .sqrt();
+        assert!(
+            (unit - expect).abs() < 1e-9 && unit > 1.0,
+            "{unit} vs {expect}"
+        );
+        s.fss1.transfer_function_per_seed = true;
+        s.fss2.transfer_function_per_seed = true;
+        let population = declared_noise(&s)["fss_systematic_arcsec"]
+            .as_f64()
+            .unwrap();
+        assert!(population != unit && population > 1.0);
+        s.declared_effects = Some(vec!["aberration".into()]);
+        assert!(declared_noise(&s).get("fss_systematic_arcsec").is_none());
+    }
 }

@@ -31,6 +31,8 @@ pub struct Truth {
     pub present: Vec<String>,
     /// The scenario, if its file was found.
     pub scenario_file: Option<sim_harness::scenario::Scenario>,
+    /// The run's seed (a per-seed FSS transfer function is drawn with it).
+    pub seed: u64,
     /// True gyro bias history: (s since the start, ACS bias in arcsec/s).
     pub bias_history: Vec<(f64, Vector3<f64>)>,
 }
@@ -78,6 +80,7 @@ pub fn read_truth(run_dir: &Path) -> anyhow::Result<Option<Truth>> {
         undeclared: list("undeclared_effects"),
         present: list("present_effects"),
         scenario_file,
+        seed: v["seed"].as_u64().unwrap_or_default(),
         bias_history: v["bias_history"]["samples"]
             .as_array()
             .map(|a| {
@@ -127,7 +130,8 @@ fn truth_field_error(m: &super::measurements::Measurement, truth: &Truth) -> [f6
             ]
         }
         _ => {
-            let f = if m.sensor == 2 { &s.fss1 } else { &s.fss2 };
+            let unit = usize::from(m.sensor == 3);
+            let f = [&s.fss1, &s.fss2][unit].as_flown(unit, truth.seed);
             [
                 (f.alpha.apply(a, b) - a) * ARCSEC_PER_RAD,
                 (f.beta.apply(b, a) - b) * ARCSEC_PER_RAD,
@@ -250,9 +254,9 @@ pub fn parameter_truth(
     };
     let fss = |n: &str| {
         if n == "FSS1" {
-            Some(&s.fss1)
+            Some(s.fss1.as_flown(0, truth.seed))
         } else if n == "FSS2" {
-            Some(&s.fss2)
+            Some(s.fss2.as_flown(1, truth.seed))
         } else {
             None
         }

@@ -63,18 +63,70 @@ impl Default for FssHeadErrors {
 }
 
 impl FssHeadErrors {
-    /// The measured angle (rad) for the true angle `own` and the other head's `other` (rad).
+    /// The five terms at the true angle `own` and the other head's `other` (rad), each for a
+    /// unit coefficient, in the order offset (arcsec), scale (ppm), cyclic (arcsec), cross
+    /// (arcsec at the corner), cubic (arcsec at the edge); the error is their dot product with
+    /// [`Self::coefficients`].
     #[must_use]
-    pub fn apply(&self, own_rad: f64, other_rad: f64) -> f64 {
+    pub fn terms(&self, own_rad: f64, other_rad: f64) -> [f64; 5] {
         let edge = 32.0 * RAD_PER_DEG;
         let (x, y) = (own_rad / edge, other_rad / edge);
         let pitch = self.cyclic_pitch_deg.abs().max(1e-6) * RAD_PER_DEG;
-        let err_arcsec = self.offset_arcsec
-            + self.scale_ppm * 1e-6 * own_rad * ARCSEC_PER_RAD
-            + self.cyclic_arcsec * (2.0 * std::f64::consts::PI * own_rad / pitch).sin()
-            + self.cross_arcsec_at_corner * x * y * y
-            + self.cubic_arcsec_at_edge * x * x * x;
+        [
+            1.0,
+            1e-6 * own_rad * ARCSEC_PER_RAD,
+            (2.0 * std::f64::consts::PI * own_rad / pitch).sin(),
+            x * y * y,
+            x * x * x,
+        ]
+    }
+
+    /// The coefficients in the order of [`Self::terms`].
+    #[must_use]
+    pub fn coefficients(&self) -> [f64; 5] {
+        [
+            self.offset_arcsec,
+            self.scale_ppm,
+            self.cyclic_arcsec,
+            self.cross_arcsec_at_corner,
+            self.cubic_arcsec_at_edge,
+        ]
+    }
+
+    /// The measured angle (rad) for the true angle `own` and the other head's `other` (rad).
+    #[must_use]
+    pub fn apply(&self, own_rad: f64, other_rad: f64) -> f64 {
+        let t = self.terms(own_rad, other_rad);
+        let err_arcsec: f64 = t.iter().zip(self.coefficients()).map(|(t, c)| t * c).sum();
         own_rad + err_arcsec * RAD_PER_ARCSEC
+    }
+
+    /// One head drawn from the population these coefficients describe as 1σ spreads: each
+    /// coefficient `N(0, |c|)` independently, the pitch kept. Why: a Monte Carlo over seeds
+    /// with one fixed transfer function samples one unit only, and says nothing about whether
+    /// the stated FSS covariance is right for the population (`transfer_function_per_seed`).
+    #[must_use]
+    pub fn drawn(&self, rng: &mut ChaCha8Rng) -> Self {
+        let mut n = || -> f64 { StandardNormal.sample(&mut *rng) };
+        Self {
+            offset_arcsec: self.offset_arcsec.abs() * n(),
+            scale_ppm: self.scale_ppm.abs() * n(),
+            cyclic_arcsec: self.cyclic_arcsec.abs() * n(),
+            cyclic_pitch_deg: self.cyclic_pitch_deg,
+            cross_arcsec_at_corner: self.cross_arcsec_at_corner.abs() * n(),
+            cubic_arcsec_at_edge: self.cubic_arcsec_at_edge.abs() * n(),
+        }
+    }
+
+    /// Mean square error (arcsec²) at `(own, other)` over the population of [`Self::drawn`]:
+    /// `Σ (c_k t_k)²`.
+    #[must_use]
+    pub fn population_mean_square_arcsec2(&self, own_rad: f64, other_rad: f64) -> f64 {
+        self.terms(own_rad, other_rad)
+            .iter()
+            .zip(self.coefficients())
+            .map(|(t, c)| (t * c).powi(2))
+            .sum()
     }
 }
 
@@ -106,6 +158,10 @@ pub struct FssParams {
     pub beta: FssHeadErrors,
     /// Undeclared effects.
     pub effects: FssEffects,
+    /// Draw this unit's transfer function from the population whose 1σ spreads are `alpha`
+    /// and `beta` ([`FssHeadErrors::drawn`]), with the run's seed; `false` = fly `alpha` and
+    /// `beta` as given (one unit in every seed).
+    pub transfer_function_per_seed: bool,
 }
 
 impl Default for FssParams {
@@ -122,7 +178,52 @@ impl Default for FssParams {
                 ..FssHeadErrors::default()
             },
             effects: FssEffects::default(),
+            transfer_function_per_seed: false,
         }
+    }
+}
+
+impl FssParams {
+    /// The parameters unit `unit` (0 or 1) flies with in scenario seed `seed`: the
+    /// transfer function drawn from its own random stream when `transfer_function_per_seed`,
+    /// else `self`.
+    #[must_use]
+    pub fn as_flown(&self, unit: usize, seed: u64) -> Self {
+        if !self.transfer_function_per_seed {
+            return self.clone();
+        }
+        let mut rng = model_rng(seed, stream::FSS1_TRANSFER + unit.min(1) as u64);
+        Self {
+            alpha: self.alpha.drawn(&mut rng),
+            beta: self.beta.drawn(&mut rng),
+            transfer_function_per_seed: false,
+            ..self.clone()
+        }
+    }
+
+    /// The transfer-function error RMS (arcsec, per axis) over the field within ±25° on each
+    /// head, 5° grid: of this unit, or, with `transfer_function_per_seed`, of the population
+    /// its draws come from. The declared FSS systematic level (metadata `fss_systematic_arcsec`).
+    #[must_use]
+    pub fn transfer_function_rms_arcsec(&self) -> f64 {
+        let mut sum = 0.0;
+        let mut n = 0.0;
+        for i in -5..=5 {
+            for j in -5..=5 {
+                let a = f64::from(i) * 5.0 * RAD_PER_DEG;
+                let b = f64::from(j) * 5.0 * RAD_PER_DEG;
+                sum += if self.transfer_function_per_seed {
+                    0.5 * (self.alpha.population_mean_square_arcsec2(a, b)
+                        + self.beta.population_mean_square_arcsec2(b, a))
+                } else {
+                    let ea = (self.alpha.apply(a, b) - a) * ARCSEC_PER_RAD;
+                    let eb = (self.beta.apply(b, a) - b) * ARCSEC_PER_RAD;
+                    0.5 * (ea * ea + eb * eb)
+                };
+                n += 1.0;
+            }
+        }
+        (sum / n).sqrt()
     }
 }
 
@@ -154,6 +255,7 @@ impl Fss {
             |a| Vector3::new(a[0], a[1], a[2]) * RAD_PER_ARCSEC,
         );
         let m_true = rot(&theta) * paper.m_acs_from_fss_prelaunch[unit];
+        let params = params.as_flown(unit, seed);
         Self::with_alignment(m_true, params, model_rng(seed, stream::FSS1 + unit as u64))
     }
 
@@ -363,5 +465,42 @@ mod tests {
             angle > 100.0 && angle < 800.0,
             "FSS1 true boresight moved {angle}″"
         );
+    }
+
+    /// Per-seed transfer functions: deterministic per (seed, unit), different between seeds
+    /// and units, the pitch kept; the declared population level is the root mean square of
+    /// the draws (500 units, within 10 %), and a fixed unit's level is its own error's RMS.
+    #[test]
+    fn per_seed_transfer_function_population() {
+        let spec = FssParams {
+            transfer_function_per_seed: true,
+            ..FssParams::default()
+        };
+        let a = spec.as_flown(0, 7);
+        assert_eq!(a, spec.as_flown(0, 7));
+        assert_ne!(a.alpha, spec.as_flown(0, 8).alpha);
+        assert_ne!(a.alpha, spec.as_flown(1, 7).alpha);
+        assert!(!a.transfer_function_per_seed);
+        assert_eq!(a.alpha.cyclic_pitch_deg, spec.alpha.cyclic_pitch_deg);
+        let declared = spec.transfer_function_rms_arcsec();
+        let n = 500;
+        let ms: f64 = (0..n)
+            .map(|seed| {
+                spec.as_flown(0, seed)
+                    .transfer_function_rms_arcsec()
+                    .powi(2)
+            })
+            .sum::<f64>()
+            / n as f64;
+        assert!(
+            (ms.sqrt() / declared - 1.0).abs() < 0.1,
+            "draws {} vs declared {declared}",
+            ms.sqrt()
+        );
+        // Without the flag the parameters fly as written.
+        let fixed = FssParams::default();
+        assert_eq!(fixed.as_flown(0, 7), fixed);
+        assert!(fixed.transfer_function_rms_arcsec() > 5.0);
+        assert!((a.alpha.apply(0.1, 0.2) - 0.1).abs() > 0.0);
     }
 }

@@ -25,6 +25,8 @@ pub mod stream {
     pub const FSS1: u64 = 3;
     /// The IRU.
     pub const IRU: u64 = 5;
+    /// FSS1's drawn transfer function (FSS2 is `FSS1_TRANSFER + 1`).
+    pub const FSS1_TRANSFER: u64 = 6;
 }
 
 /// A deterministic generator for model `stream` of scenario `seed`.
