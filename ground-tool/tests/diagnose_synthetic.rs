@@ -105,6 +105,30 @@ fn fss1_time_tag_offset() {
     at_noise_floor(&a, 2);
 }
 
+/// The same time tag on every sensor (the whole sensor frame sampled before its time code):
+/// invisible sensor against sensor, so only the slew arcs' tie to the gyro finds it. Every
+/// sensor with data gets the absolute τ, nothing else is detected.
+#[test]
+fn common_time_tag_on_every_sensor() {
+    let fx = SynthEffects {
+        time_tag_s: [0.2; 4],
+        ..SynthEffects::default()
+    };
+    let a = run(fx, 5, true, &[]);
+    let tr = a.time_reference.as_ref().expect("slew arcs");
+    assert!(tr.model.contains(&0), "the common column: {:?}", tr.model);
+    let mut sensors = Vec::new();
+    for d in &a.detected {
+        assert_eq!(d.effect, "time_tag_offset", "{}[{}]", d.effect, d.sensor);
+        within_3_sigma(d, &[("tau", 200.0)]);
+        sensors.push(d.sensor.as_str());
+    }
+    for s in ["FHST1", "FHST2"] {
+        assert!(sensors.contains(&s), "{s} in {sensors:?}");
+    }
+    assert!(a.unexplained.is_empty(), "{:?}", a.unexplained);
+}
+
 #[test]
 fn fhst2_thermal_alignment() {
     let mut fx = SynthEffects::default();

@@ -57,6 +57,13 @@ EXPECT = {
     "iru-asymmetry": [[("gyro_scale_asymmetry", "IRU")]],
     "iru-thermal-bias": [[("gyro_thermal_bias", "IRU")]],
     "iru-bias-drift": [[("gyro_bias_transient", "IRU"), ("gyro_bias_ramp", "IRU")]],
+    # The same time tag on every sensor: each sensor with data gets it, absolute against the
+    # gyro (FSS1 never sees the Sun in this plan).
+    "common-time-tag": [
+        [("time_tag_offset", "FHST1")],
+        [("time_tag_offset", "FHST2")],
+        [("time_tag_offset", "FSS2")],
+    ],
     "combo": [
         [("time_tag_offset", "FHST1")],
         [("fhst_distortion", "FHST1")],

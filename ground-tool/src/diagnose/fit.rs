@@ -511,6 +511,71 @@ pub fn solve_opt(
     })
 }
 
+/// A global parameter fixed from outside the batch system, with its 1σ.
+#[derive(Clone, Copy, Debug)]
+pub struct Fixed {
+    /// Global index.
+    pub index: usize,
+    /// Value (parameter units).
+    pub value: f64,
+    /// 1σ (parameter units).
+    pub sigma: f64,
+}
+
+/// [`solve`] with some global parameters fixed. The batch attitudes absorb a time shift
+/// common to all sensors, so the time tags are taken from the slew arcs
+/// ([`super::time_reference`], where they are absolute against the gyro) and the rest of the
+/// model is estimated conditionally on them. The fixed parameters appear in the result with
+/// their own σ (no correlation with the free ones) and take no degrees of freedom.
+#[must_use]
+pub fn solve_fixed(
+    normal: &Normal,
+    layout: &Layout,
+    idx: &[usize],
+    fixed: &[Fixed],
+) -> Option<SubFit> {
+    if fixed.is_empty() {
+        return solve(normal, layout, idx);
+    }
+    let free: Vec<usize> = idx
+        .iter()
+        .copied()
+        .filter(|i| !fixed.iter().any(|f| f.index == *i))
+        .collect();
+    let mut v = DVector::zeros(normal.b.len());
+    for f in fixed {
+        v[f.index] = f.value;
+    }
+    let nv = &normal.n * &v;
+    let reduced = Normal {
+        n: normal.n.clone(),
+        b: &normal.b - &nv,
+        chi2: (normal.chi2 - 2.0 * v.dot(&normal.b) + v.dot(&nv)).max(0.0),
+        rows: normal.rows,
+        nuisance: normal.nuisance,
+    };
+    let fit = solve(&reduced, layout, &free)?;
+    let (k, m) = (free.len(), fixed.len());
+    let scale = fit.s2().max(1.0);
+    let mut cov = DMatrix::zeros(k + m, k + m);
+    cov.view_mut((0, 0), (k, k)).copy_from(&fit.cov);
+    let mut x = DVector::zeros(k + m);
+    x.rows_mut(0, k).copy_from(&fit.x);
+    let mut all = free;
+    for (j, f) in fixed.iter().enumerate() {
+        x[k + j] = f.value;
+        cov[(k + j, k + j)] = f.sigma * f.sigma / scale;
+        all.push(f.index);
+    }
+    Some(SubFit {
+        idx: all,
+        x,
+        cov,
+        chi2: fit.chi2,
+        dof: fit.dof,
+    })
+}
+
 /// Global indices of the alignments plus the given effects.
 #[must_use]
 pub fn indices(layout: &Layout, effects: &[usize]) -> Vec<usize> {

@@ -113,7 +113,15 @@ pub fn flight_update(
     let solve = |gated: &[usize]| {
         let mut idx = always.clone();
         idx.extend(gated);
-        super::fit::solve(&res.systems.full, &res.layout, &idx)
+        // The time tags stay at their estimates against the gyro (the batch system alone
+        // does not determine their common part).
+        let fixed: Vec<super::fit::Fixed> = res
+            .fixed
+            .iter()
+            .filter(|f| idx.contains(&f.index))
+            .copied()
+            .collect();
+        super::fit::solve_fixed(&res.systems.full, &res.layout, &idx, &fixed)
     };
     let mut flight_fit = res.final_fit.clone();
     for _ in 0..=gated.len() {

@@ -184,6 +184,12 @@ pub struct MeasurementSet {
     pub frame_attitude: Vec<Option<Matrix3<f64>>>,
     /// Calibrated body rate per frame (rad/s).
     pub frame_rate: Vec<Vector3<f64>>,
+    /// Time of each frame (s since the first frame).
+    pub frame_time_s: Vec<f64>,
+    /// Calibrated gyro increment of the step that ends at each frame (rad, ACS, bias removed)
+    /// and its length (s); `None` without gyro data. The slew arcs of
+    /// [`super::time_reference`] carry one attitude through many batches with it.
+    pub frame_gyro: Vec<Option<(Vector3<f64>, f64)>>,
     /// Noise floor per sensor (arcsec, per axis), from successive differences.
     pub noise_floor_arcsec: [f64; 4],
     /// Scale applied to the declared σ per sensor.
@@ -500,6 +506,10 @@ impl MeasurementSet {
             batches,
             frame_attitude,
             frame_rate,
+            frame_time_s: frames.iter().map(|f| f.time.seconds() - t_first).collect(),
+            frame_gyro: (0..n)
+                .map(|k| (dts[k] > 0.0).then_some((phi[k], dts[k])))
+                .collect(),
             noise_floor_arcsec: [f64::NAN; 4],
             sigma_scale: [1.0; 4],
             m_acs_from_sensor: m_sensor,

@@ -14,6 +14,8 @@
 //! 4. [`search`]: the loop — add the best-supported effect (likelihood ratio, BIC, agreement
 //!    of the halves, adequacy), refit, test again; leftover structure is reported as
 //!    unexplained with the regressor it follows;
+//!    [`time_reference`]: the time tags against the gyro, from whole slews tied to the
+//!    holds around them (the batches determine only their differences);
 //! 5. [`gyro`]: the same for the gyro (bias drift and thermal bias from the hold-to-hold
 //!    attitude differences, scale asymmetry from the slews);
 //! 6. [`flight`]: effects the OBC should correct become table data (alignment corrections,
@@ -36,6 +38,7 @@ pub mod search;
 pub mod stats;
 pub mod structure;
 pub mod synthetic;
+pub mod time_reference;
 
 use measurements::{DiagnoseInput, MeasurementSet, SENSOR_NAMES};
 use search::{search, SearchConfig, SearchResult};
@@ -95,6 +98,8 @@ pub struct Analysis {
     pub detected: Vec<Detected>,
     /// Unexplained structure (sensor side).
     pub unexplained: Vec<Unexplained>,
+    /// The time tags against the gyro (None: no slew arcs with data).
+    pub time_reference: Option<time_reference::TimeReference>,
     /// Residual RMS per sensor before (baseline model) and after (final model), arcsec.
     pub rms_before: [f64; 4],
     /// After.
@@ -188,7 +193,11 @@ pub fn analyse(input: &DiagnoseInput<'_>, config: &SearchConfig) -> anyhow::Resu
             set.meas.len()
         );
     }
-    let res = search(&mut set, &input.declared_effects, config)?;
+    let mut res = search(&mut set, &input.declared_effects, config)?;
+    let time_reference = time_reference::resolve(&set, &res, config);
+    if let Some(tr) = &time_reference {
+        time_reference::apply(&set, &mut res, tr)?;
+    }
     let detected = res
         .added
         .iter()
@@ -222,6 +231,7 @@ pub fn analyse(input: &DiagnoseInput<'_>, config: &SearchConfig) -> anyhow::Resu
         search: res,
         detected,
         unexplained,
+        time_reference,
         rms_before,
         rms_after,
     })

@@ -110,7 +110,7 @@ pub struct Evidence {
 
 impl Evidence {
     /// Evidence of an effect whose own fit failed (singular sub-model).
-    fn placeholder(effect: String) -> Self {
+    pub(super) fn placeholder(effect: String) -> Self {
         Self {
             effect,
             k: 0,
@@ -168,6 +168,9 @@ pub struct SearchResult {
     pub evidence: Vec<Evidence>,
     /// The systems (for the halves of the final model).
     pub systems: Systems,
+    /// Parameters fixed from outside the batch systems: the time tags, absolute against
+    /// the gyro ([`super::time_reference`]); fits of the model keep them.
+    pub fixed: Vec<super::fit::Fixed>,
 }
 
 /// Estimate the cyclic pitch of an FSS from residuals: a grid of pitches (0.5°–8°, 1 % steps),
@@ -937,5 +940,6 @@ fn search_with_pitch(
         tests_after,
         evidence: evidence_added,
         systems,
+        fixed: Vec::new(),
     })
 }

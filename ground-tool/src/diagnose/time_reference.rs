@@ -1,0 +1,695 @@
+//! # Time tags against the gyro: whole slews tied to the holds around them
+//!
+//! **Why.** The gyro's pulse counts define the time reference. A sensor whose samples are
+//! older than their time tags by τ sees the attitude `ω τ` behind the gyro's while the body
+//! turns and nothing in a hold. The joint fit ([`super::fit`]) gives every batch (≤ 20 s in a
+//! slew) its own attitude and rate, so a shift common to all sensors is absorbed wherever the
+//! rate is constant over a batch: the search determines only the differences between the
+//! sensors' time tags, and with two tagged sensors it can put a common constant on the wrong
+//! one (`combo.toml`), or miss a tag every sensor shares. Here the time tags are absolute.
+//!
+//! **Model.** A slew arc is a run of contiguous batches in which the body turns (some frame
+//! faster than [`TURNING_RATE_ARCSEC_PER_S`]) plus the contiguous batch before and after it
+//! (the holds that tie the slew to the stars). One reference attitude is carried through
+//! the whole arc with the calibrated gyro, `A(k) = Rot(φ_k) A(k−1)`, and every measurement's
+//! residual is taken against it (`r − P ε_k`, `ε_k` the rotation from its batch's reference
+//! to the arc's, `P = J Mᵀ [b×]`). Its error is, per arc, 15 nuisance parameters:
+//! `δθ_k = T_k δθ₀ + B_k δb + D_k δM` with `T_k = Rot(φ_k) T_{k−1}` (an initial error rotates
+//! with the body), `B_k = Rot(φ_k) B_{k−1} + I Δt_k` (bias error) and
+//! `D_k = Rot(φ_k) D_{k−1} + [e_i φ_{k,j}]` (a scale/misalignment error δM of this slew on
+//! top of IRUCAL's: it grows with the angle turned and persists after the slew). The
+//! time-tag columns are those of the library (`J Mᵀ (ω × b)` per ms), one per sensor and one
+//! common to all; everything else the search found (alignments, effects) is applied at its
+//! estimate (the batch system already determines it; a common shift of the time tags does
+//! not move it).
+//!
+//! **Why it is observable.** `ω(t) τ` is zero in the holds and follows the rate profile in
+//! between; the nuisance spans a constant (rotated), a bias ramp and `δM ∫ω`, which keeps
+//! growing through the slew and stays after it. No combination of those is zero before and
+//! after the slew and `∝ ω` in between.
+//!
+//! **Evidence** (the search's rules, [`super::search`]): forward, the candidate (a sensor's
+//! τ, or τ common to all sensors with data) with the largest ΔBIC among those passing the
+//! F test (Holm over the candidates of the step, `alpha`), ΔBIC > `min_delta_bic` and the
+//! halves (alternate arcs: each half has slews about every axis in both directions) within
+//! `halves_sigma`; then backward, an effect that no longer passes against the model without
+//! it (p Bonferroni-corrected over the candidates) leaves, the weakest first, and is not
+//! offered again. The common τ is one parameter where per-sensor ones are several, so a
+//! shared delay is described by it (the sparsest model), and a single sensor's tag by that
+//! sensor's. The absolute τ of each sensor (common + own) replaces the search's relative time
+//! tags in the model, in the report and in the flight tables
+//! (`corrections.time_offset_s[i]`; [`super::fit::solve_fixed`] estimates the rest of the
+//! model conditionally on them).
+
+use super::effects::EffectKind;
+use super::fit::{indices, post_fit, solve_fixed, Fixed, Layout};
+use super::measurements::{MeasurementSet, SENSOR_NAMES};
+use super::search::{Evidence, Iteration, SearchConfig, SearchResult};
+use super::stats::{chi2_sf, f_sf, holm_adjust};
+use fsw_core::attitude::{rot, rotvec_from_rot};
+use fsw_core::units::ARCSEC_PER_RAD;
+use nalgebra::{DMatrix, DVector, Matrix3, SMatrix};
+
+/// A frame turns when the body rate exceeds this (arcsec/s; 0.0056°/s, 7 % of GRO's slew
+/// rate): below it a 1-s time tag moves the attitude by less than the FHST noise.
+pub const TURNING_RATE_ARCSEC_PER_S: f64 = 20.0;
+/// Longest turning run of one arc (s): beyond it (a continuous rotation) the run is cut.
+pub const MAX_ARC_S: f64 = 1800.0;
+/// Hold data tied to each end of a slew (s): one hold batch's worth.
+const HOLD_TIE_S: f64 = super::measurements::BATCH_HOLD_S;
+/// Longest gyro step inside an arc (s), as the batches' own cut.
+const MAX_STEP_S: f64 = 5.0;
+/// Arc nuisance: initial attitude (3), bias (3), δM (9).
+const N_ARC: usize = 15;
+/// Time unit of the bias nuisance (s): arcsec per 100 s, as the batches' rate term.
+const BIAS_UNIT_S: f64 = 100.0;
+/// Unit of the δM nuisance (100 ppm).
+const DM_UNIT: f64 = 1e-4;
+/// Prior 1σ of the arc nuisance: 600″, 10″/100 s, 3000 ppm.
+const PRIOR_SIGMA: [f64; 3] = [600.0, 10.0, 30.0];
+/// Prior 1σ of a time tag (ms), as the library's.
+const TAU_PRIOR_MS: f64 = 1000.0;
+/// A sensor is a candidate with at least this many measurements in turning frames.
+const MIN_TURNING_SAMPLES: usize = 50;
+/// Time-tag columns: 0 = common to all sensors, 1 + sensor.
+const N_TAU: usize = 5;
+
+/// A slew arc: batches `first..=last` of the measurement set.
+#[derive(Clone, Copy, Debug)]
+pub struct Arc {
+    /// First batch.
+    pub first: usize,
+    /// Last batch (inclusive).
+    pub last: usize,
+}
+
+/// Cut the batches into slew arcs (module doc).
+#[must_use]
+pub fn arcs(set: &MeasurementSet) -> Vec<Arc> {
+    let turning_rad_per_s = TURNING_RATE_ARCSEC_PER_S / ARCSEC_PER_RAD;
+    let nb = set.batches.len();
+    let turns: Vec<bool> = set
+        .batches
+        .iter()
+        .map(|b| (b.lo..b.hi).any(|k| set.frame_rate[k].norm() > turning_rad_per_s))
+        .collect();
+    // Batch i + 1 continues batch i: adjacent frames, gyro between them.
+    let linked = |i: usize| {
+        i + 1 < nb
+            && set.batches[i].hi == set.batches[i + 1].lo
+            && set.frame_gyro[set.batches[i + 1].lo].is_some_and(|(_, dt)| dt <= MAX_STEP_S)
+    };
+    let mut out = Vec::new();
+    let mut i = 0;
+    while i < nb {
+        if !turns[i] {
+            i += 1;
+            continue;
+        }
+        let start = i;
+        let t0 = set.batches[i].t_center_s;
+        while linked(i) && turns[i + 1] && set.batches[i + 1].t_center_s - t0 < MAX_ARC_S {
+            i += 1;
+        }
+        let last_turning = i;
+        // The holds around it, at least HOLD_TIE_S of each (a batch cut at the mode change
+        // can be a few frames long), none the previous arc took.
+        let span = |a: usize, b: usize| {
+            set.frame_time_s[set.batches[b].hi - 1] - set.frame_time_s[set.batches[a].lo]
+        };
+        let mut first = start;
+        while first > 0
+            && linked(first - 1)
+            && !turns[first - 1]
+            && out.last().is_none_or(|a: &Arc| a.last < first - 1)
+            && (first == start || span(first, start - 1) < HOLD_TIE_S)
+        {
+            first -= 1;
+        }
+        let mut last = last_turning;
+        while linked(last)
+            && !turns[last + 1]
+            && (last == last_turning || span(last_turning + 1, last) < HOLD_TIE_S)
+        {
+            last += 1;
+        }
+        out.push(Arc { first, last });
+        i = last + 1;
+    }
+    out
+}
+
+/// The reduced normal equations of the time-tag columns over one arc (nuisance eliminated).
+#[derive(Clone, Debug)]
+struct ArcSystem {
+    n: SMatrix<f64, N_TAU, N_TAU>,
+    b: SMatrix<f64, N_TAU, 1>,
+    chi2: f64,
+    rows: usize,
+    nuisance: usize,
+}
+
+impl ArcSystem {
+    fn zeros() -> Self {
+        Self {
+            n: SMatrix::zeros(),
+            b: SMatrix::zeros(),
+            chi2: 0.0,
+            rows: 0,
+            nuisance: 0,
+        }
+    }
+
+    fn add(&mut self, o: &Self) {
+        self.n += o.n;
+        self.b += o.b;
+        self.chi2 += o.chi2;
+        self.rows += o.rows;
+        self.nuisance += o.nuisance;
+    }
+}
+
+/// Accumulate one arc: residuals after the model `g` (time tags excluded) against the arc's
+/// gyro-carried attitude. Also counts each sensor's measurements in turning frames.
+fn accumulate_arc(
+    set: &MeasurementSet,
+    layout: &Layout,
+    g: &DVector<f64>,
+    arc: Arc,
+    meas_of_batch: &[std::ops::Range<usize>],
+    turning_samples: &mut [usize; 4],
+) -> Option<ArcSystem> {
+    let lo = set.batches[arc.first].lo;
+    let hi = set.batches[arc.last].hi;
+    let mut a = set.frame_attitude[lo]?;
+    let mut t = Matrix3::<f64>::identity();
+    let mut bm = Matrix3::<f64>::zeros();
+    let mut d = SMatrix::<f64, 3, 9>::zeros();
+    // Per frame: nuisance map L_k (3×15) and the offset ε_k (arcsec) of the batch reference.
+    let mut frame_map = Vec::with_capacity(hi - lo);
+    for k in lo..hi {
+        if k > lo {
+            let (phi, dt) = set.frame_gyro[k]?;
+            let r = rot(&phi);
+            a = r * a;
+            t = r * t;
+            bm = r * bm + Matrix3::identity() * (dt / BIAS_UNIT_S);
+            d = r * d;
+            for i in 0..3 {
+                for j in 0..3 {
+                    d[(i, 3 * i + j)] += phi[j] * DM_UNIT * ARCSEC_PER_RAD;
+                }
+            }
+        }
+        let eps = set.frame_attitude[k]
+            .map(|ab| rotvec_from_rot(&(a * ab.transpose())) * ARCSEC_PER_RAD)?;
+        let mut l = SMatrix::<f64, 3, N_ARC>::zeros();
+        l.fixed_view_mut::<3, 3>(0, 0).copy_from(&t);
+        l.fixed_view_mut::<3, 3>(0, 3).copy_from(&bm);
+        l.fixed_view_mut::<3, 9>(0, 6).copy_from(&d);
+        frame_map.push((l, eps));
+    }
+    let mut naa = SMatrix::<f64, N_ARC, N_ARC>::zeros();
+    for j in 0..N_ARC {
+        let s = PRIOR_SIGMA[usize::from(j >= 3) + usize::from(j >= 6)];
+        naa[(j, j)] = 1.0 / (s * s);
+    }
+    let mut nag = SMatrix::<f64, N_ARC, N_TAU>::zeros();
+    let mut na = SMatrix::<f64, N_ARC, 1>::zeros();
+    let mut sys = ArcSystem::zeros();
+    let (mut cols, mut scratch) = (Vec::new(), Vec::new());
+    let turning_rad_per_s = TURNING_RATE_ARCSEC_PER_S / ARCSEC_PER_RAD;
+    for bi in arc.first..=arc.last {
+        for m in set.meas[meas_of_batch[bi].clone()]
+            .iter()
+            .filter(|m| !m.outlier)
+        {
+            let (l, eps) = &frame_map[m.frame - lo];
+            let p = MeasurementSet::attitude_partial(m);
+            let arow = p * l;
+            let shift = p * eps;
+            layout.row_columns(m, &mut cols, &mut scratch);
+            let mut y = [m.r[0] - shift.x, m.r[1] - shift.y];
+            for &(c, v) in &cols {
+                y[0] -= v[0] * g[c];
+                y[1] -= v[1] * g[c];
+            }
+            let tau = m.jm * m.rate_acs.cross(&m.b_acs) * (ARCSEC_PER_RAD * 1e-3);
+            if m.rate_acs.norm() > turning_rad_per_s {
+                turning_samples[m.sensor] += 1;
+            }
+            let w = 1.0 / (m.sigma * m.sigma);
+            for ax in 0..2 {
+                let ar = arow.row(ax).transpose();
+                let mut gr = SMatrix::<f64, N_TAU, 1>::zeros();
+                gr[0] = tau[ax];
+                gr[1 + m.sensor] = tau[ax];
+                naa += ar * ar.transpose() * w;
+                nag += ar * gr.transpose() * w;
+                na += ar * (w * y[ax]);
+                sys.n += gr * gr.transpose() * w;
+                sys.b += gr * (w * y[ax]);
+                sys.chi2 += w * y[ax] * y[ax];
+                sys.rows += 1;
+            }
+        }
+    }
+    if sys.rows == 0 {
+        return None;
+    }
+    let inv = naa.cholesky()?.inverse();
+    let s = inv * nag;
+    sys.n -= nag.transpose() * s;
+    sys.b -= s.transpose() * na;
+    sys.chi2 -= (na.transpose() * inv * na)[(0, 0)];
+    sys.chi2 = sys.chi2.max(0.0);
+    sys.nuisance = N_ARC;
+    Some(sys)
+}
+
+/// A sub-model: the time-tag columns `cols` fitted.
+struct Sub {
+    x: DVector<f64>,
+    cov: DMatrix<f64>,
+    chi2: f64,
+    dof: f64,
+}
+
+impl Sub {
+    fn s2(&self) -> f64 {
+        if self.dof > 0.0 {
+            (self.chi2 / self.dof).max(1e-6)
+        } else {
+            1.0
+        }
+    }
+}
+
+fn solve(sys: &ArcSystem, cols: &[usize]) -> Option<Sub> {
+    let k = cols.len();
+    let mut n = DMatrix::zeros(k, k);
+    let mut b = DVector::zeros(k);
+    for (i, &ci) in cols.iter().enumerate() {
+        b[i] = sys.b[ci];
+        for (j, &cj) in cols.iter().enumerate() {
+            n[(i, j)] = sys.n[(ci, cj)];
+        }
+    }
+    let mut np = n.clone();
+    for i in 0..k {
+        np[(i, i)] += 1.0 / (TAU_PRIOR_MS * TAU_PRIOR_MS);
+    }
+    let chol = np.cholesky()?;
+    let x = chol.solve(&b);
+    let chi2 = (sys.chi2 - 2.0 * x.dot(&b) + x.dot(&(&n * &x))).max(0.0);
+    Some(Sub {
+        cov: chol.inverse(),
+        x,
+        chi2,
+        dof: sys.rows as f64 - sys.nuisance as f64 - k as f64,
+    })
+}
+
+fn column_label(c: usize) -> String {
+    if c == 0 {
+        "time_tag_offset[all] (slew arcs, against the gyro)".to_owned()
+    } else {
+        format!(
+            "time_tag_offset[{}] (slew arcs, against the gyro)",
+            SENSOR_NAMES[c - 1]
+        )
+    }
+}
+
+/// The time tags the slew arcs determine.
+#[derive(Clone, Debug)]
+pub struct TimeReference {
+    /// Arcs used.
+    pub arcs: usize,
+    /// Scalar equations in them.
+    pub rows: usize,
+    /// Columns kept (0 = common, 1 + sensor).
+    pub model: Vec<usize>,
+    /// Absolute time tag per sensor (ms, 1σ): common + own; `None` = not in the model.
+    pub tau_ms: [Option<(f64, f64)>; 4],
+    /// Evidence of what each sensor's time tag rests on (the common column's for a shared
+    /// delay).
+    pub evidence: [Option<Evidence>; 4],
+    /// The selection, step by step.
+    pub iterations: Vec<Iteration>,
+}
+
+/// Determine the absolute time tags from the slew arcs, with the search's final model (its
+/// time tags excluded) applied. `None` when the run has no arc with data.
+#[must_use]
+pub fn resolve(
+    set: &MeasurementSet,
+    res: &SearchResult,
+    config: &SearchConfig,
+) -> Option<TimeReference> {
+    let layout = &res.layout;
+    let mut g = res.final_fit.expand(layout.total);
+    for (i, e) in layout.effects.iter().enumerate() {
+        if e.kind == EffectKind::TimeTagOffset {
+            for j in layout.range(i) {
+                g[j] = 0.0;
+            }
+        }
+    }
+    let mut meas_of_batch = vec![0..0; set.batches.len()];
+    let mut i = 0;
+    while i < set.meas.len() {
+        let b = set.meas[i].batch;
+        let mut j = i + 1;
+        while j < set.meas.len() && set.meas[j].batch == b {
+            j += 1;
+        }
+        meas_of_batch[b] = i..j;
+        i = j;
+    }
+    let arcs = arcs(set);
+    let mut turning = [0usize; 4];
+    let systems: Vec<ArcSystem> = arcs
+        .iter()
+        .filter_map(|&a| accumulate_arc(set, layout, &g, a, &meas_of_batch, &mut turning))
+        .collect();
+    if std::env::var_os("DIAGNOSE_DEBUG").is_some() {
+        for a in &arcs {
+            let (b0, b1) = (&set.batches[a.first], &set.batches[a.last]);
+            eprintln!(
+                "arc: batches {}..={} t {:.0}..{:.0} s, usable {}",
+                a.first,
+                a.last,
+                b0.t_center_s,
+                b1.t_center_s,
+                (a.first..=a.last)
+                    .filter(|&b| set.batches[b].usable)
+                    .count()
+            );
+        }
+        eprintln!(
+            "arcs with data {} of {}; turning samples {turning:?}",
+            systems.len(),
+            arcs.len()
+        );
+    }
+    if systems.len() < 2 {
+        return None;
+    }
+    // Halves: alternate arcs.
+    let (mut full, mut first, mut second) =
+        (ArcSystem::zeros(), ArcSystem::zeros(), ArcSystem::zeros());
+    for (k, s) in systems.iter().enumerate() {
+        full.add(s);
+        if k % 2 == 0 {
+            first.add(s);
+        } else {
+            second.add(s);
+        }
+    }
+    let sensors: Vec<usize> = (0..4)
+        .filter(|&s| turning[s] >= MIN_TURNING_SAMPLES)
+        .collect();
+    let mut offered: Vec<usize> = sensors.iter().map(|s| s + 1).collect();
+    if sensors.len() >= 2 {
+        offered.insert(0, 0);
+    }
+    if offered.is_empty() {
+        return None;
+    }
+    let n_rows = full.rows as f64;
+    let halves_p_min = chi2_sf(config.halves_sigma * config.halves_sigma, 1.0);
+    // Evidence of column `c` against `model`.
+    let evaluate = |model: &[usize], c: usize| -> Option<Evidence> {
+        let small = solve(&full, model)?;
+        let mut with = model.to_vec();
+        with.push(c);
+        let big = solve(&full, &with)?;
+        let dchi2 = small.chi2 - big.chi2;
+        let f = dchi2 / big.s2();
+        let p = f_sf(f, 1.0, big.dof);
+        let dbic = n_rows * (small.chi2 / big.chi2.max(1e-9)).ln() - n_rows.ln();
+        let k = with.len() - 1;
+        let (mut hchi2, mut hp, mut est) = (f64::NAN, 0.0, (Vec::new(), Vec::new()));
+        if let (Some(a), Some(b)) = (solve(&first, &with), solve(&second, &with)) {
+            let va = a.cov[(k, k)] * a.s2().max(1.0);
+            let vb = b.cov[(k, k)] * b.s2().max(1.0);
+            hchi2 = (a.x[k] - b.x[k]).powi(2) / (va + vb);
+            hp = chi2_sf(hchi2, 1.0);
+            est = (vec![a.x[k]], vec![b.x[k]]);
+        }
+        Some(Evidence {
+            effect: column_label(c),
+            k: 1,
+            delta_chi2: dchi2,
+            f,
+            p_value: p,
+            p_holm: 1.0,
+            delta_bic: dbic,
+            halves_chi2: hchi2,
+            halves_p: hp,
+            halves_estimates: est,
+            signature_excess: (f64::NAN, f64::NAN),
+            adequate: true,
+            accepted: false,
+            rejected_because: None,
+        })
+    };
+    let why_not = |e: &Evidence, p_adjusted: f64| -> Option<String> {
+        let mut why = Vec::new();
+        if !(p_adjusted < config.alpha) {
+            why.push(format!(
+                "LR p (adjusted) {p_adjusted:.2e} ≥ {}",
+                config.alpha
+            ));
+        }
+        if !(e.delta_bic > config.min_delta_bic) {
+            why.push(format!(
+                "ΔBIC {:.1} ≤ {}",
+                e.delta_bic, config.min_delta_bic
+            ));
+        }
+        if !(e.halves_p > halves_p_min) {
+            why.push(format!(
+                "halves differ (χ² {:.1}, p {:.2e})",
+                e.halves_chi2, e.halves_p
+            ));
+        }
+        (!why.is_empty()).then(|| why.join("; "))
+    };
+    let mut model: Vec<usize> = Vec::new();
+    let mut excluded: Vec<usize> = Vec::new();
+    let mut kept: Vec<Evidence> = Vec::new();
+    let mut iterations = Vec::new();
+    let n_offered = offered.len() as f64;
+    for _ in 0..2 * N_TAU {
+        // Forward.
+        loop {
+            let cands: Vec<usize> = offered
+                .iter()
+                .copied()
+                .filter(|c| !model.contains(c) && !excluded.contains(c))
+                .collect();
+            let mut evs: Vec<(usize, Evidence)> = cands
+                .iter()
+                .filter_map(|&c| evaluate(&model, c).map(|e| (c, e)))
+                .collect();
+            if evs.is_empty() {
+                break;
+            }
+            let adj = holm_adjust(&evs.iter().map(|e| e.1.p_value).collect::<Vec<_>>());
+            let mut best: Option<(usize, f64)> = None;
+            for (i, ((_, e), a)) in evs.iter_mut().zip(adj).enumerate() {
+                e.p_holm = a;
+                e.rejected_because = why_not(e, a);
+                if e.rejected_because.is_none() && best.is_none_or(|(_, b)| e.delta_bic > b) {
+                    best = Some((i, e.delta_bic));
+                }
+            }
+            let Some((bi, _)) = best else {
+                iterations.push(Iteration {
+                    number: 0,
+                    added: None,
+                    candidates: evs.into_iter().map(|e| e.1).collect(),
+                });
+                break;
+            };
+            evs[bi].1.accepted = true;
+            let c = evs[bi].0;
+            model.push(c);
+            kept.push(evs[bi].1.clone());
+            iterations.push(Iteration {
+                number: 0,
+                added: Some(column_label(c)),
+                candidates: evs.into_iter().map(|e| e.1).collect(),
+            });
+        }
+        // Backward: the weakest column that fails against the model without it leaves.
+        let mut worst: Option<(usize, Evidence)> = None;
+        for (k, &c) in model.iter().enumerate() {
+            let without: Vec<usize> = model.iter().copied().filter(|&x| x != c).collect();
+            let Some(mut e) = evaluate(&without, c) else {
+                continue;
+            };
+            let p_adj = (e.p_value * n_offered).min(1.0);
+            e.p_holm = p_adj;
+            e.rejected_because = why_not(&e, p_adj);
+            if e.rejected_because.is_some()
+                && worst
+                    .as_ref()
+                    .is_none_or(|(_, w)| e.delta_bic < w.delta_bic)
+            {
+                worst = Some((k, e));
+            } else if e.rejected_because.is_none() {
+                e.accepted = true;
+                kept[k] = e;
+            }
+        }
+        let Some((k, e)) = worst else { break };
+        let c = model.remove(k);
+        kept.remove(k);
+        excluded.push(c);
+        iterations.push(Iteration {
+            number: 0,
+            added: Some(format!(
+                "removed {} (backward: {})",
+                column_label(c),
+                e.rejected_because.clone().unwrap_or_default()
+            )),
+            candidates: vec![e],
+        });
+    }
+    let fit = solve(&full, &model)?;
+    let scale = fit.s2().max(1.0);
+    let mut tau_ms = [None; 4];
+    let mut evidence: [Option<Evidence>; 4] = Default::default();
+    let common = model.iter().position(|&c| c == 0);
+    for &s in &sensors {
+        let own = model.iter().position(|&c| c == s + 1);
+        if common.is_none() && own.is_none() {
+            continue;
+        }
+        let (mut x, mut v) = (0.0, 0.0);
+        for a in [common, own].into_iter().flatten() {
+            x += fit.x[a];
+            for b in [common, own].into_iter().flatten() {
+                v += fit.cov[(a, b)];
+            }
+        }
+        tau_ms[s] = Some((x, (v * scale).sqrt()));
+        // A sensor's own deviation is the more specific evidence when it has one.
+        evidence[s] = own.or(common).map(|a| kept[a].clone());
+    }
+    Some(TimeReference {
+        arcs: systems.len(),
+        rows: full.rows,
+        model,
+        tau_ms,
+        evidence,
+        iterations,
+    })
+}
+
+/// Put the absolute time tags into the search's result in place of its relative ones: the
+/// time-tag effects added become those of [`TimeReference::tau_ms`], fixed at the arcs'
+/// estimates; the rest of the final model is re-estimated conditionally on them
+/// ([`solve_fixed`]), with its residuals and structure tests.
+///
+/// # Errors
+/// The conditional fit is singular.
+pub fn apply(
+    set: &MeasurementSet,
+    res: &mut SearchResult,
+    tr: &TimeReference,
+) -> anyhow::Result<()> {
+    let is_tt = |i: usize| res.layout.effects[i].kind == EffectKind::TimeTagOffset;
+    let mut added = Vec::new();
+    let mut evidence = Vec::new();
+    for (&i, e) in res.added.iter().zip(&res.evidence) {
+        if !is_tt(i) {
+            added.push(i);
+            evidence.push(e.clone());
+        }
+    }
+    let mut fixed = Vec::new();
+    let mut summary = Vec::new();
+    for s in 0..4 {
+        let (Some((x, sigma)), Some(i)) = (
+            tr.tau_ms[s],
+            res.layout.find(EffectKind::TimeTagOffset, Some(s)),
+        ) else {
+            continue;
+        };
+        added.push(i);
+        let mut e = tr.evidence[s]
+            .clone()
+            .unwrap_or_else(|| Evidence::placeholder(res.layout.effects[i].label()));
+        e.accepted = true;
+        evidence.push(e);
+        fixed.push(Fixed {
+            index: res.layout.range(i).start,
+            value: x,
+            sigma,
+        });
+        summary.push(format!("{} {x:.1} ± {sigma:.1} ms", SENSOR_NAMES[s]));
+    }
+    let mut model = res.baseline.clone();
+    model.extend(&added);
+    let fit = solve_fixed(
+        &res.systems.full,
+        &res.layout,
+        &indices(&res.layout, &model),
+        &fixed,
+    )
+    .ok_or_else(|| anyhow::anyhow!("diagnose: the fit with the arcs' time tags is singular"))?;
+    res.after = post_fit(set, &res.layout, &fit.expand(res.layout.total));
+    res.tests_after = super::structure::run_tests(set, &res.after, None, None);
+    res.final_fit = fit;
+    res.added = added;
+    res.evidence = evidence;
+    res.fixed = fixed;
+    let n0 = res.iterations.len();
+    for (k, mut it) in tr.iterations.iter().cloned().enumerate() {
+        it.number = n0 + k + 1;
+        res.iterations.push(it);
+    }
+    res.iterations.push(Iteration {
+        number: res.iterations.len() + 1,
+        added: Some(format!(
+            "time tags against the gyro from {} slew arcs ({} equations): {}",
+            tr.arcs,
+            tr.rows,
+            if summary.is_empty() {
+                "none".to_owned()
+            } else {
+                summary.join(", ")
+            }
+        )),
+        candidates: Vec::new(),
+    });
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Vector3;
+
+    /// The arc's reference offset: `A_a = Rot(ε) A_b` is what `rotvec_from_rot(A_a A_bᵀ)`
+    /// returns, and the residual shift `P ε` has the sign of an attitude error
+    /// (`A_true = Rot(δθ) Â`: the batch's error is the arc's plus ε).
+    #[test]
+    fn reference_offset_convention() {
+        let ab = rot(&Vector3::new(0.3, -0.2, 0.5));
+        let eps = Vector3::new(2e-5, -1e-5, 3e-5);
+        let aa = rot(&eps) * ab;
+        let back = rotvec_from_rot(&(aa * ab.transpose()));
+        assert!((back - eps).norm() < 1e-12, "{back:?}");
+        // Carried error: Rot(φ) Rot(δ) Rot(φ)ᵀ = Rot(Rot(φ) δ).
+        let phi = Vector3::new(0.01, 0.2, -0.1);
+        let delta = Vector3::new(1e-5, 2e-5, -1e-5);
+        let lhs = rot(&phi) * rot(&delta) * rot(&phi).transpose();
+        let rhs = rot(&(rot(&phi) * delta));
+        assert!((lhs - rhs).norm() < 1e-12);
+    }
+}
