@@ -334,10 +334,15 @@ pub fn write_calibration_report(
         };
         let _ = writeln!(
             md,
-            "\nFSS error left per field cell after calibration (the paper's \"inherent error\"): FSS1 {}, FSS2 {}; the weights use the declared {:.1}″.",
+            "\nFSS error left per field cell after calibration (the paper's \"inherent error\"): FSS1 {}, FSS2 {}; the weights use the declared {:.1}″; the FSS covariance: {}.",
             level(&levels[0]),
             level(&levels[1]),
-            levels[0].declared_arcsec
+            levels[0].declared_arcsec,
+            if r.ffcal.fss_covariance == "consider" {
+                "the declared transfer-function spreads as consider parameters plus the noise bound"
+            } else {
+                "the per-cell weights (each 8° cell one observation at the declared level)"
+            }
         );
     }
     let _ = writeln!(

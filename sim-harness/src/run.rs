@@ -531,7 +531,7 @@ fn metadata_json(sim: &Simulation, scorer: &Scorer) -> serde_json::Value {
             })
         })
         .collect();
-    serde_json::json!({
+    let mut v = serde_json::json!({
         "scenario": s.name,
         "description": s.description,
         "seed": s.seed,
@@ -549,7 +549,41 @@ fn metadata_json(sim: &Simulation, scorer: &Scorer) -> serde_json::Value {
             "star_catalog": "empty (the catalog is uplinked at t = 0)",
         },
         "uploads": uploads,
-    })
+    });
+    if let Some(spreads) = declared_fss_spreads(s) {
+        v["fss_transfer_function_sigma"] = spreads;
+    }
+    v
+}
+
+/// The 1σ spreads of the FSS transfer-function coefficients (metadata
+/// `fss_transfer_function_sigma`, for the ground's consider covariance): the magnitudes of the
+/// scenario's coefficients, the population a per-seed unit is drawn from
+/// ([`crate::sensors::fss::FssHeadErrors::drawn`]) and of which a fixed unit is one member.
+/// Only with a declared transfer function.
+#[must_use]
+pub fn declared_fss_spreads(s: &Scenario) -> Option<serde_json::Value> {
+    if !s
+        .declared_effects()
+        .iter()
+        .any(|e| e == "fss_transfer_function")
+    {
+        return None;
+    }
+    let head = |h: &crate::sensors::fss::FssHeadErrors| {
+        serde_json::json!({
+            "offset_arcsec": h.offset_arcsec.abs(),
+            "scale_ppm": h.scale_ppm.abs(),
+            "cyclic_arcsec": h.cyclic_arcsec.abs(),
+            "cyclic_pitch_deg": h.cyclic_pitch_deg,
+            "cross_arcsec_at_corner": h.cross_arcsec_at_corner.abs(),
+            "cubic_arcsec_at_edge": h.cubic_arcsec_at_edge.abs(),
+        })
+    };
+    Some(serde_json::json!({
+        "FSS1": { "alpha": head(&s.fss1.alpha), "beta": head(&s.fss1.beta) },
+        "FSS2": { "alpha": head(&s.fss2.alpha), "beta": head(&s.fss2.beta) },
+    }))
 }
 
 fn truth_json(sim: &Simulation, bias: &BiasRecorder) -> anyhow::Result<serde_json::Value> {
@@ -878,9 +912,10 @@ pub fn bench(duration_s: f64) -> anyhow::Result<serde_json::Value> {
 mod tests {
     use super::*;
 
-    /// The FSS systematic level is declared with a declared transfer function (the level of
-    /// the unit, or of the population when drawn per seed) and left out when the transfer
-    /// function is undeclared (the ground then uses its default).
+    /// The FSS systematic level and the coefficients' spreads are declared with a declared
+    /// transfer function (the level of the unit, or of the population when drawn per seed)
+    /// and left out when the transfer function is undeclared (the ground then uses its
+    /// default).
     #[test]
     fn fss_systematic_declared_with_the_transfer_function() {
         let mut s = crate::scenario::resolve("gro-early-mission").unwrap();
@@ -901,7 +936,13 @@ mod tests {
             .as_f64()
             .unwrap();
         assert!(population != unit && population > 1.0);
+        let spreads = declared_fss_spreads(&s).unwrap();
+        assert_eq!(
+            spreads["FSS1"]["beta"]["scale_ppm"].as_f64(),
+            Some(s.fss1.beta.scale_ppm.abs())
+        );
         s.declared_effects = Some(vec!["aberration".into()]);
         assert!(declared_noise(&s).get("fss_systematic_arcsec").is_none());
+        assert!(declared_fss_spreads(&s).is_none());
     }
 }

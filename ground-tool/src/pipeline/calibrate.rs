@@ -21,6 +21,7 @@
 //!    after (the paper's recommendation); holds give bias intervals and the bias history.
 //! 6. **Tables**: binary images written with `fsw-core`'s own types.
 
+use super::fss_consider::{consider_covariance, TransferSpreads};
 use super::fss_systematic::{estimate_fss_systematic, FssSystematicEstimate};
 use super::observations::{
     build_observations, fine_attitude, AttitudeSensors, DeclaredNoise, FrameObservations,
@@ -119,6 +120,9 @@ pub struct Metadata {
     /// Declared effects the operator's model includes; `None` (absent) = the GRO defaults
     /// ([`super::flown::DEFAULT_DECLARED_EFFECTS`]).
     pub declared_effects: Option<Vec<String>>,
+    /// 1σ spreads of the FSS transfer-function coefficients per unit; FFCAL carries them as
+    /// consider parameters ([`super::fss_consider`]). Absent = the per-cell weights alone.
+    pub fss_transfer_function_sigma: Option<super::fss_consider::TransferSpreads>,
 }
 
 impl Metadata {
@@ -379,6 +383,10 @@ pub struct FfcalSummary {
     /// FSS1, FSS2: the error level left in the calibrated residuals per field cell, beside
     /// the declared level the FSS weights use (absent without FSS data).
     pub fss_systematic: Option<[FssSystematicEstimate; 2]>,
+    /// How the FSS covariance was formed: `consider` (the declared transfer-function spreads
+    /// as consider parameters plus the noise bound, `pipeline::fss_consider`) or `cells` (the
+    /// per-cell weights' formal covariance with the declared systematic level).
+    pub fss_covariance: &'static str,
 }
 
 /// The gyro-batch relative FHST alignment (`calibration::fhst_relative`) for the report.
@@ -600,12 +608,15 @@ impl FhstStageResult {
 /// Covariance: the FHST block is stage 1's. An FSS's error is its stage-2 (conditional) error
 /// plus the error of the FHST frame it was tied to, taken as the mean rotation of the two
 /// trackers: `C(fss_i, fss_j) = C₂(i, j) + C_f`, `C(fss_i, fhst_k) = ½ (C₁(1,k) + C₁(2,k))`,
-/// `C_f = ¼ Σ C₁`. Residuals before are those of the flown alignments over all epochs.
+/// `C_f = ¼ Σ C₁`. With the transfer function's spreads declared (`fss_consider`: the spreads
+/// and the FSS samples at white-noise σ), `C₂` is the consider covariance plus the noise bound.
+/// Residuals before are those of the flown alignments over all epochs.
 fn ffcal_staged(
     sensors: &[SensorSpec],
     stage1: &FhstStageResult,
     data: &AlignmentData,
     cfg: &FfcalConfig,
+    fss_consider: Option<(&TransferSpreads, &AlignmentData)>,
 ) -> anyhow::Result<FfcalSolution> {
     let mut held = sensors.to_vec();
     for (spec, m) in held.iter_mut().zip(&stage1.m_acs_from_fhst) {
@@ -620,6 +631,27 @@ fn ffcal_staged(
     };
     let mut sol =
         ffcal(&held, data, &stage2_cfg).context("FFCAL stage 2 (FSSs relative to the FHSTs)")?;
+    // With declared transfer-function spreads the stage-2 covariance is what the data say
+    // about the two error sources the FSS samples carry: the transfer function as consider
+    // parameters (`fss_consider`), and the noise by the Cramér–Rao bound of the samples at
+    // their white-noise σ (`white`; sub-arcsec over thousands of samples). The per-cell
+    // weights' own formal covariance stands for the same transfer function and would count it
+    // twice (20 seeds, each its own unit: FSS NEES 1.5 / 1.3 with both, 2.9 / 3.1 without).
+    if let Some((spreads, white)) = fss_consider {
+        let converged: Vec<SensorSpec> = held
+            .iter()
+            .zip(&sol.sensors)
+            .map(|(spec, r)| SensorSpec {
+                m_acs_from_sensor: r.m_acs_from_sensor_calibrated,
+                ..spec.clone()
+            })
+            .collect();
+        let m: Vec<Matrix3<f64>> = converged.iter().map(|c| c.m_acs_from_sensor).collect();
+        let noise = cramer_rao_covariance(&converged, white, &m)
+            .context("FFCAL stage 2: the noise bound of the FSS samples")?;
+        sol.covariance_arcsec2 =
+            noise + consider_covariance(&converged, data, &stage2_cfg, spreads)?;
+    }
     // Before-residuals and corrections relative to the flown alignments.
     let before = ffcal(
         sensors,
@@ -1061,7 +1093,20 @@ pub fn calibrate_telemetry(
         eprintln!("warning: FHST stage from the simultaneous star pairs: {e}");
     }
     let solution = match &fhst_stage {
-        Some((_, stage1)) => ffcal_staged(&sensors, stage1, &data, &cfg).with_context(context)?,
+        Some((_, stage1)) => {
+            let white = metadata
+                .fss_transfer_function_sigma
+                .as_ref()
+                .map(|spreads| (spreads, alignment_data(&frames, &map, [0.0; 2])));
+            ffcal_staged(
+                &sensors,
+                stage1,
+                &data,
+                &cfg,
+                white.as_ref().map(|(s, w)| (*s, w)),
+            )
+            .with_context(context)?
+        }
         None => ffcal(&sensors, &data, &cfg).with_context(context)?,
     };
     // The FSS error level left in the calibrated residuals (the paper's "inherent" 0.022°),
@@ -1167,6 +1212,11 @@ pub fn calibrate_telemetry(
             }
         }),
         fss_systematic,
+        fss_covariance: if metadata.fss_transfer_function_sigma.is_some() && fhst_stage.is_some() {
+            "consider"
+        } else {
+            "cells"
+        },
     };
     let mut new_alignment = flown_alignment;
     let ortho = |m: &Matrix3<f64>| rows(&Quat::from_dcm(m).to_dcm());

@@ -5,6 +5,7 @@
 
 pub mod calibrate;
 pub mod flown;
+pub mod fss_consider;
 pub mod fss_systematic;
 pub mod observations;
 pub mod star_batches;
