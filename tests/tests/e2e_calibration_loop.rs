@@ -61,6 +61,16 @@ fn e2e_calibration_loop_gro_early_mission() {
     let sol = &calibration.ffcal;
     let (e, nees) = relative_error_and_nees(sol, &truth, 1).unwrap();
     assert!(nees < 16.27, "FHST2 rel FHST1 error {e:?}″, NEES {nees:.1}");
+    // The FSSs likewise, with the declared transfer-function spreads carried as consider
+    // parameters (the simulator declares them): each FSS error within χ²₃ at 99.9 % of its σ.
+    assert_eq!(calibration.report.ffcal.fss_covariance, "consider");
+    for j in [2, 3] {
+        let (e, nees) = relative_error_and_nees(sol, &truth, j).unwrap();
+        assert!(
+            nees < 16.27,
+            "sensor {j} rel FHST1 error {e:?}″, NEES {nees:.1}"
+        );
+    }
     // The FHST stage used every star (gyro batches): on the two roll axes its σ is well below
     // the Cramér–Rao bound of the simultaneous star pairs alone (5 against 9–10″ here), and it
     // equals its own bound scaled by the fit's χ²/dof.
