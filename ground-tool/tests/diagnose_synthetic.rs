@@ -336,3 +336,121 @@ fn clean_study() {
     }
     eprintln!("false alarms {alarms}/{n}");
 }
+
+/// A time tag on a sensor the slew arcs cannot test: FSS1 0.4 s with only every 40th of its
+/// samples in turning frames kept (39, below the arcs' 50). Its rows must not go into the
+/// arcs' common column: they did, the common τ took FSS1's tag and each tested sensor got an
+/// own column cancelling it, "detected" at ≈ 0 ms (0.4 ± 1.2, 1.1 ± 1.2, 4.0 ± 1.9) on
+/// FHST1, FHST2 and FSS2. (The search drops FSS1's own tag here, "not indicated" with so few
+/// samples; when it keeps it, `apply` leaves it to the batches.)
+#[test]
+fn time_tag_on_a_sensor_the_arcs_cannot_test() {
+    let mut fx = SynthEffects::default();
+    fx.time_tag_s[2] = 0.4;
+    let cfg = SynthConfig {
+        seed: 6,
+        effects: fx,
+        ..SynthConfig::default()
+    };
+    let mut synth = generate(&cfg);
+    let mut n = 0usize;
+    for f in &mut synth.frames {
+        let turning = f
+            .gyro
+            .is_some_and(|g| g.dtheta_acs_rad.norm() / g.dt_s * 206_264.8 > 20.0);
+        if turning && f.suns[0].is_some() {
+            if !n.is_multiple_of(40) {
+                f.suns[0] = None;
+            }
+            n += 1;
+        }
+    }
+    let a = analyse(&synth.input(&[]), &SearchConfig::default()).unwrap();
+    let tr = a.time_reference.as_ref().expect("slew arcs");
+    assert!(
+        !tr.tested[2],
+        "FSS1 is not tested by the arcs: {:?}",
+        tr.tested
+    );
+    for d in &a.detected {
+        eprintln!(
+            "detected {}[{}] {:?} ± {:?}",
+            d.effect, d.sensor, d.parameters, d.sigma
+        );
+        assert_eq!(d.effect, "time_tag_offset", "{}[{}]", d.effect, d.sensor);
+        assert_eq!(d.sensor, "FSS1", "no time tag on {}", d.sensor);
+        within_3_sigma(d, &[("tau", 400.0)]);
+    }
+}
+
+/// A declared time tag (the operator's model has it: in the baseline) that the arcs find is
+/// fixed there, not added to the model a second time: it was reported as detected and the
+/// flight table got it twice (`time_offset_s[FHST1]` 0.2021 s for a 0.1 s tag).
+#[test]
+fn declared_time_tag_is_not_added_twice() {
+    let mut fx = SynthEffects::default();
+    fx.time_tag_s[0] = 0.1;
+    let cfg = SynthConfig {
+        seed: 2,
+        effects: fx,
+        ..SynthConfig::default()
+    };
+    let synth = generate(&cfg);
+    let a = analyse(&synth.input(&["time_tag_offset"]), &SearchConfig::default()).unwrap();
+    let res = &a.search;
+    assert!(
+        res.added.iter().all(|i| !res.baseline.contains(i)),
+        "added {:?} baseline {:?}",
+        res.added,
+        res.baseline
+    );
+    assert!(a.detected.is_empty(), "a declared effect is not reported");
+    let flight = ground_tool::diagnose::flight::flight_update(
+        res,
+        &synth.alignment,
+        &fsw_core::tables::types::FilterTable::default_boot(),
+        None,
+        a.set.count_per_sensor(),
+        a.set.temperature_mean_c,
+    )
+    .unwrap();
+    let tau = flight.alignment.corrections.time_offset_s[0]
+        - synth.alignment.corrections.time_offset_s[0];
+    assert!((tau - 0.1).abs() < 0.01, "FHST1 time offset {tau} s");
+}
+
+/// A non-finite number in one measurement of an arc (outside data the upstream checks let
+/// through) is left out of the arcs: it made every sum NaN, the χ² 0 (`NaN.max(0.0)`) and
+/// the time tags NaN.
+#[test]
+fn slew_arcs_leave_out_a_non_finite_measurement() {
+    use ground_tool::diagnose::time_reference::{arcs, resolve};
+    let fx = SynthEffects {
+        time_tag_s: [0.2; 4],
+        ..SynthEffects::default()
+    };
+    let cfg = SynthConfig {
+        seed: 5,
+        effects: fx,
+        ..SynthConfig::default()
+    };
+    let synth = generate(&cfg);
+    let config = SearchConfig::default();
+    let a = analyse(&synth.input(&[]), &config).unwrap();
+    let mut set = a.set.clone();
+    let arc = arcs(&set)[0];
+    let m = set
+        .meas
+        .iter_mut()
+        .find(|m| !m.outlier && (arc.first..=arc.last).contains(&m.batch))
+        .expect("a measurement in the first arc");
+    m.r[0] = f64::NAN;
+    let tr = resolve(&set, &a.search, &config).expect("slew arcs");
+    for s in [0, 1] {
+        let (x, sigma) = tr.tau_ms[s].expect("the common time tag");
+        assert!(
+            x.is_finite() && sigma.is_finite() && (x - 200.0).abs() < 3.0 * sigma,
+            "sensor {s}: {x} ± {sigma} ms"
+        );
+    }
+}

@@ -19,9 +19,11 @@
 //! `D_k = Rot(φ_k) D_{k−1} + [e_i φ_{k,j}]` (a scale/misalignment error δM of this slew on
 //! top of IRUCAL's: it grows with the angle turned and persists after the slew). The
 //! time-tag columns are those of the library (`J Mᵀ (ω × b)` per ms), one per sensor and one
-//! common to all; everything else the search found (alignments, effects) is applied at its
-//! estimate (the batch system already determines it; a common shift of the time tags does
-//! not move it).
+//! common to the tested sensors (those with ≥ [`MIN_TURNING_SAMPLES`] measurements in
+//! turning frames; an untested sensor's rows stay out of it); everything else the search
+//! found (alignments, effects) is applied at its estimate (the batch system already
+//! determines it; a common shift of the time tags does not move it). An untested sensor keeps
+//! the search's time tag.
 //!
 //! **Why it is observable.** `ω(t) τ` is zero in the holds and follows the rate profile in
 //! between; the nuisance spans a constant (rotated), a bias ramp and `δM ∫ω`, which keeps
@@ -29,7 +31,7 @@
 //! after the slew and `∝ ω` in between.
 //!
 //! **Evidence** (the search's rules, [`super::search`]): forward, the candidate (a sensor's
-//! τ, or τ common to all sensors with data) with the largest ΔBIC among those passing the
+//! τ, or τ common to the tested sensors) with the largest ΔBIC among those passing the
 //! F test (Holm over the candidates of the step, `alpha`), ΔBIC > `min_delta_bic` and the
 //! halves (alternate arcs: each half has slews about every axis in both directions) within
 //! `halves_sigma`; then backward, an effect that no longer passes against the model without
@@ -71,7 +73,8 @@ const PRIOR_SIGMA: [f64; 3] = [600.0, 10.0, 30.0];
 const TAU_PRIOR_MS: f64 = 1000.0;
 /// A sensor is a candidate with at least this many measurements in turning frames.
 const MIN_TURNING_SAMPLES: usize = 50;
-/// Time-tag columns: 0 = common to all sensors, 1 + sensor.
+/// Time-tag columns: 0 = common to all sensors (made common to the tested ones before the
+/// selection, [`ArcSystem::common_to`]), 1 + sensor.
 const N_TAU: usize = 5;
 
 /// A slew arc: batches `first..=last` of the measurement set.
@@ -140,7 +143,7 @@ pub fn arcs(set: &MeasurementSet) -> Vec<Arc> {
 }
 
 /// The reduced normal equations of the time-tag columns over one arc (nuisance eliminated).
-#[derive(Clone, Debug)]
+#[derive(Clone, Copy, Debug)]
 struct ArcSystem {
     n: SMatrix<f64, N_TAU, N_TAU>,
     b: SMatrix<f64, N_TAU, 1>,
@@ -166,6 +169,24 @@ impl ArcSystem {
         self.chi2 += o.chi2;
         self.rows += o.rows;
         self.nuisance += o.nuisance;
+    }
+
+    /// The same system with the common column (0) made common to `tested` only: the sum of
+    /// their own columns. Accumulated, it holds the rows of every sensor, so a sensor the arcs
+    /// cannot test (too few samples in turning frames, no own column) would otherwise put its
+    /// own time tag into the common τ, and the tested sensors' own columns would cancel it
+    /// (false tags of ≈ 0 on them, the untested sensor's tag lost).
+    fn common_to(&self, tested: &[usize]) -> Self {
+        let mut w = SMatrix::<f64, N_TAU, N_TAU>::identity();
+        w[(0, 0)] = 0.0;
+        for &s in tested {
+            w[(1 + s, 0)] = 1.0;
+        }
+        Self {
+            n: w.transpose() * self.n * w,
+            b: w.transpose() * self.b,
+            ..*self
+        }
     }
 }
 
@@ -219,6 +240,8 @@ fn accumulate_arc(
     let mut sys = ArcSystem::zeros();
     let (mut cols, mut scratch) = (Vec::new(), Vec::new());
     let turning_rad_per_s = TURNING_RATE_ARCSEC_PER_S / ARCSEC_PER_RAD;
+    // Counted into `turning_samples` only if the arc is used.
+    let mut turning = [0usize; 4];
     for bi in arc.first..=arc.last {
         for m in set.meas[meas_of_batch[bi].clone()]
             .iter()
@@ -235,10 +258,19 @@ fn accumulate_arc(
                 y[1] -= v[1] * g[c];
             }
             let tau = m.jm * m.rate_acs.cross(&m.b_acs) * (ARCSEC_PER_RAD * 1e-3);
-            if m.rate_acs.norm() > turning_rad_per_s {
-                turning_samples[m.sensor] += 1;
-            }
             let w = 1.0 / (m.sigma * m.sigma);
+            // A non-finite number anywhere would poison the arc's sums (and `max(0.0)` of a
+            // NaN χ² is 0): such a measurement is left out.
+            if !(w.is_finite()
+                && y.iter().all(|v| v.is_finite())
+                && arow.iter().all(|v| v.is_finite())
+                && tau.iter().all(|v| v.is_finite()))
+            {
+                continue;
+            }
+            if m.rate_acs.norm() > turning_rad_per_s {
+                turning[m.sensor] += 1;
+            }
             for ax in 0..2 {
                 let ar = arow.row(ax).transpose();
                 let mut gr = SMatrix::<f64, N_TAU, 1>::zeros();
@@ -264,6 +296,9 @@ fn accumulate_arc(
     sys.chi2 -= (na.transpose() * inv * na)[(0, 0)];
     sys.chi2 = sys.chi2.max(0.0);
     sys.nuisance = N_ARC;
+    for (t, n) in turning_samples.iter_mut().zip(turning) {
+        *t += n;
+    }
     Some(sys)
 }
 
@@ -310,6 +345,55 @@ fn solve(sys: &ArcSystem, cols: &[usize]) -> Option<Sub> {
     })
 }
 
+/// Evidence of column `c` against `model` (F test, ΔBIC, halves); `None` when a fit is
+/// singular or no degrees of freedom are left.
+fn evaluate(
+    full: &ArcSystem,
+    [first, second]: [&ArcSystem; 2],
+    model: &[usize],
+    c: usize,
+) -> Option<Evidence> {
+    let small = solve(full, model)?;
+    let mut with = model.to_vec();
+    with.push(c);
+    let big = solve(full, &with)?;
+    // No degrees of freedom left (arcs with fewer equations than their nuisance): no
+    // test (the F tail of d2 ≤ 0 is 0, a "detection" of anything).
+    if !(big.dof >= 1.0) {
+        return None;
+    }
+    let dchi2 = small.chi2 - big.chi2;
+    let f = dchi2 / big.s2();
+    let p = f_sf(f, 1.0, big.dof);
+    let n_rows = full.rows as f64;
+    let dbic = n_rows * (small.chi2 / big.chi2.max(1e-9)).ln() - n_rows.ln();
+    let k = with.len() - 1;
+    let (mut hchi2, mut hp, mut est) = (f64::NAN, 0.0, (Vec::new(), Vec::new()));
+    if let (Some(a), Some(b)) = (solve(first, &with), solve(second, &with)) {
+        let va = a.cov[(k, k)] * a.s2().max(1.0);
+        let vb = b.cov[(k, k)] * b.s2().max(1.0);
+        hchi2 = (a.x[k] - b.x[k]).powi(2) / (va + vb);
+        hp = chi2_sf(hchi2, 1.0);
+        est = (vec![a.x[k]], vec![b.x[k]]);
+    }
+    Some(Evidence {
+        effect: column_label(c),
+        k: 1,
+        delta_chi2: dchi2,
+        f,
+        p_value: p,
+        p_holm: 1.0,
+        delta_bic: dbic,
+        halves_chi2: hchi2,
+        halves_p: hp,
+        halves_estimates: est,
+        signature_excess: (f64::NAN, f64::NAN),
+        adequate: true,
+        accepted: false,
+        rejected_because: None,
+    })
+}
+
 fn column_label(c: usize) -> String {
     if c == 0 {
         "time_tag_offset[all] (slew arcs, against the gyro)".to_owned()
@@ -328,8 +412,11 @@ pub struct TimeReference {
     pub arcs: usize,
     /// Scalar equations in them.
     pub rows: usize,
-    /// Columns kept (0 = common, 1 + sensor).
+    /// Columns kept (0 = common to the tested sensors, 1 + sensor).
     pub model: Vec<usize>,
+    /// The sensors the arcs test (at least [`MIN_TURNING_SAMPLES`] measurements in turning
+    /// frames); the others keep the search's time tags ([`apply`]).
+    pub tested: [bool; 4],
     /// Absolute time tag per sensor (ms, 1σ): common + own; `None` = not in the model.
     pub tau_ms: [Option<(f64, f64)>; 4],
     /// Evidence of what each sensor's time tag rests on (the common column's for a shared
@@ -396,20 +483,21 @@ pub fn resolve(
     if systems.len() < 2 {
         return None;
     }
+    let sensors: Vec<usize> = (0..4)
+        .filter(|&s| turning[s] >= MIN_TURNING_SAMPLES)
+        .collect();
     // Halves: alternate arcs.
     let (mut full, mut first, mut second) =
         (ArcSystem::zeros(), ArcSystem::zeros(), ArcSystem::zeros());
     for (k, s) in systems.iter().enumerate() {
-        full.add(s);
+        let s = s.common_to(&sensors);
+        full.add(&s);
         if k % 2 == 0 {
-            first.add(s);
+            first.add(&s);
         } else {
-            second.add(s);
+            second.add(&s);
         }
     }
-    let sensors: Vec<usize> = (0..4)
-        .filter(|&s| turning[s] >= MIN_TURNING_SAMPLES)
-        .collect();
     let mut offered: Vec<usize> = sensors.iter().map(|s| s + 1).collect();
     if sensors.len() >= 2 {
         offered.insert(0, 0);
@@ -417,44 +505,9 @@ pub fn resolve(
     if offered.is_empty() {
         return None;
     }
-    let n_rows = full.rows as f64;
     let halves_p_min = chi2_sf(config.halves_sigma * config.halves_sigma, 1.0);
     // Evidence of column `c` against `model`.
-    let evaluate = |model: &[usize], c: usize| -> Option<Evidence> {
-        let small = solve(&full, model)?;
-        let mut with = model.to_vec();
-        with.push(c);
-        let big = solve(&full, &with)?;
-        let dchi2 = small.chi2 - big.chi2;
-        let f = dchi2 / big.s2();
-        let p = f_sf(f, 1.0, big.dof);
-        let dbic = n_rows * (small.chi2 / big.chi2.max(1e-9)).ln() - n_rows.ln();
-        let k = with.len() - 1;
-        let (mut hchi2, mut hp, mut est) = (f64::NAN, 0.0, (Vec::new(), Vec::new()));
-        if let (Some(a), Some(b)) = (solve(&first, &with), solve(&second, &with)) {
-            let va = a.cov[(k, k)] * a.s2().max(1.0);
-            let vb = b.cov[(k, k)] * b.s2().max(1.0);
-            hchi2 = (a.x[k] - b.x[k]).powi(2) / (va + vb);
-            hp = chi2_sf(hchi2, 1.0);
-            est = (vec![a.x[k]], vec![b.x[k]]);
-        }
-        Some(Evidence {
-            effect: column_label(c),
-            k: 1,
-            delta_chi2: dchi2,
-            f,
-            p_value: p,
-            p_holm: 1.0,
-            delta_bic: dbic,
-            halves_chi2: hchi2,
-            halves_p: hp,
-            halves_estimates: est,
-            signature_excess: (f64::NAN, f64::NAN),
-            adequate: true,
-            accepted: false,
-            rejected_because: None,
-        })
-    };
+    let evaluate = |model: &[usize], c: usize| evaluate(&full, [&first, &second], model, c);
     let why_not = |e: &Evidence, p_adjusted: f64| -> Option<String> {
         let mut why = Vec::new();
         if !(p_adjusted < config.alpha) {
@@ -560,6 +613,9 @@ pub fn resolve(
         });
     }
     let fit = solve(&full, &model)?;
+    if !(fit.x.iter().chain(fit.cov.iter()).all(|v| v.is_finite()) && fit.chi2.is_finite()) {
+        return None;
+    }
     let scale = fit.s2().max(1.0);
     let mut tau_ms = [None; 4];
     let mut evidence: [Option<Evidence>; 4] = Default::default();
@@ -584,6 +640,7 @@ pub fn resolve(
         arcs: systems.len(),
         rows: full.rows,
         model,
+        tested: std::array::from_fn(|s| sensors.contains(&s)),
         tau_ms,
         evidence,
         iterations,
@@ -593,7 +650,9 @@ pub fn resolve(
 /// Put the absolute time tags into the search's result in place of its relative ones: the
 /// time-tag effects added become those of [`TimeReference::tau_ms`], fixed at the arcs'
 /// estimates; the rest of the final model is re-estimated conditionally on them
-/// ([`solve_fixed`]), with its residuals and structure tests.
+/// ([`solve_fixed`]), with its residuals and structure tests. A sensor the arcs do not test
+/// ([`TimeReference::tested`]) keeps the search's time tag (free, against the others'), and a
+/// declared time tag (in the baseline) is fixed there, not added a second time.
 ///
 /// # Errors
 /// The conditional fit is singular.
@@ -602,17 +661,27 @@ pub fn apply(
     res: &mut SearchResult,
     tr: &TimeReference,
 ) -> anyhow::Result<()> {
-    let is_tt = |i: usize| res.layout.effects[i].kind == EffectKind::TimeTagOffset;
+    // The arcs decide the time tags of the sensors they test.
+    let decided = |i: usize| {
+        let e = &res.layout.effects[i];
+        e.kind == EffectKind::TimeTagOffset && e.sensor.is_some_and(|s| tr.tested[s])
+    };
     let mut added = Vec::new();
     let mut evidence = Vec::new();
+    let mut summary = Vec::new();
     for (&i, e) in res.added.iter().zip(&res.evidence) {
-        if !is_tt(i) {
+        if !decided(i) {
             added.push(i);
             evidence.push(e.clone());
+            if res.layout.effects[i].kind == EffectKind::TimeTagOffset {
+                summary.push(format!(
+                    "{} from the batches (too few samples in the arcs' slews)",
+                    res.layout.effects[i].label()
+                ));
+            }
         }
     }
     let mut fixed = Vec::new();
-    let mut summary = Vec::new();
     for s in 0..4 {
         let (Some((x, sigma)), Some(i)) = (
             tr.tau_ms[s],
@@ -620,12 +689,14 @@ pub fn apply(
         ) else {
             continue;
         };
-        added.push(i);
-        let mut e = tr.evidence[s]
-            .clone()
-            .unwrap_or_else(|| Evidence::placeholder(res.layout.effects[i].label()));
-        e.accepted = true;
-        evidence.push(e);
+        if !res.baseline.contains(&i) {
+            added.push(i);
+            let mut e = tr.evidence[s]
+                .clone()
+                .unwrap_or_else(|| Evidence::placeholder(res.layout.effects[i].label()));
+            e.accepted = true;
+            evidence.push(e);
+        }
         fixed.push(Fixed {
             index: res.layout.range(i).start,
             value: x,
@@ -671,9 +742,62 @@ pub fn apply(
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 mod tests {
     use super::*;
     use nalgebra::Vector3;
+
+    /// An arc system from rows `(sensor, time-tag partial, residual)`, unit weights, no
+    /// nuisance (as `accumulate_arc` builds the time-tag part).
+    fn system(rows: &[(usize, f64, f64)], nuisance: usize) -> ArcSystem {
+        let mut sys = ArcSystem::zeros();
+        for &(s, t, y) in rows {
+            let mut gr = SMatrix::<f64, N_TAU, 1>::zeros();
+            gr[0] = t;
+            gr[1 + s] = t;
+            sys.n += gr * gr.transpose();
+            sys.b += gr * y;
+            sys.chi2 += y * y;
+            sys.rows += 1;
+        }
+        sys.nuisance = nuisance;
+        sys
+    }
+
+    /// The common column is common to the tested sensors only: an untested sensor's time tag
+    /// (FSS1, 400 ms) does not enter it (it did: the common τ took it and the tested sensors'
+    /// own columns cancelled it).
+    #[test]
+    fn common_column_leaves_out_untested_sensors() {
+        let mut rows = Vec::new();
+        for k in 0..200 {
+            let t = 1.0 + f64::from(k % 7);
+            rows.push((0, t, 0.0));
+            rows.push((1, -t, 0.0));
+            rows.push((2, t, 0.4 * t * 1000.0));
+        }
+        let sys = system(&rows, 0).common_to(&[0, 1]);
+        let common = solve(&sys, &[0]).unwrap();
+        assert!(common.x[0].abs() < 1e-6, "common τ {}", common.x[0]);
+        let own = solve(&sys, &[3]).unwrap();
+        assert!((own.x[0] - 400.0).abs() < 1e-3, "FSS1 τ {}", own.x[0]);
+        // Untouched: the tested sensors' own columns and the χ².
+        let all = system(&rows, 0);
+        assert_eq!(sys.n[(1, 1)], all.n[(1, 1)]);
+        assert_eq!(sys.chi2, all.chi2);
+    }
+
+    /// No evidence without degrees of freedom (fewer equations than the arcs' nuisance): the
+    /// F tail of d2 ≤ 0 is 0, which read as a detection of anything.
+    #[test]
+    fn no_evidence_without_degrees_of_freedom() {
+        let rows: Vec<_> = (0..10).map(|k| (0, 1.0 + f64::from(k), 30.0)).collect();
+        let sys = system(&rows, N_ARC);
+        assert!(evaluate(&sys, [&sys, &sys], &[], 1).is_none());
+        // With enough equations the same column is evidence.
+        let sys = system(&rows.repeat(3), N_ARC);
+        assert!(evaluate(&sys, [&sys, &sys], &[], 1).is_some());
+    }
 
     /// The arc's reference offset: `A_a = Rot(ε) A_b` is what `rotvec_from_rot(A_a A_bᵀ)`
     /// returns, and the residual shift `P ε` has the sign of an attitude error
