@@ -90,3 +90,25 @@ fn outside_writer_clean_run_reports_nothing() {
         "{report:#}"
     );
 }
+
+/// A 40 s telemetry gap inside a slew of the writer's calibration day (12,000 s, eight
+/// usable slews): the gyro increment across the gap is lost, so that slew must not enter
+/// the scale-asymmetry fit (it read the missing 11,800″ as an asymmetry beyond the IRU
+/// table's range, and diagnose stopped with exit code 2). Nothing is detected, and the
+/// report says why the slew was left out.
+#[test]
+fn outside_writer_gap_inside_a_slew_is_left_out_of_the_gyro_fit() {
+    let (report, _) = write_and_diagnose(
+        "gap-in-slew",
+        &["--plan", "long", "--duration", "12000", "--gap", "1000:40"],
+    );
+    assert!(named(&report).is_empty(), "{report:#}");
+    let notes = report["gyro"]["notes"].as_array().unwrap();
+    assert!(
+        notes
+            .iter()
+            .any(|n| n.as_str().unwrap().contains("a gap in the gyro data")),
+        "{notes:?}"
+    );
+    assert!(report["gyro"]["slews"].as_u64().unwrap() >= 6, "{report:#}");
+}

@@ -520,6 +520,21 @@ fn asymmetry(
     let usable: Vec<usize> = (0..set.batches.len())
         .filter(|&i| att[i].is_some())
         .collect();
+    // A telemetry gap inside a slew: the gyro increment across it is one counter difference
+    // that may have wrapped (run_check's `gyro_increment_ambiguous`), so no pair spans one.
+    let mut dts: Vec<f64> = frames
+        .iter()
+        .filter_map(|f| f.gyro)
+        .map(|g| g.dt_s)
+        .collect();
+    dts.sort_by(f64::total_cmp);
+    let median_dt = dts.get(dts.len() / 2).copied().unwrap_or(1.0);
+    let gap_free = |a: usize, b: usize| {
+        frames.get(a + 1..=b).is_some_and(|r| {
+            r.iter()
+                .all(|f| f.gyro.is_some_and(|g| g.dt_s <= 3.0 * median_dt))
+        })
+    };
     let mut pairs = Vec::new();
     for &(s, e) in &slews {
         let lo = s.saturating_sub(1200);
@@ -544,6 +559,12 @@ fn asymmetry(
         };
         let (ca, cb) = (set.batches[ia].center, set.batches[ib].center);
         if cb <= ca {
+            continue;
+        }
+        if !gap_free(ca, cb) {
+            out.notes.push(format!(
+                "slew at frames {s}..{e} not used for the scale asymmetry: a gap in the gyro data between its end attitudes"
+            ));
             continue;
         }
         let turned: Vector3<f64> = frames[ca + 1..=cb]

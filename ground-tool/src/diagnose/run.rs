@@ -286,14 +286,28 @@ pub fn diagnose_run(
     );
     // The gyro-side effects into the configuration that flew most of the run.
     let backup_cycles = tm.housekeeping.iter().filter(|h| h.iru_config == 1).count();
-    let (iru_out, iru_applied, iru_ground_only) = super::flight::iru_update(
+    let (iru_corrected, iru_applied, mut iru_ground_only) = super::flight::iru_update(
         &iru_out,
         &gyro_res.detected,
         2 * backup_cycles > tm.housekeeping.len(),
     );
-    iru_out.validate().map_err(|e| {
-        anyhow::anyhow!("diagnose: the corrected IRU table does not validate ({e:?})")
-    })?;
+    // A gyro effect too large for the table's range is reported and kept on the ground: the
+    // other tables (and the report) are still worth having.
+    let (iru_out, iru_applied) = match iru_corrected.validate() {
+        Ok(()) => (iru_corrected, iru_applied),
+        Err(e) => {
+            let why = format!(
+                "IRU table not corrected: with the gyro effects ({}) it does not validate ({e:?}); the chain's IRU table is written instead",
+                iru_applied.join(", ")
+            );
+            eprintln!("warning: {why}");
+            iru_ground_only.push(why);
+            (iru_out, Vec::new())
+        }
+    };
+    iru_out
+        .validate()
+        .map_err(|e| anyhow::anyhow!("diagnose: the IRU table does not validate ({e:?})"))?;
     let p = out_dir.join("tables").join("iru.tbl");
     write_table(&p, TableId::Iru, &iru_out, created)?;
     written.push(p.display().to_string());
