@@ -503,10 +503,7 @@ pub fn declared_noise(s: &Scenario) -> serde_json::Value {
     });
     // The level of a declared transfer function is part of the declaration (an undeclared
     // one leaves the ground at its default, the paper's 0.022°).
-    if s.declared_effects()
-        .iter()
-        .any(|e| e == "fss_transfer_function")
-    {
+    if fss_transfer_declared(s) {
         v["fss_systematic_arcsec"] =
             serde_json::json!((0.5 * (tf_rms[0].powi(2) + tf_rms[1].powi(2))).sqrt());
     }
@@ -556,6 +553,14 @@ fn metadata_json(sim: &Simulation, scorer: &Scorer) -> serde_json::Value {
     v
 }
 
+/// Whether the scenario declares the FSS transfer function (its level and spreads are then
+/// part of the metadata).
+fn fss_transfer_declared(s: &Scenario) -> bool {
+    s.declared_effects()
+        .iter()
+        .any(|e| e == "fss_transfer_function")
+}
+
 /// The 1σ spreads of the FSS transfer-function coefficients (metadata
 /// `fss_transfer_function_sigma`, for the ground's consider covariance): the magnitudes of the
 /// scenario's coefficients, the population a per-seed unit is drawn from
@@ -563,11 +568,7 @@ fn metadata_json(sim: &Simulation, scorer: &Scorer) -> serde_json::Value {
 /// Only with a declared transfer function.
 #[must_use]
 pub fn declared_fss_spreads(s: &Scenario) -> Option<serde_json::Value> {
-    if !s
-        .declared_effects()
-        .iter()
-        .any(|e| e == "fss_transfer_function")
-    {
+    if !fss_transfer_declared(s) {
         return None;
     }
     let head = |h: &crate::sensors::fss::FssHeadErrors| {

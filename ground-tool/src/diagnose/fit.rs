@@ -464,14 +464,8 @@ pub fn solve_opt(
 ) -> Option<SubFit> {
     let prior = layout.prior_information();
     let k = idx.len();
-    let mut n = DMatrix::zeros(k, k);
-    let mut b = DVector::zeros(k);
-    for (a, &i) in idx.iter().enumerate() {
-        b[a] = normal.b[i];
-        for (c, &j) in idx.iter().enumerate() {
-            n[(a, c)] = normal.n[(i, j)];
-        }
-    }
+    let n = normal.n.select_rows(idx).select_columns(idx);
+    let b = normal.b.select_rows(idx);
     let mut np = n.clone();
     for (a, &i) in idx.iter().enumerate() {
         np[(a, a)] += prior[i];

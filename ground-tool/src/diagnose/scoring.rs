@@ -29,10 +29,9 @@ pub struct Truth {
     pub undeclared: Vec<String>,
     /// Present effects.
     pub present: Vec<String>,
-    /// The scenario, if its file was found.
+    /// The scenario, if its file was found, with the FSS units as flown (a per-seed transfer
+    /// function drawn with the run's seed).
     pub scenario_file: Option<sim_harness::scenario::Scenario>,
-    /// The run's seed (a per-seed FSS transfer function is drawn with it).
-    pub seed: u64,
     /// True gyro bias history: (s since the start, ACS bias in arcsec/s).
     pub bias_history: Vec<(f64, Vector3<f64>)>,
 }
@@ -73,14 +72,19 @@ pub fn read_truth(run_dir: &Path) -> anyhow::Result<Option<Truth>> {
     .iter()
     .find(|p| p.exists())
     .and_then(|p| sim_harness::scenario::Scenario::load(p).ok())
-    .filter(|s| s.name == scenario);
+    .filter(|s| s.name == scenario)
+    .map(|mut s| {
+        let seed = v["seed"].as_u64().unwrap_or_default();
+        s.fss1 = s.fss1.as_flown(0, seed);
+        s.fss2 = s.fss2.as_flown(1, seed);
+        s
+    });
     Ok(Some(Truth {
         scenario,
         alignments,
         undeclared: list("undeclared_effects"),
         present: list("present_effects"),
         scenario_file,
-        seed: v["seed"].as_u64().unwrap_or_default(),
         bias_history: v["bias_history"]["samples"]
             .as_array()
             .map(|a| {
@@ -130,8 +134,7 @@ fn truth_field_error(m: &super::measurements::Measurement, truth: &Truth) -> [f6
             ]
         }
         _ => {
-            let unit = usize::from(m.sensor == 3);
-            let f = [&s.fss1, &s.fss2][unit].as_flown(unit, truth.seed);
+            let f = if m.sensor == 2 { &s.fss1 } else { &s.fss2 };
             [
                 (f.alpha.apply(a, b) - a) * ARCSEC_PER_RAD,
                 (f.beta.apply(b, a) - b) * ARCSEC_PER_RAD,
@@ -254,9 +257,9 @@ pub fn parameter_truth(
     };
     let fss = |n: &str| {
         if n == "FSS1" {
-            Some(s.fss1.as_flown(0, truth.seed))
+            Some(&s.fss1)
         } else if n == "FSS2" {
-            Some(s.fss2.as_flown(1, truth.seed))
+            Some(&s.fss2)
         } else {
             None
         }

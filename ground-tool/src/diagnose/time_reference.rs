@@ -322,14 +322,8 @@ impl Sub {
 
 fn solve(sys: &ArcSystem, cols: &[usize]) -> Option<Sub> {
     let k = cols.len();
-    let mut n = DMatrix::zeros(k, k);
-    let mut b = DVector::zeros(k);
-    for (i, &ci) in cols.iter().enumerate() {
-        b[i] = sys.b[ci];
-        for (j, &cj) in cols.iter().enumerate() {
-            n[(i, j)] = sys.n[(ci, cj)];
-        }
-    }
+    let n = sys.n.select_rows(cols).select_columns(cols);
+    let b = sys.b.select_rows(cols);
     let mut np = n.clone();
     for i in 0..k {
         np[(i, i)] += 1.0 / (TAU_PRIOR_MS * TAU_PRIOR_MS);
