@@ -8,7 +8,9 @@
 )]
 
 use fsw_core::attitude::{attitude_error_rad, Quat};
-use fsw_core::iru::{pulse_weight_rad, IruConfiguration, IruIntegrator};
+use fsw_core::iru::{
+    pulse_weight_rad, IruConfiguration, IruIntegrator, AXIS_PAIRS, PAIR_STUCK_ARCSEC,
+};
 use fsw_core::raw::IruSample;
 use fsw_core::tables::IruTable;
 use nalgebra::{Matrix3, Vector3};
@@ -68,7 +70,22 @@ proptest! {
             f64::from(delta[iz]) * k[2],
         ) * pulse_weight_rad(high, &t);
         let expect = cfg.g(&t) * phi;
-        prop_assert!((out.delta_theta_acs_rad.unwrap() - expect).norm() <= 1e-15 * expect.norm().max(1e-9));
+        // A selected channel that did not move while its partner on the same axis turned
+        // PAIR_STUCK_ARCSEC or more is stuck by the pair cross-check: no rotation this cycle.
+        let weight_arcsec = if high { t.high_rate_arcsec_per_pulse } else { t.low_rate_arcsec_per_pulse };
+        let pair_stuck = [ix, iy, iz].iter().any(|&c| {
+            AXIS_PAIRS.iter().any(|&(a, b)| {
+                let partner = if c == a { b } else if c == b { a } else { return false };
+                delta[c] == 0 && f64::from(delta[partner].unsigned_abs()) * weight_arcsec >= PAIR_STUCK_ARCSEC
+            })
+        });
+        match out.delta_theta_acs_rad {
+            Some(got) => {
+                prop_assert!(!pair_stuck, "a pair-stuck selected channel was used");
+                prop_assert!((got - expect).norm() <= 1e-15 * expect.norm().max(1e-9));
+            }
+            None => prop_assert!(pair_stuck, "no rotation without a stuck selected channel"),
+        }
     }
 
     /// A constant rate about any axis, any start counters, any mode schedule: the integrated
