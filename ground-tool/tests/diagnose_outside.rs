@@ -112,3 +112,27 @@ fn outside_writer_gap_inside_a_slew_is_left_out_of_the_gyro_fit() {
     );
     assert!(report["gyro"]["slews"].as_u64().unwrap() >= 6, "{report:#}");
 }
+
+/// A run shorter than two orbits (3000 s of the writer's plan: two slews, FHST1 tracking in
+/// the first only) with FHST1 100 ms late. Before: an `orbit_periodic_alignment[FSS1]` of
+/// 40–60″ (two sinusoids over half an orbit absorb any slow structure) and a false FHST2
+/// time tag of 25 ms beside FHST1's 76 ± 4 ms. Now: no orbit-periodic term is offered over
+/// less than two orbits, and a time tag seen in one slew only has no halves to agree, so
+/// nothing false is claimed; whatever is named is FHST1's tag, within 3σ.
+#[test]
+fn outside_writer_sub_orbit_run_claims_nothing_false() {
+    let (report, _) = write_and_diagnose(
+        "sub-orbit-time-tag",
+        &["--duration", "3000", "--time-tag", "FHST1:0.1"],
+    );
+    for d in report["detected"].as_array().unwrap() {
+        assert_eq!(d["effect"], "time_tag_offset", "{report:#}");
+        assert_eq!(d["sensor"], "FHST1", "{report:#}");
+        let tau = d["parameters"]["tau"].as_f64().unwrap();
+        let sigma = d["sigma"]["tau"].as_f64().unwrap();
+        assert!(
+            (tau - 100.0).abs() <= 3.0 * sigma,
+            "τ {tau:.1} ± {sigma:.1} ms"
+        );
+    }
+}

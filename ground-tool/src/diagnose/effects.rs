@@ -410,11 +410,40 @@ fn active_sensors(set: &MeasurementSet) -> [bool; 4] {
     [c[0] >= 50, c[1] >= 50, c[2] >= 50, c[3] >= 50]
 }
 
+/// Orbits a sensor's data must span before an orbit-periodic term is offered for it.
+///
+/// Why: a periodicity is established only by repetition. Over less than an orbit, `cos u`
+/// and `sin u` are two smooth functions of time that absorb any slow structure (a drift, a
+/// slew's unmodelled signature: a 50-min run with an FHST time tag gave a 60″
+/// `orbit_periodic_alignment[FSS1]`), and the halves of the data (first and second half in
+/// time) must each hold a whole orbit for their agreement to say the variation repeats.
+pub const MIN_ORBITS_FOR_PERIODIC: f64 = 2.0;
+
+/// Whether each sensor's data span at least [`MIN_ORBITS_FOR_PERIODIC`] orbits.
+#[must_use]
+pub fn spans_orbits(set: &MeasurementSet) -> [bool; 4] {
+    let Some(period_s) = set.orbit_period_s.filter(|p| p.is_finite() && *p > 0.0) else {
+        return [false; 4];
+    };
+    let mut first = [f64::INFINITY; 4];
+    let mut last = [f64::NEG_INFINITY; 4];
+    for m in set
+        .meas
+        .iter()
+        .filter(|m| !m.outlier && m.orbit_phase.is_finite())
+    {
+        first[m.sensor] = first[m.sensor].min(m.t_s);
+        last[m.sensor] = last[m.sensor].max(m.t_s);
+    }
+    core::array::from_fn(|s| last[s] - first[s] >= MIN_ORBITS_FOR_PERIODIC * period_s)
+}
+
 /// The candidate library for a measurement set. `fss_pitch_rad[i]` is the cyclic pitch found
 /// for FSS i (none: no cyclic candidate).
 #[must_use]
 pub fn library(set: &MeasurementSet, fss_pitch_rad: [Option<f64>; 2]) -> Vec<Effect> {
     let active = active_sensors(set);
+    let periodic = spans_orbits(set);
     let mut out = vec![
         Effect::new(
             EffectKind::AberrationAnnual,
@@ -461,11 +490,6 @@ pub fn library(set: &MeasurementSet, fss_pitch_rad: [Option<f64>; 2]) -> Vec<Eff
             ("sin_y", "arcsec", 100.0),
             ("sin_z", "arcsec", 100.0),
         ];
-        out.push(Effect::new(
-            EffectKind::OrbitPeriodicAlignment,
-            Some(s),
-            &once,
-        ));
         // The same with the second harmonic: a thermal orbit cycle is not a sinusoid
         // (eclipse entry and exit, algorithms.md §9 row 2: "periodic at orbit period and
         // harmonics"). A separate candidate, so a once-per-orbit variation is not charged six
@@ -479,9 +503,16 @@ pub fn library(set: &MeasurementSet, fss_pitch_rad: [Option<f64>; 2]) -> Vec<Eff
             ("sin2u_y", "arcsec", 100.0),
             ("sin2u_z", "arcsec", 100.0),
         ]);
-        let mut e = Effect::new(EffectKind::OrbitPeriodicAlignment, Some(s), &both);
-        e.harmonics = 2;
-        out.push(e);
+        if periodic[s] {
+            out.push(Effect::new(
+                EffectKind::OrbitPeriodicAlignment,
+                Some(s),
+                &once,
+            ));
+            let mut e = Effect::new(EffectKind::OrbitPeriodicAlignment, Some(s), &both);
+            e.harmonics = 2;
+            out.push(e);
+        }
         {
             let mut names = Vec::new();
             for ax in ["x", "y", "z"] {

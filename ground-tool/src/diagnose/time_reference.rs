@@ -44,7 +44,7 @@
 //! model conditionally on them).
 
 use super::effects::EffectKind;
-use super::fit::{indices, post_fit, solve_fixed, Fixed, Layout};
+use super::fit::{indices, post_fit, solve_fixed, Fixed, Layout, SubFit};
 use super::measurements::{MeasurementSet, SENSOR_NAMES};
 use super::search::{Evidence, Iteration, SearchConfig, SearchResult};
 use super::stats::{chi2_sf, f_sf, holm_adjust};
@@ -150,6 +150,8 @@ struct ArcSystem {
     chi2: f64,
     rows: usize,
     nuisance: usize,
+    /// Measurements per sensor in turning frames (what tests a sensor's time tag).
+    turning: [usize; 4],
 }
 
 impl ArcSystem {
@@ -160,6 +162,7 @@ impl ArcSystem {
             chi2: 0.0,
             rows: 0,
             nuisance: 0,
+            turning: [0; 4],
         }
     }
 
@@ -169,6 +172,22 @@ impl ArcSystem {
         self.chi2 += o.chi2;
         self.rows += o.rows;
         self.nuisance += o.nuisance;
+        for (t, n) in self.turning.iter_mut().zip(o.turning) {
+            *t += n;
+        }
+    }
+
+    /// Whether this system tests column `c` (0 = common to `tested`, 1 + sensor): at least
+    /// [`MIN_TURNING_SAMPLES`] turning measurements of the sensor (of any tested sensor for
+    /// the common column).
+    fn tests(&self, c: usize, tested: &[usize]) -> bool {
+        if c == 0 {
+            tested
+                .iter()
+                .any(|&s| self.turning[s] >= MIN_TURNING_SAMPLES)
+        } else {
+            self.turning[c - 1] >= MIN_TURNING_SAMPLES
+        }
     }
 
     /// The same system with the common column (0) made common to `tested` only: the sum of
@@ -198,7 +217,6 @@ fn accumulate_arc(
     g: &DVector<f64>,
     arc: Arc,
     meas_of_batch: &[std::ops::Range<usize>],
-    turning_samples: &mut [usize; 4],
 ) -> Option<ArcSystem> {
     let lo = set.batches[arc.first].lo;
     let hi = set.batches[arc.last].hi;
@@ -240,7 +258,6 @@ fn accumulate_arc(
     let mut sys = ArcSystem::zeros();
     let (mut cols, mut scratch) = (Vec::new(), Vec::new());
     let turning_rad_per_s = TURNING_RATE_ARCSEC_PER_S / ARCSEC_PER_RAD;
-    // Counted into `turning_samples` only if the arc is used.
     let mut turning = [0usize; 4];
     for bi in arc.first..=arc.last {
         for m in set.meas[meas_of_batch[bi].clone()]
@@ -296,9 +313,7 @@ fn accumulate_arc(
     sys.chi2 -= (na.transpose() * inv * na)[(0, 0)];
     sys.chi2 = sys.chi2.max(0.0);
     sys.nuisance = N_ARC;
-    for (t, n) in turning_samples.iter_mut().zip(turning) {
-        *t += n;
-    }
+    sys.turning = turning;
     Some(sys)
 }
 
@@ -343,7 +358,7 @@ fn solve(sys: &ArcSystem, cols: &[usize]) -> Option<Sub> {
 /// singular or no degrees of freedom are left.
 fn evaluate(
     full: &ArcSystem,
-    [first, second]: [&ArcSystem; 2],
+    halves: Option<[&ArcSystem; 2]>,
     model: &[usize],
     c: usize,
 ) -> Option<Evidence> {
@@ -363,7 +378,9 @@ fn evaluate(
     let dbic = n_rows * (small.chi2 / big.chi2.max(1e-9)).ln() - n_rows.ln();
     let k = with.len() - 1;
     let (mut hchi2, mut hp, mut est) = (f64::NAN, 0.0, (Vec::new(), Vec::new()));
-    if let (Some(a), Some(b)) = (solve(first, &with), solve(second, &with)) {
+    if let Some((a, b)) =
+        halves.and_then(|[first, second]| Some((solve(first, &with)?, solve(second, &with)?)))
+    {
         let va = a.cov[(k, k)] * a.s2().max(1.0);
         let vb = b.cov[(k, k)] * b.s2().max(1.0);
         hchi2 = (a.x[k] - b.x[k]).powi(2) / (va + vb);
@@ -404,6 +421,8 @@ fn column_label(c: usize) -> String {
 pub struct TimeReference {
     /// Arcs used.
     pub arcs: usize,
+    /// Passes of the arcs against the re-estimated model ([`resolve`]).
+    pub passes: usize,
     /// Scalar equations in them.
     pub rows: usize,
     /// Columns kept (0 = common to the tested sensors, 1 + sensor).
@@ -420,8 +439,19 @@ pub struct TimeReference {
     pub iterations: Vec<Iteration>,
 }
 
-/// Determine the absolute time tags from the slew arcs, with the search's final model (its
-/// time tags excluded) applied. `None` when the run has no arc with data.
+/// Passes of the arcs against a model re-estimated with their time tags (see [`resolve`]).
+const MAX_PASSES: usize = 4;
+
+/// Determine the absolute time tags from the slew arcs. `None` when the run has fewer than
+/// two arcs with data.
+///
+/// The arcs apply the rest of the model at its estimate, and the search estimated it without
+/// the absolute time tags: an FHST's alignment fitted while its slew samples carried an
+/// unmodelled 29″ shift is off, and the arcs then read part of that as time tag (a 50-min
+/// run with one FHST1 slew: 86 ± 4 ms for 100). So the arcs are run again against the model
+/// re-estimated with their time tags fixed ([`apply`]'s conditional fit), until the time
+/// tags and the selection stop changing (≤ [`MAX_PASSES`] passes; the selection of the
+/// last pass is reported).
 #[must_use]
 pub fn resolve(
     set: &MeasurementSet,
@@ -429,14 +459,6 @@ pub fn resolve(
     config: &SearchConfig,
 ) -> Option<TimeReference> {
     let layout = &res.layout;
-    let mut g = res.final_fit.expand(layout.total);
-    for (i, e) in layout.effects.iter().enumerate() {
-        if e.kind == EffectKind::TimeTagOffset {
-            for j in layout.range(i) {
-                g[j] = 0.0;
-            }
-        }
-    }
     let mut meas_of_batch = vec![0..0; set.batches.len()];
     let mut i = 0;
     while i < set.meas.len() {
@@ -449,12 +471,8 @@ pub fn resolve(
         i = j;
     }
     let arcs = arcs(set);
-    let mut turning = [0usize; 4];
-    let systems: Vec<ArcSystem> = arcs
-        .iter()
-        .filter_map(|&a| accumulate_arc(set, layout, &g, a, &meas_of_batch, &mut turning))
-        .collect();
-    if std::env::var_os("DIAGNOSE_DEBUG").is_some() {
+    let debug = std::env::var_os("DIAGNOSE_DEBUG").is_some();
+    if debug {
         for a in &arcs {
             let (b0, b1) = (&set.batches[a.first], &set.batches[a.last]);
             eprintln!(
@@ -468,10 +486,59 @@ pub fn resolve(
                     .count()
             );
         }
+    }
+    let mut fit = res.final_fit.clone();
+    let mut last: Option<TimeReference> = None;
+    for pass in 1..=MAX_PASSES {
+        let mut g = fit.expand(layout.total);
+        for (i, e) in layout.effects.iter().enumerate() {
+            if e.kind == EffectKind::TimeTagOffset {
+                for j in layout.range(i) {
+                    g[j] = 0.0;
+                }
+            }
+        }
+        let systems: Vec<ArcSystem> = arcs
+            .iter()
+            .filter_map(|&a| accumulate_arc(set, layout, &g, a, &meas_of_batch))
+            .collect();
+        let mut tr = select(&systems, config, debug)?;
+        tr.passes = pass;
+        let converged = last.as_ref().is_some_and(|l| {
+            l.model == tr.model
+                && l.tau_ms.iter().zip(&tr.tau_ms).all(|(a, b)| match (a, b) {
+                    (Some((xa, _)), Some((xb, sb))) => (xa - xb).abs() <= 0.05 * sb,
+                    (None, None) => true,
+                    _ => false,
+                })
+        });
+        if debug {
+            eprintln!("arcs pass {pass}: model {:?}, τ {:?}", tr.model, tr.tau_ms);
+        }
+        if converged || pass == MAX_PASSES {
+            return Some(tr);
+        }
+        let Some(next) = conditional_fit(res, &tr).map(|m| m.fit) else {
+            return Some(tr);
+        };
+        fit = next;
+        last = Some(tr);
+    }
+    last
+}
+
+/// The selection of time-tag columns over the arcs' systems (module doc, **Evidence**).
+fn select(systems: &[ArcSystem], config: &SearchConfig, debug: bool) -> Option<TimeReference> {
+    let mut turning = [0usize; 4];
+    for s in systems {
+        for (t, n) in turning.iter_mut().zip(s.turning) {
+            *t += n;
+        }
+    }
+    if debug {
         eprintln!(
-            "arcs with data {} of {}; turning samples {turning:?}",
-            systems.len(),
-            arcs.len()
+            "arcs with data {}; turning samples {turning:?}",
+            systems.len()
         );
     }
     if systems.len() < 2 {
@@ -480,18 +547,54 @@ pub fn resolve(
     let sensors: Vec<usize> = (0..4)
         .filter(|&s| turning[s] >= MIN_TURNING_SAMPLES)
         .collect();
-    // Halves: alternate arcs.
-    let (mut full, mut first, mut second) =
-        (ArcSystem::zeros(), ArcSystem::zeros(), ArcSystem::zeros());
-    for (k, s) in systems.iter().enumerate() {
-        let s = s.common_to(&sensors);
-        full.add(&s);
-        if k % 2 == 0 {
-            first.add(&s);
-        } else {
-            second.add(&s);
+    let reduced: Vec<ArcSystem> = systems.iter().map(|s| s.common_to(&sensors)).collect();
+    let mut full = ArcSystem::zeros();
+    for s in &reduced {
+        full.add(s);
+    }
+    if debug {
+        for (k, s) in reduced.iter().enumerate() {
+            let cols: Vec<usize> = sensors.iter().map(|c| c + 1).collect();
+            let per: Vec<String> = match solve(s, &cols) {
+                Some(f) => sensors
+                    .iter()
+                    .enumerate()
+                    .map(|(i, &c)| {
+                        format!(
+                            "{} {:.1} ± {:.1}",
+                            SENSOR_NAMES[c],
+                            f.x[i],
+                            (f.cov[(i, i)] * f.s2().max(1.0)).sqrt()
+                        )
+                    })
+                    .collect(),
+                None => vec!["singular".to_owned()],
+            };
+            eprintln!(
+                "arc {k}: rows {}, turning {:?}: {}",
+                s.rows,
+                s.turning,
+                per.join(", ")
+            );
         }
     }
+    // Halves per column: alternate arcs among those that test it. Alternate arcs of the
+    // whole run would leave a sensor seen only in every other slew (an FHST that sees stars
+    // in the x and z slews but not in the y slew between them) with one empty half, whose
+    // estimate is the prior's 0 ± 1 s: a test that always passes. A column tested in one arc
+    // only has no halves and is not kept: one slew cannot show that a delay repeats.
+    let halves: Vec<Option<[ArcSystem; 2]>> = (0..N_TAU)
+        .map(|c| {
+            let with: Vec<&ArcSystem> = reduced.iter().filter(|s| s.tests(c, &sensors)).collect();
+            (with.len() >= 2).then(|| {
+                let mut h = [ArcSystem::zeros(), ArcSystem::zeros()];
+                for (k, s) in with.iter().enumerate() {
+                    h[k % 2].add(s);
+                }
+                h
+            })
+        })
+        .collect();
     let mut offered: Vec<usize> = sensors.iter().map(|s| s + 1).collect();
     if sensors.len() >= 2 {
         offered.insert(0, 0);
@@ -501,7 +604,10 @@ pub fn resolve(
     }
     let halves_p_min = chi2_sf(config.halves_sigma * config.halves_sigma, 1.0);
     // Evidence of column `c` against `model`.
-    let evaluate = |model: &[usize], c: usize| evaluate(&full, [&first, &second], model, c);
+    let evaluate = |model: &[usize], c: usize| {
+        let h = halves.get(c).and_then(Option::as_ref).map(|[a, b]| [a, b]);
+        evaluate(&full, h, model, c)
+    };
     let why_not = |e: &Evidence, p_adjusted: f64| -> Option<String> {
         let mut why = Vec::new();
         if !(p_adjusted < config.alpha) {
@@ -516,7 +622,9 @@ pub fn resolve(
                 e.delta_bic, config.min_delta_bic
             ));
         }
-        if !(e.halves_p > halves_p_min) {
+        if e.halves_estimates.0.is_empty() {
+            why.push("no halves: fewer than two arcs test it".to_owned());
+        } else if !(e.halves_p > halves_p_min) {
             why.push(format!(
                 "halves differ (χ² {:.1}, p {:.2e})",
                 e.halves_chi2, e.halves_p
@@ -632,6 +740,7 @@ pub fn resolve(
     }
     Some(TimeReference {
         arcs: systems.len(),
+        passes: 1,
         rows: full.rows,
         model,
         tested: std::array::from_fn(|s| sensors.contains(&s)),
@@ -641,20 +750,22 @@ pub fn resolve(
     })
 }
 
-/// Put the absolute time tags into the search's result in place of its relative ones: the
-/// time-tag effects added become those of [`TimeReference::tau_ms`], fixed at the arcs'
-/// estimates; the rest of the final model is re-estimated conditionally on them
-/// ([`solve_fixed`]), with its residuals and structure tests. A sensor the arcs do not test
-/// ([`TimeReference::tested`]) keeps the search's time tag (free, against the others'), and a
-/// declared time tag (in the baseline) is fixed there, not added a second time.
-///
-/// # Errors
-/// The conditional fit is singular.
-pub fn apply(
-    set: &MeasurementSet,
-    res: &mut SearchResult,
-    tr: &TimeReference,
-) -> anyhow::Result<()> {
+/// The search's model with the arcs' time tags in place of its own: what [`apply`] reports
+/// and what [`resolve`]'s next pass applies.
+struct ArcModel {
+    /// Effects added to the baseline (the arcs' time tags included).
+    added: Vec<usize>,
+    /// Their evidence.
+    evidence: Vec<Evidence>,
+    /// The arcs' time tags, fixed.
+    fixed: Vec<Fixed>,
+    /// One line per time tag.
+    summary: Vec<String>,
+    /// The rest of the model estimated conditionally on them.
+    fit: SubFit,
+}
+
+fn conditional_fit(res: &SearchResult, tr: &TimeReference) -> Option<ArcModel> {
     // The arcs decide the time tags of the sensors they test.
     let decided = |i: usize| {
         let e = &res.layout.effects[i];
@@ -705,8 +816,38 @@ pub fn apply(
         &res.layout,
         &indices(&res.layout, &model),
         &fixed,
-    )
-    .ok_or_else(|| anyhow::anyhow!("diagnose: the fit with the arcs' time tags is singular"))?;
+    )?;
+    Some(ArcModel {
+        added,
+        evidence,
+        fixed,
+        summary,
+        fit,
+    })
+}
+
+/// Put the absolute time tags into the search's result in place of its relative ones: the
+/// time-tag effects added become those of [`TimeReference::tau_ms`], fixed at the arcs'
+/// estimates; the rest of the final model is re-estimated conditionally on them
+/// ([`solve_fixed`]), with its residuals and structure tests. A sensor the arcs do not test
+/// ([`TimeReference::tested`]) keeps the search's time tag (free, against the others'), and a
+/// declared time tag (in the baseline) is fixed there, not added a second time.
+///
+/// # Errors
+/// The conditional fit is singular.
+pub fn apply(
+    set: &MeasurementSet,
+    res: &mut SearchResult,
+    tr: &TimeReference,
+) -> anyhow::Result<()> {
+    let ArcModel {
+        added,
+        evidence,
+        fixed,
+        summary,
+        fit,
+    } = conditional_fit(res, tr)
+        .ok_or_else(|| anyhow::anyhow!("diagnose: the fit with the arcs' time tags is singular"))?;
     res.after = post_fit(set, &res.layout, &fit.expand(res.layout.total));
     res.tests_after = super::structure::run_tests(set, &res.after, None, None);
     res.final_fit = fit;
@@ -721,9 +862,11 @@ pub fn apply(
     res.iterations.push(Iteration {
         number: res.iterations.len() + 1,
         added: Some(format!(
-            "time tags against the gyro from {} slew arcs ({} equations): {}",
+            "time tags against the gyro from {} slew arcs ({} equations, {} pass{}): {}",
             tr.arcs,
             tr.rows,
+            tr.passes,
+            if tr.passes == 1 { "" } else { "es" },
             if summary.is_empty() {
                 "none".to_owned()
             } else {
@@ -787,10 +930,45 @@ mod tests {
     fn no_evidence_without_degrees_of_freedom() {
         let rows: Vec<_> = (0..10).map(|k| (0, 1.0 + f64::from(k), 30.0)).collect();
         let sys = system(&rows, N_ARC);
-        assert!(evaluate(&sys, [&sys, &sys], &[], 1).is_none());
+        assert!(evaluate(&sys, Some([&sys, &sys]), &[], 1).is_none());
         // With enough equations the same column is evidence.
         let sys = system(&rows.repeat(3), N_ARC);
-        assert!(evaluate(&sys, [&sys, &sys], &[], 1).is_some());
+        assert!(evaluate(&sys, Some([&sys, &sys]), &[], 1).is_some());
+    }
+
+    /// Halves per column: a sensor with a 100 ms tag tested in one arc of three (FHST1 in the
+    /// only slew where it sees stars) has no halves and is not kept, however strong its
+    /// likelihood ratio (alternate arcs gave it an empty half, the prior's 0 ± 1 s, which
+    /// always agreed); seen in two arcs it is kept with its value.
+    #[test]
+    fn a_time_tag_seen_in_one_arc_only_is_not_kept() {
+        let arc = |tagged: bool| {
+            let mut rows = Vec::new();
+            for k in 0..300 {
+                let t = 1.0 + f64::from(k % 5);
+                rows.push((1, t, 0.0));
+                if tagged {
+                    rows.push((0, t, 0.1 * t * 1000.0 + if k % 2 == 0 { 1.0 } else { -1.0 }));
+                }
+            }
+            let mut sys = system(&rows, N_ARC);
+            sys.turning = [if tagged { 300 } else { 0 }, 300, 0, 0];
+            sys
+        };
+        let config = SearchConfig::default();
+        let one = select(&[arc(true), arc(false), arc(false)], &config, false).unwrap();
+        assert!(one.tau_ms[0].is_none(), "{:?}", one.tau_ms);
+        assert!(one
+            .iterations
+            .iter()
+            .any(|it| it.candidates.iter().any(|c| c
+                .rejected_because
+                .as_deref()
+                .is_some_and(|w| w.contains("no halves")))));
+        let two = select(&[arc(true), arc(false), arc(true)], &config, false).unwrap();
+        let (tau, sigma) = two.tau_ms[0].unwrap();
+        assert!((tau - 100.0).abs() < 3.0 * sigma, "{tau} ± {sigma}");
+        assert!(two.tau_ms[1].is_none(), "{:?}", two.tau_ms);
     }
 
     /// The arc's reference offset: `A_a = Rot(ε) A_b` is what `rotvec_from_rot(A_a A_bᵀ)`
