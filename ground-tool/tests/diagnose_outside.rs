@@ -136,3 +136,26 @@ fn outside_writer_sub_orbit_run_claims_nothing_false() {
         );
     }
 }
+
+/// The writer's 82-min plan without ephemeris records (`--no-eph`; optional in
+/// `docs/icd.md` §3.4): the declared orbital aberration (5.3″) and Sun parallax (9″) cannot
+/// be applied. They were read as annual aberration (k − 1 = 1.1–1.4, ΔBIC 57) and a thermal
+/// drift; now they are modelled as an unknown circular orbit, said so in `notes`, and nothing
+/// is claimed.
+#[test]
+fn outside_writer_without_ephemeris_claims_nothing() {
+    let (report, _) = write_and_diagnose("no-ephemeris", &["--no-eph"]);
+    assert!(named(&report).is_empty(), "{report:#}");
+    assert_eq!(
+        report["unexplained"].as_array().unwrap().len(),
+        0,
+        "{report:#}"
+    );
+    let notes = report["notes"].as_array().unwrap();
+    assert!(
+        notes
+            .iter()
+            .any(|n| n.as_str().unwrap().contains("unknown circular orbit")),
+        "{notes:?}"
+    );
+}

@@ -68,6 +68,14 @@ pub enum EffectKind {
     /// harmonics 2 and 3, the square of the temperature deviation) used only to test the
     /// lack of fit of the thermal and orbit-periodic candidates.
     GenericAlignmentExtension,
+    /// Not a candidate: the orbital aberration and Sun parallax of an orbit the telemetry
+    /// does not give (no ephemeris records, `docs/icd.md` §3.4). The operator's model has
+    /// them (declared), the ground cannot apply them, and left in the residuals (≤ 5.3″ on
+    /// every sensor, ≤ 9″ on the FSSs) they were read as annual aberration, a thermal drift
+    /// or a time tag on the wrong tracker. A circular orbit's `v/c = a cos nt + b sin nt`
+    /// (ECI, 6 parameters in arcsec; position `(c/n)(a sin nt − b cos nt)` for the parallax),
+    /// `n` from the residuals ([`unknown_orbit_rate`]); in the baseline, never reported.
+    UnknownOrbit,
 }
 
 impl EffectKind {
@@ -87,6 +95,7 @@ impl EffectKind {
             Self::FssCyclicError => "fss_cyclic_error",
             Self::CatalogProperMotionError => "catalog_proper_motion_error",
             Self::GenericAlignmentExtension => "generic_alignment_extension",
+            Self::UnknownOrbit => "unknown_orbit",
         }
     }
 
@@ -137,6 +146,8 @@ pub struct Effect {
     pub extra_params: usize,
     /// Orbit harmonics of the orbit-periodic alignment (1, or 2: once and twice per orbit).
     pub harmonics: usize,
+    /// Orbit rate of [`EffectKind::UnknownOrbit`] (rad/s).
+    pub rate_rad_per_s: Option<f64>,
     /// Not a candidate (only used for lack-of-fit tests).
     #[serde(skip)]
     pub hidden: bool,
@@ -152,6 +163,7 @@ impl Effect {
             prior_sigma: params.iter().map(|p| p.2).collect(),
             pitch_rad: None,
             harmonics: 1,
+            rate_rad_per_s: None,
             stars: Vec::new(),
             star_dirs: Vec::new(),
             constraints: Vec::new(),
@@ -227,6 +239,25 @@ impl Effect {
             EffectKind::Aberration => {
                 out.push((0, v2(m.jm * m.ab_annual_acs * ARCSEC_PER_RAD)));
                 out.push((1, v2(m.jm * m.ab_orbital_acs * ARCSEC_PER_RAD)));
+            }
+            EffectKind::UnknownOrbit => {
+                let Some(n) = self.rate_rad_per_s else {
+                    return;
+                };
+                let g = unknown_orbit_map(m);
+                let (sin, cos) = (n * m.t_s).sin_cos();
+                // The Sun also moves by the parallax of the spacecraft's position.
+                let (ca, cb) = if m.sensor >= 2 {
+                    let k = parallax_per_aberration(n);
+                    (cos - k * sin, sin + k * cos)
+                } else {
+                    (cos, sin)
+                };
+                for j in 0..3 {
+                    let col = g.column(j);
+                    out.push((j, [col.x * ca, col.y * ca]));
+                    out.push((3 + j, [col.x * cb, col.y * cb]));
+                }
             }
             EffectKind::TimeTagOffset => {
                 out.push((
@@ -357,6 +388,7 @@ impl Effect {
             EffectKind::FssTransferFunction | EffectKind::FssCyclicError => &[R::FovH, R::FovV],
             EffectKind::CatalogProperMotionError => &[R::StarId],
             EffectKind::GenericAlignmentExtension => &[],
+            EffectKind::UnknownOrbit => &[R::Time],
         }
     }
 }
@@ -404,6 +436,141 @@ pub fn tangent_basis_eci(u: &nalgebra::Vector3<f64>) -> [nalgebra::Vector3<f64>;
     [east, u.cross(&east)]
 }
 
+/// `J Mᵀ A (I − u uᵀ)` (2×3, arcsec per arcsec of `v/c` along each ECI axis): how a
+/// velocity aberration moves a measurement. From the tangent basis, which the measurement
+/// carries in both frames.
+fn unknown_orbit_map(m: &Measurement) -> nalgebra::Matrix2x3<f64> {
+    let [e, n] = tangent_basis_eci(&m.u_eci);
+    let t = m.tangent_acs[0] * e.transpose() + m.tangent_acs[1] * n.transpose();
+    m.jm * t
+}
+
+/// Sun parallax per unit of orbital aberration for a circular orbit of rate `n`:
+/// `|r| / AU = (c / n) (v / c) / AU`.
+fn parallax_per_aberration(n_rad_per_s: f64) -> f64 {
+    const C_KM_PER_S: f64 = 299_792.458;
+    const AU_KM: f64 = 149_597_870.7;
+    C_KM_PER_S / (n_rad_per_s * AU_KM)
+}
+
+/// Shortest run for [`unknown_orbit_rate`] (s): a third of an orbit, over which the
+/// aberration still turns by 2 rad.
+pub const UNKNOWN_ORBIT_MIN_SPAN_S: f64 = 1800.0;
+
+/// Orbit periods searched for [`EffectKind::UnknownOrbit`] (min): low Earth orbits.
+pub const UNKNOWN_ORBIT_PERIOD_MIN: [f64; 2] = [85.0, 130.0];
+
+/// The orbit rate (rad/s) that the residuals `resid` of `set` follow best with the
+/// unknown-orbit columns: the largest χ² reduction of their six-parameter least-squares fit
+/// over periods in [`UNKNOWN_ORBIT_PERIOD_MIN`] (0.5 min steps, then 0.02 min around the
+/// best). `None` with fewer than 200 measurements or a run shorter than
+/// [`UNKNOWN_ORBIT_MIN_SPAN_S`].
+#[must_use]
+pub fn unknown_orbit_rate(set: &MeasurementSet, resid: &[[f64; 2]]) -> Option<f64> {
+    let rows: Vec<(&Measurement, [f64; 2])> = set
+        .meas
+        .iter()
+        .zip(resid)
+        .filter(|(m, r)| !m.outlier && r.iter().all(|v| v.is_finite()))
+        .map(|(m, r)| (m, *r))
+        .collect();
+    let span = rows.iter().map(|(m, _)| m.t_s).fold(0.0, f64::max)
+        - rows
+            .iter()
+            .map(|(m, _)| m.t_s)
+            .fold(f64::INFINITY, f64::min);
+    if rows.len() < 200 || !(span >= UNKNOWN_ORBIT_MIN_SPAN_S) {
+        return None;
+    }
+    let maps: Vec<nalgebra::Matrix2x3<f64>> =
+        rows.iter().map(|(m, _)| unknown_orbit_map(m)).collect();
+    // χ² reduction at one period, with each batch's attitude and rate eliminated as in the
+    // joint fit (they absorb the slow part of the signature; without them the best period
+    // of a 5.7-h writer run was 1.6 % short).
+    let gain = |period_min: f64| -> f64 {
+        let n = std::f64::consts::TAU / (period_min * 60.0);
+        let k = parallax_per_aberration(n);
+        let mut nn = nalgebra::SMatrix::<f64, 6, 6>::zeros();
+        let mut b = nalgebra::SVector::<f64, 6>::zeros();
+        let mut nbb = nalgebra::SMatrix::<f64, 6, 6>::zeros();
+        let mut nbo = nalgebra::SMatrix::<f64, 6, 6>::zeros();
+        let mut bb = nalgebra::SVector::<f64, 6>::zeros();
+        let mut batch = usize::MAX;
+        let close = |nn: &mut nalgebra::SMatrix<f64, 6, 6>,
+                     b: &mut nalgebra::SVector<f64, 6>,
+                     nbb: &mut nalgebra::SMatrix<f64, 6, 6>,
+                     nbo: &mut nalgebra::SMatrix<f64, 6, 6>,
+                     bb: &mut nalgebra::SVector<f64, 6>| {
+            for j in 0..6 {
+                nbb[(j, j)] += 1e-6;
+            }
+            if let Some(c) = nbb.cholesky() {
+                *nn -= nbo.transpose() * c.solve(nbo);
+                *b -= nbo.transpose() * c.solve(bb);
+            }
+            *nbb = nalgebra::SMatrix::zeros();
+            *nbo = nalgebra::SMatrix::zeros();
+            *bb = nalgebra::SVector::zeros();
+        };
+        for ((m, r), g) in rows.iter().zip(&maps) {
+            if m.batch != batch {
+                close(&mut nn, &mut b, &mut nbb, &mut nbo, &mut bb);
+                batch = m.batch;
+            }
+            let (sin, cos) = (n * m.t_s).sin_cos();
+            let (ca, cb) = if m.sensor >= 2 {
+                (cos - k * sin, sin + k * cos)
+            } else {
+                (cos, sin)
+            };
+            let w = 1.0 / (m.sigma * m.sigma);
+            for ax in 0..2 {
+                let row = g.row(ax);
+                let mut a = nalgebra::SVector::<f64, 6>::zeros();
+                let mut z = nalgebra::SVector::<f64, 6>::zeros();
+                for j in 0..3 {
+                    a[j] = row[j] * ca;
+                    a[3 + j] = row[j] * cb;
+                    let mut e = nalgebra::Vector3::zeros();
+                    e[j] = 1.0;
+                    let att = -(m.jm * m.b_acs.cross(&e));
+                    z[j] = att[ax];
+                    z[3 + j] = att[ax] * m.dt_center_s / 100.0;
+                }
+                nn += a * a.transpose() * w;
+                b += a * (w * r[ax]);
+                nbb += z * z.transpose() * w;
+                nbo += z * a.transpose() * w;
+                bb += z * (w * r[ax]);
+            }
+        }
+        close(&mut nn, &mut b, &mut nbb, &mut nbo, &mut bb);
+        for j in 0..6 {
+            nn[(j, j)] += 1.0 / (20.0 * 20.0);
+        }
+        nn.cholesky().map_or(0.0, |c| b.dot(&c.solve(&b)))
+    };
+    let mut best = (f64::NEG_INFINITY, UNKNOWN_ORBIT_PERIOD_MIN[0]);
+    let steps =
+        ((UNKNOWN_ORBIT_PERIOD_MIN[1] - UNKNOWN_ORBIT_PERIOD_MIN[0]) / 0.5).round() as usize;
+    for i in 0..=steps {
+        let p = UNKNOWN_ORBIT_PERIOD_MIN[0] + 0.5 * i as f64;
+        let g = gain(p);
+        if g > best.0 {
+            best = (g, p);
+        }
+    }
+    let centre = best.1;
+    for i in 0..=50 {
+        let p = centre - 0.5 + 0.02 * f64::from(i);
+        let g = gain(p);
+        if g > best.0 {
+            best = (g, p);
+        }
+    }
+    Some(std::f64::consts::TAU / (best.1 * 60.0))
+}
+
 /// Sensors with enough data (≥ 50 measurements).
 fn active_sensors(set: &MeasurementSet) -> [bool; 4] {
     let c = set.count_per_sensor();
@@ -441,7 +608,11 @@ pub fn spans_orbits(set: &MeasurementSet) -> [bool; 4] {
 /// The candidate library for a measurement set. `fss_pitch_rad[i]` is the cyclic pitch found
 /// for FSS i (none: no cyclic candidate).
 #[must_use]
-pub fn library(set: &MeasurementSet, fss_pitch_rad: [Option<f64>; 2]) -> Vec<Effect> {
+pub fn library(
+    set: &MeasurementSet,
+    fss_pitch_rad: [Option<f64>; 2],
+    unknown_orbit_rad_per_s: Option<f64>,
+) -> Vec<Effect> {
     let active = active_sensors(set);
     let periodic = spans_orbits(set);
     let mut out = vec![
@@ -464,6 +635,23 @@ pub fn library(set: &MeasurementSet, fss_pitch_rad: [Option<f64>; 2]) -> Vec<Eff
             ],
         ),
     ];
+    if let Some(n) = unknown_orbit_rad_per_s {
+        let mut e = Effect::new(
+            EffectKind::UnknownOrbit,
+            None,
+            &[
+                ("v_over_c_cos_x", "arcsec", 20.0),
+                ("v_over_c_cos_y", "arcsec", 20.0),
+                ("v_over_c_cos_z", "arcsec", 20.0),
+                ("v_over_c_sin_x", "arcsec", 20.0),
+                ("v_over_c_sin_y", "arcsec", 20.0),
+                ("v_over_c_sin_z", "arcsec", 20.0),
+            ],
+        );
+        e.rate_rad_per_s = Some(n);
+        e.hidden = true;
+        out.push(e);
+    }
     for s in 0..4 {
         if !active[s] {
             continue;

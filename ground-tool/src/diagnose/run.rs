@@ -240,6 +240,27 @@ pub fn diagnose_run(
         declared_effects: declared.clone(),
     };
     let analysis = analyse(&input, &opts.search)?;
+    if let Some(i) = analysis
+        .search
+        .layout
+        .effects
+        .iter()
+        .position(|e| e.kind == super::effects::EffectKind::UnknownOrbit)
+    {
+        let e = &analysis.search.layout.effects[i];
+        let period_min = e
+            .rate_rad_per_s
+            .map_or(f64::NAN, |n| std::f64::consts::TAU / n / 60.0);
+        let x = analysis
+            .search
+            .final_fit
+            .expand(analysis.search.layout.total);
+        let r: Vec<f64> = analysis.search.layout.range(i).map(|j| x[j]).collect();
+        let amplitude = (r.iter().map(|v| v * v).sum::<f64>() / 2.0).sqrt();
+        notes.push(format!(
+            "no orbit in the telemetry (no ephemeris records, docs/icd.md §3.4): the declared orbital aberration and Sun parallax are modelled as an unknown circular orbit, period {period_min:.2} min found from the residuals, aberration amplitude {amplitude:.1}″ (≈ 5.3″ for a 7.7 km/s orbit)"
+        ));
+    }
     let gcfg = GyroConfig {
         alpha: opts.search.alpha,
         min_delta_bic: opts.search.min_delta_bic,

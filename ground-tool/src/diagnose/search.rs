@@ -345,7 +345,7 @@ fn search_with_pitch(
     // outlier flags.
     // The FSS transfer polynomial is in the preliminary fit (only to clean the residuals of
     // the pitch search).
-    let prelim_layout = Layout::new(super::effects::library(set, [None, None]));
+    let prelim_layout = Layout::new(super::effects::library(set, [None, None], None));
     let prelim_sys = accumulate_halves(set, &prelim_layout);
     // The per-sensor time tags are in it too: their signature grows with the rate, and a
     // large one (an FSS 0.4 s late: 115″ at 0.08°/s) otherwise puts its slew samples beyond
@@ -390,14 +390,55 @@ fn search_with_pitch(
             pitch.map(|p| p.map(f64::to_degrees))
         );
     }
-    let layout = Layout::new(super::effects::library(set, pitch));
+    // No orbit in the telemetry while the operator's model has orbital aberration or Sun
+    // parallax: the unknown-orbit terms join the baseline (`EffectKind::UnknownOrbit`).
+    let orbit_declared = declared
+        .iter()
+        .any(|d| d == "orbital_aberration" || d == "sun_parallax");
+    let unknown_orbit = if set.orbit_period_s.is_none() && orbit_declared {
+        super::effects::unknown_orbit_rate(set, &pf.resid)
+    } else {
+        None
+    };
+    if std::env::var_os("DIAGNOSE_DEBUG").is_some() {
+        eprintln!(
+            "unknown orbit: period {:?} min",
+            unknown_orbit.map(|n| std::f64::consts::TAU / n / 60.0)
+        );
+    }
+    let layout = Layout::new(super::effects::library(set, pitch, unknown_orbit));
     let systems = accumulate_halves(set, &layout);
     let baseline: Vec<usize> = (0..layout.effects.len())
-        .filter(|&i| is_declared(&layout.effects[i], declared))
+        .filter(|&i| {
+            is_declared(&layout.effects[i], declared)
+                || layout.effects[i].kind == EffectKind::UnknownOrbit
+        })
         .collect();
     let mut model = baseline.clone();
     let fit_model = |sys: &super::fit::Normal, effects: &[usize]| {
         solve(sys, &layout, &indices(&layout, effects))
+    };
+    // Does effect `x` add nothing to `model` once effect `y` is in it (F test at `alpha`)?
+    // Then the structure `x` explains is `y`'s, whatever sensors each acts on: through the
+    // batch attitudes an FSS transfer function that pulls the attitude where one tracker is
+    // blind shows on that tracker's stars, and per-star catalog offsets (60 parameters)
+    // explained 98 % of its Δχ² on the writer's FSS1 transfer function.
+    let adds_nothing_beyond = |model: &[usize], x: usize, y: usize| -> bool {
+        let mut with_y = model.to_vec();
+        with_y.push(y);
+        let mut with_both = with_y.clone();
+        with_both.push(x);
+        match (
+            fit_model(&systems.full, &with_y),
+            fit_model(&systems.full, &with_both),
+        ) {
+            (Some(a), Some(b)) => {
+                let k = layout.effects[x].len() as f64;
+                let f = ((a.chi2 - b.chi2) / k) / b.s2();
+                f_sf(f, k, b.dof) >= config.alpha
+            }
+            _ => false,
+        }
     };
     let baseline_fit = fit_model(&systems.full, &model)
         .ok_or_else(|| anyhow::anyhow!("diagnose: the baseline fit is singular"))?;
@@ -801,11 +842,12 @@ fn search_with_pitch(
                 if let Some((_, v, _)) = others.iter().find(|(o, v, _)| {
                     v.p_holm < config.alpha
                         && v.delta_bic > e.delta_bic + config.min_delta_bic
-                        && overlapping(&sensors_of(&layout.effects[*o]), &mine)
+                        && (overlapping(&sensors_of(&layout.effects[*o]), &mine)
+                            || adds_nothing_beyond(&without, c, *o))
                         && !restricts(&layout.effects[*o], &layout.effects[c])
                 }) {
                     e.rejected_because = Some(format!(
-                        "vetoed: {} explains the same sensor better (ΔBIC {:.1}) but failed its checks",
+                        "vetoed: {} explains the same structure better (ΔBIC {:.1}) but failed its checks",
                         v.effect, v.delta_bic
                     ));
                 }
@@ -884,6 +926,7 @@ fn search_with_pitch(
         if let Some((bi, b_bic)) = best {
             let chosen = &layout.effects[evs[bi].0];
             let chosen_sensors = sensors_of(chosen);
+            let chosen_index = evs[bi].0;
             let veto = evs.iter().find(|(c, e, _)| {
                 let other = &layout.effects[*c];
                 let statistically_ok =
@@ -891,12 +934,13 @@ fn search_with_pitch(
                 statistically_ok
                     && e.rejected_because.is_some()
                     && e.delta_bic > b_bic + config.min_delta_bic
-                    && overlapping(&sensors_of(other), &chosen_sensors)
                     && !restricts(other, chosen)
+                    && (overlapping(&sensors_of(other), &chosen_sensors)
+                        || adds_nothing_beyond(&model, chosen_index, *c))
             });
             if let Some((_, v, _)) = veto {
                 let why = format!(
-                    "vetoed: {} explains the same sensor better (ΔBIC {:.1}) but failed its checks",
+                    "vetoed: {} explains the same structure better (ΔBIC {:.1}) but failed its checks",
                     v.effect, v.delta_bic
                 );
                 evs[bi].1.rejected_because = Some(why);

@@ -354,11 +354,46 @@ fn solve(sys: &ArcSystem, cols: &[usize]) -> Option<Sub> {
     })
 }
 
+/// The scatter of a column's estimate between the arcs that test it, against its stated σ:
+/// `max(1, χ²/(K − 1))` of the K single-arc estimates of column `with[k]` about `x` (the
+/// Birge ratio; 1 with fewer than two arcs). The arcs are the replications of the
+/// experiment: an effect the model lacks (an alignment step, a gyro ramp) moves each slew's
+/// time tag by more than its noise σ, and the halves and the reported σ must say so (FSS1
+/// 200 ms with an FHST1 step and a gyro ramp: single-arc estimates 164–211 ms at σ 2–7 ms,
+/// ratio ≈ 6; with σ from the noise alone the halves "differed" at 9 ms and the tag was lost).
+fn scatter_ratio(
+    arcs: &[ArcSystem],
+    tested: &[usize],
+    with: &[usize],
+    k: usize,
+    x: f64,
+) -> (f64, usize) {
+    let Some(&c) = with.get(k) else {
+        return (1.0, 0);
+    };
+    let (mut chi2, mut n) = (0.0, 0usize);
+    for a in arcs.iter().filter(|a| a.tests(c, tested)) {
+        let Some(f) = solve(a, with) else { continue };
+        let v = f.cov[(k, k)] * f.s2().max(1.0);
+        if v > 0.0 && v.is_finite() && f.x[k].is_finite() {
+            chi2 += (f.x[k] - x).powi(2) / v;
+            n += 1;
+        }
+    }
+    if n < 2 {
+        (1.0, n)
+    } else {
+        ((chi2 / (n - 1) as f64).max(1.0), n)
+    }
+}
+
 /// Evidence of column `c` against `model` (F test, ΔBIC, halves); `None` when a fit is
 /// singular or no degrees of freedom are left.
 fn evaluate(
     full: &ArcSystem,
     halves: Option<[&ArcSystem; 2]>,
+    scatter: &dyn Fn(&[usize], usize, f64) -> (f64, usize),
+    alpha: f64,
     model: &[usize],
     c: usize,
 ) -> Option<Evidence> {
@@ -377,12 +412,19 @@ fn evaluate(
     let n_rows = full.rows as f64;
     let dbic = n_rows * (small.chi2 / big.chi2.max(1e-9)).ln() - n_rows.ln();
     let k = with.len() - 1;
+    // The column must stand out against the scatter between the arcs (a random-effects
+    // test: its σ inflated by the scatter ratio): a tag that one arc shows and the others do
+    // not is not a delay of the sensor, however strong its likelihood ratio. (A Student t
+    // with K − 1 dof would reject a 100 ms tag seen in two arcs at 80 and 86 ± 4 ms.)
+    let (ratio, _) = scatter(&with, k, big.x[k]);
+    let z2 = big.x[k].powi(2) / (big.cov[(k, k)] * big.s2().max(1.0) * ratio);
+    let p_re = chi2_sf(z2, 1.0);
     let (mut hchi2, mut hp, mut est) = (f64::NAN, 0.0, (Vec::new(), Vec::new()));
     if let Some((a, b)) =
         halves.and_then(|[first, second]| Some((solve(first, &with)?, solve(second, &with)?)))
     {
-        let va = a.cov[(k, k)] * a.s2().max(1.0);
-        let vb = b.cov[(k, k)] * b.s2().max(1.0);
+        let va = a.cov[(k, k)] * a.s2().max(1.0) * ratio;
+        let vb = b.cov[(k, k)] * b.s2().max(1.0) * ratio;
         hchi2 = (a.x[k] - b.x[k]).powi(2) / (va + vb);
         hp = chi2_sf(hchi2, 1.0);
         est = (vec![a.x[k]], vec![b.x[k]]);
@@ -399,7 +441,7 @@ fn evaluate(
         halves_p: hp,
         halves_estimates: est,
         signature_excess: (f64::NAN, f64::NAN),
-        adequate: true,
+        adequate: p_re < alpha,
         accepted: false,
         rejected_because: None,
     })
@@ -603,10 +645,11 @@ fn select(systems: &[ArcSystem], config: &SearchConfig, debug: bool) -> Option<T
         return None;
     }
     let halves_p_min = chi2_sf(config.halves_sigma * config.halves_sigma, 1.0);
+    let scatter = |with: &[usize], k: usize, x: f64| scatter_ratio(&reduced, &sensors, with, k, x);
     // Evidence of column `c` against `model`.
     let evaluate = |model: &[usize], c: usize| {
         let h = halves.get(c).and_then(Option::as_ref).map(|[a, b]| [a, b]);
-        evaluate(&full, h, model, c)
+        evaluate(&full, h, &scatter, config.alpha, model, c)
     };
     let why_not = |e: &Evidence, p_adjusted: f64| -> Option<String> {
         let mut why = Vec::new();
@@ -621,6 +664,9 @@ fn select(systems: &[ArcSystem], config: &SearchConfig, debug: bool) -> Option<T
                 "ΔBIC {:.1} ≤ {}",
                 e.delta_bic, config.min_delta_bic
             ));
+        }
+        if !e.adequate {
+            why.push("not above the scatter between the arcs".to_owned());
         }
         if e.halves_estimates.0.is_empty() {
             why.push("no halves: fewer than two arcs test it".to_owned());
@@ -719,6 +765,9 @@ fn select(systems: &[ArcSystem], config: &SearchConfig, debug: bool) -> Option<T
         return None;
     }
     let scale = fit.s2().max(1.0);
+    let ratio: Vec<f64> = (0..model.len())
+        .map(|k| scatter(&model, k, fit.x[k]).0)
+        .collect();
     let mut tau_ms = [None; 4];
     let mut evidence: [Option<Evidence>; 4] = Default::default();
     let common = model.iter().position(|&c| c == 0);
@@ -731,7 +780,7 @@ fn select(systems: &[ArcSystem], config: &SearchConfig, debug: bool) -> Option<T
         for a in [common, own].into_iter().flatten() {
             x += fit.x[a];
             for b in [common, own].into_iter().flatten() {
-                v += fit.cov[(a, b)];
+                v += fit.cov[(a, b)] * (ratio[a] * ratio[b]).sqrt();
             }
         }
         tau_ms[s] = Some((x, (v * scale).sqrt()));
@@ -930,10 +979,10 @@ mod tests {
     fn no_evidence_without_degrees_of_freedom() {
         let rows: Vec<_> = (0..10).map(|k| (0, 1.0 + f64::from(k), 30.0)).collect();
         let sys = system(&rows, N_ARC);
-        assert!(evaluate(&sys, Some([&sys, &sys]), &[], 1).is_none());
+        assert!(evaluate(&sys, Some([&sys, &sys]), &|_, _, _| (1.0, 0), 0.001, &[], 1).is_none());
         // With enough equations the same column is evidence.
         let sys = system(&rows.repeat(3), N_ARC);
-        assert!(evaluate(&sys, Some([&sys, &sys]), &[], 1).is_some());
+        assert!(evaluate(&sys, Some([&sys, &sys]), &|_, _, _| (1.0, 0), 0.001, &[], 1).is_some());
     }
 
     /// Halves per column: a sensor with a 100 ms tag tested in one arc of three (FHST1 in the
