@@ -269,6 +269,16 @@ pub fn is_declared(effect: &Effect, declared: &[String]) -> bool {
     )
 }
 
+/// For an aberration candidate, which aberration (0 annual, 1 orbital) each parameter scales.
+fn aberration_parts(kind: EffectKind) -> Option<&'static [usize]> {
+    match kind {
+        EffectKind::AberrationAnnual => Some(&[0]),
+        EffectKind::AberrationOrbital => Some(&[1]),
+        EffectKind::Aberration => Some(&[0, 1]),
+        _ => None,
+    }
+}
+
 fn max_excess(tests: &[StructureTest]) -> f64 {
     tests.iter().map(|t| t.f - 1.0).fold(0.0, f64::max)
 }
@@ -616,6 +626,35 @@ fn search_with_pitch(
                     "halves differ (χ² {:.1}, p {:.2e})",
                     e.halves_chi2, e.halves_p
                 ));
+            }
+            // A velocity aberration is there (k = 1) or not (k = 0): an aberration candidate
+            // whose k is neither (within 3σ, at least ±0.15) describes another structure
+            // (an FHST2 alignment step on the writer's calibration day gave
+            // k_orbital − k₀ = 1.99 ± 0.07 and was accepted).
+            if full && why.is_empty() {
+                if let (Some(part_of), Some(big)) =
+                    (aberration_parts(layout.effects[*c].kind), big.as_ref())
+                {
+                    for (pi, gi) in layout.range(*c).enumerate() {
+                        let (Some(pos), Some(&part)) =
+                            (big.idx.iter().position(|&j| j == gi), part_of.get(pi))
+                        else {
+                            continue;
+                        };
+                        let x = big.x[pos];
+                        let sd = (big.cov[(pos, pos)] * big.s2().max(1.0)).sqrt();
+                        let k0 = set.aberration_k0[part];
+                        let physical = [-k0, 1.0 - k0]
+                            .iter()
+                            .any(|v| (x - v).abs() <= (3.0 * sd).max(0.15));
+                        if !physical {
+                            why.push(format!(
+                                "unphysical: {} = {x:.2} ± {sd:.2} (k is 1 or 0; applied k₀ = {k0})",
+                                layout.effects[*c].params[pi]
+                            ));
+                        }
+                    }
+                }
             }
             if full && why.is_empty() {
                 let effect = &layout.effects[*c];
