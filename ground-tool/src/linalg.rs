@@ -38,6 +38,10 @@ pub fn sym_eigen_ascending(m: &DMatrix<f64>) -> (DVector<f64>, DMatrix<f64>) {
 /// `rel_tol * λ_max` are treated as zero. Returns the inverse and the rank kept.
 #[must_use]
 pub fn sym_pinv(m: &DMatrix<f64>, rel_tol: f64) -> (DMatrix<f64>, usize) {
+    // (nalgebra's eigen-decomposition panics on an empty matrix.)
+    if m.nrows() == 0 || !m.is_square() {
+        return (DMatrix::zeros(m.ncols(), m.nrows()), 0);
+    }
     let (values, vectors) = sym_eigen_ascending(m);
     let n = m.nrows();
     let max = values.iter().fold(0.0_f64, |a, &v| a.max(v));
@@ -73,5 +77,12 @@ mod tests {
         let back = &m * &p * &m;
         assert!((back - &m).norm() < 1e-12);
         assert!(spd_inverse(&m).is_none());
+    }
+
+    /// An empty comparison (no star both halves determine) has rank 0, not a panic.
+    #[test]
+    fn pinv_of_an_empty_matrix_is_empty() {
+        let (p, rank) = sym_pinv(&DMatrix::zeros(0, 0), 1e-9);
+        assert_eq!((p.nrows(), p.ncols(), rank), (0, 0, 0));
     }
 }

@@ -105,9 +105,10 @@ fn outside_writer_gap_inside_a_slew_is_left_out_of_the_gyro_fit() {
     assert!(named(&report).is_empty(), "{report:#}");
     let notes = report["gyro"]["notes"].as_array().unwrap();
     assert!(
-        notes
-            .iter()
-            .any(|n| n.as_str().unwrap().contains("a gap in the gyro data")),
+        notes.iter().any(|n| n
+            .as_str()
+            .unwrap()
+            .contains("frames without a gyro increment")),
         "{notes:?}"
     );
     assert!(report["gyro"]["slews"].as_u64().unwrap() >= 6, "{report:#}");
@@ -158,4 +159,77 @@ fn outside_writer_without_ephemeris_claims_nothing() {
             .any(|n| n.as_str().unwrap().contains("unknown circular orbit")),
         "{notes:?}"
     );
+}
+
+/// An FSS1 alignment step (20, −15, 10)″ at t = 10,000 s of the writer's 5.7-h day (out of
+/// the library) was claimed as 60 per-star catalog offsets in 3 of 3 seeds (helper-20's
+/// review): the per-star halves test used each offset's own variance and missed that the
+/// halves differ by one shift shared by the stars of a hold (p 0.997). With the full
+/// covariance the halves differ; nothing is claimed, and the structure is reported
+/// against time.
+#[test]
+fn outside_writer_fss1_alignment_step_is_not_read_as_catalog_errors() {
+    let (report, _) = write_and_diagnose(
+        "fss1-step",
+        &[
+            "--plan",
+            "long",
+            "--hold-s",
+            "1200",
+            "--align-step",
+            "FSS1:10000:20,-15,10",
+        ],
+    );
+    assert!(named(&report).is_empty(), "{report:#}");
+    let unexplained = report["unexplained"].as_array().unwrap();
+    assert!(
+        unexplained.iter().any(|u| u["sensor"] == "FSS1"),
+        "{report:#}"
+    );
+}
+
+/// A 100-ppm scale asymmetry with a bias ramp (0.009, −0.006, 0.012)″/s per hour on the
+/// writer's 5.7-h day: the ramp is found, and the slews now see the fitted bias history
+/// (with the constant reference bias the slew model's residual scale was 10–37 and the
+/// asymmetry was missed in 3 of 3 runs). Both are named, within 3σ.
+#[test]
+fn outside_writer_scale_asymmetry_is_found_beside_a_bias_ramp() {
+    let (report, truth) = write_and_diagnose(
+        "asym-ramp",
+        &[
+            "--plan",
+            "long",
+            "--hold-s",
+            "1200",
+            "--gyro-asym",
+            "100,-80,120",
+            "--gyro-ramp",
+            "0.009,-0.006,0.012",
+        ],
+    );
+    let mut names = named(&report);
+    names.sort();
+    assert_eq!(
+        names,
+        ["gyro_bias_ramp[IRU]", "gyro_scale_asymmetry[IRU]"],
+        "{report:#}"
+    );
+    for injected in truth["effects"].as_array().unwrap() {
+        let effect = injected["effect"].as_str().unwrap();
+        let d = report["detected"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|d| d["effect"] == effect)
+            .unwrap();
+        for ax in ["x", "y", "z"] {
+            let t = injected["parameters"][ax].as_f64().unwrap();
+            let x = d["parameters"][ax].as_f64().unwrap();
+            let s = d["sigma"][ax].as_f64().unwrap();
+            assert!(
+                (x - t).abs() <= 3.0 * s,
+                "{effect} {ax}: {x:.4} ± {s:.4} against the writer's {t}"
+            );
+        }
+    }
 }

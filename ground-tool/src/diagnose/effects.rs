@@ -68,6 +68,13 @@ pub enum EffectKind {
     /// harmonics 2 and 3, the square of the temperature deviation) used only to test the
     /// lack of fit of the thermal and orbit-periodic candidates.
     GenericAlignmentExtension,
+    /// Not a candidate: a secular alignment variation of a sensor (Legendre polynomials 1–3
+    /// of time over its data), the second lack-of-fit test of the thermal and orbit-periodic
+    /// candidates. A drift or a step (an alignment that moved once) is neither orbital nor
+    /// thermal; forced onto those forms, a 14″ FHST2 step on the writer's calibration day
+    /// took 40–60″ orbit-periodic amplitudes. A test of its own: inside the generic
+    /// extension its 9 parameters diluted the test of the twice-per-orbit form.
+    SecularAlignmentExtension,
     /// Not a candidate: the orbital aberration and Sun parallax of an orbit the telemetry
     /// does not give (no ephemeris records, `docs/icd.md` §3.4). The operator's model has
     /// them (declared), the ground cannot apply them, and left in the residuals (≤ 5.3″ on
@@ -95,6 +102,7 @@ impl EffectKind {
             Self::FssCyclicError => "fss_cyclic_error",
             Self::CatalogProperMotionError => "catalog_proper_motion_error",
             Self::GenericAlignmentExtension => "generic_alignment_extension",
+            Self::SecularAlignmentExtension => "secular_alignment_extension",
             Self::UnknownOrbit => "unknown_orbit",
         }
     }
@@ -148,6 +156,10 @@ pub struct Effect {
     pub harmonics: usize,
     /// Orbit rate of [`EffectKind::UnknownOrbit`] (rad/s).
     pub rate_rad_per_s: Option<f64>,
+    /// First and last time of the sensor's data (s): the Legendre time terms of
+    /// [`EffectKind::SecularAlignmentExtension`] run over it.
+    #[serde(skip)]
+    pub time_span_s: Option<[f64; 2]>,
     /// Not a candidate (only used for lack-of-fit tests).
     #[serde(skip)]
     pub hidden: bool,
@@ -164,6 +176,7 @@ impl Effect {
             pitch_rad: None,
             harmonics: 1,
             rate_rad_per_s: None,
+            time_span_s: None,
             stars: Vec::new(),
             star_dirs: Vec::new(),
             constraints: Vec::new(),
@@ -348,6 +361,26 @@ impl Effect {
                     }
                 }
             }
+            EffectKind::SecularAlignmentExtension => {
+                let x = self.time_span_s.map_or(0.0, |[t0, t1]| {
+                    if t1 > t0 {
+                        (2.0 * (m.t_s - t0) / (t1 - t0) - 1.0).clamp(-1.0, 1.0)
+                    } else {
+                        0.0
+                    }
+                });
+                let terms = [
+                    x,
+                    0.5 * (3.0 * x * x - 1.0),
+                    0.5 * (5.0 * x * x * x - 3.0 * x),
+                ];
+                for ax in 0..3 {
+                    let col = alignment_col(ax);
+                    for (k, t) in terms.iter().enumerate() {
+                        out.push((3 * ax + k, v2(col * *t)));
+                    }
+                }
+            }
             EffectKind::CatalogProperMotionError => {
                 if m.sensor < 2 {
                     if let Some(k) = star_index(m.star) {
@@ -387,7 +420,7 @@ impl Effect {
             EffectKind::MagnitudeBias => &[R::Magnitude],
             EffectKind::FssTransferFunction | EffectKind::FssCyclicError => &[R::FovH, R::FovV],
             EffectKind::CatalogProperMotionError => &[R::StarId],
-            EffectKind::GenericAlignmentExtension => &[],
+            EffectKind::GenericAlignmentExtension | EffectKind::SecularAlignmentExtension => &[],
             EffectKind::UnknownOrbit => &[R::Time],
         }
     }
@@ -605,6 +638,17 @@ pub fn spans_orbits(set: &MeasurementSet) -> [bool; 4] {
     core::array::from_fn(|s| last[s] - first[s] >= MIN_ORBITS_FOR_PERIODIC * period_s)
 }
 
+/// First and last time of each sensor's (non-outlier) data, if any.
+fn data_spans(set: &MeasurementSet) -> [Option<[f64; 2]>; 4] {
+    let mut first = [f64::INFINITY; 4];
+    let mut last = [f64::NEG_INFINITY; 4];
+    for m in set.meas.iter().filter(|m| !m.outlier) {
+        first[m.sensor] = first[m.sensor].min(m.t_s);
+        last[m.sensor] = last[m.sensor].max(m.t_s);
+    }
+    core::array::from_fn(|s| (last[s] > first[s]).then_some([first[s], last[s]]))
+}
+
 /// The candidate library for a measurement set. `fss_pitch_rad[i]` is the cyclic pitch found
 /// for FSS i (none: no cyclic candidate).
 #[must_use]
@@ -615,6 +659,7 @@ pub fn library(
 ) -> Vec<Effect> {
     let active = active_sensors(set);
     let periodic = spans_orbits(set);
+    let spans = data_spans(set);
     let mut out = vec![
         Effect::new(
             EffectKind::AberrationAnnual,
@@ -720,6 +765,18 @@ pub fn library(
                 names.iter().map(|(n, u, s)| (n.as_str(), *u, *s)).collect();
             let mut e = Effect::new(EffectKind::GenericAlignmentExtension, Some(s), &refs);
             e.hidden = true;
+            out.push(e);
+            let names: Vec<String> = ["x", "y", "z"]
+                .iter()
+                .flat_map(|ax| (1..=3).map(move |k| format!("{ax}_time_p{k}")))
+                .collect();
+            let refs: Vec<(&str, &'static str, f64)> = names
+                .iter()
+                .map(|n| (n.as_str(), "arcsec", 100.0))
+                .collect();
+            let mut e = Effect::new(EffectKind::SecularAlignmentExtension, Some(s), &refs);
+            e.hidden = true;
+            e.time_span_s = spans[s];
             out.push(e);
         }
         if s < 2 {

@@ -237,6 +237,8 @@ pub fn analyse(
         frames.iter().map(|f| f.temperatures_c[4]).sum::<f64>() / frames.len().max(1) as f64;
     // Bias samples.
     let mut samples: Vec<BiasSample> = Vec::new();
+    // Bias history fitted by the accepted models (rad/s, relative to `b_ref`), per frame.
+    let mut model_bias: Option<Vec<Vector3<f64>>> = None;
     for i in 0..set.batches.len().saturating_sub(1) {
         let (a, b) = (&set.batches[i], &set.batches[i + 1]);
         if a.high_rate || b.high_rate || a.hi != b.lo {
@@ -473,6 +475,37 @@ pub fn analyse(
             });
         }
         out.bias_fit_after = fitted(&model);
+        // The bias the slews see: the fitted history, not the constant reference (a ramp of
+        // 0.009″/s per hour left the slew model's residual scale at 10–37 and hid a 100-ppm
+        // scale asymmetry; helper-20's review).
+        if !model.is_empty() {
+            if let Some((_, betas, ..)) = bias_fit(&samples, w_all, &model) {
+                model_bias = Some(
+                    frames
+                        .iter()
+                        .map(|f| {
+                            let s = BiasSample {
+                                t_s: f.time.seconds() - t_first,
+                                dt_s: 0.0,
+                                y: Vector3::zeros(),
+                                var_start: Vector3::zeros(),
+                                var_end: Vector3::zeros(),
+                                chained: false,
+                                dtemp_iru: f.temperatures_c[4] - tmean_iru,
+                            };
+                            Vector3::from_fn(|ax, _| {
+                                betas[ax][0]
+                                    + model
+                                        .iter()
+                                        .enumerate()
+                                        .map(|(j, m)| betas[ax][j + 1] * (m.column)(&s))
+                                        .sum::<f64>()
+                            }) * RAD_PER_ARCSEC
+                        })
+                        .collect(),
+                );
+            }
+        }
     } else {
         out.notes.push(format!(
             "bias history: {} hold-to-hold samples (need 20 and a positive-definite covariance)",
@@ -481,8 +514,15 @@ pub fn analyse(
     }
 
     // Scale asymmetry from the slews.
-    asymmetry(input, set, &att, &b_ref, cfg, &mut out);
-    let _ = t_first;
+    asymmetry(
+        input,
+        set,
+        &att,
+        &b_ref,
+        model_bias.as_deref(),
+        cfg,
+        &mut out,
+    );
     out
 }
 
@@ -497,6 +537,7 @@ fn asymmetry(
     set: &MeasurementSet,
     att: &[Option<(Matrix3<f64>, Vector3<f64>)>],
     b_ref: &Vector3<f64>,
+    model_bias: Option<&[Vector3<f64>]>,
     cfg: &GyroConfig,
     out: &mut GyroAnalysis,
 ) {
@@ -563,7 +604,7 @@ fn asymmetry(
         }
         if !gap_free(ca, cb) {
             out.notes.push(format!(
-                "slew at frames {s}..{e} not used for the scale asymmetry: a gap in the gyro data between its end attitudes"
+                "slew at frames {s}..{e} not used for the scale asymmetry: frames without a gyro increment (missing, or a channel the integrator declared stuck) or a step longer than 3 cycles between its end attitudes"
             ));
             continue;
         }
@@ -588,11 +629,16 @@ fn asymmetry(
             continue;
         };
         let (ca, cb) = (set.batches[ia].center, set.batches[ib].center);
-        let bias = input
-            .bias_per_frame
-            .as_ref()
-            .and_then(|b| b.get(ca).copied())
-            .unwrap_or(*b_ref);
+        // With a bias history accepted, its value at the middle of the interval (exact for a
+        // ramp); else the OBC's bias at the start.
+        let bias = match model_bias.and_then(|v| v.get((ca + cb) / 2)) {
+            Some(v) => b_ref + v,
+            None => input
+                .bias_per_frame
+                .as_ref()
+                .and_then(|b| b.get(ca).copied())
+                .unwrap_or(*b_ref),
+        };
         let mut phi_total = Matrix3::identity();
         let mut sm = nalgebra::SMatrix::<f64, 3, NCOL>::zeros();
         let mut angle = Vector3::zeros();

@@ -543,17 +543,42 @@ fn search_with_pitch(
                         super::effects::remove_net_rotation(&effect.star_dirs, &xa_v, &mask(&va));
                     let rb =
                         super::effects::remove_net_rotation(&effect.star_dirs, &xb_v, &mask(&vb));
-                    let mut c2 = 0.0;
-                    let mut n2 = 0usize;
-                    for i in 0..k {
-                        if both[i / 2] {
-                            c2 += (ra[i] - rb[i]).powi(2) / (va[i] + vb[i]);
-                            n2 += 1;
+                    // χ² with the full covariance of the compared offsets: the offsets of
+                    // the stars of one hold share that hold's attitude error, and per-star
+                    // variances alone (the old test) hid a common shift between the halves
+                    // (an FSS1 alignment step read as 60 star offsets passed with p 0.997;
+                    // clean runs gave p ≈ 1). The net-rotation removal is linear: its
+                    // matrix on the compared offsets carries each half's covariance.
+                    let sel: Vec<usize> = (0..k).filter(|&i| both[i / 2]).collect();
+                    let n2 = sel.len();
+                    let rot_matrix = |v: &[f64]| -> DMatrix<f64> {
+                        let mv = mask(v);
+                        let mut r = DMatrix::zeros(n2, n2);
+                        for (q, &j) in sel.iter().enumerate() {
+                            let mut unit = vec![0.0; k];
+                            unit[j] = 1.0;
+                            let col =
+                                super::effects::remove_net_rotation(&effect.star_dirs, &unit, &mv);
+                            for (r_i, &i) in sel.iter().enumerate() {
+                                r[(r_i, q)] = col[i];
+                            }
                         }
-                    }
-                    hchi2 = c2;
-                    hp = if n2 > 3 {
-                        chi2_sf(c2, (n2 - 3) as f64)
+                        r
+                    };
+                    let sub_cov = |fit: &SubFit, p: &[usize]| -> DMatrix<f64> {
+                        DMatrix::from_fn(n2, n2, |r_i, q| {
+                            fit.cov[(p[sel[r_i]], p[sel[q]])] * fit.s2().max(1.0)
+                        })
+                    };
+                    let (rma, rmb) = (rot_matrix(&va), rot_matrix(&vb));
+                    let c = &rma * sub_cov(&a, &pa) * rma.transpose()
+                        + &rmb * sub_cov(&b, &pb) * rmb.transpose();
+                    let d =
+                        nalgebra::DVector::from_iterator(n2, sel.iter().map(|&i| ra[i] - rb[i]));
+                    let (cinv, crank) = crate::linalg::sym_pinv(&c, 1e-9);
+                    hchi2 = d.dot(&(&cinv * &d));
+                    hp = if n2 > 3 && crank > 0 {
+                        chi2_sf(hchi2, crank as f64)
                     } else {
                         1.0
                     };
@@ -682,8 +707,9 @@ fn search_with_pitch(
                         ));
                     }
                     // Lack of fit of the alignment-variation candidates: does a generic
-                    // extension on the same sensor (orbit harmonics 2–3, ΔT²) still explain
-                    // something? Then the structure has another form than the candidate's.
+                    // extension on the same sensor (orbit harmonics 2–3, ΔT²; then, as a test of
+                    // its own, time P1–P3) still explain something? Then the structure has
+                    // another form than the candidate's.
                     if e.adequate
                         && matches!(
                             effect.kind,
@@ -734,6 +760,25 @@ fn search_with_pitch(
                                 }
                             }
                         }
+                        if let Some(ext) =
+                            layout.find(EffectKind::SecularAlignmentExtension, effect.sensor)
+                        {
+                            let mut with_ext = model.to_vec();
+                            with_ext.push(*c);
+                            with_ext.push(ext);
+                            if let Some(fe) = fit_model(&systems.full, &with_ext) {
+                                let k_ext = layout.effects[ext].len() as f64;
+                                let d = big.chi2 - fe.chi2;
+                                let f_ext = (d / k_ext) / fe.s2();
+                                let p_ext = f_sf(f_ext, k_ext, fe.dof);
+                                if e.adequate && p_ext < config.alpha {
+                                    e.adequate = false;
+                                    why.push(format!(
+                                        "lack of fit: a secular alignment variation (time P1–P3) still explains Δχ² {d:.1} (F {f_ext:.2}, p {p_ext:.1e})"
+                                    ));
+                                }
+                            }
+                        }
                     }
                 }
             }
@@ -769,8 +814,14 @@ fn search_with_pitch(
         )
     };
     let joint_lack_of_fit = |model: &[usize], added: &[usize], current: &SubFit| {
-        for s in 0..4 {
-            let Some(ext) = layout.find(EffectKind::GenericAlignmentExtension, Some(s)) else {
+        for (s, ext_kind) in (0..4).flat_map(|s| {
+            [
+                EffectKind::GenericAlignmentExtension,
+                EffectKind::SecularAlignmentExtension,
+            ]
+            .map(|k| (s, k))
+        }) {
+            let Some(ext) = layout.find(ext_kind, Some(s)) else {
                 continue;
             };
             if std::env::var_os("DIAGNOSE_DEBUG").is_some() {
@@ -819,8 +870,13 @@ fn search_with_pitch(
                 e.delta_chi2 = dchi2;
                 e.accepted = false;
                 e.rejected_because = Some(format!(
-                    "joint lack of fit on {}: a generic extension (orbit harmonics 2–3, ΔT²) still explains Δχ² {d:.1} (p {p_ext:.1e}) with it in the model",
-                    super::measurements::SENSOR_NAMES[s]
+                    "joint lack of fit on {}: a {} still explains Δχ² {d:.1} (p {p_ext:.1e}) with it in the model",
+                    super::measurements::SENSOR_NAMES[s],
+                    if ext_kind == EffectKind::SecularAlignmentExtension {
+                        "secular alignment variation (time P1–P3)"
+                    } else {
+                        "generic extension (orbit harmonics 2–3, ΔT²)"
+                    }
                 ));
                 return Some((k, e));
             }
