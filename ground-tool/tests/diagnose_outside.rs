@@ -186,6 +186,15 @@ fn outside_writer_fss1_alignment_step_is_not_read_as_catalog_errors() {
         unexplained.iter().any(|u| u["sensor"] == "FSS1"),
         "{report:#}"
     );
+    // FSS2 never sees the Sun on this plan: the report says its effects were not tested.
+    let notes = report["notes"].as_array().unwrap();
+    assert!(
+        notes.iter().any(|n| n
+            .as_str()
+            .unwrap()
+            .starts_with("FSS2: no usable measurement")),
+        "{notes:?}"
+    );
 }
 
 /// A 100-ppm scale asymmetry with a bias ramp (0.009, −0.006, 0.012)″/s per hour on the

@@ -60,6 +60,15 @@ CASES = {
                          "--gyro-asym", "100,-80,120"],
     "combo-fss-tt+ramp+step": ["--time-tag", "FSS1:0.2", "--gyro-ramp", "0.003,-0.002,0.004",
                                "--align-step", "FHST1:10000:0,12,-8"],
+    # --- from the outside reviews (docs/diagnose.md §9)
+    "fhst2-time-tag": ["--time-tag", "FHST2:0.1"],
+    "no-ephemeris": ["--no-eph"],  # clean, the orbit unknown to the ground
+    "fss1-step": ["--align-step", "FSS1:10000:20,-15,10"],  # out of library, 27″ once
+    "fhst2-step+orbit": ["--temps", "flat", "--orbit-align", "FHST2:4,-3,6,-2,5,3",
+                         "--align-step", "FHST2:10000:0,12,-8"],
+    "asym+ramp": ["--gyro-asym", "100,-80,120", "--gyro-ramp", "0.009,-0.006,0.012"],
+    "hold600-dist+fss-tf": ["--hold-s", "600", "--fhst-radial", "FHST2:30",
+                            "--fss-transfer", "FSS1:alpha_scale=300,beta_cubic=40"],
 }
 
 OTHER_TRACKER = {"FHST1": "FHST2", "FHST2": "FHST1"}

@@ -261,6 +261,9 @@ pub fn diagnose_run(
             "no orbit in the telemetry (no ephemeris records, docs/icd.md §3.4): the declared orbital aberration and Sun parallax are modelled as an unknown circular orbit, period {period_min:.2} min found from the residuals, aberration amplitude {amplitude:.1}″ (≈ 5.3″ for a 7.7 km/s orbit)"
         ));
     }
+    notes.extend(coverage_notes(&analysis.set, frames.len(), |k| {
+        frames.get(k).is_some_and(|f| f.high_rate)
+    }));
     let gcfg = GyroConfig {
         alpha: opts.search.alpha,
         min_delta_bic: opts.search.min_delta_bic,
@@ -486,4 +489,64 @@ pub fn diagnose_run(
         filter: flight.filter,
         calibration: cal.output,
     })
+}
+
+/// What a sensor's data leave untestable: no usable sample at all, data in one hold only
+/// (a field-dependent error or an alignment variation is then its alignment), or no sample
+/// in a slew (its time tag needs the body to turn). Without these notes an untested
+/// sensor's candidates read as "checked, nothing found" (helper-20's review: FSS2 sees the
+/// Sun in one hold of the writer's long plan).
+fn coverage_notes(
+    set: &super::measurements::MeasurementSet,
+    n_frames: usize,
+    high_rate: impl Fn(usize) -> bool,
+) -> Vec<String> {
+    use super::measurements::SENSOR_NAMES;
+    // Hold index of every frame: a hold ends where high-rate (slew) frames begin.
+    let mut hold = Vec::with_capacity(n_frames);
+    let mut h = 0usize;
+    let mut in_slew = false;
+    for k in 0..n_frames {
+        let hr = high_rate(k);
+        if hr && !in_slew {
+            h += 1;
+        }
+        in_slew = hr;
+        hold.push(h);
+    }
+    let mut notes = Vec::new();
+    for (s, name) in SENSOR_NAMES.iter().enumerate() {
+        let mine: Vec<_> = set
+            .meas
+            .iter()
+            .filter(|m| m.sensor == s && !m.outlier)
+            .collect();
+        if mine.is_empty() {
+            notes.push(format!(
+                "{name}: no usable measurement: none of its effects was tested"
+            ));
+            continue;
+        }
+        let mut holds: Vec<usize> = mine
+            .iter()
+            .filter(|m| !m.high_rate)
+            .filter_map(|m| hold.get(m.frame).copied())
+            .collect();
+        holds.sort_unstable();
+        holds.dedup();
+        let in_slews = mine.iter().filter(|m| m.high_rate).count();
+        if holds.len() < 2 {
+            notes.push(format!(
+                "{name}: data in {} hold(s) ({} samples): its field-dependent errors and alignment variations cannot be told from its alignment and were not testable",
+                holds.len(),
+                mine.len()
+            ));
+        }
+        if in_slews == 0 {
+            notes.push(format!(
+                "{name}: no sample during slews: its time tag was not testable"
+            ));
+        }
+    }
+    notes
 }
