@@ -625,24 +625,20 @@ pub fn spans_orbits(set: &MeasurementSet) -> [bool; 4] {
     let Some(period_s) = set.orbit_period_s.filter(|p| p.is_finite() && *p > 0.0) else {
         return [false; 4];
     };
-    let mut first = [f64::INFINITY; 4];
-    let mut last = [f64::NEG_INFINITY; 4];
-    for m in set
-        .meas
-        .iter()
-        .filter(|m| !m.outlier && m.orbit_phase.is_finite())
-    {
-        first[m.sensor] = first[m.sensor].min(m.t_s);
-        last[m.sensor] = last[m.sensor].max(m.t_s);
-    }
-    core::array::from_fn(|s| last[s] - first[s] >= MIN_ORBITS_FOR_PERIODIC * period_s)
+    let spans = data_spans(set, |m| m.orbit_phase.is_finite());
+    core::array::from_fn(|s| {
+        spans[s].is_some_and(|[t0, t1]| t1 - t0 >= MIN_ORBITS_FOR_PERIODIC * period_s)
+    })
 }
 
-/// First and last time of each sensor's (non-outlier) data, if any.
-fn data_spans(set: &MeasurementSet) -> [Option<[f64; 2]>; 4] {
+/// First and last time of each sensor's non-outlier data that `keep` accepts, if any.
+fn data_spans(
+    set: &MeasurementSet,
+    keep: impl Fn(&super::measurements::Measurement) -> bool,
+) -> [Option<[f64; 2]>; 4] {
     let mut first = [f64::INFINITY; 4];
     let mut last = [f64::NEG_INFINITY; 4];
-    for m in set.meas.iter().filter(|m| !m.outlier) {
+    for m in set.meas.iter().filter(|m| !m.outlier && keep(m)) {
         first[m.sensor] = first[m.sensor].min(m.t_s);
         last[m.sensor] = last[m.sensor].max(m.t_s);
     }
@@ -659,7 +655,7 @@ pub fn library(
 ) -> Vec<Effect> {
     let active = active_sensors(set);
     let periodic = spans_orbits(set);
-    let spans = data_spans(set);
+    let spans = data_spans(set, |_| true);
     let mut out = vec![
         Effect::new(
             EffectKind::AberrationAnnual,

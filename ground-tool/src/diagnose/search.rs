@@ -279,6 +279,15 @@ fn aberration_parts(kind: EffectKind) -> Option<&'static [usize]> {
     }
 }
 
+/// What a lack-of-fit extension holds, for the rejection messages.
+fn extension_terms(kind: EffectKind) -> &'static str {
+    if kind == EffectKind::SecularAlignmentExtension {
+        "secular alignment variation (time P1–P3)"
+    } else {
+        "generic extension (orbit harmonics 2–3, ΔT²)"
+    }
+}
+
 fn max_excess(tests: &[StructureTest]) -> f64 {
     tests.iter().map(|t| t.f - 1.0).fold(0.0, f64::max)
 }
@@ -427,6 +436,18 @@ fn search_with_pitch(
     let mut model = baseline.clone();
     let fit_model = |sys: &super::fit::Normal, effects: &[usize]| {
         solve(sys, &layout, &indices(&layout, effects))
+    };
+    // F test of a hidden extension `ext` (lack-of-fit terms) added to `model`, whose fit has
+    // χ² `chi2`: (the fit with it, Δχ², F, p).
+    let extension_test = |model: &[usize], chi2: f64, ext: usize| {
+        let mut with = model.to_vec();
+        with.push(ext);
+        let fe = fit_model(&systems.full, &with)?;
+        let k = layout.effects[ext].len() as f64;
+        let d = chi2 - fe.chi2;
+        let f = (d / k) / fe.s2();
+        let p = f_sf(f, k, fe.dof);
+        Some((fe, d, f, p))
     };
     // Does effect `x` add nothing to `model` once effect `y` is in it (F test at `alpha`)?
     // Then the structure `x` explains is `y`'s, whatever sensors each acts on: through the
@@ -716,67 +737,57 @@ fn search_with_pitch(
                             EffectKind::ThermalAlignmentDrift | EffectKind::OrbitPeriodicAlignment
                         )
                     {
-                        if let Some(ext) =
-                            layout.find(EffectKind::GenericAlignmentExtension, effect.sensor)
+                        let mut with_c = model.to_vec();
+                        with_c.push(*c);
+                        if let Some((ext, (fe, d, f_ext, p_ext))) = layout
+                            .find(EffectKind::GenericAlignmentExtension, effect.sensor)
+                            .and_then(|ext| {
+                                extension_test(&with_c, big.chi2, ext).map(|t| (ext, t))
+                            })
                         {
-                            let mut with_ext = model.to_vec();
-                            with_ext.push(*c);
-                            with_ext.push(ext);
-                            if let Some(fe) = fit_model(&systems.full, &with_ext) {
-                                let k_ext = layout.effects[ext].len() as f64;
-                                let d = big.chi2 - fe.chi2;
-                                let f_ext = (d / k_ext) / fe.s2();
-                                let p_ext = f_sf(f_ext, k_ext, fe.dof);
-                                // A test of the candidate's form, not a model choice: the
-                                // F test at the family level decides (BIC would charge the
-                                // extension's 21 parameters and let a twice-per-orbit or a
-                                // quadratic structure be forced onto the linear candidate).
-                                if p_ext < config.alpha {
-                                    e.adequate = false;
-                                    why.push(format!(
-                                        "lack of fit: a generic extension (orbit harmonics 2–3, ΔT²) still explains Δχ² {d:.1} (F {f_ext:.2}, p {p_ext:.1e})"
+                            // A test of the candidate's form, not a model choice: the
+                            // F test at the family level decides (BIC would charge the
+                            // extension's 21 parameters and let a twice-per-orbit or a
+                            // quadratic structure be forced onto the linear candidate).
+                            if p_ext < config.alpha {
+                                e.adequate = false;
+                                why.push(format!(
+                                        "lack of fit: a {} still explains Δχ² {d:.1} (F {f_ext:.2}, p {p_ext:.1e})",
+                                        extension_terms(EffectKind::GenericAlignmentExtension)
                                     ));
-                                }
-                                // The form with the second harmonic describes a thermal orbit
-                                // cycle, which has its once-per-orbit part: given the generic
-                                // extension (which holds the 2u terms), the candidate must
-                                // still add something. A twice-per-orbit structure alone (a
-                                // geomagnetic sensitivity, algorithms.md §9 row 18, or a
-                                // ΔT² term of a sinusoidal temperature) is left unexplained.
-                                if e.adequate && effect.harmonics > 1 {
-                                    let mut only_ext = model.to_vec();
-                                    only_ext.push(ext);
-                                    if let Some(f0) = fit_model(&systems.full, &only_ext) {
-                                        let d1 = f0.chi2 - fe.chi2;
-                                        let f1 = (d1 / 6.0) / fe.s2();
-                                        let p1 = f_sf(f1, 6.0, fe.dof);
-                                        if !(p1 < config.alpha) {
-                                            e.adequate = false;
-                                            why.push(format!(
+                            }
+                            // The form with the second harmonic describes a thermal orbit
+                            // cycle, which has its once-per-orbit part: given the generic
+                            // extension (which holds the 2u terms), the candidate must
+                            // still add something. A twice-per-orbit structure alone (a
+                            // geomagnetic sensitivity, algorithms.md §9 row 18, or a
+                            // ΔT² term of a sinusoidal temperature) is left unexplained.
+                            if e.adequate && effect.harmonics > 1 {
+                                let mut only_ext = model.to_vec();
+                                only_ext.push(ext);
+                                if let Some(f0) = fit_model(&systems.full, &only_ext) {
+                                    let d1 = f0.chi2 - fe.chi2;
+                                    let f1 = (d1 / 6.0) / fe.s2();
+                                    let p1 = f_sf(f1, 6.0, fe.dof);
+                                    if !(p1 < config.alpha) {
+                                        e.adequate = false;
+                                        why.push(format!(
                                                 "no once-per-orbit part: given the 2u terms the candidate adds Δχ² {d1:.1} (F {f1:.2}, p {p1:.1e})"
                                             ));
-                                        }
                                     }
                                 }
                             }
                         }
-                        if let Some(ext) =
-                            layout.find(EffectKind::SecularAlignmentExtension, effect.sensor)
+                        if let Some((_, d, f_ext, p_ext)) = layout
+                            .find(EffectKind::SecularAlignmentExtension, effect.sensor)
+                            .and_then(|ext| extension_test(&with_c, big.chi2, ext))
                         {
-                            let mut with_ext = model.to_vec();
-                            with_ext.push(*c);
-                            with_ext.push(ext);
-                            if let Some(fe) = fit_model(&systems.full, &with_ext) {
-                                let k_ext = layout.effects[ext].len() as f64;
-                                let d = big.chi2 - fe.chi2;
-                                let f_ext = (d / k_ext) / fe.s2();
-                                let p_ext = f_sf(f_ext, k_ext, fe.dof);
-                                if e.adequate && p_ext < config.alpha {
-                                    e.adequate = false;
-                                    why.push(format!(
-                                        "lack of fit: a secular alignment variation (time P1–P3) still explains Δχ² {d:.1} (F {f_ext:.2}, p {p_ext:.1e})"
-                                    ));
-                                }
+                            if e.adequate && p_ext < config.alpha {
+                                e.adequate = false;
+                                why.push(format!(
+                                    "lack of fit: a {} still explains Δχ² {d:.1} (F {f_ext:.2}, p {p_ext:.1e})",
+                                    extension_terms(EffectKind::SecularAlignmentExtension)
+                                ));
                             }
                         }
                     }
@@ -824,16 +835,10 @@ fn search_with_pitch(
             let Some(ext) = layout.find(ext_kind, Some(s)) else {
                 continue;
             };
+            let test = extension_test(model, current.chi2, ext);
             if std::env::var_os("DIAGNOSE_DEBUG").is_some() {
-                let mut w = model.to_vec();
-                w.push(ext);
-                if let Some(fe) = fit_model(&systems.full, &w) {
-                    let k_ext = layout.effects[ext].len() as f64;
-                    let d = current.chi2 - fe.chi2;
-                    eprintln!(
-                        "joint lack of fit sensor {s}: Δχ² {d:.1}, p {:.2e}",
-                        f_sf((d / k_ext) / fe.s2(), k_ext, fe.dof)
-                    );
+                if let Some((_, d, _, p)) = &test {
+                    eprintln!("joint lack of fit sensor {s}: Δχ² {d:.1}, p {p:.2e}");
                 }
             }
             let suspects: Vec<usize> = (0..added.len())
@@ -845,14 +850,9 @@ fn search_with_pitch(
             if suspects.is_empty() {
                 continue;
             }
-            let mut with_ext = model.to_vec();
-            with_ext.push(ext);
-            let Some(fe) = fit_model(&systems.full, &with_ext) else {
+            let Some((_, d, _, p_ext)) = test else {
                 continue;
             };
-            let k_ext = layout.effects[ext].len() as f64;
-            let d = current.chi2 - fe.chi2;
-            let p_ext = f_sf((d / k_ext) / fe.s2(), k_ext, fe.dof);
             if p_ext >= config.alpha {
                 continue;
             }
@@ -872,11 +872,7 @@ fn search_with_pitch(
                 e.rejected_because = Some(format!(
                     "joint lack of fit on {}: a {} still explains Δχ² {d:.1} (p {p_ext:.1e}) with it in the model",
                     super::measurements::SENSOR_NAMES[s],
-                    if ext_kind == EffectKind::SecularAlignmentExtension {
-                        "secular alignment variation (time P1–P3)"
-                    } else {
-                        "generic extension (orbit harmonics 2–3, ΔT²)"
-                    }
+                    extension_terms(ext_kind)
                 ));
                 return Some((k, e));
             }
