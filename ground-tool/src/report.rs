@@ -351,18 +351,37 @@ pub fn write_calibration_report(
         r.adjustment_theta_acs_arcsec[0], r.adjustment_theta_acs_arcsec[1], r.adjustment_theta_acs_arcsec[2]
     );
     let _ = writeln!(md, "## IRU\n");
-    for m in &r.maneuvers {
+    let used = r.maneuvers.iter().filter(|m| m.used).count();
+    let _ = writeln!(
+        md,
+        "{} maneuvers found, {used} carried by the gyro chain between attitude fixes; rate-mode switches inside decimated frames: {} split at the switch, {} dropped.\n",
+        r.maneuvers.len(),
+        r.data.rate_switch_frames_split,
+        r.data.rate_switch_frames_dropped
+    );
+    let listed = if r.maneuvers.len() > 20 {
+        let _ = writeln!(
+            md,
+            "(only the maneuvers not used are listed; report.json has all)\n"
+        );
+        r.maneuvers
+            .iter()
+            .filter(|m| !m.used)
+            .take(20)
+            .collect::<Vec<_>>()
+    } else {
+        r.maneuvers.iter().collect()
+    };
+    for m in listed {
         let _ = writeln!(
             md,
             "- maneuver at {:.0}–{:.0} s, {:.2}° {}",
             m.start_s,
             m.end_s,
             m.angle_deg,
-            if m.used {
-                "(used)"
-            } else {
-                "(ends lack attitude solutions: not used)"
-            }
+            m.why_not_used
+                .as_ref()
+                .map_or_else(|| "(used)".to_owned(), |w| format!("(not used: {w})"))
         );
         if let Some(c) = &m.coarse_attitude {
             let _ = writeln!(
@@ -382,8 +401,8 @@ pub fn write_calibration_report(
         (Some(iru), _) => {
             let _ = writeln!(
                 md,
-                "\nδM (ppm) with 1σ, from {} intervals:\n",
-                iru.intervals
+                "\nδM (ppm) with 1σ, primary triad, from {} gyro links:\n",
+                iru.links
             );
             for row in 0..3 {
                 let _ = writeln!(
@@ -399,19 +418,47 @@ pub fn write_calibration_report(
             }
             let _ = writeln!(
                 md,
-                "\nBias (ACS, arcsec/s): [{:.5}, {:.5}, {:.5}] ± [{:.5}, {:.5}, {:.5}]. G {}.\n",
+                "\nBias at the last fix (ACS, arcsec/s): [{:.5}, {:.5}, {:.5}] ± [{:.5}, {:.5}, {:.5}].\n",
                 iru.bias_rad_per_s[0] * ARCSEC_PER_RAD,
                 iru.bias_rad_per_s[1] * ARCSEC_PER_RAD,
                 iru.bias_rad_per_s[2] * ARCSEC_PER_RAD,
                 iru.bias_sigma_rad_per_s[0] * ARCSEC_PER_RAD,
                 iru.bias_sigma_rad_per_s[1] * ARCSEC_PER_RAD,
                 iru.bias_sigma_rad_per_s[2] * ARCSEC_PER_RAD,
-                if iru.g_updated {
-                    "updated in the uplinked IRU table (δM significant at 3σ)"
-                } else {
-                    "left at its flown value (δM not significant at 3σ, as the paper decided)"
-                }
             );
+            let _ = writeln!(
+                md,
+                "Estimator: {}; {} fixes, {} links ({} with maneuvers); rate random walk {:.2e} rad/s^1.5 used ({:.2e} declared); fixes' mean NIS per dof {:.2}, {} outside the gate.\n",
+                iru.estimator,
+                iru.fixes,
+                iru.links,
+                iru.maneuver_links,
+                iru.rrw_used_rad_per_s_1p5,
+                iru.rrw_declared_rad_per_s_1p5,
+                iru.nis_mean_per_dof,
+                iru.gated_fixes
+            );
+            let _ = writeln!(md, "**Primary G:** {}\n", iru.decision);
+            if let Some(b) = &iru.backup {
+                let _ = writeln!(
+                    md,
+                    "Backup triad (X1, Y2, Z2; {:.0}° of rotation in the links), δM (ppm) with 1σ:\n",
+                    b.rotation_deg
+                );
+                for row in 0..3 {
+                    let _ = writeln!(
+                        md,
+                        "    [{:8.0} ±{:5.0}] [{:8.0} ±{:5.0}] [{:8.0} ±{:5.0}]",
+                        b.delta_m[row][0] * 1e6,
+                        b.delta_m_sigma[row][0] * 1e6,
+                        b.delta_m[row][1] * 1e6,
+                        b.delta_m_sigma[row][1] * 1e6,
+                        b.delta_m[row][2] * 1e6,
+                        b.delta_m_sigma[row][2] * 1e6
+                    );
+                }
+                let _ = writeln!(md, "\n**Backup G:** {}\n", b.decision);
+            }
         }
         (None, Some(why)) => {
             let _ = writeln!(md, "\nIRU calibration not done: {why}\n");

@@ -5,8 +5,11 @@
 //!   gyro and eliminated (the FFCAL FHST stage).
 //! - [`adjust`]: the appendix adjustment that preserves the OBC's FHST attitude.
 //! - [`iru`]: IRUCAL, gyro misalignment/scale and bias; bias from inertial holds; plan study.
+//! - [`iru_chain`]: IRUCAL over a whole timeline (calibration filter + RTS smoother, bias as a
+//!   random walk, held-out validation).
 
 pub mod adjust;
 pub mod alignment;
 pub mod fhst_relative;
 pub mod iru;
+pub mod iru_chain;

@@ -12,7 +12,7 @@
 
 use crate::calibration::iru::{GyroCalibration, GyroStep};
 use crate::pipeline::observations::{
-    DeclaredNoise, FrameObservations, StarObservation, SunObservation,
+    DeclaredNoise, FrameObservations, RateSwitch, StarObservation, SunObservation,
 };
 use fsw_core::attitude::{rot, Quat};
 use fsw_core::fhst::FhstMeasurement;
@@ -488,6 +488,10 @@ pub fn generate(cfg: &SynthConfig) -> SynthRun {
             time,
             gyro,
             high_rate: prev_rate.norm() > 0.0,
+            iru_backup: false,
+            rate_switch: RateSwitch::None,
+            gyro_split_var_rad2: 0.0,
+            gyro_split_dir_rad: nalgebra::Vector3::zeros(),
             stars: stars_obs,
             suns: suns_obs,
             temperatures_c: std::array::from_fn(|s| 20.0 + dtemp[s]),

@@ -23,9 +23,10 @@
 
 use super::fss_consider::{consider_covariance, TransferSpreads};
 use super::fss_systematic::{estimate_fss_systematic, FssSystematicEstimate};
+use super::gyro_chain::{build_gyro_chain, irucal_stage, BackupIruReport, IruStage};
 use super::observations::{
     build_observations, fine_attitude, AttitudeSensors, DeclaredNoise, FrameObservations,
-    IdentifyOptions,
+    IdentifyOptions, RateSwitch,
 };
 use super::star_batches::star_batch_samples;
 use crate::calibration::adjust::{preserve_obc_attitude, BoresightFrame};
@@ -36,10 +37,8 @@ use crate::calibration::alignment::{
 use crate::calibration::fhst_relative::{
     estimate_relative_alignment, fuse_with_prior, FhstRelativeAlignment,
 };
-use crate::calibration::iru::{
-    bias_history, irucal, AttitudeFix, BiasEstimate, CalibrationInterval, GyroCalibration,
-    GyroNoise, GyroStep, InertialHold, IrucalConfig, IrucalSolution, TimedFix,
-};
+use crate::calibration::iru::{AttitudeFix, GyroNoise, GyroStep, IrucalSolution};
+use crate::calibration::iru_chain::{ChainConfig, HeldOutValidation};
 use crate::tp::{self, Telemetry, TpReport};
 use anyhow::{bail, Context};
 use fsw_core::attitude::{rot, rotvec_from_rot, Quat};
@@ -64,17 +63,13 @@ const FIX_SIGMA_FLOOR_ARCSEC: f64 = 3.0;
 /// What a fine attitude's formal covariance leaves out, added before it is used as an
 /// IRUCAL interval end.
 #[derive(Clone, Copy, Debug)]
-struct FixFloors {
+pub(crate) struct FixFloors {
     /// For a FHST-only fix (rad²): a quarter of the FHST1–FHST2 relative alignment covariance.
-    fhst_cov_rad2: Matrix3<f64>,
+    pub(crate) fhst_cov_rad2: Matrix3<f64>,
     /// For a fix that needed the Sun, per axis (arcsec): the FSS error that does not average
     /// down (`DeclaredNoise::fss_systematic_arcsec`, default the paper's inherent 0.022°).
-    fss_arcsec: f64,
+    pub(crate) fss_arcsec: f64,
 }
-
-/// Fewest intervals kept by the outlier loop, and needed before a new G is uplinked: 12
-/// unknowns need redundancy (≥ 18 equations) for the residuals to vouch for the solution.
-const MIN_IRUCAL_INTERVALS: usize = 6;
 
 /// Fewest gyro batches with both trackers for the gyro-batch FHST stage.
 const MIN_GYRO_BATCHES: usize = 3;
@@ -99,11 +94,7 @@ const COARSE_MAX_SIGMA_DEG: f64 = 2.0;
 const FSS_CELL_DEG: f64 = 8.0;
 
 /// Half-length of the fine-attitude batches (s): the paper's 10-min batches.
-const BATCH_HALF_S: f64 = 300.0;
-
-/// How far into a hold a FHST-only maneuver end is searched for (s), and the search step.
-const MAX_END_SEARCH_S: f64 = 1800.0;
-const END_SEARCH_STEP_S: f64 = 120.0;
+pub(crate) const BATCH_HALF_S: f64 = 300.0;
 
 /// Prior 1σ of the flown alignments per axis (arcsec): FHSTs, FSSs. The paper's FSS1 moved by
 /// 733 arcsec, so the FSS prior must not constrain a change of that size.
@@ -243,6 +234,35 @@ pub struct IruReport {
     pub rejected_intervals: Vec<usize>,
     /// Every interval built from the telemetry, in build order, with its use.
     pub interval_spans: Vec<IntervalSpan>,
+    /// The estimator that produced δM.
+    pub estimator: &'static str,
+    /// Attitude fixes in the gyro chain.
+    pub fixes: usize,
+    /// Gyro links joining consecutive fixes.
+    pub links: usize,
+    /// Links that carry a maneuver.
+    pub maneuver_links: usize,
+    /// Rate random walk declared in the metadata (rad/s^1.5).
+    pub rrw_declared_rad_per_s_1p5: f64,
+    /// Rate random walk used (larger when the data's likelihood needed it).
+    pub rrw_used_rad_per_s_1p5: f64,
+    /// Mean normalised innovation of the fixes per dof (1 = σ right).
+    pub nis_mean_per_dof: f64,
+    /// Fixes outside the innovation gate (not used).
+    pub gated_fixes: usize,
+    /// Why the gyro model does not fit, when it does not.
+    pub model_fit: Option<String>,
+    /// Where in their envelope the rate-mode switches inside decimated frames fell, as
+    /// estimated (slew start, slew end; 0 = middle, ±0.5 = edges), with 1σ (0.5: no data).
+    pub split_fraction: [f64; 2],
+    /// See `split_fraction`.
+    pub split_fraction_sigma: [f64; 2],
+    /// Held-out validation of the primary triad's δM, when attempted.
+    pub validation: Option<HeldOutValidation>,
+    /// Why G was or was not updated (the real reason, with numbers).
+    pub decision: String,
+    /// The backup triad, when it flew slews.
+    pub backup: Option<BackupIruReport>,
 }
 
 /// Where an IRUCAL interval lies in the telemetry (for the report and for checks against a
@@ -271,8 +291,10 @@ pub struct ManeuverReport {
     pub end_s: f64,
     /// Rotation angle from the gyro, deg.
     pub angle_deg: f64,
-    /// Used for IRUCAL (ends had attitude solutions).
+    /// Used for IRUCAL (a gyro link joins attitude fixes before and after it).
     pub used: bool,
+    /// Why not, when not used.
+    pub why_not_used: Option<String>,
     /// Coarse attitude at the maneuver end from the FSSs alone (the Sun moving in the body
     /// during the slew, tied by the gyro), when determined.
     pub coarse_attitude: Option<CoarseAttitude>,
@@ -341,6 +363,10 @@ pub struct DataSummary {
     /// Sensors never observed together with another one: left out of FFCAL, their flown
     /// alignment is kept.
     pub not_observed: Vec<String>,
+    /// Frame intervals holding an IRU rate-mode switch whose pulses were split at the switch.
+    pub rate_switch_frames_split: usize,
+    /// Frame intervals holding a rate-mode switch that could not be split (step dropped).
+    pub rate_switch_frames_dropped: usize,
 }
 
 /// Per-sensor before/after.
@@ -443,8 +469,6 @@ pub struct CalibrationOutput {
     pub ffcal: FfcalSolution,
     /// IRUCAL solution.
     pub irucal: Option<IrucalSolution>,
-    /// Every IRUCAL interval built (before the outlier loop), with where it lies.
-    pub iru_intervals: Vec<(IntervalSpan, CalibrationInterval)>,
 }
 
 fn rows(m: &Matrix3<f64>) -> [[f64; 3]; 3] {
@@ -743,7 +767,7 @@ fn frame_index_at(frames: &[FrameObservations], t_s: f64) -> usize {
 /// Sun, which otherwise would claim arcsec accuracy from hundreds of samples of a sensor
 /// whose error is systematic.
 #[allow(clippy::too_many_arguments)]
-fn batch_fix(
+pub(crate) fn batch_fix(
     frames: &[FrameObservations],
     t_center_s: f64,
     lo_s: f64,
@@ -808,46 +832,14 @@ fn batch_fix(
     ))
 }
 
-/// The interval end next to a maneuver: the FHST-only fix nearest to it in the hold
-/// (`away` = +1 searching forward from `t_edge_s`, −1 backward), else the FHST + FSS fix next to
-/// the maneuver. Why: FHST-only ends are an order of magnitude better (the paper's advice), and
-/// a longer interval costs only gyro noise and bias, which IRUCAL estimates.
-#[allow(clippy::too_many_arguments)]
-fn maneuver_end_fix(
-    frames: &[FrameObservations],
-    t_edge_s: f64,
-    away: f64,
-    lo_s: f64,
-    hi_s: f64,
-    bias_at: &dyn Fn(f64) -> Vector3<f64>,
-    delta_m: &Matrix3<f64>,
-    floors: &FixFloors,
-) -> Option<(usize, AttitudeFix)> {
-    let hold_s = if away > 0.0 {
-        hi_s - t_edge_s
-    } else {
-        t_edge_s - lo_s
-    };
-    let mut offset = BATCH_HALF_S;
-    while offset + BATCH_HALF_S <= hold_s.min(MAX_END_SEARCH_S) || offset == BATCH_HALF_S {
-        let t = t_edge_s + away * offset;
-        if let Some(f) = batch_fix(frames, t, lo_s, hi_s, &bias_at(t), delta_m, floors, false) {
-            return Some(f);
-        }
-        offset += END_SEARCH_STEP_S;
-    }
-    let t = t_edge_s + away * BATCH_HALF_S;
-    batch_fix(frames, t, lo_s, hi_s, &bias_at(t), delta_m, floors, true)
-}
-
 /// Every frame after `a` up to `b` has a gyro step (none lost to a gap or a bad count).
-fn gyro_complete(frames: &[FrameObservations], a: usize, b: usize) -> bool {
+pub(crate) fn gyro_complete(frames: &[FrameObservations], a: usize, b: usize) -> bool {
     frames
         .get(a + 1..=b)
         .is_some_and(|f| f.iter().all(|f| f.gyro.is_some()))
 }
 
-fn steps_between(frames: &[FrameObservations], a: usize, b: usize) -> Vec<GyroStep> {
+pub(crate) fn steps_between(frames: &[FrameObservations], a: usize, b: usize) -> Vec<GyroStep> {
     frames[a + 1..=b]
         .iter()
         .map(|f| {
@@ -939,6 +931,14 @@ fn user_maneuvers(
     Ok(out)
 }
 
+/// The OBC's bias from the housekeeping record at or before `t_s` (absolute time, s).
+fn obc_bias_sample(tm: &Telemetry, t_s: f64) -> Option<[f64; 3]> {
+    let k = tm.housekeeping.partition_point(|h| h.time.seconds() <= t_s);
+    tm.housekeeping
+        .get(k.checked_sub(1)?)
+        .map(|h| h.bias_acs_rad_per_s)
+}
+
 /// Maneuvers as runs of high-rate frames: (first index, last index).
 fn find_maneuvers(frames: &[FrameObservations]) -> Vec<(usize, usize)> {
     let mut out = Vec::new();
@@ -1011,7 +1011,6 @@ pub fn calibrate_telemetry(
         eprintln!("warning: no ephemeris packets (APID 0x020): orbital aberration and Sun parallax are not corrected");
     }
 
-    let initial_bias = obc_bias_at(tm, f64::NEG_INFINITY);
     // The batches that give the interval end attitudes (and the FHST gyro batches) carry their
     // vectors with the OBC's bias, so the bias is not smeared into them.
     let obc_bias_at = |t_s: f64| obc_bias_at(tm, t_s);
@@ -1230,6 +1229,9 @@ pub fn calibrate_telemetry(
 
     // IRUCAL: re-derive observations with the calibrated alignments so that end attitudes
     // use the best alignments.
+    // The first pass's frames are not needed any more: free them before the second pass
+    // (six months of 30-s frames are ~0.5 GB each).
+    drop(frames);
     let frames_cal = build_observations(
         tm,
         &new_alignment,
@@ -1247,293 +1249,74 @@ pub fn calibrate_telemetry(
         Some(spans) => user_maneuvers(&frames_cal, spans)?,
         None => find_maneuvers(&frames_cal),
     };
-    let zero_dm = Matrix3::zeros();
     // A FHST-only fix may follow either tracker's frame: a quarter of the FHST1–FHST2
     // relative alignment covariance (FFCAL, arcsec²) is added to it.
     let fhst_floor = FixFloors {
         fhst_cov_rad2: solution.relative_covariance_arcsec2(1, 0) * (0.25 / ARCSEC_PER_RAD.powi(2)),
         fss_arcsec: metadata.sensors.fss_systematic_arcsec,
     };
-    let mut intervals = Vec::new();
-    let mut spans: Vec<IntervalSpan> = Vec::new();
-    let span = |kind: &'static str, a: usize, b: usize, ca: &Matrix3<f64>, cb: &Matrix3<f64>| {
-        let sigma =
-            |c: &Matrix3<f64>| [0, 1, 2].map(|i| c[(i, i)].max(0.0).sqrt() * ARCSEC_PER_RAD);
-        IntervalSpan {
-            kind,
-            start_s: frames_cal[a].time.seconds() - t0,
-            end_s: frames_cal[b].time.seconds() - t0,
-            rejected: false,
-            end_sigma_arcsec: [sigma(ca), sigma(cb)],
-        }
-    };
-    let mut maneuver_reports = Vec::new();
-    let mut holds: Vec<(usize, usize)> = Vec::new();
-    let mut prev_end = 0usize;
-    for &(s, e) in &maneuvers {
-        if s > prev_end {
-            holds.push((prev_end, s - 1));
-        }
-        prev_end = e + 1;
-    }
-    if prev_end + 1 < frames_cal.len() {
-        holds.push((prev_end, frames_cal.len() - 1));
-    }
-    for (k, &(s, e)) in maneuvers.iter().enumerate() {
-        let t_start = frames_cal[s].time.seconds();
-        let t_end = frames_cal[e].time.seconds();
-        let lo_hold = if k == 0 {
-            t0
-        } else {
-            frames_cal[maneuvers[k - 1].1].time.seconds()
-        };
-        let hi_hold = maneuvers
-            .get(k + 1)
-            .map_or(f64::INFINITY, |m| frames_cal[m.0].time.seconds());
-        let angle: f64 = frames_cal[s..=e]
-            .iter()
-            .filter_map(|f| f.gyro)
-            .map(|g| g.dtheta_acs_rad)
-            .sum::<Vector3<f64>>()
-            .norm();
-        let before = maneuver_end_fix(
-            &frames_cal,
-            t_start,
-            -1.0,
-            lo_hold,
-            t_start,
-            &obc_bias_at,
-            &zero_dm,
-            &fhst_floor,
-        );
-        let after = maneuver_end_fix(
-            &frames_cal,
-            t_end,
-            1.0,
-            t_end,
-            hi_hold,
-            &obc_bias_at,
-            &zero_dm,
-            &fhst_floor,
-        );
-        let used = match (before, after) {
-            (Some((a, fa)), Some((b, fb))) if b > a && gyro_complete(&frames_cal, a, b) => {
-                spans.push(span("maneuver", a, b, &fa.cov_acs_rad2, &fb.cov_acs_rad2));
-                intervals.push(CalibrationInterval {
-                    start: fa,
-                    end: fb,
-                    steps: steps_between(&frames_cal, a, b),
-                });
-                true
-            }
-            _ => false,
-        };
-        let coarse = coarse_attitude(&frames_cal, s, e, &obc_bias_at(t_end), t0);
-        maneuver_reports.push(ManeuverReport {
-            start_s: t_start - t0,
-            end_s: t_end - t0,
-            angle_deg: angle.to_degrees(),
-            used,
-            coarse_attitude: coarse,
-        });
-    }
-    // Holds long enough for two disjoint batches give bias intervals and the bias history.
-    let mut inertial_holds = Vec::new();
-    for &(a, b) in &holds {
-        let ta = frames_cal[a].time.seconds();
-        let tb = frames_cal[b].time.seconds();
-        if tb - ta < 4.0 * BATCH_HALF_S {
-            continue;
-        }
-        let mut fixes = Vec::new();
-        let mut first_idx = None;
-        let mut t = ta + BATCH_HALF_S;
-        while t + BATCH_HALF_S <= tb {
-            if let Some((idx, fix)) = batch_fix(
-                &frames_cal,
-                t,
-                ta,
-                tb,
-                &obc_bias_at(t),
-                &zero_dm,
-                &fhst_floor,
-                true,
-            ) {
-                let origin = *first_idx.get_or_insert(idx);
-                let sigma = Vector3::new(
-                    fix.cov_acs_rad2[(0, 0)].sqrt(),
-                    fix.cov_acs_rad2[(1, 1)].sqrt(),
-                    fix.cov_acs_rad2[(2, 2)].sqrt(),
-                );
-                fixes.push((
-                    idx,
-                    TimedFix {
-                        t_s: frames_cal[idx].time.seconds() - frames_cal[origin].time.seconds(),
-                        m_acs_from_eci: fix.m_acs_from_eci,
-                        sigma_acs_rad: sigma,
-                    },
-                ));
-            }
-            t += 2.0 * BATCH_HALF_S;
-        }
-        if fixes.len() >= 2 && gyro_complete(&frames_cal, fixes[0].0, fixes[fixes.len() - 1].0) {
-            let (i0, f0) = fixes[0];
-            let (i1, f1) = fixes[fixes.len() - 1];
-            let fix = |f: &TimedFix| AttitudeFix {
-                m_acs_from_eci: f.m_acs_from_eci,
-                cov_acs_rad2: Matrix3::from_diagonal(
-                    &f.sigma_acs_rad.component_mul(&f.sigma_acs_rad),
-                ),
-            };
-            spans.push(span(
-                "hold",
-                i0,
-                i1,
-                &fix(&f0).cov_acs_rad2,
-                &fix(&f1).cov_acs_rad2,
-            ));
-            intervals.push(CalibrationInterval {
-                start: fix(&f0),
-                end: fix(&f1),
-                steps: steps_between(&frames_cal, i0, i1),
-            });
-            inertial_holds.push((
-                frames_cal[i0].time.seconds() - t0,
-                InertialHold {
-                    fixes: fixes.iter().map(|(_, f)| *f).collect(),
-                    steps: steps_between(&frames_cal, i0, i1),
-                },
-            ));
-        }
-    }
-    let all_intervals: Vec<(IntervalSpan, CalibrationInterval)> = spans
+    summary.rate_switch_frames_split = frames_cal
         .iter()
-        .copied()
-        .zip(intervals.iter().cloned())
-        .collect();
-    let initial_cal = GyroCalibration {
-        delta_m: Matrix3::zeros(),
-        bias_acs_rad_per_s: initial_bias,
-    };
-    let mut iru_skipped = None;
-    let mut rejected_intervals: Vec<usize> = Vec::new();
-    let irucal_solution = if maneuver_reports.iter().filter(|m| m.used).count() >= 3 {
-        // The prelaunch calibration is the prior (3000 ppm on δM, 1″/s on the bias correction
-        // from the OBC's estimate): it only regularises combinations the maneuvers leave weak.
-        let cfg = IrucalConfig {
-            noise,
-            prior_sigma_ppm_and_arcsec_per_s: Some((3000.0, 1.0)),
-            ..IrucalConfig::default()
-        };
-        // Robust loop: an interval whose residual after the fit exceeds 5σ of its end
-        // attitudes (plus 20″ for gyro noise and systematics) has a bad end attitude; it is
-        // dropped (reported) and the fit repeated, while at least four intervals remain.
-        let mut result = irucal(&intervals, &initial_cal, &cfg);
-        while let Ok(sol) = &result {
-            let worst = sol
-                .residual_after_arcsec
+        .filter(|f| f.rate_switch == RateSwitch::Split)
+        .count();
+    summary.rate_switch_frames_dropped = frames_cal
+        .iter()
+        .filter(|f| f.rate_switch == RateSwitch::Dropped)
+        .count();
+    let gyro_chain = build_gyro_chain(&frames_cal, &maneuvers, &obc_bias_at, &fhst_floor, t0);
+    let mut maneuver_reports: Vec<ManeuverReport> = maneuvers
+        .iter()
+        .enumerate()
+        .map(|(k, &(s, e))| {
+            let t_end = frames_cal[e].time.seconds();
+            let angle: f64 = frames_cal[s..=e]
                 .iter()
-                .zip(&intervals)
-                .enumerate()
-                .map(|(k, (r, iv))| {
-                    let sigma = ((iv.start.cov_acs_rad2.trace() + iv.end.cov_acs_rad2.trace())
-                        .max(0.0))
-                    .sqrt()
-                        * ARCSEC_PER_RAD;
-                    (k, r / (5.0 * sigma + 20.0))
-                })
-                .max_by(|a, b| a.1.total_cmp(&b.1));
-            match worst {
-                Some((k, ratio)) if ratio > 1.0 && intervals.len() > MIN_IRUCAL_INTERVALS => {
-                    rejected_intervals.push(k);
-                    intervals.remove(k);
-                    if let Some(sp) = spans.iter_mut().filter(|s| !s.rejected).nth(k) {
-                        sp.rejected = true;
-                    }
-                    result = irucal(&intervals, &initial_cal, &cfg);
-                }
-                _ => break,
-            }
-        }
-        match result {
-            Ok(s) => Some(s),
-            Err(e) => {
-                iru_skipped = Some(format!("IRUCAL failed: {e}"));
-                None
-            }
-        }
-    } else {
-        iru_skipped = Some(format!(
-            "IRUCAL needs maneuvers about three non-coplanar axes with FHST attitudes in the holds before and after; found {} maneuvers, {} usable",
-            maneuver_reports.len(),
-            maneuver_reports.iter().filter(|m| m.used).count()
-        ));
-        None
-    };
-    let mut new_iru = flown_iru;
-    let iru_report = irucal_solution.as_ref().map(|s| {
-        let dm = s.calibration.delta_m;
-        let sig = s.sigma_delta_m;
-        // Only the elements determined at 3σ go up; the others stay at the flown G (an element
-        // of an axis no maneuver turned about is the prior, not information).
-        let dm_uplink = Matrix3::from_fn(|i, j| {
-            if dm[(i, j)].abs() > 3.0 * sig[(i, j)] {
-                dm[(i, j)]
-            } else {
-                0.0
-            }
-        });
-        let significant = dm_uplink.iter().any(|x| *x != 0.0);
-        // Uplink a new G only from a redundant, self-consistent fit: enough intervals, none
-        // rejected as outliers. Otherwise the prelaunch G stays (and the report says why).
-        let consistent = intervals.len() >= MIN_IRUCAL_INTERVALS && rejected_intervals.is_empty();
-        if significant && consistent {
-            let g = (Matrix3::identity() + dm_uplink) * matrix_from_rows(&flown_iru.g_primary);
-            new_iru.g_primary = rows(&g);
-        }
-        IruReport {
-            delta_m: rows(&dm),
-            delta_m_sigma: rows(&sig),
-            bias_rad_per_s: s.calibration.bias_acs_rad_per_s.into(),
-            bias_sigma_rad_per_s: s.sigma_bias_acs_rad_per_s.into(),
-            intervals: intervals.len(),
-            residual_before_arcsec: s.residual_before_arcsec.clone(),
-            residual_after_arcsec: s.residual_after_arcsec.clone(),
-            g_updated: significant && consistent,
-            delta_m_uplinked: rows(&if significant && consistent {
-                dm_uplink
-            } else {
-                Matrix3::zeros()
-            }),
-            rejected_intervals: rejected_intervals.clone(),
-            interval_spans: spans.clone(),
-        }
-    });
-    let cal_for_bias = irucal_solution
-        .as_ref()
-        .map_or(initial_cal, |s| s.calibration);
-    let holds_only: Vec<InertialHold> = inertial_holds.iter().map(|(_, h)| h.clone()).collect();
-    let history: Vec<BiasEstimate> =
-        bias_history(&holds_only, &cal_for_bias, &noise).unwrap_or_default();
-    let bias_history_points = history
-        .iter()
-        .zip(inertial_holds.iter())
-        .map(|(b, (t_origin, _))| {
-            let t_s = t_origin + b.t_mid_s;
-            let hk = tm.housekeeping.get(
-                tm.housekeeping
-                    .partition_point(|h| h.time.seconds() - t0 < t_s)
-                    .min(tm.housekeeping.len().saturating_sub(1)),
-            );
-            BiasHistoryPoint {
-                t_s,
-                bias_rad_per_s: b.bias_acs_rad_per_s.into(),
-                sigma_rad_per_s: b.sigma_acs_rad_per_s.into(),
-                obc_bias_rad_per_s: hk.map(|h| h.bias_acs_rad_per_s),
+                .filter_map(|f| f.gyro)
+                .map(|g| g.dtheta_acs_rad)
+                .sum::<Vector3<f64>>()
+                .norm();
+            let why_not_used = gyro_chain.why_not_used(&frames_cal, k, s, e);
+            ManeuverReport {
+                start_s: frames_cal[s].time.seconds() - t0,
+                end_s: t_end - t0,
+                angle_deg: angle.to_degrees(),
+                used: why_not_used.is_none(),
+                why_not_used,
+                coarse_attitude: coarse_attitude(&frames_cal, s, e, &obc_bias_at(t_end), t0),
             }
         })
         .collect();
-
+    let chain_cfg = ChainConfig {
+        noise,
+        ..ChainConfig::default()
+    };
+    let iru_stage = irucal_stage(
+        &gyro_chain.chain,
+        &chain_cfg,
+        &flown_iru,
+        &mut maneuver_reports,
+    );
+    let IruStage {
+        table: new_iru,
+        report: iru_report,
+        solution: irucal_solution,
+        skipped: iru_skipped,
+        chain_solution,
+    } = iru_stage;
+    let bias_history_points = chain_solution
+        .as_ref()
+        .map(|sol| {
+            sol.bias
+                .iter()
+                .map(|b| BiasHistoryPoint {
+                    t_s: b.t_s,
+                    bias_rad_per_s: b.bias_rad_per_s,
+                    sigma_rad_per_s: b.sigma_rad_per_s,
+                    obc_bias_rad_per_s: obc_bias_sample(tm, t0 + b.t_s),
+                })
+                .collect()
+        })
+        .unwrap_or_default();
     let (new_filter, filter_changes) = filter_update(
         &options
             .flown_filter
@@ -1563,7 +1346,6 @@ pub fn calibrate_telemetry(
         frames: frames_cal,
         ffcal: solution,
         irucal: irucal_solution,
-        iru_intervals: all_intervals,
     })
 }
 

@@ -130,7 +130,7 @@ pub fn estimate_fss_systematic(
 mod tests {
     use super::*;
     use crate::pipeline::calibrate::fss_cell as cell;
-    use crate::pipeline::observations::{StarObservation, SunObservation};
+    use crate::pipeline::observations::{RateSwitch, StarObservation, SunObservation};
     use fsw_core::fhst::FhstMeasurement;
     use fsw_core::fss::FssMeasurement;
     use rand_distr::{Distribution, StandardNormal};
@@ -187,6 +187,10 @@ mod tests {
                     time: Default::default(),
                     gyro: None,
                     high_rate: false,
+                    iru_backup: false,
+                    rate_switch: RateSwitch::None,
+                    gyro_split_var_rad2: 0.0,
+                    gyro_split_dir_rad: nalgebra::Vector3::zeros(),
                     stars,
                     suns: [
                         Some(SunObservation {

@@ -7,5 +7,6 @@ pub mod calibrate;
 pub mod flown;
 pub mod fss_consider;
 pub mod fss_systematic;
+pub mod gyro_chain;
 pub mod observations;
 pub mod star_batches;

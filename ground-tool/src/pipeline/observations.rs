@@ -21,9 +21,10 @@ use crate::attitude::quest::{solve_attitude, AttitudeError, AttitudeSolution, Ve
 use crate::calibration::iru::GyroStep;
 use crate::tp::Telemetry;
 use fsw_core::attitude::{rot, Quat};
+use fsw_core::events::EventId;
 use fsw_core::fhst::{self, FhstId, FhstMeasurement};
 use fsw_core::fss::{self, FssId, FssMeasurement};
-use fsw_core::iru::{IruConfiguration, IruIntegrator};
+use fsw_core::iru::{delta_theta_from_pulses, pulse_weight_rad, IruConfiguration, IruIntegrator};
 use fsw_core::raw::TimeTag;
 use fsw_core::tables::{AlignmentTable, IruTable};
 use fsw_core::telemetry::EphemerisRecord;
@@ -103,8 +104,19 @@ pub struct FrameObservations {
     pub time: TimeTag,
     /// Gyro increment over the interval that ended at this frame (ACS, no bias removed).
     pub gyro: Option<GyroStep>,
-    /// IRU rate mode of that interval.
+    /// IRU rate mode of that interval (of its last cycle, ICD §3.1 byte 13).
     pub high_rate: bool,
+    /// The gyro step came from the backup triad (X1, Y2, Z2).
+    pub iru_backup: bool,
+    /// Whether the frame interval held a rate-mode switch, and what was done with it.
+    pub rate_switch: RateSwitch,
+    /// Per-axis variance added to the gyro step by splitting its pulses between the two rate
+    /// modes (rad²; 0 without a switch).
+    pub gyro_split_var_rad2: f64,
+    /// How the split step moves (ACS, rad) per unit of the split fraction `c`: the angle
+    /// before the switch at the top (`c = +½`) or bottom (`c = −½`) of its envelope
+    /// (`split_step`); zero without a split. The calibration estimates `c` per kind of switch.
+    pub gyro_split_dir_rad: Vector3<f64>,
     /// FHST1, FHST2.
     pub stars: [Option<StarObservation>; 2],
     /// FSS1, FSS2.
@@ -115,6 +127,19 @@ pub struct FrameObservations {
     pub obc_q_acs_from_eci: Option<Quat>,
     /// Spacecraft position and velocity, J2000, km and km/s (interpolated ephemeris).
     pub orbit: Option<(Vector3<f64>, Vector3<f64>)>,
+}
+
+/// A frame interval that contains an IRU rate-mode switch (decimated telemetry: the counter
+/// difference mixes 0.05″ and 0.8″ pulses).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub enum RateSwitch {
+    /// No switch inside the interval (or a 1-cycle interval).
+    #[default]
+    None,
+    /// One switch at a known time (event 0x0203): the pulses were split between the modes.
+    Split,
+    /// A switch whose time or pulse split is unknown: the step was dropped (no gyro step).
+    Dropped,
 }
 
 /// Interpolate the definitive orbit (cubic Hermite between records ≤ 600 s apart).
@@ -222,6 +247,9 @@ pub fn build_observations(
     // identified stars, carried by the gyro in between (`OwnAttitude`).
     let mut own = OwnAttitude::default();
     let max_gyro_step_s = max_gyro_step_s(&tm.raw);
+    // Per frame: the selected channels' pulse differences and the configuration, kept for
+    // re-weighting a frame interval that holds a rate-mode switch (`split_rate_switches`).
+    let mut pulses: Vec<Option<[f64; 3]>> = Vec::with_capacity(tm.raw.len());
     for raw in &tm.raw {
         let t_s = raw.time.seconds();
         let j2000_tt_s = raw.time.seconds_since_j2000_tt();
@@ -250,6 +278,7 @@ pub fn build_observations(
             _ => None,
         };
         previous_time = Some(t_s);
+        pulses.push(gyro.map(|_| config.channels().map(|c| f64::from(out.delta_counts[c]))));
         let orbit = interpolate_orbit(&tm.ephemeris, t_s);
         let eph = sun_ephemeris.get_or_insert_with(|| SunEphemeris::new(j2000_tt_s, 600.0));
         let sun_state = eph.state(j2000_tt_s);
@@ -347,6 +376,10 @@ pub fn build_observations(
             time: raw.time,
             gyro,
             high_rate: raw.iru.high_rate,
+            iru_backup: config == IruConfiguration::Backup,
+            rate_switch: RateSwitch::None,
+            gyro_split_var_rad2: 0.0,
+            gyro_split_dir_rad: Vector3::zeros(),
             stars,
             suns,
             temperatures_c,
@@ -354,7 +387,210 @@ pub fn build_observations(
             orbit,
         });
     }
+    split_rate_switches(tm, &mut frames, &pulses, iru);
     frames
+}
+
+/// The IRU rate-mode switches announced by `0x0203` events: (time the new mode starts, high).
+/// docs/icd.md §3.3: the command changed at the event's cycle applies from the next sample
+/// interval, so the new mode starts one cycle after the event.
+fn rate_mode_switches(tm: &Telemetry, cycle_s: f64) -> Vec<(f64, bool)> {
+    tm.events
+        .iter()
+        .filter(|(_, e)| e.id == EventId::IruRateModeChanged)
+        .map(|(t, e)| (t.seconds() + cycle_s, e.p1 == 1))
+        .collect()
+}
+
+/// The flight software's cycle (s): the shortest spacing of raw frames or events, at most 1 s.
+fn cycle_period_s(tm: &Telemetry) -> f64 {
+    let raw = tm
+        .raw
+        .windows(2)
+        .map(|w| w[1].time.seconds() - w[0].time.seconds());
+    let events = tm
+        .events
+        .windows(2)
+        .map(|w| w[1].0.seconds() - w[0].0.seconds());
+    raw.chain(events).filter(|d| *d > 1e-3).fold(1.0, f64::min)
+}
+
+/// Frame intervals that hold an IRU rate-mode switch (docs/icd.md §3.1: byte 13 is the mode
+/// of the **last** cycle of the interval; with decimated telemetry the counter difference
+/// mixes 0.05″ and 0.8″ pulses, `algorithms.md` §10a "Decimated gyro data").
+///
+/// Why: weighting every pulse of such an interval with the end mode's weight undercounts (or
+/// overcounts) the slew by up to 15/16 of the high-rate pulses; over a 10° slew that is
+/// thousands of ppm of false scale factor. The switch time comes from the `0x0203` events
+/// (downlinked every cycle); the angle of the interval is split with the rate interpolated
+/// between its one-mode neighbours (`split_step`), and the split's uncertainty (including one
+/// cycle of switch timing, since writers differ on the event's cycle) is carried as a
+/// variance of the step. Without events, or with more than one switch inside, or without
+/// one-mode neighbours on both sides, the step is dropped (the gyro chain breaks there and the report says how many
+/// frames were dropped).
+fn split_rate_switches(
+    tm: &Telemetry,
+    frames: &mut [FrameObservations],
+    pulses: &[Option<[f64; 3]>],
+    iru: &IruTable,
+) {
+    let cycle_s = cycle_period_s(tm);
+    let switches = rate_mode_switches(tm, cycle_s);
+    let have_events = !tm.events.is_empty();
+    // Mode of the interval that starts at `t`.
+    let mode_from = |t: f64, fallback: bool| -> bool {
+        let k = switches.partition_point(|c| c.0 <= t + 1e-6);
+        if k == 0 {
+            fallback
+        } else {
+            switches[k - 1].1
+        }
+    };
+    // First: which intervals hold a switch, and the switch time when exactly one is known.
+    let n = frames.len();
+    let mut straddles: Vec<Option<Option<f64>>> = vec![None; n];
+    for k in 1..n {
+        let (t_prev, t_now) = (frames[k - 1].time.seconds(), frames[k].time.seconds());
+        // A one-cycle interval has one mode, the one byte 13 gives.
+        if frames[k].gyro.is_none() || t_now - t_prev < 1.5 * cycle_s {
+            continue;
+        }
+        let end_mode = frames[k].high_rate;
+        let start_mode = if have_events {
+            mode_from(t_prev, frames[k - 1].high_rate)
+        } else {
+            frames[k - 1].high_rate
+        };
+        let inside: Vec<(f64, bool)> = switches
+            .iter()
+            .copied()
+            .filter(|c| c.0 > t_prev + 1e-6 && c.0 < t_now - 1e-6)
+            .collect();
+        if inside.is_empty() && start_mode == end_mode {
+            continue;
+        }
+        straddles[k] = Some(match inside.as_slice() {
+            [(t_switch, new_mode)] if *new_mode == end_mode && start_mode != end_mode => {
+                Some(*t_switch)
+            }
+            _ => None,
+        });
+    }
+    // Then the split of each, from a clean low-rate neighbour.
+    for k in 1..n {
+        let Some(switch) = straddles[k] else {
+            continue;
+        };
+        let split = switch.and_then(|t_switch| {
+            let high_before = !frames[k].high_rate;
+            // Both neighbours must be one-mode intervals.
+            let clean = |j: usize| straddles.get(j).is_some_and(Option::is_none);
+            (clean(k - 1) && clean(k + 1))
+                .then(|| split_step(frames, pulses, iru, k, t_switch, high_before, cycle_s))
+                .flatten()
+        });
+        let f = &mut frames[k];
+        match split {
+            Some((dtheta, dir, var)) => {
+                if let Some(g) = f.gyro.as_mut() {
+                    g.dtheta_acs_rad = dtheta;
+                }
+                f.gyro_split_var_rad2 = var;
+                f.gyro_split_dir_rad = dir;
+                f.rate_switch = RateSwitch::Split;
+            }
+            None => {
+                f.gyro = None;
+                f.rate_switch = RateSwitch::Dropped;
+            }
+        }
+    }
+}
+
+/// The rate (pulses × weight / s, per selected channel) and centre time of the wholly
+/// one-mode frame interval `k`.
+fn interval_rate(
+    frames: &[FrameObservations],
+    pulses: &[Option<[f64; 3]>],
+    iru: &IruTable,
+    k: usize,
+) -> Option<([f64; 3], f64)> {
+    let f = frames.get(k)?;
+    let prev = frames.get(k.checked_sub(1)?)?;
+    let p = pulses.get(k).copied().flatten()?;
+    let dt = f.time.seconds() - prev.time.seconds();
+    if !(dt > 0.0) || f.gyro.is_none() {
+        return None;
+    }
+    let w = pulse_weight_rad(f.high_rate, iru);
+    Some((
+        p.map(|x| x * w / dt),
+        0.5 * (f.time.seconds() + prev.time.seconds()),
+    ))
+}
+
+/// Scatter of the split fraction from one switch to the next, as a fraction of its envelope
+/// (what the estimated common fraction leaves): measured on `gro-bias-history` at 1-s and
+/// 30-s downlink, the slews' main axis had λ = 0.009–0.012 at slew starts and 0.50–0.60 at
+/// slew ends (`docs/investigations.md`, "Rate-mode switches in decimated telemetry").
+const SPLIT_SCATTER: f64 = 0.04;
+
+/// The angle per selected channel of frame interval `k` whose pulses switch weight at
+/// `t_switch` (high rate before it when `high_before`): the step (ACS, rad), its direction per
+/// unit split fraction, and its per-axis variance.
+///
+/// The counts give `N = I₁/w₁ + I₂/w₂` (angles `I₁` before and `I₂` after the switch, pulse
+/// weights `w₁`, `w₂`) but not the split, so the angle `A = I₁ + I₂ = w₂ N + I₁ (1 − w₂/w₁)`
+/// depends on `I₁`. With the rate monotone through the switch (a slew accelerating out of a
+/// hold or braking into one) the rate before the switch lies between the mean rates of the
+/// one-mode neighbour intervals before (`r_a`) and after (`r_b`): `I₁ = τ₁ (r_a + λ (r_b −
+/// r_a))`, `λ ∈ [0, 1]`. The step is taken at `λ = ½`; where the truth lies depends on the
+/// control profile and is nearly the same for every slew start (or end): the calibration
+/// estimates `c = λ − ½` per kind (`gyro_split_dir_rad` is the step's change per unit `c`), and
+/// what varies from slew to slew (`SPLIT_SCATTER` of the envelope and one pulse) is the
+/// step's variance.
+#[allow(clippy::too_many_arguments)]
+fn split_step(
+    frames: &[FrameObservations],
+    pulses: &[Option<[f64; 3]>],
+    iru: &IruTable,
+    k: usize,
+    t_switch: f64,
+    high_before: bool,
+    cycle_s: f64,
+) -> Option<(Vector3<f64>, Vector3<f64>, f64)> {
+    let total = pulses.get(k).copied().flatten()?;
+    let t_prev = frames.get(k.checked_sub(1)?)?.time.seconds();
+    let (ra, _) = interval_rate(frames, pulses, iru, k - 1)?;
+    let (rb, _) = interval_rate(frames, pulses, iru, k + 1)?;
+    let (w1, w2) = (
+        pulse_weight_rad(high_before, iru),
+        pulse_weight_rad(!high_before, iru),
+    );
+    let tau1 = t_switch - t_prev;
+    let _ = cycle_s;
+    let gain = 1.0 - w2 / w1;
+    let mut angle = [0.0; 3];
+    let mut per_c = [0.0; 3];
+    let mut var: f64 = 0.0;
+    for c in 0..3 {
+        // I₁ = τ₁ (r_a + λ (r_b − r_a)), λ = ½ + c.
+        angle[c] = w2 * total[c] + 0.5 * (ra[c] + rb[c]) * tau1 * gain;
+        per_c[c] = (rb[c] - ra[c]) * tau1 * gain;
+        let spread = SPLIT_SCATTER * per_c[c].abs() + w1.max(w2);
+        var = var.max(spread * spread);
+    }
+    let config = if frames[k].iru_backup {
+        IruConfiguration::Backup
+    } else {
+        IruConfiguration::Primary
+    };
+    // Angles as equivalent counts of high-rate pulses (the table's scale factors and
+    // asymmetry act per channel the same way).
+    let w_high = pulse_weight_rad(true, iru);
+    let step = delta_theta_from_pulses(&angle.map(|x| x / w_high), true, config, iru);
+    let dir = delta_theta_from_pulses(&per_c.map(|x| x / w_high), true, config, iru);
+    Some((step, dir, var))
 }
 
 /// Largest age of the ground's own attitude used for identification, s: the gyro bias

@@ -1,0 +1,853 @@
+//! # IRUCAL over a whole timeline: a calibration Kalman filter with an RTS smoother
+//!
+//! Why: the interval form of [`super::iru`] (Keat/Davenport) takes one constant bias over the
+//! whole span and treats every interval as independent. Over days or months the bias is not
+//! constant (GRO: a transient over the first six days after release, then a random walk), and
+//! adjacent intervals share their end attitudes. A constant bias then leaks into δM (a 10° slew
+//! bracketed by holds whose bias differs by 0.01″/s reads as hundreds of ppm), and the shared
+//! ends make the stated σ too small. `docs/algorithms.md` §10a: "Bias as a random walk in a
+//! batch calibration"; the filter/smoother form is Pittelkau's calibration filter [Pit07].
+//!
+//! ## Model
+//! The timeline is a **chain** of attitude fixes `Rⱼ` (fine attitudes from sensor batches,
+//! `A_true = Rot(θⱼ) Rⱼ` with `θⱼ ~ N(0, Pⱼ)`, each from its own disjoint data so that the fixes
+//! are independent) joined by the gyro data between consecutive fixes. The state at fix `j` is
+//! `x = [θ (3, ″), δβ (3, ″/s), δm_primary (9, ppm), δm_backup (9, ppm)]`, corrections to the
+//! linearisation point (δM per triad, bias `β̂ⱼ` per fix). Between fixes `j → j+1` the gyro,
+//! propagated from `Rⱼ` with the current calibration (`super::iru::propagate_interval`), gives
+//! `θⱼ₊₁ = Φ θⱼ + S_b δβⱼ + S_m δm − zⱼ + w`, `zⱼ = rotvec(Rⱼ₊₁ Âⱼ₊₁ᵀ)` (the interval residual
+//! of §7), `Φ = Âⱼ₊₁ Rⱼᵀ`. The bias is a random walk: `βⱼ₊₁ = βⱼ + u`, with Farrenkopf's
+//! discrete noise (`σ_v² T + σ_u² T³/3` on the angle, `σ_u² T` on the bias, `−σ_u² T²/2`
+//! between them) plus the variance of any pulse split at a rate-mode switch. Where the gyro
+//! chain breaks (a telemetry gap, a dropped step, a configuration switch inside) the attitude
+//! is released (`θ` gets a 28° prior) while the bias walk and δM carry across.
+//!
+//! ## Estimation
+//! A forward Kalman filter over the fixes (each fix a measurement `0 = θ + v`, `v ~ N(0, Pⱼ)`)
+//! and a Rauch–Tung–Striebel smoother give δM with its covariance and the bias at every fix
+//! with its σ; the linearisation is iterated (Gauss–Newton) until δM moves by < 0.05 ppm. The
+//! rate random walk `σ_u` is the declared one unless the data's likelihood (prediction-error
+//! decomposition of the filter) prefers a larger one on a ×4 grid: then the larger one is used
+//! and reported (a transient that the declared walk cannot follow would otherwise leak into δM
+//! with a σ that is too small). A fix whose normalised innovation exceeds `gate_nis` (χ²₃) is
+//! not used and is reported; many such fixes mean the gyro model does not fit.
+//!
+//! ## Held-out validation
+//! [`validate_heldout`] splits the maneuver-bearing links into two folds (alternate), fits on
+//! one fold (the other's links released) and predicts the held-out links with the fold's δM
+//! and with δM = 0 (the flown table): a table is worth uplinking only when the held-out χ²
+//! falls by more than its sampling spread and the held-out normalised residuals are
+//! consistent (`algorithms.md` §10a "Held-out validation before uplink").
+
+use nalgebra::{Matrix2, Matrix3, SMatrix, SVector, Vector2, Vector3};
+use serde::Serialize;
+
+use fsw_core::attitude::rotvec_from_rot;
+
+use super::iru::{propagate_interval, AttitudeFix, GyroCalibration, GyroNoise, GyroStep, PPM};
+use crate::diagnose::stats::chi2_sf;
+use crate::{ARCSEC_PER_RAD, RAD_PER_ARCSEC};
+
+/// State size: θ, δβ, δm primary, δm backup, split fractions (slew start, slew end).
+const NX: usize = 26;
+
+/// Index of the split fractions `c` (rate-mode switches inside decimated frames).
+const SPLIT: usize = 24;
+
+/// Prior σ of a split fraction (its envelope is ±½).
+const SPLIT_PRIOR_SIGMA: f64 = 0.5;
+type Mx = SMatrix<f64, NX, NX>;
+type Vx = SVector<f64, NX>;
+
+/// Prior variance of an attitude released at a break of the gyro chain (arcsec²: 1e5″ ≈ 28°).
+const RELEASED_ATTITUDE_VAR_ARCSEC2: f64 = 1e10;
+
+/// The gyro triad that produced a link's increments.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+pub enum Triad {
+    /// X2, Y1, Z1.
+    Primary,
+    /// X1, Y2, Z2.
+    Backup,
+}
+
+impl Triad {
+    fn offset(self) -> usize {
+        match self {
+            Self::Primary => 6,
+            Self::Backup => 15,
+        }
+    }
+    fn index(self) -> usize {
+        match self {
+            Self::Primary => 0,
+            Self::Backup => 1,
+        }
+    }
+}
+
+/// One attitude fix of the chain.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ChainFix {
+    /// Time (s since the first frame).
+    pub t_s: f64,
+    /// The fix and its covariance.
+    pub fix: AttitudeFix,
+    /// Linearisation bias at this fix (rad/s, ACS): e.g. the OBC's estimate.
+    pub bias_nominal_rad_per_s: Vector3<f64>,
+}
+
+/// The gyro data joining fix `j` to fix `j + 1`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ChainLink {
+    /// Gyro steps from fix `j`'s frame (exclusive) to fix `j + 1`'s frame (inclusive).
+    pub steps: Vec<GyroStep>,
+    /// The triad that produced them.
+    pub triad: Triad,
+    /// Extra per-axis variance of the propagated attitude (rad²): rate-mode pulse splits.
+    pub extra_var_rad2: f64,
+    /// Held-out group (a maneuver in the link), `None` for a hold.
+    pub maneuver: Option<usize>,
+    /// Change of the propagated attitude per unit split fraction (rad, ACS) of the
+    /// rate-mode switches split inside the link: [into high rate, into low rate].
+    pub split_dirs_rad: [Vector3<f64>; 2],
+}
+
+/// The whole timeline: fixes in time order and the links between consecutive fixes
+/// (`links[j]` joins fix `j` and `j + 1`; `None` where the gyro chain breaks).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Chain {
+    /// Fixes.
+    pub fixes: Vec<ChainFix>,
+    /// Links, `fixes.len() − 1` of them.
+    pub links: Vec<Option<ChainLink>>,
+}
+
+/// Options of the chain estimator.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ChainConfig {
+    /// Declared gyro noise (σ_v, σ_u).
+    pub noise: GyroNoise,
+    /// Prior σ of each δM element (ppm) and of the first bias correction (″/s).
+    pub prior_dm_ppm: f64,
+    /// Prior σ of the bias at the first fix about its nominal (″/s).
+    pub prior_bias_arcsec_per_s: f64,
+    /// Gate on the normalised innovation of a fix (χ²₃).
+    pub gate_nis: f64,
+    /// Largest Gauss–Newton passes.
+    pub max_iterations: usize,
+    /// Estimate σ_u from the likelihood when the declared one is too small.
+    pub estimate_rrw: bool,
+}
+
+impl Default for ChainConfig {
+    fn default() -> Self {
+        Self {
+            noise: GyroNoise::default(),
+            prior_dm_ppm: 3000.0,
+            prior_bias_arcsec_per_s: 1.0,
+            // χ²₃ at p = 1e-5.
+            gate_nis: 25.9,
+            max_iterations: 6,
+            estimate_rrw: true,
+        }
+    }
+}
+
+/// Why the chain estimator gave no answer.
+#[derive(Debug, thiserror::Error, Clone, PartialEq)]
+pub enum ChainError {
+    /// Fewer than two fixes or no link.
+    #[error("the gyro chain has {fixes} attitude fixes and {links} gyro links: at least two fixes joined by gyro data are needed")]
+    TooShort {
+        /// Fixes.
+        fixes: usize,
+        /// Links with gyro data.
+        links: usize,
+    },
+    /// A covariance lost positive definiteness.
+    #[error("the calibration filter's covariance is not positive definite at fix {fix} (t = {t_s:.0} s): check the fix covariances there")]
+    Covariance {
+        /// Fix index.
+        fix: usize,
+        /// Its time.
+        t_s: f64,
+    },
+}
+
+/// The bias at one fix (smoothed).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct ChainBias {
+    /// Time (s since the first frame).
+    pub t_s: f64,
+    /// Bias (rad/s, ACS).
+    pub bias_rad_per_s: [f64; 3],
+    /// 1σ (rad/s).
+    pub sigma_rad_per_s: [f64; 3],
+}
+
+/// The result.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ChainSolution {
+    /// δM per triad (primary, backup), unitless, relative to the flown `G`.
+    pub delta_m: [Matrix3<f64>; 2],
+    /// 1σ of δM per triad (unitless).
+    pub sigma_delta_m: [Matrix3<f64>; 2],
+    /// Covariance of vec(δM) per triad (ppm², column-major as [`super::iru::PARAMETER_NAMES`]).
+    pub covariance_ppm2: [SMatrix<f64, 9, 9>; 2],
+    /// Total rotation the gyro measured in the links, per triad (deg): 0 = not observed.
+    pub rotation_deg: [f64; 2],
+    /// The smoothed bias at every fix.
+    pub bias: Vec<ChainBias>,
+    /// Normalised innovation squared per fix (`None`: first fix or after a break).
+    pub nis: Vec<Option<f64>>,
+    /// Fixes not used (innovation beyond the gate).
+    pub gated: Vec<usize>,
+    /// Link residual norms `|zⱼ|` (″) with the flown calibration and the OBC bias, and at the
+    /// solution.
+    pub link_residual_before_arcsec: Vec<Option<f64>>,
+    /// See `link_residual_before_arcsec`.
+    pub link_residual_after_arcsec: Vec<Option<f64>>,
+    /// σ_u declared and used (rad/s^1.5); used > declared when the data needed it.
+    pub rrw_declared: f64,
+    /// See `rrw_declared`.
+    pub rrw_used: f64,
+    /// Mean NIS / 3 over the fixes used (1 = the model's σ fits the data).
+    pub nis_mean_per_dof: f64,
+    /// Fixes with a NIS.
+    pub nis_count: usize,
+    /// Gauss–Newton passes.
+    pub iterations: usize,
+    /// Split fractions of the rate-mode switches inside decimated frames (into high rate,
+    /// into low rate; 0 = the middle of their envelope) and their 1σ (0.5 = the prior: no
+    /// split in the data).
+    pub split_fraction: [f64; 2],
+    /// See `split_fraction`.
+    pub split_fraction_sigma: [f64; 2],
+}
+
+/// One linearised link.
+#[derive(Clone, Copy)]
+struct LinkModel {
+    phi: Matrix3<f64>,
+    /// ″ per ″/s.
+    s_b: Matrix3<f64>,
+    /// ″ per ppm.
+    s_m: SMatrix<f64, 3, 9>,
+    /// ″.
+    z: Vector3<f64>,
+    t_s: f64,
+    extra_var_arcsec2: f64,
+    triad: Triad,
+    /// ″ per unit split fraction.
+    s_c: SMatrix<f64, 3, 2>,
+}
+
+/// The linearisation point.
+#[derive(Clone, Debug)]
+struct Nominal {
+    delta_m: [Matrix3<f64>; 2],
+    bias: Vec<Vector3<f64>>,
+}
+
+fn linearise(chain: &Chain, nominal: &Nominal) -> Vec<Option<LinkModel>> {
+    chain
+        .links
+        .iter()
+        .enumerate()
+        .map(|(j, link)| {
+            let link = link.as_ref()?;
+            let start = chain.fixes.get(j)?;
+            let end = chain.fixes.get(j + 1)?;
+            let cal = GyroCalibration {
+                delta_m: nominal.delta_m[link.triad.index()],
+                bias_acs_rad_per_s: *nominal.bias.get(j)?,
+            };
+            let (a_end, s, t) = propagate_interval(&start.fix.m_acs_from_eci, &link.steps, &cal);
+            let z = rotvec_from_rot(&(end.fix.m_acs_from_eci * a_end.transpose())) * ARCSEC_PER_RAD;
+            let s_m: SMatrix<f64, 3, 9> = s.fixed_columns::<9>(0) * (PPM * ARCSEC_PER_RAD);
+            let s_b: Matrix3<f64> = s.fixed_columns::<3>(9).into_owned();
+            Some(LinkModel {
+                phi: a_end * start.fix.m_acs_from_eci.transpose(),
+                s_b,
+                s_m,
+                z,
+                t_s: t,
+                extra_var_arcsec2: link.extra_var_rad2 * ARCSEC_PER_RAD * ARCSEC_PER_RAD,
+                triad: link.triad,
+                s_c: SMatrix::<f64, 3, 2>::from_columns(&link.split_dirs_rad) * ARCSEC_PER_RAD,
+            })
+        })
+        .collect()
+}
+
+/// The filter's record at every fix, for the smoother.
+struct Pass {
+    x_filt: Vec<Vx>,
+    p_filt: Vec<Mx>,
+    x_pred: Vec<Vx>,
+    p_pred: Vec<Mx>,
+    f: Vec<Mx>,
+    nis: Vec<Option<f64>>,
+    gated: Vec<usize>,
+    log_likelihood: f64,
+}
+
+fn fix_cov_arcsec2(fix: &ChainFix) -> Matrix3<f64> {
+    fix.fix.cov_acs_rad2 * (ARCSEC_PER_RAD * ARCSEC_PER_RAD)
+}
+
+/// Transition and noise of one link (or of a break when `model` is `None`).
+fn transition(model: Option<&LinkModel>, dt_s: f64, cfg: &ChainConfig, rrw: f64) -> (Mx, Mx) {
+    let mut f = Mx::identity();
+    let mut q = Mx::zeros();
+    let sv = cfg.noise.sigma_v_rad_per_sqrt_s * ARCSEC_PER_RAD;
+    let su = rrw * ARCSEC_PER_RAD;
+    match model {
+        Some(m) => {
+            let t = m.t_s;
+            f.fixed_view_mut::<3, 3>(0, 0).copy_from(&m.phi);
+            f.fixed_view_mut::<3, 3>(0, 3).copy_from(&m.s_b);
+            f.fixed_view_mut::<3, 9>(0, m.triad.offset())
+                .copy_from(&m.s_m);
+            f.fixed_view_mut::<3, 2>(0, SPLIT).copy_from(&m.s_c);
+            let qtt = sv * sv * t + su * su * t * t * t / 3.0 + m.extra_var_arcsec2;
+            let qtb = -su * su * t * t / 2.0;
+            let qbb = su * su * t;
+            for i in 0..3 {
+                q[(i, i)] = qtt;
+                q[(i, 3 + i)] = qtb;
+                q[(3 + i, i)] = qtb;
+                q[(3 + i, 3 + i)] = qbb;
+            }
+        }
+        None => {
+            f.fixed_view_mut::<3, 3>(0, 0).fill(0.0);
+            let qbb = su * su * dt_s.max(0.0);
+            for i in 0..3 {
+                q[(i, i)] = RELEASED_ATTITUDE_VAR_ARCSEC2;
+                q[(3 + i, 3 + i)] = qbb;
+            }
+        }
+    }
+    (f, q)
+}
+
+fn symmetrise(p: &Mx) -> Mx {
+    (p + p.transpose()) * 0.5
+}
+
+/// One forward pass of the filter.
+fn forward(
+    chain: &Chain,
+    models: &[Option<LinkModel>],
+    nominal: &Nominal,
+    cfg: &ChainConfig,
+    rrw: f64,
+) -> Result<Pass, ChainError> {
+    let n = chain.fixes.len();
+    let mut x = Vx::zeros();
+    let mut p = Mx::zeros();
+    for i in 0..3 {
+        p[(i, i)] = RELEASED_ATTITUDE_VAR_ARCSEC2;
+        p[(3 + i, 3 + i)] = cfg.prior_bias_arcsec_per_s.powi(2);
+    }
+    // The prior is on the total: δm ~ N(−m̂, σ²), δβ₀ ~ N(β_nominal₀ − β̂₀, σ²).
+    for (k, m) in nominal.delta_m.iter().enumerate() {
+        for c in 0..9 {
+            x[6 + 9 * k + c] = -m[c] / PPM;
+            p[(6 + 9 * k + c, 6 + 9 * k + c)] = cfg.prior_dm_ppm.powi(2);
+        }
+    }
+    for i in 0..2 {
+        p[(SPLIT + i, SPLIT + i)] = SPLIT_PRIOR_SIGMA.powi(2);
+    }
+    if let (Some(f0), Some(b0)) = (chain.fixes.first(), nominal.bias.first()) {
+        let d = (f0.bias_nominal_rad_per_s - b0) * ARCSEC_PER_RAD;
+        for i in 0..3 {
+            x[3 + i] = d[i];
+        }
+    }
+    let mut pass = Pass {
+        x_filt: Vec::with_capacity(n),
+        p_filt: Vec::with_capacity(n),
+        x_pred: Vec::with_capacity(n),
+        p_pred: Vec::with_capacity(n),
+        f: Vec::with_capacity(n),
+        nis: Vec::with_capacity(n),
+        gated: Vec::new(),
+        log_likelihood: 0.0,
+    };
+    let mut released = true;
+    for j in 0..n {
+        if j > 0 {
+            let model = models.get(j - 1).copied().flatten();
+            let dt = chain.fixes[j].t_s - chain.fixes[j - 1].t_s;
+            let (f, q) = transition(model.as_ref(), dt, cfg, rrw);
+            x = f * x;
+            if let Some(m) = model {
+                for i in 0..3 {
+                    x[i] -= m.z[i];
+                }
+            } else {
+                for i in 0..3 {
+                    x[i] = 0.0;
+                }
+            }
+            let db = (nominal.bias[j - 1] - nominal.bias[j]) * ARCSEC_PER_RAD;
+            for i in 0..3 {
+                x[3 + i] += db[i];
+            }
+            p = symmetrise(&(f * p * f.transpose() + q));
+            pass.f.push(f);
+            released = model.is_none();
+        }
+        pass.x_pred.push(x);
+        pass.p_pred.push(p);
+        let r = fix_cov_arcsec2(&chain.fixes[j]);
+        let s = p.fixed_view::<3, 3>(0, 0) + r;
+        let Some(s_chol) = s.cholesky() else {
+            return Err(ChainError::Covariance {
+                fix: j,
+                t_s: chain.fixes[j].t_s,
+            });
+        };
+        let nu = -Vector3::new(x[0], x[1], x[2]);
+        let nis = nu.dot(&s_chol.solve(&nu));
+        let ln_det: f64 = 2.0 * (0..3).map(|i| s_chol.l()[(i, i)].ln()).sum::<f64>();
+        let testable = j > 0 && !released;
+        let gate = testable && nis > cfg.gate_nis;
+        if testable {
+            // Capped at the gate so that likelihoods of different σ_u stay comparable.
+            pass.log_likelihood -= 0.5 * (nis.min(cfg.gate_nis) + ln_det);
+        }
+        pass.nis.push(testable.then_some(nis));
+        if gate {
+            pass.gated.push(j);
+        } else {
+            // K = P Hᵀ S⁻¹; Joseph form.
+            let ph: SMatrix<f64, NX, 3> = p.fixed_columns::<3>(0).into_owned();
+            let k: SMatrix<f64, NX, 3> = s_chol.solve(&ph.transpose()).transpose();
+            x += k * nu;
+            let mut ikh = Mx::identity();
+            ikh.fixed_columns_mut::<3>(0).sub_assign(&k);
+            p = symmetrise(&(ikh * p * ikh.transpose() + k * r * k.transpose()));
+        }
+        pass.x_filt.push(x);
+        pass.p_filt.push(p);
+    }
+    Ok(pass)
+}
+
+use std::ops::SubAssign;
+
+/// RTS smoother: smoothed states and covariances at every fix.
+fn smooth(pass: &Pass) -> (Vec<Vx>, Vec<Mx>) {
+    let n = pass.x_filt.len();
+    let mut xs = pass.x_filt.clone();
+    let mut ps = pass.p_filt.clone();
+    for j in (0..n.saturating_sub(1)).rev() {
+        let f = &pass.f[j];
+        let pp = symmetrise(&pass.p_pred[j + 1]);
+        let cross = f * pass.p_filt[j];
+        // C = P_f Fᵀ P_p⁻¹  ⇔  P_p Cᵀ = F P_f.
+        let ct = match pp.cholesky() {
+            Some(ch) => ch.solve(&cross),
+            None => match pp.try_inverse() {
+                Some(inv) => inv * cross,
+                None => continue,
+            },
+        };
+        let c = ct.transpose();
+        xs[j] = pass.x_filt[j] + c * (xs[j + 1] - pass.x_pred[j + 1]);
+        ps[j] =
+            symmetrise(&(pass.p_filt[j] + c * (ps[j + 1] - pass.p_pred[j + 1]) * c.transpose()));
+    }
+    (xs, ps)
+}
+
+fn dm_block(x: &Vx, triad: usize) -> Matrix3<f64> {
+    Matrix3::from_fn(|r, c| x[6 + 9 * triad + 3 * c + r] * PPM)
+}
+
+/// Estimate δM (both triads) and the bias history over the whole chain.
+///
+/// # Errors
+/// [`ChainError`] when the chain is too short or the filter loses positive definiteness.
+pub fn solve_chain(chain: &Chain, cfg: &ChainConfig) -> Result<ChainSolution, ChainError> {
+    let links = chain.links.iter().filter(|l| l.is_some()).count();
+    if chain.fixes.len() < 2 || links == 0 || chain.links.len() + 1 != chain.fixes.len() {
+        return Err(ChainError::TooShort {
+            fixes: chain.fixes.len(),
+            links,
+        });
+    }
+    let mut nominal = Nominal {
+        delta_m: [Matrix3::zeros(); 2],
+        bias: chain
+            .fixes
+            .iter()
+            .map(|f| f.bias_nominal_rad_per_s)
+            .collect(),
+    };
+    let rrw_declared = cfg.noise.sigma_u_rad_per_s_1p5.max(0.0);
+    let mut rrw = rrw_declared;
+    let before = linearise(chain, &nominal);
+    let mut iterations = 0;
+    let mut models = before.clone();
+    loop {
+        if iterations == 1 && cfg.estimate_rrw {
+            rrw = choose_rrw(chain, &models, &nominal, cfg, rrw_declared)?;
+        }
+        let pass = forward(chain, &models, &nominal, cfg, rrw)?;
+        let (xs, _) = smooth(&pass);
+        let last = pass.x_filt.last().copied().unwrap_or_else(Vx::zeros);
+        let mut step: f64 = 0.0;
+        for k in 0..2 {
+            let d = dm_block(&last, k);
+            step = step.max(d.amax() / PPM);
+            nominal.delta_m[k] += d;
+        }
+        for (b, x) in nominal.bias.iter_mut().zip(&xs) {
+            let d = Vector3::new(x[3], x[4], x[5]) * RAD_PER_ARCSEC;
+            *b += d;
+        }
+        iterations += 1;
+        models = linearise(chain, &nominal);
+        if (step < 0.05 && iterations >= 2) || iterations >= cfg.max_iterations {
+            break;
+        }
+    }
+    // Final pass at the converged point: covariances, NIS, smoothed bias.
+    let pass = forward(chain, &models, &nominal, cfg, rrw)?;
+    let (xs, ps) = smooth(&pass);
+    let last_p = pass.p_filt.last().copied().unwrap_or_else(Mx::zeros);
+    let last_x = pass.x_filt.last().copied().unwrap_or_else(Vx::zeros);
+    let mut delta_m = nominal.delta_m;
+    let mut sigma_delta_m = [Matrix3::zeros(); 2];
+    let mut covariance_ppm2 = [SMatrix::<f64, 9, 9>::zeros(); 2];
+    for k in 0..2 {
+        delta_m[k] += dm_block(&last_x, k);
+        covariance_ppm2[k] = last_p.fixed_view::<9, 9>(6 + 9 * k, 6 + 9 * k).into_owned();
+        sigma_delta_m[k] = Matrix3::from_fn(|r, c| {
+            covariance_ppm2[k][(3 * c + r, 3 * c + r)].max(0.0).sqrt() * PPM
+        });
+    }
+    let bias = chain
+        .fixes
+        .iter()
+        .zip(nominal.bias.iter().zip(xs.iter().zip(&ps)))
+        .map(|(f, (b, (x, p)))| {
+            let total = b + Vector3::new(x[3], x[4], x[5]) * RAD_PER_ARCSEC;
+            ChainBias {
+                t_s: f.t_s,
+                bias_rad_per_s: total.into(),
+                sigma_rad_per_s: [0, 1, 2]
+                    .map(|i| p[(3 + i, 3 + i)].max(0.0).sqrt() * RAD_PER_ARCSEC),
+            }
+        })
+        .collect();
+    let mut rotation_deg = [0.0; 2];
+    for link in chain.links.iter().flatten() {
+        let turned: f64 = link.steps.iter().map(|s| s.dtheta_acs_rad.norm()).sum();
+        rotation_deg[link.triad.index()] += turned.to_degrees();
+    }
+    let used: Vec<f64> = pass.nis.iter().flatten().copied().collect();
+    let used_ok: Vec<f64> = used
+        .iter()
+        .copied()
+        .filter(|v| *v <= cfg.gate_nis)
+        .collect();
+    Ok(ChainSolution {
+        delta_m,
+        sigma_delta_m,
+        covariance_ppm2,
+        rotation_deg,
+        bias,
+        nis: pass.nis.clone(),
+        gated: pass.gated.clone(),
+        link_residual_before_arcsec: before.iter().map(|m| m.map(|m| m.z.norm())).collect(),
+        link_residual_after_arcsec: models.iter().map(|m| m.map(|m| m.z.norm())).collect(),
+        rrw_declared,
+        rrw_used: rrw,
+        nis_mean_per_dof: if used_ok.is_empty() {
+            f64::NAN
+        } else {
+            used_ok.iter().sum::<f64>() / (3.0 * used_ok.len() as f64)
+        },
+        nis_count: used.len(),
+        iterations,
+        split_fraction: [last_x[SPLIT], last_x[SPLIT + 1]],
+        split_fraction_sigma: [
+            last_p[(SPLIT, SPLIT)].max(0.0).sqrt(),
+            last_p[(SPLIT + 1, SPLIT + 1)].max(0.0).sqrt(),
+        ],
+    })
+}
+
+/// σ_u: the declared one unless the filter's likelihood prefers a larger one (×4 grid up to
+/// 4⁸ = 65,536×; `algorithms.md` §10a, "RRW from the metadata, or estimated and reported").
+fn choose_rrw(
+    chain: &Chain,
+    models: &[Option<LinkModel>],
+    nominal: &Nominal,
+    cfg: &ChainConfig,
+    declared: f64,
+) -> Result<f64, ChainError> {
+    // A floor so that a declared 0 still lets the grid move.
+    let base = declared.max(1e-12);
+    let mut best = (
+        declared,
+        forward(chain, models, nominal, cfg, declared)?.log_likelihood,
+    );
+    let mut q = base;
+    for _ in 0..8 {
+        q *= 4.0;
+        let ll = forward(chain, models, nominal, cfg, q)?.log_likelihood;
+        // Two log-likelihood units: a larger walk must be clearly better to be taken.
+        if ll > best.1 + 2.0 {
+            best = (q, ll);
+        } else if ll < best.1 - 50.0 {
+            break;
+        }
+    }
+    Ok(best.0)
+}
+
+/// Held-out validation of the δM a chain solution would uplink (see the module doc).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct HeldOutValidation {
+    /// The triad validated.
+    pub triad: Triad,
+    /// Folds (maneuvers held out in turn: every `folds`-th one).
+    pub folds: usize,
+    /// Held-out links (maneuvers) predicted.
+    pub links: usize,
+    /// Degrees of freedom (3 per link).
+    pub dof: usize,
+    /// Held-out χ² with the table that would be written (the uplinked elements, re-estimated
+    /// without the held-out maneuvers).
+    pub chi2_new: f64,
+    /// Held-out χ² with the flown table (δM = 0).
+    pub chi2_flown: f64,
+    /// Sampling spread of the χ² (√(2 dof)).
+    pub spread: f64,
+    /// Held-out χ² of the full gyro model (every δM element, with its covariance): whether
+    /// the model's σ describe data it was not fitted to.
+    pub chi2_model: f64,
+    /// χ²_model / dof: the held-out normalised residuals' mean square (1 = consistent).
+    pub mean_square_normalised: f64,
+    /// Probability of a χ²_model at least this large if the σ are right.
+    pub p_value: f64,
+    /// Whether the table passes.
+    pub passed: bool,
+    /// Why (numbers included).
+    pub reason: String,
+}
+
+/// Smallest p-value of the held-out χ² that still counts as consistent.
+const HELDOUT_P_MIN: f64 = 1e-3;
+
+/// Most folds of the held-out validation.
+const MAX_FOLDS: usize = 5;
+
+/// The elements of δM determined at 3σ (the ones a table would carry).
+#[must_use]
+pub fn significant_elements(dm: &Matrix3<f64>, sigma: &Matrix3<f64>) -> Matrix3<f64> {
+    Matrix3::from_fn(|i, j| {
+        if dm[(i, j)].abs() > 3.0 * sigma[(i, j)] {
+            dm[(i, j)]
+        } else {
+            0.0
+        }
+    })
+}
+
+/// χ² of one held-out link predicted with `dm` (and `cov_ppm2` of the elements it carries).
+#[allow(clippy::too_many_arguments)]
+fn heldout_chi2(
+    a: &ChainFix,
+    b: &ChainFix,
+    link: &ChainLink,
+    bias: &ChainBias,
+    dm: &Matrix3<f64>,
+    cov_ppm2: Option<&SMatrix<f64, 9, 9>>,
+    split: (Vector2<f64>, Vector2<f64>),
+    cfg: &ChainConfig,
+    rrw: f64,
+) -> f64 {
+    let cal = GyroCalibration {
+        delta_m: *dm,
+        bias_acs_rad_per_s: Vector3::from(bias.bias_rad_per_s),
+    };
+    let (a_end, s, t) = propagate_interval(&a.fix.m_acs_from_eci, &link.steps, &cal);
+    let s_c = SMatrix::<f64, 3, 2>::from_columns(&link.split_dirs_rad) * ARCSEC_PER_RAD;
+    let z = rotvec_from_rot(&(b.fix.m_acs_from_eci * a_end.transpose())) * ARCSEC_PER_RAD
+        - s_c * split.0;
+    let phi = a_end * a.fix.m_acs_from_eci.transpose();
+    let s_m: SMatrix<f64, 3, 9> = s.fixed_columns::<9>(0) * (PPM * ARCSEC_PER_RAD);
+    let s_b: Matrix3<f64> = s.fixed_columns::<3>(9).into_owned();
+    let sv = cfg.noise.sigma_v_rad_per_sqrt_s * ARCSEC_PER_RAD;
+    let su = rrw * ARCSEC_PER_RAD;
+    let bias_var = Matrix3::from_diagonal(
+        &Vector3::from(bias.sigma_rad_per_s).map(|x| (x * ARCSEC_PER_RAD).powi(2)),
+    );
+    let mut c = fix_cov_arcsec2(b)
+        + phi * fix_cov_arcsec2(a) * phi.transpose()
+        + Matrix3::identity()
+            * (sv * sv * t
+                + su * su * t * t * t / 3.0
+                + link.extra_var_rad2 * ARCSEC_PER_RAD * ARCSEC_PER_RAD)
+        + s_b * bias_var * s_b.transpose()
+        + s_c * Matrix2::from_diagonal(&split.1.map(|x| x * x)) * s_c.transpose();
+    if let Some(cov) = cov_ppm2 {
+        c += s_m * cov * s_m.transpose();
+    }
+    c.cholesky()
+        .map_or(f64::INFINITY, |ch| z.dot(&ch.solve(&z)))
+}
+
+/// K-fold held-out validation of the triad's δM (see the module doc): `mask` marks the
+/// elements the table would carry (chosen on all data); each fold's fit re-estimates them
+/// without its held-out maneuvers.
+///
+/// # Errors
+/// A fold's fit fails ([`ChainError`]).
+pub fn validate_heldout(
+    chain: &Chain,
+    cfg: &ChainConfig,
+    triad: Triad,
+    rrw: f64,
+    mask: &Matrix3<bool>,
+) -> Result<HeldOutValidation, ChainError> {
+    let maneuvers: Vec<usize> = {
+        let mut m: Vec<usize> = chain
+            .links
+            .iter()
+            .flatten()
+            .filter(|l| l.triad == triad)
+            .filter_map(|l| l.maneuver)
+            .collect();
+        m.sort_unstable();
+        m.dedup();
+        m
+    };
+    let folds = maneuvers.len().min(MAX_FOLDS);
+    let fold_of = |m: usize| {
+        maneuvers
+            .iter()
+            .position(|&x| x == m)
+            .map(|p| p % folds.max(1))
+    };
+    let (mut chi2_new, mut chi2_flown, mut chi2_model) = (0.0, 0.0, 0.0);
+    let mut links = 0usize;
+    let cfg_fold = ChainConfig {
+        noise: GyroNoise {
+            sigma_u_rad_per_s_1p5: rrw,
+            ..cfg.noise
+        },
+        estimate_rrw: false,
+        ..*cfg
+    };
+    let k = triad.index();
+    for fold in 0..folds {
+        let held: Vec<bool> = chain
+            .links
+            .iter()
+            .map(|l| {
+                l.as_ref()
+                    .is_some_and(|l| l.triad == triad && l.maneuver.and_then(fold_of) == Some(fold))
+            })
+            .collect();
+        let train = Chain {
+            fixes: chain.fixes.clone(),
+            links: chain
+                .links
+                .iter()
+                .zip(&held)
+                .map(|(l, h)| if *h { None } else { l.clone() })
+                .collect(),
+        };
+        if train.links.iter().flatten().count() == 0 {
+            continue;
+        }
+        let sol = solve_chain(&train, &cfg_fold)?;
+        let dm_all = sol.delta_m[k];
+        let cov_all = sol.covariance_ppm2[k];
+        let dm_new = Matrix3::from_fn(|i, j| if mask[(i, j)] { dm_all[(i, j)] } else { 0.0 });
+        let mut cov_new = cov_all;
+        for e in 0..9 {
+            if !mask[e] {
+                for f in 0..9 {
+                    cov_new[(e, f)] = 0.0;
+                    cov_new[(f, e)] = 0.0;
+                }
+            }
+        }
+        for (j, (link, h)) in chain.links.iter().zip(&held).enumerate() {
+            let (Some(link), true) = (link, *h) else {
+                continue;
+            };
+            let (Some(a), Some(b), Some(bias)) =
+                (chain.fixes.get(j), chain.fixes.get(j + 1), sol.bias.get(j))
+            else {
+                continue;
+            };
+            let split = (
+                Vector2::from(sol.split_fraction),
+                Vector2::from(sol.split_fraction_sigma),
+            );
+            chi2_new += heldout_chi2(a, b, link, bias, &dm_new, Some(&cov_new), split, cfg, rrw);
+            chi2_flown += heldout_chi2(a, b, link, bias, &Matrix3::zeros(), None, split, cfg, rrw);
+            chi2_model += heldout_chi2(a, b, link, bias, &dm_all, Some(&cov_all), split, cfg, rrw);
+            links += 1;
+        }
+    }
+    let dof = 3 * links;
+    let spread = (2.0 * dof as f64).sqrt();
+    let mean_square = if dof > 0 {
+        chi2_model / dof as f64
+    } else {
+        f64::NAN
+    };
+    let p_value = if dof > 0 {
+        chi2_sf(chi2_model, dof as f64)
+    } else {
+        f64::NAN
+    };
+    let (passed, reason) = if links < 2 {
+        (
+            false,
+            format!("only {links} maneuver link(s) of this triad to hold out: a table cannot be validated on held-out data (need ≥ 2 maneuvers with attitude fixes around them)"),
+        )
+    } else if !(p_value >= HELDOUT_P_MIN) {
+        (
+            false,
+            format!("the gyro model does not predict held-out maneuvers within its σ: χ²/dof = {mean_square:.2} over {dof} dof (p = {p_value:.1e} < {HELDOUT_P_MIN:.0e}; {folds}-fold, {links} maneuvers): a gyro error the model lacks"),
+        )
+    } else if !(chi2_new < chi2_flown - spread) {
+        (
+            false,
+            format!("held-out χ² with the new table {chi2_new:.1} is not lower than with the flown table {chi2_flown:.1} by more than its sampling spread {spread:.1} ({folds}-fold, {links} maneuvers, {dof} dof): the new table would not improve the gyro"),
+        )
+    } else {
+        (
+            true,
+            format!("held-out χ² {chi2_new:.1} with the new table against {chi2_flown:.1} with the flown one ({folds}-fold, {links} maneuvers, {dof} dof, spread {spread:.1}); the full model's held-out χ²/dof = {mean_square:.2}, p = {p_value:.2}"),
+        )
+    };
+    Ok(HeldOutValidation {
+        triad,
+        folds,
+        links,
+        dof,
+        chi2_new,
+        chi2_flown,
+        spread,
+        chi2_model,
+        mean_square_normalised: mean_square,
+        p_value,
+        passed,
+        reason,
+    })
+}

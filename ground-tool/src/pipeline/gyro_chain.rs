@@ -1,0 +1,523 @@
+//! # IRUCAL stage of the chain: the gyro chain from the telemetry, its solution, the table gate
+//!
+//! Why here: the estimator ([`crate::calibration::iru_chain`]) knows fixes and gyro links;
+//! this module decides which fine attitudes become fixes, which gyro data join them, why a
+//! maneuver is not used, and whether the IRU table may be written (held-out validation). It
+//! replaces the interval form (one fix before and one after each maneuver, holds as separate
+//! intervals, one constant bias), whose adjacent intervals shared end data while being
+//! weighted as independent.
+//!
+//! **Fixes.** Every hold (the frames between maneuvers) is tiled with disjoint batch windows
+//! (the paper's 10-min batches; two half-length windows in holds of 8–20 min, one in a hold of
+//! 4–8 min), each giving a FHST-only fine attitude, or FHST + FSS where the trackers do not
+//! suffice; in long holds one window per `HOLD_FIX_SPACING_S` is kept besides the first and
+//! last. Disjoint data make the fixes independent, so the chain's correlations are exact.
+//!
+//! **Links.** Consecutive fixes are joined by the gyro steps between them when every frame has
+//! a step and the triad does not change; a link may carry a maneuver whose own holds gave no
+//! fix (the gyro carries the attitude to the next fix, with its noise). A break (gap, dropped
+//! rate-switch step, configuration switch) releases the attitude but keeps the bias walk.
+
+use nalgebra::{Matrix3, Vector3};
+use serde::Serialize;
+
+use fsw_core::tables::types::{matrix_from_rows, rows_from_matrix};
+use fsw_core::tables::IruTable;
+
+use super::calibrate::{
+    batch_fix, gyro_complete, steps_between, FixFloors, IruReport, ManeuverReport, BATCH_HALF_S,
+};
+use super::observations::{FrameObservations, RateSwitch};
+use crate::calibration::iru::{GyroCalibration, IrucalSolution, PARAMETER_NAMES};
+use crate::calibration::iru_chain::{
+    significant_elements, solve_chain, validate_heldout, Chain, ChainConfig, ChainFix, ChainLink,
+    ChainSolution, HeldOutValidation, Triad,
+};
+use crate::ARCSEC_PER_RAD;
+
+/// Spacing of the fixes kept inside a long hold (s): the bias walk is slow, and fewer fixes
+/// keep six months of telemetry within seconds.
+const HOLD_FIX_SPACING_S: f64 = 1800.0;
+
+/// Fewest links with a maneuver before IRUCAL is attempted at all.
+const MIN_MANEUVER_LINKS: usize = 3;
+
+/// Largest fraction of fixes the innovation gate may reject before the gyro model is said
+/// not to fit (and no table is written).
+const MAX_GATED_FRACTION: f64 = 0.05;
+
+/// Largest mean normalised innovation (per dof) of the fixes with which the model's σ are
+/// taken as right (a smaller one means conservative fix σ, which does not endanger a table).
+const NIS_CONSISTENT: (f64, f64) = (0.0, 2.0);
+
+/// The gyro chain of a run, with where each fix and link lies in the frames.
+pub struct GyroChain {
+    /// Fixes and links.
+    pub chain: Chain,
+    /// Frame index of each fix.
+    pub fix_frames: Vec<usize>,
+}
+
+/// The frames of each hold: between maneuvers, before the first and after the last.
+fn holds(frames: &[FrameObservations], maneuvers: &[(usize, usize)]) -> Vec<(usize, usize)> {
+    let mut out = Vec::new();
+    let mut start = 0usize;
+    for &(s, e) in maneuvers {
+        if s > start {
+            out.push((start, s - 1));
+        }
+        start = e + 1;
+    }
+    if start + 1 < frames.len() {
+        out.push((start, frames.len() - 1));
+    }
+    out
+}
+
+/// Batch windows (start, end) tiling a hold of `[ta, tb]` (s).
+fn hold_windows(ta: f64, tb: f64) -> Vec<(f64, f64)> {
+    let len = tb - ta;
+    let full = 2.0 * BATCH_HALF_S;
+    if len >= 2.0 * full {
+        let mut out = Vec::new();
+        let mut lo = ta;
+        while lo + full <= tb + 1e-6 {
+            out.push((lo, lo + full));
+            lo += full;
+        }
+        out
+    } else if len >= 0.8 * full {
+        let mid = ta + 0.5 * len;
+        vec![(ta, mid), (mid, tb)]
+    } else if len >= 0.4 * full {
+        vec![(ta, tb)]
+    } else {
+        Vec::new()
+    }
+}
+
+/// Build the chain (see the module doc). `bias_at` is the linearisation bias (the OBC's).
+pub(crate) fn build_gyro_chain(
+    frames: &[FrameObservations],
+    maneuvers: &[(usize, usize)],
+    bias_at: &dyn Fn(f64) -> Vector3<f64>,
+    floors: &FixFloors,
+    t0: f64,
+) -> GyroChain {
+    let zero_dm = Matrix3::zeros();
+    let mut fix_frames: Vec<usize> = Vec::new();
+    let mut fixes: Vec<ChainFix> = Vec::new();
+    for (a, b) in holds(frames, maneuvers) {
+        let (ta, tb) = (frames[a].time.seconds(), frames[b].time.seconds());
+        let mut found: Vec<(usize, ChainFix)> = Vec::new();
+        for (lo, hi) in hold_windows(ta, tb) {
+            let center = 0.5 * (lo + hi);
+            if let Some((idx, fix)) = batch_fix(
+                frames,
+                center,
+                lo,
+                hi,
+                &bias_at(center),
+                &zero_dm,
+                floors,
+                true,
+            ) {
+                let t = frames[idx].time.seconds();
+                found.push((
+                    idx,
+                    ChainFix {
+                        t_s: t - t0,
+                        fix,
+                        bias_nominal_rad_per_s: bias_at(t),
+                    },
+                ));
+            }
+        }
+        // Keep the first and last of the hold and one per HOLD_FIX_SPACING_S between.
+        let last = found.len().saturating_sub(1);
+        let mut kept_t = f64::NEG_INFINITY;
+        for (k, (idx, fix)) in found.into_iter().enumerate() {
+            if k == 0 || k == last || fix.t_s - kept_t >= HOLD_FIX_SPACING_S {
+                kept_t = fix.t_s;
+                fix_frames.push(idx);
+                fixes.push(fix);
+            }
+        }
+    }
+    let links = fix_frames
+        .windows(2)
+        .map(|w| link_between(frames, maneuvers, w[0], w[1]))
+        .collect();
+    GyroChain {
+        chain: Chain { fixes, links },
+        fix_frames,
+    }
+}
+
+/// The gyro link between the fixes at frames `a` and `b`, or `None` where the chain breaks.
+fn link_between(
+    frames: &[FrameObservations],
+    maneuvers: &[(usize, usize)],
+    a: usize,
+    b: usize,
+) -> Option<ChainLink> {
+    if b <= a || !gyro_complete(frames, a, b) {
+        return None;
+    }
+    let backup = frames[a + 1].iru_backup;
+    if frames[a + 1..=b].iter().any(|f| f.iru_backup != backup) {
+        return None;
+    }
+    let extra_var_rad2 = frames[a + 1..=b]
+        .iter()
+        .map(|f| f.gyro_split_var_rad2)
+        .sum();
+    let maneuver = maneuvers.iter().position(|&(s, e)| s > a && e <= b);
+    let mut split_dirs_rad = [Vector3::zeros(); 2];
+    for f in frames[a + 1..=b]
+        .iter()
+        .filter(|f| f.rate_switch == RateSwitch::Split)
+    {
+        // A split frame that ends in high rate is a slew start, else a slew end.
+        split_dirs_rad[usize::from(!f.high_rate)] += f.gyro_split_dir_rad;
+    }
+    Some(ChainLink {
+        steps: steps_between(frames, a, b),
+        triad: if backup {
+            Triad::Backup
+        } else {
+            Triad::Primary
+        },
+        extra_var_rad2,
+        maneuver,
+        split_dirs_rad,
+    })
+}
+
+impl GyroChain {
+    /// Why maneuver `k` (frames `s..=e`) is not in the estimator, or `None` when a link
+    /// carries it.
+    #[must_use]
+    pub fn why_not_used(
+        &self,
+        frames: &[FrameObservations],
+        k: usize,
+        s: usize,
+        e: usize,
+    ) -> Option<String> {
+        let carried = self
+            .fix_frames
+            .windows(2)
+            .zip(&self.chain.links)
+            .any(|(w, l)| w[0] < s && w[1] >= e && l.is_some());
+        if carried {
+            return None;
+        }
+        let before = self.fix_frames.iter().any(|&f| f < s);
+        let after = self.fix_frames.iter().any(|&f| f >= e);
+        let inside = &frames[s..=e];
+        let dropped = inside
+            .iter()
+            .filter(|f| f.rate_switch == RateSwitch::Dropped)
+            .count();
+        let missing = inside.iter().filter(|f| f.gyro.is_none()).count();
+        Some(if !before || !after {
+            format!(
+                "maneuver {k}: no attitude fix {} it in the telemetry (no batch with two referenced vectors)",
+                if before { "after" } else { "before" }
+            )
+        } else if dropped > 0 {
+            format!("maneuver {k}: {dropped} frame(s) hold an IRU rate-mode switch that could not be split (no 0x0203 event inside, or no clean low-rate neighbour): the gyro chain breaks there")
+        } else if missing > 0 {
+            format!("maneuver {k}: {missing} frame(s) without a gyro step (telemetry gap or an unusable channel)")
+        } else {
+            format!("maneuver {k}: the gyro chain breaks between the fixes around it (a gap or an IRU configuration switch in the holds next to it)")
+        })
+    }
+}
+
+/// What the IRUCAL stage hands back to the chain.
+pub struct IruStage {
+    /// The IRU table to write (the flown one unless a validated δM changes `G`).
+    pub table: IruTable,
+    /// The report's IRU section.
+    pub report: Option<IruReport>,
+    /// The primary triad's solution in the interval form's type (for diagnose and the tests).
+    pub solution: Option<IrucalSolution>,
+    /// Why IRUCAL gave no answer.
+    pub skipped: Option<String>,
+    /// The chain solution (bias history).
+    pub chain_solution: Option<ChainSolution>,
+}
+
+/// The backup triad's δM in the report.
+#[derive(Clone, Debug, Serialize)]
+pub struct BackupIruReport {
+    /// δM (row-major, unitless).
+    pub delta_m: [[f64; 3]; 3],
+    /// 1σ.
+    pub delta_m_sigma: [[f64; 3]; 3],
+    /// Rotation the backup triad measured in the links (deg).
+    pub rotation_deg: f64,
+    /// Whether `G_backup` was updated.
+    pub g_updated: bool,
+    /// The δM applied to `G_backup` (0 without an update).
+    pub delta_m_uplinked: [[f64; 3]; 3],
+    /// Held-out validation, when attempted.
+    pub validation: Option<HeldOutValidation>,
+    /// Why `G_backup` was or was not updated.
+    pub decision: String,
+}
+
+fn rows(m: &Matrix3<f64>) -> [[f64; 3]; 3] {
+    rows_from_matrix(m)
+}
+
+/// Solve the chain, validate on held-out maneuvers, decide the table (see the module doc).
+pub fn irucal_stage(
+    chain: &Chain,
+    cfg: &ChainConfig,
+    flown: &IruTable,
+    maneuvers: &mut [ManeuverReport],
+) -> IruStage {
+    let mut stage = IruStage {
+        table: *flown,
+        report: None,
+        solution: None,
+        skipped: None,
+        chain_solution: None,
+    };
+    let maneuver_links = chain
+        .links
+        .iter()
+        .flatten()
+        .filter(|l| l.maneuver.is_some())
+        .count();
+    if maneuver_links < MIN_MANEUVER_LINKS {
+        stage.skipped = Some(format!(
+            "IRUCAL needs at least {MIN_MANEUVER_LINKS} maneuvers joined by gyro data to attitude fixes; found {} maneuvers, {maneuver_links} carried ({})",
+            maneuvers.len(),
+            maneuvers
+                .iter()
+                .filter_map(|m| m.why_not_used.clone())
+                .take(3)
+                .collect::<Vec<_>>()
+                .join("; ")
+        ));
+        return stage;
+    }
+    let sol = match solve_chain(chain, cfg) {
+        Ok(s) => s,
+        Err(e) => {
+            stage.skipped = Some(format!("IRUCAL failed: {e}"));
+            return stage;
+        }
+    };
+    if let Ok(path) = std::env::var("GROUND_TOOL_CHAIN_CSV") {
+        write_chain_csv(&path, chain, &sol);
+    }
+    let fit = model_fit(&sol, cfg);
+    let decide = |triad: Triad, table_g: &mut [[f64; 3]; 3]| {
+        let k = match triad {
+            Triad::Primary => 0,
+            Triad::Backup => 1,
+        };
+        let dm_up = significant_elements(&sol.delta_m[k], &sol.sigma_delta_m[k]);
+        if dm_up.iter().all(|x| *x == 0.0) {
+            return (
+                false,
+                Matrix3::zeros(),
+                None,
+                "G left at its flown value: no δM element is determined at 3σ".to_owned(),
+            );
+        }
+        if let Err(why) = &fit {
+            return (
+                false,
+                Matrix3::zeros(),
+                None,
+                format!("G left at its flown value: {why}"),
+            );
+        }
+        let mask = dm_up.map(|x| x != 0.0);
+        let validation = validate_heldout(chain, cfg, triad, sol.rrw_used, &mask);
+        match validation {
+            Ok(v) if v.passed => {
+                let g = (Matrix3::identity() + dm_up) * matrix_from_rows(table_g);
+                *table_g = rows(&g);
+                let why = format!(
+                    "G updated with the δM elements determined at 3σ; held-out validation: {}",
+                    v.reason
+                );
+                (true, dm_up, Some(v), why)
+            }
+            Ok(v) => {
+                let why = format!("G left at its flown value: {}", v.reason);
+                (false, Matrix3::zeros(), Some(v), why)
+            }
+            Err(e) => (
+                false,
+                Matrix3::zeros(),
+                None,
+                format!("G left at its flown value: the held-out fit failed ({e})"),
+            ),
+        }
+    };
+    let mut table = *flown;
+    let (g_updated, dm_up, validation, decision) = decide(Triad::Primary, &mut table.g_primary);
+    let backup = (sol.rotation_deg[1] > 1.0).then(|| {
+        let (upd, dmb, v, why) = decide(Triad::Backup, &mut table.g_backup);
+        BackupIruReport {
+            delta_m: rows(&sol.delta_m[1]),
+            delta_m_sigma: rows(&sol.sigma_delta_m[1]),
+            rotation_deg: sol.rotation_deg[1],
+            g_updated: upd,
+            delta_m_uplinked: rows(&dmb),
+            validation: v,
+            decision: why,
+        }
+    });
+    let last_bias = sol.bias.last().copied();
+    let bias = last_bias.map_or([0.0; 3], |b| b.bias_rad_per_s);
+    let bias_sigma = last_bias.map_or([0.0; 3], |b| b.sigma_rad_per_s);
+    let residual_before: Vec<f64> = sol
+        .link_residual_before_arcsec
+        .iter()
+        .flatten()
+        .copied()
+        .collect();
+    let residual_after: Vec<f64> = sol
+        .link_residual_after_arcsec
+        .iter()
+        .flatten()
+        .copied()
+        .collect();
+    stage.report = Some(IruReport {
+        delta_m: rows(&sol.delta_m[0]),
+        delta_m_sigma: rows(&sol.sigma_delta_m[0]),
+        bias_rad_per_s: bias,
+        bias_sigma_rad_per_s: bias_sigma,
+        intervals: residual_after.len(),
+        residual_before_arcsec: residual_before.clone(),
+        residual_after_arcsec: residual_after.clone(),
+        g_updated,
+        delta_m_uplinked: rows(&dm_up),
+        rejected_intervals: sol.gated.clone(),
+        interval_spans: Vec::new(),
+        estimator: "calibration Kalman filter + RTS smoother over the whole timeline (bias random walk, fixes shared by adjacent links)",
+        fixes: chain.fixes.len(),
+        links: chain.links.iter().flatten().count(),
+        maneuver_links,
+        rrw_declared_rad_per_s_1p5: sol.rrw_declared,
+        rrw_used_rad_per_s_1p5: sol.rrw_used,
+        nis_mean_per_dof: sol.nis_mean_per_dof,
+        gated_fixes: sol.gated.len(),
+        model_fit: fit.clone().err(),
+        split_fraction: sol.split_fraction,
+        split_fraction_sigma: sol.split_fraction_sigma,
+        validation,
+        decision,
+        backup,
+    });
+    let cov = &sol.covariance_ppm2[0];
+    let mut covariance_scaled = nalgebra::DMatrix::zeros(12, 12);
+    for r in 0..9 {
+        for c in 0..9 {
+            covariance_scaled[(r, c)] = cov[(r, c)];
+        }
+    }
+    for i in 0..3 {
+        covariance_scaled[(9 + i, 9 + i)] = (bias_sigma[i] * ARCSEC_PER_RAD).powi(2);
+    }
+    let _ = PARAMETER_NAMES;
+    stage.solution = Some(IrucalSolution {
+        calibration: GyroCalibration {
+            delta_m: sol.delta_m[0],
+            bias_acs_rad_per_s: Vector3::from(bias),
+        },
+        delta_m_correction: sol.delta_m[0],
+        bias_correction_acs_rad_per_s: Vector3::zeros(),
+        sigma_delta_m: sol.sigma_delta_m[0],
+        sigma_bias_acs_rad_per_s: Vector3::from(bias_sigma),
+        covariance_scaled,
+        normal_eigenvalues_scaled: Vec::new(),
+        residual_before_arcsec: residual_before,
+        residual_after_arcsec: residual_after,
+        chi2: sol.nis.iter().flatten().sum(),
+        iterations: sol.iterations,
+    });
+    stage.table = table;
+    stage.chain_solution = Some(sol);
+    stage
+}
+
+/// Whether the gyro model fits the fixes: few gated fixes and a consistent mean NIS.
+fn model_fit(sol: &ChainSolution, cfg: &ChainConfig) -> Result<(), String> {
+    let gated = sol.gated.len();
+    let tested = sol.nis_count.max(1);
+    if gated as f64 > MAX_GATED_FRACTION * tested as f64 {
+        return Err(format!(
+            "the gyro model does not fit: {gated} of {tested} attitude fixes fall outside the filter's χ²₃ gate ({:.1}); a gyro error the model lacks (a nonlinear scale, a bias change faster than the random walk) or bad fixes",
+            cfg.gate_nis
+        ));
+    }
+    let m = sol.nis_mean_per_dof;
+    if !(m <= NIS_CONSISTENT.1) {
+        return Err(format!(
+            "the fixes' normalised innovations have mean square {m:.2} per dof over {tested} fixes (consistent: ≤ {:.1}): the gyro model's σ do not describe the data",
+            NIS_CONSISTENT.1
+        ));
+    }
+    Ok(())
+}
+
+/// Developer aid: the chain's fixes and links as CSV (`GROUND_TOOL_CHAIN_CSV=path`).
+fn write_chain_csv(path: &str, chain: &Chain, sol: &ChainSolution) {
+    use std::fmt::Write as _;
+    let mut out = String::from(
+        "j,t_s,sig_x,sig_y,sig_z,nis,gated,link_T_s,maneuver,rot_deg,z_before,z_after\n",
+    );
+    for (j, f) in chain.fixes.iter().enumerate() {
+        let sd = |i: usize| f.fix.cov_acs_rad2[(i, i)].sqrt() * ARCSEC_PER_RAD;
+        let link = chain.links.get(j).and_then(Option::as_ref);
+        let _ = writeln!(
+            out,
+            "{j},{:.1},{:.1},{:.1},{:.1},{},{},{},{},{},{},{}",
+            f.t_s,
+            sd(0),
+            sd(1),
+            sd(2),
+            sol.nis
+                .get(j)
+                .copied()
+                .flatten()
+                .map_or(String::new(), |v| format!("{v:.2}")),
+            u8::from(sol.gated.contains(&j)),
+            link.map_or(String::new(), |l| format!(
+                "{:.0}",
+                l.steps.iter().map(|s| s.dt_s).sum::<f64>()
+            )),
+            link.and_then(|l| l.maneuver)
+                .map_or(String::new(), |m| m.to_string()),
+            link.map_or(String::new(), |l| format!(
+                "{:.2}",
+                l.steps
+                    .iter()
+                    .map(|s| s.dtheta_acs_rad.norm())
+                    .sum::<f64>()
+                    .to_degrees()
+            )),
+            sol.link_residual_before_arcsec
+                .get(j)
+                .copied()
+                .flatten()
+                .map_or(String::new(), |v| format!("{v:.1}")),
+            sol.link_residual_after_arcsec
+                .get(j)
+                .copied()
+                .flatten()
+                .map_or(String::new(), |v| format!("{v:.1}")),
+        );
+    }
+    let _ = std::fs::write(path, out);
+}
