@@ -533,8 +533,8 @@ def main(argv=None):
     p.add_argument("--backup-bias", default=None, metavar="BX,BY,BZ",
                    help="backup-triad bias in ACS, arcsec/s; default " + ",".join(f"{x:g}" for x in BACKUP_BIAS_DEFAULT))
     p.add_argument("--backup-halfway", action="store_true",
-                   help="the OBC selects the backup triad (X1, Y2, Z2) at the first hold cycle in low rate at or after "
-                        "half the run: event 0x0202 (p1 = 1, p2 = 0 commanded), housekeeping byte 106 = 1 from then on")
+                   help="the OBC selects the backup triad (X1, Y2, Z2) at the first cycle at or after half the run that "
+                        "is in a hold, in low rate, at least 60 s from any high-rate interval: event 0x0202 (p1 = 1, p2 = 0 commanded), housekeeping byte 106 = 1 from then on")
     p.add_argument("--ringing", action="append", default=[], metavar="SENSOR:AX,AY,AZ:PERIOD_S:DECAY_S",
                    help="(outside the library) mount ringing after every slew: θ = a e^(−t/T) sin(2π t/P), t since the slew ended")
     p.add_argument("--align-step", action="append", default=[], metavar="SENSOR:T_S:X,Y,Z",
@@ -583,6 +583,9 @@ def main(argv=None):
     args = p.parse_args(argv)
 
     rng = random.Random(args.seed)
+    # The gyro's noise has its own generator: the counters of a run with --downlink-every N
+    # are then exactly those of the 1-s run at the same cycles (the sensors draw only at frames).
+    rng_iru = random.Random(f"iru-{args.seed}")
     os.makedirs(args.out, exist_ok=True)
     t0 = parse_epoch_utc(args.epoch)
     epoch_year = 2000.0 + (t0 - J2000_TAI1958) / (86400.0 * 365.25)
@@ -875,7 +878,8 @@ def main(argv=None):
     if args.backup_halfway:
         for kk in range(int(math.ceil(0.5 * total / args.cycle_s)), n_cycles):
             tk = kk * args.cycle_s
-            if attitude(tk)[1] != 2 and not high_at(tk) and not high_at(tk + args.cycle_s):
+            if not any(high_at(tk + d) or attitude(tk + d)[1] == 2 for d in (-60.0, -30.0, 0.0, 30.0, 60.0)) \
+                    and not (hi_start and any(s - 60.0 < tk < e + 60.0 for (s, e) in hi_win)):
                 t_switch = tk
                 break
         if t_switch is None:
@@ -922,7 +926,7 @@ def main(argv=None):
                    for i in range(3)]
             for cfg, chans in ((0, (1, 2, 4)), (1, (0, 3, 5))):
                 b_now = bias_at(cfg, t_mid)
-                meas = [dth[i] + b_now[i] * args.cycle_s + rng.gauss(0.0, arw * math.sqrt(args.cycle_s))
+                meas = [dth[i] + b_now[i] * args.cycle_s + rng_iru.gauss(0.0, arw * math.sqrt(args.cycle_s))
                         for i in range(3)]
                 dn = scale(mv(g_inv_cfg[cfg], meas), 1.0 / (w_arcsec * RAD_PER_ARCSEC))
                 if cfg == 1 and args.backup_channels_dead:
