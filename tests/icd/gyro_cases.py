@@ -172,6 +172,32 @@ def row(r):
             f"{'**yes**' if r['g_updated'] else 'no'} | {', '.join(r['tables'])} | {bk} |")
 
 
+def summary(results):
+    """Per case and frame spacing, over the seeds: markdown lines."""
+    out = ["| case | frames | runs | exit codes | δM max \\|err/σ\\| (min–max over seeds) | mean z² (mean over seeds) "
+           "| elements \\|z\\| > 3 | max \\|err\\| ppm | raw mean z² | intervals rejected | G uplinked |",
+           "|---|---|---|---|---|---|---|---|---|---|---|"]
+    keys = []
+    for r in results:
+        if (r["case"], r["downlink"]) not in keys:
+            keys.append((r["case"], r["downlink"]))
+    for (c, n) in keys:
+        rs = [r for r in results if r["case"] == c and r["downlink"] == n]
+        ok = [r for r in rs if r.get("primary")]
+        ex = sorted({r.get("exit", "err") for r in rs})
+        if not ok:
+            out.append(f"| {c} | {n} s | {len(rs)} | {ex} | no IRU result | | | | | | |")
+            continue
+        mz = [r["primary"]["max_abs_z"] for r in ok]
+        z2 = [r["primary"]["mean_z2"] for r in ok]
+        raw = [r["primary_raw"]["mean_z2"] for r in ok]
+        out.append(f"| {c} | {n} s | {len(rs)} | {', '.join(map(str, ex))} | {min(mz):.1f}–{max(mz):.1f} "
+                   f"| {sum(z2) / len(z2):.2f} | {sum(r['primary']['n_over_3'] for r in ok)}/{9 * len(ok)} "
+                   f"| {max(r['primary']['max_abs_err_ppm'] for r in ok):.0f} | {sum(raw) / len(raw):.1f} "
+                   f"| {'/'.join(str(r['rejected']) for r in ok)} | {sum(bool(r['g_updated']) for r in ok)}/{len(ok)} |")
+    return "\n".join(out)
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("cases", nargs="*", help="case names (default: all)")
@@ -180,7 +206,11 @@ def main():
     ap.add_argument("--bin", default=os.path.join(ROOT, "target", "release", "ground-tool"))
     ap.add_argument("--work", default="/tmp/icd-gyro")
     ap.add_argument("--json", default=None, help="also write every result here")
+    ap.add_argument("--from-json", default=None, help="print only the summary of an earlier --json file")
     args = ap.parse_args()
+    if args.from_json:
+        print(summary(json.load(open(args.from_json))))
+        return 0
     cases = args.cases or list(CASES)
     for c in cases:
         if c not in CASES:
@@ -199,6 +229,8 @@ def main():
                 r = run_one(c, s, n, args)
                 results.append(r)
                 print(row(r), flush=True)
+    print()
+    print(summary(results))
     if args.json:
         with open(args.json, "w") as f:
             json.dump(results, f, indent=1)

@@ -10,9 +10,20 @@ it Meeus' low-precision formula, Astronomical Algorithms ch. 25, precessed to J2
 parallax and aberration, and FHST / FSS / IRU counts computed with the ICD's conventions.
 
 Optional undeclared effects (--time-tag, --orbit-align, --fhst-radial, --fss-transfer,
---gyro-asym, --gyro-ramp, and outside diagnose's library --gyro-rate2, --ringing,
---align-step) are recorded in truth_icd.json "effects" with the library's parameter names;
---plan long is the calibration day tests/icd/diagnose_cases.py flies them on.
+--gyro-asym, --gyro-ramp, --gyro-bias-transient, and outside diagnose's library
+--gyro-rate2, --gyro-rate3, --gyro-bias-step, --ringing, --align-step) are recorded in
+truth_icd.json "effects" with the library's parameter names; --plan long is the calibration
+day tests/icd/diagnose_cases.py flies them on, --days D repeats its slews for D days.
+
+The gyro: each triad (primary X2, Y1, Z1; backup X1, Y2, Z2) has a true δM and bias
+(--iru-delta-m, --iru-delta-m-backup, --backup-bias), so that Δθ_acs = (I + δM) G w ΔN with
+G the prelaunch G the ground flies; truth_icd.json "iru" holds both, the bias model and a
+bias history. --backup-halfway has the OBC select the backup triad halfway (event 0x0202,
+housekeeping byte 106). --downlink-every N writes raw frames and housekeeping every N cycles
+while the counters accumulate every cycle (refused when they could alias); the gyro noise
+has its own random generator, so such a run's counters are the 1-s run's at the same
+cycles. tests/icd/check_writer.py decodes these options back (tests/icd/read_run.py) and
+checks them; tests/icd/gyro_cases.py runs issue 16's gyro cases through the ground tool.
 
 It is deliberately written without the simulator's or the flight software's encoders: every
 byte comes from the tables of docs/icd.md (and the conventions it cites: docs/conventions.md,
@@ -547,11 +558,12 @@ def main(argv=None):
     p.add_argument("--allow-alias", action="store_true",
                    help="write even if the IRU counters alias between frames (to test the ground's handling)")
     p.add_argument("--days", type=float, default=None, metavar="D",
-                   help="D days: the long plan's block of 12 slews (high rate) and holds (low rate) repeated, cut at D days")
+                   help="D days (any --plan): the long plan's block of 12 out-and-back slews (high rate) and --hold-s holds "
+                        "(low rate) repeated, cut at D days")
     p.add_argument("--slew-rates", default=None, metavar="R1,R2,...",
                    help="slew rates in deg/s, cycled over the slews in order (default: --slew-rate-deg-s for all)")
     p.add_argument("--no-hk", action="store_true", help="no housekeeping (APID 0x011)")
-    p.add_argument("--hk-every", type=int, default=1, help="housekeeping every N cycles")
+    p.add_argument("--hk-every", type=int, default=1, help="housekeeping with every Nth raw frame")
     p.add_argument("--no-eph", action="store_true", help="no ephemeris (APID 0x020)")
     p.add_argument("--eph-period", type=float, default=60.0, help="ephemeris period, s")
     p.add_argument("--no-events", action="store_true")
