@@ -263,6 +263,12 @@ def main():
         r1, r2 = read(os.path.join(a.work, "dl30")), read(run_ne)
         check("dl30 --no-events: raw frames and housekeeping identical to dl30",
               r1["raw"] == r2["raw"] and r1["hk"] == r2["hk"] and r1["eph"] == r2["eph"])
+    run, w = write(a.work, "dl30-aligned", base + ["--downlink-every", "30", "--rate-switch-at-frames"])
+    if w.returncode == 0:
+        truth, r = check_stream(run, 30, "dl30 --rate-switch-at-frames")
+        check("--rate-switch-at-frames: no frame straddles a switch",
+              truth["downlink"]["frames_straddling_rate_switch"] == 0 and
+              all((round(e["t"] - r["raw"][0]["t"]) % 30) == 0 for e in r["events"] if e["code"] == 0x0203))
     # Rate nonlinearities, 1-s frames: excess angle per slew.
     k2, k3 = [20000.0, -15000.0, 25000.0], [100000.0, 80000.0, -120000.0]
     run, w = write(a.work, "rate23", ["--hold-s", "300", "--slew-rates", "0.04,0.16,0.1",

@@ -22,6 +22,8 @@ a rate switch mix 0.05″ and 0.8″ pulses). The cases differ only in the gyro:
                    housekeeping byte 106 = 1); the backup's own δM (150–510 ppm) and bias
                    ((−0.30, 0.44, 0.29) ″/s against the primary's (0.30, −0.20, 0.25))
   backup-halfway-dm-only   the same with the backup bias = the primary's: only δM differs
+  clean-switch-at-frames   control: clean, with every high-rate window widened to frame
+                   times (--rate-switch-at-frames), so no frame straddles a switch
 
 Per run: the exit code; IRU δM error against truth in units of the reported σ (report.json
 `iru.delta_m`, `iru.delta_m_sigma`, rows of 3×3; truth `iru.primary.delta_m` of
@@ -39,7 +41,7 @@ writer's δM directly (what tests/src/bin/calibration_mc.rs does with the simula
 truth). Then intervals used / rejected; whether a new G
 was uplinked (`iru.g_updated`) and which tables calibrate wrote (OUT/tables/*.tbl; note
 that iru.tbl is always written, with the flown G when `g_updated` is false).
-Standard library only; 14 runs per seed, ≈ 1.5–3 min per seed on 2 shared cores.
+Standard library only; 16 runs per seed, ≈ 2–3 min per seed (the writer dominates) on 2 shared cores.
 """
 
 import argparse
@@ -63,6 +65,8 @@ CASES = {
     "bias-transient": ["--gyro-bias-transient", "0.10,-0.08,0.12:7200"],
     "rate2": ["--gyro-rate2", "10000,-8000,12000"],
     "backup-halfway": ["--backup-halfway"],
+    # control: high-rate windows widened to frame times (at 1 s the same as clean)
+    "clean-switch-at-frames": ["--rate-switch-at-frames"],
     # the backup triad with the primary's bias: only its δM differs
     "backup-halfway-dm-only": ["--backup-halfway", "--backup-bias", "0.30,-0.20,0.25"],
 }
@@ -155,14 +159,16 @@ def in_ground_frame(dm, theta_arcsec):
 
 def row(r):
     if "error" in r:
-        return f"| {r['case']} | {r['downlink']} s | {r['seed']} | ERROR {r['error']} ||||||||"
+        return f"| {r['case']} | {r['downlink']} s | {r['seed']} | ERROR {r['error']} |||||||||"
     p = r.get("primary")
     if p is None:
         dm = f"no IRU result ({r.get('iru_skipped') or r.get('stderr', '')})"
-        return (f"| {r['case']} | {r['downlink']} s | {r['seed']} | {r['exit']} | {dm} | | | | | "
+        return (f"| {r['case']} | {r['downlink']} s | {r['seed']} | {r['exit']} | {dm} | | | | | | "
                 f"| {', '.join(r['tables']) or 'none'} | |")
     raw = r["primary_raw"]
-    dm = (f"{p['max_abs_z']:.1f} ({p['max_z_element']}) | {p['n_over_3']}/9 | {p['mean_z2']:.2f} | "
+    z = p["z"]
+    zs = "; ".join(" ".join(f"{z[3 * i + j]:+.1f}" for j in range(3)) for i in range(3))
+    dm = (f"{zs} | {p['max_abs_z']:.1f} ({p['max_z_element']}) | {p['n_over_3']}/9 | {p['mean_z2']:.2f} | "
           f"{p['max_abs_err_ppm']:.0f} (σ {p['sigma_ppm_range'][0]:.0f}–{p['sigma_ppm_range'][1]:.0f}) | "
           f"{raw['max_abs_z']:.1f} / {raw['mean_z2']:.1f}")
     b = r.get("backup")
@@ -218,10 +224,10 @@ def main():
     if not os.path.exists(args.bin):
         ap.error(f"{args.bin} not found: cargo build --release -p ground-tool")
     os.makedirs(args.work, exist_ok=True)
-    print("| case | frames | seed | exit | δM max \\|err/σ\\| (element) | \\|z\\|>3 | mean z² | max \\|err\\| ppm (σ range) "
+    print("| case | frames | seed | exit | δM err/σ per element (rows x; y; z) | δM max \\|err/σ\\| (element) | \\|z\\|>3 | mean z² | max \\|err\\| ppm (σ range) "
           "| raw: max \\|z\\| / mean z² | maneuvers used, intervals, rejected | G uplinked (`g_updated`) "
           "| tables written | backup δM |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     results = []
     for c in cases:
         for s in (int(x) for x in args.seeds.split()):

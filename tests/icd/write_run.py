@@ -555,6 +555,9 @@ def main(argv=None):
                         "the IRU counters accumulate every cycle, byte 13 is the mode of the last cycle's interval; "
                         "events every cycle, ephemeris at its own period. Refused when the counters could change by "
                         "more than 32767 pulses between two frames (16-bit aliasing)")
+    p.add_argument("--rate-switch-at-frames", action="store_true",
+                   help="with --downlink-every: widen every high-rate window to frame times, so that no frame "
+                        "interval straddles a rate switch (a control case)")
     p.add_argument("--allow-alias", action="store_true",
                    help="write even if the IRU counters alias between frames (to test the ground's handling)")
     p.add_argument("--days", type=float, default=None, metavar="D",
@@ -854,6 +857,9 @@ def main(argv=None):
     # of the next interval (housekeeping byte 107; event 0x0203 when that command changes).
     hi_win = [] if args.low_rate_slews else [(b - 10.0, e + 10.0) for (b, e, kind, *_r) in segments
                                              if kind == "slew"]
+    if args.rate_switch_at_frames:  # widen each window to frame times: no frame straddles a switch
+        fr = max(args.downlink_every, 1) * args.cycle_s
+        hi_win = [(math.floor(s0 / fr) * fr, math.ceil(e0 / fr) * fr) for (s0, e0) in hi_win]
     hi_start = [w[0] for w in hi_win]
 
     def high_at(tt):
