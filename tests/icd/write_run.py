@@ -406,11 +406,15 @@ def load_catalog(epoch_year):
 
 # ----------------------------------------------------------------------------- packets
 class Packets:
-    def __init__(self, seq_start=0, time_offset_s=0.0):
+    def __init__(self, seq_start=0, time_offset_s=0.0, stream_to=None):
         self.time_offset_s = time_offset_s
         self.seq = {APID_RAW: seq_start, APID_HK: seq_start, APID_EVENT: seq_start,
                     APID_EPH: seq_start}
         self.out = []  # (time, apid, bytes)
+        # Streamed straight to the file unless packets are to be reordered or duplicated
+        # (a multi-day 1-s run would otherwise hold every packet in memory).
+        self.f = open(stream_to, "wb") if stream_to else None
+        self.n = 0
 
     def add(self, apid, tai1958, user):
         tai1958 += self.time_offset_s
@@ -422,7 +426,11 @@ class Packets:
         seq = self.seq[apid] % 16384
         self.seq[apid] += 1
         hdr = struct.pack(">HHH", (1 << 11) | apid, (3 << 14) | seq, len(data) - 1)
-        self.out.append((tai1958, apid, hdr + data))
+        self.n += 1
+        if self.f is not None:
+            self.f.write(hdr + data)
+        else:
+            self.out.append((tai1958, apid, hdr + data))
 
 
 def i16(x):
@@ -596,6 +604,8 @@ def main(argv=None):
     p.add_argument("--misalign", default="default",
                    help="'default' (injected rotations below) or 'none' (true = prelaunch)")
     args = p.parse_args(argv)
+    if args.downlink_every < 1:
+        p.error("--downlink-every must be >= 1")
 
     rng = random.Random(args.seed)
     # The gyro's noise has its own generator: the counters of a run with --downlink-every N
@@ -836,7 +846,16 @@ def main(argv=None):
         invalid.setdefault(name.upper(), []).append((float(s), float(n)))
     missing = {m.upper() for m in args.missing}
 
-    pk = Packets(args.seq_start, args.time_code_offset_s)
+    tm_path = os.path.join(args.out, "telemetry.bin")
+    stream = not (args.reorder_every or args.duplicate_every)
+    pk = Packets(args.seq_start, args.time_code_offset_s, tm_path if stream else None)
+
+    def refuse(msg):
+        if pk.f is not None:
+            pk.f.close()
+            os.remove(tm_path)
+        sys.stderr.write(msg)
+        return 2
     counters = [args.iru_start % 65536] * 6
     frac = [0.0] * 6
     prev_a = None
@@ -868,8 +887,6 @@ def main(argv=None):
 
     # Downlink (raw frame + housekeeping) every N cycles; the counters must not alias.
     n_dl = args.downlink_every
-    if n_dl < 1:
-        p.error("--downlink-every must be >= 1")
     max_rate_deg_s = max([sg[3] for sg in build_timeline(args) if sg[0] == "slew"], default=0.0)
     w_slew = IRU_LOW_ARCSEC_PER_PULSE if args.low_rate_slews else IRU_HIGH_ARCSEC_PER_PULSE
     # Worst channel: the largest row of ((I + δM) G)⁻¹ times the rate, plus the bias, per frame.
@@ -880,11 +897,10 @@ def main(argv=None):
                    "ground_saturation_pulses": 30000}
     if predicted > 32767 and not args.allow_alias:
         n_ok = int(32767 / (predicted / n_dl))
-        sys.stderr.write(f"write_run.py: refused: at {max_rate_deg_s:g}°/s in "
-                         f"{'low' if args.low_rate_slews else 'high'} rate about {predicted:.0f} pulses pass "
-                         f"between two frames {n_dl} cycles apart; the 16-bit counters alias beyond 32767 "
-                         f"(ICD §3.1). Use --downlink-every <= {n_ok}, or --allow-alias.\n")
-        return 2
+        return refuse(f"write_run.py: refused: at {max_rate_deg_s:g}°/s in "
+                      f"{'low' if args.low_rate_slews else 'high'} rate about {predicted:.0f} pulses pass "
+                      f"between two frames {n_dl} cycles apart; the 16-bit counters alias beyond 32767 "
+                      f"(ICD §3.1). Use --downlink-every <= {n_ok}, or --allow-alias.\n")
     if predicted > 30000:
         sys.stderr.write(f"write_run.py: warning: up to {predicted:.0f} pulses between frames: the ground "
                          f"excludes a channel above 30000 pulses in a cycle as saturated (ICD §3.1)\n")
@@ -901,7 +917,8 @@ def main(argv=None):
                 t_switch = tk
                 break
         if t_switch is None:
-            p.error("--backup-halfway: no low-rate hold cycle in the second half of the run")
+            return refuse("write_run.py: --backup-halfway: no low-rate hold cycle ≥ 60 s from high rate "
+                          "in the second half of the run\n")
     cfg_now = 0
     prev_high = False
 
@@ -976,10 +993,9 @@ def main(argv=None):
         if worst > 32767:
             stats["aliased_frame_intervals"] += 1
             if not args.allow_alias:
-                sys.stderr.write(f"write_run.py: refused: {worst} pulses on one channel between the frames "
-                                 f"ending at {tt:g} s: the 16-bit counters alias (ICD §3.1); lower "
-                                 f"--downlink-every or give --allow-alias\n")
-                return 2
+                return refuse(f"write_run.py: refused: {worst} pulses on one channel between the frames "
+                              f"ending at {tt:g} s: the 16-bit counters alias (ICD §3.1); lower "
+                              f"--downlink-every or give --allow-alias\n")
         stats["frames_straddling_rate_switch"] += len(modes_since_frame) > 1
         since_frame = [0] * 6
         modes_since_frame = set()
@@ -1119,17 +1135,22 @@ def main(argv=None):
             for (code, p1, p2) in events:
                 pk.add(APID_EVENT, tai, struct.pack(">HII", code, p1, p2))
 
-    packets = [b for (_t, _a, b) in pk.out]
-    if args.reorder_every:
-        # Swap packet j with j + 2: with a raw frame and a housekeeping packet per cycle that
-        # is the same APID one cycle later, so time goes backwards within an APID.
-        for j in range(0, len(packets) - 2, args.reorder_every):
-            packets[j], packets[j + 2] = packets[j + 2], packets[j]
-    if args.duplicate_every:
-        packets = [x for j, x in enumerate(packets) for _ in range(2 if j % args.duplicate_every == 0 else 1)]
-    with open(os.path.join(args.out, "telemetry.bin"), "wb") as f:
-        for b in packets:
-            f.write(b)
+    if pk.f is not None:
+        pk.f.close()
+        n_packets = pk.n
+    else:
+        packets = [b for (_t, _a, b) in pk.out]
+        if args.reorder_every:
+            # Swap packet j with j + 2: with a raw frame and a housekeeping packet per cycle that
+            # is the same APID one cycle later, so time goes backwards within an APID.
+            for j in range(0, len(packets) - 2, args.reorder_every):
+                packets[j], packets[j + 2] = packets[j + 2], packets[j]
+        if args.duplicate_every:
+            packets = [x for j, x in enumerate(packets) for _ in range(2 if j % args.duplicate_every == 0 else 1)]
+        with open(tm_path, "wb") as f:
+            for b in packets:
+                f.write(b)
+        n_packets = len(packets)
 
     meta = {
         "scenario": "icd-writer",
@@ -1192,7 +1213,7 @@ def main(argv=None):
         "fss_samples": stats["fss_samples"],
         "high_rate_frames": stats["high_rate_frames"],
         "per_segment": stats["per_segment"],
-        "packets": len(packets),
+        "packets": n_packets,
         "args": vars(args),
     }
     with open(os.path.join(args.out, "truth_icd.json"), "w") as f:
