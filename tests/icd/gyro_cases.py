@@ -5,7 +5,7 @@ writer: `ground-tool calibrate` on each, IRU δM scored against the writer's tru
     cargo build --release -p ground-tool
     python3 tests/icd/gyro_cases.py [--seeds "1"] [--downlinks "1 30"] [--work /tmp/icd-gyro] [CASE ...]
 
-Every case flies the same plan (BASE: the writer's calibration day, 13 holds of 1200 s and
+Every case flies the same plan (BASE: the writer's calibration day, 5.9 h, 13 holds of 1200 s and
 12 out-and-back slews about every body axis, at 0.04, 0.08 and 0.16 °/s in turn, so that a
 rate-dependent scale error is not one constant scale; slews in high rate, holds in low
 rate; the primary triad's true δM = the paper's published δM), once with 1-s frames and
@@ -13,11 +13,11 @@ once with `--downlink-every 30` (raw frames and housekeeping every 30 s; frames 
 a rate switch mix 0.05″ and 0.8″ pulses). The cases differ only in the gyro:
 
   clean            nothing else
-  bias-ramp        bias ramp (0.010, −0.008, 0.012) ″/s per hour (±0.03 ″/s about the mean)
-  bias-step        bias step (0.04, −0.03, 0.05) ″/s at 11000 s (mid-run)
+  bias-ramp        bias ramp (0.010, −0.008, 0.012) ″/s per hour (±0.024–0.035 ″/s about the mean)
+  bias-step        bias step (0.04, −0.03, 0.05) ″/s at 11000 s (mid-run, of 21146 s)
   bias-transient   bias transient (0.10, −0.08, 0.12) ″/s e^(−t/7200 s) from the start
   rate2            scale error k ω² with k = (10000, −8000, 12000) ppm at 1 °/s
-                   (16–19 ppm at 0.04 °/s, 64–96 at 0.08, 205–307 at 0.16)
+                   (13–19 ppm at 0.04 °/s, 51–77 at 0.08, 205–307 at 0.16)
   backup-halfway   the OBC selects the backup triad (X1, Y2, Z2) halfway (event 0x0202,
                    housekeeping byte 106 = 1); the backup's own δM (150–510 ppm) and bias
                    ((−0.30, 0.44, 0.29) ″/s against the primary's (0.30, −0.20, 0.25))
