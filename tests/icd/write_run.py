@@ -10,9 +10,20 @@ it Meeus' low-precision formula, Astronomical Algorithms ch. 25, precessed to J2
 parallax and aberration, and FHST / FSS / IRU counts computed with the ICD's conventions.
 
 Optional undeclared effects (--time-tag, --orbit-align, --fhst-radial, --fss-transfer,
---gyro-asym, --gyro-ramp, and outside diagnose's library --gyro-rate2, --ringing,
---align-step) are recorded in truth_icd.json "effects" with the library's parameter names;
---plan long is the calibration day tests/icd/diagnose_cases.py flies them on.
+--gyro-asym, --gyro-ramp, --gyro-bias-transient, and outside diagnose's library
+--gyro-rate2, --gyro-rate3, --gyro-bias-step, --ringing, --align-step) are recorded in
+truth_icd.json "effects" with the library's parameter names; --plan long is the calibration
+day tests/icd/diagnose_cases.py flies them on, --days D repeats its slews for D days.
+
+The gyro: each triad (primary X2, Y1, Z1; backup X1, Y2, Z2) has a true δM and bias
+(--iru-delta-m, --iru-delta-m-backup, --backup-bias), so that Δθ_acs = (I + δM) G w ΔN with
+G the prelaunch G the ground flies; truth_icd.json "iru" holds both, the bias model and a
+bias history. --backup-halfway has the OBC select the backup triad halfway (event 0x0202,
+housekeeping byte 106). --downlink-every N writes raw frames and housekeeping every N cycles
+while the counters accumulate every cycle (refused when they could alias); the gyro noise
+has its own random generator, so such a run's counters are the 1-s run's at the same
+cycles. tests/icd/check_writer.py decodes these options back (tests/icd/read_run.py) and
+checks them; tests/icd/gyro_cases.py runs issue 16's gyro cases through the ground tool.
 
 It is deliberately written without the simulator's or the flight software's encoders: every
 byte comes from the tables of docs/icd.md (and the conventions it cites: docs/conventions.md,
@@ -31,6 +42,7 @@ import argparse
 import json
 import math
 import os
+import bisect
 import random
 import struct
 import sys
@@ -72,6 +84,17 @@ M_PRELAUNCH = {
 G_PRELAUNCH = [[1.00000, 0.00108, 0.00079],
                [-0.00100, 1.00000, -0.00156],
                [-0.00056, 0.00128, 1.00000]]
+
+# The writer's backup triad (X1, Y2, Z2): its own δM and bias (the paper's Fig. 4 / Table 3
+# backup biases are of this size: X1 −0.84e-4, Y2 1.22e-4, Z2 0.81e-4 °/s).
+DELTA_M_BACKUP_DEFAULT_PPM = [[420.0, -310.0, 180.0],
+                              [260.0, -380.0, 150.0],
+                              [-230.0, 340.0, 510.0]]
+BACKUP_BIAS_DEFAULT = [-0.30, 0.44, 0.29]  # arcsec/s, ACS
+# The paper's published primary δM (data/gro_paper.toml [iru_calibration_published]).
+DELTA_M_PAPER = [[0.000167, 0.000374, 0.000167],
+                 [-0.000511, -0.000265, -0.000048],
+                 [-0.000547, 0.000365, 0.000037]]
 
 # TAI - UTC (s) from each date on (IERS Bulletin C), enough for 1972..2035.
 LEAP = [(1972, 1, 1, 10), (1972, 7, 1, 11), (1973, 1, 1, 12), (1974, 1, 1, 13),
@@ -383,11 +406,15 @@ def load_catalog(epoch_year):
 
 # ----------------------------------------------------------------------------- packets
 class Packets:
-    def __init__(self, seq_start=0, time_offset_s=0.0):
+    def __init__(self, seq_start=0, time_offset_s=0.0, stream_to=None):
         self.time_offset_s = time_offset_s
         self.seq = {APID_RAW: seq_start, APID_HK: seq_start, APID_EVENT: seq_start,
                     APID_EPH: seq_start}
         self.out = []  # (time, apid, bytes)
+        # Streamed straight to the file unless packets are to be reordered or duplicated
+        # (a multi-day 1-s run would otherwise hold every packet in memory).
+        self.f = open(stream_to, "wb") if stream_to else None
+        self.n = 0
 
     def add(self, apid, tai1958, user):
         tai1958 += self.time_offset_s
@@ -399,7 +426,11 @@ class Packets:
         seq = self.seq[apid] % 16384
         self.seq[apid] += 1
         hdr = struct.pack(">HHH", (1 << 11) | apid, (3 << 14) | seq, len(data) - 1)
-        self.out.append((tai1958, apid, hdr + data))
+        self.n += 1
+        if self.f is not None:
+            self.f.write(hdr + data)
+        else:
+            self.out.append((tai1958, apid, hdr + data))
 
 
 def i16(x):
@@ -408,22 +439,42 @@ def i16(x):
 
 # ----------------------------------------------------------------------------- scenario
 def build_timeline(args):
-    """List of segments: ('hold', duration_s) or ('slew', axis_index, angle_deg)."""
+    """List of segments: ('hold', duration_s) or ('slew', axis_index, angle_deg, rate_deg_s).
+
+    Slew rates: --slew-rates cycled over the slews in order (default: --slew-rate-deg-s)."""
     hold = args.hold_s
     if args.no_slews:
         return [("hold", args.duration or 4 * hold)]
-    if args.plan == "long":
+    if args.plan == "long" or args.days:
         # A calibration day: out-and-back slews about every body axis in both directions,
         # twice, between holds (≈ 5.7 h, ≈ 3.6 orbits): the signatures of time tags (rate),
         # the gyro scale asymmetry (± slews), orbit-periodic and drift terms (time) all occur.
+        # --days D: that block of 12 slews repeated until D days are covered (the run is
+        # cut at D days); slews in high rate, holds in low rate, as every plan.
         segs = [("hold", hold)]
-        for _ in range(2):
-            for axis, ang in ((0, 30.0), (1, 30.0), (2, 25.0)):
-                segs += [("slew", axis, ang), ("hold", hold), ("slew", axis, -ang), ("hold", hold)]
-        return segs
-    segs = [("hold", hold), ("slew", 0, 30.0), ("hold", hold), ("slew", 1, -45.0),
-            ("hold", hold), ("slew", 2, 20.0), ("hold", hold)]
-    return segs
+        block = []
+        for axis, ang in ((0, 30.0), (1, 30.0), (2, 25.0)):
+            block += [("slew", axis, ang), ("hold", hold), ("slew", axis, -ang), ("hold", hold)]
+        if not args.days:
+            segs += block + block
+        else:
+            t = hold
+            while t < args.days * 86400.0:
+                for seg in block:
+                    segs.append(seg)
+                    t += hold if seg[0] == "hold" else abs(seg[2]) / args.slew_rate_deg_s
+    else:
+        segs = [("hold", hold), ("slew", 0, 30.0), ("hold", hold), ("slew", 1, -45.0),
+                ("hold", hold), ("slew", 2, 20.0), ("hold", hold)]
+    rates = ([float(x) for x in args.slew_rates.split(",")] if args.slew_rates
+             else [args.slew_rate_deg_s])
+    out, j = [], 0
+    for seg in segs:
+        if seg[0] == "slew":
+            seg = seg + (rates[j % len(rates)],)
+            j += 1
+        out.append(seg)
+    return out
 
 
 def slew_profile(angle_rad, rate, accel):
@@ -485,12 +536,45 @@ def main(argv=None):
                    help="gyro bias ramp per ACS axis, arcsec/s per hour (bias(t) = b0 + r t)")
     p.add_argument("--gyro-rate2", default=None, metavar="KX,KY,KZ",
                    help="(outside the library) gyro scale nonlinearity: measured = Δθ (1 + k (ω/1°/s)²), k in ppm")
+    p.add_argument("--gyro-rate3", default=None, metavar="KX,KY,KZ",
+                   help="(outside the library) gyro scale nonlinearity: measured = Δθ (1 + k |ω/1°/s|³), k in ppm")
+    p.add_argument("--gyro-bias-step", action="append", default=[], metavar="T_S:BX,BY,BZ",
+                   help="(outside the library) gyro bias step of (BX, BY, BZ) arcsec/s (ACS) at T_S s from the start, "
+                        "both triads")
+    p.add_argument("--gyro-bias-transient", default=None, metavar="AX,AY,AZ:TAU_S",
+                   help="gyro bias transient added from the start: a e^(−t/TAU_S), a in arcsec/s (ACS), both triads")
+    p.add_argument("--iru-delta-m", default=None, metavar="paper|9 ppm",
+                   help="true primary-triad δM (Δθ_acs = (I + δM) G w ΔN, G = prelaunch): 'paper' (the published "
+                        "δM of data/gro_paper.toml) or 9 numbers row-major in ppm; default 0 (true G = prelaunch)")
+    p.add_argument("--iru-delta-m-backup", default=None, metavar="9 ppm",
+                   help="true backup-triad (X1, Y2, Z2) δM, 9 numbers row-major in ppm; default " +
+                        ",".join(f"{x:g}" for row in DELTA_M_BACKUP_DEFAULT_PPM for x in row))
+    p.add_argument("--backup-bias", default=None, metavar="BX,BY,BZ",
+                   help="backup-triad bias in ACS, arcsec/s; default " + ",".join(f"{x:g}" for x in BACKUP_BIAS_DEFAULT))
+    p.add_argument("--backup-halfway", action="store_true",
+                   help="the OBC selects the backup triad (X1, Y2, Z2) at the first cycle at or after half the run that "
+                        "is in a hold, in low rate, at least 60 s from any high-rate interval: event 0x0202 (p1 = 1, p2 = 0 commanded), housekeeping byte 106 = 1 from then on")
     p.add_argument("--ringing", action="append", default=[], metavar="SENSOR:AX,AY,AZ:PERIOD_S:DECAY_S",
                    help="(outside the library) mount ringing after every slew: θ = a e^(−t/T) sin(2π t/P), t since the slew ended")
     p.add_argument("--align-step", action="append", default=[], metavar="SENSOR:T_S:X,Y,Z",
                    help="(outside the library) one-time alignment step at T_S s from the start")
+    p.add_argument("--downlink-every", type=int, default=1, metavar="N",
+                   help="raw frames (0x010) and housekeeping (0x011) only every N cycles (cycles k with k %% N == 0); "
+                        "the IRU counters accumulate every cycle, byte 13 is the mode of the last cycle's interval; "
+                        "events every cycle, ephemeris at its own period. Refused when the counters could change by "
+                        "more than 32767 pulses between two frames (16-bit aliasing)")
+    p.add_argument("--rate-switch-at-frames", action="store_true",
+                   help="with --downlink-every: widen every high-rate window to frame times, so that no frame "
+                        "interval straddles a rate switch (a control case)")
+    p.add_argument("--allow-alias", action="store_true",
+                   help="write even if the IRU counters alias between frames (to test the ground's handling)")
+    p.add_argument("--days", type=float, default=None, metavar="D",
+                   help="D days (any --plan): the long plan's block of 12 out-and-back slews (high rate) and --hold-s holds "
+                        "(low rate) repeated, cut at D days")
+    p.add_argument("--slew-rates", default=None, metavar="R1,R2,...",
+                   help="slew rates in deg/s, cycled over the slews in order (default: --slew-rate-deg-s for all)")
     p.add_argument("--no-hk", action="store_true", help="no housekeeping (APID 0x011)")
-    p.add_argument("--hk-every", type=int, default=1, help="housekeeping every N cycles")
+    p.add_argument("--hk-every", type=int, default=1, help="housekeeping with every Nth raw frame")
     p.add_argument("--no-eph", action="store_true", help="no ephemeris (APID 0x020)")
     p.add_argument("--eph-period", type=float, default=60.0, help="ephemeris period, s")
     p.add_argument("--no-events", action="store_true")
@@ -520,8 +604,13 @@ def main(argv=None):
     p.add_argument("--misalign", default="default",
                    help="'default' (injected rotations below) or 'none' (true = prelaunch)")
     args = p.parse_args(argv)
+    if args.downlink_every < 1:
+        p.error("--downlink-every must be >= 1")
 
     rng = random.Random(args.seed)
+    # The gyro's noise has its own generator: the counters of a run with --downlink-every N
+    # are then exactly those of the 1-s run at the same cycles (the sensors draw only at frames).
+    rng_iru = random.Random(f"iru-{args.seed}")
     os.makedirs(args.out, exist_ok=True)
     t0 = parse_epoch_utc(args.epoch)
     epoch_year = 2000.0 + (t0 - J2000_TAI1958) / (86400.0 * 365.25)
@@ -610,6 +699,60 @@ def main(argv=None):
         effects.append({"effect": "gyro_rate_squared_scale", "sensor": "IRU", "in_library": False,
                         "parameters_ppm_at_1deg_s": dict(zip("xyz", rate2)),
                         "unexplained_should_follow": ["slew"]})
+    rate3 = floats(args.gyro_rate3) if args.gyro_rate3 else [0.0, 0.0, 0.0]
+    if args.gyro_rate3:
+        effects.append({"effect": "gyro_rate_cubed_scale", "sensor": "IRU", "in_library": False,
+                        "parameters_ppm_at_1deg_s": dict(zip("xyz", rate3)),
+                        "unexplained_should_follow": ["slew"]})
+    bias_steps = []
+    for spec in args.gyro_bias_step:
+        ts, vec = spec.split(":")
+        bias_steps.append((float(ts), floats(vec)))
+        effects.append({"effect": "gyro_bias_step", "sensor": "IRU", "in_library": False,
+                        "t_s": float(ts), "step_acs_arcsec_per_s": floats(vec),
+                        "unexplained_should_follow": ["time_s"]})
+    transient = None
+    if args.gyro_bias_transient:
+        amp, tau = args.gyro_bias_transient.split(":")
+        transient = (floats(amp), float(tau))
+        if float(tau) <= 0:
+            p.error("--gyro-bias-transient: TAU_S must be > 0")
+        effects.append({"effect": "gyro_bias_transient", "sensor": "IRU", "in_library": True,
+                        "parameters": {"x": transient[0][0], "y": transient[0][1], "z": transient[0][2],
+                                       "tau_s": transient[1]}})
+
+    def delta_m_of(spec, default):
+        if spec is None:
+            return [row[:] for row in default]
+        if spec == "paper":
+            return [row[:] for row in DELTA_M_PAPER]
+        v = floats(spec)
+        if len(v) != 9:
+            p.error(f"{spec}: δM needs 9 numbers (row-major, ppm) or 'paper'")
+        return [[v[3 * i + j] * 1e-6 for j in range(3)] for i in range(3)]
+    delta_m = {0: delta_m_of(args.iru_delta_m, [[0.0] * 3 for _ in range(3)]),
+               1: delta_m_of(args.iru_delta_m_backup,
+                             [[x * 1e-6 for x in row] for row in DELTA_M_BACKUP_DEFAULT_PPM])}
+    # ΔN = ((I + δM) G w)⁻¹ (Δθ + b Δt + noise) per triad: the ground's (I + δM) G w ΔN is then
+    # the true turn plus the bias and noise (ICD §3.1 "IRU", the simulator's convention).
+    g_inv_cfg = {c: inv3(mm([[(i == j) + delta_m[c][i][j] for j in range(3)] for i in range(3)], G_PRELAUNCH))
+                 for c in (0, 1)}
+    backup_bias = floats(args.backup_bias) if args.backup_bias else BACKUP_BIAS_DEFAULT[:]
+    if args.quiet_iru:
+        backup_bias = [0.0, 0.0, 0.0]
+    bias_cfg = {0: bias, 1: [x * RAD_PER_ARCSEC for x in backup_bias]}
+
+    def bias_at(cfg, tt):
+        """True bias of a triad at tt (rad/s, ACS): constant + ramp + steps + transient."""
+        b = [bias_cfg[cfg][i] + ramp[i] * RAD_PER_ARCSEC * tt / 3600.0 for i in range(3)]
+        for (ts, vec) in bias_steps:
+            if tt >= ts:
+                b = [b[i] + vec[i] * RAD_PER_ARCSEC for i in range(3)]
+        if transient is not None:
+            f = math.exp(-tt / transient[1])
+            b = [b[i] + transient[0][i] * f * RAD_PER_ARCSEC for i in range(3)]
+        return b
+
     for spec in args.ringing:
         n, r = sensor_of(spec)
         amp, per, dec = r.split(":")
@@ -636,7 +779,6 @@ def main(argv=None):
 
     segments = []  # (t_begin, t_end, kind, A_begin, axis, profile)
     t = 0.0
-    rate = args.slew_rate_deg_s * RAD_PER_DEG
     for seg in build_timeline(args):
         if seg[0] == "hold":
             segments.append((t, t + seg[1], "hold", a_hold, None, None))
@@ -644,19 +786,24 @@ def main(argv=None):
         else:
             axis = [0.0, 0.0, 0.0]
             axis[seg[1]] = 1.0
+            rate = seg[3] * RAD_PER_DEG
             dur, prof = slew_profile(seg[2] * RAD_PER_DEG, rate, rate / 40.0)
             dur = math.ceil(dur / args.cycle_s) * args.cycle_s
             segments.append((t, t + dur, "slew", a_hold, axis, prof))
             a_hold = mm(rot(scale(axis, prof(dur))), a_hold)
             t += dur
     total = t if args.duration is None else min(t, args.duration)
+    if args.days:
+        total = min(total, args.days * 86400.0)
+    seg_ends = [sg[1] for sg in segments]
 
     def attitude(tt):
-        for (b, e, kind, a0, axis, prof) in segments:
-            if tt <= e + 1e-9:
-                if kind == "hold":
-                    return a0, 0, None
-                return mm(rot(scale(axis, prof(tt - b))), a0), 2, (b, e)
+        j = bisect.bisect_left(seg_ends, tt - 1e-9)  # the first segment with tt <= end + 1e-9
+        if j < len(segments):
+            b, e, kind, a0, axis, prof = segments[j]
+            if kind == "hold":
+                return a0, 0, None
+            return mm(rot(scale(axis, prof(tt - b))), a0), 2, (b, e)
         b, e, kind, a0, axis, prof = segments[-1]
         return (a0 if kind == "hold" else mm(rot(scale(axis, prof(e - b))), a0)), 1, None
 
@@ -673,9 +820,9 @@ def main(argv=None):
                           + c[6 + i] * math.cos(2 * u) + c[9 + i] * math.sin(2 * u))
         if name in ringing:
             amp, per, dec = ringing[name]
-            ends = [e for e in slew_ends if e <= tt]
-            if ends:
-                d = tt - ends[-1]
+            j = bisect.bisect_right(slew_ends, tt)
+            if j:
+                d = tt - slew_ends[j - 1]
                 f = math.exp(-d / dec) * math.sin(2 * math.pi * d / per)
                 th = add(th, scale(amp, f))
         for (ts, vec) in steps.get(name, []):
@@ -699,74 +846,165 @@ def main(argv=None):
         invalid.setdefault(name.upper(), []).append((float(s), float(n)))
     missing = {m.upper() for m in args.missing}
 
-    pk = Packets(args.seq_start, args.time_code_offset_s)
+    tm_path = os.path.join(args.out, "telemetry.bin")
+    stream = not (args.reorder_every or args.duplicate_every)
+    pk = Packets(args.seq_start, args.time_code_offset_s, tm_path if stream else None)
+
+    def refuse(msg):
+        if pk.f is not None:
+            pk.f.close()
+            os.remove(tm_path)
+        sys.stderr.write(msg)
+        return 2
     counters = [args.iru_start % 65536] * 6
     frac = [0.0] * 6
-    g_inv = inv3(G_PRELAUNCH)
     prev_a = None
     tracked = [None, None]  # (hip) per tracker
     cand = [None, None]  # (boresight eci at refresh, list of stars)
     n_cycles = int(round(total / args.cycle_s)) + 1
     next_eph = 0.0
     stats = {"frames": 0, "fhst_samples": [0, 0], "fss_samples": [0, 0], "new_stars": [0, 0],
-             "high_rate_frames": 0, "hips": [set(), set()], "per_segment": []}
-    prev_mode_high = False
+             "high_rate_frames": 0, "hips": [set(), set()], "per_segment": [],
+             "frames_straddling_rate_switch": 0, "max_pulses_between_frames": 0,
+             "aliased_frame_intervals": 0, "cycles": n_cycles}
     slew_no = 0
     was_slewing = False
     q_err = rot([4.0 * RAD_PER_ARCSEC, -3.0 * RAD_PER_ARCSEC, 5.0 * RAD_PER_ARCSEC])
+
+    # Rate mode: high from 10 s before a slew to 10 s after it; high_at(tt) is the mode of
+    # the interval that ENDS at tt (ICD §3.1 byte 13). At cycle k the OBC commands the mode
+    # of the next interval (housekeeping byte 107; event 0x0203 when that command changes).
+    hi_win = [] if args.low_rate_slews else [(b - 10.0, e + 10.0) for (b, e, kind, *_r) in segments
+                                             if kind == "slew"]
+    if args.rate_switch_at_frames:  # widen each window to frame times: no frame straddles a switch
+        fr = max(args.downlink_every, 1) * args.cycle_s
+        hi_win = [(math.floor(s0 / fr) * fr, math.ceil(e0 / fr) * fr) for (s0, e0) in hi_win]
+    hi_start = [w[0] for w in hi_win]
+
+    def high_at(tt):
+        j = bisect.bisect_left(hi_start, tt) - 1  # the last window with start < tt
+        return j >= 0 and tt <= hi_win[j][1]
+
+    # Downlink (raw frame + housekeeping) every N cycles; the counters must not alias.
+    n_dl = args.downlink_every
+    max_rate_deg_s = max([sg[3] for sg in build_timeline(args) if sg[0] == "slew"], default=0.0)
+    w_slew = IRU_LOW_ARCSEC_PER_PULSE if args.low_rate_slews else IRU_HIGH_ARCSEC_PER_PULSE
+    # Worst channel: the largest row of ((I + δM) G)⁻¹ times the rate, plus the bias, per frame.
+    gmax = max(sum(abs(x) for x in row) for c in (0, 1) for row in g_inv_cfg[c])
+    bmax = max(abs(x) for c in (0, 1) for x in bias_at(c, 0.0)) / RAD_PER_ARCSEC
+    predicted = (gmax * max_rate_deg_s * 3600.0 / w_slew + bmax / IRU_LOW_ARCSEC_PER_PULSE) * n_dl * args.cycle_s
+    alias_check = {"predicted_max_pulses_between_frames": predicted, "limit": 32767,
+                   "ground_saturation_pulses": 30000}
+    if predicted > 32767 and not args.allow_alias:
+        n_ok = int(32767 / (predicted / n_dl))
+        return refuse(f"write_run.py: refused: at {max_rate_deg_s:g}°/s in "
+                      f"{'low' if args.low_rate_slews else 'high'} rate about {predicted:.0f} pulses pass "
+                      f"between two frames {n_dl} cycles apart; the 16-bit counters alias beyond 32767 "
+                      f"(ICD §3.1). Use --downlink-every <= {n_ok}, or --allow-alias.\n")
+    if predicted > 30000:
+        sys.stderr.write(f"write_run.py: warning: up to {predicted:.0f} pulses between frames: the ground "
+                         f"excludes a channel above 30000 pulses in a cycle as saturated (ICD §3.1)\n")
+    since_frame = [0] * 6  # whole pulses since the last downlinked frame (unwrapped)
+    modes_since_frame = set()
+
+    # Backup triad: selected at the first low-rate hold cycle at or after half the run.
+    t_switch = None
+    if args.backup_halfway:
+        for kk in range(int(math.ceil(0.5 * total / args.cycle_s)), n_cycles):
+            tk = kk * args.cycle_s
+            if not any(high_at(tk + d) or attitude(tk + d)[1] == 2 for d in (-60.0, -30.0, 0.0, 30.0, 60.0)) \
+                    and not (hi_start and any(s - 60.0 < tk < e + 60.0 for (s, e) in hi_win)):
+                t_switch = tk
+                break
+        if t_switch is None:
+            return refuse("write_run.py: --backup-halfway: no low-rate hold cycle ≥ 60 s from high rate "
+                          "in the second half of the run\n")
+    cfg_now = 0
+    prev_high = False
 
     for k in range(n_cycles):
         tt = k * args.cycle_s
         tai = t0 + tt
         a, ctrl, slew_span = attitude(tt)
         pos, vel = orbit.state(tt)
-        sun_geo = sun_geocentric(tai)
-        v_earth = earth_velocity(tai)
-        v_obs = add(v_earth, vel)
-        earth_helio_au = scale(sun_geo, -1.0 / AU_KM)
-        observer_au = add(earth_helio_au, scale(pos, 1.0 / AU_KM))
-        sun_dir = aberrate(unit(sub(sun_geo, pos)), v_obs)
-        # Rate mode: high from 10 s before a slew to 10 s after it (the interval ending at tt).
-        high = False
-        for (b, e, kind, _a0, _ax, _p) in segments:
-            if kind == "slew" and b - 10.0 < tt <= e + 10.0 and not args.low_rate_slews:
-                high = True
+        high = high_at(tt)
+        high_next = high_at(tt + args.cycle_s)
+        downlink = k % n_dl == 0
         events = []
+        if t_switch is not None and cfg_now == 0 and tt >= t_switch - 1e-9:
+            cfg_now = 1
+            events.append((0x0202, 1, 0))
         if ctrl == 2 and not was_slewing:
             slew_no += 1
             events.append((0x0601, slew_no, 0))
         if ctrl != 2 and was_slewing:
             events.append((0x0602, slew_no, 0))
         was_slewing = ctrl == 2
-        if high != prev_mode_high:
-            events.append((0x0203, 1 if high else 0, 0))
+        if high_next != (high if k > 0 else False):
+            events.append((0x0203, 1 if high_next else 0, 0))
         # ---------------- IRU: Δθ with A_k = Rot(Δθ) A_{k−1}, plus bias and ARW, into pulses.
         w_arcsec = IRU_HIGH_ARCSEC_PER_PULSE if high else IRU_LOW_ARCSEC_PER_PULSE
         if prev_a is not None:
+            modes_since_frame.add(high)
             r = mm(a, mt(prev_a))  # Rot(Δθ) = A_k A_{k−1}ᵀ; small angle: Δθ from the skew part
             dth = [0.5 * (r[1][2] - r[2][1]), 0.5 * (r[2][0] - r[0][2]), 0.5 * (r[0][1] - r[1][0])]
             sn = norm(dth)
             if sn > 1e-12:
                 dth = scale(dth, math.asin(min(sn, 1.0)) / sn)
             t_mid = tt - 0.5 * args.cycle_s
-            # Scale asymmetry (over-reads by a|Δθ| both ways) and the rate² nonlinearity per
-            # ACS axis, then the bias (with its ramp) and the angle random walk.
+            # Scale asymmetry (over-reads by a|Δθ| both ways) and the rate² and |rate|³
+            # nonlinearities per ACS axis, then the bias (ramp, steps, transient) and the
+            # angle random walk; every triad through its own (I + δM) G.
             dth = [dth[i] + asym[i] * 1e-6 * abs(dth[i])
                    + rate2[i] * 1e-6 * dth[i] * (dth[i] / args.cycle_s / RAD_PER_DEG) ** 2
+                   + rate3[i] * 1e-6 * dth[i] * abs(dth[i] / args.cycle_s / RAD_PER_DEG) ** 3
                    for i in range(3)]
-            b_now = [bias[i] + ramp[i] * RAD_PER_ARCSEC * t_mid / 3600.0 for i in range(3)]
             for cfg, chans in ((0, (1, 2, 4)), (1, (0, 3, 5))):
-                meas = [dth[i] + b_now[i] * args.cycle_s + rng.gauss(0.0, arw * math.sqrt(args.cycle_s))
+                b_now = bias_at(cfg, t_mid)
+                meas = [dth[i] + b_now[i] * args.cycle_s + rng_iru.gauss(0.0, arw * math.sqrt(args.cycle_s))
                         for i in range(3)]
-                dn = scale(mv(g_inv, meas), 1.0 / (w_arcsec * RAD_PER_ARCSEC))
+                dn = scale(mv(g_inv_cfg[cfg], meas), 1.0 / (w_arcsec * RAD_PER_ARCSEC))
                 if cfg == 1 and args.backup_channels_dead:
                     continue
                 for ax, ch in enumerate(chans):
+                    if high != prev_high:  # the angle not yet pulsed, in the new pulse weight
+                        frac[ch] *= (IRU_HIGH_ARCSEC_PER_PULSE if prev_high else IRU_LOW_ARCSEC_PER_PULSE) / w_arcsec
                     frac[ch] += dn[ax]
                     whole = math.floor(frac[ch])
                     frac[ch] -= whole
                     counters[ch] = (counters[ch] + int(whole)) % 65536
+                    since_frame[ch] += int(whole)
         prev_a = a
+        prev_high = high
+        if not downlink:
+            # No raw frame, no housekeeping: only the ephemeris when due, then the events.
+            if in_span(gaps, tt):
+                continue
+            if not args.no_eph and (tt + 1e-9 >= next_eph or k == n_cycles - 1):
+                pk.add(APID_EPH, tai, struct.pack(">6d", *pos, *vel))
+                while next_eph <= tt + 1e-9:
+                    next_eph += args.eph_period
+            if not args.no_events:
+                for (code, p1, p2) in events:
+                    pk.add(APID_EVENT, tai, struct.pack(">HII", code, p1, p2))
+            continue
+        worst = max(abs(x) for x in since_frame)
+        stats["max_pulses_between_frames"] = max(stats["max_pulses_between_frames"], worst)
+        if worst > 32767:
+            stats["aliased_frame_intervals"] += 1
+            if not args.allow_alias:
+                return refuse(f"write_run.py: refused: {worst} pulses on one channel between the frames "
+                              f"ending at {tt:g} s: the 16-bit counters alias (ICD §3.1); lower "
+                              f"--downlink-every or give --allow-alias\n")
+        stats["frames_straddling_rate_switch"] += len(modes_since_frame) > 1
+        since_frame = [0] * 6
+        modes_since_frame = set()
+        sun_geo = sun_geocentric(tai)
+        v_earth = earth_velocity(tai)
+        v_obs = add(v_earth, vel)
+        earth_helio_au = scale(sun_geo, -1.0 / AU_KM)
+        observer_au = add(earth_helio_au, scale(pos, 1.0 / AU_KM))
+        sun_dir = aberrate(unit(sub(sun_geo, pos)), v_obs)
         # ---------------- FHSTs
         fhst_bytes = b""
         for i, name in enumerate(("FHST1", "FHST2")):
@@ -850,7 +1088,7 @@ def main(argv=None):
             if in_span(invalid.get(name, []), tt) and flags:
                 flags = 0  # "Sun present" bits clear: the FSS's only validity flags
             fss_bytes += struct.pack(">hhB", al, be, flags)
-        seg_i = next((j for j, sg in enumerate(segments) if tt <= sg[1] + 1e-9), len(segments) - 1)
+        seg_i = min(bisect.bisect_left(seg_ends, tt - 1e-9), len(segments) - 1)
         while len(stats["per_segment"]) <= seg_i:
             sg = segments[len(stats["per_segment"])]
             stats["per_segment"].append({"kind": sg[2], "begin_s": sg[0], "end_s": sg[1],
@@ -871,19 +1109,20 @@ def main(argv=None):
         assert len(raw) == 48
         stats["frames"] += 1
         stats["high_rate_frames"] += high
-        prev_mode_high = high
         if in_span(gaps, tt):
             continue
         pk.add(APID_RAW, tai, raw)
         if not args.no_eph and (tt + 1e-9 >= next_eph or k == n_cycles - 1):
             pk.add(APID_EPH, tai, struct.pack(">6d", *pos, *vel))
-            next_eph += args.eph_period
-        if not args.no_hk and k % max(args.hk_every, 1) == 0:
+            while next_eph <= tt + 1e-9:
+                next_eph += args.eph_period
+        if not args.no_hk and (k // n_dl) % max(args.hk_every, 1) == 0:
             q = quat_from_dcm(mm(q_err, a))
             hk = struct.pack(">4d", *q)
-            hk += struct.pack(">3d", *bias)
+            # The OBC's bias estimate: the active triad's true bias now (an ideal filter).
+            hk += struct.pack(">3d", *bias_at(cfg_now, tt))
             hk += struct.pack(">6d", 1e-10, 1e-10, 1e-10, 1e-16, 1e-16, 1e-16)
-            hk += struct.pack(">BBBB", 2, ctrl, 0, 1 if high else 0)
+            hk += struct.pack(">BBBB", 2, ctrl, cfg_now, 1 if high_next else 0)
             hk += struct.pack(">3f", 0.0, 0.0, 0.0)
             hk += struct.pack(">BffI", 0, 0.0, 0.0, 0) * 4
             hk += struct.pack(">B", 0)
@@ -896,17 +1135,22 @@ def main(argv=None):
             for (code, p1, p2) in events:
                 pk.add(APID_EVENT, tai, struct.pack(">HII", code, p1, p2))
 
-    packets = [b for (_t, _a, b) in pk.out]
-    if args.reorder_every:
-        # Swap packet j with j + 2: with a raw frame and a housekeeping packet per cycle that
-        # is the same APID one cycle later, so time goes backwards within an APID.
-        for j in range(0, len(packets) - 2, args.reorder_every):
-            packets[j], packets[j + 2] = packets[j + 2], packets[j]
-    if args.duplicate_every:
-        packets = [x for j, x in enumerate(packets) for _ in range(2 if j % args.duplicate_every == 0 else 1)]
-    with open(os.path.join(args.out, "telemetry.bin"), "wb") as f:
-        for b in packets:
-            f.write(b)
+    if pk.f is not None:
+        pk.f.close()
+        n_packets = pk.n
+    else:
+        packets = [b for (_t, _a, b) in pk.out]
+        if args.reorder_every:
+            # Swap packet j with j + 2: with a raw frame and a housekeeping packet per cycle that
+            # is the same APID one cycle later, so time goes backwards within an APID.
+            for j in range(0, len(packets) - 2, args.reorder_every):
+                packets[j], packets[j + 2] = packets[j + 2], packets[j]
+        if args.duplicate_every:
+            packets = [x for j, x in enumerate(packets) for _ in range(2 if j % args.duplicate_every == 0 else 1)]
+        with open(tm_path, "wb") as f:
+            for b in packets:
+                f.write(b)
+        n_packets = len(packets)
 
     meta = {
         "scenario": "icd-writer",
@@ -934,6 +1178,33 @@ def main(argv=None):
         "effects": effects,
         "injected_rotation_acs_arcsec": inject,
         "bias_acs_rad_per_s": bias,
+        "iru": {
+            "primary": {"channels": ["X2", "Y1", "Z1"], "g": G_PRELAUNCH, "delta_m": delta_m[0],
+                        "bias_acs_rad_per_s": bias_cfg[0]},
+            "backup": {"channels": ["X1", "Y2", "Z2"], "g": G_PRELAUNCH, "delta_m": delta_m[1],
+                       "bias_acs_rad_per_s": bias_cfg[1]},
+            "convention": "Δθ_acs = (I + delta_m) g w ΔN (channels X, Y, Z of the triad); the ground's δM "
+                          "against the flown (prelaunch) G is delta_m; bias(t) = bias + ramp t + steps + "
+                          "transient, in ACS, added before (I + delta_m) g is inverted",
+            "bias_ramp_arcsec_per_s_per_h": ramp,
+            "bias_steps": [{"t_s": ts, "step_acs_arcsec_per_s": v} for (ts, v) in bias_steps],
+            "bias_transient": (None if transient is None else
+                               {"amplitude_acs_arcsec_per_s": transient[0], "tau_s": transient[1]}),
+            "scale_asymmetry_ppm": asym,
+            "rate2_ppm_at_1deg_s": rate2,
+            "rate3_ppm_at_1deg_s": rate3,
+            "backup_selected_at_s": t_switch,
+            "bias_history": [{"t_s": tb, "primary_acs_arcsec_per_s": [x / RAD_PER_ARCSEC for x in bias_at(0, tb)],
+                              "backup_acs_arcsec_per_s": [x / RAD_PER_ARCSEC for x in bias_at(1, tb)]}
+                             for tb in [i * min(600.0, max(total, 1.0) / 20) for i in
+                                        range(int(total / min(600.0, max(total, 1.0) / 20)) + 1)]],
+        },
+        "downlink": {"every_n_cycles": n_dl, "cycle_s": args.cycle_s,
+                     "frames_straddling_rate_switch": stats["frames_straddling_rate_switch"],
+                     "max_pulses_between_frames": stats["max_pulses_between_frames"],
+                     "aliased_frame_intervals": stats["aliased_frame_intervals"],
+                     **alias_check},
+        "cycles": n_cycles,
         "fhst_sigma_arcsec_injected": fhst_sigma,
         "duration_s": total,
         "frames": stats["frames"],
@@ -942,7 +1213,7 @@ def main(argv=None):
         "fss_samples": stats["fss_samples"],
         "high_rate_frames": stats["high_rate_frames"],
         "per_segment": stats["per_segment"],
-        "packets": len(packets),
+        "packets": n_packets,
         "args": vars(args),
     }
     with open(os.path.join(args.out, "truth_icd.json"), "w") as f:
