@@ -114,10 +114,11 @@ def mode_timeline(events, t0):
 
 
 def mode_of_interval_ending(tl, t):
-    """Mode of the cycle interval ending at t: the last command issued at a cycle < t."""
+    """Mode of the cycle interval ending at t: the last command issued at a cycle c whose
+    next sample (c + 1 s, ICD §3.3 event 0x0203) is before t."""
     m = 0
     for (c, v) in tl:
-        if c < t - 1e-6:
+        if c + 1.0 < t - 1e-6:
             m = v
     return m
 
@@ -145,11 +146,11 @@ def check_stream(run, n, label, with_events=True, ref=None):
     tl = mode_timeline(r["events"], t0)
     bad13 = [x["t"] - t0 for x in raw[1:] if x["rate_mode"] != mode_of_interval_ending(tl, x["t"] - t0)]
     check(f"{label}: byte 13 = mode of the last cycle's interval (from 0x0203)", not bad13, f"bad at {bad13[:3]}")
-    bad107 = [h["t"] - t0 for h in hk if h["rate_cmd"] != mode_of_interval_ending(tl, h["t"] - t0 + 1.0)]
+    bad107 = [h["t"] - t0 for h in hk if h["rate_cmd"] != mode_of_interval_ending(tl, h["t"] - t0 + 2.0)]
     check(f"{label}: housekeeping byte 107 = mode commanded for the next interval", not bad107, f"bad at {bad107[:3]}")
-    # Straddling frames: a command change at a cycle c with t_prev < c < t.
+    # Straddling frames: a switch (one cycle after the command at c) with t_prev < c + 1 < t.
     strad = [b["t"] - t0 for a, b in zip(raw, raw[1:])
-             if any(a["t"] - t0 + 1e-6 < c < b["t"] - t0 - 1e-6 for (c, _v) in tl)]
+             if any(a["t"] - t0 + 1e-6 < c + 1.0 < b["t"] - t0 - 1e-6 for (c, _v) in tl)]
     check(f"{label}: frames straddling a rate switch = truth_icd.json's count",
           len(strad) == truth["downlink"]["frames_straddling_rate_switch"],
           f"{len(strad)} vs {truth['downlink']['frames_straddling_rate_switch']}")
@@ -268,7 +269,7 @@ def main():
         truth, r = check_stream(run, 30, "dl30 --rate-switch-at-frames")
         check("--rate-switch-at-frames: no frame straddles a switch",
               truth["downlink"]["frames_straddling_rate_switch"] == 0 and
-              all((round(e["t"] - r["raw"][0]["t"]) % 30) == 0 for e in r["events"] if e["code"] == 0x0203))
+              all((round(e["t"] - r["raw"][0]["t"] + 1.0) % 30) == 0 for e in r["events"] if e["code"] == 0x0203))
     # Rate nonlinearities, 1-s frames: excess angle per slew.
     k2, k3 = [20000.0, -15000.0, 25000.0], [100000.0, 80000.0, -120000.0]
     run, w = write(a.work, "rate23", ["--hold-s", "300", "--slew-rates", "0.04,0.16,0.1",

@@ -872,8 +872,9 @@ def main(argv=None):
     q_err = rot([4.0 * RAD_PER_ARCSEC, -3.0 * RAD_PER_ARCSEC, 5.0 * RAD_PER_ARCSEC])
 
     # Rate mode: high from 10 s before a slew to 10 s after it; high_at(tt) is the mode of
-    # the interval that ENDS at tt (ICD §3.1 byte 13). At cycle k the OBC commands the mode
-    # of the next interval (housekeeping byte 107; event 0x0203 when that command changes).
+    # the interval that ENDS at tt (ICD §3.1 byte 13). A command given at cycle tt applies
+    # from the next sample on (ICD §3.3, event 0x0203): the interval that ends at tt + 2
+    # cycles; housekeeping byte 107 carries it, event 0x0203 marks its change.
     hi_win = [] if args.low_rate_slews else [(b - 10.0, e + 10.0) for (b, e, kind, *_r) in segments
                                              if kind == "slew"]
     if args.rate_switch_at_frames:  # widen each window to frame times: no frame straddles a switch
@@ -928,7 +929,8 @@ def main(argv=None):
         a, ctrl, slew_span = attitude(tt)
         pos, vel = orbit.state(tt)
         high = high_at(tt)
-        high_next = high_at(tt + args.cycle_s)
+        high_next = high_at(tt + 2.0 * args.cycle_s)
+        high_cmd_prev = high_at(tt + args.cycle_s) if k > 0 else False
         downlink = k % n_dl == 0
         events = []
         if t_switch is not None and cfg_now == 0 and tt >= t_switch - 1e-9:
@@ -940,7 +942,7 @@ def main(argv=None):
         if ctrl != 2 and was_slewing:
             events.append((0x0602, slew_no, 0))
         was_slewing = ctrl == 2
-        if high_next != (high if k > 0 else False):
+        if high_next != high_cmd_prev:
             events.append((0x0203, 1 if high_next else 0, 0))
         # ---------------- IRU: Δθ with A_k = Rot(Δθ) A_{k−1}, plus bias and ARW, into pulses.
         w_arcsec = IRU_HIGH_ARCSEC_PER_PULSE if high else IRU_LOW_ARCSEC_PER_PULSE
