@@ -1,6 +1,6 @@
 //! Developer check of IRUCAL against a simulation's truth: flies a scenario, runs the
-//! calibration chain on its telemetry, and prints for every interval the error of its end
-//! attitudes against the true attitude (with the σ IRUCAL gives them), the relative alignment
+//! calibration chain on its telemetry, and prints for every attitude fix of the gyro chain its
+//! error against the true attitude (with the random and systematic σ IRUCAL gives it), the relative alignment
 //! errors, the stars far from the truth, and the OBC's bias error.
 //!
 //! ```text
@@ -80,18 +80,18 @@ fn main() -> anyhow::Result<()> {
             Matrix3::from_row_slice(&r.delta_m.concat()) * 1e6
         );
     }
-    println!("kind      start_s    end_s  rej  err_start(″ acs)          σ_start           err_end(″ acs)            σ_end");
-    for (span, iv) in &out.iru_intervals {
-        let err = |fix: &ground_tool::calibration::iru::AttitudeFix, t: f64| {
-            rotvec_from_rot(&(a_true(t) * fix.m_acs_from_eci.transpose())) * ARCSEC_PER_RAD
-        };
-        let (e0, e1) = (err(&iv.start, span.start_s), err(&iv.end, span.end_s));
-        let [s0, s1] = span.end_sigma_arcsec;
+    println!("fix   t_s      err(″ acs)                 σ random (″)          σ systematic (″)");
+    for (k, f) in out.gyro_chain.fixes.iter().enumerate() {
+        let e =
+            rotvec_from_rot(&(a_true(f.t_s) * f.fix.m_acs_from_eci.transpose())) * ARCSEC_PER_RAD;
+        let sd = |m: &Matrix3<f64>| [0, 1, 2].map(|i| m[(i, i)].max(0.0).sqrt() * ARCSEC_PER_RAD);
+        let (r, sy) = (
+            sd(&(f.fix.cov_acs_rad2 - f.systematic_cov_rad2)),
+            sd(&f.systematic_cov_rad2),
+        );
         println!(
-            "{:8} {:8.0} {:8.0} {:>4} [{:7.1},{:7.1},{:7.1}] [{:5.1},{:5.1},{:5.1}] [{:7.1},{:7.1},{:7.1}] [{:5.1},{:5.1},{:5.1}]",
-            span.kind, span.start_s, span.end_s, span.rejected,
-            e0.x, e0.y, e0.z, s0[0], s0[1], s0[2],
-            e1.x, e1.y, e1.z, s1[0], s1[1], s1[2],
+            "{k:4} {:8.0} [{:7.1},{:7.1},{:7.1}] [{:5.1},{:5.1},{:5.1}] [{:5.1},{:5.1},{:5.1}]",
+            f.t_s, e.x, e.y, e.z, r[0], r[1], r[2], sy[0], sy[1], sy[2],
         );
     }
     // Per-star residual against the truth (flown = calibrated alignments, so tens of arcsec

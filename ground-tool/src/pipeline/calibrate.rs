@@ -38,7 +38,7 @@ use crate::calibration::fhst_relative::{
     estimate_relative_alignment, fuse_with_prior, FhstRelativeAlignment,
 };
 use crate::calibration::iru::{AttitudeFix, GyroNoise, GyroStep, IrucalSolution};
-use crate::calibration::iru_chain::{ChainConfig, HeldOutValidation};
+use crate::calibration::iru_chain::{Chain, ChainConfig, HeldOutValidation};
 use crate::tp::{self, Telemetry, TpReport};
 use anyhow::{bail, Context};
 use fsw_core::attitude::{rot, rotvec_from_rot, Quat};
@@ -246,6 +246,10 @@ pub struct IruReport {
     pub rrw_declared_rad_per_s_1p5: f64,
     /// Rate random walk used (larger when the data's likelihood needed it).
     pub rrw_used_rad_per_s_1p5: f64,
+    /// Scale of the attitude fixes' random covariance chosen by the likelihood (1 = as stated).
+    pub fix_cov_scale: f64,
+    /// Scale of the fixes' systematic (per-attitude) covariance chosen by the likelihood.
+    pub fix_systematic_scale: f64,
     /// Mean normalised innovation of the fixes per dof (1 = σ right).
     pub nis_mean_per_dof: f64,
     /// Fixes outside the innovation gate (not used).
@@ -469,6 +473,8 @@ pub struct CalibrationOutput {
     pub ffcal: FfcalSolution,
     /// IRUCAL solution.
     pub irucal: Option<IrucalSolution>,
+    /// The gyro chain IRUCAL used (attitude fixes and gyro links).
+    pub gyro_chain: Chain,
 }
 
 fn rows(m: &Matrix3<f64>) -> [[f64; 3]; 3] {
@@ -759,7 +765,8 @@ fn frame_index_at(frames: &[FrameObservations], t_s: f64) -> usize {
 }
 
 /// A fine attitude centred at `t_center_s` from frames within ±`BATCH_HALF_S` restricted to
-/// `[lo_s, hi_s]`: FHST-only when the trackers give it, else FHST + FSS.
+/// `[lo_s, hi_s]`: FHST-only when the trackers give it, else FHST + FSS; with the part of its
+/// covariance that is systematic (the floors: the same for fixes of one kind in one attitude).
 ///
 /// The covariance adds what the formal one ignores: `FixFloors::fhst_cov_rad2` for a FHST-only fix
 /// (the FHST1–FHST2 relative alignment uncertainty: a fix may follow either tracker's frame),
@@ -776,7 +783,7 @@ pub(crate) fn batch_fix(
     delta_m: &Matrix3<f64>,
     floors: &FixFloors,
     allow_fss: bool,
-) -> Option<(usize, AttitudeFix)> {
+) -> Option<(usize, AttitudeFix, Matrix3<f64>)> {
     let lo = frame_index_at(frames, (t_center_s - BATCH_HALF_S).max(lo_s));
     let hi = frame_index_at(frames, (t_center_s + BATCH_HALF_S).min(hi_s)) + 1;
     let center = frame_index_at(frames, t_center_s);
@@ -811,9 +818,9 @@ pub(crate) fn batch_fix(
         ),
     };
     // Floor for systematic errors the formal covariance ignores (residual alignment error).
-    let cov = sol.cov_acs_rad2
-        + floor
-        + Matrix3::identity() * (FIX_SIGMA_FLOOR_ARCSEC / ARCSEC_PER_RAD).powi(2);
+    let systematic =
+        floor + Matrix3::identity() * (FIX_SIGMA_FLOOR_ARCSEC / ARCSEC_PER_RAD).powi(2);
+    let cov = sol.cov_acs_rad2 + systematic;
     // A fix is an interval end only if every axis is known to FSS quality or better (the
     // paper's FSS-based ends were 0.022°); a batch with one star and the Sun nearly parallel
     // gives a formally valid but useless attitude.
@@ -829,6 +836,7 @@ pub(crate) fn batch_fix(
             m_acs_from_eci: sol.m_acs_from_eci,
             cov_acs_rad2: cov,
         },
+        systematic,
     ))
 }
 
@@ -1251,9 +1259,20 @@ pub fn calibrate_telemetry(
     };
     // A FHST-only fix may follow either tracker's frame: a quarter of the FHST1–FHST2
     // relative alignment covariance (FFCAL, arcsec²) is added to it.
+    // A fix that needed the Sun carries the FSS's own error and its calibrated alignment's
+    // uncertainty (FFCAL, relative to FHST1): the larger FSS's largest axis σ.
+    let fss_alignment_sigma = ["FSS1", "FSS2"]
+        .iter()
+        .filter_map(|n| ffcal_summary.relative_covariance_to_fhst1_arcsec2.get(*n))
+        .flat_map(|c| [c[0][0], c[1][1], c[2][2]])
+        .fold(0.0_f64, f64::max)
+        .sqrt();
     let fhst_floor = FixFloors {
         fhst_cov_rad2: solution.relative_covariance_arcsec2(1, 0) * (0.25 / ARCSEC_PER_RAD.powi(2)),
-        fss_arcsec: metadata.sensors.fss_systematic_arcsec,
+        fss_arcsec: metadata
+            .sensors
+            .fss_systematic_arcsec
+            .hypot(fss_alignment_sigma),
     };
     summary.rate_switch_frames_split = frames_cal
         .iter()
@@ -1346,6 +1365,7 @@ pub fn calibrate_telemetry(
         frames: frames_cal,
         ffcal: solution,
         irucal: irucal_solution,
+        gyro_chain: gyro_chain.chain,
     })
 }
 

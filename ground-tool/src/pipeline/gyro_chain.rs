@@ -112,7 +112,7 @@ pub(crate) fn build_gyro_chain(
         let mut found: Vec<(usize, ChainFix)> = Vec::new();
         for (lo, hi) in hold_windows(ta, tb) {
             let center = 0.5 * (lo + hi);
-            if let Some((idx, fix)) = batch_fix(
+            if let Some((idx, fix, systematic)) = batch_fix(
                 frames,
                 center,
                 lo,
@@ -128,6 +128,7 @@ pub(crate) fn build_gyro_chain(
                     ChainFix {
                         t_s: t - t0,
                         fix,
+                        systematic_cov_rad2: systematic,
                         bias_nominal_rad_per_s: bias_at(t),
                     },
                 ));
@@ -340,7 +341,12 @@ pub fn irucal_stage(
             );
         }
         let mask = dm_up.map(|x| x != 0.0);
-        let validation = validate_heldout(chain, cfg, triad, sol.rrw_used, &mask);
+        let cfg_solved = ChainConfig {
+            fix_cov_scale: sol.fix_cov_scale,
+            fix_systematic_scale: sol.fix_systematic_scale,
+            ..*cfg
+        };
+        let validation = validate_heldout(chain, &cfg_solved, triad, sol.rrw_used, &mask);
         match validation {
             Ok(v) if v.passed => {
                 let g = (Matrix3::identity() + dm_up) * matrix_from_rows(table_g);
@@ -410,6 +416,8 @@ pub fn irucal_stage(
         maneuver_links,
         rrw_declared_rad_per_s_1p5: sol.rrw_declared,
         rrw_used_rad_per_s_1p5: sol.rrw_used,
+        fix_cov_scale: sol.fix_cov_scale,
+        fix_systematic_scale: sol.fix_systematic_scale,
         nis_mean_per_dof: sol.nis_mean_per_dof,
         gated_fixes: sol.gated.len(),
         model_fit: fit.clone().err(),

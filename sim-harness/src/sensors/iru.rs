@@ -93,6 +93,11 @@ pub struct IruParams {
     pub bias_transient_time_constant_s: f64,
     /// Time since release at the scenario epoch (s): where on the transient the run starts.
     pub time_since_release_at_start_s: f64,
+    /// A step in the bias per channel (deg/s) from `bias_step_at_s` on (a gyro event outside
+    /// the random walk, for testing the ground's bias model; 0 = none).
+    pub bias_step_deg_per_s: [f64; IRU_CHANNELS],
+    /// Time of the bias step (s from the scenario start); `None` = no step.
+    pub bias_step_at_s: Option<f64>,
     /// Bias random walk σ_u (arcsec/s^1.5).
     pub bias_random_walk_arcsec_per_s15: f64,
     /// Angle random walk σ_v (arcsec/√s).
@@ -122,6 +127,8 @@ impl Default for IruParams {
             bias_transient_deg_per_s: [0.0, 3.0e-5, 0.0, 0.0, -2.0e-5, 0.0],
             bias_transient_time_constant_s: 1.5 * 86_400.0,
             time_since_release_at_start_s: 0.0,
+            bias_step_deg_per_s: [0.0; IRU_CHANNELS],
+            bias_step_at_s: None,
             bias_random_walk_arcsec_per_s15: 0.0012 / (6.0_f64 * 3600.0).sqrt(),
             angle_random_walk_arcsec_per_sqrt_s: 0.003,
             low_rate_arcsec_per_pulse: 0.05,
@@ -296,6 +303,11 @@ impl Iru {
             + p.bias_transient_deg_per_s[ch] * RAD_PER_DEG * (-t_rel.max(0.0) / tau).exp()
             + self.bias_rw_rad_per_s[ch]
             + p.effects.thermal_bias_deg_per_s_per_c[ch] * RAD_PER_DEG * dev_c
+            + if p.bias_step_at_s.is_some_and(|at| t_s >= at) {
+                p.bias_step_deg_per_s[ch] * RAD_PER_DEG
+            } else {
+                0.0
+            }
     }
 
     /// Sample at the end of an interval of `dt_s` ending at `t_s`, during which the body
