@@ -42,7 +42,7 @@
 use nalgebra::{Matrix2, Matrix3, SMatrix, SVector, Vector2, Vector3};
 use serde::Serialize;
 
-use fsw_core::attitude::rotvec_from_rot;
+use fsw_core::attitude::{rot, rotvec_from_rot};
 
 use super::iru::{propagate_interval, AttitudeFix, GyroCalibration, GyroNoise, GyroStep, PPM};
 use crate::diagnose::stats::chi2_sf;
@@ -50,7 +50,21 @@ use crate::{ARCSEC_PER_RAD, RAD_PER_ARCSEC};
 
 /// State size: θ, δβ, δm primary, δm backup, split fractions (slew start, slew end), the
 /// fixes' systematic error in the current attitude.
-const NX: usize = 29;
+const NX: usize = 32;
+
+/// Index of the lack-of-fit extension: a diagonal scale error proportional to the body rate
+/// (ppm at 1°/s per axis), inert (zero prior) in the fitted model and freed only for the test
+/// of [`rate_scale_test`].
+const EXT: usize = 29;
+
+/// Rate at which the extension's coefficients are stated (rad/s: 1°/s).
+const EXT_RATE_REF_RAD_PER_S: f64 = std::f64::consts::PI / 180.0;
+
+/// Prior σ of the extension's coefficients when freed (ppm at 1°/s).
+const EXT_PRIOR_PPM: f64 = 1e5;
+
+/// p-value below which the extension counts as needed (the gyro model does not fit).
+const EXT_P_MAX: f64 = 1e-4;
 
 /// Index of the fixes' systematic error (″): shared by the fixes of one hold, drawn anew after
 /// a maneuver or a break (alignment residuals and FSS transfer function differ per attitude).
@@ -150,6 +164,8 @@ pub struct ChainConfig {
     pub fix_cov_scale: f64,
     /// Scale of the systematic part of every fix covariance.
     pub fix_systematic_scale: f64,
+    /// Free the lack-of-fit extension (a rate-proportional scale) in the filter.
+    pub extension: bool,
 }
 
 impl Default for ChainConfig {
@@ -164,6 +180,7 @@ impl Default for ChainConfig {
             estimate_rrw: true,
             fix_cov_scale: 1.0,
             fix_systematic_scale: 1.0,
+            extension: false,
         }
     }
 }
@@ -236,6 +253,8 @@ pub struct ChainSolution {
     pub nis_count: usize,
     /// Gauss–Newton passes.
     pub iterations: usize,
+    /// The lack-of-fit test of a scale error that changes with rate.
+    pub rate_scale: RateScaleTest,
     /// Split fractions of the rate-mode switches inside decimated frames (into high rate,
     /// into low rate; 0 = the middle of their envelope) and their 1σ (0.5 = the prior: no
     /// split in the data).
@@ -259,6 +278,26 @@ struct LinkModel {
     triad: Triad,
     /// ″ per unit split fraction.
     s_c: SMatrix<f64, 3, 2>,
+    /// ″ per ppm (at 1°/s) of the rate-proportional scale extension.
+    s_ext: Matrix3<f64>,
+}
+
+/// Sensitivity of the end attitude to a diagonal scale error proportional to the rate (rad
+/// per unit coefficient at `EXT_RATE_REF_RAD_PER_S`): §7's recursion with the increments
+/// weighted by `|ω| / ω_ref`.
+fn rate_scale_sensitivity(steps: &[GyroStep], cal: &GyroCalibration) -> Matrix3<f64> {
+    let mut s = Matrix3::zeros();
+    for step in steps {
+        let phi = cal.corrected(step);
+        let rate = if step.dt_s > 0.0 {
+            step.dtheta_acs_rad.norm() / step.dt_s
+        } else {
+            0.0
+        };
+        let b = Matrix3::from_diagonal(&step.dtheta_acs_rad) * (rate / EXT_RATE_REF_RAD_PER_S);
+        s = rot(&phi) * s + rot(&(phi * 0.5)) * b;
+    }
+    s
 }
 
 /// The linearisation point.
@@ -294,6 +333,7 @@ fn linearise(chain: &Chain, nominal: &Nominal) -> Vec<Option<LinkModel>> {
                 extra_var_arcsec2: link.extra_var_rad2 * ARCSEC_PER_RAD * ARCSEC_PER_RAD,
                 triad: link.triad,
                 s_c: SMatrix::<f64, 3, 2>::from_columns(&link.split_dirs_rad) * ARCSEC_PER_RAD,
+                s_ext: rate_scale_sensitivity(&link.steps, &cal) * (PPM * ARCSEC_PER_RAD),
             })
         })
         .collect()
@@ -348,6 +388,7 @@ fn transition(model: Option<&LinkModel>, dt_s: f64, cfg: &ChainConfig, rrw: f64)
             f.fixed_view_mut::<3, 9>(0, m.triad.offset())
                 .copy_from(&m.s_m);
             f.fixed_view_mut::<3, 2>(0, SPLIT).copy_from(&m.s_c);
+            f.fixed_view_mut::<3, 3>(0, EXT).copy_from(&m.s_ext);
             let qtt = sv * sv * t + su * su * t * t * t / 3.0 + m.extra_var_arcsec2;
             let qtb = -su * su * t * t / 2.0;
             let qbb = su * su * t;
@@ -402,6 +443,11 @@ fn forward(
     }
     for i in 0..2 {
         p[(SPLIT + i, SPLIT + i)] = SPLIT_PRIOR_SIGMA.powi(2);
+    }
+    if cfg.extension {
+        for i in 0..3 {
+            p[(EXT + i, EXT + i)] = EXT_PRIOR_PPM.powi(2);
+        }
     }
     if let Some(f0) = chain.fixes.first() {
         p.fixed_view_mut::<3, 3>(SYS, SYS)
@@ -481,7 +527,11 @@ fn forward(
         let nis = nu.dot(&s_chol.solve(&nu));
         let ln_det: f64 = 2.0 * (0..3).map(|i| s_chol.l()[(i, i)].ln()).sum::<f64>();
         let testable = j > 0 && !released;
-        let gate = testable && nis > cfg.gate_nis;
+        // An isolated outlier is left out; a second fix in a row beyond the gate is a change
+        // the model must follow (a bias step), so it is used (gating both would lock the
+        // filter out of the data for good).
+        let gate =
+            testable && nis > cfg.gate_nis && pass.gated.last() != Some(&(j.wrapping_sub(1)));
         if testable {
             // Capped at the gate so that likelihoods of different noise models stay comparable.
             pass.log_likelihood -= 0.5 * (nis.min(cfg.gate_nis) + ln_det);
@@ -583,6 +633,7 @@ pub fn solve_chain(chain: &Chain, cfg: &ChainConfig) -> Result<ChainSolution, Ch
     }
     // Final pass at the converged point: covariances, NIS, smoothed bias.
     let pass = forward(chain, &models, &nominal, cfg, rrw)?;
+    let rate_scale = rate_scale_test(chain, &models, &nominal, cfg, rrw, pass.log_likelihood)?;
     let (xs, ps) = smooth(&pass);
     let last_p = pass.p_filt.last().copied().unwrap_or_else(Mx::zeros);
     let last_x = pass.x_filt.last().copied().unwrap_or_else(Vx::zeros);
@@ -642,11 +693,58 @@ pub fn solve_chain(chain: &Chain, cfg: &ChainConfig) -> Result<ChainSolution, Ch
         },
         nis_count: used.len(),
         iterations,
+        rate_scale,
         split_fraction: [last_x[SPLIT], last_x[SPLIT + 1]],
         split_fraction_sigma: [
             last_p[(SPLIT, SPLIT)].max(0.0).sqrt(),
             last_p[(SPLIT + 1, SPLIT + 1)].max(0.0).sqrt(),
         ],
+    })
+}
+
+/// The lack-of-fit test of the gyro model against rate: a diagonal scale error proportional
+/// to the body rate (any power of rate above the first shows in it), freed in the filter and
+/// tested with the Wald statistic of its coefficients (`algorithms.md` §7a).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct RateScaleTest {
+    /// Coefficient per axis (ppm at 1°/s) with the extension freed.
+    pub k_ppm_at_1deg_per_s: [f64; 3],
+    /// Its 1σ.
+    pub sigma_ppm: [f64; 3],
+    /// Wald statistic `kᵀ P_k⁻¹ k` (χ²₃ under the model without it).
+    pub delta_chi2: f64,
+    /// Its p-value.
+    pub p_value: f64,
+    /// Whether the model needs it (p < `EXT_P_MAX`): the gyro model does not fit.
+    pub significant: bool,
+}
+
+fn rate_scale_test(
+    chain: &Chain,
+    models: &[Option<LinkModel>],
+    nominal: &Nominal,
+    cfg: &ChainConfig,
+    rrw: f64,
+    ll_model: f64,
+) -> Result<RateScaleTest, ChainError> {
+    let c = ChainConfig {
+        extension: true,
+        ..*cfg
+    };
+    let pass = forward(chain, models, nominal, &c, rrw)?;
+    let x = pass.x_filt.last().copied().unwrap_or_else(Vx::zeros);
+    let p = pass.p_filt.last().copied().unwrap_or_else(Mx::zeros);
+    let k = Vector3::new(x[EXT], x[EXT + 1], x[EXT + 2]);
+    let pk: Matrix3<f64> = p.fixed_view::<3, 3>(EXT, EXT).into_owned();
+    let _ = ll_model;
+    let delta_chi2 = pk.cholesky().map_or(0.0, |ch| k.dot(&ch.solve(&k)));
+    let p_value = chi2_sf(delta_chi2, 3.0);
+    Ok(RateScaleTest {
+        k_ppm_at_1deg_per_s: [x[EXT], x[EXT + 1], x[EXT + 2]],
+        sigma_ppm: [0, 1, 2].map(|i| p[(EXT + i, EXT + i)].max(0.0).sqrt()),
+        delta_chi2,
+        p_value,
+        significant: p_value < EXT_P_MAX,
     })
 }
 

@@ -38,7 +38,7 @@ use crate::calibration::fhst_relative::{
     estimate_relative_alignment, fuse_with_prior, FhstRelativeAlignment,
 };
 use crate::calibration::iru::{AttitudeFix, GyroNoise, GyroStep, IrucalSolution};
-use crate::calibration::iru_chain::{Chain, ChainConfig, HeldOutValidation};
+use crate::calibration::iru_chain::{Chain, ChainConfig, HeldOutValidation, RateScaleTest};
 use crate::tp::{self, Telemetry, TpReport};
 use anyhow::{bail, Context};
 use fsw_core::attitude::{rot, rotvec_from_rot, Quat};
@@ -256,6 +256,8 @@ pub struct IruReport {
     pub gated_fixes: usize,
     /// Why the gyro model does not fit, when it does not.
     pub model_fit: Option<String>,
+    /// The lack-of-fit test of a scale error that changes with rate.
+    pub rate_scale: RateScaleTest,
     /// Where in their envelope the rate-mode switches inside decimated frames fell, as
     /// estimated (slew start, slew end; 0 = middle, ±0.5 = edges), with 1σ (0.5: no data).
     pub split_fraction: [f64; 2],

@@ -421,6 +421,7 @@ pub fn irucal_stage(
         nis_mean_per_dof: sol.nis_mean_per_dof,
         gated_fixes: sol.gated.len(),
         model_fit: fit.clone().err(),
+        rate_scale: sol.rate_scale,
         split_fraction: sol.split_fraction,
         split_fraction_sigma: sol.split_fraction_sigma,
         validation,
@@ -461,6 +462,14 @@ pub fn irucal_stage(
 
 /// Whether the gyro model fits the fixes: few gated fixes and a consistent mean NIS.
 fn model_fit(sol: &ChainSolution, cfg: &ChainConfig) -> Result<(), String> {
+    let r = &sol.rate_scale;
+    if r.significant {
+        return Err(format!(
+            "the gyro model does not fit: a scale error that changes with rate, k = [{:.0}, {:.0}, {:.0}] ± [{:.0}, {:.0}, {:.0}] ppm at 1°/s (Wald χ² {:.1} on 3 dof, p = {:.1e}); δM from this fit would be wrong at other rates",
+            r.k_ppm_at_1deg_per_s[0], r.k_ppm_at_1deg_per_s[1], r.k_ppm_at_1deg_per_s[2],
+            r.sigma_ppm[0], r.sigma_ppm[1], r.sigma_ppm[2], r.delta_chi2, r.p_value
+        ));
+    }
     let gated = sol.gated.len();
     let tested = sol.nis_count.max(1);
     if gated as f64 > MAX_GATED_FRACTION * tested as f64 {
