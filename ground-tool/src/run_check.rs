@@ -196,7 +196,11 @@ fn utc_naive_1958_s(text: &str) -> Option<f64> {
 pub fn check(tm: &Telemetry, metadata: Option<&serde_json::Value>) -> Vec<Finding> {
     let mut out = Vec::new();
     let r = &tm.report;
-    if !r.is_clean() || !r.duplicate_conflicts.is_empty() {
+    if !r.skipped.is_empty()
+        || !r.duplicates.is_empty()
+        || !r.time_reversals.is_empty()
+        || !r.duplicate_conflicts.is_empty()
+    {
         let first = r
             .skipped
             .first()
