@@ -305,7 +305,15 @@ fn run_calibrate(
     let meta = ground_tool::pipeline::flown::metadata_json(run_dir);
     let (flown_alignment, flown_iru, flown_filter) =
         ground_tool::pipeline::flown::flown_tables(run_dir, &meta, tables)?;
-    let dir = OutputDir::begin(out_target, "ground-tool calibrate", force)?;
+    let dir = OutputDir::begin(
+        out_target,
+        "ground-tool calibrate",
+        force,
+        &[Some(run_dir), tables]
+            .into_iter()
+            .flatten()
+            .collect::<Vec<_>>(),
+    )?;
     let out = dir.path();
     ground_tool::run_check::check_run_dir(run_dir, out)?;
     let options = CalibrateOptions {
@@ -351,7 +359,15 @@ fn run_diagnose(
         tables: tables.map(std::path::Path::to_path_buf),
         ..DiagnoseOptions::default()
     };
-    let dir = OutputDir::begin(out_target, "ground-tool diagnose", force)?;
+    let dir = OutputDir::begin(
+        out_target,
+        "ground-tool diagnose",
+        force,
+        &[Some(run_dir), tables]
+            .into_iter()
+            .flatten()
+            .collect::<Vec<_>>(),
+    )?;
     let out = dir.path();
     ground_tool::run_check::check_run_dir(run_dir, out)?;
     let result = diagnose_run(run_dir, out, &options)?;

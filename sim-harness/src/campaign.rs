@@ -212,20 +212,22 @@ pub fn monte_carlo(
             }
             let seed = s.seed;
             let folder = opts.out_dir.join(format!("run_{i:05}"));
-            let out = crate::outdir::OutputDir::begin(&folder, "sim-harness run", opts.force)
-                .and_then(|dir| {
-                    let summary = run(
-                        s,
-                        &RunOptions {
-                            out_dir: Some(dir.path().to_path_buf()),
-                            tables_dir: opts.tables_dir.clone(),
-                            progress: false,
-                        },
-                    )?;
-                    dir.commit()?;
-                    Ok(summary)
-                })
-                .with_context(|| format!("run {i} (seed {seed})"));
+            let inputs: Vec<&Path> = opts.tables_dir.as_deref().into_iter().collect();
+            let out =
+                crate::outdir::OutputDir::begin(&folder, "sim-harness run", opts.force, &inputs)
+                    .and_then(|dir| {
+                        let summary = run(
+                            s,
+                            &RunOptions {
+                                out_dir: Some(dir.path().to_path_buf()),
+                                tables_dir: opts.tables_dir.clone(),
+                                progress: false,
+                            },
+                        )?;
+                        dir.commit()?;
+                        Ok(summary)
+                    })
+                    .with_context(|| format!("run {i} (seed {seed})"));
             on_done();
             out
         })

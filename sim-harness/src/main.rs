@@ -222,7 +222,13 @@ fn main_inner(cli: Cli) -> anyhow::Result<()> {
         } => {
             let s = load_scenario(&scenario, duration, seed)?;
             let name = s.name.clone();
-            let dir = OutputDir::begin(&out, "sim-harness run", force)?;
+            // The scenario file and the tables folder are inputs: --out must not contain them.
+            let scenario_path = std::path::Path::new(&scenario);
+            let inputs: Vec<&std::path::Path> = [Some(scenario_path), tables.as_deref()]
+                .into_iter()
+                .flatten()
+                .collect();
+            let dir = OutputDir::begin(&out, "sim-harness run", force, &inputs)?;
             let summary = run::run(
                 s,
                 &RunOptions {

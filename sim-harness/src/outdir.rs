@@ -121,12 +121,35 @@ fn take_lock(lock: &Path, target: &Path) -> anyhow::Result<()> {
 
 impl OutputDir {
     /// Start writing `target` as `tool` (e.g. `"ground-tool calibrate"`); `force` allows
-    /// replacing a non-empty folder that another tool (or a person) wrote.
+    /// replacing a non-empty folder that another tool (or a person) wrote; `inputs` are the
+    /// folders or files the command reads, which `target` must not contain.
     ///
     /// # Errors
     /// [`Busy`] when another writer holds the lock; [`InputError`] when `target` is a file,
-    /// or a non-empty folder not written by `tool` and `force` is off; I/O errors.
-    pub fn begin(target: &Path, tool: &str, force: bool) -> anyhow::Result<Self> {
+    /// contains the current folder or an input, or is a non-empty folder not written by `tool`
+    /// and `force` is off; I/O errors.
+    pub fn begin(target: &Path, tool: &str, force: bool, inputs: &[&Path]) -> anyhow::Result<Self> {
+        if let Ok(t) = target.canonicalize() {
+            let cwd = std::env::current_dir()
+                .ok()
+                .and_then(|c| c.canonicalize().ok());
+            let mut protected: Vec<(String, PathBuf)> = cwd
+                .map(|c| ("the current folder".to_owned(), c))
+                .into_iter()
+                .collect();
+            for i in inputs {
+                if let Ok(c) = i.canonicalize() {
+                    protected.push((format!("the input {}", i.display()), c));
+                }
+            }
+            if let Some((what, _)) = protected.iter().find(|(_, p)| p.starts_with(&t)) {
+                return Err(InputError::msg(format!(
+                    "--out {} contains {what}: replacing it would delete it; choose another output folder",
+                    target.display()
+                ))
+                .into());
+            }
+        }
         let lock = sibling(target, ".lock")?;
         let staging = sibling(target, &format!(".tmp-{}", std::process::id()))?;
         if let Some(parent) = lock.parent() {
@@ -255,21 +278,21 @@ mod tests {
     fn replaces_its_own_output_whole_and_refuses_foreign_folders() {
         let root = scratch("own");
         let out = root.join("o");
-        let w = OutputDir::begin(&out, "t", false).unwrap();
+        let w = OutputDir::begin(&out, "t", false, &[]).unwrap();
         std::fs::write(w.path().join("old.tbl"), b"x").unwrap();
         w.commit().unwrap();
         assert_eq!(written_by(&out).as_deref(), Some("t"));
         // Second run of the same tool: nothing of the first one is left.
-        let w = OutputDir::begin(&out, "t", false).unwrap();
+        let w = OutputDir::begin(&out, "t", false, &[]).unwrap();
         std::fs::write(w.path().join("new.tbl"), b"y").unwrap();
         w.commit().unwrap();
         assert!(!out.join("old.tbl").exists() && out.join("new.tbl").exists());
         // Another tool: refused without --force, and nothing touched.
-        let e = OutputDir::begin(&out, "u", false).unwrap_err();
+        let e = OutputDir::begin(&out, "u", false, &[]).unwrap_err();
         assert!(crate::is_input_error(&e), "{e:#}");
         assert!(out.join("new.tbl").exists());
         // A failed run (dropped without commit) leaves the old folder as it was.
-        let w = OutputDir::begin(&out, "t", false).unwrap();
+        let w = OutputDir::begin(&out, "t", false, &[]).unwrap();
         std::fs::write(w.path().join("half.tbl"), b"z").unwrap();
         drop(w);
         assert!(out.join("new.tbl").exists() && !out.join("half.tbl").exists());
@@ -277,11 +300,16 @@ mod tests {
         let foreign = root.join("f");
         std::fs::create_dir_all(&foreign).unwrap();
         std::fs::write(foreign.join("mine.txt"), b"keep").unwrap();
-        assert!(OutputDir::begin(&foreign, "t", false).is_err());
+        assert!(OutputDir::begin(&foreign, "t", false, &[]).is_err());
         assert!(foreign.join("mine.txt").exists());
-        let w = OutputDir::begin(&foreign, "t", true).unwrap();
+        let w = OutputDir::begin(&foreign, "t", true, &[]).unwrap();
         w.commit().unwrap();
         assert!(!foreign.join("mine.txt").exists());
+        // --force never replaces a folder holding an input.
+        let run = foreign.join("run");
+        std::fs::create_dir_all(&run).unwrap();
+        let e = OutputDir::begin(&foreign, "x", true, &[&run]).unwrap_err();
+        assert!(crate::is_input_error(&e) && run.exists(), "{e:#}");
         let _ = std::fs::remove_dir_all(&root);
     }
 
@@ -289,13 +317,13 @@ mod tests {
     fn a_second_writer_fails_cleanly() {
         let root = scratch("busy");
         let out = root.join("o");
-        let first = OutputDir::begin(&out, "t", false).unwrap();
-        let second = OutputDir::begin(&out, "t", false).unwrap_err();
+        let first = OutputDir::begin(&out, "t", false, &[]).unwrap();
+        let second = OutputDir::begin(&out, "t", false, &[]).unwrap_err();
         assert!(second.downcast_ref::<Busy>().is_some(), "{second:#}");
         assert!(!crate::is_input_error(&second));
         first.commit().unwrap();
         // The lock is gone with the first writer.
-        assert!(OutputDir::begin(&out, "t", false).is_ok());
+        assert!(OutputDir::begin(&out, "t", false, &[]).is_ok());
         let _ = std::fs::remove_dir_all(&root);
     }
 }

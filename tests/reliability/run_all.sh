@@ -13,7 +13,12 @@ set -uo pipefail
 root="$(cd "$(dirname "$0")/../.." && pwd)"
 bin="${CARGO_TARGET_DIR:-$root/target}/release"
 work="${1:-$(mktemp -d /tmp/gro-reliability.XXXXXX)}"
-mkdir -p "$work" && cd "$work" || exit 1
+# The work folder is cleared first only if it is empty or an earlier work folder of this script.
+if [ -d "$work" ] && [ -n "$(ls -A "$work")" ]; then
+    [ -e "$work/.gro-reliability" ] || { echo "$work is not empty and not a work folder of run_all.sh" >&2; exit 2; }
+    rm -rf "${work:?}"/* "$work"/.[!.]*
+fi
+mkdir -p "$work" && cd "$work" && touch .gro-reliability || exit 1
 sh="$bin/sim-harness"; gt="$bin/ground-tool"; loop="$bin/calibration-loop"; mc="$bin/calibration-mc"
 writer="python3 $root/tests/icd/write_run.py"
 for b in "$sh" "$gt" "$loop" "$mc"; do

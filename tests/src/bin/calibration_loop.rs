@@ -51,6 +51,45 @@ struct Args {
     /// Print report.json instead of the table.
     #[arg(long)]
     json: bool,
+    /// Fail (exit code 1, after writing the reports) when any quantity of the table is worse
+    /// after the calibration than before: a relative alignment error, a residual RMS, the
+    /// fine-attitude error of an axis or the largest post-maneuver error (CI runs this).
+    #[arg(long)]
+    check: bool,
+}
+
+/// The quantities of the loop's table that are worse after the calibration than before.
+fn regressions(r: &LoopReport) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut pair = |what: &str, before: f64, after: f64| {
+        if after > before {
+            out.push(format!("{what}: {before:.1} -> {after:.1}"));
+        }
+    };
+    for (k, b) in &r.relative_alignment_error_arcsec.before {
+        if let Some(a) = r.relative_alignment_error_arcsec.after.get(k) {
+            pair(&format!("relative alignment error {k} (″)"), *b, *a);
+        }
+    }
+    for (k, b) in &r.residual_rms_arcsec.before {
+        if let Some(a) = r.residual_rms_arcsec.after.get(k) {
+            pair(&format!("residual RMS {k} (″)"), *b, *a);
+        }
+    }
+    for i in 0..3 {
+        pair(
+            &format!("fine-attitude error 3×RMS axis {i} (″)"),
+            r.fine_attitude_error_3rms_arcsec.before[i],
+            r.fine_attitude_error_3rms_arcsec.after[i],
+        );
+    }
+    let max = |v: &[f64]| v.iter().copied().fold(0.0, f64::max);
+    pair(
+        "largest post-maneuver error (°)",
+        max(&r.post_maneuver_error_deg.before),
+        max(&r.post_maneuver_error_deg.after),
+    );
+    out
 }
 
 fn main() {
@@ -74,7 +113,7 @@ fn run_loop(args: &Args) -> anyhow::Result<()> {
             .context("--duration")
             .map_err(InputError::from)?;
     }
-    let out = OutputDir::begin(&args.out, "calibration-loop", args.force)?;
+    let out = OutputDir::begin(&args.out, "calibration-loop", args.force, &[])?;
     let fly_a = out.path().join("1-fly-prelaunch");
     let cal = out.path().join("2-calibration");
     let fly_b = out.path().join("3-fly-calibrated");
@@ -134,6 +173,16 @@ fn run_loop(args: &Args) -> anyhow::Result<()> {
             args.out.display(),
             args.out.join("2-calibration").display()
         );
+    }
+    if args.check {
+        let worse = regressions(&report);
+        if !worse.is_empty() {
+            anyhow::bail!(
+                "--check: worse after the calibration than before: {}",
+                worse.join("; ")
+            );
+        }
+        eprintln!("--check: every quantity of the table is better after the calibration");
     }
     Ok(())
 }
