@@ -370,7 +370,19 @@ fn run_diagnose(
     )?;
     let out = dir.path();
     ground_tool::run_check::check_run_dir(run_dir, out)?;
-    let result = diagnose_run(run_dir, out, &options)?;
+    // Diagnose's refusals (too few frames, a singular fit) are about the data: exit code 2;
+    // an I/O error (writing the report) stays a runtime failure.
+    let result = diagnose_run(run_dir, out, &options).map_err(|e| {
+        if e.chain().any(|c| c.is::<std::io::Error>()) || sim_harness::is_input_error(&e) {
+            e
+        } else {
+            ground_tool::run_check::InputError(e.context(format!(
+                "{}: the telemetry does not support a diagnosis",
+                run_dir.display()
+            )))
+            .into()
+        }
+    })?;
     // The folder is new: its images are exactly the ones this diagnose wrote.
     sim_harness::manifest::write_for_all(&out.join("tables"), "ground-tool diagnose")?;
     dir.commit()?;

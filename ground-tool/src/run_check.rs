@@ -65,9 +65,10 @@ pub struct Finding {
 /// one type for every binary of the workspace ([`sim_harness::exit_code`]).
 pub use sim_harness::InputError;
 
-/// Check the declared figures of `metadata.json` against their physical ranges: every noise
-/// figure finite and > 0 (`fss_systematic_arcsec` and `iru_rrw_rad_per_s_sqrt_s` ≥ 0: zero is
-/// "no such error"), every transfer-function spread finite and ≥ 0.
+/// Check the declared figures of `metadata.json` against their physical ranges: the FHST and
+/// FSS 1σ figures finite and > 0 (they are measurement weights); the gyro's random walks,
+/// `fss_systematic_arcsec` and every transfer-function spread finite and ≥ 0 (zero is "no
+/// such error": a noiseless gyro, as the ICD writer's `--quiet-iru` declares).
 ///
 /// Why: a negative or zero σ turns the weights of FFCAL, the bias filter and IRUCAL into
 /// garbage without any error (`iru_arw_rad_per_sqrt_s: -1` gave a garbage bias with exit 0).
@@ -80,9 +81,9 @@ pub fn validate_metadata(path: &std::path::Path, m: &Metadata) -> Result<(), Inp
         ("sensors.fhst_sigma_arcsec[0]", n.fhst_sigma_arcsec[0]),
         ("sensors.fhst_sigma_arcsec[1]", n.fhst_sigma_arcsec[1]),
         ("sensors.fss_sigma_arcsec", n.fss_sigma_arcsec),
-        ("sensors.iru_arw_rad_per_sqrt_s", n.iru_arw_rad_per_sqrt_s),
     ];
     let non_negative = [
+        ("sensors.iru_arw_rad_per_sqrt_s", n.iru_arw_rad_per_sqrt_s),
         ("sensors.fss_systematic_arcsec", n.fss_systematic_arcsec),
         (
             "sensors.iru_rrw_rad_per_s_sqrt_s",
