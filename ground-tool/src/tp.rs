@@ -104,6 +104,14 @@ pub const TIME_TOLERANCE_STEPS: f64 = 4.0;
 /// Lower bound of the time tolerance, s (see [`TIME_TOLERANCE_STEPS`]).
 pub const MIN_TIME_TOLERANCE_S: f64 = 2.0;
 
+/// The first or last packet of an APID further than this many median steps from its one
+/// neighbour (and at least [`FAR_TIME_S`]) has a damaged time code: a gap that long right at
+/// the start or the end of a file is not credible, a flipped high bit of the time code is.
+pub const FAR_TIME_STEPS: f64 = 1000.0;
+
+/// Lower bound of the far distance of the first or last packet, s (one hour).
+pub const FAR_TIME_S: f64 = 3600.0;
+
 impl TpReport {
     /// Octets that could not be used.
     #[must_use]
@@ -433,12 +441,15 @@ fn follows(a: u16, b: u16) -> bool {
 /// Which records of one APID (times and sequence counts in file order) are isolated time-code
 /// outliers, and the backward jumps among the others: `(outlier indices, jump indices)`.
 ///
-/// A record is an outlier when it sits in sequence (its sequence count follows its
-/// neighbour's and is followed by the next one's: the packet is where it belongs) but its
-/// time is more than the tolerance from both neighbours, which agree with each other: its
-/// time code is damaged. A jump is a backward time step beyond the tolerance between packets
-/// in sequence: the packets that follow carry shifted time codes. A packet moved in the file
-/// (reordered) has a sequence count out of sequence with its neighbours and is neither: the
+/// In a well-formed file an APID's times never decrease, so a packet in sequence (its
+/// sequence count 1–64 after its predecessor's and 1–64 before its successor's: it is where
+/// it belongs) lies between its neighbours' times. It is an outlier (a damaged time code)
+/// when it lies outside them by more than the tolerance while they agree with each other.
+/// The first and the last packet have one neighbour: they are outliers when they are out of
+/// order with it by more than the tolerance, or more than [`FAR_TIME_STEPS`] median steps
+/// (and at least [`FAR_TIME_S`]) from it. A jump is a backward time step beyond the tolerance
+/// between packets in sequence: the packets that follow carry shifted time codes. A packet
+/// moved in the file (reordered) is out of sequence with its neighbours and is neither: the
 /// reader puts it back by time.
 #[must_use]
 pub fn screen_times(times: &[f64], seqs: &[u16]) -> (Vec<usize>, Vec<usize>) {
@@ -450,29 +461,43 @@ pub fn screen_times(times: &[f64], seqs: &[u16]) -> (Vec<usize>, Vec<usize>) {
     steps.sort_by(f64::total_cmp);
     let median = steps.get(steps.len() / 2).copied().unwrap_or(0.0);
     let tol = (TIME_TOLERANCE_STEPS * median).max(MIN_TIME_TOLERANCE_S);
-    let far = |a: f64, b: f64| (a - b).abs() > tol;
+    let far = (FAR_TIME_STEPS * median).max(FAR_TIME_S);
     let n = times.len().min(seqs.len());
     let in_seq = |i: usize, j: usize| follows(seqs[i], seqs[j]);
     let mut outliers = Vec::new();
     if n >= 3 {
-        for i in 0..n {
-            // The two nearest neighbours (two after the first record, two before the last),
-            // which must agree with each other, and the packet in sequence between them.
-            let (a, b, placed) = match i {
-                0 => (times[1], times[2], in_seq(0, 1) && in_seq(1, 2)),
-                _ if i == n - 1 => (
-                    times[n - 3],
-                    times[n - 2],
-                    in_seq(n - 3, n - 2) && in_seq(n - 2, n - 1),
-                ),
-                _ => (
-                    times[i - 1],
-                    times[i + 1],
-                    in_seq(i - 1, i) && in_seq(i, i + 1),
-                ),
-            };
-            if placed && far(times[i], a) && far(times[i], b) && !far(a, b) {
+        // The packets inside: both neighbours known.
+        for i in 1..n - 1 {
+            let (t, a, b) = (times[i], times[i - 1], times[i + 1]);
+            if in_seq(i - 1, i) && in_seq(i, i + 1) && a <= b + tol && (t < a - tol || t > b + tol)
+            {
                 outliers.push(i);
+            }
+        }
+        // The first and the last packet, against their nearest two packets that are not
+        // outliers themselves.
+        let kept: Vec<usize> = (0..n).filter(|i| !outliers.contains(i)).collect();
+        if let [_, j, k, ..] = kept[..] {
+            let (t, b, c) = (times[0], times[j], times[k]);
+            if j == 1
+                && in_seq(0, j)
+                && in_seq(j, k)
+                && b <= c + tol
+                && (t > b + tol || b - t > far)
+            {
+                outliers.insert(0, 0);
+            }
+        }
+        if let [.., k, j, last] = kept[..] {
+            let (t, a, y) = (times[last], times[j], times[k]);
+            if last == n - 1
+                && j == n - 2
+                && in_seq(k, j)
+                && in_seq(j, last)
+                && y <= a + tol
+                && (t < a - tol || t - a > far)
+            {
+                outliers.push(last);
             }
         }
     }
@@ -583,12 +608,23 @@ mod time_screen_tests {
         let clean: Vec<f64> = (0..100).map(f64::from).collect();
         let seq: Vec<u16> = (0..100u16).map(|i| (16_350 + i) & 0x3fff).collect();
         assert_eq!(screen_times(&clean, &seq), (vec![], vec![]));
-        // One flipped bit (2^20 s) in one frame, also the first or the last.
+        // One flipped bit (±2^20 s, ±16 s) in one frame, also the first or the last.
         for k in [0usize, 37, 99] {
-            let mut t = clean.clone();
-            t[k] += 1_048_576.0;
-            assert_eq!(screen_times(&t, &seq), (vec![k], vec![]), "frame {k}");
+            for d in [1_048_576.0, -1_048_576.0, 16.0, -16.0] {
+                let mut t = clean.clone();
+                t[k] += d;
+                let expect = if (k == 0 && d == -16.0) || (k == 99 && d == 16.0) {
+                    vec![] // a 16 s gap at an end: possible, kept
+                } else {
+                    vec![k]
+                };
+                assert_eq!(screen_times(&t, &seq), (expect, vec![]), "frame {k} {d}");
+            }
         }
+        // An irregular clean stream (records every 5 s and at random in between): nothing.
+        let t: Vec<f64> = vec![0.0, 5.0, 6.0, 10.0, 15.0, 15.5, 20.0, 60.0, 61.0, 65.0];
+        let q: Vec<u16> = (0..10).collect();
+        assert_eq!(screen_times(&t, &q), (vec![], vec![]));
         // Reordered packets (time and sequence count move together) and a real gap: nothing.
         let (mut t, mut q) = (clean.clone(), seq.clone());
         for (a, b) in [(10, 11), (50, 52), (20, 40)] {
