@@ -209,8 +209,8 @@ mod tests {
             flown_tables(&dir, &serde_json::json!({}), None).unwrap_or((None, None, None));
         assert!(a.is_none(), "no uploads: the boot table");
         // --tables that does not exist: refused, not read as "the boot tables".
-        let e = flown_tables(&dir, &meta, Some(&dir.join("none"))).unwrap_err();
-        assert!(sim_harness::is_input_error(&e), "{e:#}");
+        let r = flown_tables(&dir, &meta, Some(&dir.join("none")));
+        assert!(matches!(&r, Err(e) if sim_harness::is_input_error(e)));
         // --tables with a manifest that lists no alignment: only that folder counts.
         let _ = std::fs::create_dir_all(dir.join("t"));
         assert!(crate::pipeline::calibrate::write_table(
@@ -229,11 +229,9 @@ mod tests {
         );
         // An activated upload whose file is gone: refused, not "the boot table was flown".
         let _ = std::fs::remove_file(dir.join("uploads/01_alignment.tbl"));
-        let e = flown_tables(&dir, &meta, None).unwrap_err();
-        assert!(
-            sim_harness::is_input_error(&e) && format!("{e:#}").contains("missing"),
-            "{e:#}"
-        );
+        let r = flown_tables(&dir, &meta, None);
+        assert!(matches!(&r, Err(e)
+            if sim_harness::is_input_error(e) && format!("{e:#}").contains("missing")));
         let _ = std::fs::remove_dir_all(&dir);
     }
 }
