@@ -142,6 +142,24 @@ run loop-1 "$loop" --out loop
 run loop-2 "$loop" --out loop
 row loop-2 "calibration-loop --out runs/loop, twice" 0 "$(diff <(grep '^|' loop-1.log) <(grep '^|' loop-2.log) > /dev/null && echo 1 || echo 0)" "same before/after table both times"
 
+# --- more of our own
+echo "not a folder" > afile
+run out-file "$sh" run gro-early-mission --duration 60 --out afile -q
+row out-file "sim-harness run … --out FILE" 2 "$(grep -c 'not a folder' afile)" "the file kept"
+mkdir -p wrap; cp -r run wrap/run
+run out-input "$gt" calibrate wrap/run --out wrap --force
+row out-input "ground-tool calibrate wrap/run --out wrap --force" 2 "$([ -s wrap/run/telemetry.bin ] && echo 1 || echo 0)" "the input run kept"
+mkdir -p empty-run
+run no-telemetry "$gt" calibrate empty-run --out cal-empty
+row no-telemetry "ground-tool calibrate DIR (no telemetry.bin)" 2 "$(absent cal-empty)" "no output folder"
+mkdir -p trav; cp cal/tables/alignment.tbl trav/
+printf '{"format":"gro-tables-manifest-1","written_by":"x","tables":[{"file":"../crc.tbl","table":"alignment","table_id":1,"octets":760,"crc32":"0x0"}]}' > trav/manifest.json
+run manifest-path "$sh" run gro-early-mission --duration 60 --out s-trav --tables trav -q
+row manifest-path "sim-harness run … --tables DIR (manifest names ../crc.tbl)" 2 "$(absent s-trav)" "nothing outside DIR read"
+"$sh" run gro-early-mission --duration 60 --out stale-lock -q > /dev/null 2>&1; echo 4000000000 > .stale-lock.lock
+run stale-lock "$sh" run gro-early-mission --duration 60 --out stale-lock -q
+row stale-lock "sim-harness run … --out DIR (lock file of a process that no longer exists)" 0 "$(absent .stale-lock.lock)" "lock taken over and removed"
+
 # --- 4. time codes (the ICD writer's run: 4 909 frames)
 $writer --out w-clean > /dev/null 2>&1
 $writer --out w-flip --flip-time-bit 2000:36 > /dev/null 2>&1
