@@ -34,7 +34,8 @@
 //! 1. Uplinks the onboard star catalog ([`crate::onboard`]) with `TableLoad` + `TableActivate`
 //!    (unless `uplink_catalog = false`);
 //! 2. with `fly_true_alignments = true`, uplinks an alignment table equal to the truth;
-//! 3. loads and activates every `*.tbl` of `--tables DIR` (file-name order);
+//! 3. loads and activates the images `--tables DIR/manifest.json` lists, in its order
+//!    ([`crate::manifest`]);
 //! 4. initialises the filter with `FilterInitialize(Rot(error) · A_true)`, `error` =
 //!    `[initial_estimate]` (default 0.1° about (1, 1, 1)/√3), which also starts the inertial
 //!    hold (unless `initial_estimate.enabled = false`).
