@@ -75,6 +75,23 @@ pub enum RecordError {
     BufferTooSmall,
 }
 
+/// A sentence for people (offsets are within the packet's user data, docs/icd.md §3).
+impl core::fmt::Display for RecordError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match *self {
+            Self::Length { expected, found } => write!(
+                f,
+                "the user data is {found} octets where this record has {expected}"
+            ),
+            Self::BadEnum { offset } => write!(
+                f,
+                "user-data octet {offset} holds a value outside its enumeration (docs/icd.md §3)"
+            ),
+            Self::BufferTooSmall => write!(f, "the output buffer is too small for the record"),
+        }
+    }
+}
+
 /// Status of one sensor's measurement in a cycle.
 /// Residual-block status, docs/icd.md §3.2.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]

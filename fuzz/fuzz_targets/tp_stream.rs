@@ -3,8 +3,9 @@
 //!
 //! Invariants: never panics; the report's file length is the input length; skipped regions
 //! are non-empty, inside the file, in increasing order and disjoint; duplicate offsets are
-//! inside the file; decoded packets, dropped duplicates and skipped regions add up to the
-//! whole file (every octet is accounted for exactly once); the record counts match the
+//! inside the file; decoded packets, dropped duplicates, packets dropped for a damaged time
+//! code and skipped regions add up to the whole file (every octet is accounted for exactly
+//! once); time-code outliers and jumps are inside the file; the record counts match the
 //! records returned, which are sorted by time.
 #![no_main]
 
@@ -64,8 +65,16 @@ fuzz_target!(|data: &[u8]| {
         + r.packets_housekeeping * (OVERHEAD + HOUSEKEEPING_LEN)
         + r.packets_event * (OVERHEAD + EVENT_LEN)
         + r.packets_ephemeris * (OVERHEAD + EPHEMERIS_LEN);
+    let mut outlier_octets = 0;
+    for o in &r.time_outliers {
+        assert!(o.offset + o.len <= data.len());
+        outlier_octets += o.len;
+    }
+    for j in &r.time_jumps {
+        assert!(j.offset < data.len() && j.to_s < j.from_s);
+    }
     assert_eq!(
-        decoded + dup_octets + r.skipped_octets(),
+        decoded + dup_octets + outlier_octets + r.skipped_octets(),
         data.len(),
         "octets not accounted for exactly once"
     );

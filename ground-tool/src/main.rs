@@ -1,6 +1,7 @@
 //! `ground-tool`: command-line front end of the flight-dynamics ground tool.
-use anyhow::Result;
+use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
+use sim_harness::outdir::OutputDir;
 
 #[derive(Parser)]
 #[command(
@@ -11,7 +12,13 @@ in-flight attitude sensor calibration, 1991).\n\n\
 Typical loop:\n  sim-harness run gro-early-mission --out runs/a      # fly with the prelaunch tables\n  \
 ground-tool calibrate runs/a --out runs/a-cal        # TP -> FADS -> FFCAL -> adjustment -> IRUCAL -> tables\n  \
 sim-harness run gro-early-mission --out runs/b --tables runs/a-cal/tables   # fly again\n\n\
-Exit codes: 0 success, 1 failure, 2 bad or insufficient input (the message says what is missing)."
+Output folders (calibrate, diagnose): written as a temporary sibling .OUT.tmp-PID and renamed \
+into place, so OUT holds one whole result or its previous content; OUT/tables/manifest.json names \
+the tables to fly (with their CRC-32), and `sim-harness run --tables OUT/tables` loads only those. \
+A non-empty OUT that is not a previous output of the same command is refused unless --force; a \
+second writer into the same OUT fails (lock file .OUT.lock).\n\n\
+Exit codes (every binary of the workspace): 0 success, 1 runtime failure (I/O, another writer busy), \
+2 bad or insufficient input (the message names the file, the field and the cause, and what would fix it)."
 )]
 struct Cli {
     #[command(subcommand)]
@@ -23,16 +30,22 @@ enum Command {
     /// Calibrate from a run folder: TP -> DA/FADS -> FFCAL -> adjustment -> IRUCAL -> tables.
     ///
     /// Reads RUN_DIR/telemetry.bin (docs/icd.md) and RUN_DIR/metadata.json (optional); never
-    /// truth.json. Writes OUT/report.json, OUT/report.md, PNG plots and OUT/tables/*.tbl
-    /// (binary images that fsw-core loads).
+    /// truth.json. Writes OUT/report.json, OUT/report.md, PNG plots, OUT/tables/*.tbl
+    /// (binary images that fsw-core loads) and OUT/tables/manifest.json (the tables to fly).
     Calibrate {
         /// Run folder with telemetry.bin.
         run_dir: std::path::PathBuf,
-        /// Output folder.
+        /// Output folder (replaced whole when it is a previous `calibrate` output).
         #[arg(long)]
         out: std::path::PathBuf,
-        /// Folder with the alignment.tbl / iru.tbl / filter.tbl images that were flown; default:
-        /// the run's activated uploads (metadata.json `uploads`), else the boot tables.
+        /// Replace the whole content of a non-empty OUT that is not a previous `calibrate`
+        /// output.
+        #[arg(long)]
+        force: bool,
+        /// Tables folder of the images that were flown (its manifest.json lists them, e.g.
+        /// the tables/ of an earlier calibrate); default: the run's activated uploads
+        /// (metadata.json `uploads`), else the boot tables. A folder that does not exist or
+        /// has no manifest is refused (exit code 2).
         #[arg(long)]
         tables: Option<std::path::PathBuf>,
         /// Use Shuster's 1982 scalar weights instead of the optimal (1990) weighting.
@@ -66,18 +79,22 @@ enum Command {
     /// thermal/orbital alignment, FHST distortion and magnitude bias, FSS transfer function,
     /// catalog errors, gyro bias drift, thermal bias and scale asymmetry) jointly with the
     /// alignments and keeps an effect only on the evidence (likelihood ratio, BIC, halves).
-    /// Writes OUT/report.md, OUT/report.json, PNG plots and OUT/tables/*.tbl for
-    /// `sim-harness run ... --tables OUT/tables`, which loads every image of the folder:
-    /// alignment.tbl and iru.tbl always, filter.tbl and star_catalog.tbl when a detected
-    /// effect changes them (report.md lists what went into each). Scores against
-    /// RUN_DIR/truth.json only if it exists (labelled as scoring).
+    /// Writes OUT/report.md, OUT/report.json, PNG plots, OUT/tables/*.tbl and
+    /// OUT/tables/manifest.json for `sim-harness run ... --tables OUT/tables`, which loads
+    /// the images the manifest lists: alignment.tbl and iru.tbl always, filter.tbl and
+    /// star_catalog.tbl when a detected effect changes them (report.md lists what went into
+    /// each). Scores against RUN_DIR/truth.json only if it exists (labelled as scoring).
     Diagnose {
         /// Run folder with telemetry.bin.
         run_dir: std::path::PathBuf,
-        /// Output folder.
+        /// Output folder (replaced whole when it is a previous `diagnose` output).
         #[arg(long)]
         out: std::path::PathBuf,
-        /// Folder with the tables flown (alignment.tbl, iru.tbl, filter.tbl); default: the
+        /// Replace the whole content of a non-empty OUT that is not a previous `diagnose`
+        /// output.
+        #[arg(long)]
+        force: bool,
+        /// Tables folder of the tables flown (its manifest.json lists them); default: the
         /// run's activated uploads, else the boot tables.
         #[arg(long)]
         tables: Option<std::path::PathBuf>,
@@ -144,14 +161,24 @@ enum TableAction {
         /// Output image file.
         out: std::path::PathBuf,
     },
+    /// Write DIR/manifest.json listing every *.tbl image of DIR (each checked, with its
+    /// CRC-32), for a tables folder made by hand: check first that DIR holds exactly the
+    /// images to fly. `calibrate` and `diagnose` write the manifest themselves.
+    Manifest {
+        /// Tables folder.
+        dir: std::path::PathBuf,
+    },
 }
 
 fn run_table(action: TableAction) -> Result<()> {
+    use ground_tool::run_check::InputError;
     use ground_tool::table::{self, AnyTable};
+    // A file that cannot be read or is not a valid image is bad input (exit code 2).
+    let input = |e: ground_tool::table::TableToolError| InputError(e.into());
     match action {
         TableAction::Inspect { file, json } => {
-            let bytes = table::read_file(&file)?;
-            let ins = table::inspect(&bytes, &file.display().to_string())?;
+            let bytes = table::read_file(&file).map_err(input)?;
+            let ins = table::inspect(&bytes, &file.display().to_string()).map_err(input)?;
             if json {
                 println!("{}", serde_json::to_string_pretty(&ins)?);
             } else {
@@ -172,12 +199,20 @@ fn run_table(action: TableAction) -> Result<()> {
                 }
                 println!("{}", serde_json::to_string_pretty(&ins.content)?);
             }
-            if ins.validation_error.is_some() {
-                anyhow::bail!("the OBC would reject this table");
+            if let Some(why) = &ins.validation_error {
+                return Err(InputError::msg(format!(
+                    "{}: the OBC would reject this table: {why}",
+                    file.display()
+                ))
+                .into());
             }
         }
         TableAction::Diff { a, b, json } => {
-            let d = table::diff(&table::read_file(&a)?, &table::read_file(&b)?)?;
+            let d = table::diff(
+                &table::read_file(&a).map_err(input)?,
+                &table::read_file(&b).map_err(input)?,
+            )
+            .map_err(input)?;
             if json {
                 println!("{}", serde_json::to_string_pretty(&d)?);
             } else {
@@ -206,7 +241,8 @@ fn run_table(action: TableAction) -> Result<()> {
                 fine: 0,
             };
             let img = table::write_image(&t, tag)?;
-            std::fs::write(&out, &img)?;
+            std::fs::write(&out, &img)
+                .with_context(|| format!("cannot write {}", out.display()))?;
             println!("wrote {} ({} bytes)", out.display(), img.len());
         }
         TableAction::WritePrelaunchAlignment { out } => {
@@ -218,8 +254,22 @@ fn run_table(action: TableAction) -> Result<()> {
                     fine: 0,
                 },
             )?;
-            std::fs::write(&out, &img)?;
+            std::fs::write(&out, &img)
+                .with_context(|| format!("cannot write {}", out.display()))?;
             println!("wrote {} ({} bytes)", out.display(), img.len());
+        }
+        TableAction::Manifest { dir } => {
+            let m = sim_harness::manifest::write_for_all(&dir, "ground-tool table manifest")?;
+            for e in &m.tables {
+                println!(
+                    "{}: {} table, {} octets, CRC-32 {}",
+                    e.file, e.table, e.octets, e.crc32
+                );
+            }
+            println!(
+                "wrote {}",
+                dir.join(sim_harness::manifest::MANIFEST).display()
+            );
         }
     }
     Ok(())
@@ -241,7 +291,8 @@ fn parse_span(s: &str) -> std::result::Result<(f64, f64), String> {
 #[allow(clippy::too_many_arguments)]
 fn run_calibrate(
     run_dir: &std::path::Path,
-    out: &std::path::Path,
+    out_target: &std::path::Path,
+    force: bool,
     tables: Option<&std::path::Path>,
     shuster1982: bool,
     single_stage: bool,
@@ -254,6 +305,16 @@ fn run_calibrate(
     let meta = ground_tool::pipeline::flown::metadata_json(run_dir);
     let (flown_alignment, flown_iru, flown_filter) =
         ground_tool::pipeline::flown::flown_tables(run_dir, &meta, tables)?;
+    let dir = OutputDir::begin(
+        out_target,
+        "ground-tool calibrate",
+        force,
+        &[Some(run_dir), tables]
+            .into_iter()
+            .flatten()
+            .collect::<Vec<_>>(),
+    )?;
+    let out = dir.path();
     ground_tool::run_check::check_run_dir(run_dir, out)?;
     let options = CalibrateOptions {
         flown_alignment,
@@ -274,17 +335,22 @@ fn run_calibrate(
         .flown_alignment
         .unwrap_or_else(fsw_core::tables::AlignmentTable::prelaunch);
     ground_tool::report::write_calibration_report(out, &result, &flown)?;
+    dir.commit()?;
     if json {
         println!("{}", serde_json::to_string_pretty(&result.report)?);
     } else {
-        eprintln!("wrote {}/report.md, report.json and tables/", out.display());
+        eprintln!(
+            "wrote {}/report.md, report.json and tables/",
+            out_target.display()
+        );
     }
     Ok(())
 }
 
 fn run_diagnose(
     run_dir: &std::path::Path,
-    out: &std::path::Path,
+    out_target: &std::path::Path,
+    force: bool,
     tables: Option<&std::path::Path>,
     json: bool,
 ) -> Result<()> {
@@ -293,8 +359,33 @@ fn run_diagnose(
         tables: tables.map(std::path::Path::to_path_buf),
         ..DiagnoseOptions::default()
     };
+    let dir = OutputDir::begin(
+        out_target,
+        "ground-tool diagnose",
+        force,
+        &[Some(run_dir), tables]
+            .into_iter()
+            .flatten()
+            .collect::<Vec<_>>(),
+    )?;
+    let out = dir.path();
     ground_tool::run_check::check_run_dir(run_dir, out)?;
-    let result = diagnose_run(run_dir, out, &options)?;
+    // Diagnose's refusals (too few frames, a singular fit) are about the data: exit code 2;
+    // an I/O error (writing the report) stays a runtime failure.
+    let result = diagnose_run(run_dir, out, &options).map_err(|e| {
+        if e.chain().any(|c| c.is::<std::io::Error>()) || sim_harness::is_input_error(&e) {
+            e
+        } else {
+            ground_tool::run_check::InputError(e.context(format!(
+                "{}: the telemetry does not support a diagnosis",
+                run_dir.display()
+            )))
+            .into()
+        }
+    })?;
+    // The folder is new: its images are exactly the ones this diagnose wrote.
+    sim_harness::manifest::write_for_all(&out.join("tables"), "ground-tool diagnose")?;
+    dir.commit()?;
     for note in &result.report.notes {
         eprintln!("note: {note}");
     }
@@ -314,32 +405,23 @@ fn run_diagnose(
                 u.sensor, u.axis, u.regressor, u.size, u.p_value
             );
         }
-        eprintln!("wrote {}/report.md, report.json and tables/", out.display());
+        eprintln!(
+            "wrote {}/report.md, report.json and tables/",
+            out_target.display()
+        );
     }
     Ok(())
 }
 
-fn main() {
+fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
-    if let Err(e) = run(cli) {
-        eprintln!("error: {e:#}");
-        // Input problems (missing or malformed files, too little data) are exit code 2.
-        let text = format!("{e:#}");
-        let input = e.is::<ground_tool::run_check::InputError>()
-            || [
-                "not found",
-                "needs",
-                "malformed",
-                "not valid",
-                "only ",
-                "cannot read",
-                "FFCAL:",
-                "outside the telemetry",
-                "overlaps the previous",
-            ]
-            .iter()
-            .any(|k| text.contains(k));
-        std::process::exit(if input { 2 } else { 1 });
+    match run(cli) {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            // Chosen from the error's type (sim_harness::InputError = bad input), not its text.
+            std::process::ExitCode::from(sim_harness::exit_code(&e))
+        }
     }
 }
 
@@ -348,6 +430,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::Calibrate {
             run_dir,
             out,
+            force,
             tables,
             shuster1982,
             single_stage,
@@ -357,6 +440,7 @@ fn run(cli: Cli) -> Result<()> {
         } => run_calibrate(
             &run_dir,
             &out,
+            force,
             tables.as_deref(),
             shuster1982,
             single_stage,
@@ -367,9 +451,10 @@ fn run(cli: Cli) -> Result<()> {
         Command::Diagnose {
             run_dir,
             out,
+            force,
             tables,
             json,
-        } => run_diagnose(&run_dir, &out, tables.as_deref(), json)?,
+        } => run_diagnose(&run_dir, &out, force, tables.as_deref(), json)?,
         Command::Paper { json } => {
             let r = ground_tool::paper::reproduce()?;
             if json {

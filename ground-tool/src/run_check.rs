@@ -9,11 +9,15 @@
 //!
 //! * **errors** (exit code 2): no raw frame at all (with what the reader found instead), time
 //!   codes that are not TAI since 1958 (mission elapsed time), time codes that disagree with
-//!   `metadata.json`'s `epoch_utc`;
+//!   `metadata.json`'s `epoch_utc`, a block of packets whose time codes jump back while the
+//!   packet sequence continues (`time_code_jump`);
+//! * **warnings** for packets dropped for an isolated damaged time code (`time_code_outliers`,
+//!   with their offsets);
 //! * **warnings**: frames without an orbit, a sensor never usable (flags), an IRU channel
 //!   unchanged long enough to be declared stuck, slews without high-rate frames, gaps, damage
 //!   the reader repaired, housekeeping that matches no raw frame.
 
+use crate::pipeline::calibrate::Metadata;
 use crate::pipeline::observations::interpolate_orbit;
 use crate::tp::Telemetry;
 use fsw_core::raw::{FHST_FLAG_TRACKING, FHST_FLAG_VALID, FSS_FLAG_SUN_ALPHA, FSS_FLAG_SUN_BETA};
@@ -57,10 +61,73 @@ pub struct Finding {
     pub message: String,
 }
 
-/// An input that breaks the ICD so that no meaningful result can be computed (exit code 2).
-#[derive(Debug, thiserror::Error)]
-#[error("{0}")]
-pub struct InputError(pub String);
+/// An input that breaks the ICD so that no meaningful result can be computed (exit code 2):
+/// one type for every binary of the workspace ([`sim_harness::exit_code`]).
+pub use sim_harness::InputError;
+
+/// Check the declared figures of `metadata.json` against their physical ranges: the FHST and
+/// FSS 1σ figures finite and > 0 (they are measurement weights); the gyro's random walks,
+/// `fss_systematic_arcsec` and every transfer-function spread finite and ≥ 0 (zero is "no
+/// such error": a noiseless gyro, as the ICD writer's `--quiet-iru` declares).
+///
+/// Why: a negative or zero σ turns the weights of FFCAL, the bias filter and IRUCAL into
+/// garbage without any error (`iru_arw_rad_per_sqrt_s: -1` gave a garbage bias with exit 0).
+///
+/// # Errors
+/// [`InputError`] naming the first offending field, its value and the range.
+pub fn validate_metadata(path: &std::path::Path, m: &Metadata) -> Result<(), InputError> {
+    let n = &m.sensors;
+    let positive = [
+        ("sensors.fhst_sigma_arcsec[0]", n.fhst_sigma_arcsec[0]),
+        ("sensors.fhst_sigma_arcsec[1]", n.fhst_sigma_arcsec[1]),
+        ("sensors.fss_sigma_arcsec", n.fss_sigma_arcsec),
+    ];
+    let non_negative = [
+        ("sensors.iru_arw_rad_per_sqrt_s", n.iru_arw_rad_per_sqrt_s),
+        ("sensors.fss_systematic_arcsec", n.fss_systematic_arcsec),
+        (
+            "sensors.iru_rrw_rad_per_s_sqrt_s",
+            n.iru_rrw_rad_per_s_sqrt_s,
+        ),
+    ];
+    let bad = |field: &str, v: f64, range: &str| {
+        InputError::msg(format!(
+            "{}: {field} = {v} is not a possible value ({range}; docs/icd.md §5): fix the declared noise figure",
+            path.display()
+        ))
+    };
+    for (field, v) in positive {
+        if !(v.is_finite() && v > 0.0) {
+            return Err(bad(field, v, "a 1σ figure must be finite and > 0"));
+        }
+    }
+    for (field, v) in non_negative {
+        if !(v.is_finite() && v >= 0.0) {
+            return Err(bad(field, v, "must be finite and ≥ 0"));
+        }
+    }
+    if let Some(spreads) = &m.fss_transfer_function_sigma {
+        // Every number of the spreads, by its JSON path.
+        if let Ok(tree) = serde_json::to_value(spreads) {
+            let mut stack = vec![("fss_transfer_function_sigma".to_owned(), &tree)];
+            while let Some((p, v)) = stack.pop() {
+                match v {
+                    serde_json::Value::Object(o) => {
+                        stack.extend(o.iter().map(|(k, x)| (format!("{p}.{k}"), x)));
+                    }
+                    serde_json::Value::Number(x) => {
+                        let x = x.as_f64().unwrap_or(f64::NAN);
+                        if !(x.is_finite() && x >= 0.0) {
+                            return Err(bad(&p, x, "a 1σ spread must be finite and ≥ 0"));
+                        }
+                    }
+                    _ => {}
+                }
+            }
+        }
+    }
+    Ok(())
+}
 
 fn warn(code: &'static str, message: String) -> Finding {
     Finding {
@@ -130,7 +197,11 @@ fn utc_naive_1958_s(text: &str) -> Option<f64> {
 pub fn check(tm: &Telemetry, metadata: Option<&serde_json::Value>) -> Vec<Finding> {
     let mut out = Vec::new();
     let r = &tm.report;
-    if !r.is_clean() || !r.duplicate_conflicts.is_empty() {
+    if !r.skipped.is_empty()
+        || !r.duplicates.is_empty()
+        || !r.time_reversals.is_empty()
+        || !r.duplicate_conflicts.is_empty()
+    {
         let first = r
             .skipped
             .first()
@@ -147,6 +218,44 @@ pub fn check(tm: &Telemetry, metadata: Option<&serde_json::Value>) -> Vec<Findin
                 r.time_reversals.len()
             ),
         ));
+    }
+    if !r.time_outliers.is_empty() {
+        let list: Vec<String> = r
+            .time_outliers
+            .iter()
+            .take(10)
+            .map(|o| {
+                format!(
+                    "offset {} (APID 0x{:03x}, time code {:.0} s between {:.0} and {:.0} s)",
+                    o.offset, o.apid, o.time_s, o.neighbours_s.0, o.neighbours_s.1
+                )
+            })
+            .collect();
+        out.push(warn(
+            "time_code_outliers",
+            format!(
+                "telemetry.bin: {} packet(s) dropped for a damaged time code (in sequence with their neighbours but far from both in time): {}{} (docs/icd.md §4)",
+                r.time_outliers.len(),
+                list.join("; "),
+                if r.time_outliers.len() > 10 { "; …" } else { "" }
+            ),
+        ));
+    }
+    if let Some(j) = r.time_jumps.first() {
+        out.push(error(
+            "time_code_jump",
+            format!(
+                "telemetry.bin: at offset {} the time codes of APID 0x{:03x} jump back by {:.0} s ({} → {} TAI) while the packet sequence continues ({} such jump(s) in all): a block of packets carries shifted time codes (a clock reset or a time-stamping error), not a few reordered packets; sorting by time would interleave two stretches of flight into one wrong timeline. Correct the time codes of the packets from offset {} on, or cut the file there and calibrate each part separately (docs/icd.md §4)",
+                j.offset,
+                j.apid,
+                j.from_s - j.to_s,
+                date_of(j.from_s),
+                date_of(j.to_s),
+                r.time_jumps.len(),
+                j.offset
+            ),
+        ));
+        return out;
     }
     let Some(first) = tm.raw.first() else {
         let mut reasons: Vec<&str> = r.skipped.iter().map(|s| s.reason.as_str()).collect();
@@ -438,7 +547,7 @@ pub fn check_run_dir(
         serde_json::to_string_pretty(&findings)?,
     )?;
     if let Some(e) = findings.iter().find(|f| f.severity == Severity::Error) {
-        return Err(InputError(e.message.clone()).into());
+        return Err(InputError::msg(&e.message).into());
     }
     Ok(findings)
 }

@@ -32,7 +32,7 @@ const MAX_IMAGE_BYTES: usize = 1 << 20;
 #[derive(Debug, Error)]
 pub enum TableToolError {
     /// File could not be read or written.
-    #[error("{path}: {source}")]
+    #[error("cannot read {path}")]
     Io {
         /// File.
         path: String,
@@ -110,7 +110,7 @@ impl AnyTable {
 pub fn decode_image(bytes: &[u8], what: &str) -> Result<(ImageHeader, AnyTable), TableToolError> {
     let image_err = |e: TableError| TableToolError::Image {
         what: what.to_owned(),
-        detail: format!("{e:?}"),
+        detail: e.to_string(),
     };
     let (header, payload) = parse_image(bytes).map_err(image_err)?;
     let table = match header.table_id {
@@ -174,7 +174,7 @@ pub fn inspect(bytes: &[u8], what: &str) -> Result<Inspection, TableToolError> {
         payload_len: header.payload_len,
         created_tai_s: f64::from(header.created.coarse_s)
             + f64::from(header.created.fine) / 65536.0,
-        validation_error: table.validate().err().map(|e| format!("{e:?}")),
+        validation_error: table.validate().err().map(|e| e.to_string()),
         rotation_from_prelaunch_arcsec,
         content: table.to_json(),
     })
@@ -272,7 +272,7 @@ pub fn diff(a_bytes: &[u8], b_bytes: &[u8]) -> Result<TableDiff, TableToolError>
 /// if encoding fails.
 pub fn write_image(table: &AnyTable, created: TimeTag) -> Result<Vec<u8>, TableToolError> {
     table.validate().map_err(|e| TableToolError::Invalid {
-        detail: format!("{e:?}"),
+        detail: e.to_string(),
     })?;
     let mut buf = vec![0u8; MAX_IMAGE_BYTES];
     let encoded = match table {
@@ -285,7 +285,7 @@ pub fn write_image(table: &AnyTable, created: TimeTag) -> Result<Vec<u8>, TableT
     };
     let len = encoded.map_err(|e| TableToolError::Image {
         what: "new image".into(),
-        detail: format!("{e:?}"),
+        detail: e.to_string(),
     })?;
     buf.truncate(len);
     let (_, back) = decode_image(&buf, "new image")?;

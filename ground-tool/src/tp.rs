@@ -56,9 +56,61 @@ pub struct TpReport {
     /// both kept (offsets of the later ones).
     pub duplicate_conflicts: Vec<usize>,
     /// Places where a packet's time was earlier than the previous packet of the same APID:
-    /// `(offset, previous time s, time s)`.
+    /// `(offset, previous time s, time s)` (after the time-code outliers were dropped).
     pub time_reversals: Vec<(usize, f64, f64)>,
+    /// Packets dropped because their time code is an isolated outlier (a damaged time code:
+    /// far from both neighbours of its APID, which agree with each other).
+    pub time_outliers: Vec<TimeOutlier>,
+    /// Backward jumps of an APID's time codes too large for reordered packets, after which the
+    /// packets continue from the earlier time (a block with shifted time codes). Re-sorting
+    /// would interleave two stretches of flight: the run check refuses such a file.
+    pub time_jumps: Vec<TimeJump>,
 }
+
+/// A packet dropped for its time code.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct TimeOutlier {
+    /// File offset of the packet.
+    pub offset: usize,
+    /// Its length, octets.
+    pub len: usize,
+    /// APID.
+    pub apid: u16,
+    /// Its time code, s (TAI since 1958).
+    pub time_s: f64,
+    /// The times of the APID's packets before and after it, s.
+    pub neighbours_s: (f64, f64),
+}
+
+/// A backward jump of one APID's time codes (file order).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct TimeJump {
+    /// File offset of the first packet after the jump.
+    pub offset: usize,
+    /// APID.
+    pub apid: u16,
+    /// Time of the packet before, s.
+    pub from_s: f64,
+    /// Time of the packet at `offset`, s.
+    pub to_s: f64,
+}
+
+/// The largest backward step of an APID's time codes that reordered packets explain: this
+/// many median steps of that APID (4 cycles for the 1 s raw frames), and at least
+/// [`MIN_TIME_TOLERANCE_S`]. An isolated packet further than this from both neighbours is a
+/// damaged time code; a larger backward step followed by consistent packets is a jump.
+pub const TIME_TOLERANCE_STEPS: f64 = 4.0;
+
+/// Lower bound of the time tolerance, s (see [`TIME_TOLERANCE_STEPS`]).
+pub const MIN_TIME_TOLERANCE_S: f64 = 2.0;
+
+/// The first or last packet of an APID further than this many median steps from its one
+/// neighbour (and at least [`FAR_TIME_S`]) has a damaged time code: a gap that long right at
+/// the start or the end of a file is not credible, a flipped high bit of the time code is.
+pub const FAR_TIME_STEPS: f64 = 1000.0;
+
+/// Lower bound of the far distance of the first or last packet, s (one hour).
+pub const FAR_TIME_S: f64 = 3600.0;
 
 impl TpReport {
     /// Octets that could not be used.
@@ -70,7 +122,11 @@ impl TpReport {
     /// True if nothing was skipped, duplicated or out of order.
     #[must_use]
     pub fn is_clean(&self) -> bool {
-        self.skipped.is_empty() && self.duplicates.is_empty() && self.time_reversals.is_empty()
+        self.skipped.is_empty()
+            && self.duplicates.is_empty()
+            && self.time_reversals.is_empty()
+            && self.time_outliers.is_empty()
+            && self.time_jumps.is_empty()
     }
 }
 
@@ -93,7 +149,7 @@ pub struct Telemetry {
 #[derive(Debug, thiserror::Error)]
 pub enum TpError {
     /// The file could not be read.
-    #[error("cannot read telemetry file {path}: {source}")]
+    #[error("cannot read telemetry file {path}")]
     Io {
         /// Path.
         path: String,
@@ -211,7 +267,9 @@ pub fn decode(bytes: &[u8]) -> Telemetry {
     let mut tm = Telemetry::default();
     tm.report.file_len = bytes.len();
     let mut seen: HashMap<(u16, u16, u32, u16), usize> = HashMap::new();
-    let mut last_time: [Option<f64>; 4] = [None; 4];
+    // Per APID slot (raw, housekeeping, event, ephemeris), in file order: (offset, length,
+    // sequence count).
+    let mut placed: [Vec<(usize, usize, u16)>; 4] = Default::default();
     let mut at = 0usize;
     while at < bytes.len() {
         let Some(h) = parse_header(&bytes[at..]) else {
@@ -332,13 +390,6 @@ pub fn decode(bytes: &[u8]) -> Telemetry {
             APID_EVENT => 2,
             _ => 3,
         };
-        let t = time.seconds();
-        if let Some(prev) = last_time[slot] {
-            if t < prev {
-                tm.report.time_reversals.push((at, prev, t));
-            }
-        }
-        last_time[slot] = Some(t);
         let decoded = match h.apid {
             APID_RAW_SENSORS => decode_raw_frame(time, user).map(|r| {
                 tm.raw.push(r);
@@ -357,18 +408,245 @@ pub fn decode(bytes: &[u8]) -> Telemetry {
                 tm.report.packets_ephemeris += 1;
             }),
         };
+        if decoded.is_ok() {
+            placed[slot].push((at, h.total_len, h.seq));
+        }
         if let Err(e) = decoded {
             tm.report.skipped.push(Skipped {
                 offset: at,
                 len: h.total_len,
-                reason: format!("APID 0x{:03x}: field does not decode ({e:?})", h.apid),
+                reason: format!("APID 0x{:03x}: field does not decode ({e})", h.apid),
             });
         }
         at += h.total_len;
     }
+    screen_time_codes(&mut tm, &placed);
     tm.raw.sort_by_key(|r| r.time);
     tm.housekeeping.sort_by_key(|r| r.time);
     tm.events.sort_by_key(|(t, _)| *t);
     tm.ephemeris.sort_by_key(|r| r.time);
     tm
+}
+
+/// Largest forward step of the CCSDS sequence count between two packets of one APID that
+/// counts as "in sequence" (a few packets may be lost between them).
+const SEQ_IN_ORDER_MAX: u16 = 64;
+
+/// Sequence count `b` follows `a` (1..=[`SEQ_IN_ORDER_MAX`] later, 14-bit wrap-around).
+fn follows(a: u16, b: u16) -> bool {
+    let d = b.wrapping_sub(a) & 0x3fff;
+    (1..=SEQ_IN_ORDER_MAX).contains(&d)
+}
+
+/// Which records of one APID (times and sequence counts in file order) are isolated time-code
+/// outliers, and the backward jumps among the others: `(outlier indices, jump indices)`.
+///
+/// In a well-formed file an APID's times never decrease, so a packet in sequence (its
+/// sequence count 1–64 after its predecessor's and 1–64 before its successor's: it is where
+/// it belongs) lies between its neighbours' times. It is an outlier (a damaged time code)
+/// when it lies outside them by more than the tolerance while they agree with each other.
+/// The first and the last packet have one neighbour: they are outliers when they are out of
+/// order with it by more than the tolerance, or more than [`FAR_TIME_STEPS`] median steps
+/// (and at least [`FAR_TIME_S`]) from it. A jump is a backward time step beyond the tolerance
+/// between packets in sequence: the packets that follow carry shifted time codes. A packet
+/// moved in the file (reordered) is out of sequence with its neighbours and is neither: the
+/// reader puts it back by time.
+#[must_use]
+pub fn screen_times(times: &[f64], seqs: &[u16]) -> (Vec<usize>, Vec<usize>) {
+    let mut steps: Vec<f64> = times
+        .windows(2)
+        .map(|w| w[1] - w[0])
+        .filter(|d| *d > 0.0)
+        .collect();
+    steps.sort_by(f64::total_cmp);
+    let median = steps.get(steps.len() / 2).copied().unwrap_or(0.0);
+    let tol = (TIME_TOLERANCE_STEPS * median).max(MIN_TIME_TOLERANCE_S);
+    let far = (FAR_TIME_STEPS * median).max(FAR_TIME_S);
+    let n = times.len().min(seqs.len());
+    let in_seq = |i: usize, j: usize| follows(seqs[i], seqs[j]);
+    let mut outliers = Vec::new();
+    if n >= 3 {
+        // The packets inside: both neighbours known.
+        for i in 1..n - 1 {
+            let (t, a, b) = (times[i], times[i - 1], times[i + 1]);
+            if in_seq(i - 1, i) && in_seq(i, i + 1) && a <= b + tol && (t < a - tol || t > b + tol)
+            {
+                outliers.push(i);
+            }
+        }
+        // The first and the last packet, against their nearest two packets that are not
+        // outliers themselves.
+        let kept: Vec<usize> = (0..n).filter(|i| !outliers.contains(i)).collect();
+        if let [_, j, k, ..] = kept[..] {
+            let (t, b, c) = (times[0], times[j], times[k]);
+            if j == 1
+                && in_seq(0, j)
+                && in_seq(j, k)
+                && b <= c + tol
+                && (t > b + tol || b - t > far)
+            {
+                outliers.insert(0, 0);
+            }
+        }
+        if let [.., k, j, last] = kept[..] {
+            let (t, a, y) = (times[last], times[j], times[k]);
+            if last == n - 1
+                && j == n - 2
+                && in_seq(k, j)
+                && in_seq(j, last)
+                && y <= a + tol
+                && (t < a - tol || t - a > far)
+            {
+                outliers.push(last);
+            }
+        }
+    }
+    let mut jumps = Vec::new();
+    let mut prev: Option<usize> = None;
+    for i in 0..n {
+        if outliers.binary_search(&i).is_ok() {
+            continue;
+        }
+        if let Some(p) = prev {
+            if times[i] < times[p] - tol && in_seq(p, i) {
+                jumps.push(i);
+            }
+        }
+        prev = Some(i);
+    }
+    (outliers, jumps)
+}
+
+/// Drop isolated time-code outliers, report them, the remaining reversals and the backward
+/// jumps (`placed`: offset and length of each decoded record, per APID slot, file order).
+fn screen_time_codes(tm: &mut Telemetry, placed: &[Vec<(usize, usize, u16)>; 4]) {
+    let apids = [
+        APID_RAW_SENSORS,
+        APID_HOUSEKEEPING,
+        APID_EVENT,
+        APID_EPHEMERIS,
+    ];
+    let times: [Vec<f64>; 4] = [
+        tm.raw.iter().map(|r| r.time.seconds()).collect(),
+        tm.housekeeping.iter().map(|r| r.time.seconds()).collect(),
+        tm.events.iter().map(|(t, _)| t.seconds()).collect(),
+        tm.ephemeris.iter().map(|r| r.time.seconds()).collect(),
+    ];
+    let mut reversals = Vec::new();
+    for slot in 0..4 {
+        let (t, pl) = (&times[slot], &placed[slot]);
+        if t.len() != pl.len() {
+            continue; // cannot happen: one placement per decoded record
+        }
+        let seqs: Vec<u16> = pl.iter().map(|p| p.2).collect();
+        let (outliers, jumps) = screen_times(t, &seqs);
+        for &i in &outliers {
+            tm.report.time_outliers.push(TimeOutlier {
+                offset: pl[i].0,
+                len: pl[i].1,
+                apid: apids[slot],
+                time_s: t[i],
+                neighbours_s: (
+                    t.get(i.wrapping_sub(1)).copied().unwrap_or(f64::NAN),
+                    t.get(i + 1).copied().unwrap_or(f64::NAN),
+                ),
+            });
+        }
+        let mut prev: Option<f64> = None;
+        for (i, &ti) in t.iter().enumerate() {
+            if outliers.binary_search(&i).is_ok() {
+                continue;
+            }
+            if let Some(p) = prev {
+                if ti < p {
+                    reversals.push((pl[i].0, p, ti));
+                }
+                if jumps.binary_search(&i).is_ok() {
+                    tm.report.time_jumps.push(TimeJump {
+                        offset: pl[i].0,
+                        apid: apids[slot],
+                        from_s: p,
+                        to_s: ti,
+                    });
+                }
+            }
+            prev = Some(ti);
+        }
+        let keep = |i: usize| outliers.binary_search(&i).is_err();
+        match slot {
+            0 => retain_indexed(&mut tm.raw, keep),
+            1 => retain_indexed(&mut tm.housekeeping, keep),
+            2 => retain_indexed(&mut tm.events, keep),
+            _ => retain_indexed(&mut tm.ephemeris, keep),
+        }
+    }
+    reversals.sort_by_key(|r| r.0);
+    tm.report.time_reversals = reversals;
+    tm.report.time_outliers.sort_by_key(|o| o.offset);
+    tm.report.time_jumps.sort_by_key(|j| j.offset);
+    tm.report.packets_raw = tm.raw.len();
+    tm.report.packets_housekeeping = tm.housekeeping.len();
+    tm.report.packets_event = tm.events.len();
+    tm.report.packets_ephemeris = tm.ephemeris.len();
+}
+
+fn retain_indexed<T>(v: &mut Vec<T>, keep: impl Fn(usize) -> bool) {
+    let mut i = 0;
+    v.retain(|_| {
+        let k = keep(i);
+        i += 1;
+        k
+    });
+}
+
+#[cfg(test)]
+mod time_screen_tests {
+    use super::screen_times;
+
+    #[test]
+    fn one_bad_time_code_is_an_outlier_a_shifted_block_is_a_jump() {
+        let clean: Vec<f64> = (0..100).map(f64::from).collect();
+        let seq: Vec<u16> = (0..100u16).map(|i| (16_350 + i) & 0x3fff).collect();
+        assert_eq!(screen_times(&clean, &seq), (vec![], vec![]));
+        // One flipped bit (±2^20 s, ±16 s) in one frame, also the first or the last.
+        for k in [0usize, 37, 99] {
+            for d in [1_048_576.0, -1_048_576.0, 16.0, -16.0] {
+                let mut t = clean.clone();
+                t[k] += d;
+                let expect = if (k == 0 && d == -16.0) || (k == 99 && d == 16.0) {
+                    vec![] // a 16 s gap at an end: possible, kept
+                } else {
+                    vec![k]
+                };
+                assert_eq!(screen_times(&t, &seq), (expect, vec![]), "frame {k} {d}");
+            }
+        }
+        // An irregular clean stream (records every 5 s and at random in between): nothing.
+        let t: Vec<f64> = vec![0.0, 5.0, 6.0, 10.0, 15.0, 15.5, 20.0, 60.0, 61.0, 65.0];
+        let q: Vec<u16> = (0..10).collect();
+        assert_eq!(screen_times(&t, &q), (vec![], vec![]));
+        // Reordered packets (time and sequence count move together) and a real gap: nothing.
+        let (mut t, mut q) = (clean.clone(), seq.clone());
+        for (a, b) in [(10, 11), (50, 52), (20, 40)] {
+            t.swap(a, b);
+            q.swap(a, b);
+        }
+        t[60..68].reverse();
+        q[60..68].reverse();
+        for x in t.iter_mut().skip(70) {
+            *x += 5000.0;
+        }
+        assert_eq!(screen_times(&t, &q), (vec![], vec![]));
+        // The second half 3600 s earlier, sequence counts unbroken: one jump at its start.
+        let mut t = clean.clone();
+        for x in t.iter_mut().skip(50) {
+            *x -= 3600.0;
+        }
+        assert_eq!(screen_times(&t, &seq), (vec![], vec![50]));
+        // Sparse records with a gap before the last two: not outliers.
+        let s5: Vec<u16> = (0..5).collect();
+        assert!(screen_times(&[100.0, 200.0, 300.0, 5000.0, 5001.0], &s5)
+            .0
+            .is_empty());
+    }
 }

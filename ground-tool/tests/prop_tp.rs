@@ -354,9 +354,11 @@ fn check_report(tm: &Telemetry, bytes: &[u8]) -> Result<(), String> {
         + r.packets_housekeeping * (OVERHEAD + HOUSEKEEPING_LEN)
         + r.packets_event * (OVERHEAD + EVENT_LEN)
         + r.packets_ephemeris * (OVERHEAD + EPHEMERIS_LEN);
-    if decoded + dup + r.skipped_octets() != bytes.len() {
+    // Packets dropped for a damaged time code are accounted for with their length.
+    let outliers: usize = r.time_outliers.iter().map(|o| o.len).sum();
+    if decoded + dup + outliers + r.skipped_octets() != bytes.len() {
         return Err(format!(
-            "octets not accounted for: decoded {decoded} + duplicates {dup} + skipped {} != {}",
+            "octets not accounted for: decoded {decoded} + duplicates {dup} + time-code outliers {outliers} + skipped {} != {}",
             r.skipped_octets(),
             bytes.len()
         ));

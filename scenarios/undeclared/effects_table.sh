@@ -34,12 +34,12 @@ for f in "$ROOT"/scenarios/undeclared/*.toml; do
   if [ -n "${ONLY:-}" ] && [[ " $ONLY " != *" $name "* ]]; then continue; fi
   for seed in $SEEDS; do
     run=$WORK/$name-$seed
-    "$BIN/sim-harness" run "$f" --out "$run" --seed "$seed" -q >/dev/null 2>&1
-    if ! "$BIN/ground-tool" diagnose "$run" --out "$run-diag" --json >"$run-diag.json" 2>"$run-diag.err"; then
+    "$BIN/sim-harness" run "$f" --out "$run" --seed "$seed" --force -q >/dev/null 2>&1
+    if ! "$BIN/ground-tool" diagnose "$run" --out "$run-diag" --force --json >"$run-diag.json" 2>"$run-diag.err"; then
       echo "{\"scenario\": \"$name\", \"seed\": $seed, \"error\": \"diagnose failed\"}" >>"$WORK/lines.jsonl"
       continue
     fi
-    "$BIN/sim-harness" run "$f" --out "$run-after" --seed "$seed" --tables "$run-diag/tables" -q >/dev/null 2>&1
+    "$BIN/sim-harness" run "$f" --out "$run-after" --seed "$seed" --tables "$run-diag/tables" --force -q >/dev/null 2>&1
     python3 - "$f" "$name" "$seed" "$run" >>"$WORK/lines.jsonl" <<'PY'
 import json, math, re, sys
 scen, name, seed, run = sys.argv[1:5]

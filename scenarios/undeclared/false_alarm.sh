@@ -23,8 +23,8 @@ alarms=0
 for ((k = 0; k < N; k++)); do
   seed=$((FIRST + k))
   run=$WORK/run-$seed
-  "$BIN/sim-harness" run "${SCENARIO:-$ROOT/scenarios/undeclared/clean.toml}" --out "$run" --seed "$seed" -q >/dev/null 2>&1
-  "$BIN/ground-tool" diagnose "$run" --out "$WORK/diag-$seed" --json >"$WORK/diag-$seed.json" 2>/dev/null || {
+  "$BIN/sim-harness" run "${SCENARIO:-$ROOT/scenarios/undeclared/clean.toml}" --out "$run" --seed "$seed" --force -q >/dev/null 2>&1
+  "$BIN/ground-tool" diagnose "$run" --out "$WORK/diag-$seed" --force --json >"$WORK/diag-$seed.json" 2>/dev/null || {
     echo "seed $seed: diagnose failed (exit $?)"; alarms=$((alarms + 1)); continue; }
   line=$(python3 - "$WORK/diag-$seed.json" <<'PY'
 import json, sys

@@ -26,8 +26,8 @@ NOTF=$WORK/gro-early-mission-no-fss-tf.toml
 } >"$NOTF"
 pairs=()
 for seed in $SEEDS; do
-  "$BIN/sim-harness" run gro-early-mission --out "$WORK/tf-$seed" --seed "$seed" -q >/dev/null 2>&1
-  "$BIN/sim-harness" run "$NOTF" --out "$WORK/notf-$seed" --seed "$seed" -q >/dev/null 2>&1
+  "$BIN/sim-harness" run gro-early-mission --out "$WORK/tf-$seed" --seed "$seed" --force -q >/dev/null 2>&1
+  "$BIN/sim-harness" run "$NOTF" --out "$WORK/notf-$seed" --seed "$seed" --force -q >/dev/null 2>&1
   pairs+=("$WORK/tf-$seed:$WORK/notf-$seed")
 done
 cd "$ROOT"

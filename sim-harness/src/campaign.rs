@@ -85,6 +85,25 @@ pub struct Aggregate {
     pub rejected_measurements: Spread,
     /// Real-time factor, over runs.
     pub real_time_factor: Spread,
+    /// The campaign this (shard's) aggregate belongs to; written by `monte-carlo`, checked by
+    /// `merge` (absent in a merged aggregate and in files of older versions).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub campaign: Option<CampaignInfo>,
+}
+
+/// What a `monte-carlo` shard was asked to fly: `merge` combines only shards that agree.
+#[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
+pub struct CampaignInfo {
+    /// Scenario name.
+    pub scenario: String,
+    /// Runs in the whole campaign.
+    pub runs: u32,
+    /// Seed of run 0.
+    pub first_seed: u64,
+    /// Simulated duration of each run (s).
+    pub duration_s: f64,
+    /// `(K, M)`: this aggregate holds the runs with `i mod M = K`.
+    pub shard: (u32, u32),
 }
 
 /// Aggregate run summaries (sorted by seed first, so the result does not depend on order).
@@ -124,6 +143,7 @@ pub fn aggregate(summaries: &[Summary]) -> Aggregate {
         fine_mode_fraction: Spread::of(&col(&|x| x.fine_mode_fraction)),
         rejected_measurements: Spread::of(&col(&|x| x.rejected_measurements as f64)),
         real_time_factor: Spread::of(&col(&|x| x.real_time_factor)),
+        campaign: None,
     }
 }
 
@@ -164,6 +184,8 @@ pub struct CampaignOptions {
     pub tables_dir: Option<PathBuf>,
     /// Duration override (s).
     pub duration_s: Option<f64>,
+    /// Replace run folders another tool wrote (`--force`).
+    pub force: bool,
 }
 
 /// Fly a campaign (or its shard) and write its aggregate; returns the aggregate and where it
@@ -189,21 +211,36 @@ pub fn monte_carlo(
                 s.duration_s = d;
             }
             let seed = s.seed;
-            let out = run(
-                s,
-                &RunOptions {
-                    out_dir: Some(opts.out_dir.join(format!("run_{i:05}"))),
-                    tables_dir: opts.tables_dir.clone(),
-                    progress: false,
-                },
-            )
-            .with_context(|| format!("run {i} (seed {seed})"));
+            let folder = opts.out_dir.join(format!("run_{i:05}"));
+            let inputs: Vec<&Path> = opts.tables_dir.as_deref().into_iter().collect();
+            let out =
+                crate::outdir::OutputDir::begin(&folder, "sim-harness run", opts.force, &inputs)
+                    .and_then(|dir| {
+                        let summary = run(
+                            s,
+                            &RunOptions {
+                                out_dir: Some(dir.path().to_path_buf()),
+                                tables_dir: opts.tables_dir.clone(),
+                                progress: false,
+                            },
+                        )?;
+                        dir.commit()?;
+                        Ok(summary)
+                    })
+                    .with_context(|| format!("run {i} (seed {seed})"));
             on_done();
             out
         })
         .collect();
     let summaries: Vec<Summary> = summaries.into_iter().collect::<anyhow::Result<_>>()?;
-    let agg = aggregate(&summaries);
+    let mut agg = aggregate(&summaries);
+    agg.campaign = Some(CampaignInfo {
+        scenario: scenario.name.clone(),
+        runs: opts.runs,
+        first_seed: opts.seed,
+        duration_s: opts.duration_s.unwrap_or(scenario.duration_s),
+        shard: opts.shard,
+    });
     let name = if m == 1 {
         "aggregate.json".to_owned()
     } else {
@@ -215,12 +252,11 @@ pub fn monte_carlo(
 }
 
 /// Every `run_*/summary.json` below the folders (a folder that is itself a run counts too),
-/// one per seed (the first found).
+/// with its file, in folder order.
 ///
 /// # Errors
 /// Unreadable folders or malformed summaries (named).
-pub fn collect_summaries(dirs: &[PathBuf]) -> anyhow::Result<Vec<Summary>> {
-    let mut out: Vec<Summary> = Vec::new();
+pub fn collect_summary_files(dirs: &[PathBuf]) -> anyhow::Result<Vec<(PathBuf, Summary)>> {
     let mut files = Vec::new();
     for d in dirs {
         let own = d.join("summary.json");
@@ -228,7 +264,7 @@ pub fn collect_summaries(dirs: &[PathBuf]) -> anyhow::Result<Vec<Summary>> {
             files.push(own);
         }
         let mut entries: Vec<PathBuf> = std::fs::read_dir(d)
-            .with_context(|| format!("reading {}", d.display()))?
+            .with_context(|| format!("cannot read {}", d.display()))?
             .filter_map(Result::ok)
             .map(|e| e.path())
             .filter(|p| {
@@ -245,11 +281,24 @@ pub fn collect_summaries(dirs: &[PathBuf]) -> anyhow::Result<Vec<Summary>> {
                 .filter(|p| p.exists()),
         );
     }
+    let mut out = Vec::new();
     for f in files {
         let text =
-            std::fs::read_to_string(&f).with_context(|| format!("reading {}", f.display()))?;
+            std::fs::read_to_string(&f).with_context(|| format!("cannot read {}", f.display()))?;
         let s: Summary = serde_json::from_str(&text)
             .with_context(|| format!("{} is not a run summary", f.display()))?;
+        out.push((f, s));
+    }
+    Ok(out)
+}
+
+/// Every run summary below the folders, one per (scenario, seed) (the first found).
+///
+/// # Errors
+/// Unreadable folders or malformed summaries (named).
+pub fn collect_summaries(dirs: &[PathBuf]) -> anyhow::Result<Vec<Summary>> {
+    let mut out: Vec<Summary> = Vec::new();
+    for (_, s) in collect_summary_files(dirs)? {
         if !out
             .iter()
             .any(|o| o.seed == s.seed && o.scenario == s.scenario)
@@ -260,15 +309,150 @@ pub fn collect_summaries(dirs: &[PathBuf]) -> anyhow::Result<Vec<Summary>> {
     Ok(out)
 }
 
-/// `merge`: aggregate every run below `dirs` into `out` (default `dirs[0]/aggregate.json`).
+/// The campaign descriptions (`aggregate*.json` written by `monte-carlo`) in the folders.
+fn campaign_infos(dirs: &[PathBuf]) -> anyhow::Result<Vec<(PathBuf, CampaignInfo)>> {
+    let mut out = Vec::new();
+    for d in dirs {
+        let mut files: Vec<PathBuf> = std::fs::read_dir(d)
+            .with_context(|| format!("cannot read {}", d.display()))?
+            .filter_map(Result::ok)
+            .map(|e| e.path())
+            .filter(|p| {
+                p.file_name().is_some_and(|n| {
+                    let n = n.to_string_lossy();
+                    n.starts_with("aggregate") && n.ends_with(".json")
+                })
+            })
+            .collect();
+        files.sort();
+        for f in files {
+            let text = std::fs::read_to_string(&f)
+                .with_context(|| format!("cannot read {}", f.display()))?;
+            let agg: Aggregate = serde_json::from_str(&text)
+                .with_context(|| format!("{} is not an aggregate", f.display()))?;
+            if let Some(c) = agg.campaign {
+                out.push((f, c));
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// Shards and runs belong to one campaign: one scenario and duration for every run, one seed
+/// once; the `monte-carlo` descriptions agree on scenario, runs, first seed, duration and
+/// shard count, every shard is present once, and the seeds are the campaign's.
 ///
 /// # Errors
-/// No runs found, or I/O.
-pub fn merge(dirs: &[PathBuf], out: Option<&Path>) -> anyhow::Result<(Aggregate, PathBuf)> {
-    let summaries = collect_summaries(dirs)?;
-    if summaries.is_empty() {
+/// The first disagreement, naming the two files.
+pub fn check_mergeable(
+    summaries: &[(PathBuf, Summary)],
+    infos: &[(PathBuf, CampaignInfo)],
+) -> anyhow::Result<()> {
+    let Some((f0, s0)) = summaries.first() else {
         anyhow::bail!("no run_*/summary.json found under the given folders");
+    };
+    for (f, s) in summaries {
+        if s.scenario != s0.scenario {
+            anyhow::bail!(
+                "{} is scenario {:?} but {} is {:?}: merge combines the runs of one campaign only",
+                f.display(),
+                s.scenario,
+                f0.display(),
+                s0.scenario
+            );
+        }
+        if (s.sim_seconds - s0.sim_seconds).abs() > 1e-6 {
+            anyhow::bail!(
+                "{} simulated {} s but {} simulated {} s: merge combines runs of one duration only",
+                f.display(),
+                s.sim_seconds,
+                f0.display(),
+                s0.sim_seconds
+            );
+        }
     }
+    for (i, (fa, a)) in summaries.iter().enumerate() {
+        for (fb, b) in &summaries[i + 1..] {
+            if a.seed == b.seed {
+                anyhow::bail!(
+                    "seed {} appears twice ({} and {}): the folders overlap; give each shard once",
+                    a.seed,
+                    fa.display(),
+                    fb.display()
+                );
+            }
+        }
+    }
+    let Some((g0, c0)) = infos.first() else {
+        return Ok(());
+    };
+    let mut shards = Vec::new();
+    for (g, c) in infos {
+        let same = c.scenario == c0.scenario
+            && c.runs == c0.runs
+            && c.first_seed == c0.first_seed
+            && (c.duration_s - c0.duration_s).abs() < 1e-9
+            && c.shard.1 == c0.shard.1;
+        if !same {
+            anyhow::bail!(
+                "{} (scenario {:?}, {} runs from seed {}, {} s, {} shard(s)) and {} (scenario {:?}, {} runs from seed {}, {} s, {} shard(s)) describe different campaigns",
+                g.display(), c.scenario, c.runs, c.first_seed, c.duration_s, c.shard.1,
+                g0.display(), c0.scenario, c0.runs, c0.first_seed, c0.duration_s, c0.shard.1
+            );
+        }
+        if shards.contains(&c.shard.0) {
+            anyhow::bail!(
+                "shard {} of {} given twice ({})",
+                c.shard.0,
+                c.shard.1,
+                g.display()
+            );
+        }
+        shards.push(c.shard.0);
+    }
+    if c0.scenario != s0.scenario {
+        anyhow::bail!(
+            "{} describes scenario {:?} but the runs are {:?}",
+            g0.display(),
+            c0.scenario,
+            s0.scenario
+        );
+    }
+    let missing: Vec<u32> = (0..c0.shard.1).filter(|k| !shards.contains(k)).collect();
+    if !missing.is_empty() {
+        anyhow::bail!(
+            "shard(s) {missing:?} of {} missing: give every shard's folder (the aggregate would be of part of the campaign)",
+            c0.shard.1
+        );
+    }
+    let mut seeds: Vec<u64> = summaries.iter().map(|(_, s)| s.seed).collect();
+    seeds.sort_unstable();
+    let want: Vec<u64> = (0..u64::from(c0.runs))
+        .map(|i| c0.first_seed.wrapping_add(i))
+        .collect();
+    if seeds != want {
+        anyhow::bail!(
+            "the runs found have seeds {:?}..{:?} ({} runs) but the campaign is {} runs from seed {}: a run is missing or foreign",
+            seeds.first(),
+            seeds.last(),
+            seeds.len(),
+            c0.runs,
+            c0.first_seed
+        );
+    }
+    Ok(())
+}
+
+/// `merge`: aggregate every run below `dirs` into `out` (default `dirs[0]/aggregate.json`),
+/// after [`check_mergeable`].
+///
+/// # Errors
+/// [`crate::InputError`] when no runs are found or they are not of one campaign; I/O.
+pub fn merge(dirs: &[PathBuf], out: Option<&Path>) -> anyhow::Result<(Aggregate, PathBuf)> {
+    let found = collect_summary_files(dirs).map_err(crate::InputError::from)?;
+    let infos = campaign_infos(dirs).map_err(crate::InputError::from)?;
+    check_mergeable(&found, &infos).map_err(crate::InputError::from)?;
+    let summaries: Vec<Summary> = found.into_iter().map(|(_, s)| s).collect();
     let agg = aggregate(&summaries);
     let path = out.map_or_else(
         || {

@@ -128,8 +128,8 @@ fn quat_from_array([x, y, z, w]: [f64; 4]) -> Quat {
 
 impl Simulation {
     /// Build every model from a validated scenario, boot the flight software and schedule
-    /// the start-up uplinks and the scenario timeline. `tables_dir`: every `*.tbl` in it is
-    /// loaded and activated at t = 0.
+    /// the start-up uplinks and the scenario timeline. `tables_dir`: the images its
+    /// `manifest.json` lists ([`crate::manifest`]) are loaded and activated at t = 0.
     ///
     /// # Errors
     /// [`InputError`] for unreadable/invalid table files or parameters (naming the field);
@@ -242,21 +242,16 @@ impl Simulation {
             );
         }
         if let Some(dir) = tables_dir {
-            let mut files: Vec<_> = std::fs::read_dir(dir)
-                .with_context(|| format!("--tables {}", dir.display()))
-                .map_err(InputError::from)?
-                .filter_map(Result::ok)
-                .map(|e| e.path())
-                .filter(|p| p.extension().is_some_and(|e| e == "tbl"))
-                .collect();
-            files.sort();
-            if files.is_empty() {
-                return Err(
-                    InputError::msg(format!("--tables {}: no *.tbl files", dir.display())).into(),
+            // The images the folder's manifest lists, checked (crate::manifest).
+            let (tables, unlisted) = crate::manifest::read(dir)?;
+            for f in &unlisted {
+                eprintln!(
+                    "warning: {} is not listed in {}: not loaded",
+                    f.display(),
+                    dir.join(crate::manifest::MANIFEST).display()
                 );
             }
-            for f in files {
-                let image = read_image(&f).map_err(InputError::from)?;
+            for (f, _, image) in tables {
                 push_upload(
                     &mut uploads,
                     &mut timeline,
@@ -679,6 +674,6 @@ impl Simulation {
 pub fn read_image(path: &std::path::Path) -> anyhow::Result<Vec<u8>> {
     let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
     fsw_core::tables::image::parse_image(&bytes)
-        .map_err(|e| anyhow::anyhow!("{} is not a valid table image: {e:?}", path.display()))?;
+        .map_err(|e| anyhow::anyhow!("{} is not a valid table image: {e}", path.display()))?;
     Ok(bytes)
 }

@@ -17,7 +17,9 @@ pub mod campaign;
 pub mod closed_loop;
 pub mod data;
 pub mod faults;
+pub mod manifest;
 pub mod onboard;
+pub mod outdir;
 pub mod paper;
 pub mod run;
 pub mod scenario;
@@ -40,6 +42,28 @@ impl InputError {
     /// An input error from a message.
     pub fn msg(m: impl std::fmt::Display) -> Self {
         Self(anyhow::anyhow!("{m}"))
+    }
+}
+
+/// Exit code of every binary of the workspace (README "Exit codes", docs/reliability.md):
+/// 0 success, 1 runtime failure, 2 bad or insufficient input.
+pub mod exit {
+    /// Success.
+    pub const OK: u8 = 0;
+    /// A runtime failure: I/O while writing, another writer busy, an internal error.
+    pub const FAILURE: u8 = 1;
+    /// Bad or insufficient input: the message names the file, field or option and the cause.
+    pub const BAD_INPUT: u8 = 2;
+}
+
+/// The exit code for an error: [`exit::BAD_INPUT`] when it (or one of its causes) is an
+/// [`InputError`], else [`exit::FAILURE`]. Chosen from the error's type, never its text.
+#[must_use]
+pub fn exit_code(e: &anyhow::Error) -> u8 {
+    if is_input_error(e) {
+        exit::BAD_INPUT
+    } else {
+        exit::FAILURE
     }
 }
 

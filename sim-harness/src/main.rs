@@ -9,9 +9,10 @@ use anyhow::Context;
 use clap::{Parser, Subcommand};
 
 use sim_harness::campaign::{self, CampaignOptions};
+use sim_harness::outdir::OutputDir;
 use sim_harness::run::{self, RunOptions};
 use sim_harness::scenario::{self, Scenario};
-use sim_harness::{is_input_error, InputError};
+use sim_harness::{exit_code, InputError};
 
 const ABOUT: &str =
     "Closed-loop simulator of the Compton Gamma Ray Observatory (1991) attitude system.
@@ -25,8 +26,9 @@ system's, built from Hipparcos) and initialises the filter 0.1 deg off the truth
 Scenarios are TOML files (see scenarios/*.toml, each documented). A bare name such as
 `gro-early-mission` means scenarios/gro-early-mission.toml (built into the binary too).
 
-Exit codes: 0 ok, 2 bad input (scenario or table file; the message names the field),
-1 runtime failure.";
+Exit codes (every binary of the workspace): 0 ok, 1 runtime failure (I/O, another writer
+busy on the same folder), 2 bad input (scenario, option or table file; the message names the
+file, the field and the cause).";
 
 const AFTER: &str = "Examples:
   sim-harness run gro-early-mission --out runs/early
@@ -54,23 +56,33 @@ enum Cmd {
     /// uploads/*.tbl (every table image uplinked), truth.json (true alignments, IRU delta_m
     /// and G, bias history, undeclared effects: for scoring only) and summary.json (attitude
     /// error rms/3-sigma per axis, post-maneuver errors, NEES, rejected measurements, speed).
-    /// Files are written under *.partial names and renamed at the end, summary.json last.
+    /// The folder is written as a temporary sibling (.DIR.tmp-PID) and renamed into place at
+    /// the end, so DIR holds one whole run or its previous content; a second writer into the
+    /// same DIR fails (lock file .DIR.lock, exit code 1).
     #[command(after_help = "Example: sim-harness run gro-early-mission --out runs/early --json")]
     Run {
         /// Scenario TOML file, or a bare built-in name (gro-early-mission, gro-bias-history,
         /// normal-ops, inertial_hold, undeclared_effects).
         scenario: String,
-        /// Run folder (created; an old summary.json in it is removed first).
+        /// Run folder. An existing DIR is replaced whole if it is a previous `sim-harness run`
+        /// output (its .gro-output.json says so); any other non-empty DIR is refused (exit
+        /// code 2) unless --force.
         #[arg(long)]
         out: PathBuf,
+        /// Replace the whole content of a non-empty --out that another tool or a person wrote.
+        #[arg(long)]
+        force: bool,
         /// Override the scenario's duration_s (s).
         #[arg(long)]
         duration: Option<f64>,
         /// Override the scenario's seed (every random stream derives from it).
         #[arg(long)]
         seed: Option<u64>,
-        /// Load and activate every *.tbl table image of DIR at t = 0 (after the catalog),
-        /// e.g. the tables written by `ground-tool calibrate`.
+        /// Load and activate at t = 0 (after the catalog) the table images that
+        /// DIR/manifest.json lists, each checked against its CRC-32: the tables/ folder
+        /// written by `ground-tool calibrate` or `diagnose`. A folder without a manifest is
+        /// refused (exit code 2); `ground-tool table manifest DIR` writes one for a folder
+        /// made by hand. Other *.tbl files in DIR are not loaded.
         #[arg(long, value_name = "DIR")]
         tables: Option<PathBuf>,
         /// Print summary.json to stdout.
@@ -110,9 +122,12 @@ enum Cmd {
         /// Override the scenario's duration_s (s).
         #[arg(long)]
         duration: Option<f64>,
-        /// Table images to activate at t = 0 in every run.
+        /// Table images to activate at t = 0 in every run (DIR/manifest.json, as `run`).
         #[arg(long, value_name = "DIR")]
         tables: Option<PathBuf>,
+        /// Replace run folders DIR/run_* that `sim-harness run` did not write.
+        #[arg(long)]
+        force: bool,
         /// Print the aggregate to stdout.
         #[arg(long)]
         json: bool,
@@ -123,8 +138,10 @@ enum Cmd {
     /// Combine the runs of campaign folders (e.g. the shards of a job array) into one
     /// aggregate.json.
     ///
-    /// Reads every DIR/run_*/summary.json (each seed once) and writes the aggregate to
-    /// --out or DIR[0]/aggregate.json, and prints it.
+    /// Reads every DIR/run_*/summary.json and writes the aggregate to --out or
+    /// DIR[0]/aggregate.json, and prints it. Refused (exit code 2) unless the runs are of one
+    /// campaign: one scenario and duration, each seed once, and the shards' aggregate files
+    /// agree on scenario, runs, first seed, duration and shard count, with every shard given.
     #[command(
         after_help = "Example: sim-harness merge runs/mc-shard0 runs/mc-shard1 --out runs/mc.json"
     )]
@@ -175,10 +192,10 @@ enum Cmd {
 fn load_scenario(arg: &str, duration: Option<f64>, seed: Option<u64>) -> anyhow::Result<Scenario> {
     let mut s = scenario::resolve(arg).map_err(InputError::from)?;
     if let Some(d) = duration {
-        if !(d.is_finite() && d >= 0.0) {
-            return Err(InputError::msg(format!("--duration must be ≥ 0, got {d}")).into());
-        }
         s.duration_s = d;
+        s.validate()
+            .context("--duration")
+            .map_err(InputError::from)?;
     }
     if let Some(seed) = seed {
         s.seed = seed;
@@ -196,6 +213,7 @@ fn main_inner(cli: Cli) -> anyhow::Result<()> {
         Cmd::Run {
             scenario,
             out,
+            force,
             duration,
             seed,
             tables,
@@ -204,14 +222,22 @@ fn main_inner(cli: Cli) -> anyhow::Result<()> {
         } => {
             let s = load_scenario(&scenario, duration, seed)?;
             let name = s.name.clone();
+            // The scenario file and the tables folder are inputs: --out must not contain them.
+            let scenario_path = std::path::Path::new(&scenario);
+            let inputs: Vec<&std::path::Path> = [Some(scenario_path), tables.as_deref()]
+                .into_iter()
+                .flatten()
+                .collect();
+            let dir = OutputDir::begin(&out, "sim-harness run", force, &inputs)?;
             let summary = run::run(
                 s,
                 &RunOptions {
-                    out_dir: Some(out.clone()),
+                    out_dir: Some(dir.path().to_path_buf()),
                     tables_dir: tables,
                     progress: !quiet,
                 },
             )?;
+            dir.commit()?;
             if json {
                 print_json(&summary)?;
             } else {
@@ -249,6 +275,7 @@ fn main_inner(cli: Cli) -> anyhow::Result<()> {
             shard,
             duration,
             tables,
+            force,
             json,
             quiet,
         } => {
@@ -288,6 +315,7 @@ fn main_inner(cli: Cli) -> anyhow::Result<()> {
                     shard,
                     tables_dir: tables,
                     duration_s: duration,
+                    force,
                 },
                 &on_done,
             )?;
@@ -300,9 +328,7 @@ fn main_inner(cli: Cli) -> anyhow::Result<()> {
             eprintln!("{} runs aggregated into {}", agg.runs, path.display());
         }
         Cmd::Merge { dirs, out } => {
-            let (agg, path) = campaign::merge(&dirs, out.as_deref())
-                .context("merge")
-                .map_err(InputError::from)?;
+            let (agg, path) = campaign::merge(&dirs, out.as_deref()).context("merge")?;
             print_json(&agg)?;
             eprintln!("{} runs aggregated into {}", agg.runs, path.display());
         }
@@ -357,11 +383,7 @@ fn main() -> ExitCode {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("sim-harness: error: {e:#}");
-            if is_input_error(&e) {
-                ExitCode::from(2)
-            } else {
-                ExitCode::from(1)
-            }
+            ExitCode::from(exit_code(&e))
         }
     }
 }

@@ -34,7 +34,8 @@
 //! 1. Uplinks the onboard star catalog ([`crate::onboard`]) with `TableLoad` + `TableActivate`
 //!    (unless `uplink_catalog = false`);
 //! 2. with `fly_true_alignments = true`, uplinks an alignment table equal to the truth;
-//! 3. loads and activates every `*.tbl` of `--tables DIR` (file-name order);
+//! 3. loads and activates the images `--tables DIR/manifest.json` lists, in its order
+//!    ([`crate::manifest`]);
 //! 4. initialises the filter with `FilterInitialize(Rot(error) · A_true)`, `error` =
 //!    `[initial_estimate]` (default 0.1° about (1, 1, 1)/√3), which also starts the inertial
 //!    hold (unless `initial_estimate.enabled = false`).
@@ -418,6 +419,34 @@ pub const DEFAULT_DECLARED_EFFECTS: [&str; 5] = [
     "iru_bias_transient",
 ];
 
+/// Longest `duration_s` accepted (s): one year. Why: runs are simulated cycle by cycle
+/// (≈ 0.01 ms each) and write ≈ 300 octets of telemetry per cycle; a longer value is a typo
+/// (`1e30` used to saturate the cycle count and simulate nothing with exit code 0).
+pub const MAX_DURATION_S: f64 = 366.0 * 86_400.0;
+
+/// Longest `step_s` accepted (s): the OBC's filter table accepts cycle periods of 0.125–2 s.
+pub const MAX_STEP_S: f64 = 2.0;
+
+/// The TOML path and value of the first NaN or infinite float in `v`.
+fn first_non_finite(v: &toml::Value, path: String) -> Option<(String, f64)> {
+    match v {
+        toml::Value::Float(x) if !x.is_finite() => Some((path, *x)),
+        toml::Value::Array(a) => a
+            .iter()
+            .enumerate()
+            .find_map(|(i, x)| first_non_finite(x, format!("{path}[{i}]"))),
+        toml::Value::Table(t) => t.iter().find_map(|(k, x)| {
+            let p = if path.is_empty() {
+                k.clone()
+            } else {
+                format!("{path}.{k}")
+            };
+            first_non_finite(x, p)
+        }),
+        _ => None,
+    }
+}
+
 /// Scenarios shipped in `scenarios/` and embedded in the binary: (name, TOML text).
 pub const EMBEDDED_SCENARIOS: [(&str, &str); 5] = [
     (
@@ -546,9 +575,32 @@ impl Scenario {
             }
             Ok(())
         };
+        // Every number of the file, however deep, is finite (a NaN or an infinity in any
+        // parameter would propagate into the truth and the telemetry as nulls or garbage).
+        if let Ok(tree) = toml::Value::try_from(self) {
+            if let Some((path, v)) = first_non_finite(&tree, String::new()) {
+                bail!("{path} must be a finite number, got {v}");
+            }
+        }
         pos("step_s", self.step_s)?;
-        if !(self.duration_s.is_finite() && self.duration_s >= 0.0) {
-            bail!("duration_s must be ≥ 0, got {}", self.duration_s);
+        if self.step_s > MAX_STEP_S {
+            bail!(
+                "step_s must be ≤ {MAX_STEP_S} s (the OBC's filter table accepts cycle periods of 0.125–2 s), got {}",
+                self.step_s
+            );
+        }
+        if !(self.duration_s.is_finite() && (0.0..=MAX_DURATION_S).contains(&self.duration_s)) {
+            bail!(
+                "duration_s must be in [0, {MAX_DURATION_S}] s (one year; the run is simulated cycle by cycle), got {}",
+                self.duration_s
+            );
+        }
+        if self.duration_s > 0.0 && self.duration_s < self.step_s {
+            bail!(
+                "duration_s ({}) is shorter than one cycle (step_s = {}): nothing would be simulated",
+                self.duration_s,
+                self.step_s
+            );
         }
         pos("sun_refresh_s", self.sun_refresh_s)?;
         pos("ephemeris_period_s", self.ephemeris_period_s)?;
@@ -588,6 +640,22 @@ impl Scenario {
             self.orbit.semimajor_axis_km - 6378.137,
         )
         .context("orbit.semimajor_axis_km must exceed the Earth radius")?;
+        if !(0.0..=180.0).contains(&self.orbit.inclination_deg) {
+            bail!(
+                "orbit.inclination_deg must be in [0, 180], got {}",
+                self.orbit.inclination_deg
+            );
+        }
+        for (name, v) in [
+            ("orbit.raan_deg", self.orbit.raan_deg),
+            ("orbit.arg_perigee_deg", self.orbit.arg_perigee_deg),
+            ("orbit.arg_latitude_deg", self.orbit.arg_latitude_deg),
+        ] {
+            if !(-360.0..=360.0).contains(&v) {
+                bail!("{name} must be in [-360, 360] deg, got {v}");
+            }
+        }
+        pos("orbit.max_step_s", self.orbit.max_step_s)?;
         if !(0.0..1.0).contains(&self.orbit.eccentricity) {
             bail!(
                 "orbit.eccentricity must be in [0, 1), got {}",

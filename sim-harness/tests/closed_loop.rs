@@ -478,6 +478,7 @@ fn monte_carlo_shards_merge_to_the_campaign() {
         shard,
         tables_dir: None,
         duration_s: None,
+        force: false,
     };
     let (whole, _) = monte_carlo(&s, &opts("all", (0, 1)), &|| {}).unwrap();
     monte_carlo(&s, &opts("s0", (0, 2)), &|| {}).unwrap();

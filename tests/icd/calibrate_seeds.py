@@ -59,7 +59,7 @@ def main():
         run = os.path.join(a.work, f"s{seed}")
         subprocess.run([sys.executable, os.path.join(HERE, "write_run.py"), "--out", run,
                         "--seed", str(seed)] + extra, check=True, stdout=subprocess.DEVNULL)
-        subprocess.run([a.bin, "calibrate", run, "--out", run + "-cal"], check=True,
+        subprocess.run([a.bin, "calibrate", run, "--out", run + "-cal", "--force"], check=True,
                        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         truth = json.load(open(os.path.join(run, "truth_icd.json")))["injected_rotation_acs_arcsec"]
         rep = json.load(open(os.path.join(run + "-cal", "report.json")))

@@ -148,7 +148,7 @@ def run_one(case, seed, args):
                         "--seed", str(seed)] + BASE + CASES[case], capture_output=True, text=True)
     if w.returncode != 0:
         return {"error": "writer: " + w.stderr.strip()[-300:]}
-    d = subprocess.run([args.bin, "diagnose", run, "--out", out, "--json"],
+    d = subprocess.run([args.bin, "diagnose", run, "--out", out, "--force", "--json"],
                        capture_output=True, text=True)
     if d.returncode != 0:
         return {"error": f"diagnose exit {d.returncode}: " + d.stderr.strip()[-300:]}

@@ -84,7 +84,7 @@ def run_case(name, flags, what, args):
     row = {"case": name}
     for cmd in ("calibrate", "diagnose"):
         out = os.path.join(run, cmd[:3])
-        r = subprocess.run([args.bin, cmd, run, "--out", out, "--json"], capture_output=True, text=True)
+        r = subprocess.run([args.bin, cmd, run, "--out", out, "--force", "--json"], capture_output=True, text=True)
         err = [l for l in r.stderr.splitlines() if l.strip()]
         row[cmd + "_rc"] = r.returncode
         row[cmd + "_msg"] = err[-1][:300] if err else ""

@@ -593,6 +593,10 @@ def main(argv=None):
                    help="valid extremes: counters near wrap, 0.5°/s slews, temperatures −40/+70 °C, Sun at the FSS edge")
     p.add_argument("--time-code-offset-s", type=float, default=0.0,
                    help="add this to every time code without changing the physics (a writer error)")
+    p.add_argument("--flip-time-bit", default=None, metavar="K:BIT",
+                   help="flip bit BIT (0 = LSB of the 6-octet CUC time code, 16 = LSB of the coarse seconds) of the K-th raw frame's time code (a damaged time code)")
+    p.add_argument("--time-shift-after", default=None, metavar="T_S:DELTA_S",
+                   help="add DELTA_S to the time code of every packet at or after T_S s from the start, sequence counts unbroken (a clock or time-stamping error of a block)")
     p.add_argument("--low-rate-slews", action="store_true", help="keep the IRU in low rate during slews")
     p.add_argument("--quiet-iru", action="store_true", help="no gyro bias and no noise")
     p.add_argument("--backup-channels-dead", action="store_true",
@@ -847,7 +851,7 @@ def main(argv=None):
     missing = {m.upper() for m in args.missing}
 
     tm_path = os.path.join(args.out, "telemetry.bin")
-    stream = not (args.reorder_every or args.duplicate_every)
+    stream = not (args.reorder_every or args.duplicate_every or args.time_shift_after or args.flip_time_bit)
     pk = Packets(args.seq_start, args.time_code_offset_s, tm_path if stream else None)
 
     def refuse(msg):
@@ -1142,6 +1146,23 @@ def main(argv=None):
         n_packets = pk.n
     else:
         packets = [b for (_t, _a, b) in pk.out]
+        if args.time_shift_after:
+            t_cut, delta = (float(x) for x in args.time_shift_after.split(":"))
+            t_start = pk.out[0][0] if pk.out else 0.0
+            for j, (t, _a, b) in enumerate(pk.out):
+                if t - t_start >= t_cut:
+                    coarse, fine = struct.unpack(">IH", b[6:12])
+                    tc = coarse + fine / 65536.0 + delta
+                    c2 = int(math.floor(tc))
+                    f2 = int(round((tc - c2) * 65536.0)) % 65536
+                    packets[j] = b[:6] + struct.pack(">IH", c2, f2) + b[12:]
+        if args.flip_time_bit:
+            k, bit = (int(x) for x in args.flip_time_bit.split(":"))
+            raws = [j for j, (_t, a, _b) in enumerate(pk.out) if a == APID_RAW]
+            j = raws[k]
+            code = bytearray(packets[j][6:12])
+            code[5 - bit // 8] ^= 1 << (bit % 8)
+            packets[j] = packets[j][:6] + bytes(code) + packets[j][12:]
         if args.reorder_every:
             # Swap packet j with j + 2: with a raw frame and a housekeeping packet per cycle that
             # is the same APID one cycle later, so time goes backwards within an APID.

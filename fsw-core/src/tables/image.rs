@@ -244,6 +244,87 @@ impl TableError {
     }
 }
 
+/// A sentence for people (the field index is the table's field number of `docs/tables.md`);
+/// the reason code is in brackets so logs and events can be matched.
+impl core::fmt::Display for TableError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match *self {
+            Self::TooShort { len } => write!(
+                f,
+                "the image is {len} octets, shorter than a header and a CRC (24 octets) [reason 1]"
+            ),
+            Self::TooLong { len, max } => write!(
+                f,
+                "the image is {len} octets, longer than the {max}-octet load buffer [reason 2]"
+            ),
+            Self::BadMagic { found } => write!(
+                f,
+                "octets 0-3 hold 0x{found:08x}, not the magic word \"GROT\": not a table image [reason 3]"
+            ),
+            Self::UnknownTableId { found } => write!(
+                f,
+                "octet 4 (table id) holds {found}, not 1 alignment, 2 IRU, 3 filter or 4 star catalog [reason 4]"
+            ),
+            Self::WrongTableId { expected, found } => write!(
+                f,
+                "the image holds a {} table where a {} table was expected [reason 5]",
+                found.name(),
+                expected.name()
+            ),
+            Self::UnsupportedVersion { found } => write!(
+                f,
+                "octet 5 (format version) holds {found}, a version this software does not read [reason 6]"
+            ),
+            Self::ReservedNotZero => write!(
+                f,
+                "reserved header octets (6-7 or 18-19) are not zero [reason 7]"
+            ),
+            Self::LengthMismatch { declared, actual } => write!(
+                f,
+                "the header declares a {declared}-octet payload but {actual} octets follow (truncated or extended file) [reason 8]"
+            ),
+            Self::CrcMismatch { computed, stored } => write!(
+                f,
+                "the CRC-32 stored in the last 4 octets (0x{stored:08x}) does not match the CRC-32 of the image (0x{computed:08x}): the file is damaged [reason 9]"
+            ),
+            Self::PayloadDecode => write!(
+                f,
+                "the payload does not decode as the table named in the header (or has trailing octets) [reason 10]"
+            ),
+            Self::BufferTooSmall => {
+                write!(f, "the payload does not fit the output buffer [reason 11]")
+            }
+            Self::NotFinite { field } => write!(
+                f,
+                "field {field} (docs/tables.md) holds NaN or an infinity [reason 12]"
+            ),
+            Self::NotRotation { sensor } => write!(
+                f,
+                "the alignment matrix of {} is not a proper rotation (orthonormal to 1e-6, det +1) [reason 13]",
+                match sensor {
+                    0 => "FHST1",
+                    1 => "FHST2",
+                    2 => "FSS1",
+                    3 => "FSS2",
+                    _ => "an unknown sensor",
+                }
+            ),
+            Self::OutOfRange { field } => write!(
+                f,
+                "field {field} (docs/tables.md) is outside its documented range [reason 14]"
+            ),
+            Self::ChangeTooLarge {
+                field,
+                change,
+                limit,
+            } => write!(
+                f,
+                "field {field} would change by {change} from the active table, above the filter table's bound {limit} [reason 15]"
+            ),
+        }
+    }
+}
+
 /// The parsed, CRC-checked header of an image.
 /// docs/tables.md ("Image = header + payload + CRC").
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -1415,7 +1415,7 @@ pub fn write_table<T: serde::Serialize>(
     let created = fsw_core::raw::TimeTag::from_seconds(created_tai1958_s).unwrap_or_default();
     let mut buf = vec![0u8; 256 * 1024];
     let n = encode_image(id, created, table, &mut buf)
-        .map_err(|e| anyhow::anyhow!("encoding {} table: {e:?}", id.name()))?;
+        .map_err(|e| anyhow::anyhow!("encoding the {} table: {e}", id.name()))?;
     std::fs::write(path, &buf[..n]).with_context(|| format!("writing {}", path.display()))
 }
 
@@ -1426,13 +1426,17 @@ pub fn write_table<T: serde::Serialize>(
 pub fn read_run(run_dir: &Path) -> anyhow::Result<(Telemetry, Metadata)> {
     let telemetry_path = run_dir.join("telemetry.bin");
     if !telemetry_path.exists() {
-        bail!(
+        return Err(crate::run_check::InputError::msg(format!(
             "{} not found: a run folder needs telemetry.bin (docs/icd.md); run `sim-harness run SCENARIO --out {}` first",
             telemetry_path.display(),
             run_dir.display()
-        );
+        ))
+        .into());
     }
-    Ok((tp::read_file(&telemetry_path)?, read_metadata(run_dir)?))
+    let tm = tp::read_file(&telemetry_path).map_err(|e| crate::run_check::InputError(e.into()))?;
+    let metadata = read_metadata(run_dir).map_err(crate::run_check::InputError::from)?;
+    crate::run_check::validate_metadata(&run_dir.join("metadata.json"), &metadata)?;
+    Ok((tm, metadata))
 }
 
 /// A table from its binary image file (header, CRC and canonical payload checked).
@@ -1442,12 +1446,24 @@ pub fn read_run(run_dir: &Path) -> anyhow::Result<(Telemetry, Metadata)> {
 pub fn read_table_image<T: serde::de::DeserializeOwned + serde::Serialize>(
     path: &Path,
 ) -> anyhow::Result<T> {
-    use fsw_core::tables::image::{decode_payload, parse_image};
     let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
-    let (_, payload) = parse_image(&bytes)
-        .map_err(|e| anyhow::anyhow!("{} is not valid (table image): {e:?}", path.display()))?;
+    decode_table_image(&bytes, path)
+}
+
+/// A table from the octets of its image file `path` (header, CRC and canonical payload
+/// checked).
+///
+/// # Errors
+/// An image that does not parse or decode: a sentence naming the file and the cause.
+pub fn decode_table_image<T: serde::de::DeserializeOwned + serde::Serialize>(
+    bytes: &[u8],
+    path: &Path,
+) -> anyhow::Result<T> {
+    use fsw_core::tables::image::{decode_payload, parse_image};
+    let (_, payload) = parse_image(bytes)
+        .map_err(|e| anyhow::anyhow!("{} is not a valid table image: {e}", path.display()))?;
     decode_payload(payload)
-        .map_err(|e| anyhow::anyhow!("{} is not valid (payload): {e:?}", path.display()))
+        .map_err(|e| anyhow::anyhow!("{} is not a valid table image: {e}", path.display()))
 }
 
 /// `ground-tool calibrate RUN_DIR --out DIR`: run the chain and write tables and reports.
@@ -1460,27 +1476,38 @@ pub fn calibrate_run(
     options: &CalibrateOptions,
 ) -> anyhow::Result<CalibrationOutput> {
     let (tm, metadata) = read_run(run_dir)?;
-    let mut out = calibrate_telemetry(&tm, &metadata, options)?;
+    // The chain's refusals are about the data (too few frames, stars or Sun samples): exit 2.
+    let mut out = calibrate_telemetry(&tm, &metadata, options).map_err(|e| {
+        crate::run_check::InputError(e.context(format!(
+            "{}: the telemetry does not support a calibration",
+            run_dir.display()
+        )))
+    })?;
     let tables_dir = out_dir.join("tables");
     std::fs::create_dir_all(&tables_dir)
         .with_context(|| format!("creating {}", tables_dir.display()))?;
     let created = tm.raw.last().map_or(0.0, |r| r.time.seconds());
+    // Names relative to OUT: the folder may be written under a temporary name and renamed.
     let alignment_path: PathBuf = tables_dir.join("alignment.tbl");
     write_table(&alignment_path, TableId::Alignment, &out.alignment, created)?;
     out.report
         .tables
-        .insert("alignment".into(), alignment_path.display().to_string());
+        .insert("alignment".into(), "tables/alignment.tbl".into());
     let iru_path = tables_dir.join("iru.tbl");
     write_table(&iru_path, TableId::Iru, &out.iru, created)?;
     out.report
         .tables
-        .insert("iru".into(), iru_path.display().to_string());
+        .insert("iru".into(), "tables/iru.tbl".into());
+    let mut files = vec!["alignment.tbl".to_owned(), "iru.tbl".to_owned()];
     if let Some(filter) = &out.filter {
         let filter_path = tables_dir.join("filter.tbl");
         write_table(&filter_path, TableId::Filter, filter, created)?;
         out.report
             .tables
-            .insert("filter".into(), filter_path.display().to_string());
+            .insert("filter".into(), "tables/filter.tbl".into());
+        files.push("filter.tbl".to_owned());
     }
+    // The tables to fly, named (sim_harness::manifest): exactly those the report lists.
+    sim_harness::manifest::write(&tables_dir, &files, "ground-tool calibrate")?;
     Ok(out)
 }

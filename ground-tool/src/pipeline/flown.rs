@@ -10,7 +10,8 @@ use std::path::Path;
 
 use fsw_core::tables::{AlignmentTable, FilterTable, IruTable, StarCatalogTable};
 
-use super::calibrate::read_table_image;
+use super::calibrate::{decode_table_image, read_table_image};
+use crate::run_check::InputError;
 
 /// The effects every GRO analyst's model includes when `metadata.json` does not list
 /// `declared_effects`: the list `sim-harness` declares by default (one definition).
@@ -27,48 +28,76 @@ pub fn metadata_json(run_dir: &Path) -> serde_json::Value {
 
 /// The image files of the activated, accepted uploads of `table` ("alignment", "iru",
 /// "filter", "star_catalog"), in upload order.
-fn activated_uploads<'a>(
-    run_dir: &'a Path,
-    meta: &'a serde_json::Value,
-    table: &'a str,
-) -> impl Iterator<Item = std::path::PathBuf> + 'a {
-    meta["uploads"]
-        .as_array()
-        .into_iter()
-        .flatten()
-        .filter(move |u| {
-            !u["activated_at_s"].is_null()
-                && u["accepted"].as_bool() != Some(false)
-                && u["table"].as_str() == Some(table)
-        })
-        .filter_map(|u| u["file"].as_str().map(|f| run_dir.join(f)))
-        .filter(|p| p.exists())
+///
+/// # Errors
+/// [`InputError`] when a listed upload's file is missing: the flown table cannot be known
+/// (reading it as "the boot table was flown" would calibrate against the wrong table).
+fn activated_uploads(
+    run_dir: &Path,
+    meta: &serde_json::Value,
+    table: &str,
+) -> Result<Vec<std::path::PathBuf>, InputError> {
+    let mut out = Vec::new();
+    for (i, u) in meta["uploads"].as_array().into_iter().flatten().enumerate() {
+        if u["activated_at_s"].is_null()
+            || u["accepted"].as_bool() == Some(false)
+            || u["table"].as_str() != Some(table)
+        {
+            continue;
+        }
+        let Some(f) = u["file"].as_str() else {
+            continue;
+        };
+        let p = run_dir.join(f);
+        if !p.is_file() {
+            return Err(InputError::msg(format!(
+                "{}: uploads[{i}] lists {} ({table} table, activated at t = {} s) but the file is missing: the table the OBC flew cannot be known. Restore the file, or give the flown tables with --tables DIR",
+                run_dir.join("metadata.json").display(),
+                p.display(),
+                u["activated_at_s"]
+            )));
+        }
+        out.push(p);
+    }
+    Ok(out)
 }
 
-/// The last flown image of `table`: `tables/<file>` when `tables` is given (only that
-/// folder counts then), else the run's last activated upload; `None` = the boot table.
+/// The last flown image of `table`: the one `tables/manifest.json` lists when `tables` is
+/// given (only that folder counts then), else the run's last activated upload; `None` = the
+/// boot table.
 fn flown<T: serde::de::DeserializeOwned + serde::Serialize>(
     run_dir: &Path,
     meta: &serde_json::Value,
     tables: Option<&Path>,
     table: &str,
-    file: &str,
 ) -> anyhow::Result<Option<T>> {
-    let (path, whence) = match tables {
-        Some(dir) => (
-            Some(dir.join(file)).filter(|p| p.exists()),
-            "given with --tables",
-        ),
-        None => (
-            activated_uploads(run_dir, meta, table).last(),
-            "the last activated upload of metadata.json `uploads`; pass --tables DIR to use other tables",
-        ),
-    };
-    path.map(|p| {
-        read_table_image(&p)
-            .map_err(|e| anyhow::anyhow!("{e:#} (the flown {table} table: {whence})"))
-    })
-    .transpose()
+    match tables {
+        Some(dir) => {
+            let (listed, _) = sim_harness::manifest::read(dir)?;
+            listed
+                .iter()
+                .rev()
+                .find(|(_, t, _)| t == table)
+                .map(|(p, _, bytes)| {
+                    decode_table_image(bytes, p).map_err(|e| {
+                        InputError(e.context(format!("the flown {table} table, given with --tables")))
+                    })
+                })
+                .transpose()
+                .map_err(Into::into)
+        }
+        None => activated_uploads(run_dir, meta, table)?
+            .last()
+            .map(|p| {
+                read_table_image(p).map_err(|e| {
+                    InputError(e.context(format!(
+                        "the flown {table} table: the last activated upload of metadata.json `uploads`; pass --tables DIR to use other tables"
+                    )))
+                })
+            })
+            .transpose()
+            .map_err(Into::into),
+    }
 }
 
 /// Alignment, IRU and filter tables flown (`None` = boot).
@@ -85,32 +114,28 @@ pub fn flown_tables(
     Option<FilterTable>,
 )> {
     Ok((
-        flown(run_dir, meta, tables, "alignment", "alignment.tbl")?,
-        flown(run_dir, meta, tables, "iru", "iru.tbl")?,
-        flown(run_dir, meta, tables, "filter", "filter.tbl")?,
+        flown(run_dir, meta, tables, "alignment")?,
+        flown(run_dir, meta, tables, "iru")?,
+        flown(run_dir, meta, tables, "filter")?,
     ))
 }
 
-/// The onboard star catalog flown: `--tables DIR/star_catalog.tbl` if it exists, else the
+/// The onboard star catalog flown: the catalog `--tables DIR/manifest.json` lists, else the
 /// run's last activated catalog upload (`None` when neither exists).
 ///
 /// # Errors
-/// A table image that does not parse.
+/// As [`flown_tables`].
 pub fn flown_catalog(
     run_dir: &Path,
     meta: &serde_json::Value,
     tables: Option<&Path>,
 ) -> anyhow::Result<Option<StarCatalogTable>> {
-    if let Some(p) = tables
-        .map(|d| d.join("star_catalog.tbl"))
-        .filter(|p| p.exists())
-    {
-        return Ok(Some(read_table_image(&p)?));
+    if let Some(dir) = tables {
+        if let Some(c) = flown(run_dir, meta, Some(dir), "star_catalog")? {
+            return Ok(Some(c));
+        }
     }
-    activated_uploads(run_dir, meta, "star_catalog")
-        .last()
-        .map(|p| read_table_image(&p))
-        .transpose()
+    flown(run_dir, meta, None, "star_catalog")
 }
 
 #[cfg(test)]
@@ -183,9 +208,30 @@ mod tests {
         let (a, _, _) =
             flown_tables(&dir, &serde_json::json!({}), None).unwrap_or((None, None, None));
         assert!(a.is_none(), "no uploads: the boot table");
-        let (a, _, _) =
-            flown_tables(&dir, &meta, Some(&dir.join("none"))).unwrap_or((None, None, None));
-        assert!(a.is_none(), "--tables given: only that folder counts");
+        // --tables that does not exist: refused, not read as "the boot tables".
+        let r = flown_tables(&dir, &meta, Some(&dir.join("none")));
+        assert!(matches!(&r, Err(e) if sim_harness::is_input_error(e)));
+        // --tables with a manifest that lists no alignment: only that folder counts.
+        let _ = std::fs::create_dir_all(dir.join("t"));
+        assert!(crate::pipeline::calibrate::write_table(
+            &dir.join("t/iru.tbl"),
+            fsw_core::tables::TableId::Iru,
+            &IruTable::prelaunch(),
+            0.0
+        )
+        .is_ok());
+        assert!(sim_harness::manifest::write(&dir.join("t"), &["iru.tbl".into()], "test").is_ok());
+        let (a, i, _) =
+            flown_tables(&dir, &meta, Some(&dir.join("t"))).unwrap_or((None, None, None));
+        assert!(
+            a.is_none() && i == Some(IruTable::prelaunch()),
+            "--tables given: only that folder counts"
+        );
+        // An activated upload whose file is gone: refused, not "the boot table was flown".
+        let _ = std::fs::remove_file(dir.join("uploads/01_alignment.tbl"));
+        let r = flown_tables(&dir, &meta, None);
+        assert!(matches!(&r, Err(e)
+            if sim_harness::is_input_error(e) && format!("{e:#}").contains("missing")));
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

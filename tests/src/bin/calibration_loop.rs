@@ -8,8 +8,10 @@ use anyhow::Context;
 use clap::Parser;
 use gro_tests::loop_report::{compare, render_markdown, LoopReport};
 use ground_tool::pipeline::calibrate::{calibrate_run, CalibrateOptions};
+use sim_harness::outdir::OutputDir;
 use sim_harness::run::{run, RunOptions};
 use sim_harness::scenario::resolve;
+use sim_harness::InputError;
 use std::path::PathBuf;
 
 #[derive(Parser)]
@@ -22,15 +24,24 @@ scenario's true misalignments and IRU errors; (2) ground-tool calibrates from OU
 only (TP -> FADS -> FFCAL -> adjustment -> IRUCAL); (3) the new tables OUT/2-calibration/tables/*.tbl are \
 uplinked and the same scenario (same seed) is flown again; (4) the comparison is printed and written to \
 OUT/report.md and OUT/report.json (truth is used only here, for scoring).\n\n\
+OUT is written as a temporary sibling .OUT.tmp-PID and renamed into place at the end: it holds one \
+whole loop or its previous content. A previous calibration-loop output is replaced (so the same \
+command can be run again); any other non-empty OUT is refused unless --force; a second loop into \
+the same OUT fails (lock file .OUT.lock).\n\n\
+Exit codes (every binary of the workspace): 0 success, 1 runtime failure, 2 bad input.\n\n\
 Example: calibration-loop --out runs/loop"
 )]
 struct Args {
     /// Scenario name (scenarios/NAME.toml, built in) or a TOML path.
     #[arg(long, default_value = "gro-early-mission")]
     scenario: String,
-    /// Output folder.
+    /// Output folder (replaced whole when it is a previous calibration-loop output).
     #[arg(long, default_value = "runs/loop")]
     out: PathBuf,
+    /// Replace the whole content of a non-empty OUT that is not a previous calibration-loop
+    /// output.
+    #[arg(long)]
+    force: bool,
     /// Seed (both flights use it, so only the tables differ).
     #[arg(long)]
     seed: Option<u64>,
@@ -40,30 +51,72 @@ struct Args {
     /// Print report.json instead of the table.
     #[arg(long)]
     json: bool,
+    /// Fail (exit code 1, after writing the reports) when any quantity of the table is worse
+    /// after the calibration than before: a relative alignment error, a residual RMS, the
+    /// fine-attitude error of an axis or the largest post-maneuver error (CI runs this).
+    #[arg(long)]
+    check: bool,
+}
+
+/// The quantities of the loop's table that are worse after the calibration than before.
+fn regressions(r: &LoopReport) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut pair = |what: &str, before: f64, after: f64| {
+        if after > before {
+            out.push(format!("{what}: {before:.1} -> {after:.1}"));
+        }
+    };
+    for (k, b) in &r.relative_alignment_error_arcsec.before {
+        if let Some(a) = r.relative_alignment_error_arcsec.after.get(k) {
+            pair(&format!("relative alignment error {k} (″)"), *b, *a);
+        }
+    }
+    for (k, b) in &r.residual_rms_arcsec.before {
+        if let Some(a) = r.residual_rms_arcsec.after.get(k) {
+            pair(&format!("residual RMS {k} (″)"), *b, *a);
+        }
+    }
+    for i in 0..3 {
+        pair(
+            &format!("fine-attitude error 3×RMS axis {i} (″)"),
+            r.fine_attitude_error_3rms_arcsec.before[i],
+            r.fine_attitude_error_3rms_arcsec.after[i],
+        );
+    }
+    let max = |v: &[f64]| v.iter().copied().fold(0.0, f64::max);
+    pair(
+        "largest post-maneuver error (°)",
+        max(&r.post_maneuver_error_deg.before),
+        max(&r.post_maneuver_error_deg.after),
+    );
+    out
 }
 
 fn main() {
     let args = Args::parse();
     if let Err(e) = run_loop(&args) {
         eprintln!("error: {e:#}");
-        std::process::exit(1);
+        std::process::exit(i32::from(sim_harness::exit_code(&e)));
     }
 }
 
 fn run_loop(args: &Args) -> anyhow::Result<()> {
     let t_start = std::time::Instant::now();
-    let mut scenario = resolve(&args.scenario)?;
+    let mut scenario = resolve(&args.scenario).map_err(InputError::from)?;
     if let Some(seed) = args.seed {
         scenario.seed = seed;
     }
     if let Some(d) = args.duration {
         scenario.duration_s = scenario.duration_s.min(d);
+        scenario
+            .validate()
+            .context("--duration")
+            .map_err(InputError::from)?;
     }
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("creating {}", args.out.display()))?;
-    let fly_a = args.out.join("1-fly-prelaunch");
-    let cal = args.out.join("2-calibration");
-    let fly_b = args.out.join("3-fly-calibrated");
+    let out = OutputDir::begin(&args.out, "calibration-loop", args.force, &[])?;
+    let fly_a = out.path().join("1-fly-prelaunch");
+    let cal = out.path().join("2-calibration");
+    let fly_b = out.path().join("3-fly-calibrated");
 
     eprintln!(
         "[1/3] flying {} with the prelaunch tables ...",
@@ -79,7 +132,7 @@ fn run_loop(args: &Args) -> anyhow::Result<()> {
     )?;
     eprintln!(
         "[2/3] calibrating from {}/telemetry.bin ...",
-        fly_a.display()
+        args.out.join("1-fly-prelaunch").display()
     );
     let calibration = calibrate_run(&fly_a, &cal, &CalibrateOptions::default())?;
     ground_tool::report::write_calibration_report(
@@ -89,7 +142,7 @@ fn run_loop(args: &Args) -> anyhow::Result<()> {
     )?;
     eprintln!(
         "[3/3] flying again with the uplinked tables {}/tables ...",
-        cal.display()
+        args.out.join("2-calibration").display()
     );
     let summary_b = run(
         scenario,
@@ -105,11 +158,12 @@ fn run_loop(args: &Args) -> anyhow::Result<()> {
     let mut report: LoopReport = compare(&summary_a, &summary_b, &calibration, &truth)?;
     report.wall_seconds = t_start.elapsed().as_secs_f64();
     std::fs::write(
-        args.out.join("report.json"),
+        out.path().join("report.json"),
         serde_json::to_string_pretty(&report)?,
     )?;
     let md = render_markdown(&report);
-    std::fs::write(args.out.join("report.md"), &md)?;
+    std::fs::write(out.path().join("report.md"), &md)?;
+    out.commit()?;
     if args.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
@@ -117,8 +171,18 @@ fn run_loop(args: &Args) -> anyhow::Result<()> {
         eprintln!(
             "wrote {}/report.md, report.json; calibration report and plots in {}",
             args.out.display(),
-            cal.display()
+            args.out.join("2-calibration").display()
         );
+    }
+    if args.check {
+        let worse = regressions(&report);
+        if !worse.is_empty() {
+            anyhow::bail!(
+                "--check: worse after the calibration than before: {}",
+                worse.join("; ")
+            );
+        }
+        eprintln!("--check: every quantity of the table is better after the calibration");
     }
     Ok(())
 }

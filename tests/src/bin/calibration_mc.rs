@@ -19,6 +19,7 @@ use nalgebra::Vector3;
 use serde::Serialize;
 use sim_harness::run::{run, RunOptions};
 use sim_harness::scenario::resolve;
+use sim_harness::{exit_code, InputError};
 use std::path::PathBuf;
 
 #[derive(Parser)]
@@ -35,6 +36,9 @@ scenario's unit in every seed), and the metadata declares that population's leve
 errors and the within-36-arcsec counts of the README come from it). The summary gives the mean NEES, the fraction of seeds with FHST1-FHST2 \
 within 5 arcsec, the RMS error per axis against the mean stated σ and the mean Cramér–Rao bound \
 of the same data, and the fraction of δM elements within 3σ.\n\n\
+--work W: each seed's folder W/seed-N is created by this run (refused, exit code 2, if it \
+already exists) and removed after scoring; nothing else in W is touched.\n\n\
+Exit codes (every binary of the workspace): 0 success, 1 runtime failure, 2 bad input (e.g. -n 0).\n\n\
 Example: calibration-mc -n 20 --first-seed 1 --json > mc.json"
 )]
 struct Args {
@@ -47,7 +51,8 @@ struct Args {
     /// First seed.
     #[arg(long, default_value_t = 1)]
     first_seed: u64,
-    /// Work folder (run folders are written here and removed after scoring).
+    /// Work folder: each seed's W/seed-N is created here (it must not exist yet) and removed
+    /// after scoring; nothing else in W is touched.
     #[arg(long, default_value = "runs/mc")]
     work: PathBuf,
     /// FFCAL with Shuster's 1982 scalar weights (covariance by the sandwich formula) instead of
@@ -113,6 +118,28 @@ fn one_seed(args: &Args, seed: u64) -> anyhow::Result<SeedResult> {
         scenario.fss2.transfer_function_per_seed = true;
     }
     let dir = args.work.join(format!("seed-{seed}"));
+    // Only a folder this run creates is removed afterwards.
+    if let Err(e) = std::fs::create_dir(&dir) {
+        if e.kind() == std::io::ErrorKind::AlreadyExists {
+            return Err(InputError::msg(format!(
+                "{} already exists and was not created by this run: calibration-mc removes its seed folders after scoring, so it does not write into one it did not create; remove it or choose another --work",
+                dir.display()
+            ))
+            .into());
+        }
+        return Err(anyhow::Error::new(e).context(format!("cannot create {}", dir.display())));
+    }
+    let scored = score_seed(args, seed, scenario, &dir);
+    let _ = std::fs::remove_dir_all(&dir);
+    scored
+}
+
+fn score_seed(
+    args: &Args,
+    seed: u64,
+    scenario: sim_harness::scenario::Scenario,
+    dir: &std::path::Path,
+) -> anyhow::Result<SeedResult> {
     run(
         scenario,
         &RunOptions {
@@ -159,7 +186,6 @@ fn one_seed(args: &Args, seed: u64) -> anyhow::Result<SeedResult> {
         }
         _ => None,
     };
-    let _ = std::fs::remove_dir_all(&dir);
     Ok(SeedResult {
         seed,
         relative_error_arcsec: relative,
@@ -187,7 +213,7 @@ fn main() {
                     Ok(j) => println!("{j}"),
                     Err(e) => {
                         eprintln!("error: {e}");
-                        std::process::exit(1);
+                        std::process::exit(i32::from(sim_harness::exit::FAILURE));
                     }
                 }
             } else {
@@ -196,12 +222,16 @@ fn main() {
         }
         Err(e) => {
             eprintln!("error: {e:#}");
-            std::process::exit(1);
+            std::process::exit(i32::from(exit_code(&e)));
         }
     }
 }
 
 fn monte_carlo(args: &Args) -> anyhow::Result<McSummary> {
+    if args.runs == 0 {
+        return Err(InputError::msg("-n must be ≥ 1 (the number of seeds)").into());
+    }
+    resolve(&args.scenario).map_err(InputError::from)?;
     std::fs::create_dir_all(&args.work)
         .with_context(|| format!("creating {}", args.work.display()))?;
     let mut seeds = Vec::new();
