@@ -39,6 +39,7 @@ pub mod report;
 pub mod run;
 pub mod scoring;
 pub mod search;
+pub mod sparse_catalog;
 pub mod stats;
 pub mod structure;
 pub mod synthetic;
