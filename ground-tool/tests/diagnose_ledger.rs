@@ -306,3 +306,66 @@ fn three_bad_stars_are_named_by_the_sparse_form() {
         }
     }
 }
+
+/// Study (docs/diagnose.md §10): three bad stars (10–15″) among the ≈ 100 seen, seeds 22–26,
+/// with and without the sparse form: what is named, and how the ledger ends the catalog test.
+#[test]
+#[ignore = "study: cargo test --release -p ground-tool --test diagnose_ledger sparse_catalog_study -- --ignored --nocapture"]
+fn sparse_catalog_study() {
+    let offsets = [[12.0, -6.0], [-8.0, 10.0], [10.0, 8.0]];
+    for seed in 22..=26 {
+        let base = SynthConfig {
+            seed,
+            ..SynthConfig::default()
+        };
+        let seen = most_seen(&base);
+        let bad: Vec<u32> = seen.iter().step_by(4).take(3).map(|s| s.0).collect();
+        let mut fx = SynthEffects::default();
+        for (&h, o) in bad.iter().zip(offsets) {
+            fx.catalog_star_offsets.insert(h, o);
+        }
+        for sparse in [false, true] {
+            let cfg = SynthConfig {
+                seed,
+                effects: fx.clone(),
+                ..SynthConfig::default()
+            };
+            let config = SearchConfig {
+                sparse_catalog: sparse,
+                ..SearchConfig::default()
+            };
+            let a = analyse(&generate(&cfg).input(&[]), &config).unwrap();
+            let v = ledger::violations(&raw(&a), &a.ledger, &a.detected, &a.unexplained);
+            let mut line = format!(
+                "seed {seed} sparse {sparse}: {} stars seen; violations {}; ",
+                seen.len(),
+                v.len()
+            );
+            for d in &a.detected {
+                let mut zmax: f64 = 0.0;
+                let mut n = 0;
+                for (&h, o) in bad.iter().zip(offsets) {
+                    for (axis, t) in ["east", "north"].iter().zip(o) {
+                        if let (Some(x), Some(s)) = (
+                            d.parameters.get(&format!("HIP{h}_{axis}")),
+                            d.sigma.get(&format!("HIP{h}_{axis}")),
+                        ) {
+                            zmax = zmax.max(((x - t) / s).abs());
+                            n += 1;
+                        }
+                    }
+                }
+                line += &format!(
+                    "detected {}[{}] ({} parameters; bad-star parameters {n}/6, max |z| {zmax:.1}); ",
+                    d.effect,
+                    d.sensor,
+                    d.parameters.len()
+                );
+            }
+            for e in a.ledger.iter().filter(|e| e.regressor == "star_id") {
+                line += &format!("ledger {} p {:.1e}: {:?}; ", e.test, e.p_holm, e.outcome);
+            }
+            eprintln!("{line}");
+        }
+    }
+}

@@ -60,6 +60,8 @@ pub struct SearchConfig {
     pub indication_alpha: f64,
     /// Smallest BIC improvement accepted (10: "very strong" on the Kass–Raftery scale).
     pub min_delta_bic: f64,
+    /// Offer the sparse catalog form ([`super::sparse_catalog`]); off only for ablation.
+    pub sparse_catalog: bool,
 }
 
 impl Default for SearchConfig {
@@ -71,6 +73,7 @@ impl Default for SearchConfig {
             adequacy_reduction: 0.8,
             indication_alpha: 0.01,
             min_delta_bic: 10.0,
+            sparse_catalog: true,
         }
     }
 }
@@ -442,8 +445,18 @@ fn search_with_pitch(
         .collect();
     // The sparse catalog form (per-star offsets selected star by star): appended to the
     // library when a few stars pass their own tests against the baseline.
-    let (layout, systems, _star_tests) =
-        super::sparse_catalog::with_sparse_catalog(set, layout, systems, &baseline, config.alpha);
+    let (layout, systems) = if config.sparse_catalog {
+        let (l, s, _) = super::sparse_catalog::with_sparse_catalog(
+            set,
+            layout,
+            systems,
+            &baseline,
+            config.alpha,
+        );
+        (l, s)
+    } else {
+        (layout, systems)
+    };
     let mut model = baseline.clone();
     let fit_model = |sys: &super::fit::Normal, effects: &[usize]| {
         solve(sys, &layout, &indices(&layout, effects))
