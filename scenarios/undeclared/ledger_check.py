@@ -7,8 +7,9 @@ from the raw test results is `ledger::violations`, run by ground-tool/tests/diag
 From the report alone: every ledger entry has an outcome; an explained entry names effects
 that are detected or in the baseline model; an unexplained one has a size, a regressor and a
 reason, and is in `unexplained` (residual structure: its sensor's summary lists its regressor,
-as the main one or in `also_follows`; the other families: its test is the item's or in its
-`also_follows`); every `unexplained` item has a reason and an unexplained ledger entry.
+as the main one or in `also_follows`; the other families: its test is among the item's
+`method`, joined by "; "); every `unexplained` item has a reason and an unexplained ledger
+entry.
 Prints one line per file and the violations; exit status 1 when any file violates it.
 """
 
@@ -42,8 +43,9 @@ def violations(r):
                              and (u["regressor"] == e["regressor"] or e["regressor"] in u["also_follows"])
                              for u in unexpl)
             else:
-                listed = any(u["sensor"] == e["sensor"] and u.get("source") == e["family"]
-                             and (u["method"] == e["test"] or e["test"] in u["also_follows"])
+                listed = any(u["sensor"] == e.get("report_sensor", e["sensor"])
+                             and u.get("source") == e["family"]
+                             and e["test"] in u["method"].split("; ")
                              for u in unexpl)
             if not listed:
                 out.append(f"{e['id']}: unexplained, not in the report's list")
@@ -52,7 +54,7 @@ def violations(r):
     for u in unexpl:
         if not u.get("reason"):
             out.append(f"unexplained {u['sensor']}:{u['regressor']} without a reason")
-        if not any(e["sensor"] == u["sensor"] and e["family"] == u.get("source")
+        if not any(e.get("report_sensor", e["sensor"]) == u["sensor"] and e["family"] == u.get("source")
                    and e["outcome"]["outcome"] == "unexplained" for e in ledger):
             out.append(f"unexplained {u['sensor']}:{u['regressor']} has no ledger entry")
     return out

@@ -96,6 +96,9 @@ pub struct LedgerEntry {
     pub family: Family,
     /// Sensor (`FHST1` … `FSS2`, `IRU`, `all`).
     pub sensor: String,
+    /// The sensor whose `unexplained` line carries it: its own, or that of the candidate
+    /// whose structure it is ([`Swept::same_as`]).
+    pub report_sensor: String,
     /// Regressor the structure follows.
     pub regressor: String,
     /// Axis (H, V, alpha, beta) or `-`.
@@ -122,6 +125,10 @@ pub struct Swept {
     /// RMS change of its sensors' residuals when it is added (arcsec; NaN when not computed:
     /// only for significant candidates).
     pub size_arcsec: f64,
+    /// A stronger significant candidate on another sensor beyond which this one adds nothing
+    /// (its effect index): the structure is that one's, seen here through the batch
+    /// attitudes ([`attribute`]).
+    pub same_as: Option<usize>,
 }
 
 /// `effect[sensor]` as `detected` names it (`effect[all]` for an all-sensor effect).
@@ -132,6 +139,11 @@ pub fn detected_label(e: &Effect) -> String {
         e.kind.name(),
         e.sensor.map_or("all", |s| SENSOR_NAMES[s])
     )
+}
+
+/// An effect's sensor name (`all` for an all-sensor effect).
+fn sensor_label(e: &Effect) -> String {
+    e.sensor.map_or("all", |s| SENSOR_NAMES[s]).to_owned()
 }
 
 /// The sensors an effect acts on (the catalog: the trackers).
@@ -150,12 +162,18 @@ fn overlaps(e: &Effect, sensor: usize) -> bool {
     mine.contains(&sensor) || (sensor < 2 && mine.iter().any(|&s| s < 2))
 }
 
-/// The regressor a candidate's structure follows (for the report).
+/// The regressor a candidate's structure follows (for the report): the generic extension's
+/// orbit harmonics 2–3 and ΔT² are reported against the orbit phase (the temperature follows
+/// the orbit in a hold; the other candidates of the sensor add theirs to `also_follows`).
 fn regressor_of(e: &Effect) -> &'static str {
     match e.kind {
         EffectKind::AberrationAnnual | EffectKind::Aberration => Regressor::VelocityX.name(),
         EffectKind::TimeTagOffset => "slew_rate",
-        EffectKind::GenericAlignmentExtension => "orbit_phase_rad (harmonics 2–3) / temperature_c²",
+        EffectKind::ThermalAlignmentDrift => Regressor::Temperature.name(),
+        EffectKind::OrbitPeriodicAlignment
+        | EffectKind::GenericAlignmentExtension
+        | EffectKind::AberrationOrbital => Regressor::OrbitPhase.name(),
+        EffectKind::SecularAlignmentExtension => Regressor::Time.name(),
         _ => e.signature().first().map_or("time_s", |r| r.name()),
     }
 }
@@ -207,6 +225,7 @@ pub fn sweep(set: &MeasurementSet, res: &SearchResult, alpha: f64) -> Vec<Swept>
                 effect: c,
                 evidence: e,
                 size_arcsec: f64::NAN,
+                same_as: None,
             },
             Some(big),
         ));
@@ -226,7 +245,63 @@ pub fn sweep(set: &MeasurementSet, res: &SearchResult, alpha: f64) -> Vec<Swept>
             }
         }
     }
-    out.into_iter().map(|s| s.0).collect()
+    let mut swept: Vec<Swept> = out.into_iter().map(|s| s.0).collect();
+    attribute(
+        &mut swept,
+        alpha,
+        &|effects: &[usize]| {
+            let mut with = model.clone();
+            with.extend(effects);
+            fit(&with)
+        },
+        layout,
+    );
+    swept
+}
+
+/// One structure, one line: a significant candidate that adds nothing (F test at `alpha`)
+/// beyond a stronger significant one on another sensor is that one's structure seen through
+/// the batch attitudes (an FHST2 alignment term moves the attitude, and an FSS2
+/// orbit-periodic term then fits FSS2's residuals: the same rule as the search's veto,
+/// `adds_nothing_beyond`). Sets [`Swept::same_as`] to the strongest such (root) candidate.
+fn attribute(
+    swept: &mut [Swept],
+    alpha: f64,
+    fit: &dyn Fn(&[usize]) -> Option<super::fit::SubFit>,
+    layout: &super::fit::Layout,
+) {
+    let mut sig: Vec<usize> = (0..swept.len())
+        .filter(|&i| swept[i].evidence.p_holm < alpha)
+        .collect();
+    // Strongest first: the smallest p (a flexible form's large Δχ² is not strength: the
+    // catalog's 94 parameters took 553 against a secular term's 484 with 9), then F.
+    sig.sort_by(|&a, &b| {
+        let (ea, eb) = (&swept[a].evidence, &swept[b].evidence);
+        ea.p_value
+            .total_cmp(&eb.p_value)
+            .then_with(|| eb.f.total_cmp(&ea.f))
+    });
+    for r in 1..sig.len() {
+        let x = swept[sig[r]].effect;
+        for &yi in &sig[..r] {
+            if swept[yi].same_as.is_some() {
+                continue;
+            }
+            let y = swept[yi].effect;
+            if layout.effects[x].sensor == layout.effects[y].sensor {
+                continue;
+            }
+            let (Some(a), Some(b)) = (fit(&[y]), fit(&[y, x])) else {
+                continue;
+            };
+            let k = layout.effects[x].len() as f64;
+            let f = ((a.chi2 - b.chi2) / k) / b.s2();
+            if b.dof > 0.0 && f_sf(f, k, b.dof) >= alpha {
+                swept[sig[r]].same_as = Some(y);
+                break;
+            }
+        }
+    }
 }
 
 /// RMS over the sensors' usable measurements and both axes of the change of the residuals.
@@ -451,6 +526,7 @@ fn residual_entry(t: &StructureTest, outcome: Outcome) -> LedgerEntry {
         id: residual_id(t),
         family: Family::ResidualStructure,
         sensor: t.sensor_name.to_owned(),
+        report_sensor: t.sensor_name.to_owned(),
         regressor: t.regressor.name().to_owned(),
         axis: t.axis_name.to_owned(),
         test: format!("{:?}", t.method).to_lowercase(),
@@ -475,7 +551,8 @@ fn candidate_entries(
         out.push(LedgerEntry {
             id: candidate_id(&e.label()),
             family: Family::EffectFit,
-            sensor: e.sensor.map_or("all", |s| SENSOR_NAMES[s]).to_owned(),
+            sensor: sensor_label(e),
+            report_sensor: sensor_label(e),
             regressor: regressor_of(e).to_owned(),
             axis: "-".to_owned(),
             test: e.label(),
@@ -489,10 +566,20 @@ fn candidate_entries(
     }
     for s in swept.iter().filter(|s| s.evidence.p_holm < alpha) {
         let e = &res.layout.effects[s.effect];
+        let root = s.same_as.map(|y| &res.layout.effects[y]);
+        let reason = match root {
+            Some(r) => format!(
+                "the structure of {} seen through the batch attitudes (adds nothing beyond it); {}",
+                r.label(),
+                reason_for(e, reasons)
+            ),
+            None => reason_for(e, reasons),
+        };
         out.push(LedgerEntry {
             id: candidate_id(&e.label()),
             family: Family::EffectFit,
-            sensor: e.sensor.map_or("all", |s| SENSOR_NAMES[s]).to_owned(),
+            sensor: sensor_label(e),
+            report_sensor: sensor_label(root.unwrap_or(e)),
             regressor: regressor_of(e).to_owned(),
             axis: "-".to_owned(),
             test: format!(
@@ -504,9 +591,7 @@ fn candidate_entries(
             size: s.size_arcsec,
             unit: "arcsec".to_owned(),
             p_holm: s.evidence.p_holm,
-            outcome: Outcome::Unexplained {
-                reason: reason_for(e, reasons),
-            },
+            outcome: Outcome::Unexplained { reason },
         });
     }
     out
@@ -522,6 +607,7 @@ pub(crate) fn arc_entries(tr: &TimeReference, alpha: f64) -> Vec<LedgerEntry> {
                 id: arc_id(SENSOR_NAMES[s], &ev.effect),
                 family: Family::SlewArcs,
                 sensor: SENSOR_NAMES[s].to_owned(),
+                report_sensor: SENSOR_NAMES[s].to_owned(),
                 regressor: "slew_rate".to_owned(),
                 axis: "-".to_owned(),
                 test: ev.effect.clone(),
@@ -544,6 +630,7 @@ pub(crate) fn arc_entries(tr: &TimeReference, alpha: f64) -> Vec<LedgerEntry> {
             id: arc_id(l.sensor(), &l.evidence.effect),
             family: Family::SlewArcs,
             sensor: l.sensor().to_owned(),
+            report_sensor: l.sensor().to_owned(),
             regressor: "slew_rate".to_owned(),
             axis: "-".to_owned(),
             test: format!(
@@ -601,6 +688,7 @@ pub fn gyro_ledger(g: &GyroAnalysis, alpha: f64) -> Vec<LedgerEntry> {
             id: gyro_id(f, &d.evidence.effect),
             family: f,
             sensor: "IRU".to_owned(),
+            report_sensor: "IRU".to_owned(),
             regressor: if f == Family::GyroSlews {
                 "slew_angle_abs"
             } else if d.effect == "gyro_thermal_bias" {
@@ -625,6 +713,7 @@ pub fn gyro_ledger(g: &GyroAnalysis, alpha: f64) -> Vec<LedgerEntry> {
             id: gyro_id(f, &l.evidence.effect),
             family: f,
             sensor: "IRU".to_owned(),
+            report_sensor: "IRU".to_owned(),
             regressor: l.regressor.to_owned(),
             axis: "-".to_owned(),
             test: l.evidence.effect.clone(),
@@ -644,10 +733,11 @@ pub fn gyro_ledger(g: &GyroAnalysis, alpha: f64) -> Vec<LedgerEntry> {
 
 /// The report's `unexplained` items for the ledger's unexplained entries that are not
 /// residual structure (those are summarised per sensor by [`super::unexplained_from`]): one
-/// item per family and sensor, the smallest p first, the other tests of that family and
-/// sensor in `also_follows` (a structure no candidate describes makes several candidates
-/// significant at once; one line per sensor keeps the list readable, the ledger has them
-/// all).
+/// item per family and sensor, as the residual ones: the smallest p first (its regressor,
+/// size and reason), the other regressors of the group in `also_follows`, and every test of
+/// the group in `method` (joined by "; "). A structure no candidate describes makes several
+/// candidates significant at once; one line per sensor keeps the list readable, the ledger
+/// has them all.
 #[must_use]
 pub fn unexplained_items(entries: &[LedgerEntry]) -> Vec<Unexplained> {
     let mut groups: BTreeMap<(&str, &str), Vec<&LedgerEntry>> = BTreeMap::new();
@@ -657,7 +747,7 @@ pub fn unexplained_items(entries: &[LedgerEntry]) -> Vec<Unexplained> {
         .filter(|e| matches!(e.outcome, Outcome::Unexplained { .. }))
     {
         groups
-            .entry((e.family.name(), e.sensor.as_str()))
+            .entry((e.family.name(), e.report_sensor.as_str()))
             .or_default()
             .push(e);
     }
@@ -669,22 +759,35 @@ pub fn unexplained_items(entries: &[LedgerEntry]) -> Vec<Unexplained> {
             let Outcome::Unexplained { reason } = &e.outcome else {
                 return None;
             };
+            let mut also: Vec<String> = Vec::new();
+            for o in &v[1..] {
+                if o.regressor != e.regressor && !also.contains(&o.regressor) {
+                    also.push(o.regressor.clone());
+                }
+            }
             Some(Unexplained {
-                sensor: e.sensor.clone(),
+                sensor: e.report_sensor.clone(),
                 regressor: e.regressor.clone(),
                 axis: e.axis.clone(),
-                method: e.test.clone(),
+                method: v
+                    .iter()
+                    .map(|o| o.test.as_str())
+                    .collect::<Vec<_>>()
+                    .join(TESTS_SEP),
                 size: e.size,
                 unit: e.unit.clone(),
                 p_value: e.p_holm,
                 p_raw: f64::NAN,
-                also_follows: v[1..].iter().map(|o| o.test.clone()).collect(),
+                also_follows: also,
                 source: e.family.name().to_owned(),
                 reason: reason.clone(),
             })
         })
         .collect()
 }
+
+/// Separator of the tests of a non-residual `unexplained` item's `method`.
+pub const TESTS_SEP: &str = "; ";
 
 /// The residual-structure summaries get the reason of their main test.
 pub fn attach_reasons(unexplained: &mut [Unexplained], entries: &[LedgerEntry]) {
@@ -804,14 +907,14 @@ pub fn violations(
                     ));
                 }
                 let listed = unexplained.iter().any(|u| {
-                    u.sensor == e.sensor
+                    u.sensor == e.report_sensor
                         && if e.family == Family::ResidualStructure {
                             u.source == e.family.name()
                                 && (u.regressor == e.regressor
                                     || u.also_follows.contains(&e.regressor))
                         } else {
                             u.source == e.family.name()
-                                && (u.method == e.test || u.also_follows.contains(&e.test))
+                                && u.method.split(TESTS_SEP).any(|t| t == e.test)
                         }
                 });
                 if !listed {
@@ -825,7 +928,7 @@ pub fn violations(
     }
     for u in unexplained {
         let has = ledger.iter().any(|e| {
-            e.sensor == u.sensor
+            e.report_sensor == u.sensor
                 && e.family.name() == u.source
                 && matches!(e.outcome, Outcome::Unexplained { .. })
         });
