@@ -32,6 +32,8 @@ import sys
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.normpath(os.path.join(HERE, "..", ".."))
+sys.path.insert(0, os.path.join(ROOT, "scenarios", "undeclared"))
+import ledger_check  # noqa: E402  (the evidence ledger's invariant on report.json)
 
 BASE = ["--plan", "long", "--hold-s", "1200"]
 
@@ -135,6 +137,7 @@ def score(truth, report):
         "unexplained": [f"{u['sensor']}:{u['regressor']} ({u['size']:.1f}″, p {u['p_value']:.0e})"
                         for u in unexpl],
         "extra_unexplained": len(extra_unexpl),
+        "ledger_violations": ledger_check.violations(report),
         "pass": ok,
     }
 
@@ -211,6 +214,10 @@ def main():
         tot[1] += len(seeds)
         print(f"| {c} | {len(seeds)} | {named}/{n} | {pk}/{pn} | {ol_s} | {nu}/{n} | {ps}/{len(seeds)} |")
     print(f"\npassed {tot[0]} of {tot[1]} runs")
+    done = [r for r in results.values() if "error" not in r]
+    broken = [k for k, r in results.items() if r.get("ledger_violations")]
+    print(f"evidence ledger invariant (scenarios/undeclared/ledger_check.py): violated in {len(broken)} of "
+          f"{len(done)} runs {broken if broken else ''}")
     if args.json:
         with open(args.json, "w") as f:
             json.dump(results, f, indent=1)

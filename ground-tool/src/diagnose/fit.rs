@@ -53,7 +53,9 @@ pub struct Layout {
     pub offsets: Vec<usize>,
     /// Total number of global parameters.
     pub total: usize,
-    star_index: HashMap<u32, usize>,
+    /// Per effect: HIP → the star's index among the effect's stars (the full catalog form
+    /// and the sparse one hold different subsets).
+    star_index: Vec<HashMap<u32, usize>>,
 }
 
 impl Layout {
@@ -62,15 +64,15 @@ impl Layout {
     pub fn new(effects: Vec<Effect>) -> Self {
         let mut offsets = Vec::with_capacity(effects.len());
         let mut total = N_ALIGN;
-        let mut star_index = HashMap::new();
+        let mut star_index = Vec::with_capacity(effects.len());
         for e in &effects {
             offsets.push(total);
             total += e.len();
-            if e.kind == EffectKind::CatalogProperMotionError {
-                for (k, h) in e.stars.iter().enumerate() {
-                    star_index.insert(*h, k);
-                }
-            }
+            star_index.push(if e.kind == EffectKind::CatalogProperMotionError {
+                e.stars.iter().enumerate().map(|(k, h)| (*h, k)).collect()
+            } else {
+                HashMap::new()
+            });
         }
         Self {
             effects,
@@ -110,9 +112,9 @@ impl Layout {
                 out.push((o + ax, [c.x, c.y]));
             }
         }
-        let lookup = |h: u32| self.star_index.get(&h).copied();
         for (i, e) in self.effects.iter().enumerate() {
             scratch.clear();
+            let lookup = |h: u32| self.star_index[i].get(&h).copied();
             e.columns(m, &lookup, scratch);
             let o = self.offsets[i];
             out.extend(scratch.iter().map(|(k, v)| (o + k, *v)));

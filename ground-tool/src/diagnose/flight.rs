@@ -453,7 +453,13 @@ fn corrected_catalog(
             var[2 * k + 1] = sn * sn;
         }
     }
-    let x = super::effects::remove_net_rotation(&e.star_dirs, &x, &var);
+    // The full form's offsets carry the gauge; the sparse form's few stars do not (their
+    // common rotation is data: removing it would take most of three stars' offsets away).
+    let x = if e.sparse {
+        x
+    } else {
+        super::effects::remove_net_rotation(&e.star_dirs, &x, &var)
+    };
     // Each offset is known to about its σ (≈ the size of the offsets themselves in a few
     // hours of data): the table gets the linear minimum-variance estimate given the spread
     // of the offsets over the stars, τ² = mean(x² − σ²) (empirical Bayes), i.e. each offset

@@ -99,6 +99,34 @@ pub struct GyroAnalysis {
     pub slew_residuals: Vec<(f64, f64, f64)>,
     /// Notes (why something was not analysed).
     pub notes: Vec<String>,
+    /// The candidates not kept, tested against the final model (the last round of the bias
+    /// history, the asymmetry when rejected): the evidence ledger ([`super::ledger`]) reports
+    /// a significant one as unexplained with its size and the reason it was not kept.
+    pub leftover: Vec<GyroLeftover>,
+}
+
+/// A gyro candidate not kept, with its size against the final model.
+#[derive(Clone, Debug)]
+pub struct GyroLeftover {
+    /// Its evidence (`p_holm`: Bonferroni over the candidates of its family).
+    pub evidence: Evidence,
+    /// The regressor its structure follows (`time_s`, `iru_temperature_c`, `slew_angle_abs`).
+    pub regressor: &'static str,
+    /// Size: RMS of the fitted term over the samples (arcsec/s), or the largest asymmetry
+    /// (ppm).
+    pub size: f64,
+    /// Unit of `size`.
+    pub unit: &'static str,
+}
+
+/// RMS over the samples of the term `est[axis] × column(sample)` (column centred), norm over
+/// the three axes: the size of a bias-history candidate.
+fn term_rms(samples: &[BiasSample], column: &dyn Fn(&BiasSample) -> f64, est: &[f64]) -> f64 {
+    let n = samples.len().max(1) as f64;
+    let cols: Vec<f64> = samples.iter().map(column).collect();
+    let mean = cols.iter().sum::<f64>() / n;
+    let spread = (cols.iter().map(|c| (c - mean).powi(2)).sum::<f64>() / n).sqrt();
+    spread * est.iter().map(|e| e * e).sum::<f64>().sqrt()
 }
 
 fn batch_attitudes(
@@ -357,6 +385,7 @@ pub fn analyse(
             };
             let mut best: Option<(usize, Evidence, Vec<f64>, Vec<f64>)> = None;
             let mut round_evs = Vec::new();
+            let mut round_left = Vec::new();
             for (ci, cand) in candidates.iter().enumerate() {
                 if model.iter().any(|m| m.name == cand.name) {
                     continue;
@@ -426,6 +455,16 @@ pub fn analyse(
                     accepted: false,
                     rejected_because: (!why.is_empty()).then(|| why.join("; ")),
                 };
+                round_left.push(GyroLeftover {
+                    evidence: ev.clone(),
+                    regressor: if cand.name == "gyro_thermal_bias" {
+                        "iru_temperature_c"
+                    } else {
+                        "time_s"
+                    },
+                    size: term_rms(&samples, &*cand.column, &est),
+                    unit: "arcsec/s",
+                });
                 if why.is_empty() && best.as_ref().is_none_or(|b| dbic > b.1.delta_bic) {
                     best = Some((ci, ev.clone(), est, sig));
                 }
@@ -433,6 +472,9 @@ pub fn analyse(
             }
             let Some((ci, mut ev, est, sig)) = best else {
                 out.candidates.extend(round_evs);
+                // Nothing passed: this round tested every remaining candidate against the
+                // final model.
+                out.leftover.extend(round_left);
                 break;
             };
             ev.accepted = true;
@@ -780,6 +822,14 @@ fn asymmetry(
         accepted: why.is_empty(),
         rejected_because: (!why.is_empty()).then(|| why.join("; ")),
     };
+    if !why.is_empty() {
+        out.leftover.push(GyroLeftover {
+            evidence: ev.clone(),
+            regressor: "slew_angle_abs",
+            size: (ASYM..NCOL).map(|j| x1[j].abs()).fold(0.0, f64::max),
+            unit: "ppm",
+        });
+    }
     for (z, s, _, angle) in &rows {
         let j = angle.iamax();
         let resid0 = z[j] - (0..ASYM).map(|c| s[(j, c)] * x0[c]).sum::<f64>();

@@ -20,7 +20,10 @@
 //!    attitude differences, scale asymmetry from the slews);
 //! 6. [`flight`]: effects the OBC should correct become table data (alignment corrections,
 //!    filter aberration flag) that `fsw-core` applies;
-//! 7. [`report`]: `report.md` with before/after plots against the guilty regressor and
+//! 7. [`ledger`]: every test significant after its multiplicity correction ends explained by
+//!    an accepted effect or in `unexplained` with its size, regressor and the reason nothing
+//!    was named (the candidates are tested once more against the final model for it);
+//! 8. [`report`]: `report.md` with before/after plots against the guilty regressor and
 //!    `report.json`; scoring against `truth.json` only when it exists ([`scoring`]).
 //!
 //! [`synthetic`] makes frames with known effects for tests.
@@ -30,11 +33,13 @@ pub mod fit;
 pub mod flight;
 pub mod gyro;
 pub mod inject;
+pub mod ledger;
 pub mod measurements;
 pub mod report;
 pub mod run;
 pub mod scoring;
 pub mod search;
+pub mod sparse_catalog;
 pub mod stats;
 pub mod structure;
 pub mod synthetic;
@@ -85,6 +90,12 @@ pub struct Unexplained {
     /// Other regressors with significant structure on this sensor (correlated with
     /// `regressor` or a second structure), strongest first.
     pub also_follows: Vec<String>,
+    /// Unit of `size` (`arcsec`, `ms` for a slew-arc time tag, `arcsec/s`, `ppm`).
+    pub unit: String,
+    /// The test family ([`ledger::Family::name`]).
+    pub source: String,
+    /// Why nothing was named ([`ledger`]).
+    pub reason: String,
 }
 
 /// Result of the sensor-side analysis.
@@ -100,6 +111,11 @@ pub struct Analysis {
     pub unexplained: Vec<Unexplained>,
     /// The time tags against the gyro (None: no slew arcs with data).
     pub time_reference: Option<time_reference::TimeReference>,
+    /// The library candidates tested against the final model ([`ledger::sweep`]).
+    pub swept: Vec<ledger::Swept>,
+    /// Every significant test and its outcome (sensor side; the gyro's are added by
+    /// [`run`]).
+    pub ledger: Vec<ledger::LedgerEntry>,
     /// Residual RMS per sensor before (baseline model) and after (final model), arcsec.
     pub rms_before: [f64; 4],
     /// After.
@@ -175,6 +191,9 @@ pub fn unexplained_from(tests: &[structure::StructureTest], alpha: f64) -> Vec<U
                     .iter()
                     .map(|t| t.regressor.name().to_owned())
                     .collect(),
+                unit: "arcsec".to_owned(),
+                source: ledger::Family::ResidualStructure.name().to_owned(),
+                reason: String::new(),
             });
         }
     }
@@ -223,7 +242,11 @@ pub fn analyse(input: &DiagnoseInput<'_>, config: &SearchConfig) -> anyhow::Resu
             }
         })
         .collect();
-    let unexplained = unexplained_from(&res.tests_after, config.alpha);
+    let swept = ledger::sweep(&set, &res, config.alpha);
+    let ledger = ledger::sensor_ledger(&res, &swept, time_reference.as_ref(), config.alpha);
+    let mut unexplained = unexplained_from(&res.tests_after, config.alpha);
+    ledger::attach_reasons(&mut unexplained, &ledger);
+    unexplained.extend(ledger::unexplained_items(&ledger));
     let rms_before = set.rms_per_sensor(&res.before.resid);
     let rms_after = set.rms_per_sensor(&res.after.resid);
     Ok(Analysis {
@@ -232,6 +255,8 @@ pub fn analyse(input: &DiagnoseInput<'_>, config: &SearchConfig) -> anyhow::Resu
         detected,
         unexplained,
         time_reference,
+        swept,
+        ledger,
         rms_before,
         rms_after,
     })

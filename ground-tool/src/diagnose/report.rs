@@ -1,7 +1,10 @@
 //! # `report.json` and `report.md` of `ground-tool diagnose`, with before/after plots
 //!
 //! `report.json` carries `detected` (list of `{effect, sensor, parameters, sigma, units,
-//! evidence}`), `unexplained` (list of `{sensor, regressor, axis, method, size, p_value, also_follows}`),
+//! evidence}`), `unexplained` (list of `{sensor, regressor, axis, method, size, unit, p_value,
+//! also_follows, source, reason}`), `ledger` (every test significant after its multiplicity
+//! correction and its outcome: explained by the accepted effects or unexplained with the
+//! reason, [`super::ledger`]),
 //! `residual_rms_arcsec.before/.after` per sensor, `iterations`, and — only when the run
 //! folder has a `truth.json`, labelled as scoring — `calibration_error_arcsec.before/.after`
 //! and a parameter check against the scenario.
@@ -56,6 +59,8 @@ pub struct DiagnoseReport {
     pub detected: Vec<Detected>,
     /// Structure no candidate explains.
     pub unexplained: Vec<Unexplained>,
+    /// Every significant test and its outcome ([`super::ledger`]).
+    pub ledger: Vec<super::ledger::LedgerEntry>,
     /// Residual RMS per sensor (arcsec): the calibration chain's model vs the final model.
     pub residual_rms_arcsec: BeforeAfter,
     /// White-noise floor per sensor (arcsec, successive differences).
@@ -349,6 +354,46 @@ fn fmt_params(d: &Detected) -> String {
         .join("<br>")
 }
 
+/// The ledger section: every significant test and how it ended.
+fn ledger_markdown(s: &mut String, ledger: &[super::ledger::LedgerEntry]) {
+    use super::ledger::Outcome;
+    let _ = writeln!(
+        s,
+        "## Evidence ledger\n\nEvery test significant after its multiplicity correction (family-wise α = 0.001) and how it ended.\n"
+    );
+    if ledger.is_empty() {
+        let _ = writeln!(s, "No significant test.\n");
+        return;
+    }
+    let _ = writeln!(
+        s,
+        "| family | sensor | axis | regressor | test | size | p (corrected) | outcome |\n|---|---|---|---|---|---|---|---|"
+    );
+    for e in ledger {
+        let outcome = match &e.outcome {
+            Outcome::Explained { by } => format!("explained by {}", by.join(", ")),
+            Outcome::Unexplained { reason } => format!("UNEXPLAINED: {reason}"),
+        };
+        let size = if e.size.is_finite() {
+            format!("{:.2} {}", e.size, e.unit)
+        } else {
+            "–".to_owned()
+        };
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} | {} | {} | {size} | {:.2e} | {} |",
+            e.family.name(),
+            e.sensor,
+            e.axis,
+            e.regressor,
+            e.test.replace('|', "/"),
+            e.p_holm,
+            outcome.replace('|', "/")
+        );
+    }
+    s.push('\n');
+}
+
 /// Markdown report.
 #[must_use]
 pub fn markdown(r: &DiagnoseReport) -> String {
@@ -400,23 +445,26 @@ pub fn markdown(r: &DiagnoseReport) -> String {
     } else {
         let _ = writeln!(
             s,
-            "| sensor | axis | regressor | test | size (″) | p (Holm) | also follows |\n|---|---|---|---|---|---|---|"
+            "| sensor | axis | regressor | test | size | p (Holm) | also follows | why nothing was named |\n|---|---|---|---|---|---|---|---|"
         );
         for u in &r.unexplained {
             let _ = writeln!(
                 s,
-                "| {} | {} | {} | {} | {:.2} | {:.2e} | {} |",
+                "| {} | {} | {} | {} | {:.2} {} | {:.2e} | {} | {} |",
                 u.sensor,
                 u.axis,
                 u.regressor,
                 u.method,
                 u.size,
+                u.unit,
                 u.p_value,
-                u.also_follows.join(", ")
+                u.also_follows.join(", "),
+                u.reason.replace('|', "/")
             );
         }
         s.push('\n');
     }
+    ledger_markdown(&mut s, &r.ledger);
     let _ = writeln!(s, "## Residual RMS (arcsec, per axis)\n\n| sensor | measurements | before | after | noise floor |\n|---|---|---|---|---|");
     for n in SENSOR_NAMES {
         let g =

@@ -57,6 +57,8 @@ pub struct DiagnoseOutput {
     pub alignment: AlignmentTable,
     /// New filter table (if changed).
     pub filter: Option<FilterTable>,
+    /// The gyro side (its candidates left over are in the ledger).
+    pub gyro: gyro::GyroAnalysis,
 }
 
 /// What the analysis takes from the calibration chain.
@@ -272,6 +274,7 @@ pub fn diagnose_run(
         transient_declared: declared.iter().any(|d| d == "iru_bias_transient"),
     };
     let gyro_res = gyro::analyse(&input, &analysis.set, &analysis.search.after, &gcfg);
+    let gyro_ledger = super::ledger::gyro_ledger(&gyro_res, opts.search.alpha);
 
     // Flight tables.
     let filter_flown = flown_filter.unwrap_or_else(FilterTable::default_boot);
@@ -439,7 +442,13 @@ pub fn diagnose_run(
             .map(|&i| analysis.search.layout.effects[i].label())
             .collect(),
         detected: detected.clone(),
-        unexplained: analysis.unexplained.clone(),
+        unexplained: analysis
+            .unexplained
+            .iter()
+            .cloned()
+            .chain(super::ledger::unexplained_items(&gyro_ledger))
+            .collect(),
+        ledger: analysis.ledger.iter().cloned().chain(gyro_ledger).collect(),
         residual_rms_arcsec: BeforeAfter {
             before: to_map(analysis.rms_before),
             after: to_map(analysis.rms_after),
@@ -488,6 +497,7 @@ pub fn diagnose_run(
         alignment: flight.alignment,
         filter: flight.filter,
         calibration: cal.output,
+        gyro: gyro_res,
     })
 }
 

@@ -60,6 +60,8 @@ pub struct SearchConfig {
     pub indication_alpha: f64,
     /// Smallest BIC improvement accepted (10: "very strong" on the Kass–Raftery scale).
     pub min_delta_bic: f64,
+    /// Offer the sparse catalog form ([`super::sparse_catalog`]); off only for ablation.
+    pub sparse_catalog: bool,
 }
 
 impl Default for SearchConfig {
@@ -71,6 +73,7 @@ impl Default for SearchConfig {
             adequacy_reduction: 0.8,
             indication_alpha: 0.01,
             min_delta_bic: 10.0,
+            sparse_catalog: true,
         }
     }
 }
@@ -314,6 +317,13 @@ fn restricts(sub: &Effect, full: &Effect) -> bool {
     sub.kind == full.kind && sub.sensor == full.sensor && sub.harmonics < full.harmonics
 }
 
+/// The full and the sparse catalog forms ([`super::sparse_catalog`]) describe the same
+/// structure: a model holds one of them, so effect `i` is not offered when the other is in.
+fn catalog_taken(layout: &Layout, model: &[usize], i: usize) -> bool {
+    let catalog = |j: usize| layout.effects[j].kind == EffectKind::CatalogProperMotionError;
+    catalog(i) && model.iter().any(|&m| m != i && catalog(m))
+}
+
 /// Run the loop.
 ///
 /// # Errors
@@ -433,6 +443,20 @@ fn search_with_pitch(
                 || layout.effects[i].kind == EffectKind::UnknownOrbit
         })
         .collect();
+    // The sparse catalog form (per-star offsets selected star by star): appended to the
+    // library when a few stars pass their own tests against the baseline.
+    let (layout, systems) = if config.sparse_catalog {
+        let (l, s, _) = super::sparse_catalog::with_sparse_catalog(
+            set,
+            layout,
+            systems,
+            &baseline,
+            config.alpha,
+        );
+        (l, s)
+    } else {
+        (layout, systems)
+    };
     let mut model = baseline.clone();
     let fit_model = |sys: &super::fit::Normal, effects: &[usize]| {
         solve(sys, &layout, &indices(&layout, effects))
@@ -532,7 +556,7 @@ fn search_with_pitch(
                     }
                 }
                 let (inv, rank) = crate::linalg::sym_pinv(&cab, 1e-12);
-                if effect.kind == EffectKind::CatalogProperMotionError {
+                if effect.kind == EffectKind::CatalogProperMotionError && !effect.sparse {
                     // Gauge-free comparison: per-star offsets of the stars both halves
                     // determine (σ below half the prior), each half's net rotation removed.
                     let prior: Vec<f64> = effect.prior_sigma.clone();
@@ -883,7 +907,10 @@ fn search_with_pitch(
         for _ in 0..config.max_iterations {
             let candidates: Vec<usize> = (0..layout.effects.len())
                 .filter(|&i| {
-                    !model.contains(&i) && !excluded.contains(&i) && !layout.effects[i].hidden
+                    !model.contains(&i)
+                        && !excluded.contains(&i)
+                        && !layout.effects[i].hidden
+                        && !catalog_taken(&layout, &model, i)
                 })
                 .collect();
             let (mut evs, best) = evaluate(&model, &current, &current_post, &candidates, false);
@@ -1009,7 +1036,12 @@ fn search_with_pitch(
     for _ in 1..=config.max_iterations {
         let number = iterations.len() + 1;
         let candidates: Vec<usize> = (0..layout.effects.len())
-            .filter(|&i| !model.contains(&i) && !excluded.contains(&i) && !layout.effects[i].hidden)
+            .filter(|&i| {
+                !model.contains(&i)
+                    && !excluded.contains(&i)
+                    && !layout.effects[i].hidden
+                    && !catalog_taken(&layout, &model, i)
+            })
             .collect();
         let (mut evs, mut best) = evaluate(&model, &current, &current_post, &candidates, true);
         // A stronger explanation that failed only on halves or adequacy vetoes a weaker one on

@@ -42,6 +42,9 @@ pub struct SynthEffects {
     pub fss_tf: [Option<(FssHeadErrors, FssHeadErrors)>; 2],
     /// Catalog error: per-star offsets of this 1σ (arcsec) per axis.
     pub catalog_sigma_arcsec: f64,
+    /// Catalog error of a few named stars: HIP → (east, north) arcsec (true − catalog), on
+    /// top of `catalog_sigma_arcsec` (a handful of bad stars among the good ones).
+    pub catalog_star_offsets: std::collections::BTreeMap<u32, [f64; 2]>,
     /// Not in the library: alignment ∝ ΔT² (arcsec/°C², ACS) per sensor.
     pub thermal_squared: [[f64; 3]; 4],
     /// Not in the library: (sensor, amplitude arcsec, period s, decay s, ACS axis) oscillation
@@ -218,6 +221,14 @@ pub fn generate(cfg: &SynthConfig) -> SynthRun {
             );
             offset = (east * de + north * dn) * RAD_PER_ARCSEC;
             catalog_offsets.insert(hip, [de, dn]);
+        }
+        if let Some(&[de, dn]) = fx.catalog_star_offsets.get(&hip) {
+            let east = Vector3::z().cross(&dir).normalize();
+            let north = dir.cross(&east);
+            offset += (east * de + north * dn) * RAD_PER_ARCSEC;
+            let e = catalog_offsets.entry(hip).or_insert([0.0; 2]);
+            e[0] += de;
+            e[1] += dn;
         }
         stars.push(Star {
             hip,
