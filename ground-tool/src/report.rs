@@ -260,6 +260,48 @@ pub fn write_calibration_report(
             &series,
         )?;
         plots.push("bias_history.png".into());
+        // The OBC's bias minus the ground's, with the ground's ±1σ band (what the onboard
+        // filter still carries after its own convergence).
+        let mut diff = Vec::new();
+        for (axis, name) in ["x", "y", "z"].iter().enumerate() {
+            let pts: Vec<(f64, f64, f64)> = out
+                .report
+                .bias_history
+                .iter()
+                .filter_map(|p| {
+                    p.obc_bias_rad_per_s.map(|b| {
+                        (
+                            p.t_s / 3600.0,
+                            (b[axis] - p.bias_rad_per_s[axis]) * ARCSEC_PER_RAD,
+                            p.sigma_rad_per_s[axis] * ARCSEC_PER_RAD,
+                        )
+                    })
+                })
+                .collect();
+            diff.push(Series {
+                label: format!("OBC − ground {name}"),
+                points: pts.iter().map(|(t, d, _)| (*t, *d)).collect(),
+                color: colors[axis],
+            });
+            diff.push(Series {
+                label: format!("ground ±1σ {name}"),
+                points: pts
+                    .iter()
+                    .flat_map(|(t, _, s)| [(*t, *s), (*t, -*s)])
+                    .collect(),
+                color: light[axis],
+            });
+        }
+        if diff.iter().any(|s| !s.points.is_empty()) {
+            plot_series(
+                &out_dir.join("bias_difference.png"),
+                "OBC bias minus the ground's (smoothed, calibration filter)",
+                "time (h)",
+                "bias difference (arcsec/s)",
+                &diff,
+            )?;
+            plots.push("bias_difference.png".into());
+        }
     }
 
     let r = &out.report;

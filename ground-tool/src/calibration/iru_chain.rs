@@ -426,6 +426,7 @@ fn forward(
     nominal: &Nominal,
     cfg: &ChainConfig,
     rrw: f64,
+    keep_history: bool,
 ) -> Result<Pass, ChainError> {
     let n = chain.fixes.len();
     let mut x = Vx::zeros();
@@ -505,8 +506,15 @@ fn forward(
                 x[3 + i] += db[i];
             }
             p = symmetrise(&(f * p * f.transpose() + q));
+            if !keep_history {
+                pass.f.clear();
+            }
             pass.f.push(f);
             released = model.is_none();
+        }
+        if !keep_history {
+            pass.x_pred.clear();
+            pass.p_pred.clear();
         }
         pass.x_pred.push(x);
         pass.p_pred.push(p);
@@ -546,6 +554,10 @@ fn forward(
             let ikh = Mx::identity() - k * h;
             p = symmetrise(&(ikh * p * ikh.transpose() + k * r * k.transpose()));
         }
+        if !keep_history {
+            pass.x_filt.clear();
+            pass.p_filt.clear();
+        }
         pass.x_filt.push(x);
         pass.p_filt.push(p);
     }
@@ -559,7 +571,15 @@ fn smooth(pass: &Pass) -> (Vec<Vx>, Vec<Mx>) {
     let mut ps = pass.p_filt.clone();
     for j in (0..n.saturating_sub(1)).rev() {
         let f = &pass.f[j];
-        let pp = symmetrise(&pass.p_pred[j + 1]);
+        // States without variance (the lack-of-fit extension when it is not freed) are
+        // given a unit diagonal: their rows of F P_f are zero, so their gain is zero and the
+        // others' are unchanged.
+        let mut pp = symmetrise(&pass.p_pred[j + 1]);
+        for i in 0..NX {
+            if pp[(i, i)] <= 0.0 {
+                pp[(i, i)] = 1.0;
+            }
+        }
         let cross = f * pass.p_filt[j];
         // C = P_f Fᵀ P_p⁻¹  ⇔  P_p Cᵀ = F P_f.
         let ct = match pp.cholesky() {
@@ -612,7 +632,7 @@ pub fn solve_chain(chain: &Chain, cfg: &ChainConfig) -> Result<ChainSolution, Ch
         if iterations == 1 && cfg.estimate_rrw {
             rrw = choose_noise(chain, &models, &nominal, cfg, rrw_declared)?;
         }
-        let pass = forward(chain, &models, &nominal, cfg, rrw)?;
+        let pass = forward(chain, &models, &nominal, cfg, rrw, true)?;
         let (xs, _) = smooth(&pass);
         let last = pass.x_filt.last().copied().unwrap_or_else(Vx::zeros);
         let mut step: f64 = 0.0;
@@ -632,7 +652,7 @@ pub fn solve_chain(chain: &Chain, cfg: &ChainConfig) -> Result<ChainSolution, Ch
         }
     }
     // Final pass at the converged point: covariances, NIS, smoothed bias.
-    let pass = forward(chain, &models, &nominal, cfg, rrw)?;
+    let pass = forward(chain, &models, &nominal, cfg, rrw, true)?;
     let rate_scale = rate_scale_test(chain, &models, &nominal, cfg, rrw, pass.log_likelihood)?;
     let (xs, ps) = smooth(&pass);
     let last_p = pass.p_filt.last().copied().unwrap_or_else(Mx::zeros);
@@ -731,7 +751,7 @@ fn rate_scale_test(
         extension: true,
         ..*cfg
     };
-    let pass = forward(chain, models, nominal, &c, rrw)?;
+    let pass = forward(chain, models, nominal, &c, rrw, false)?;
     let x = pass.x_filt.last().copied().unwrap_or_else(Vx::zeros);
     let p = pass.p_filt.last().copied().unwrap_or_else(Mx::zeros);
     let k = Vector3::new(x[EXT], x[EXT + 1], x[EXT + 2]);
@@ -769,7 +789,7 @@ fn choose_noise(
     declared: f64,
 ) -> Result<f64, ChainError> {
     let ll = |c: &ChainConfig, rrw: f64| -> Result<f64, ChainError> {
-        Ok(forward(chain, models, nominal, c, rrw)?.log_likelihood)
+        Ok(forward(chain, models, nominal, c, rrw, false)?.log_likelihood)
     };
     let grid = [0.25, 0.5, 1.0, 2.0, 4.0];
     let mut rrw = declared;
@@ -1216,6 +1236,10 @@ mod tests {
             assert!(z.abs() < 3.0, "element {e}: z = {z:.2}");
         }
         assert!(sol.gated.is_empty(), "{:?}", sol.gated);
+        // The smoother carries the data back to the first fix (its bias is not the prior).
+        let first_sigma = sol.bias[0].sigma_rad_per_s[0] * ARCSEC_PER_RAD;
+        let last_sigma = sol.bias[sol.bias.len() - 1].sigma_rad_per_s[0] * ARCSEC_PER_RAD;
+        assert!(first_sigma < 3.0 * last_sigma, "first {first_sigma} last {last_sigma}″/s");
         let mask = significant_elements(&sol.delta_m[0], &sol.sigma_delta_m[0]).map(|x| x != 0.0);
         let v =
             validate_heldout(&chain, &cfg(sigma_u), Triad::Primary, sol.rrw_used, &mask).unwrap();
