@@ -385,12 +385,22 @@ fn run_diagnose(
     })?;
     // The folder is new: its images are exactly the ones this diagnose wrote.
     sim_harness::manifest::write_for_all(&out.join("tables"), "ground-tool diagnose")?;
+    // Diagnose names the files it wrote by the temporary folder's path: name them by OUT.
+    let (tmp, target) = (out.display().to_string(), out_target.display().to_string());
+    for f in ["report.json", "report.md"] {
+        let p = out.join(f);
+        if let Ok(text) = std::fs::read_to_string(&p) {
+            std::fs::write(&p, text.replace(&tmp, &target))
+                .with_context(|| format!("cannot write {}", p.display()))?;
+        }
+    }
     dir.commit()?;
     for note in &result.report.notes {
         eprintln!("note: {note}");
     }
     if json {
-        println!("{}", serde_json::to_string_pretty(&result.report)?);
+        let text = serde_json::to_string_pretty(&result.report)?;
+        println!("{}", text.replace(&tmp, &target));
     } else {
         let r = &result.report;
         for d in &r.detected {
