@@ -34,6 +34,9 @@ pub struct LoopReport {
     /// Relative alignment error against truth, arcsec, per sensor pair
     /// (angle of `R_iᵀ R_j`, `R_k = M_k,table M_k,trueᵀ`).
     pub relative_alignment_error_arcsec: Pair<BTreeMap<String, f64>>,
+    /// The calibration's stated 1σ of each relative alignment (largest ACS axis, ″): from
+    /// FFCAL's covariance relative to FHST1 (pairs without FHST1: the root sum of squares).
+    pub relative_alignment_sigma_arcsec: BTreeMap<String, f64>,
     /// Absolute alignment error against truth per sensor, arcsec (includes the common
     /// rotation that the adjustment deliberately keeps).
     pub absolute_alignment_error_arcsec: Pair<BTreeMap<String, f64>>,
@@ -122,6 +125,29 @@ fn three_rms(s: &Summary) -> [f64; 3] {
 /// Score the loop.
 ///
 /// # Errors
+/// The stated 1σ of every sensor pair's relative alignment (largest ACS axis, ″).
+fn stated_relative_sigma(calibration: &CalibrationOutput) -> BTreeMap<String, f64> {
+    let rel = &calibration
+        .report
+        .ffcal
+        .relative_covariance_to_fhst1_arcsec2;
+    let var = |name: &str| -> f64 {
+        if name == SENSOR_NAMES[0] {
+            return 0.0;
+        }
+        rel.get(name)
+            .map_or(f64::INFINITY, |c| c[0][0].max(c[1][1]).max(c[2][2]))
+    };
+    let mut out = BTreeMap::new();
+    for i in 0..4 {
+        for j in i + 1..4 {
+            let (a, b) = (SENSOR_NAMES[i], SENSOR_NAMES[j]);
+            out.insert(format!("{a}-{b}"), (var(a) + var(b)).sqrt());
+        }
+    }
+    out
+}
+
 /// A malformed `truth.json`.
 pub fn compare(
     a: &Summary,
@@ -157,6 +183,7 @@ pub fn compare(
             before: rel_before,
             after: rel_after,
         },
+        relative_alignment_sigma_arcsec: stated_relative_sigma(calibration),
         absolute_alignment_error_arcsec: Pair {
             before: abs_before,
             after: abs_after,

@@ -777,7 +777,7 @@ const MIN_MANEUVERS_FOR_SCALE: usize = 20;
 /// The noise model from the data (`algorithms.md` §7a): σ_u is the declared one unless the
 /// filter's likelihood (prediction-error decomposition) is higher by more than 2 units at a
 /// larger one on a ×4 grid (up to 4⁸); the scales of the fixes' random and systematic
-/// covariance are chosen on a ×2 grid from ¼ to 4 (the fine attitudes' stated covariance
+/// covariance are chosen on a ×2 grid from 1/16 to 4 (the fine attitudes' stated covariance
 /// carries declared sensor noise and floors that may be conservative or optimistic; the
 /// random part shows between the fixes of one hold, the systematic part only across
 /// maneuvers). Coordinate ascent: random, systematic, σ_u, random, systematic.
@@ -791,7 +791,7 @@ fn choose_noise(
     let ll = |c: &ChainConfig, rrw: f64| -> Result<f64, ChainError> {
         Ok(forward(chain, models, nominal, c, rrw, false)?.log_likelihood)
     };
-    let grid = [0.25, 0.5, 1.0, 2.0, 4.0];
+    let grid = [0.0625, 0.125, 0.25, 0.5, 1.0, 2.0, 4.0];
     let mut rrw = declared;
     // A scale is estimated only from enough data to pin it (a short run keeps the stated σ).
     let fixes = chain.links.iter().flatten().count();
@@ -1239,7 +1239,10 @@ mod tests {
         // The smoother carries the data back to the first fix (its bias is not the prior).
         let first_sigma = sol.bias[0].sigma_rad_per_s[0] * ARCSEC_PER_RAD;
         let last_sigma = sol.bias[sol.bias.len() - 1].sigma_rad_per_s[0] * ARCSEC_PER_RAD;
-        assert!(first_sigma < 3.0 * last_sigma, "first {first_sigma} last {last_sigma}″/s");
+        assert!(
+            first_sigma < 3.0 * last_sigma,
+            "first {first_sigma} last {last_sigma}″/s"
+        );
         let mask = significant_elements(&sol.delta_m[0], &sol.sigma_delta_m[0]).map(|x| x != 0.0);
         let v =
             validate_heldout(&chain, &cfg(sigma_u), Triad::Primary, sol.rrw_used, &mask).unwrap();
