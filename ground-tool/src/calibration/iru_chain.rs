@@ -66,6 +66,7 @@ const EXT_PRIOR_PPM: f64 = 1e5;
 /// p-value below which the extension counts as needed (the gyro model does not fit).
 const EXT_P_MAX: f64 = 1e-4;
 
+
 /// Index of the fixes' systematic error (″): shared by the fixes of one hold, drawn anew after
 /// a maneuver or a break (alignment residuals and FSS transfer function differ per attitude).
 const SYS: usize = 26;
@@ -654,6 +655,9 @@ pub fn solve_chain(chain: &Chain, cfg: &ChainConfig) -> Result<ChainSolution, Ch
     // Final pass at the converged point: covariances, NIS, smoothed bias.
     let pass = forward(chain, &models, &nominal, cfg, rrw, true)?;
     let rate_scale = rate_scale_test(chain, &models, &nominal, cfg, rrw, pass.log_likelihood)?;
+    // Raising σ_u until this test passes was tried: it also "fits" a scale error ∝ ω² (the
+    // ICD writer's rate² case passes at 64× the declared walk, p 0.18), so a lack of fit is
+    // reported, not absorbed (`docs/investigations.md`).
     let (xs, ps) = smooth(&pass);
     let last_p = pass.p_filt.last().copied().unwrap_or_else(Mx::zeros);
     let last_x = pass.x_filt.last().copied().unwrap_or_else(Vx::zeros);

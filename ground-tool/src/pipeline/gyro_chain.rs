@@ -465,9 +465,9 @@ fn model_fit(sol: &ChainSolution, cfg: &ChainConfig) -> Result<(), String> {
     let r = &sol.rate_scale;
     if r.significant {
         return Err(format!(
-            "the gyro model does not fit: a scale error that changes with rate, k = [{:.0}, {:.0}, {:.0}] ± [{:.0}, {:.0}, {:.0}] ppm at 1°/s (Wald χ² {:.1} on 3 dof, p = {:.1e}); δM from this fit would be wrong at other rates",
+            "the gyro model does not fit: the maneuvers' residuals follow the body rate, k = [{:.0}, {:.0}, {:.0}] ± [{:.0}, {:.0}, {:.0}] ppm at 1°/s as a rate-proportional scale (Wald χ² {:.1} on 3 dof, p = {:.1e}): a scale error that changes with rate, or a bias change the random walk (σ_u {:.2e} rad/s^1.5) cannot follow, which the maneuvers see first; δM from this fit would be wrong",
             r.k_ppm_at_1deg_per_s[0], r.k_ppm_at_1deg_per_s[1], r.k_ppm_at_1deg_per_s[2],
-            r.sigma_ppm[0], r.sigma_ppm[1], r.sigma_ppm[2], r.delta_chi2, r.p_value
+            r.sigma_ppm[0], r.sigma_ppm[1], r.sigma_ppm[2], r.delta_chi2, r.p_value, sol.rrw_used
         ));
     }
     let gated = sol.gated.len();
