@@ -274,7 +274,7 @@ pub enum AlignmentError {
     #[error("normal matrix is singular even with the prior: check the priors")]
     Singular,
     /// Gauss–Newton did not converge.
-    #[error("Gauss–Newton did not converge in {iterations} passes (last step {last_step_arcsec:.3e} arcsec): the prelaunch alignments may be too far off, or the data inconsistent; raise max_iterations or inspect the residuals")]
+    #[error("Gauss–Newton did not converge in {iterations} passes (last step {last_step_arcsec:.3e} arcsec): the flown alignments may be too far off for the linearisation, or the data inconsistent (misidentified stars, a sensor with wrong flags): inspect the residual plots of the report, or fly with alignments closer to the truth")]
     NotConverged {
         /// Passes made.
         iterations: usize,

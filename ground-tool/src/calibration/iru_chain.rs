@@ -66,7 +66,6 @@ const EXT_PRIOR_PPM: f64 = 1e5;
 /// p-value below which the extension counts as needed (the gyro model does not fit).
 const EXT_P_MAX: f64 = 1e-4;
 
-
 /// Index of the fixes' systematic error (″): shared by the fixes of one hold, drawn anew after
 /// a maneuver or a break (alignment residuals and FSS transfer function differ per attitude).
 const SYS: usize = 26;
@@ -472,6 +471,7 @@ fn forward(
         log_likelihood: 0.0,
     };
     let mut released = true;
+    let mut last_triad: Option<Triad> = None;
     for j in 0..n {
         if j > 0 {
             let model = models.get(j - 1).copied().flatten();
@@ -482,6 +482,15 @@ fn forward(
                 .get(j - 1)
                 .and_then(Option::as_ref)
                 .is_some_and(|l| l.maneuver.is_some());
+            // Another triad has its own bias: the walk restarts from the prior there.
+            if let Some(m) = model.as_ref() {
+                if last_triad.is_some_and(|t| t != m.triad) {
+                    for i in 0..3 {
+                        q[(3 + i, 3 + i)] += cfg.prior_bias_arcsec_per_s.powi(2);
+                    }
+                }
+                last_triad = Some(m.triad);
+            }
             if new_attitude(
                 model.as_ref(),
                 maneuver,
