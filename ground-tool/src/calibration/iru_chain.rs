@@ -482,11 +482,12 @@ fn forward(
                 .get(j - 1)
                 .and_then(Option::as_ref)
                 .is_some_and(|l| l.maneuver.is_some());
-            // Another triad has its own bias: the walk restarts from the prior there.
+            // Another triad has its own bias: the walk restarts from the prior at the start
+            // of its first link (before the propagation, so the attitude sees it).
             if let Some(m) = model.as_ref() {
                 if last_triad.is_some_and(|t| t != m.triad) {
                     for i in 0..3 {
-                        q[(3 + i, 3 + i)] += cfg.prior_bias_arcsec_per_s.powi(2);
+                        p[(3 + i, 3 + i)] += cfg.prior_bias_arcsec_per_s.powi(2);
                     }
                 }
                 last_triad = Some(m.triad);
