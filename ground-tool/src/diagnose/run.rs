@@ -61,12 +61,20 @@ pub struct DiagnoseOutput {
     pub gyro: gyro::GyroAnalysis,
 }
 
-/// What the analysis takes from the calibration chain.
+/// What the analysis takes from the calibration chain. The frames are the chain output's
+/// when there is one (not copied: six months of frames are ~0.5 GB).
 struct Chain {
+    /// The frames when the chain failed (empty otherwise: see [`Chain::frames`]).
     frames: Vec<crate::pipeline::observations::FrameObservations>,
     alignment: AlignmentTable,
     irucal: Option<crate::calibration::iru::IrucalSolution>,
     output: Option<CalibrationOutput>,
+}
+
+impl Chain {
+    fn frames(&self) -> &[crate::pipeline::observations::FrameObservations] {
+        self.output.as_ref().map_or(&self.frames, |o| &o.frames)
+    }
 }
 
 /// The chain's output without FFCAL/IRUCAL: DA/FADS with the flown tables.
@@ -177,7 +185,7 @@ pub fn diagnose_run(
     let mut notes = Vec::new();
     let cal = match calibrate_telemetry(&tm, &metadata, &copt) {
         Ok(c) => Chain {
-            frames: c.frames.clone(),
+            frames: Vec::new(),
             alignment: c.alignment,
             irucal: c.irucal.clone(),
             output: Some(c),
@@ -198,7 +206,7 @@ pub fn diagnose_run(
     };
 
     // Ephemerides per frame.
-    let frames = &cal.frames;
+    let frames = cal.frames();
     let mut earth = Vec::with_capacity(frames.len());
     let mut sun = Vec::with_capacity(frames.len());
     let mut eph: Option<sim_harness::truth::sun::SunEphemeris> = None;
