@@ -446,18 +446,7 @@ pub fn write_calibration_report(
                 "\nδM (ppm) with 1σ, primary triad, from {} gyro links:\n",
                 iru.links
             );
-            for row in 0..3 {
-                let _ = writeln!(
-                    md,
-                    "    [{:8.0} ±{:5.0}] [{:8.0} ±{:5.0}] [{:8.0} ±{:5.0}]",
-                    iru.delta_m[row][0] * 1e6,
-                    iru.delta_m_sigma[row][0] * 1e6,
-                    iru.delta_m[row][1] * 1e6,
-                    iru.delta_m_sigma[row][1] * 1e6,
-                    iru.delta_m[row][2] * 1e6,
-                    iru.delta_m_sigma[row][2] * 1e6
-                );
-            }
+            write_delta_m(&mut md, &iru.delta_m, &iru.delta_m_sigma);
             let _ = writeln!(
                 md,
                 "\nBias at the last fix (ACS, arcsec/s): [{:.5}, {:.5}, {:.5}] ± [{:.5}, {:.5}, {:.5}].\n",
@@ -487,18 +476,7 @@ pub fn write_calibration_report(
                     "Backup triad (X1, Y2, Z2; {:.0}° of rotation in the links), δM (ppm) with 1σ:\n",
                     b.rotation_deg
                 );
-                for row in 0..3 {
-                    let _ = writeln!(
-                        md,
-                        "    [{:8.0} ±{:5.0}] [{:8.0} ±{:5.0}] [{:8.0} ±{:5.0}]",
-                        b.delta_m[row][0] * 1e6,
-                        b.delta_m_sigma[row][0] * 1e6,
-                        b.delta_m[row][1] * 1e6,
-                        b.delta_m_sigma[row][1] * 1e6,
-                        b.delta_m[row][2] * 1e6,
-                        b.delta_m_sigma[row][2] * 1e6
-                    );
-                }
+                write_delta_m(&mut md, &b.delta_m, &b.delta_m_sigma);
                 let _ = writeln!(md, "\n**Backup G:** {}\n", b.decision);
             }
         }
@@ -520,4 +498,20 @@ pub fn write_calibration_report(
     }
     std::fs::write(out_dir.join("report.md"), md)?;
     Ok(())
+}
+
+/// δM (ppm) with its 1σ, one row per line.
+fn write_delta_m(md: &mut String, delta_m: &[[f64; 3]; 3], sigma: &[[f64; 3]; 3]) {
+    for (row, sig) in delta_m.iter().zip(sigma) {
+        let _ = writeln!(
+            md,
+            "    [{:8.0} ±{:5.0}] [{:8.0} ±{:5.0}] [{:8.0} ±{:5.0}]",
+            row[0] * 1e6,
+            sig[0] * 1e6,
+            row[1] * 1e6,
+            sig[1] * 1e6,
+            row[2] * 1e6,
+            sig[2] * 1e6
+        );
+    }
 }

@@ -232,8 +232,6 @@ pub struct IruReport {
     pub delta_m_uplinked: [[f64; 3]; 3],
     /// Intervals dropped as outliers (index in the order they were built, after earlier drops).
     pub rejected_intervals: Vec<usize>,
-    /// Every interval built from the telemetry, in build order, with its use.
-    pub interval_spans: Vec<IntervalSpan>,
     /// The estimator that produced δM.
     pub estimator: &'static str,
     /// Attitude fixes in the gyro chain.
@@ -269,23 +267,6 @@ pub struct IruReport {
     pub decision: String,
     /// The backup triad, when it flew slews.
     pub backup: Option<BackupIruReport>,
-}
-
-/// Where an IRUCAL interval lies in the telemetry (for the report and for checks against a
-/// simulation's truth).
-#[derive(Clone, Copy, Debug, Serialize, PartialEq)]
-pub struct IntervalSpan {
-    /// `"maneuver"` or `"hold"`.
-    pub kind: &'static str,
-    /// Time of the start fix, s since the first frame.
-    pub start_s: f64,
-    /// Time of the end fix, s since the first frame.
-    pub end_s: f64,
-    /// Rejected by the outlier loop.
-    pub rejected: bool,
-    /// 1σ per ACS axis of the start and end attitudes as IRUCAL weights them (floors
-    /// included), arcsec.
-    pub end_sigma_arcsec: [[f64; 3]; 2],
 }
 
 /// A maneuver found in the telemetry.

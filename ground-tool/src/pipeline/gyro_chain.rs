@@ -28,7 +28,7 @@ use super::calibrate::{
     batch_fix, gyro_complete, steps_between, FixFloors, IruReport, ManeuverReport, BATCH_HALF_S,
 };
 use super::observations::{FrameObservations, RateSwitch};
-use crate::calibration::iru::{GyroCalibration, IrucalSolution, PARAMETER_NAMES};
+use crate::calibration::iru::{GyroCalibration, IrucalSolution};
 use crate::calibration::iru_chain::{
     significant_elements, solve_chain, validate_heldout, Chain, ChainConfig, ChainFix, ChainLink,
     ChainSolution, HeldOutValidation, Triad,
@@ -270,10 +270,6 @@ pub struct BackupIruReport {
     pub decision: String,
 }
 
-fn rows(m: &Matrix3<f64>) -> [[f64; 3]; 3] {
-    rows_from_matrix(m)
-}
-
 /// Solve the chain, validate on held-out maneuvers, decide the table (see the module doc).
 pub fn irucal_stage(
     chain: &Chain,
@@ -350,7 +346,7 @@ pub fn irucal_stage(
         match validation {
             Ok(v) if v.passed => {
                 let g = (Matrix3::identity() + dm_up) * matrix_from_rows(table_g);
-                *table_g = rows(&g);
+                *table_g = rows_from_matrix(&g);
                 let why = format!(
                     "G updated with the δM elements determined at 3σ; held-out validation: {}",
                     v.reason
@@ -374,11 +370,11 @@ pub fn irucal_stage(
     let backup = (sol.rotation_deg[1] > 1.0).then(|| {
         let (upd, dmb, v, why) = decide(Triad::Backup, &mut table.g_backup);
         BackupIruReport {
-            delta_m: rows(&sol.delta_m[1]),
-            delta_m_sigma: rows(&sol.sigma_delta_m[1]),
+            delta_m: rows_from_matrix(&sol.delta_m[1]),
+            delta_m_sigma: rows_from_matrix(&sol.sigma_delta_m[1]),
             rotation_deg: sol.rotation_deg[1],
             g_updated: upd,
-            delta_m_uplinked: rows(&dmb),
+            delta_m_uplinked: rows_from_matrix(&dmb),
             validation: v,
             decision: why,
         }
@@ -399,17 +395,16 @@ pub fn irucal_stage(
         .copied()
         .collect();
     stage.report = Some(IruReport {
-        delta_m: rows(&sol.delta_m[0]),
-        delta_m_sigma: rows(&sol.sigma_delta_m[0]),
+        delta_m: rows_from_matrix(&sol.delta_m[0]),
+        delta_m_sigma: rows_from_matrix(&sol.sigma_delta_m[0]),
         bias_rad_per_s: bias,
         bias_sigma_rad_per_s: bias_sigma,
         intervals: residual_after.len(),
         residual_before_arcsec: residual_before.clone(),
         residual_after_arcsec: residual_after.clone(),
         g_updated,
-        delta_m_uplinked: rows(&dm_up),
+        delta_m_uplinked: rows_from_matrix(&dm_up),
         rejected_intervals: sol.gated.clone(),
-        interval_spans: Vec::new(),
         estimator: "calibration Kalman filter + RTS smoother over the whole timeline (bias random walk, fixes shared by adjacent links)",
         fixes: chain.fixes.len(),
         links: chain.links.iter().flatten().count(),
@@ -438,7 +433,6 @@ pub fn irucal_stage(
     for i in 0..3 {
         covariance_scaled[(9 + i, 9 + i)] = (bias_sigma[i] * ARCSEC_PER_RAD).powi(2);
     }
-    let _ = PARAMETER_NAMES;
     stage.solution = Some(IrucalSolution {
         calibration: GyroCalibration {
             delta_m: sol.delta_m[0],

@@ -486,7 +486,7 @@ fn split_rate_switches(
             // Both neighbours must be one-mode intervals.
             let clean = |j: usize| straddles.get(j).is_some_and(Option::is_none);
             (clean(k - 1) && clean(k + 1))
-                .then(|| split_step(frames, pulses, iru, k, t_switch, high_before, cycle_s))
+                .then(|| split_step(frames, pulses, iru, k, t_switch, high_before))
                 .flatten()
         });
         let f = &mut frames[k];
@@ -557,7 +557,6 @@ fn split_step(
     k: usize,
     t_switch: f64,
     high_before: bool,
-    cycle_s: f64,
 ) -> Option<(Vector3<f64>, Vector3<f64>, f64)> {
     let total = pulses.get(k).copied().flatten()?;
     let t_prev = frames.get(k.checked_sub(1)?)?.time.seconds();
@@ -568,7 +567,6 @@ fn split_step(
         pulse_weight_rad(!high_before, iru),
     );
     let tau1 = t_switch - t_prev;
-    let _ = cycle_s;
     let gain = 1.0 - w2 / w1;
     let mut angle = [0.0; 3];
     let mut per_c = [0.0; 3];
