@@ -392,6 +392,29 @@ pub fn write_calibration_report(
         "\nAdjustment (paper appendix): common rotation removed [{:.1}, {:.1}, {:.1}]″ so that the OBC's two-tracker attitude frame M_AN is unchanged.\n",
         r.adjustment_theta_acs_arcsec[0], r.adjustment_theta_acs_arcsec[1], r.adjustment_theta_acs_arcsec[2]
     );
+    let v = &r.alignment_validation;
+    let _ = writeln!(
+        md,
+        "**Alignment table:** {} — held-out validation: {}\n",
+        if v.passed {
+            "new alignments written"
+        } else {
+            "flown table kept (written again unchanged)"
+        },
+        v.reason
+    );
+    if !v.rms_new_arcsec.is_empty() {
+        let _ = writeln!(
+            md,
+            "| sensor | held-out RMS, new (″) | held-out RMS, flown (″) |"
+        );
+        let _ = writeln!(md, "|---|---|---|");
+        for (name, new) in &v.rms_new_arcsec {
+            let flown = v.rms_flown_arcsec.get(name).copied().unwrap_or(f64::NAN);
+            let _ = writeln!(md, "| {name} | {new:.1} | {flown:.1} |");
+        }
+        let _ = writeln!(md);
+    }
     let _ = writeln!(md, "## IRU\n");
     let used = r.maneuvers.iter().filter(|m| m.used).count();
     let _ = writeln!(

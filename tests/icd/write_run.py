@@ -598,6 +598,9 @@ def main(argv=None):
     p.add_argument("--time-shift-after", default=None, metavar="T_S:DELTA_S",
                    help="add DELTA_S to the time code of every packet at or after T_S s from the start, sequence counts unbroken (a clock or time-stamping error of a block)")
     p.add_argument("--low-rate-slews", action="store_true", help="keep the IRU in low rate during slews")
+    p.add_argument("--no-annual-aberration", action="store_true",
+                   help="(a mis-declared model) star and Sun directions without annual aberration, though "
+                        "metadata.json still declares it: the ground must not switch the OBC's correction on")
     p.add_argument("--quiet-iru", action="store_true", help="no gyro bias and no noise")
     p.add_argument("--backup-channels-dead", action="store_true",
                    help="backup IRU channels X1, Y2, Z2 never move (only the primary is written)")
@@ -1006,7 +1009,7 @@ def main(argv=None):
         since_frame = [0] * 6
         modes_since_frame = set()
         sun_geo = sun_geocentric(tai)
-        v_earth = earth_velocity(tai)
+        v_earth = earth_velocity(tai) if not args.no_annual_aberration else [0.0, 0.0, 0.0]
         v_obs = add(v_earth, vel)
         earth_helio_au = scale(sun_geo, -1.0 / AU_KM)
         observer_au = add(earth_helio_au, scale(pos, 1.0 / AU_KM))

@@ -730,6 +730,81 @@ fn accumulate(
     total
 }
 
+/// Residuals of `data` at given alignments, without estimating anything: what a table would
+/// leave on data it was not fitted to (held-out validation, `pipeline::alignment_heldout`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct AlignmentResiduals {
+    /// Weighted residual sum of squares of the dot products (whitened with the epoch's full
+    /// pair covariance under [`Weighting::Optimal1990`]).
+    pub chi2: f64,
+    /// Dot products behind `chi2` (its degrees of freedom).
+    pub pairs: usize,
+    /// RMS angle residual of the pairs involving each sensor (arcsec; NaN without pairs).
+    pub rms_arcsec: Vec<f64>,
+    /// Pairs behind each sensor's RMS.
+    pub rms_pairs: Vec<usize>,
+    /// Each epoch's share of `chi2`, in epoch order (for paired comparisons of two tables on
+    /// the same epochs).
+    pub chi2_per_epoch: Vec<f64>,
+}
+
+/// The residuals of `data` with the alignments `m_acs_from_sensor` (one per sensor index of
+/// `data`), weighted as `weighting` says.
+///
+/// # Errors
+/// [`AlignmentError::UnknownSensor`]: an observation's sensor index outside
+/// `m_acs_from_sensor`.
+pub fn alignment_residuals(
+    data: &AlignmentData,
+    m_acs_from_sensor: &[Matrix3<f64>],
+    weighting: Weighting,
+) -> Result<AlignmentResiduals, AlignmentError> {
+    let ns = m_acs_from_sensor.len();
+    for (epoch, obs) in data.epochs().enumerate() {
+        if let Some(bad) = obs.iter().find(|o| o.sensor >= ns) {
+            return Err(AlignmentError::UnknownSensor {
+                epoch,
+                sensor: bad.sensor,
+                sensors: ns,
+            });
+        }
+    }
+    let acc = accumulate(data, m_acs_from_sensor, ns, weighting);
+    let chi2_per_epoch = {
+        use rayon::prelude::*;
+        (0..data.epoch_count())
+            .into_par_iter()
+            .map_init(
+                || Accumulator::new(ns, weighting),
+                |a, e| {
+                    let before = a.chi2;
+                    a.add_epoch(data.epoch(e), m_acs_from_sensor);
+                    a.chi2 - before
+                },
+            )
+            .collect()
+    };
+    let rms_arcsec = acc
+        .resid_sum_sq_arcsec2
+        .iter()
+        .zip(&acc.resid_count)
+        .map(|(&sq, &n)| {
+            if n > 0 {
+                (sq / n as f64).sqrt()
+            } else {
+                f64::NAN
+            }
+        })
+        .collect();
+    Ok(AlignmentResiduals {
+        chi2: acc.chi2,
+        pairs: acc.pairs_used,
+        rms_arcsec,
+        rms_pairs: acc.resid_count,
+        chi2_per_epoch,
+    })
+}
+
 /// In-place inverse of a small SPD matrix (row-major `m × m`) by Cholesky; false if not SPD.
 fn small_spd_inverse(
     a: &[f64],

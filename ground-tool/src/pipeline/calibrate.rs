@@ -21,6 +21,10 @@
 //!    after (the paper's recommendation); holds give bias intervals and the bias history.
 //! 6. **Tables**: binary images written with `fsw-core`'s own types.
 
+use super::alignment_heldout::{
+    validate_aberration_switch, validate_alignment_heldout, AberrationSwitchValidation,
+    AlignmentValidation,
+};
 use super::fss_consider::{consider_covariance, TransferSpreads};
 use super::fss_systematic::{estimate_fss_systematic, FssSystematicEstimate};
 use super::gyro_chain::{build_gyro_chain, irucal_stage, BackupIruReport, IruStage};
@@ -35,10 +39,12 @@ use crate::calibration::alignment::{
     SensorSpec, Weighting,
 };
 use crate::calibration::fhst_relative::{
-    estimate_relative_alignment, fuse_with_prior, FhstRelativeAlignment,
+    estimate_relative_alignment, fuse_with_prior, FhstRelativeAlignment, RelativeAlignmentError,
 };
 use crate::calibration::iru::{AttitudeFix, GyroNoise, GyroStep, IrucalSolution};
-use crate::calibration::iru_chain::{Chain, ChainConfig, HeldOutValidation, RateScaleTest};
+use crate::calibration::iru_chain::{
+    BiasStepTest, Chain, ChainConfig, HeldOutValidation, RateScaleTest,
+};
 use crate::tp::{self, Telemetry, TpReport};
 use anyhow::{bail, Context};
 use fsw_core::attitude::{rot, rotvec_from_rot, Quat};
@@ -256,6 +262,11 @@ pub struct IruReport {
     pub model_fit: Option<String>,
     /// The lack-of-fit test of a scale error that changes with rate.
     pub rate_scale: RateScaleTest,
+    /// Bias steps at unknown times found by the change-point scan (run when the rate test
+    /// fails) and modelled: each with its time, size, σ and multiplicity-corrected p.
+    pub bias_steps: Vec<BiasStepTest>,
+    /// The scan's best candidate that was not accepted (when a scan ran and stopped).
+    pub bias_step_rejected: Option<BiasStepTest>,
     /// Where in their envelope the rate-mode switches inside decimated frames fell, as
     /// estimated (slew start, slew end; 0 = middle, ±0.5 = edges), with 1σ (0.5: no data).
     pub split_fraction: [f64; 2],
@@ -328,8 +339,15 @@ pub struct CalibrationReport {
     pub bias_history: Vec<BiasHistoryPoint>,
     /// Table images written.
     pub tables: std::collections::BTreeMap<String, String>,
-    /// Filter-table settings changed, with why (empty = no filter table written).
+    /// Filter-table settings changed, with why; a last line "not written: …" when the change
+    /// failed its validation (`filter_validation`). Empty = no change proposed.
     pub filter_changes: Vec<String>,
+    /// Held-out validation of the alignment table (`super::alignment_heldout`): the new
+    /// alignments are written only if it passed; otherwise the flown table is written again.
+    pub alignment_validation: AlignmentValidation,
+    /// Validation of the filter-table change, when there is one (the flown filter table is
+    /// kept when it fails).
+    pub filter_validation: Option<AberrationSwitchValidation>,
 }
 
 /// Data counts.
@@ -509,10 +527,33 @@ fn alignment_data(
     map: &[Option<usize>; 4],
     fss_systematic_arcsec: [f64; 2],
 ) -> AlignmentData {
+    alignment_data_segments(&[frames], map, fss_systematic_arcsec)
+}
+
+/// [`alignment_data`] over the frames of several segments taken together (a held-out fold's
+/// training data: the frames before and after the held-out block).
+pub(crate) fn alignment_data_segments(
+    segments: &[&[FrameObservations]],
+    map: &[Option<usize>; 4],
+    fss_systematic_arcsec: [f64; 2],
+) -> AlignmentData {
+    alignment_data_references(segments, map, fss_systematic_arcsec, &mut |_, d| *d)
+}
+
+/// [`alignment_data_segments`] with every reference direction (star or Sun, ECI) passed
+/// through `reference(frame, direction)`: the references another model would use (e.g. the
+/// OBC's without annual aberration, `super::alignment_heldout::validate_aberration_switch`).
+pub(crate) fn alignment_data_references(
+    segments: &[&[FrameObservations]],
+    map: &[Option<usize>; 4],
+    fss_systematic_arcsec: [f64; 2],
+    reference: &mut dyn FnMut(&FrameObservations, &Vector3<f64>) -> Vector3<f64>,
+) -> AlignmentData {
     let cell = fss_cell;
     let mut per_cell: std::collections::HashMap<(usize, (i64, i64)), usize> =
         std::collections::HashMap::new();
-    for f in frames {
+    let frames = || segments.iter().flat_map(|s| s.iter());
+    for f in frames() {
         for (i, s) in f.suns.iter().enumerate() {
             if let Some(s) = s {
                 *per_cell.entry((i, cell(&s.meas.dir_sensor))).or_default() += 1;
@@ -520,9 +561,9 @@ fn alignment_data(
         }
     }
     let sys_rad = fss_systematic_arcsec.map(|s| s / ARCSEC_PER_RAD);
-    let mut data = AlignmentData::with_capacity(frames.len(), 4);
+    let mut data = AlignmentData::with_capacity(frames().count(), 4);
     let mut obs = Vec::with_capacity(4);
-    for f in frames {
+    for f in frames() {
         obs.clear();
         for (i, s) in f.stars.iter().enumerate() {
             if let Some(s) = s {
@@ -530,7 +571,7 @@ fn alignment_data(
                     obs.push(SensorObservation {
                         sensor,
                         dir_sensor: s.meas.dir_sensor,
-                        dir_eci,
+                        dir_eci: reference(f, &dir_eci),
                         sigma_rad: s.sigma_rad,
                     });
                 }
@@ -545,7 +586,7 @@ fn alignment_data(
                 obs.push(SensorObservation {
                     sensor,
                     dir_sensor: s.meas.dir_sensor,
-                    dir_eci: s.sun_eci,
+                    dir_eci: reference(f, &s.sun_eci),
                     sigma_rad: (s.sigma_rad.powi(2) + n * sys_rad[i] * sys_rad[i]).sqrt(),
                 });
             }
@@ -559,7 +600,7 @@ fn alignment_data(
 }
 
 /// The FHSTs after stage 1: alignments and their 6×6 covariance (arcsec², ACS).
-struct FhstStageResult {
+pub(crate) struct FhstStageResult {
     m_acs_from_fhst: [Matrix3<f64>; 2],
     covariance_arcsec2: nalgebra::Matrix6<f64>,
     iterations: usize,
@@ -605,6 +646,120 @@ impl FhstStageResult {
             ],
             covariance_arcsec2: cov,
             iterations: 1,
+        })
+    }
+}
+
+/// What an FFCAL fit needs besides the frames: the same for the full fit and for every
+/// held-out fold (`super::alignment_heldout`), so a fold re-runs exactly the estimator whose
+/// table would be written.
+pub(crate) struct AlignmentSetup<'a> {
+    /// The observed sensors (indices of `map`), with the flown alignments and their priors.
+    pub(crate) sensors: &'a [SensorSpec],
+    /// Table index (FHST1, FHST2, FSS1, FSS2) → sensor index in `sensors`, `None` = unobserved.
+    pub(crate) map: [Option<usize>; 4],
+    /// Declared FSS systematic error (arcsec) behind the per-cell weights.
+    pub(crate) fss_systematic_arcsec: f64,
+    /// How the FHST stage is chosen.
+    pub(crate) options: &'a CalibrateOptions,
+    /// FFCAL options.
+    pub(crate) cfg: FfcalConfig,
+    /// The OBC's bias at a time (ACS, rad/s), to carry the gyro batches.
+    pub(crate) obc_bias_at: &'a dyn Fn(f64) -> Vector3<f64>,
+    /// Counts of the data, for the error messages.
+    pub(crate) data_note: String,
+}
+
+/// One FFCAL fit: its inputs and its solution.
+pub(crate) struct AlignmentFit {
+    /// The epochs of ≥ 2 referenced vectors (every sensor).
+    pub(crate) data: AlignmentData,
+    /// The simultaneous FHST1–FHST2 star epochs.
+    pub(crate) fhst_data: AlignmentData,
+    /// The FHST stage used, if staged.
+    pub(crate) fhst_stage: Option<(FhstStage, FhstStageResult)>,
+    /// The gyro-batch relative alignment, or why there is none.
+    pub(crate) batch_rel: Result<FhstRelativeAlignment, RelativeAlignmentError>,
+    /// The alignments and their covariance.
+    pub(crate) solution: FfcalSolution,
+}
+
+impl AlignmentSetup<'_> {
+    /// FFCAL over the frames of `segments` (module doc, step 3): the FHSTs first, from the
+    /// gyro batches or the simultaneous star pairs, then the FSSs relative to that frame
+    /// (`ffcal_staged`); without a FHST stage, one joint fit. `consider`: the declared FSS
+    /// transfer-function spreads for the stage-2 covariance (changes σ, not the estimate).
+    ///
+    /// # Errors
+    /// A stage that cannot be solved, with the data counts in the message.
+    pub(crate) fn fit(
+        &self,
+        segments: &[&[FrameObservations]],
+        consider: Option<&TransferSpreads>,
+    ) -> anyhow::Result<AlignmentFit> {
+        let sys = [self.fss_systematic_arcsec; 2];
+        let data = alignment_data_segments(segments, &self.map, sys);
+        let context = || {
+            format!(
+                "FFCAL: {} epochs with ≥ 2 referenced vectors ({})",
+                data.epoch_count(),
+                self.data_note
+            )
+        };
+        let fhst_data = alignment_data_segments(segments, &[Some(0), Some(1), None, None], sys);
+        let (mut batch_samples, mut batch_count) = (Vec::new(), 0);
+        for seg in segments {
+            let (samples, n) = star_batch_samples(seg, self.obc_bias_at);
+            batch_samples.extend(samples.into_iter().map(|mut s| {
+                s.batch += batch_count;
+                s
+            }));
+            batch_count += n;
+        }
+        let batch_rel = estimate_relative_alignment(&batch_samples, batch_count, MIN_GYRO_BATCHES);
+        let (sensors, cfg) = (self.sensors, &self.cfg);
+        let fhst_stage = match (
+            self.options.staged_ffcal,
+            self.options.fhst_stage,
+            &batch_rel,
+        ) {
+            (false, _, _) => None,
+            (true, FhstStage::GyroBatches, Ok(rel)) => Some((
+                FhstStage::GyroBatches,
+                FhstStageResult::gyro_batches(sensors, rel)?,
+            )),
+            // Without usable batches the star pairs still give the stage.
+            (true, _, _) if fhst_data.epoch_count() >= MIN_FHST_STAGE_EPOCHS => Some((
+                FhstStage::StarPairs,
+                FhstStageResult::star_pairs(sensors, &fhst_data, cfg).with_context(context)?,
+            )),
+            (true, _, _) => None,
+        };
+        let solution = match &fhst_stage {
+            Some((_, stage1)) => {
+                let white = consider.map(|spreads| {
+                    (
+                        spreads,
+                        alignment_data_segments(segments, &self.map, [0.0; 2]),
+                    )
+                });
+                ffcal_staged(
+                    sensors,
+                    stage1,
+                    &data,
+                    cfg,
+                    white.as_ref().map(|(s, w)| (*s, w)),
+                )
+                .with_context(context)?
+            }
+            None => ffcal(sensors, &data, cfg).with_context(context)?,
+        };
+        Ok(AlignmentFit {
+            data,
+            fhst_data,
+            fhst_stage,
+            batch_rel,
+            solution,
         })
     }
 }
@@ -1030,8 +1185,6 @@ pub fn calibrate_telemetry(
             observed.push(k);
         }
     }
-    let data = alignment_data(&frames, &map, [declared_fss_sys; 2]);
-    summary.ffcal_epochs = data.epoch_count();
     summary.not_observed = (0..4)
         .filter(|k| seen[*k] == 0)
         .map(|k| SENSOR_NAMES[k].to_string())
@@ -1045,60 +1198,36 @@ pub fn calibrate_telemetry(
         .iter()
         .map(|&k| SensorSpec::new(SENSOR_NAMES[k], flown[k], PRIOR_SIGMA_ARCSEC[k]))
         .collect();
-    let cfg = FfcalConfig {
-        weighting: options.weighting,
-        ..FfcalConfig::default()
+    let setup = AlignmentSetup {
+        sensors: &sensors,
+        map,
+        fss_systematic_arcsec: declared_fss_sys,
+        options,
+        cfg: FfcalConfig {
+            weighting: options.weighting,
+            ..FfcalConfig::default()
+        },
+        obc_bias_at: &obc_bias_at,
+        data_note: format!(
+            "stars identified per FHST: {:?}; Sun samples per FSS: {:?}",
+            summary.stars_identified, summary.sun_samples
+        ),
     };
-    let context = || {
-        format!(
-            "FFCAL: {} epochs with ≥ 2 referenced vectors (stars identified per FHST: {:?}; Sun samples per FSS: {:?})",
-            summary.ffcal_epochs, summary.stars_identified, summary.sun_samples
-        )
-    };
-    // FHSTs first, from star pairs alone, when the trackers saw stars together; then the FSSs
-    // relative to that frame (`ffcal_staged`). Without simultaneous star pairs, one joint fit.
-    let fhst_data = alignment_data(
-        &frames,
-        &[Some(0), Some(1), None, None],
-        [declared_fss_sys; 2],
-    );
-    let (batch_samples, batch_count) = star_batch_samples(&frames, &obc_bias_at);
-    let batch_rel = estimate_relative_alignment(&batch_samples, batch_count, MIN_GYRO_BATCHES);
-    let fhst_stage = match (options.staged_ffcal, options.fhst_stage, &batch_rel) {
-        (false, _, _) => None,
-        (true, FhstStage::GyroBatches, Ok(rel)) => Some((
-            FhstStage::GyroBatches,
-            FhstStageResult::gyro_batches(&sensors, rel)?,
-        )),
-        // Without usable batches the star pairs still give the stage.
-        (true, _, _) if fhst_data.epoch_count() >= MIN_FHST_STAGE_EPOCHS => Some((
-            FhstStage::StarPairs,
-            FhstStageResult::star_pairs(&sensors, &fhst_data, &cfg).with_context(context)?,
-        )),
-        (true, _, _) => None,
-    };
+    let fit = setup.fit(&[&frames], metadata.fss_transfer_function_sigma.as_ref())?;
     if let (Some((FhstStage::StarPairs, _)), FhstStage::GyroBatches, Err(e)) =
-        (&fhst_stage, options.fhst_stage, &batch_rel)
+        (&fit.fhst_stage, options.fhst_stage, &fit.batch_rel)
     {
         eprintln!("warning: FHST stage from the simultaneous star pairs: {e}");
     }
-    let solution = match &fhst_stage {
-        Some((_, stage1)) => {
-            let white = metadata
-                .fss_transfer_function_sigma
-                .as_ref()
-                .map(|spreads| (spreads, alignment_data(&frames, &map, [0.0; 2])));
-            ffcal_staged(
-                &sensors,
-                stage1,
-                &data,
-                &cfg,
-                white.as_ref().map(|(s, w)| (*s, w)),
-            )
-            .with_context(context)?
-        }
-        None => ffcal(&sensors, &data, &cfg).with_context(context)?,
-    };
+    let AlignmentFit {
+        data,
+        fhst_data,
+        fhst_stage,
+        batch_rel,
+        solution,
+    } = fit;
+    summary.ffcal_epochs = data.epoch_count();
+    let alignment_validation = validate_alignment_heldout(&frames, &setup);
     // The FSS error level left in the calibrated residuals (the paper's "inherent" 0.022°),
     // reported beside the declared level the FSS weights use (`pipeline::fss_systematic`).
     let fss_systematic = observed.iter().any(|&k| k >= 2).then(|| {
@@ -1319,12 +1448,24 @@ pub fn calibrate_telemetry(
                 .collect()
         })
         .unwrap_or_default();
-    let (new_filter, filter_changes) = filter_update(
+    let (new_filter, mut filter_changes) = filter_update(
         &options
             .flown_filter
             .unwrap_or_else(FilterTable::default_boot),
         metadata,
     )?;
+    // The one change `filter_update` makes (aberration on) is written only if the telemetry
+    // shows it is needed (`alignment_heldout::validate_aberration_switch`).
+    let filter_validation = new_filter
+        .as_ref()
+        .map(|_| validate_aberration_switch(&frames_cal, &setup));
+    let new_filter = match &filter_validation {
+        Some(v) if !v.passed => {
+            filter_changes.push(format!("not written: {}", v.reason));
+            None
+        }
+        _ => new_filter,
+    };
     let report = CalibrationReport {
         telemetry: tm.report.clone(),
         data: summary,
@@ -1339,6 +1480,8 @@ pub fn calibrate_telemetry(
         bias_history: bias_history_points,
         tables: std::collections::BTreeMap::new(),
         filter_changes,
+        alignment_validation,
+        filter_validation,
     };
     Ok(CalibrationOutput {
         report,
@@ -1470,7 +1613,21 @@ pub fn calibrate_run(
     let created = tm.raw.last().map_or(0.0, |r| r.time.seconds());
     // Names relative to OUT: the folder may be written under a temporary name and renamed.
     let alignment_path: PathBuf = tables_dir.join("alignment.tbl");
-    write_table(&alignment_path, TableId::Alignment, &out.alignment, created)?;
+    // Only a table that passed the held-out validation is uplinked; else the flown one again
+    // (so that OUT/tables stays the complete set to fly), and the report says why.
+    let alignment_to_fly = if out.report.alignment_validation.passed {
+        out.alignment
+    } else {
+        options
+            .flown_alignment
+            .unwrap_or_else(AlignmentTable::prelaunch)
+    };
+    write_table(
+        &alignment_path,
+        TableId::Alignment,
+        &alignment_to_fly,
+        created,
+    )?;
     out.report
         .tables
         .insert("alignment".into(), "tables/alignment.tbl".into());

@@ -340,6 +340,7 @@ pub fn irucal_stage(
         let cfg_solved = ChainConfig {
             fix_cov_scale: sol.fix_cov_scale,
             fix_systematic_scale: sol.fix_systematic_scale,
+            bias_restarts: sol.bias_restarts,
             ..*cfg
         };
         let validation = validate_heldout(chain, &cfg_solved, triad, sol.rrw_used, &mask);
@@ -417,6 +418,10 @@ pub fn irucal_stage(
         gated_fixes: sol.gated.len(),
         model_fit: fit.clone().err(),
         rate_scale: sol.rate_scale,
+        bias_steps: sol.bias_steps.clone(),
+        bias_step_rejected: sol
+            .bias_step_scan
+            .filter(|s| !sol.bias_steps.contains(s)),
         split_fraction: sol.split_fraction,
         split_fraction_sigma: sol.split_fraction_sigma,
         validation,
@@ -458,8 +463,20 @@ pub fn irucal_stage(
 fn model_fit(sol: &ChainSolution, cfg: &ChainConfig) -> Result<(), String> {
     let r = &sol.rate_scale;
     if r.significant {
+        let steps = match (sol.bias_steps.len(), &sol.bias_step_scan) {
+            (0, Some(b)) if !b.significant => format!(
+                "; no bias step explains it (the change-point scan's best, at t = {:.1} h, has corrected p = {:.1e} over {} positions)",
+                b.t_s / 3600.0,
+                b.p_value,
+                b.positions
+            ),
+            (0, _) => String::new(),
+            (n, _) => format!(
+                "; {n} bias step(s) found by the change-point scan are modelled and it still does not fit"
+            ),
+        };
         return Err(format!(
-            "the gyro model does not fit: the maneuvers' residuals follow the body rate, k = [{:.0}, {:.0}, {:.0}] ± [{:.0}, {:.0}, {:.0}] ppm at 1°/s as a rate-proportional scale (Wald χ² {:.1} on 3 dof, p = {:.1e}): a scale error that changes with rate, or a bias change the random walk (σ_u {:.2e} rad/s^1.5) cannot follow, which the maneuvers see first; δM from this fit would be wrong",
+            "the gyro model does not fit: the maneuvers' residuals follow the body rate, k = [{:.0}, {:.0}, {:.0}] ± [{:.0}, {:.0}, {:.0}] ppm at 1°/s as a rate-proportional scale (Wald χ² {:.1} on 3 dof, p = {:.1e}): a scale error that changes with rate, or a bias change the random walk (σ_u {:.2e} rad/s^1.5) cannot follow, which the maneuvers see first{steps}; δM from this fit would be wrong",
             r.k_ppm_at_1deg_per_s[0], r.k_ppm_at_1deg_per_s[1], r.k_ppm_at_1deg_per_s[2],
             r.sigma_ppm[0], r.sigma_ppm[1], r.sigma_ppm[2], r.delta_chi2, r.p_value, sol.rrw_used
         ));

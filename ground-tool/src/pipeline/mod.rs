@@ -3,6 +3,7 @@
 //! [`observations`]: DA and FADS (counts → referenced vectors, fine attitudes);
 //! [`calibrate`]: TP → FADS → FFCAL → adjustment → IRUCAL → tables.
 
+pub mod alignment_heldout;
 pub mod calibrate;
 pub mod flown;
 pub mod fss_consider;

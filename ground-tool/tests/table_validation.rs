@@ -1,0 +1,133 @@
+//! No table without held-out validation (`pipeline::alignment_heldout`), on telemetry from
+//! the independent ICD writer (`tests/icd/write_run.py`):
+//! - prelaunch tables ≈ 100–700″ off: the new alignments lower the held-out χ² and are written;
+//! - the same telemetry with those new alignments declared as the flown ones: a new fit cannot
+//!   improve on them, so the flown table is written again, byte for byte;
+//! - an alignment that steps by 60″ half-way through (outside the model): the held-out blocks
+//!   are not predicted within σ, and the flown table is kept;
+//! - the filter table's annual-aberration switch: written when the star pairs show the
+//!   aberration, refused when the telemetry lacks it though the metadata declare it.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+
+mod support;
+
+use fsw_core::tables::AlignmentTable;
+use ground_tool::pipeline::calibrate::read_table_image;
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn calibrate(run: &Path, out: &Path, extra: &[&str]) -> Value {
+    let o = Command::new(env!("CARGO_BIN_EXE_ground-tool"))
+        .arg("calibrate")
+        .arg(run)
+        .arg("--out")
+        .arg(out)
+        .arg("--force")
+        .arg("--json")
+        .args(extra)
+        .output()
+        .unwrap();
+    assert!(
+        o.status.success(),
+        "calibrate {}: {}",
+        run.display(),
+        String::from_utf8_lossy(&o.stderr)
+    );
+    serde_json::from_slice(&o.stdout).unwrap()
+}
+
+fn validation(r: &Value) -> (bool, f64, f64, f64, String) {
+    let v = &r["alignment_validation"];
+    (
+        v["passed"].as_bool().unwrap(),
+        v["chi2_new"].as_f64().unwrap(),
+        v["chi2_flown"].as_f64().unwrap(),
+        v["mean_square_normalised"].as_f64().unwrap(),
+        v["reason"].as_str().unwrap().to_owned(),
+    )
+}
+
+fn table(out: &Path) -> AlignmentTable {
+    read_table_image(&out.join("tables/alignment.tbl")).unwrap()
+}
+
+#[test]
+fn alignment_table_is_written_only_when_held_out_data_say_it_is_better() {
+    let run = support::write_run("heldout", "nominal", &[]);
+    let out1: PathBuf = run.join("cal1");
+    let r1 = calibrate(&run, &out1, &[]);
+    let (passed, new, flown, ms, why) = validation(&r1);
+    assert!(passed, "prelaunch tables: {why}");
+    assert!(new < 0.5 * flown, "held-out χ² {new} vs flown {flown}");
+    assert!(ms <= 2.0, "{why}");
+    assert_ne!(
+        table(&out1).matrices(),
+        AlignmentTable::prelaunch().matrices(),
+        "the new alignments were not written"
+    );
+
+    // The same telemetry, with the calibrated table declared flown.
+    let out2 = run.join("cal2");
+    let tables1 = out1.join("tables");
+    let r2 = calibrate(&run, &out2, &["--tables", tables1.to_str().unwrap()]);
+    let (passed, _, _, _, why) = validation(&r2);
+    assert!(!passed, "a refit of the same data was written: {why}");
+    assert!(why.contains("would not improve"), "{why}");
+    assert_eq!(
+        std::fs::read(out2.join("tables/alignment.tbl")).unwrap(),
+        std::fs::read(tables1.join("alignment.tbl")).unwrap(),
+        "the flown table must be written again unchanged"
+    );
+}
+
+#[test]
+fn an_alignment_that_changes_mid_run_is_not_uplinked() {
+    let run = support::write_run(
+        "heldout",
+        "align-step",
+        &["--align-step", "FHST2:2500:0,0,60"],
+    );
+    let out = run.join("cal");
+    let r = calibrate(&run, &out, &[]);
+    let (passed, _, _, ms, why) = validation(&r);
+    assert!(!passed, "an alignment step was uplinked: {why}");
+    assert!(ms > 2.0 && why.contains("within their σ"), "{why}");
+    assert_eq!(
+        table(&out).matrices(),
+        AlignmentTable::prelaunch().matrices(),
+        "the flown (prelaunch) table must be kept"
+    );
+}
+
+#[test]
+fn the_aberration_switch_is_written_only_when_the_telemetry_shows_aberration() {
+    for (case, flags, expect) in [
+        ("aberration", &[][..], true),
+        ("no-aberration", &["--no-annual-aberration"][..], false),
+    ] {
+        let run = support::write_run("heldout", case, flags);
+        let out = run.join("cal");
+        let r = calibrate(&run, &out, &[]);
+        let v = &r["filter_validation"];
+        let z = v["improvement"]["z"].as_f64().unwrap();
+        assert_eq!(v["passed"].as_bool(), Some(expect), "{case}: {v}");
+        assert_eq!(
+            out.join("tables/filter.tbl").exists(),
+            expect,
+            "{case}: filter.tbl written = {}",
+            !expect
+        );
+        let manifest = std::fs::read_to_string(out.join("tables/manifest.json")).unwrap();
+        assert_eq!(
+            manifest.contains("filter.tbl"),
+            expect,
+            "{case}: {manifest}"
+        );
+        if expect {
+            assert!(z > 3.0, "{case}: z = {z}");
+        } else {
+            assert!(z < 0.0, "{case}: the data contradict the switch, z = {z}");
+        }
+    }
+}
