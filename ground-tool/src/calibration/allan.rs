@@ -80,8 +80,8 @@ pub enum AllanError {
     /// No frame interval is a low-rate inertial hold.
     #[error(
         "no low-rate inertial hold: of {frames} raw frames, {hold_frames} are in inertial hold \
-         (housekeeping control mode 1{hk_note}) and {low_rate_frames} in low rate; fly an \
-         inertial hold in low rate (e.g. scenarios/inertial-hold-long.toml)"
+         ({hk_note}) and {low_rate_frames} in low rate; fly an inertial hold in low rate \
+         (e.g. scenarios/inertial-hold-long.toml)"
     )]
     NoHolds {
         /// Raw frames.
@@ -90,7 +90,7 @@ pub enum AllanError {
         hold_frames: usize,
         /// Frames in low rate.
         low_rate_frames: usize,
-        /// Note on where the hold flag came from.
+        /// Where the hold flag came from.
         hk_note: String,
     },
     /// The holds are cut by gaps in the frames into pieces too short to use.
@@ -746,50 +746,54 @@ pub struct Segments {
     pub largest_gap_s: f64,
 }
 
-/// Hold flag per raw frame and where it came from: the last housekeeping control mode at or
-/// before the frame (1 = inertial hold); without any housekeeping, outside the slew events.
+/// Hold flag per raw frame and where it came from: not in a slew, i.e. outside the slew
+/// events (0x0601 … 0x0602) and, where housekeeping is downlinked, the last control mode at
+/// or before the frame is not 2 (slew). Control mode 1 (inertial hold) is not required:
+/// docs/icd.md §3.2 lets an outside writer leave the field 0, and the ICD writer flies its
+/// holds with 0. (A frame with no control at all still counts: the pair difference cancels
+/// the body's motion whatever it is; the high-rate frames of a slew are left out anyway.)
 fn hold_flags(tm: &Telemetry) -> (Vec<bool>, String) {
-    if tm.housekeeping.is_empty() {
-        let mut in_slew = false;
-        let mut ev = tm
-            .events
-            .iter()
-            .filter(|(_, e)| matches!(e.id, EventId::SlewStarted | EventId::SlewCompleted))
-            .peekable();
-        let flags = tm
-            .raw
-            .iter()
-            .map(|r| {
-                while let Some((t, e)) = ev.peek() {
-                    if t.seconds() > r.time.seconds() {
-                        break;
-                    }
-                    in_slew = e.id == EventId::SlewStarted;
-                    ev.next();
-                }
-                !in_slew
-            })
-            .collect();
-        return (
-            flags,
-            "no housekeeping: frames outside slew events (0x0601–0x0602)".to_owned(),
-        );
-    }
+    let mut in_slew = false;
+    let mut ev = tm
+        .events
+        .iter()
+        .filter(|(_, e)| matches!(e.id, EventId::SlewStarted | EventId::SlewCompleted))
+        .peekable();
+    let slews = tm
+        .events
+        .iter()
+        .filter(|(_, e)| e.id == EventId::SlewStarted)
+        .count();
     let mut k = 0usize;
     let flags = tm
         .raw
         .iter()
         .map(|r| {
+            while let Some((t, e)) = ev.peek() {
+                if t.seconds() > r.time.seconds() {
+                    break;
+                }
+                in_slew = e.id == EventId::SlewStarted;
+                ev.next();
+            }
             while k + 1 < tm.housekeeping.len() && tm.housekeeping[k + 1].time <= r.time {
                 k += 1;
             }
-            let h = &tm.housekeeping[k];
-            h.time <= r.time && h.control_mode == 1
+            let hk_slew = tm
+                .housekeeping
+                .get(k)
+                .is_some_and(|h| h.time <= r.time && h.control_mode == 2);
+            !in_slew && !hk_slew
         })
         .collect();
+    let hk = if tm.housekeeping.is_empty() {
+        "no housekeeping"
+    } else {
+        "housekeeping control mode ≠ 2 (slew)"
+    };
     (
         flags,
-        "housekeeping control mode 1 (inertial hold)".to_owned(),
+        format!("{hk} and outside the {slews} slew(s) of the events 0x0601–0x0602"),
     )
 }
 
@@ -915,11 +919,7 @@ pub fn identify_gyro_noise(
             frames: tm.raw.len(),
             hold_frames,
             low_rate_frames,
-            hk_note: if tm.housekeeping.is_empty() {
-                "; no housekeeping: outside slew events".to_owned()
-            } else {
-                String::new()
-            },
+            hk_note: hold_source,
         });
     }
     let divisor = match options.signal {
@@ -1173,7 +1173,7 @@ pub fn plot_allan(path: &std::path::Path, r: &GyroNoiseReport) -> anyhow::Result
     root.fill(&WHITE).map_err(|e| err(&e))?;
     let mut chart = ChartBuilder::on(&root)
         .caption(
-            "Gyro Allan deviation per channel (bars: confidence interval; lines: fit)",
+            "Gyro Allan deviation per channel (bars: interval; lines: fit; dashed: ARW, RRW)",
             ("sans-serif", 20),
         )
         .margin(12)
@@ -1254,6 +1254,7 @@ pub fn plot_allan(path: &std::path::Path, r: &GyroNoiseReport) -> anyhow::Result
     }
     chart
         .configure_series_labels()
+        .position(SeriesLabelPosition::UpperMiddle)
         .background_style(WHITE.mix(0.8))
         .border_style(BLACK)
         .label_font(("sans-serif", 14))
@@ -1308,7 +1309,8 @@ mod tests {
     fn segments_pool() {
         let a = vec![0.0, 1.0, 0.0, 1.0, 0.0];
         let b = vec![1.0, 0.0];
-        let (va, na) = overlapping_allan_variance(std::slice::from_ref(&a), 1.0, 2).unwrap_or_default();
+        let (va, na) =
+            overlapping_allan_variance(std::slice::from_ref(&a), 1.0, 2).unwrap_or_default();
         let (vab, nab) = overlapping_allan_variance(&[a, b], 1.0, 2).unwrap_or_default();
         assert_eq!(na, nab);
         assert!((va - vab).abs() < 1e-15);
