@@ -191,8 +191,12 @@ pub struct NoiseTerm {
     pub dominant_tau_s: Option<[f64; 2]>,
     /// The τ (s) whose point gives the interval, and its equivalent dof for this term.
     pub interval_tau_s: Option<f64>,
-    /// Equivalent degrees of freedom of the interval.
+    /// Equivalent degrees of freedom of the χ² interval (the best single τ, or the fit's
+    /// covariance if smaller).
     pub interval_edf: f64,
+    /// How the interval was made: "bootstrap" (parametric, the fitted model re-simulated
+    /// on the same segments and refitted), "chi2" (from `interval_edf`), or "upper bound".
+    pub interval_method: &'static str,
 }
 
 /// The fitted noise model (per sample stream; see [`AxisNoise`] for the per-channel figures).
@@ -468,11 +472,17 @@ fn term_shapes(tau_s: f64) -> [f64; TERMS] {
 /// Noise exponent α of each term (the rate ramp takes the random-walk edf).
 pub const TERM_ALPHA: [i32; TERMS] = [2, 0, -1, -2, -2];
 
-/// Non-negative weighted least squares over every support set: rows `a` (shapes × √w),
-/// right side `b` (σ² × √w). Returns the coefficients of the feasible support of least
-/// residual.
+/// Non-negative weighted least squares over every support set, the support chosen by the
+/// Bayesian information criterion: rows `a` (shapes × √w), right side `b` (σ² × √w). Each
+/// support with a non-negative solution scores `χ² + (terms) ln(points)`; the least wins.
+/// Why not the plain NNLS (least χ²): a term the data do not need (a bias-instability floor
+/// or a quantization term on a white + random-walk gyro) then takes a share of the variance
+/// at the floor and biases the others (over 40 seeded series, K came out 0.34–0.75 of the
+/// truth whenever a spurious floor was fitted, and its intervals covered the truth 70 % of
+/// the time instead of 95 %). Returns the coefficients and the χ².
 fn nnls_by_supports(a: &[[f64; TERMS]], b: &[f64]) -> Option<([f64; TERMS], f64)> {
-    let mut best: Option<([f64; TERMS], f64)> = None;
+    let penalty = (a.len() as f64).ln();
+    let mut best: Option<([f64; TERMS], f64, f64)> = None;
     for mask in 1u32..(1 << TERMS) {
         let cols: Vec<usize> = (0..TERMS).filter(|j| mask & (1 << j) != 0).collect();
         if cols.len() > a.len() {
@@ -499,15 +509,16 @@ fn nnls_by_supports(a: &[[f64; TERMS]], b: &[f64]) -> Option<([f64; TERMS], f64)
             continue;
         }
         let resid = (&mat * &sol - &rhs).norm_squared();
-        if best.as_ref().is_none_or(|(_, r)| resid < *r) {
+        let score = resid + penalty * cols.len() as f64;
+        if best.as_ref().is_none_or(|(_, _, s)| score < *s) {
             let mut c = [0.0; TERMS];
             for (k, &j) in cols.iter().enumerate() {
                 c[j] = sol[k] / scale[k];
             }
-            best = Some((c, resid));
+            best = Some((c, resid, score));
         }
     }
-    best
+    best.map(|(c, r, _)| (c, r))
 }
 
 /// Fit the five-term model to Allan points (their `edf` and σ; the confidence level for the
@@ -544,7 +555,10 @@ pub fn fit_noise(
         let mut a = Vec::with_capacity(used.len());
         let mut b = Vec::with_capacity(used.len());
         for (k, p) in used.iter().enumerate() {
-            let w = 1.0 / (var_model[k] * (2.0 / p.edf + model_error2).sqrt());
+            // A model far below a point (a support that leaves a region unexplained) must
+            // not give that point an enormous weight: floor at half the measured σ².
+            let var_w = var_model[k].max(0.5 * var_meas[k]);
+            let w = 1.0 / (var_w * (2.0 / p.edf + model_error2).sqrt());
             a.push(term_shapes(p.tau_s).map(|f| f * w));
             b.push(var_meas[k] * w);
         }
@@ -592,8 +606,9 @@ pub fn fit_noise(
             .iter()
             .enumerate()
             .map(|(k, p)| {
-                let w = 1.0 / (var_model[k] * (2.0 / p.edf + model_error2).sqrt());
-                term_shapes(p.tau_s).map(|f| f * w * 1.0)
+                let var_w = var_model[k].max(0.5 * var_meas[k]);
+                let w = 1.0 / (var_w * (2.0 / p.edf + model_error2).sqrt());
+                term_shapes(p.tau_s).map(|f| f * w)
             })
             .collect();
         // Scale each column by its coefficient: the normal matrix is then in relative units.
@@ -650,6 +665,7 @@ pub fn fit_noise(
                     dominant_tau_s: Some(r),
                     interval_tau_s: Some(tau),
                     interval_edf: edf,
+                    interval_method: "chi2",
                 }
             }
             _ => NoiseTerm {
@@ -660,6 +676,7 @@ pub fn fit_noise(
                 dominant_tau_s: None,
                 interval_tau_s: None,
                 interval_edf: 0.0,
+                interval_method: "upper bound",
             },
         }
     };
@@ -710,8 +727,12 @@ pub fn model_shares(fit: &NoiseFit, tau_s: f64) -> [f64; TERMS] {
     }
 }
 
+/// Parametric-bootstrap replicas of [`analyse_segments`]' intervals.
+pub const BOOTSTRAP_REPLICAS: usize = 100;
+
 /// Allan deviation and fit of rate segments: the points' edf follow the fitted model's
-/// dominant noise type (three passes: white FM first).
+/// mixture of noise types (three passes: white FM first); the intervals of the quantization,
+/// ARW, RRW and ramp terms by a parametric bootstrap of [`BOOTSTRAP_REPLICAS`] replicas.
 ///
 /// # Errors
 /// [`AllanError::FitFailed`].
@@ -721,13 +742,160 @@ pub fn analyse_segments(
     tau0_s: f64,
     confidence: f64,
 ) -> Result<(Vec<AllanPoint>, NoiseFit), AllanError> {
+    analyse_segments_with(axis, segments, tau0_s, confidence, BOOTSTRAP_REPLICAS)
+}
+
+/// [`analyse_segments`] with a chosen number of bootstrap replicas (0: χ² intervals only).
+///
+/// # Errors
+/// [`AllanError::FitFailed`].
+pub fn analyse_segments_with(
+    axis: &'static str,
+    segments: &[Vec<f64>],
+    tau0_s: f64,
+    confidence: f64,
+    replicas: usize,
+) -> Result<(Vec<AllanPoint>, NoiseFit), AllanError> {
     let mut points = allan_deviation(segments, tau0_s, confidence, &|_| [0.0, 1.0, 0.0, 0.0, 0.0]);
     let mut fit = fit_noise(axis, &points, confidence)?;
     for _ in 0..2 {
         points = allan_deviation(segments, tau0_s, confidence, &|t| model_shares(&fit, t));
         fit = fit_noise(axis, &points, confidence)?;
     }
+    if replicas > 0 {
+        bootstrap_intervals(&mut fit, segments, tau0_s, confidence, replicas);
+    }
     Ok((points, fit))
+}
+
+/// SplitMix64 and Box–Muller: the bootstrap's own seeded normal generator (the library has no
+/// random-number crate; the replicas need not match any other generator).
+struct Normal {
+    state: u64,
+    spare: Option<f64>,
+}
+
+impl Normal {
+    fn new(seed: u64) -> Self {
+        Self {
+            state: seed,
+            spare: None,
+        }
+    }
+
+    fn uniform(&mut self) -> f64 {
+        self.state = self.state.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.state;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^= z >> 31;
+        // (0, 1]: never 0, so ln is finite.
+        ((z >> 11) as f64 + 1.0) / (1u64 << 53) as f64
+    }
+
+    fn sample(&mut self) -> f64 {
+        if let Some(s) = self.spare.take() {
+            return s;
+        }
+        let (u1, u2) = (self.uniform(), self.uniform());
+        let r = (-2.0 * u1.ln()).sqrt();
+        let t = 2.0 * PI * u2;
+        self.spare = Some(r * t.sin());
+        r * t.cos()
+    }
+}
+
+/// Rate segments of the same lengths as `lens` from the fitted model: white phase
+/// (quantization, var Q² per sample), white rate (N), random-walk rate (K), ramp (R). The
+/// flicker floor (B) is not simulated: its interval stays the χ² one.
+fn simulate_segments(
+    fit: &NoiseFit,
+    lens: &[usize],
+    tau0_s: f64,
+    rng: &mut Normal,
+) -> Vec<Vec<f64>> {
+    let q = fit.quantization_rad.value;
+    let n = fit.arw_rad_per_sqrt_s.value;
+    let k = fit.rrw_rad_per_s_sqrt_s.value;
+    let r = fit.rate_ramp_rad_per_s2.value;
+    lens.iter()
+        .map(|&len| {
+            let mut walk = 0.0;
+            let mut e_prev = q * rng.sample();
+            (0..len)
+                .map(|i| {
+                    let e = q * rng.sample();
+                    walk += k * tau0_s.sqrt() * rng.sample();
+                    let y = (e - e_prev) / tau0_s
+                        + n / tau0_s.sqrt() * rng.sample()
+                        + walk
+                        + r * i as f64 * tau0_s;
+                    e_prev = e;
+                    y
+                })
+                .collect()
+        })
+        .collect()
+}
+
+/// Replace the χ² intervals of the detected Q, N, K, R terms by parametric-bootstrap ones:
+/// the fitted model simulated on the same segment lengths, analysed and fitted the same way;
+/// with `v` the fit and `v*` the replicas, the interval is `[v²/v*_hi, v²/v*_lo]` (the
+/// ratio `v*/v` as the pivot, on the log scale), `v*_lo/hi` the replicas' quantiles at
+/// `(1 ∓ c)/2`. Why: the χ² interval of one τ knows neither that the terms share the
+/// variance near the floor nor that octave points share data; over 40 seeded white +
+/// random-walk series it covered the true K 75 % of the time for a 95 % interval.
+fn bootstrap_intervals(
+    fit: &mut NoiseFit,
+    segments: &[Vec<f64>],
+    tau0_s: f64,
+    confidence: f64,
+    replicas: usize,
+) {
+    use rayon::prelude::*;
+    let lens: Vec<usize> = segments.iter().map(Vec::len).collect();
+    let base = fit.clone();
+    let values: Vec<[f64; TERMS]> = (0..replicas)
+        .into_par_iter()
+        .filter_map(|i| {
+            let mut rng = Normal::new(0x5EED_0019_u64.wrapping_mul(i as u64 + 1));
+            let sim = simulate_segments(&base, &lens, tau0_s, &mut rng);
+            let points = allan_deviation(&sim, tau0_s, confidence, &|t| model_shares(&base, t));
+            let f = fit_noise("bootstrap", &points, confidence).ok()?;
+            Some([
+                f.quantization_rad.value,
+                f.arw_rad_per_sqrt_s.value,
+                f.bias_instability_rad_per_s.value,
+                f.rrw_rad_per_s_sqrt_s.value,
+                f.rate_ramp_rad_per_s2.value,
+            ])
+        })
+        .collect();
+    if values.len() < replicas / 2 {
+        return;
+    }
+    let tail = 0.5 * (1.0 - confidence);
+    let terms = [
+        (0, &mut fit.quantization_rad),
+        (1, &mut fit.arw_rad_per_sqrt_s),
+        (3, &mut fit.rrw_rad_per_s_sqrt_s),
+        (4, &mut fit.rate_ramp_rad_per_s2),
+    ];
+    for (j, t) in terms {
+        if !t.detected || !(t.value > 0.0) {
+            continue;
+        }
+        let mut v: Vec<f64> = values.iter().map(|r| r[j]).collect();
+        v.sort_by(f64::total_cmp);
+        let at = |p: f64| v[((p * (v.len() - 1) as f64).round() as usize).min(v.len() - 1)];
+        let (lo, hi) = (at(tail), at(1.0 - tail));
+        let value = t.value;
+        t.low = if hi > 0.0 { value * value / hi } else { 0.0 };
+        if lo > 0.0 {
+            t.high = value * value / lo;
+        }
+        t.interval_method = "bootstrap";
+    }
 }
 
 /// Hold segments of one axis: the rate samples (rad/s) of consecutive usable intervals, and
