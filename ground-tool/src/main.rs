@@ -517,11 +517,21 @@ fn run_allan(
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
         for a in &report.axes {
-            let [n, nl, nh] = a.arw_rad_per_sqrt_s;
-            let [k, kl, kh] = a.rrw_rad_per_s_sqrt_s;
+            let show = |v: [f64; 3], t: &allan::NoiseTerm| {
+                if t.detected {
+                    format!("{:.3e} [{:.3e}, {:.3e}]", v[0], v[1], v[2])
+                } else {
+                    format!("not detected (≤ {:.2e})", v[2])
+                }
+            };
             eprintln!(
-                "{} ({}, {} samples in {} segments): ARW {n:.3e} [{nl:.3e}, {nh:.3e}] rad/√s, RRW {k:.3e} [{kl:.3e}, {kh:.3e}] rad/s/√s",
-                a.axis, a.channels, a.samples, a.segments
+                "{} ({}, {} samples in {} segments): ARW {} rad/√s, RRW {} rad/s/√s",
+                a.axis,
+                a.channels,
+                a.samples,
+                a.segments,
+                show(a.arw_rad_per_sqrt_s, &a.fit.arw_rad_per_sqrt_s),
+                show(a.rrw_rad_per_s_sqrt_s, &a.fit.rrw_rad_per_s_sqrt_s)
             );
         }
         for n in &report.notes {
