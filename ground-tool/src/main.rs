@@ -111,14 +111,19 @@ enum Command {
     /// τ^−½ (N = the line at τ = 1 s), bias instability flat (σ = 0.664 B), rate random walk
     /// τ^+½ (K = the line at τ = 3 s), a rate ramp τ⁺¹.
     ///
-    /// Reads RUN_DIR/telemetry.bin; uses only low-rate inertial-hold intervals (housekeeping
-    /// control mode 1) without gaps, and by default the difference of each axis's two
+    /// Reads RUN_DIR/telemetry.bin; uses only low-rate hold intervals (not in a slew:
+    /// housekeeping control mode ≠ 2, outside the slew events) without gaps, and by default
+    /// the difference of each axis's two
     /// redundant channels (X2−X1, Y1−Y2, Z1−Z2), which cancels the body's own motion in the
     /// hold; figures are per channel (÷ √2). RRW needs holds of days (the ARW and RRW lines
     /// cross near τ = 640 s for GRO's gyro): scenarios/inertial-hold-long.toml.
     ///
-    /// Writes OUT/allan.json (every point: τ, σ, interval, edf; the fit: each term's value,
-    /// interval and the τ range it came from), OUT/allan.md (the table for people) and
+    /// Writes OUT/allan.json, per axis: `points` (tau_s, sigma_rad_per_s and its interval,
+    /// edf, alpha = the dominant noise type), `fit` (quantization_rad, arw_rad_per_sqrt_s,
+    /// bias_instability_rad_per_s, rrw_rad_per_s_sqrt_s, rate_ramp_rad_per_s2: each value,
+    /// low, high, detected, dominant_tau_s = the τ range it came from, interval_method), and
+    /// the per-channel [value, low, high] of N, K, B, Q with the samples and segments used;
+    /// OUT/allan.md (the same for people) and
     /// OUT/allan.png (log-log σ(τ) per axis with the interval bars, the fitted model, and the
     /// fitted ARW and RRW lines dashed). Exit code 2 when the run has no usable holds, too few
     /// samples, or holds cut by gaps (the message gives the counts).
