@@ -102,6 +102,55 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Gyro noise by Allan deviation of the inertial holds: ARW, bias instability, RRW.
+    ///
+    /// What it is for: the OBC filter's gyro noise (σ_v = angle random walk N, σ_u = rate
+    /// random walk K) should be measured, not guessed. The Allan deviation σ_A(τ) is the
+    /// spread of the gyro's mean rate over clusters of length τ; each noise process has its
+    /// own slope on a log-log plot: quantization (whole pulses, 0.05″) τ⁻¹, angle random walk
+    /// τ^−½ (N = the line at τ = 1 s), bias instability flat (σ = 0.664 B), rate random walk
+    /// τ^+½ (K = the line at τ = 3 s), a rate ramp τ⁺¹.
+    ///
+    /// Reads RUN_DIR/telemetry.bin; uses only low-rate hold intervals (not in a slew:
+    /// housekeeping control mode ≠ 2, outside the slew events) without gaps, and by default
+    /// the difference of each axis's two
+    /// redundant channels (X2−X1, Y1−Y2, Z1−Z2), which cancels the body's own motion in the
+    /// hold; figures are per channel (÷ √2). RRW needs holds of days (the ARW and RRW lines
+    /// cross near τ = 640 s for GRO's gyro): scenarios/inertial-hold-long.toml.
+    ///
+    /// Writes OUT/allan.json, per axis: `points` (tau_s, sigma_rad_per_s and its interval,
+    /// edf, alpha = the dominant noise type), `fit` (quantization_rad, arw_rad_per_sqrt_s,
+    /// bias_instability_rad_per_s, rrw_rad_per_s_sqrt_s, rate_ramp_rad_per_s2: each value,
+    /// low, high, detected, dominant_tau_s = the τ range it came from, interval_method), and
+    /// the per-channel [value, low, high] of N, K, B, Q with the samples and segments used;
+    /// OUT/allan.md (the same for people) and
+    /// OUT/allan.png (log-log σ(τ) per axis with the interval bars, the fitted model, and the
+    /// fitted ARW and RRW lines dashed). Exit code 2 when the run has no usable holds, too few
+    /// samples, or holds cut by gaps (the message gives the counts).
+    Allan {
+        /// Run folder with telemetry.bin.
+        run_dir: std::path::PathBuf,
+        /// Output folder (replaced whole when it is a previous `allan` output).
+        #[arg(long)]
+        out: std::path::PathBuf,
+        /// Replace the content of a non-empty OUT that is not a previous `allan` output.
+        #[arg(long)]
+        force: bool,
+        /// Confidence level of the intervals.
+        #[arg(long, default_value_t = 0.95)]
+        confidence: f64,
+        /// `pair-difference`: each axis's two channels differenced (the body's motion
+        /// cancels); `active-channel`: the primary channel alone (body motion included).
+        #[arg(long, value_enum, default_value = "pair-difference")]
+        signal: ground_tool::calibration::allan::Signal,
+        /// Tables folder of the flown tables (for the pulse weight and scale factors);
+        /// default: the run's activated uploads, else the boot tables.
+        #[arg(long)]
+        tables: Option<std::path::PathBuf>,
+        /// Print allan.json to stdout.
+        #[arg(long)]
+        json: bool,
+    },
     /// Reproduce the paper's numbers from data/gro_paper.toml.
     Paper {
         /// Machine-readable JSON instead of the table.
@@ -423,6 +472,84 @@ fn run_diagnose(
     Ok(())
 }
 
+/// `ground-tool allan`: read the telemetry, identify the gyro noise, write the outputs.
+fn run_allan(
+    run_dir: &std::path::Path,
+    out_target: &std::path::Path,
+    force: bool,
+    tables: Option<&std::path::Path>,
+    options: ground_tool::calibration::allan::AllanOptions,
+    json: bool,
+) -> Result<()> {
+    use ground_tool::calibration::allan;
+    use ground_tool::run_check::{InputError, Severity};
+    if !(options.confidence > 0.0 && options.confidence < 1.0) {
+        return Err(InputError::msg(format!(
+            "--confidence {}: must be between 0 and 1 (e.g. 0.95)",
+            options.confidence
+        ))
+        .into());
+    }
+    let meta = ground_tool::pipeline::flown::metadata_json(run_dir);
+    let (_, flown_iru, _) = ground_tool::pipeline::flown::flown_tables(run_dir, &meta, tables)?;
+    let iru = flown_iru.unwrap_or_else(fsw_core::tables::IruTable::prelaunch);
+    let tm = ground_tool::tp::read_file(&run_dir.join("telemetry.bin"))
+        .map_err(|e| InputError(e.into()))?;
+    if let Some(f) = ground_tool::run_check::check(&tm, Some(&meta))
+        .into_iter()
+        .find(|f| f.severity == Severity::Error)
+    {
+        return Err(InputError::msg(format!("{}: {}", run_dir.display(), f.message)).into());
+    }
+    let report = allan::identify_gyro_noise(&tm, &iru, &options).map_err(|e| {
+        InputError(anyhow::Error::new(e).context(format!(
+            "{}: the telemetry does not support a gyro noise identification",
+            run_dir.display()
+        )))
+    })?;
+    let dir = OutputDir::begin(
+        out_target,
+        "ground-tool allan",
+        force,
+        &[Some(run_dir), tables]
+            .into_iter()
+            .flatten()
+            .collect::<Vec<_>>(),
+    )?;
+    allan::write_outputs(dir.path(), &report, &run_dir.display().to_string())?;
+    dir.commit()?;
+    if json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        for a in &report.axes {
+            let show = |v: [f64; 3], t: &allan::NoiseTerm| {
+                if t.detected {
+                    format!("{:.3e} [{:.3e}, {:.3e}]", v[0], v[1], v[2])
+                } else {
+                    format!("not detected (≤ {:.2e})", v[2])
+                }
+            };
+            eprintln!(
+                "{} ({}, {} samples in {} segments): ARW {} rad/√s, RRW {} rad/s/√s",
+                a.axis,
+                a.channels,
+                a.samples,
+                a.segments,
+                show(a.arw_rad_per_sqrt_s, &a.fit.arw_rad_per_sqrt_s),
+                show(a.rrw_rad_per_s_sqrt_s, &a.fit.rrw_rad_per_s_sqrt_s)
+            );
+        }
+        for n in &report.notes {
+            eprintln!("note: {n}");
+        }
+        eprintln!(
+            "wrote {}/allan.json, allan.md, allan.png",
+            out_target.display()
+        );
+    }
+    Ok(())
+}
+
 fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
     match run(cli) {
@@ -465,6 +592,22 @@ fn run(cli: Cli) -> Result<()> {
             tables,
             json,
         } => run_diagnose(&run_dir, &out, force, tables.as_deref(), json)?,
+        Command::Allan {
+            run_dir,
+            out,
+            force,
+            confidence,
+            signal,
+            tables,
+            json,
+        } => run_allan(
+            &run_dir,
+            &out,
+            force,
+            tables.as_deref(),
+            ground_tool::calibration::allan::AllanOptions { confidence, signal },
+            json,
+        )?,
         Command::Paper { json } => {
             let r = ground_tool::paper::reproduce()?;
             if json {
