@@ -262,8 +262,8 @@ pub struct IruReport {
     pub model_fit: Option<String>,
     /// The lack-of-fit test of a scale error that changes with rate.
     pub rate_scale: RateScaleTest,
-    /// Bias steps at unknown times found by the change-point scan (run when the rate test
-    /// fails) and modelled: each with its time, size, σ and multiplicity-corrected p.
+    /// Bias steps at unknown times found by the change-point scan and modelled: each with its
+    /// time, size, σ and multiplicity-corrected p.
     pub bias_steps: Vec<BiasStepTest>,
     /// The scan's best candidate that was not accepted (when a scan ran and stopped).
     pub bias_step_rejected: Option<BiasStepTest>,
