@@ -6,6 +6,12 @@
 #   scenarios/undeclared/false_alarm.sh [N=20] [FIRST_SEED=100] [WORK=/tmp/diagnose-fa]
 #   SCENARIO=gro-early-mission scenarios/undeclared/false_alarm.sh 10   # another clean geometry
 #
+# The shipped clean plans and their seeds in docs/diagnose.md §3 (issue 22: every plan):
+#   scenarios/undeclared/false_alarm.sh 20 100
+#   SCENARIO=scenarios/gro-early-mission.toml scenarios/undeclared/false_alarm.sh 20 200
+#   SCENARIO=scenarios/gro-early-mission-orbit-holds.toml scenarios/undeclared/false_alarm.sh 20 300
+#   SCENARIO=scenarios/gro-early-mission-reordered.toml scenarios/undeclared/false_alarm.sh 20 400
+#
 # Uses the release binaries if built and current (cargo build --release -p sim-harness -p
 # ground-tool), else the dev ones (BIN=dir overrides). About 5 s per seed in the dev profile.
 set -euo pipefail

@@ -31,7 +31,7 @@ pub const NUISANCE: usize = 6;
 /// Prior 1σ of an alignment correction (arcsec).
 const ALIGN_PRIOR_ARCSEC: f64 = 3600.0;
 /// Time unit of the batch rate nuisance (s).
-const RATE_UNIT_S: f64 = 100.0;
+pub const RATE_UNIT_S: f64 = 100.0;
 
 /// Offset of a sensor's alignment parameters (None for the reference FHST1).
 #[must_use]
