@@ -53,7 +53,8 @@ pub struct DiagnoseOutput {
     pub analysis: Analysis,
     /// The calibration chain's output (None when it failed and the flown tables were used).
     pub calibration: Option<CalibrationOutput>,
-    /// New alignment table.
+    /// The alignment table written (the flown one when the held-out validation refused the
+    /// new alignments).
     pub alignment: AlignmentTable,
     /// New filter table (if changed).
     pub filter: Option<FilterTable>,
@@ -296,10 +297,17 @@ pub fn diagnose_run(
     )?;
     // What `calibrate` uplinks as well (`calibrate::filter_update`): the onboard annual-
     // aberration correction when the model declares aberration and the flown table has it off.
-    let (chain_filter, chain_changes) = crate::pipeline::calibrate::filter_update(
-        flight.filter.as_ref().unwrap_or(&filter_flown),
-        &metadata,
-    )?;
+    // Only when the chain's held-out check of that change passed
+    // (`pipeline::alignment_heldout::validate_aberration_switch`).
+    let chain_filter_validated = cal.output.as_ref().is_some_and(|o| o.filter.is_some());
+    let (chain_filter, chain_changes) = if chain_filter_validated {
+        crate::pipeline::calibrate::filter_update(
+            flight.filter.as_ref().unwrap_or(&filter_flown),
+            &metadata,
+        )?
+    } else {
+        (None, Vec::new())
+    };
     if let Some(f) = chain_filter {
         flight.filter = Some(f);
         flight.applied.extend(
@@ -313,7 +321,24 @@ pub fn diagnose_run(
     let created = tm.raw.last().map_or(0.0, |r| r.time.seconds());
     let mut written = Vec::new();
     let p = out_dir.join("tables").join("alignment.tbl");
-    write_table(&p, TableId::Alignment, &flight.alignment, created)?;
+    // Alignments the chain's held-out validation refused are not uplinked from here either:
+    // the flown table is written again (`pipeline::alignment_heldout`).
+    let refused = cal
+        .output
+        .as_ref()
+        .map(|o| &o.report.alignment_validation)
+        .filter(|v| !v.passed);
+    let alignment_out = match refused {
+        Some(v) => {
+            notes.push(format!(
+                "alignment table: the flown one written again, the new alignments failed the held-out validation ({})",
+                v.reason
+            ));
+            copt.flown_alignment.unwrap_or_else(AlignmentTable::prelaunch)
+        }
+        None => flight.alignment,
+    };
+    write_table(&p, TableId::Alignment, &alignment_out, created)?;
     written.push(p.display().to_string());
     let (iru_out, iru_note) = iru_table_out(
         &copt.flown_iru.unwrap_or_else(IruTable::prelaunch),
@@ -502,7 +527,7 @@ pub fn diagnose_run(
     Ok(DiagnoseOutput {
         report,
         analysis,
-        alignment: flight.alignment,
+        alignment: alignment_out,
         filter: flight.filter,
         calibration: cal.output,
         gyro: gyro_res,
