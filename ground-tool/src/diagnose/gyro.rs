@@ -129,10 +129,17 @@ fn term_rms(samples: &[BiasSample], column: &dyn Fn(&BiasSample) -> f64, est: &[
     spread * est.iter().map(|e| e * e).sum::<f64>().sqrt()
 }
 
-fn batch_attitudes(
-    set: &MeasurementSet,
-    post: &PostFit,
-) -> Vec<Option<(Matrix3<f64>, Vector3<f64>)>> {
+/// A batch's corrected attitude and its per-axis variance (rad²), boxed: few batches are
+/// usable (on six months of 30-s frames a few thousand of 0.5 million), so the list costs 8
+/// bytes per batch instead of 104 (issue 22).
+type BatchAttitude = Option<Box<(Matrix3<f64>, Vector3<f64>)>>;
+
+/// The attitude of batch `i`, if usable.
+fn batch_attitude(att: &[BatchAttitude], i: usize) -> Option<(Matrix3<f64>, Vector3<f64>)> {
+    att[i].as_deref().copied()
+}
+
+fn batch_attitudes(set: &MeasurementSet, post: &PostFit) -> Vec<BatchAttitude> {
     set.batches
         .iter()
         .enumerate()
@@ -143,7 +150,7 @@ fn batch_attitudes(
             let (a, cov) = post.batch_nuisance.get(i)?.as_ref()?;
             let dtheta = Vector3::new(a[0], a[1], a[2]) * RAD_PER_ARCSEC;
             let var = Vector3::new(cov[(0, 0)], cov[(1, 1)], cov[(2, 2)]);
-            Some((rot(&dtheta) * b.m_acs_from_eci, var))
+            Some(Box::new((rot(&dtheta) * b.m_acs_from_eci, var)))
         })
         .collect()
 }
@@ -272,7 +279,7 @@ pub fn analyse(
         if a.high_rate || b.high_rate || a.hi != b.lo {
             continue;
         }
-        let (Some((ma, va)), Some((mb, vb))) = (att[i], att[i + 1]) else {
+        let (Some((ma, va)), Some((mb, vb))) = (batch_attitude(&att, i), batch_attitude(&att, i + 1)) else {
             continue;
         };
         let phi = propagate(input, a.center, b.center, &b_ref);
@@ -555,6 +562,9 @@ pub fn analyse(
         ));
     }
 
+    // The whitening factors are dense (samples² per axis, 0.2 GB on six months): not kept
+    // through the slews.
+    drop(whiteners);
     // Scale asymmetry from the slews.
     asymmetry(
         input,
@@ -577,7 +587,7 @@ const ASYM: usize = 12;
 fn asymmetry(
     input: &DiagnoseInput<'_>,
     set: &MeasurementSet,
-    att: &[Option<(Matrix3<f64>, Vector3<f64>)>],
+    att: &[BatchAttitude],
     b_ref: &Vector3<f64>,
     model_bias: Option<&[Vector3<f64>]>,
     cfg: &GyroConfig,
@@ -667,7 +677,7 @@ fn asymmetry(
         Vector3<f64>,
     )> = Vec::new();
     for &(ia, ib) in &pairs {
-        let (Some((ma, va)), Some((mb, vb))) = (att[ia], att[ib]) else {
+        let (Some((ma, va)), Some((mb, vb))) = (batch_attitude(att, ia), batch_attitude(att, ib)) else {
             continue;
         };
         let (ca, cb) = (set.batches[ia].center, set.batches[ib].center);
