@@ -279,7 +279,9 @@ pub fn analyse(
         if a.high_rate || b.high_rate || a.hi != b.lo {
             continue;
         }
-        let (Some((ma, va)), Some((mb, vb))) = (batch_attitude(&att, i), batch_attitude(&att, i + 1)) else {
+        let (Some((ma, va)), Some((mb, vb))) =
+            (batch_attitude(&att, i), batch_attitude(&att, i + 1))
+        else {
             continue;
         };
         let phi = propagate(input, a.center, b.center, &b_ref);
@@ -677,7 +679,8 @@ fn asymmetry(
         Vector3<f64>,
     )> = Vec::new();
     for &(ia, ib) in &pairs {
-        let (Some((ma, va)), Some((mb, vb))) = (batch_attitude(att, ia), batch_attitude(att, ib)) else {
+        let (Some((ma, va)), Some((mb, vb))) = (batch_attitude(att, ia), batch_attitude(att, ib))
+        else {
             continue;
         };
         let (ca, cb) = (set.batches[ia].center, set.batches[ib].center);

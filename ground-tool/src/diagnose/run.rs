@@ -325,11 +325,8 @@ pub fn diagnose_run(
         cal.output.as_ref(),
     );
     // The gyro-side effects into the configuration that flew most of the run.
-    let (iru_corrected, iru_applied, mut iru_ground_only) = super::flight::iru_update(
-        &iru_out,
-        &gyro_res.detected,
-        2 * backup_cycles > hk_cycles,
-    );
+    let (iru_corrected, iru_applied, mut iru_ground_only) =
+        super::flight::iru_update(&iru_out, &gyro_res.detected, 2 * backup_cycles > hk_cycles);
     // A gyro effect too large for the table's range is reported and kept on the ground: the
     // other tables (and the report) are still worth having.
     let (iru_out, iru_applied) = match iru_corrected.validate() {
