@@ -232,6 +232,12 @@ pub fn diagnose_run(
                 .map_or(Vector3::zeros(), |h| Vector3::from(h.bias_acs_rad_per_s)),
         );
     }
+    // The rest needs three figures of the telemetry, not the telemetry: six months of it
+    // decoded are ~0.2 GB, held otherwise through the analysis (issue 22).
+    let created = tm.raw.last().map_or(0.0, |r| r.time.seconds());
+    let backup_cycles = tm.housekeeping.iter().filter(|h| h.iru_config == 1).count();
+    let hk_cycles = tm.housekeeping.len();
+    drop(tm);
     let gyro_cal = cal.irucal.as_ref().map_or(
         GyroCalibration {
             delta_m: Matrix3::zeros(),
@@ -318,7 +324,6 @@ pub fn diagnose_run(
     }
     std::fs::create_dir_all(out_dir.join("tables"))
         .with_context(|| format!("creating {}", out_dir.display()))?;
-    let created = tm.raw.last().map_or(0.0, |r| r.time.seconds());
     let mut written = Vec::new();
     let p = out_dir.join("tables").join("alignment.tbl");
     // Alignments the chain's held-out validation refused are not uplinked from here either:
@@ -345,12 +350,8 @@ pub fn diagnose_run(
         cal.output.as_ref(),
     );
     // The gyro-side effects into the configuration that flew most of the run.
-    let backup_cycles = tm.housekeeping.iter().filter(|h| h.iru_config == 1).count();
-    let (iru_corrected, iru_applied, mut iru_ground_only) = super::flight::iru_update(
-        &iru_out,
-        &gyro_res.detected,
-        2 * backup_cycles > tm.housekeeping.len(),
-    );
+    let (iru_corrected, iru_applied, mut iru_ground_only) =
+        super::flight::iru_update(&iru_out, &gyro_res.detected, 2 * backup_cycles > hk_cycles);
     // A gyro effect too large for the table's range is reported and kept on the ground: the
     // other tables (and the report) are still worth having.
     let (iru_out, iru_applied) = match iru_corrected.validate() {
