@@ -492,6 +492,15 @@ pub fn write_calibration_report(
                 iru.nis_mean_per_dof,
                 iru.gated_fixes
             );
+            for b in &iru.bias_steps {
+                let arcsec = |v: &[f64; 3]| v.map(|x| x * crate::ARCSEC_PER_RAD);
+                let (st, sd) = (arcsec(&b.step_rad_per_s), arcsec(&b.sigma_rad_per_s));
+                let _ = writeln!(
+                    md,
+                    "Bias change faster than the random walk, found by the change-point scan at t = {:.2} h and modelled as a step: [{:.4}, {:.4}, {:.4}] ± [{:.4}, {:.4}, {:.4}]″/s (Wald χ² {:.1}, p = {:.1e} corrected over {} positions); the bias walk restarts there.\n",
+                    b.t_s / 3600.0, st[0], st[1], st[2], sd[0], sd[1], sd[2], b.delta_chi2, b.p_value, b.positions
+                );
+            }
             let _ = writeln!(md, "**Primary G:** {}\n", iru.decision);
             if let Some(b) = &iru.backup {
                 let _ = writeln!(

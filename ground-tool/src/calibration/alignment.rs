@@ -777,9 +777,10 @@ pub fn alignment_residuals(
             .map_init(
                 || Accumulator::new(ns, weighting),
                 |a, e| {
-                    let before = a.chi2;
+                    // From zero per epoch: the same on any thread, whatever it did before.
+                    a.chi2 = 0.0;
                     a.add_epoch(data.epoch(e), m_acs_from_sensor);
-                    a.chi2 - before
+                    a.chi2
                 },
             )
             .collect()

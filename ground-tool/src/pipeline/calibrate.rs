@@ -1133,26 +1133,7 @@ pub fn calibrate_telemetry(
         &sky,
         &options.identify,
     );
-    let mut summary = DataSummary {
-        frames: frames.len(),
-        ..DataSummary::default()
-    };
-    for f in &frames {
-        for (i, s) in f.stars.iter().enumerate() {
-            if let Some(s) = s {
-                if s.identified.is_some() {
-                    summary.stars_identified[i] += 1;
-                } else {
-                    summary.stars_unidentified[i] += 1;
-                }
-            }
-        }
-        for (i, s) in f.suns.iter().enumerate() {
-            if s.is_some() {
-                summary.sun_samples[i] += 1;
-            }
-        }
-    }
+    let mut summary = DataSummary::of_frames(&frames);
     if tm.ephemeris.is_empty() {
         eprintln!("warning: no ephemeris packets (APID 0x020): orbital aberration and Sun parallax are not corrected");
     }
@@ -1163,32 +1144,8 @@ pub fn calibrate_telemetry(
 
     // FFCAL. A sensor never seen together with another one (e.g. an FSS the Sun never
     // visited) is left out and keeps its flown alignment (reported as not observed).
-    let all: [Option<usize>; 4] = [Some(0), Some(1), Some(2), Some(3)];
     let declared_fss_sys = metadata.sensors.fss_systematic_arcsec;
-    let mut seen = [0usize; 4];
-    for epoch in alignment_data(&frames, &all, [declared_fss_sys; 2]).epochs() {
-        for o in epoch {
-            seen[o.sensor] += 1;
-        }
-    }
-    if seen[0] == 0 || seen[1] == 0 {
-        bail!(
-            "FFCAL needs both FHSTs observing with another sensor at the same time; epochs per sensor FHST1/FHST2/FSS1/FSS2: {seen:?} (stars identified per FHST: {:?})",
-            summary.stars_identified
-        );
-    }
-    let mut map = [None; 4];
-    let mut observed = Vec::new();
-    for k in 0..4 {
-        if seen[k] > 0 {
-            map[k] = Some(observed.len());
-            observed.push(k);
-        }
-    }
-    summary.not_observed = (0..4)
-        .filter(|k| seen[*k] == 0)
-        .map(|k| SENSOR_NAMES[k].to_string())
-        .collect();
+    let (map, observed) = observed_sensors(&frames, declared_fss_sys, &mut summary)?;
     let flown: Vec<Matrix3<f64>> = flown_alignment
         .matrices()
         .iter()
@@ -1227,7 +1184,6 @@ pub fn calibrate_telemetry(
         solution,
     } = fit;
     summary.ffcal_epochs = data.epoch_count();
-    let alignment_validation = validate_alignment_heldout(&frames, &setup);
     // The FSS error level left in the calibrated residuals (the paper's "inherent" 0.022°),
     // reported beside the declared level the FSS weights use (`pipeline::fss_systematic`).
     let fss_systematic = observed.iter().any(|&k| k >= 2).then(|| {
@@ -1248,95 +1204,26 @@ pub fn calibrate_telemetry(
         calibrated[k] = solution.sensors[j].m_acs_from_sensor_calibrated;
     }
     let adjustment = preserve_obc_attitude(&flown, &calibrated, 0, 1, BoresightFrame::Bisector)?;
-    let mut alignments = std::collections::BTreeMap::new();
-    let mut alignments_adjusted = std::collections::BTreeMap::new();
-    let mut residual = BeforeAfter::default();
-    for (j, s) in solution.sensors.iter().enumerate() {
-        let i = observed[j];
-        let sigma = [
-            s.sigma_acs_arcsec.x,
-            s.sigma_acs_arcsec.y,
-            s.sigma_acs_arcsec.z,
-        ];
-        alignments.insert(
-            s.id.clone(),
-            AlignmentReport {
-                m_acs_from_sensor: rows(&s.m_acs_from_sensor_calibrated),
-                sigma_arcsec: sigma,
-                theta_acs_arcsec: s.theta_acs_arcsec.into(),
-            },
-        );
-        let adj = adjustment.m_acs_from_sensor_adjusted[i];
-        let theta = rotvec_from_rot(&(adj * flown[i].transpose())) * ARCSEC_PER_RAD;
-        alignments_adjusted.insert(
-            s.id.clone(),
-            AlignmentReport {
-                m_acs_from_sensor: rows(&adj),
-                sigma_arcsec: sigma,
-                theta_acs_arcsec: theta.into(),
-            },
-        );
-        residual
-            .before
-            .insert(s.id.clone(), s.residual_rms_before_arcsec);
-        residual
-            .after
-            .insert(s.id.clone(), s.residual_rms_after_arcsec);
-    }
-    let rel = solution.relative_covariance_arcsec2(1, 0);
-    let ffcal_summary = FfcalSummary {
-        weighting: solution.weighting,
-        iterations: solution.iterations,
-        epochs: solution.epochs,
-        eigenvalues: solution
-            .observability
-            .eigenvalues_with_prior_per_arcsec2
-            .clone(),
-        sigma_fhst2_rel_fhst1_arcsec: [rel[(0, 0)].sqrt(), rel[(1, 1)].sqrt(), rel[(2, 2)].sqrt()],
-        relative_covariance_to_fhst1_arcsec2: match observed.iter().position(|&k| k == 0) {
-            Some(j1) => observed
-                .iter()
-                .enumerate()
-                .filter(|&(j, _)| j != j1)
-                .map(|(j, &k)| {
-                    (
-                        SENSOR_NAMES[k].to_string(),
-                        rows(&solution.relative_covariance_arcsec2(j, j1)),
-                    )
-                })
-                .collect(),
-            None => std::collections::BTreeMap::new(),
-        },
-        crb_sigma_fhst2_rel_fhst1_all_sensors_arcsec: crb_relative_sigma(
-            &sensors, &data, &solution,
-        ),
-        crb_sigma_fhst2_rel_fhst1_fhst_only_arcsec: crb_relative_sigma(
-            sensors.get(..2).unwrap_or(&sensors),
-            &fhst_data,
-            &solution,
-        ),
-        fhst_stage: fhst_stage.as_ref().map(|(k, _)| *k),
-        gyro_batches: batch_rel.as_ref().ok().map(|h| {
-            let sd = |c: &Matrix3<f64>| [0, 1, 2].map(|i| c[(i, i)].max(0.0).sqrt());
-            BatchAlignmentSummary {
-                theta_fhst2_rel_fhst1_arcsec: h.theta_acs_arcsec.into(),
-                sigma_arcsec: sd(&h.covariance_arcsec2),
-                crb_sigma_arcsec: sd(&h.crb_covariance_arcsec2),
-                aberration_consider_sigma_arcsec: sd(&h.aberration_consider_arcsec2),
-                variance_factor: h.variance_factor,
-                batches: h.batches,
-                samples: h.samples,
-                rejected: h.rejected,
-                residual_rms_arcsec: h.residual_rms_arcsec,
-            }
-        }),
+    let (alignments, alignments_adjusted, residual) = alignment_reports(
+        &solution,
+        &observed,
+        &flown,
+        &adjustment.m_acs_from_sensor_adjusted,
+    );
+    let ffcal_summary = FfcalSummary::new(
+        &solution,
+        &observed,
+        &sensors,
+        (&data, &fhst_data),
+        fhst_stage.as_ref().map(|(k, _)| *k),
+        &batch_rel,
         fss_systematic,
-        fss_covariance: if metadata.fss_transfer_function_sigma.is_some() && fhst_stage.is_some() {
-            "consider"
-        } else {
-            "cells"
-        },
-    };
+        metadata.fss_transfer_function_sigma.is_some(),
+    );
+    // The full fit's data are not needed any more: free them before the folds build theirs
+    // (six months: 2 × 134 MB).
+    drop((data, fhst_data));
+    let alignment_validation = validate_alignment_heldout(&frames, &setup);
     let mut new_alignment = flown_alignment;
     let ortho = |m: &Matrix3<f64>| rows(&Quat::from_dcm(m).to_dcm());
     new_alignment.m_acs_from_fhst1 = ortho(&adjustment.m_acs_from_sensor_adjusted[0]);
@@ -1369,23 +1256,7 @@ pub fn calibrate_telemetry(
         Some(spans) => user_maneuvers(&frames_cal, spans)?,
         None => find_maneuvers(&frames_cal),
     };
-    // A FHST-only fix may follow either tracker's frame: a quarter of the FHST1–FHST2
-    // relative alignment covariance (FFCAL, arcsec²) is added to it.
-    // A fix that needed the Sun carries the FSS's own error and its calibrated alignment's
-    // uncertainty (FFCAL, relative to FHST1): the larger FSS's largest axis σ.
-    let fss_alignment_sigma = ["FSS1", "FSS2"]
-        .iter()
-        .filter_map(|n| ffcal_summary.relative_covariance_to_fhst1_arcsec2.get(*n))
-        .flat_map(|c| [c[0][0], c[1][1], c[2][2]])
-        .fold(0.0_f64, f64::max)
-        .sqrt();
-    let fhst_floor = FixFloors {
-        fhst_cov_rad2: solution.relative_covariance_arcsec2(1, 0) * (0.25 / ARCSEC_PER_RAD.powi(2)),
-        fss_arcsec: metadata
-            .sensors
-            .fss_systematic_arcsec
-            .hypot(fss_alignment_sigma),
-    };
+    let fhst_floor = FixFloors::from_ffcal(&ffcal_summary, &solution, metadata);
     summary.rate_switch_frames_split = frames_cal
         .iter()
         .filter(|f| f.rate_switch == RateSwitch::Split)
@@ -1395,28 +1266,8 @@ pub fn calibrate_telemetry(
         .filter(|f| f.rate_switch == RateSwitch::Dropped)
         .count();
     let gyro_chain = build_gyro_chain(&frames_cal, &maneuvers, &obc_bias_at, &fhst_floor, t0);
-    let mut maneuver_reports: Vec<ManeuverReport> = maneuvers
-        .iter()
-        .enumerate()
-        .map(|(k, &(s, e))| {
-            let t_end = frames_cal[e].time.seconds();
-            let angle: f64 = frames_cal[s..=e]
-                .iter()
-                .filter_map(|f| f.gyro)
-                .map(|g| g.dtheta_acs_rad)
-                .sum::<Vector3<f64>>()
-                .norm();
-            let why_not_used = gyro_chain.why_not_used(&frames_cal, k, s, e);
-            ManeuverReport {
-                start_s: frames_cal[s].time.seconds() - t0,
-                end_s: t_end - t0,
-                angle_deg: angle.to_degrees(),
-                used: why_not_used.is_none(),
-                why_not_used,
-                coarse_attitude: coarse_attitude(&frames_cal, s, e, &obc_bias_at(t_end), t0),
-            }
-        })
-        .collect();
+    let mut maneuver_reports =
+        maneuver_reports(&frames_cal, &maneuvers, &gyro_chain, &obc_bias_at, t0);
     let chain_cfg = ChainConfig {
         noise,
         ..ChainConfig::default()
@@ -1436,36 +1287,10 @@ pub fn calibrate_telemetry(
     } = iru_stage;
     let bias_history_points = chain_solution
         .as_ref()
-        .map(|sol| {
-            sol.bias
-                .iter()
-                .map(|b| BiasHistoryPoint {
-                    t_s: b.t_s,
-                    bias_rad_per_s: b.bias_rad_per_s,
-                    sigma_rad_per_s: b.sigma_rad_per_s,
-                    obc_bias_rad_per_s: obc_bias_sample(tm, t0 + b.t_s),
-                })
-                .collect()
-        })
+        .map(|sol| bias_history(sol, tm, t0))
         .unwrap_or_default();
-    let (new_filter, mut filter_changes) = filter_update(
-        &options
-            .flown_filter
-            .unwrap_or_else(FilterTable::default_boot),
-        metadata,
-    )?;
-    // The one change `filter_update` makes (aberration on) is written only if the telemetry
-    // shows it is needed (`alignment_heldout::validate_aberration_switch`).
-    let filter_validation = new_filter
-        .as_ref()
-        .map(|_| validate_aberration_switch(&frames_cal, &setup));
-    let new_filter = match &filter_validation {
-        Some(v) if !v.passed => {
-            filter_changes.push(format!("not written: {}", v.reason));
-            None
-        }
-        _ => new_filter,
-    };
+    let (new_filter, filter_changes, filter_validation) =
+        filter_stage(options, metadata, &frames_cal, &setup)?;
     let report = CalibrationReport {
         telemetry: tm.report.clone(),
         data: summary,
@@ -1493,6 +1318,305 @@ pub fn calibrate_telemetry(
         irucal: irucal_solution,
         gyro_chain: gyro_chain.chain,
     })
+}
+
+impl DataSummary {
+    /// Frame, star and Sun counts of the frames (the rest is filled in by the stages).
+    fn of_frames(frames: &[FrameObservations]) -> Self {
+        let mut summary = DataSummary {
+            frames: frames.len(),
+            ..DataSummary::default()
+        };
+        for f in frames {
+            for (i, s) in f.stars.iter().enumerate() {
+                if let Some(s) = s {
+                    if s.identified.is_some() {
+                        summary.stars_identified[i] += 1;
+                    } else {
+                        summary.stars_unidentified[i] += 1;
+                    }
+                }
+            }
+            for (i, s) in f.suns.iter().enumerate() {
+                if s.is_some() {
+                    summary.sun_samples[i] += 1;
+                }
+            }
+        }
+        summary
+    }
+}
+
+/// The sensors FFCAL can calibrate: those seen together with another one (an FSS the Sun
+/// never visited is left out, keeps its flown alignment and is reported as not observed).
+/// Returns the table index → sensor index map and the observed table indices.
+///
+/// # Errors
+/// A FHST never observed with another sensor.
+fn observed_sensors(
+    frames: &[FrameObservations],
+    fss_systematic_arcsec: f64,
+    summary: &mut DataSummary,
+) -> anyhow::Result<([Option<usize>; 4], Vec<usize>)> {
+    let all: [Option<usize>; 4] = [Some(0), Some(1), Some(2), Some(3)];
+    let mut seen = [0usize; 4];
+    for epoch in alignment_data(frames, &all, [fss_systematic_arcsec; 2]).epochs() {
+        for o in epoch {
+            seen[o.sensor] += 1;
+        }
+    }
+    if seen[0] == 0 || seen[1] == 0 {
+        bail!(
+            "FFCAL needs both FHSTs observing with another sensor at the same time; epochs per sensor FHST1/FHST2/FSS1/FSS2: {seen:?} (stars identified per FHST: {:?})",
+            summary.stars_identified
+        );
+    }
+    let mut map = [None; 4];
+    let mut observed = Vec::new();
+    for k in 0..4 {
+        if seen[k] > 0 {
+            map[k] = Some(observed.len());
+            observed.push(k);
+        }
+    }
+    summary.not_observed = (0..4)
+        .filter(|k| seen[*k] == 0)
+        .map(|k| SENSOR_NAMES[k].to_string())
+        .collect();
+    Ok((map, observed))
+}
+
+/// Alignment report per observed sensor: as calibrated, as adjusted (uplinked), and the
+/// residual RMS before and after.
+fn alignment_reports(
+    solution: &FfcalSolution,
+    observed: &[usize],
+    flown: &[Matrix3<f64>],
+    adjusted: &[Matrix3<f64>],
+) -> (
+    std::collections::BTreeMap<String, AlignmentReport>,
+    std::collections::BTreeMap<String, AlignmentReport>,
+    BeforeAfter,
+) {
+    let mut alignments = std::collections::BTreeMap::new();
+    let mut alignments_adjusted = std::collections::BTreeMap::new();
+    let mut residual = BeforeAfter::default();
+    for (j, s) in solution.sensors.iter().enumerate() {
+        let i = observed[j];
+        let sigma = [
+            s.sigma_acs_arcsec.x,
+            s.sigma_acs_arcsec.y,
+            s.sigma_acs_arcsec.z,
+        ];
+        alignments.insert(
+            s.id.clone(),
+            AlignmentReport {
+                m_acs_from_sensor: rows(&s.m_acs_from_sensor_calibrated),
+                sigma_arcsec: sigma,
+                theta_acs_arcsec: s.theta_acs_arcsec.into(),
+            },
+        );
+        let adj = adjusted[i];
+        let theta = rotvec_from_rot(&(adj * flown[i].transpose())) * ARCSEC_PER_RAD;
+        alignments_adjusted.insert(
+            s.id.clone(),
+            AlignmentReport {
+                m_acs_from_sensor: rows(&adj),
+                sigma_arcsec: sigma,
+                theta_acs_arcsec: theta.into(),
+            },
+        );
+        residual
+            .before
+            .insert(s.id.clone(), s.residual_rms_before_arcsec);
+        residual
+            .after
+            .insert(s.id.clone(), s.residual_rms_after_arcsec);
+    }
+    (alignments, alignments_adjusted, residual)
+}
+
+/// One report per maneuver: span, angle, whether the calibration filter used it (and why
+/// not), and its coarse attitude.
+fn maneuver_reports(
+    frames: &[FrameObservations],
+    maneuvers: &[(usize, usize)],
+    gyro_chain: &super::gyro_chain::GyroChain,
+    obc_bias_at: &dyn Fn(f64) -> Vector3<f64>,
+    t0: f64,
+) -> Vec<ManeuverReport> {
+    maneuvers
+        .iter()
+        .enumerate()
+        .map(|(k, &(s, e))| {
+            let t_end = frames[e].time.seconds();
+            let angle: f64 = frames[s..=e]
+                .iter()
+                .filter_map(|f| f.gyro)
+                .map(|g| g.dtheta_acs_rad)
+                .sum::<Vector3<f64>>()
+                .norm();
+            let why_not_used = gyro_chain.why_not_used(frames, k, s, e);
+            ManeuverReport {
+                start_s: frames[s].time.seconds() - t0,
+                end_s: t_end - t0,
+                angle_deg: angle.to_degrees(),
+                used: why_not_used.is_none(),
+                why_not_used,
+                coarse_attitude: coarse_attitude(frames, s, e, &obc_bias_at(t_end), t0),
+            }
+        })
+        .collect()
+}
+
+/// The smoothed bias at every fix, beside the OBC's estimate at that time.
+fn bias_history(
+    sol: &crate::calibration::iru_chain::ChainSolution,
+    tm: &Telemetry,
+    t0: f64,
+) -> Vec<BiasHistoryPoint> {
+    sol.bias
+        .iter()
+        .map(|b| BiasHistoryPoint {
+            t_s: b.t_s,
+            bias_rad_per_s: b.bias_rad_per_s,
+            sigma_rad_per_s: b.sigma_rad_per_s,
+            obc_bias_rad_per_s: obc_bias_sample(tm, t0 + b.t_s),
+        })
+        .collect()
+}
+
+impl FfcalSummary {
+    /// The FFCAL part of the report from the fit and its inputs.
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        solution: &FfcalSolution,
+        observed: &[usize],
+        sensors: &[SensorSpec],
+        (data, fhst_data): (&AlignmentData, &AlignmentData),
+        fhst_stage: Option<FhstStage>,
+        batch_rel: &Result<FhstRelativeAlignment, RelativeAlignmentError>,
+        fss_systematic: Option<[FssSystematicEstimate; 2]>,
+        consider_declared: bool,
+    ) -> Self {
+        let rel = solution.relative_covariance_arcsec2(1, 0);
+        FfcalSummary {
+            weighting: solution.weighting,
+            iterations: solution.iterations,
+            epochs: solution.epochs,
+            eigenvalues: solution
+                .observability
+                .eigenvalues_with_prior_per_arcsec2
+                .clone(),
+            sigma_fhst2_rel_fhst1_arcsec: [
+                rel[(0, 0)].sqrt(),
+                rel[(1, 1)].sqrt(),
+                rel[(2, 2)].sqrt(),
+            ],
+            relative_covariance_to_fhst1_arcsec2: match observed.iter().position(|&k| k == 0) {
+                Some(j1) => observed
+                    .iter()
+                    .enumerate()
+                    .filter(|&(j, _)| j != j1)
+                    .map(|(j, &k)| {
+                        (
+                            SENSOR_NAMES[k].to_string(),
+                            rows(&solution.relative_covariance_arcsec2(j, j1)),
+                        )
+                    })
+                    .collect(),
+                None => std::collections::BTreeMap::new(),
+            },
+            crb_sigma_fhst2_rel_fhst1_all_sensors_arcsec: crb_relative_sigma(
+                sensors, data, solution,
+            ),
+            crb_sigma_fhst2_rel_fhst1_fhst_only_arcsec: crb_relative_sigma(
+                sensors.get(..2).unwrap_or(sensors),
+                fhst_data,
+                solution,
+            ),
+            fhst_stage,
+            gyro_batches: batch_rel.as_ref().ok().map(|h| {
+                let sd = |c: &Matrix3<f64>| [0, 1, 2].map(|i| c[(i, i)].max(0.0).sqrt());
+                BatchAlignmentSummary {
+                    theta_fhst2_rel_fhst1_arcsec: h.theta_acs_arcsec.into(),
+                    sigma_arcsec: sd(&h.covariance_arcsec2),
+                    crb_sigma_arcsec: sd(&h.crb_covariance_arcsec2),
+                    aberration_consider_sigma_arcsec: sd(&h.aberration_consider_arcsec2),
+                    variance_factor: h.variance_factor,
+                    batches: h.batches,
+                    samples: h.samples,
+                    rejected: h.rejected,
+                    residual_rms_arcsec: h.residual_rms_arcsec,
+                }
+            }),
+            fss_systematic,
+            fss_covariance: if consider_declared && fhst_stage.is_some() {
+                "consider"
+            } else {
+                "cells"
+            },
+        }
+    }
+}
+
+impl FixFloors {
+    /// The floors from FFCAL's result and the declared FSS error.
+    fn from_ffcal(ffcal: &FfcalSummary, solution: &FfcalSolution, metadata: &Metadata) -> Self {
+        // A FHST-only fix may follow either tracker's frame: a quarter of the FHST1–FHST2
+        // relative alignment covariance (FFCAL, arcsec²) is added to it.
+        // A fix that needed the Sun carries the FSS's own error and its calibrated alignment's
+        // uncertainty (FFCAL, relative to FHST1): the larger FSS's largest axis σ.
+        let fss_alignment_sigma = ["FSS1", "FSS2"]
+            .iter()
+            .filter_map(|n| ffcal.relative_covariance_to_fhst1_arcsec2.get(*n))
+            .flat_map(|c| [c[0][0], c[1][1], c[2][2]])
+            .fold(0.0_f64, f64::max)
+            .sqrt();
+        FixFloors {
+            fhst_cov_rad2: solution.relative_covariance_arcsec2(1, 0)
+                * (0.25 / ARCSEC_PER_RAD.powi(2)),
+            fss_arcsec: metadata
+                .sensors
+                .fss_systematic_arcsec
+                .hypot(fss_alignment_sigma),
+        }
+    }
+}
+
+/// The filter table to write, the changes with why, and their validation: the one change
+/// [`filter_update`] makes (aberration on) is written only if the telemetry shows it is needed
+/// (`alignment_heldout::validate_aberration_switch`).
+///
+/// # Errors
+/// The new table fails the OBC's validation.
+fn filter_stage(
+    options: &CalibrateOptions,
+    metadata: &Metadata,
+    frames: &[FrameObservations],
+    setup: &AlignmentSetup<'_>,
+) -> anyhow::Result<(
+    Option<FilterTable>,
+    Vec<String>,
+    Option<AberrationSwitchValidation>,
+)> {
+    let (new_filter, mut filter_changes) = filter_update(
+        &options
+            .flown_filter
+            .unwrap_or_else(FilterTable::default_boot),
+        metadata,
+    )?;
+    let filter_validation = new_filter
+        .as_ref()
+        .map(|_| validate_aberration_switch(frames, setup));
+    let new_filter = match &filter_validation {
+        Some(v) if !v.passed => {
+            filter_changes.push(format!("not written: {}", v.reason));
+            None
+        }
+        _ => new_filter,
+    };
+    Ok((new_filter, filter_changes, filter_validation))
 }
 
 /// The filter table the OBC should fly, when it differs from the flown one, and why.
