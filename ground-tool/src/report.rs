@@ -501,6 +501,13 @@ pub fn write_calibration_report(
                     b.t_s / 3600.0, st[0], st[1], st[2], sd[0], sd[1], sd[2], b.delta_chi2, b.p_value, b.positions
                 );
             }
+            if iru.bias_steps_capped {
+                let _ = writeln!(
+                    md,
+                    "The change-point scan stopped at its cap of {} steps: more bias changes faster than the walk may remain (see the bias history).\n",
+                    iru.bias_steps.len()
+                );
+            }
             let _ = writeln!(md, "**Primary G:** {}\n", iru.decision);
             if let Some(b) = &iru.backup {
                 let _ = writeln!(

@@ -267,6 +267,9 @@ pub struct IruReport {
     pub bias_steps: Vec<BiasStepTest>,
     /// The scan's best candidate that was not accepted (when a scan ran and stopped).
     pub bias_step_rejected: Option<BiasStepTest>,
+    /// The scan stopped at its cap of steps (`iru_chain::MAX_BIAS_STEPS`): more changes faster
+    /// than the walk may remain.
+    pub bias_steps_capped: bool,
     /// Where in their envelope the rate-mode switches inside decimated frames fell, as
     /// estimated (slew start, slew end; 0 = middle, ±0.5 = edges), with 1σ (0.5: no data).
     pub split_fraction: [f64; 2],

@@ -422,6 +422,7 @@ pub fn irucal_stage(
         bias_step_rejected: sol
             .bias_step_scan
             .filter(|s| !sol.bias_steps.contains(s)),
+        bias_steps_capped: sol.bias_steps.len() >= crate::calibration::iru_chain::MAX_BIAS_STEPS,
         split_fraction: sol.split_fraction,
         split_fraction_sigma: sol.split_fraction_sigma,
         validation,
