@@ -339,7 +339,8 @@ pub fn diagnose_run(
                 "alignment table: the flown one written again, the new alignments failed the held-out validation ({})",
                 v.reason
             ));
-            copt.flown_alignment.unwrap_or_else(AlignmentTable::prelaunch)
+            copt.flown_alignment
+                .unwrap_or_else(AlignmentTable::prelaunch)
         }
         None => flight.alignment,
     };
