@@ -630,7 +630,7 @@ pub fn post_fit(set: &MeasurementSet, layout: &Layout, g: &DVector<f64>) -> Post
             None
         };
         if let Some((a, inv)) = a_hat {
-            batch_nuisance[bi] = Some((a, inv));
+            batch_nuisance[bi] = Some(Box::new((a, inv)));
             for i in range {
                 let arow = nuisance_row(&set.meas[i]);
                 resid[i][0] -= arow[0].dot(&a);
@@ -649,6 +649,18 @@ pub fn post_fit(set: &MeasurementSet, layout: &Layout, g: &DVector<f64>) -> Post
 pub struct PostFit {
     /// Residual per measurement (arcsec).
     pub resid: Vec<[f64; 2]>,
-    /// Per batch: nuisance estimate (angle arcsec, rate arcsec/100 s) and its covariance.
-    pub batch_nuisance: Vec<Option<(Vector6<f64>, Matrix6<f64>)>>,
+    /// Per batch: nuisance estimate and its covariance ([`PostFit::batch_nuisance`]).
+    /// Boxed: on long telemetry at 30-s frames (one frame per batch, issue 22) only a few
+    /// thousand of the 524k batches are solved, and an unboxed `Option` (344 B per batch)
+    /// cost 180 MB per `PostFit`; three are alive at diagnose's peak.
+    batch_nuisance: Vec<Option<Box<(Vector6<f64>, Matrix6<f64>)>>>,
+}
+
+impl PostFit {
+    /// Nuisance estimate of batch `b` (angle arcsec, rate arcsec/100 s) and its covariance;
+    /// `None` when the batch has no FHST row in the fit or its normal matrix is singular.
+    #[must_use]
+    pub fn batch_nuisance(&self, b: usize) -> Option<&(Vector6<f64>, Matrix6<f64>)> {
+        self.batch_nuisance.get(b)?.as_deref()
+    }
 }

@@ -148,7 +148,7 @@ fn batch_attitudes(set: &MeasurementSet, post: &PostFit) -> Vec<BatchAttitude> {
             if !b.usable {
                 return None;
             }
-            let (a, cov) = post.batch_nuisance.get(i)?.as_ref()?;
+            let (a, cov) = post.batch_nuisance(i)?;
             let dtheta = Vector3::new(a[0], a[1], a[2]) * RAD_PER_ARCSEC;
             let var = Vector3::new(cov[(0, 0)], cov[(1, 1)], cov[(2, 2)]);
             Some(Box::new((rot(&dtheta) * b.m_acs_from_eci, var)))

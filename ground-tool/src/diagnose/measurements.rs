@@ -343,7 +343,20 @@ impl MeasurementSet {
 
         let mut batches = Vec::new();
         let mut frame_attitude = vec![None; n];
-        let mut meas = Vec::new();
+        // At most one measurement per identified star and Sun sighting: reserved at once and
+        // trimmed after, not doubled as it grows (six months of 30-s frames: ~0.5 M of
+        // 424 B, issue 22).
+        let sightings = frames
+            .iter()
+            .map(|f| {
+                f.stars
+                    .iter()
+                    .filter(|s| s.as_ref().is_some_and(|s| s.identified.is_some()))
+                    .count()
+                    + f.suns.iter().filter(|s| s.is_some()).count()
+            })
+            .sum();
+        let mut meas = Vec::with_capacity(sightings);
         for (lo, hi, hr) in make_batches(frames) {
             let center = (lo + hi) / 2;
             let bias = bias_at(center);
@@ -501,6 +514,7 @@ impl MeasurementSet {
                 }
             }
         }
+        meas.shrink_to_fit();
         let mut set = Self {
             meas,
             batches,
@@ -526,28 +540,9 @@ impl MeasurementSet {
     /// Mark batches whose FHST attitude is poorly determined (one star, short slew batches)
     /// and exclude their measurements.
     fn check_batches(&mut self) {
-        let nb = self.batches.len();
-        let mut info_fhst = vec![nalgebra::Matrix6::<f64>::zeros(); nb];
-        let mut info_all = vec![nalgebra::Matrix6::<f64>::zeros(); nb];
-        let mut has_fhst = vec![false; nb];
-        for m in self.meas.iter().filter(|m| !m.outlier) {
-            let a = Self::attitude_partial(m);
-            let t = m.dt_center_s / 100.0;
-            let w = 1.0 / (m.sigma * m.sigma);
-            for ax in 0..2 {
-                let mut row = nalgebra::Vector6::zeros();
-                for j in 0..3 {
-                    row[j] = a[(ax, j)];
-                    row[j + 3] = a[(ax, j)] * t;
-                }
-                let add = row * row.transpose() * w;
-                info_all[m.batch] += add;
-                if m.sensor < 2 {
-                    info_fhst[m.batch] += add;
-                    has_fhst[m.batch] = true;
-                }
-            }
-        }
+        // One batch at a time (the measurements are in batch order): two 6×6 information
+        // matrices per batch for the whole run at once were 0.3 GB on six months of 30-s
+        // frames (issue 22). The sums are the same, in the same order.
         let good = |inf: &mut nalgebra::Matrix6<f64>| {
             for j in 0..3 {
                 inf[(j, j)] += 1.0 / NUISANCE_ANGLE_PRIOR_ARCSEC.powi(2);
@@ -558,11 +553,38 @@ impl MeasurementSet {
                 None => false,
             }
         };
+        let mut next = 0usize;
         for (i, b) in self.batches.iter_mut().enumerate() {
-            b.fhst_only = good(&mut info_fhst[i]);
+            let mut info_fhst = nalgebra::Matrix6::<f64>::zeros();
+            let mut info_all = nalgebra::Matrix6::<f64>::zeros();
+            let mut has_fhst = false;
+            let start = next;
+            while next < self.meas.len() && self.meas[next].batch == i {
+                next += 1;
+            }
+            for m in self.meas[start..next].iter().filter(|m| !m.outlier) {
+                let a = Self::attitude_partial(m);
+                let t = m.dt_center_s / 100.0;
+                let w = 1.0 / (m.sigma * m.sigma);
+                for ax in 0..2 {
+                    let mut row = nalgebra::Vector6::zeros();
+                    for j in 0..3 {
+                        row[j] = a[(ax, j)];
+                        row[j + 3] = a[(ax, j)] * t;
+                    }
+                    let add = row * row.transpose() * w;
+                    info_all += add;
+                    if m.sensor < 2 {
+                        info_fhst += add;
+                        has_fhst = true;
+                    }
+                }
+            }
+            b.fhst_only = good(&mut info_fhst);
             // A batch needs a star: the Sun alone gives two axes.
-            b.usable = has_fhst[i] && (b.fhst_only || (ALLOW_FSS_AIDED && good(&mut info_all[i])));
+            b.usable = has_fhst && (b.fhst_only || (ALLOW_FSS_AIDED && good(&mut info_all)));
         }
+        debug_assert_eq!(next, self.meas.len(), "measurements in batch order");
         let usable: Vec<bool> = self.batches.iter().map(|b| b.usable).collect();
         for m in &mut self.meas {
             if !usable[m.batch] {

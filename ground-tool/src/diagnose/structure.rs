@@ -543,7 +543,7 @@ fn samples_for(
             }
             j += 1;
         }
-        let p = post.batch_nuisance.get(b).and_then(|x| x.as_ref());
+        let p = post.batch_nuisance(b);
         // post_fit puts the FSS rows in the batch attitude unless the FHSTs alone determine it.
         let in_fit = p.is_some() && !set.batches.get(b).is_some_and(|bt| bt.fhst_only);
         if let Some((x, r, w)) = batch_mean(&rows, p.map(|(_, p)| p), in_fit) {
