@@ -1009,7 +1009,8 @@ fn bias_step_wald(
     Ok(step_wald(&pass))
 }
 
-/// The Wald statistic of the extension states at a pass's last fix, the estimate and its σ.
+/// The Wald statistic of the extension states at a pass's last fix (a bias step or the
+/// rate-proportional scale), the estimate and its σ.
 fn step_wald(pass: &Pass) -> (f64, Vector3<f64>, Vector3<f64>) {
     let x = pass.x_filt.last().copied().unwrap_or_else(Vx::zeros);
     let p = pass.p_filt.last().copied().unwrap_or_else(Mx::zeros);
@@ -1141,15 +1142,11 @@ fn rate_scale_test(
         ..*cfg
     };
     let pass = forward(chain, models, nominal, &c, rrw, History::Last)?;
-    let x = pass.x_filt.last().copied().unwrap_or_else(Vx::zeros);
-    let p = pass.p_filt.last().copied().unwrap_or_else(Mx::zeros);
-    let k = Vector3::new(x[EXT], x[EXT + 1], x[EXT + 2]);
-    let pk: Matrix3<f64> = p.fixed_view::<3, 3>(EXT, EXT).into_owned();
-    let delta_chi2 = pk.cholesky().map_or(0.0, |ch| k.dot(&ch.solve(&k)));
+    let (delta_chi2, k, sd) = step_wald(&pass);
     let p_value = chi2_sf(delta_chi2, 3.0);
     Ok(RateScaleTest {
-        k_ppm_at_1deg_per_s: [x[EXT], x[EXT + 1], x[EXT + 2]],
-        sigma_ppm: [0, 1, 2].map(|i| p[(EXT + i, EXT + i)].max(0.0).sqrt()),
+        k_ppm_at_1deg_per_s: k.into(),
+        sigma_ppm: sd.into(),
         delta_chi2,
         p_value,
         significant: p_value < EXT_P_MAX,
@@ -1275,10 +1272,10 @@ pub struct HeldOutValidation {
 /// consistent (the range the Monte Carlo asks of δM's (error/σ)²: [0.5, 2]; a p-value would
 /// refuse a 15 % variance excess over hundreds of held-out maneuvers, which does not make a
 /// table wrong; a model error shows as a multiple).
-const HELDOUT_MS_MAX: f64 = 2.0;
+pub(crate) const HELDOUT_MS_MAX: f64 = 2.0;
 
 /// Most folds of the held-out validation.
-const MAX_FOLDS: usize = 5;
+pub(crate) const MAX_FOLDS: usize = 5;
 
 /// The elements of δM determined at 3σ (the ones a table would carry).
 #[must_use]

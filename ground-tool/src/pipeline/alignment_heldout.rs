@@ -33,13 +33,9 @@ use super::observations::FrameObservations;
 use crate::calibration::alignment::{alignment_residuals, ffcal, FfcalConfig, Weighting};
 use crate::diagnose::stats::chi2_sf;
 
-/// Most folds (blocks of time held out in turn).
-pub const MAX_FOLDS: usize = 5;
-
-/// Largest held-out χ²/dof that counts as consistent. The same bound as the IRU table's
-/// (`calibration::iru_chain`): the range the Monte Carlo asks of normalised errors, [0.5, 2];
-/// a model error shows as a multiple, not as a 15 % excess over thousands of pairs.
-pub const HELDOUT_MS_MAX: f64 = 2.0;
+/// Most folds (blocks of time held out in turn) and the largest held-out χ²/dof that counts
+/// as consistent: the IRU table's (`calibration::iru_chain`), one rule for every table.
+use crate::calibration::iru_chain::{HELDOUT_MS_MAX, MAX_FOLDS};
 
 /// Fewest FFCAL epochs in a held-out block for it to count.
 const MIN_HELDOUT_EPOCHS: usize = 10;
