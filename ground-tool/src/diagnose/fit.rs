@@ -311,7 +311,10 @@ fn accumulate_rows(
         let mut neg: Vec<Vector6<f64>> = vec![Vector6::zeros(); touched.len()];
         let n_fhst_cols = touched.len();
         let mut any_fss = false;
-        for m in ms.iter().filter(|m| fss_rows && m.sensor >= 2 && !m.outlier) {
+        for m in ms
+            .iter()
+            .filter(|m| fss_rows && m.sensor >= 2 && !m.outlier)
+        {
             any_fss = true;
             layout.row_columns(m, &mut cols, &mut scratch);
             let arow = nuisance_row(m);
