@@ -209,6 +209,7 @@ pub fn with_sparse_catalog(
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 mod tests {
     use super::*;
     use crate::diagnose::effects::library;
@@ -240,11 +241,13 @@ mod tests {
         let show = std::env::var("SHOW").is_ok();
         let (mut p_all, mut p_with_fss) = (Vec::new(), Vec::new());
         for seed in 40..64 {
-            let mut effects = SynthEffects::default();
-            effects.fss_tf = [
-                Some((FssHeadErrors::default(), FssHeadErrors::default())),
-                Some((FssHeadErrors::default(), FssHeadErrors::default())),
-            ];
+            let effects = SynthEffects {
+                fss_tf: [
+                    Some((FssHeadErrors::default(), FssHeadErrors::default())),
+                    Some((FssHeadErrors::default(), FssHeadErrors::default())),
+                ],
+                ..SynthEffects::default()
+            };
             let cfg = SynthConfig {
                 duration_s: 3.0 * 3600.0,
                 seed,
