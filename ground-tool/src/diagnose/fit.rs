@@ -218,6 +218,23 @@ pub fn accumulate(
     layout: &Layout,
     use_batch: &dyn Fn(usize) -> bool,
 ) -> Normal {
+    accumulate_rows(set, layout, use_batch, true)
+}
+
+/// [`accumulate`] over the FHST rows only (the per-star catalog screen,
+/// [`super::sparse_catalog`]: the FSS's position-dependent systematic is shared by a
+/// batch's Sun samples and is not in their weights).
+#[must_use]
+pub fn accumulate_fhst_only(set: &MeasurementSet, layout: &Layout) -> Normal {
+    accumulate_rows(set, layout, &|_| true, false)
+}
+
+fn accumulate_rows(
+    set: &MeasurementSet,
+    layout: &Layout,
+    use_batch: &dyn Fn(usize) -> bool,
+    fss_rows: bool,
+) -> Normal {
     let p = layout.total;
     let mut out = Normal::zeros(p);
     let mut local = vec![usize::MAX; p];
@@ -294,7 +311,10 @@ pub fn accumulate(
         let mut neg: Vec<Vector6<f64>> = vec![Vector6::zeros(); touched.len()];
         let n_fhst_cols = touched.len();
         let mut any_fss = false;
-        for m in ms.iter().filter(|m| m.sensor >= 2 && !m.outlier) {
+        for m in ms
+            .iter()
+            .filter(|m| fss_rows && m.sensor >= 2 && !m.outlier)
+        {
             any_fss = true;
             layout.row_columns(m, &mut cols, &mut scratch);
             let arow = nuisance_row(m);
