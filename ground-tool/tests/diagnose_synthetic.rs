@@ -412,6 +412,7 @@ fn declared_time_tag_is_not_added_twice() {
         None,
         a.set.count_per_sensor(),
         a.set.temperature_mean_c,
+        None,
     )
     .unwrap();
     let tau = flight.alignment.corrections.time_offset_s[0]

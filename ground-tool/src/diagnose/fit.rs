@@ -383,6 +383,107 @@ fn accumulate_rows(
     out
 }
 
+/// χ² of each selected batch for the global vector `g` (full length): the likelihood
+/// [`accumulate`] maximises, evaluated instead of accumulated — the batch attitude
+/// re-estimated from the FHST rows, the FSS rows taken against it with its error eliminated
+/// as well — so that `Σ χ²_b(g) = χ² − 2 gᵀb + gᵀN g` of the same batches' [`Normal`].
+/// Returns (batch, χ², scalar rows) per batch in batch order; the held-out validation of
+/// diagnose's tables ([`super::heldout`]) compares two vectors batch by batch with it.
+#[must_use]
+pub fn batch_chi2(
+    set: &MeasurementSet,
+    layout: &Layout,
+    g: &DVector<f64>,
+    use_batch: &dyn Fn(usize) -> bool,
+) -> Vec<(usize, f64, usize)> {
+    batch_quadratic(set, layout, g, use_batch, true)
+}
+
+/// [`batch_chi2`] of data that are all zero: `gᵀ N_b g`, the χ² by which the batch tells the
+/// vector `g` from zero (with `g` a difference of two models, the expected change of the
+/// batch's χ² between them).
+#[must_use]
+pub fn batch_information(
+    set: &MeasurementSet,
+    layout: &Layout,
+    g: &DVector<f64>,
+    use_batch: &dyn Fn(usize) -> bool,
+) -> Vec<(usize, f64, usize)> {
+    batch_quadratic(set, layout, g, use_batch, false)
+}
+
+fn batch_quadratic(
+    set: &MeasurementSet,
+    layout: &Layout,
+    g: &DVector<f64>,
+    use_batch: &dyn Fn(usize) -> bool,
+    with_data: bool,
+) -> Vec<(usize, f64, usize)> {
+    let mut out = Vec::new();
+    let mut cols = Vec::new();
+    let mut scratch = Vec::new();
+    let mut shifted = |m: &Measurement| {
+        layout.row_columns(m, &mut cols, &mut scratch);
+        let mut r = if with_data { m.r } else { [0.0; 2] };
+        for &(c, v) in &cols {
+            r[0] -= v[0] * g[c];
+            r[1] -= v[1] * g[c];
+        }
+        r
+    };
+    for (bi, range) in batch_ranges(set).into_iter().enumerate() {
+        if !use_batch(bi) || range.is_empty() {
+            continue;
+        }
+        let ms = &set.meas[range];
+        if !ms.iter().any(|m| m.sensor < 2 && !m.outlier) {
+            continue;
+        }
+        let (mut chi2, mut rows) = (0.0, 0usize);
+        let mut naa = nuisance_prior();
+        let mut na = Vector6::<f64>::zeros();
+        for m in ms.iter().filter(|m| m.sensor < 2 && !m.outlier) {
+            let r = shifted(m);
+            let arow = nuisance_row(m);
+            let w = 1.0 / (m.sigma * m.sigma);
+            for ax in 0..2 {
+                naa += arow[ax] * arow[ax].transpose() * w;
+                na += arow[ax] * (w * r[ax]);
+                chi2 += w * r[ax] * r[ax];
+                rows += 1;
+            }
+        }
+        let Some(inv) = naa.try_inverse() else {
+            continue;
+        };
+        let a0 = inv * na;
+        chi2 -= na.dot(&a0);
+        let mut nee = naa;
+        let mut ne = Vector6::<f64>::zeros();
+        let mut any_fss = false;
+        for m in ms.iter().filter(|m| m.sensor >= 2 && !m.outlier) {
+            any_fss = true;
+            let r = shifted(m);
+            let arow = nuisance_row(m);
+            let w = 1.0 / (m.sigma * m.sigma);
+            for ax in 0..2 {
+                let r = r[ax] - arow[ax].dot(&a0);
+                nee += arow[ax] * arow[ax].transpose() * w;
+                ne += arow[ax] * (w * r);
+                chi2 += w * r * r;
+                rows += 1;
+            }
+        }
+        if any_fss {
+            if let Some(inv_e) = nee.try_inverse() {
+                chi2 -= ne.dot(&(inv_e * ne));
+            }
+        }
+        out.push((bi, chi2, rows));
+    }
+    out
+}
+
 /// Length of the alternating time blocks that make the two halves (s).
 pub const HALF_BLOCK_S: f64 = 600.0;
 

@@ -27,7 +27,7 @@
 //! OBC estimates its bias itself), and the non-library extension terms.
 
 use super::effects::{EffectKind, FHST_REF_RAD, FSS_EDGE_RAD};
-use super::fit::align_offset;
+use super::fit::{align_offset, N_ALIGN};
 use super::search::SearchResult;
 use super::Detected;
 use crate::calibration::adjust::{preserve_obc_attitude, BoresightFrame};
@@ -53,15 +53,36 @@ pub struct FlightUpdate {
     /// Corrected onboard star catalog, when catalog offsets were found.
     #[serde(skip)]
     pub catalog: Option<StarCatalogTable>,
+    /// The layout's parameters the tables hold (the alignments and the terms written), for
+    /// the held-out validation ([`super::heldout`]).
+    #[serde(skip)]
+    pub flight_idx: Vec<usize>,
+    /// The fit of those parameters (the tables' values, before the adjustment that keeps the
+    /// OBC's FHST frame), for scoring.
+    #[serde(skip)]
+    pub flight_fit: super::fit::SubFit,
     /// What went into the tables.
     pub applied: Vec<String>,
     /// Effects with no flight-table hook (corrected on the ground only).
     pub ground_only: Vec<String>,
 }
 
+/// What the held-out validation let through ([`super::heldout`]): the tables are rebuilt with
+/// only these parameters free and the alignments of the other sensors held at the reference's.
+#[derive(Clone, Copy, Debug)]
+pub struct Restriction<'a> {
+    /// The layout's parameters that may change (the components taken).
+    pub free: &'a [usize],
+    /// The reference table's alignment parameters relative to the alignments the
+    /// measurements were built with ([`super::heldout::alignment_parameters_arcsec`]); the
+    /// `base` of [`flight_update`] is then the reference table itself.
+    pub reference_arcsec: [f64; N_ALIGN],
+}
+
 /// Build the tables from the final fit. `temperature_mean_c` is the run mean of each
 /// temperature slot, the reference of the thermal parameters
-/// ([`super::measurements::MeasurementSet::temperature_mean_c`]).
+/// ([`super::measurements::MeasurementSet::temperature_mean_c`]). `base` is the table the
+/// measurements were built with, or with a `restrict`ion the reference table it holds.
 ///
 /// # Errors
 /// The adjusted table does not validate (an effect too large for the table's range).
@@ -72,6 +93,7 @@ pub fn flight_update(
     flown_catalog: Option<&StarCatalogTable>,
     counts: [usize; 4],
     temperature_mean_c: [f64; 5],
+    restrict: Option<Restriction<'_>>,
 ) -> anyhow::Result<FlightUpdate> {
     // The flight fit: the final model restricted to what the OBC can apply (alignments, time
     // offsets, distortion, magnitude bias, thermal drift, the FSS transfer function, annual
@@ -81,6 +103,19 @@ pub fn flight_update(
     // alignment).
     let mut effects: Vec<usize> = res.baseline.clone();
     effects.extend(&res.added);
+    let free = |p: usize| restrict.is_none_or(|r| r.free.contains(&p));
+    effects.retain(|&i| res.layout.range(i).any(free));
+    // Alignments not let through stay at the reference's.
+    let held_alignment: Vec<super::fit::Fixed> = restrict.map_or_else(Vec::new, |r| {
+        (0..N_ALIGN)
+            .filter(|&p| !free(p))
+            .map(|p| super::fit::Fixed {
+                index: p,
+                value: r.reference_arcsec[p],
+                sigma: 0.0,
+            })
+            .collect()
+    });
     // `always`: the alignments, the aberration scale (its table field is a switch) and the
     // catalog offsets (every star goes up, shrunk); `gated`: the terms that go up only when
     // determined at 3σ.
@@ -102,7 +137,7 @@ pub fn flight_update(
             _ => (Vec::new(), Vec::new()),
         };
         always.extend(a.iter().map(|k| r.start + k));
-        gated.extend(g.iter().map(|k| r.start + k));
+        gated.extend(g.iter().map(|k| r.start + k).filter(|&p| free(p)));
     }
     // Only terms determined at 3σ go up: an ill-determined polynomial term (a transfer
     // function seen over a small part of the field) would make the OBC worse elsewhere. The
@@ -115,12 +150,13 @@ pub fn flight_update(
         idx.extend(gated);
         // The time tags stay at their estimates against the gyro (the batch system alone
         // does not determine their common part).
-        let fixed: Vec<super::fit::Fixed> = res
+        let mut fixed: Vec<super::fit::Fixed> = res
             .fixed
             .iter()
             .filter(|f| idx.contains(&f.index))
             .copied()
             .collect();
+        fixed.extend(&held_alignment);
         super::fit::solve_fixed(&res.systems.full, &res.layout, &idx, &fixed)
     };
     let mut flight_fit = res.final_fit.clone();
@@ -136,6 +172,13 @@ pub fn flight_update(
         }
     }
     let g = flight_fit.expand(res.layout.total);
+    // The alignment parameters relative to `base`: with a restriction, the reference table.
+    let mut g_table = g.clone();
+    if let Some(r) = restrict {
+        for (p, v) in r.reference_arcsec.iter().enumerate() {
+            g_table[p] -= v;
+        }
+    }
     let p3 = |i: usize| {
         if !gated.contains(&i) {
             return 0.0;
@@ -167,19 +210,32 @@ pub fn flight_update(
     }
     let mut applied = Vec::new();
     let mut ground_only = Vec::new();
-    let mut table = adjusted_alignment(base, &g, &thermal_constant, counts)?;
-    let ground_alignment = adjusted_alignment(
-        base,
-        &res.final_fit.expand(res.layout.total),
-        &[Vector3::zeros(); 4],
-        counts,
-    )?;
-    applied.push(
-        "alignments re-estimated jointly with the effects (FHST frame of the OBC kept)".to_owned(),
-    );
+    let mut table = adjusted_alignment(base, &g_table, &thermal_constant, counts)?;
+    let mut g_ground = res.final_fit.expand(res.layout.total);
+    if let Some(r) = restrict {
+        for (p, v) in r.reference_arcsec.iter().enumerate() {
+            g_ground[p] -= v;
+        }
+    }
+    let ground_alignment = adjusted_alignment(base, &g_ground, &[Vector3::zeros(); 4], counts)?;
+    let names = super::measurements::SENSOR_NAMES;
+    let refit: Vec<&str> = (1..4)
+        .filter(|s| (0..3).any(|ax| free(3 * (s - 1) + ax)))
+        .map(|s| names[s])
+        .collect();
+    if refit.len() == 3 {
+        applied.push(
+            "alignments re-estimated jointly with the effects (FHST frame of the OBC kept)"
+                .to_owned(),
+        );
+    } else if !refit.is_empty() {
+        applied.push(format!(
+            "alignments of {} re-estimated jointly with the effects, the others as the reference table (FHST frame of the OBC kept)",
+            refit.join(", ")
+        ));
+    }
     let mut filter = None;
     let mut catalog = None;
-    let names = super::measurements::SENSOR_NAMES;
     for i in effects {
         let e = &res.layout.effects[i];
         let r = res.layout.range(i);
@@ -316,6 +372,8 @@ pub fn flight_update(
         ground_alignment,
         filter,
         catalog,
+        flight_idx: always.iter().chain(&gated).copied().collect(),
+        flight_fit,
         applied,
         ground_only,
     })

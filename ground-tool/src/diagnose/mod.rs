@@ -19,7 +19,8 @@
 //! 5. [`gyro`]: the same for the gyro (bias drift and thermal bias from the hold-to-hold
 //!    attitude differences, scale asymmetry from the slews);
 //! 6. [`flight`]: effects the OBC should correct become table data (alignment corrections,
-//!    filter aberration flag) that `fsw-core` applies;
+//!    filter aberration flag) that `fsw-core` applies, written only when [`heldout`] finds
+//!    that they lower the held-out residuals against the table `calibrate` writes;
 //! 7. [`ledger`]: every test significant after its multiplicity correction ends explained by
 //!    an accepted effect or in `unexplained` with its size, regressor and the reason nothing
 //!    was named (the candidates are tested once more against the final model for it);
@@ -32,6 +33,7 @@ pub mod effects;
 pub mod fit;
 pub mod flight;
 pub mod gyro;
+pub mod heldout;
 pub mod inject;
 pub mod ledger;
 pub mod measurements;

@@ -84,6 +84,11 @@ pub struct DiagnoseReport {
     /// rotations the data do not constrain), arcsec.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub calibration_rotation_error_arcsec: Option<BeforeAfter>,
+    /// Scoring only: the error of the alignment tables *written* (what flies), before = the
+    /// one `calibrate` writes for the same telemetry, after = diagnose's `tables/alignment.tbl`
+    /// (with the field terms it carries), arcsec, as `calibration_error_arcsec`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub written_table_error_arcsec: Option<BeforeAfter>,
     /// Scoring only (truth.json).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub scoring: Option<Scoring>,
@@ -113,8 +118,13 @@ pub struct FlightSummary {
     pub written: Vec<String>,
     /// What went in.
     pub applied: Vec<String>,
-    /// Ground-only effects.
+    /// Ground-only effects (and, when the held-out validation refused them, the terms that
+    /// would have gone up).
     pub ground_only: Vec<String>,
+    /// Held-out validation of diagnose's tables against the alignment table `calibrate`
+    /// writes ([`super::heldout`]); `None` when there was nothing to validate.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub validation: Option<super::heldout::FlightTableValidation>,
 }
 
 const BLUE: RGBColor = RGBColor(31, 119, 180);
@@ -526,6 +536,19 @@ pub fn markdown(r: &DiagnoseReport) -> String {
     }
     for g in &r.flight_tables.ground_only {
         let _ = writeln!(s, "* ground only: {g}");
+    }
+    if let Some(v) = &r.flight_tables.validation {
+        let _ = writeln!(
+            s,
+            "\n**Held-out validation against {}: {}.** {}",
+            v.reference,
+            if v.passed {
+                "diagnose's tables written"
+            } else {
+                "refused, calibrate's table written"
+            },
+            v.reason
+        );
     }
     let _ = writeln!(
         s,

@@ -159,6 +159,53 @@ pub fn iru_table_out(flown: &IruTable, chain: Option<&CalibrationOutput>) -> (Ir
     (out, note)
 }
 
+/// The alignment table `calibrate` writes for the same telemetry: its own when its held-out
+/// validation passed, else the flown one (`pipeline::calibrate::run_calibrate`); the flown one
+/// when the chain failed.
+fn calibrate_written_alignment(cal: &Chain, copt: &CalibrateOptions) -> AlignmentTable {
+    match &cal.output {
+        Some(o) if o.report.alignment_validation.passed => cal.alignment,
+        _ => copt
+            .flown_alignment
+            .unwrap_or_else(AlignmentTable::prelaunch),
+    }
+}
+
+/// Diagnose's flight model against `calibrate_alignment` on held-out data
+/// ([`super::heldout`]); also the reference's alignment parameters.
+fn validate_tables(
+    analysis: &Analysis,
+    flight: &super::flight::FlightUpdate,
+    cal: &Chain,
+    calibrate_alignment: &AlignmentTable,
+) -> (
+    super::heldout::FlightTableValidation,
+    [f64; super::fit::N_ALIGN],
+) {
+    let m = |t: &AlignmentTable| -> [Matrix3<f64>; 4] {
+        let ms = t.matrices();
+        std::array::from_fn(|s| fsw_core::tables::types::matrix_from_rows(ms[s]))
+    };
+    let reference_arcsec =
+        super::heldout::alignment_parameters_arcsec(&m(calibrate_alignment), &m(&cal.alignment));
+    let reference = match &cal.output {
+        Some(o) if o.report.alignment_validation.passed => "calibrate's alignment table",
+        Some(_) => "the flown alignment table (calibrate's validation refused its own)",
+        None => "the flown alignment table (no calibration chain)",
+    };
+    (
+        super::heldout::validate_flight_tables(
+            &analysis.set,
+            &analysis.search.layout,
+            &flight.flight_idx,
+            &analysis.search.fixed,
+            &reference_arcsec,
+            reference,
+        ),
+        reference_arcsec,
+    )
+}
+
 /// Run the diagnosis of a run folder and write the report and tables into `out_dir`.
 ///
 /// # Errors
@@ -293,14 +340,65 @@ pub fn diagnose_run(
 
     // Flight tables.
     let filter_flown = flown_filter.unwrap_or_else(FilterTable::default_boot);
-    let mut flight = super::flight::flight_update(
+    let flight_all = super::flight::flight_update(
         &analysis.search,
         &cal.alignment,
         &filter_flown,
         flown_catalog.as_ref(),
         analysis.set.count_per_sensor(),
         analysis.set.temperature_mean_c,
+        None,
     )?;
+    // Diagnose's tables against the table calibrate writes, on held-out blocks of time
+    // (`super::heldout`): the tables are rebuilt from the reference with only the components
+    // the validation took; nothing taken, calibrate's alignment table is written. Every term
+    // left out is listed as not written.
+    let calibrate_alignment = calibrate_written_alignment(&cal, &copt);
+    let (validation, reference_arcsec) =
+        validate_tables(&analysis, &flight_all, &cal, &calibrate_alignment);
+    let validated = validation.passed;
+    let ground_alignment = flight_all.ground_alignment;
+    let mut flight = if validated {
+        super::flight::flight_update(
+            &analysis.search,
+            &calibrate_alignment,
+            &filter_flown,
+            flown_catalog.as_ref(),
+            analysis.set.count_per_sensor(),
+            analysis.set.temperature_mean_c,
+            Some(super::flight::Restriction {
+                free: &validation.taken_params,
+                reference_arcsec,
+            }),
+        )?
+    } else {
+        let mut f = flight_all;
+        let terms: Vec<String> = f.applied.drain(..).collect();
+        f.ground_only.extend(
+            terms
+                .into_iter()
+                .map(|a| format!("not written (held-out validation): {a}")),
+        );
+        f.alignment = calibrate_alignment;
+        f.catalog = None;
+        f.filter = None;
+        f.flight_idx.clear();
+        notes.push(format!(
+            "diagnose's tables not written; the alignment table calibrate writes is written instead: {}",
+            validation.reason
+        ));
+        f
+    };
+    if validated {
+        flight
+            .ground_only
+            .extend(validation.not_taken.iter().map(|c| {
+                format!(
+                    "not written (held-out validation, z {:.1}): {}",
+                    c.improvement.z, c.component
+                )
+            }));
+    }
     // What `calibrate` uplinks as well (`calibrate::filter_update`): the onboard annual-
     // aberration correction when the model declares aberration and the flown table has it off.
     // Only when the chain's held-out check of that change passed
@@ -326,9 +424,9 @@ pub fn diagnose_run(
         .with_context(|| format!("creating {}", out_dir.display()))?;
     let mut written = Vec::new();
     let p = out_dir.join("tables").join("alignment.tbl");
-    // The chain's held-out validation judges the chain's model; diagnose's table carries the
-    // effects it found on top (a time tag, say), which that model lacks, so a refusal there
-    // is reported, not applied (diagnose's own held-out gate is still to come: issue 22).
+    // The chain's held-out validation judges the chain's model; diagnose's tables carry the
+    // effects it found on top (a time tag, say), which that model lacks: a refusal there makes
+    // the flown table the reference of diagnose's own validation above.
     if let Some(v) = cal
         .output
         .as_ref()
@@ -336,7 +434,7 @@ pub fn diagnose_run(
         .filter(|v| !v.passed)
     {
         notes.push(format!(
-            "calibrate's held-out validation refused its own alignments ({}); diagnose's table, with the effects found, is written",
+            "calibrate's held-out validation refused its own alignments ({}); diagnose's tables were validated against the flown ones",
             v.reason
         ));
     }
@@ -398,6 +496,7 @@ pub fn diagnose_run(
         .first()
         .map_or(0.0, |f| f.time.seconds_since_j2000_tt());
     let mut rotation_error = None;
+    let mut written_error = None;
     let (calibration_error, scoring) = match &truth {
         Some(t) => {
             // The final model's field corrections (transfer function, distortion) per
@@ -434,16 +533,40 @@ pub fn diagnose_run(
             };
             let ce = BeforeAfter {
                 before: calibration_error_arcsec(&cal.alignment, t, &analysis.set, &|_| [0.0; 2]),
-                after: calibration_error_arcsec(
-                    &flight.ground_alignment,
-                    t,
-                    &analysis.set,
-                    &field_after,
-                ),
+                after: calibration_error_arcsec(&ground_alignment, t, &analysis.set, &field_after),
             };
+            // The tables written: diagnose's with the field terms that went up (none when
+            // the validation refused them), calibrate's with none.
+            let g_flight = flight.flight_fit.expand(res.layout.total);
+            let written_field = |k: usize| -> [f64; 2] {
+                if !validated {
+                    return [0.0; 2];
+                }
+                let m = &analysis.set.meas[k];
+                let mut out = [0.0; 2];
+                let mut cols = Vec::new();
+                for &i in &field {
+                    cols.clear();
+                    res.layout.effects[i].columns(m, &|_| None, &mut cols);
+                    let o = res.layout.offsets[i];
+                    for (p, v) in &cols {
+                        if flight.flight_idx.contains(&(o + p)) {
+                            out[0] += v[0] * g_flight[o + p];
+                            out[1] += v[1] * g_flight[o + p];
+                        }
+                    }
+                }
+                out
+            };
+            written_error = Some(BeforeAfter {
+                before: calibration_error_arcsec(&calibrate_alignment, t, &analysis.set, &|_| {
+                    [0.0; 2]
+                }),
+                after: calibration_error_arcsec(&alignment_out, t, &analysis.set, &written_field),
+            });
             rotation_error = Some(BeforeAfter {
                 before: rotation_error_arcsec(&cal.alignment, t),
-                after: rotation_error_arcsec(&flight.ground_alignment, t),
+                after: rotation_error_arcsec(&ground_alignment, t),
             });
             let sc = Scoring {
                 label: "scoring only: from truth.json, never used by the analysis".into(),
@@ -508,9 +631,11 @@ pub fn diagnose_run(
                 g.extend(iru_ground_only);
                 g
             },
+            validation: Some(validation),
         },
         calibration_error_arcsec: calibration_error,
         calibration_rotation_error_arcsec: rotation_error,
+        written_table_error_arcsec: written_error,
         scoring,
         plots: Vec::new(),
         notes,

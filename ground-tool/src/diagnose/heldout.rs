@@ -1,0 +1,811 @@
+//! # Held-out validation of diagnose's flight tables against calibrate's
+//!
+//! Why: diagnose's tables come from a larger model (the alignments and the effects it named)
+//! fitted to the same data, so their in-sample χ² is always lower than calibrate's. That says
+//! nothing about the next flight: an alignment that changed during the span, an effect named
+//! wrongly (a focal-plane error taken for catalog offsets), or a term that trades with an
+//! alignment all fit better in sample and fly worse (issue 22: diagnose's FHST1–FHST2
+//! alignment 26–33″ from the truth where calibrate's was 14–19″, and uplinked). And a table
+//! that is better as a whole can still carry a part that is worse: a real time tag found, and
+//! the alignments re-estimated with noise where the flown ones were already right.
+//!
+//! What is compared is what would fly. The *flight model* is the final model restricted to
+//! what the OBC applies ([`super::flight::flight_update`]: the alignments and the table terms
+//! that pass 3σ, the time tags at their estimates against the gyro). The *reference* is the
+//! alignment table `calibrate` writes for the same telemetry (its own alignments when its
+//! held-out validation passed, else the flown ones), with no effect terms. The flight model is
+//! cut into *components* — each sensor's alignment, each effect's terms — and built up from the
+//! reference by forward selection: in each round every component not yet taken is added in
+//! turn, the one that lowers the held-out χ² most is taken if its paired decrease exceeds
+//! [`MIN_IMPROVEMENT_Z`] standard errors (batch means,
+//! `pipeline::alignment_heldout::paired_improvement`, the rule of calibrate's own tables), and
+//! the selection stops when none does. A component not taken stays at the reference (an
+//! alignment at calibrate's, an effect term not written); nothing taken = calibrate's table.
+//!
+//! The held-out χ²: the span is cut into K ([`MAX_FOLDS`], the chain's) contiguous blocks of
+//! equal duration; for each block the model is refitted on the batch systems of the others
+//! ([`super::fit::accumulate`] per block, summed) and every held-out batch's χ² is evaluated
+//! ([`super::fit::batch_chi2`]: the exact likelihood of the fit, the batch attitude
+//! re-estimated). A parameter that a fold's training data do not determine (σ more than
+//! [`UNDETERMINED_SIGMA_RATIO`] × the whole span's: a sensor seen in one block only, a star
+//! tracked once) is held at the reference in that fold: the block validates nothing about it,
+//! and its wandering estimate would charge the table for the design of the folds.
+//! The held-out mean square of the normalised residuals is reported, not gated on: the
+//! reference is what flies otherwise, so a table that beats it is the better choice even where
+//! neither describes the data to the noise (an effect outside the library stays in both, and
+//! is in the report's `unexplained`).
+//!
+//! Limits: the time tags keep their estimates from the whole span's slew arcs (a fold refit
+//! would need the arcs again); the catalog offsets are evaluated as fitted, before the
+//! shrinkage and net-rotation removal [`super::flight`] applies to the uplinked catalog.
+
+use super::fit::{
+    accumulate, batch_chi2, batch_information, solve_fixed, Fixed, Layout, Normal, NUISANCE,
+    N_ALIGN,
+};
+use super::measurements::{MeasurementSet, SENSOR_NAMES};
+use crate::calibration::iru_chain::MAX_FOLDS;
+use crate::pipeline::alignment_heldout::paired_improvement;
+pub use crate::pipeline::alignment_heldout::MIN_IMPROVEMENT_Z;
+use fsw_core::attitude::rotvec_from_rot;
+use fsw_core::units::ARCSEC_PER_RAD;
+use nalgebra::{DVector, Matrix3};
+use rayon::prelude::*;
+use serde::Serialize;
+
+/// A fold's training σ of a parameter beyond this multiple of the whole span's means the
+/// held-out block holds nearly all (≥ 89 %) of the information on it.
+pub const UNDETERMINED_SIGMA_RATIO: f64 = 3.0;
+
+/// Least expected χ² change between two models for a held-out test: below it the component
+/// changes nothing the held-out data can see (a sensor without data) and its z is not formed.
+pub const MIN_SEPARATION: f64 = 1.0;
+
+/// One component's held-out test in the forward selection.
+#[derive(Clone, Debug, Serialize)]
+pub struct ComponentTest {
+    /// The component: `FHST2 alignment`, or an effect's label.
+    pub component: String,
+    /// The decrease of the held-out χ² from adding it to the components taken before.
+    pub improvement: HeldOutTest,
+}
+
+/// A held-out comparison of two models, batch by batch (module doc).
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct HeldOutTest {
+    /// Σ (χ²_before − χ²_after) over the held-out batches.
+    pub chi2_decrease: f64,
+    /// Σ Δgᵀ N_b Δg (Δg the two fold fits' difference): the decrease expected if the new
+    /// model were exact, and minus it if the old one were.
+    pub separation: f64,
+    /// σ² scale of the differences, from their own scatter (`dispersion`), at least 1.
+    pub noise_scale: f64,
+    /// Standard error of the decrease from the noise: `2 √(noise_scale · separation)`.
+    pub standard_error: f64,
+    /// `chi2_decrease / standard_error`.
+    pub z: f64,
+    /// z of the same differences with the standard error by batch means (reported: it
+    /// cannot exceed ≈ √m when only m of its groups see the change, a sensor tracking in a
+    /// few holds).
+    pub batch_means_z: f64,
+    /// Held-out batches compared.
+    pub batches: usize,
+}
+
+/// The held-out validation of diagnose's flight tables (module doc).
+#[derive(Clone, Debug, Serialize)]
+pub struct FlightTableValidation {
+    /// The table compared against.
+    pub reference: String,
+    /// Blocks of time held out in turn.
+    pub folds: usize,
+    /// Why a fold was not used in the final model's evaluation (one line each).
+    pub folds_skipped: Vec<String>,
+    /// Parameters held at the reference in a fold of the final model's evaluation (one line
+    /// per fold; module doc).
+    pub held_at_reference: Vec<String>,
+    /// Held-out batches evaluated.
+    pub batches: usize,
+    /// Held-out scalar residuals minus the batch attitudes' parameters.
+    pub dof: usize,
+    /// Held-out χ² with the components taken.
+    pub chi2_diagnose: f64,
+    /// Held-out χ² with the reference table.
+    pub chi2_reference: f64,
+    /// The decrease from the reference to the components taken.
+    pub improvement: HeldOutTest,
+    /// χ²_diagnose / dof.
+    pub mean_square_diagnose: f64,
+    /// χ²_reference / dof.
+    pub mean_square_reference: f64,
+    /// The components taken, in order, each with its test when it was taken.
+    pub taken: Vec<ComponentTest>,
+    /// The components left at the reference, with their test in the last round.
+    pub not_taken: Vec<ComponentTest>,
+    /// The layout's parameters of the components taken (what the tables may change).
+    #[serde(skip)]
+    pub taken_params: Vec<usize>,
+    /// Whether any of diagnose's table terms may be written.
+    pub passed: bool,
+    /// Why, with the numbers.
+    pub reason: String,
+}
+
+/// The alignment parameters of the joint fit (`M' = Rot(θ) M` for FHST2, FSS1, FSS2, arcsec;
+/// FHST1 the reference) that take the alignments `m_base` to `m_new`, the common rotation of
+/// the four removed (it is a change of the ACS frame, absorbed by the batch attitudes).
+#[must_use]
+pub fn alignment_parameters_arcsec(
+    m_new: &[Matrix3<f64>; 4],
+    m_base: &[Matrix3<f64>; 4],
+) -> [f64; N_ALIGN] {
+    let r: Vec<Matrix3<f64>> = (0..4).map(|s| m_new[s] * m_base[s].transpose()).collect();
+    let mut out = [0.0; N_ALIGN];
+    for s in 1..4 {
+        let theta = rotvec_from_rot(&(r[0].transpose() * r[s])) * ARCSEC_PER_RAD;
+        for ax in 0..3 {
+            out[3 * (s - 1) + ax] = theta[ax];
+        }
+    }
+    out
+}
+
+/// A part of the flight model taken or left as a whole: a sensor's alignment or an effect's
+/// terms. `params` are indices of the validation's own layout.
+struct Component {
+    name: String,
+    params: Vec<usize>,
+}
+
+/// The layout of the effects that hold the parameters `idx` of `layout`, where each of `idx`
+/// sits in it, and the components (each sensor's alignment, each effect's terms).
+fn sub_layout(layout: &Layout, idx: &[usize]) -> (Layout, Vec<usize>, Vec<Component>) {
+    let holds = |e: usize| idx.iter().any(|i| layout.range(e).contains(i));
+    let kept: Vec<usize> = (0..layout.effects.len()).filter(|&e| holds(e)).collect();
+    let sub = Layout::new(kept.iter().map(|&e| layout.effects[e].clone()).collect());
+    let map: Vec<usize> = idx
+        .iter()
+        .map(|&i| {
+            kept.iter()
+                .enumerate()
+                .find(|(_, &e)| layout.range(e).contains(&i))
+                .map_or(i, |(k, &e)| sub.offsets[k] + (i - layout.offsets[e]))
+        })
+        .collect();
+    let mut components: Vec<Component> = (1..4)
+        .map(|s| Component {
+            name: format!("{} alignment", SENSOR_NAMES[s]),
+            params: map
+                .iter()
+                .copied()
+                .filter(|&i| i < N_ALIGN && i / 3 + 1 == s)
+                .collect(),
+        })
+        .collect();
+    components.extend(sub.effects.iter().enumerate().map(|(e, effect)| {
+        Component {
+            name: effect.label(),
+            params: map
+                .iter()
+                .copied()
+                .filter(|i| sub.range(e).contains(i))
+                .collect(),
+        }
+    }));
+    components.retain(|c| !c.params.is_empty());
+    (sub, map, components)
+}
+
+/// Fold of every batch: K contiguous blocks of equal duration over the batches that enter
+/// the fit (a non-outlier FHST row); `None` for the others.
+fn folds_of_batches(set: &MeasurementSet, k: usize) -> Vec<Option<usize>> {
+    let mut in_fit = vec![false; set.batches.len()];
+    for m in set.meas.iter().filter(|m| m.sensor < 2 && !m.outlier) {
+        if let Some(b) = in_fit.get_mut(m.batch) {
+            *b = true;
+        }
+    }
+    let times: Vec<f64> = (0..set.batches.len())
+        .filter(|&b| in_fit[b])
+        .map(|b| set.batches[b].t_center_s)
+        .collect();
+    let (t0, t1) = times
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &t| {
+            (a.min(t), b.max(t))
+        });
+    let span = (t1 - t0).max(1e-9);
+    (0..set.batches.len())
+        .map(|b| {
+            in_fit[b].then(|| {
+                (((set.batches[b].t_center_s - t0) / span * k as f64).floor() as usize).min(k - 1)
+            })
+        })
+        .collect()
+}
+
+fn minus(total: &Normal, part: &Normal) -> Normal {
+    Normal {
+        n: &total.n - &part.n,
+        b: &total.b - &part.b,
+        chi2: total.chi2 - part.chi2,
+        rows: total.rows - part.rows,
+        nuisance: total.nuisance - part.nuisance,
+    }
+}
+
+/// Names of the parameters `params` of `layout` (alignment axes and effect labels, once each).
+fn parameter_names(layout: &Layout, params: &[usize]) -> Vec<String> {
+    let mut out: Vec<String> = Vec::new();
+    for &i in params {
+        let name = if i < N_ALIGN {
+            format!("{} alignment", SENSOR_NAMES[i / 3 + 1])
+        } else {
+            (0..layout.effects.len())
+                .find(|&e| layout.range(e).contains(&i))
+                .map_or_else(|| format!("parameter {i}"), |e| layout.effects[e].label())
+        };
+        if !out.contains(&name) {
+            out.push(name);
+        }
+    }
+    out
+}
+
+/// The data of the validation: the blocks' systems and what every model shares.
+struct Folds<'a> {
+    set: &'a MeasurementSet,
+    sub: Layout,
+    /// The flight model's parameters (validation layout).
+    idx: Vec<usize>,
+    /// Parameters fixed from outside (the time tags), validation layout.
+    fixed: Vec<Fixed>,
+    components: Vec<Component>,
+    fold: Vec<Option<usize>>,
+    normals: Vec<Normal>,
+    total: Normal,
+    g_ref: DVector<f64>,
+}
+
+/// Held-out χ² of one model, batch by batch.
+struct Evaluation {
+    /// (batch, χ², dof) over the held-out batches of every fold used, in batch order.
+    rows: Vec<(usize, f64, usize)>,
+    /// Each fold's fitted vector (None: fold not used).
+    g: Vec<Option<DVector<f64>>>,
+    skipped: Vec<String>,
+    held: Vec<String>,
+}
+
+impl Folds<'_> {
+    /// The model with the components `free` fitted and the rest held at the reference.
+    fn evaluate(&self, free: &[usize]) -> Evaluation {
+        let mut held: Vec<Fixed> = Vec::new();
+        for (c, comp) in self.components.iter().enumerate() {
+            let taken = free.contains(&c);
+            for &i in &comp.params {
+                match self.fixed.iter().find(|f| f.index == i) {
+                    Some(f) if taken => held.push(*f),
+                    _ if taken => {}
+                    _ => held.push(Fixed {
+                        index: i,
+                        value: self.g_ref[i],
+                        sigma: 0.0,
+                    }),
+                }
+            }
+        }
+        let all_held = held.len() == self.idx.len();
+        let full_sigma: Vec<(usize, f64)> = if all_held {
+            Vec::new()
+        } else {
+            solve_fixed(&self.total, &self.sub, &self.idx, &held).map_or_else(Vec::new, |full| {
+                full.idx
+                    .iter()
+                    .enumerate()
+                    .map(|(a, &i)| (i, full.cov[(a, a)].sqrt()))
+                    .collect()
+            })
+        };
+        let mut out = Evaluation {
+            rows: Vec::new(),
+            g: vec![None; self.normals.len()],
+            skipped: Vec::new(),
+            held: Vec::new(),
+        };
+        for (f, held_out) in self.normals.iter().enumerate() {
+            if held_out.rows == 0 {
+                out.skipped.push(format!("block {}: no batch", f + 1));
+                continue;
+            }
+            let g = if all_held {
+                let mut g = self.g_ref.clone();
+                for f in &held {
+                    g[f.index] = f.value;
+                }
+                g
+            } else {
+                let train = minus(&self.total, held_out);
+                let Some((g, at_reference)) = self.fold_fit(&train, &held, &full_sigma) else {
+                    out.skipped.push(format!(
+                        "block {}: the model is singular on the other blocks",
+                        f + 1
+                    ));
+                    continue;
+                };
+                if !at_reference.is_empty() {
+                    out.held.push(format!(
+                        "block {}: {} (the data that determine it are mostly in the block)",
+                        f + 1,
+                        parameter_names(&self.sub, &at_reference).join(", ")
+                    ));
+                }
+                g
+            };
+            let in_fold = |b: usize| self.fold[b] == Some(f);
+            out.rows.extend(
+                batch_chi2(self.set, &self.sub, &g, &in_fold)
+                    .into_iter()
+                    .map(|(b, c, n)| (b, c, n.saturating_sub(NUISANCE))),
+            );
+            out.g[f] = Some(g);
+        }
+        out.rows.sort_by_key(|r| r.0);
+        out
+    }
+
+    /// The model fitted on a fold's training system, the parameters it does not determine
+    /// ([`UNDETERMINED_SIGMA_RATIO`]) held at the reference; also which were held.
+    fn fold_fit(
+        &self,
+        train: &Normal,
+        held: &[Fixed],
+        full_sigma: &[(usize, f64)],
+    ) -> Option<(DVector<f64>, Vec<usize>)> {
+        let fit = solve_fixed(train, &self.sub, &self.idx, held)?;
+        let undetermined: Vec<usize> = fit
+            .idx
+            .iter()
+            .enumerate()
+            .filter(|(_, i)| !held.iter().any(|f| f.index == **i))
+            .filter(|(a, i)| {
+                full_sigma
+                    .iter()
+                    .find(|(j, _)| j == *i)
+                    .is_some_and(|(_, s)| fit.cov[(*a, *a)].sqrt() > UNDETERMINED_SIGMA_RATIO * s)
+            })
+            .map(|(_, &i)| i)
+            .collect();
+        if undetermined.is_empty() {
+            return Some((fit.expand(self.sub.total), undetermined));
+        }
+        let mut more: Vec<Fixed> = held.to_vec();
+        more.extend(undetermined.iter().map(|&i| Fixed {
+            index: i,
+            value: self.g_ref[i],
+            sigma: 0.0,
+        }));
+        let fit = solve_fixed(train, &self.sub, &self.idx, &more)?;
+        Some((fit.expand(self.sub.total), undetermined))
+    }
+}
+
+impl Folds<'_> {
+    /// The held-out decrease from `base` to `new` over the batches both evaluated, its
+    /// standard error from the noise: with `Δg` the folds' difference of the two models, a
+    /// batch's χ² changes by `δ_b = Δgᵀ N_b Δg` in expectation (up if `base` is exact, down if
+    /// `new` is) and by `2 √δ_b` σ of noise, so `Σ d_b / (2 √(s² Σ δ_b))` is the held-out
+    /// likelihood-ratio z of the two; `s²` (the models' held-out χ²/dof, at least 1) widens
+    /// it for noise the σ understate. Why not batch means alone (the chain's rule): a change
+    /// seen in m of its groups cannot get past z ≈ √m there, however large it is.
+    fn compare(&self, new: &Evaluation, base: &Evaluation) -> HeldOutTest {
+        // δ_b per batch.
+        let mut delta: Vec<(usize, f64)> = Vec::new();
+        for (f, (gn, gb)) in new.g.iter().zip(&base.g).enumerate() {
+            let (Some(gn), Some(gb)) = (gn, gb) else {
+                continue;
+            };
+            let dg = gn - gb;
+            if dg.iter().all(|x| *x == 0.0) {
+                continue;
+            }
+            let in_fold = |b: usize| self.fold[b] == Some(f);
+            delta.extend(
+                batch_information(self.set, &self.sub, &dg, &in_fold)
+                    .into_iter()
+                    .map(|(b, d, _)| (b, d)),
+            );
+        }
+        delta.sort_by_key(|d| d.0);
+        // (χ²_new, χ²_base, δ) of the batches both evaluated, in batch order.
+        let mut pairs: Vec<(f64, f64, f64)> = Vec::new();
+        let (mut j, mut k) = (0usize, 0usize);
+        for r in &new.rows {
+            while j < base.rows.len() && base.rows[j].0 < r.0 {
+                j += 1;
+            }
+            while k < delta.len() && delta[k].0 < r.0 {
+                k += 1;
+            }
+            if let Some(o) = base.rows.get(j).filter(|o| o.0 == r.0) {
+                let d = delta.get(k).filter(|d| d.0 == r.0).map_or(0.0, |d| d.1);
+                pairs.push((r.1, o.1, d));
+            }
+        }
+        let separation: f64 = pairs.iter().map(|p| p.2).sum();
+        let decrease: f64 = pairs.iter().map(|p| p.1 - p.0).sum();
+        let noise_scale = dispersion(&pairs, decrease, separation);
+        let standard_error = 2.0 * (noise_scale * separation).sqrt();
+        let (a, b): (Vec<f64>, Vec<f64>) = pairs.iter().map(|p| (p.0, p.1)).unzip();
+        HeldOutTest {
+            chi2_decrease: decrease,
+            separation,
+            noise_scale,
+            standard_error,
+            z: if separation > MIN_SEPARATION {
+                decrease / standard_error
+            } else {
+                f64::NAN
+            },
+            batch_means_z: paired_improvement(&a, &b).z,
+            batches: pairs.len(),
+        }
+    }
+}
+
+/// The σ² scale of the held-out differences, from their own scatter: over groups of
+/// consecutive batches (≤ 50, as batch means: the errors the tables leave are correlated over
+/// minutes), `d_g = λ δ_g + e_g` with `var e_g = 4 s² δ_g`; `λ̂ = Σd/Σδ` and
+/// `s² = Σ (d_g − λ̂ δ_g)² / (4 δ_g) / (G − 1)` over the groups that see the change. At
+/// least 1 (the σ of the measurements are a floor). This is the quasi-likelihood dispersion
+/// of the held-out likelihood ratio: a change seen in a few groups keeps its size (unlike
+/// batch means, where it cannot pass z ≈ √m), and errors the σ do not hold (a catalog star's
+/// offset over its track, a Sun position's transfer-function error) widen it as they scatter.
+fn dispersion(pairs: &[(f64, f64, f64)], decrease: f64, separation: f64) -> f64 {
+    let n = pairs.len();
+    let groups = (n / 10).clamp(2, 50).min(n);
+    if groups < 2 || separation <= 0.0 {
+        return 1.0;
+    }
+    let lambda = decrease / separation;
+    let mut sum = 0.0;
+    let mut used = 0usize;
+    for g in 0..groups {
+        let part = &pairs[g * n / groups..(g + 1) * n / groups];
+        let d: f64 = part.iter().map(|p| p.1 - p.0).sum();
+        let delta: f64 = part.iter().map(|p| p.2).sum();
+        if delta > 1e-9 * separation {
+            sum += (d - lambda * delta).powi(2) / (4.0 * delta);
+            used += 1;
+        }
+    }
+    if used < 2 {
+        return 1.0;
+    }
+    (sum / (used - 1) as f64).max(1.0)
+}
+
+/// Validate the flight model (`flight_idx` of `layout`, with the parameters `fixed` held at
+/// their values) against the reference alignments `reference_arcsec` (the joint fit's
+/// alignment parameters of the table compared with, relative to the alignments the
+/// measurements were built with; effect terms zero), described by `reference`: the forward
+/// selection of the module doc.
+#[must_use]
+pub fn validate_flight_tables(
+    set: &MeasurementSet,
+    layout: &Layout,
+    flight_idx: &[usize],
+    fixed: &[Fixed],
+    reference_arcsec: &[f64; N_ALIGN],
+    reference: &str,
+) -> FlightTableValidation {
+    let (sub, idx, components) = sub_layout(layout, flight_idx);
+    let fixed: Vec<Fixed> = fixed
+        .iter()
+        .filter_map(|f| {
+            let p = flight_idx.iter().position(|&i| i == f.index)?;
+            Some(Fixed {
+                index: idx[p],
+                ..*f
+            })
+        })
+        .collect();
+    let k = MAX_FOLDS;
+    let fold = folds_of_batches(set, k);
+    let normals: Vec<Normal> = (0..k)
+        .into_par_iter()
+        .map(|f| accumulate(set, &sub, &|b| fold[b] == Some(f)))
+        .collect();
+    let total = normals
+        .iter()
+        .skip(1)
+        .fold(normals[0].clone(), |acc, n| acc.sum(n));
+    let mut g_ref = DVector::zeros(sub.total);
+    for (i, v) in reference_arcsec.iter().enumerate() {
+        g_ref[i] = *v;
+    }
+    let folds = Folds {
+        set,
+        sub,
+        idx,
+        fixed,
+        components,
+        fold,
+        normals,
+        total,
+        g_ref,
+    };
+    // Forward selection from the reference.
+    let reference_eval = folds.evaluate(&[]);
+    let mut taken: Vec<usize> = Vec::new();
+    let mut taken_tests: Vec<ComponentTest> = Vec::new();
+    let mut current = folds.evaluate(&[]);
+    let mut last_round: Vec<(usize, HeldOutTest)> = Vec::new();
+    while taken.len() < folds.components.len() {
+        let candidates: Vec<usize> = (0..folds.components.len())
+            .filter(|c| !taken.contains(c))
+            .collect();
+        let results: Vec<(usize, HeldOutTest, Evaluation)> = candidates
+            .par_iter()
+            .map(|&c| {
+                let mut free = taken.clone();
+                free.push(c);
+                let e = folds.evaluate(&free);
+                (c, folds.compare(&e, &current), e)
+            })
+            .collect();
+        last_round = results.iter().map(|(c, imp, _)| (*c, *imp)).collect();
+        let Some((c, imp, e)) = results
+            .into_iter()
+            .filter(|(_, imp, _)| imp.z.is_finite())
+            .max_by(|a, b| a.1.z.total_cmp(&b.1.z))
+        else {
+            break;
+        };
+        if imp.z <= MIN_IMPROVEMENT_Z {
+            break;
+        }
+        taken.push(c);
+        taken_tests.push(ComponentTest {
+            component: folds.components[c].name.clone(),
+            improvement: imp,
+        });
+        last_round.retain(|(d, _)| *d != c);
+        current = e;
+    }
+    let not_taken: Vec<ComponentTest> = last_round
+        .iter()
+        .filter(|(c, _)| !taken.contains(c))
+        .map(|(c, imp)| ComponentTest {
+            component: folds.components[*c].name.clone(),
+            improvement: *imp,
+        })
+        .collect();
+    let taken_params: Vec<usize> = taken
+        .iter()
+        .flat_map(|&c| folds.components[c].params.iter().copied())
+        .filter_map(|i| folds.idx.iter().position(|&j| j == i))
+        .map(|p| flight_idx[p])
+        .collect();
+    summary(
+        &folds,
+        reference,
+        &reference_eval,
+        &current,
+        taken_tests,
+        not_taken,
+        taken_params,
+    )
+}
+
+fn summary(
+    folds: &Folds<'_>,
+    reference: &str,
+    reference_eval: &Evaluation,
+    current: &Evaluation,
+    taken: Vec<ComponentTest>,
+    not_taken: Vec<ComponentTest>,
+    taken_params: Vec<usize>,
+) -> FlightTableValidation {
+    let improvement = folds.compare(current, reference_eval);
+    let chi2_new: f64 = current.rows.iter().map(|r| r.1).sum();
+    let chi2_ref: f64 = reference_eval.rows.iter().map(|r| r.1).sum();
+    let dof: usize = current.rows.iter().map(|r| r.2).sum();
+    let ms = |c: f64| if dof > 0 { c / dof as f64 } else { f64::NAN };
+    let list = |t: &[ComponentTest]| {
+        t.iter()
+            .map(|c| {
+                format!(
+                    "{} (z {:.1}, batch means {:.1})",
+                    c.component, c.improvement.z, c.improvement.batch_means_z
+                )
+            })
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    let passed = !taken.is_empty();
+    let mut reason = if passed {
+        format!(
+            "taken: {}; together they lower the held-out χ² by {:.0} ± {:.0} (z {:.1}) over {} batches in {} blocks; χ²/dof {:.3} against {:.3} ({reference})",
+            list(&taken),
+            improvement.chi2_decrease,
+            improvement.standard_error,
+            improvement.z,
+            current.rows.len(),
+            folds.normals.len() - current.skipped.len(),
+            ms(chi2_new),
+            ms(chi2_ref),
+        )
+    } else {
+        format!(
+            "no part of diagnose's tables lowers the held-out χ² by more than {MIN_IMPROVEMENT_Z} standard errors against {reference} ({} batches in {} blocks, χ²/dof {:.3})",
+            reference_eval.rows.len(),
+            folds.normals.len() - reference_eval.skipped.len(),
+            ms(chi2_ref),
+        )
+    };
+    if !not_taken.is_empty() {
+        reason.push_str(&format!("; left at the reference: {}", list(&not_taken)));
+    }
+    FlightTableValidation {
+        reference: reference.to_owned(),
+        folds: folds.normals.len(),
+        folds_skipped: current.skipped.clone(),
+        held_at_reference: current.held.clone(),
+        batches: current.rows.len(),
+        dof,
+        chi2_diagnose: chi2_new,
+        chi2_reference: chi2_ref,
+        improvement,
+        mean_square_diagnose: ms(chi2_new),
+        mean_square_reference: ms(chi2_ref),
+        taken,
+        not_taken,
+        taken_params,
+        passed,
+        reason,
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+mod tests {
+    use super::*;
+    use crate::diagnose::effects::{library, EffectKind};
+    use crate::diagnose::fit::{indices, Layout};
+    use crate::diagnose::synthetic::{generate, SynthConfig, SynthEffects};
+    use fsw_core::tables::types::matrix_from_rows;
+
+    fn run(
+        effects: SynthEffects,
+        seed: u64,
+    ) -> (crate::diagnose::synthetic::SynthRun, MeasurementSet) {
+        let cfg = SynthConfig {
+            duration_s: 3.0 * 3600.0,
+            seed,
+            effects,
+            ..SynthConfig::default()
+        };
+        let synth = generate(&cfg);
+        let set = MeasurementSet::build(&synth.input(&[]));
+        (synth, set)
+    }
+
+    fn truth_parameters(synth: &crate::diagnose::synthetic::SynthRun) -> [f64; N_ALIGN] {
+        let m_base: Vec<Matrix3<f64>> = synth
+            .alignment
+            .matrices()
+            .iter()
+            .map(|r| matrix_from_rows(r))
+            .collect();
+        let m_base = [m_base[0], m_base[1], m_base[2], m_base[3]];
+        alignment_parameters_arcsec(&synth.m_true, &m_base)
+    }
+
+    /// `batch_chi2` is the likelihood `accumulate` builds: at any global vector the batch sums
+    /// equal the quadratic form of the accumulated system.
+    #[test]
+    fn batch_chi2_is_the_accumulated_likelihood() {
+        let effects = SynthEffects {
+            distortion_arcsec: [[6.0, 3.0, -2.0], [0.0; 3]],
+            ..SynthEffects::default()
+        };
+        let (_, set) = run(effects, 7);
+        let lib = library(&set, [None, None], None);
+        let dist = lib
+            .into_iter()
+            .find(|e| e.kind == EffectKind::FhstDistortion && e.sensor == Some(0))
+            .expect("the library has FHST1 distortion");
+        let layout = Layout::new(vec![dist]);
+        let normal = accumulate(&set, &layout, &|_| true);
+        let g = DVector::from_fn(layout.total, |i, _| ((i as f64) * 0.37).sin() * 4.0);
+        let quadratic = normal.chi2 - 2.0 * g.dot(&normal.b) + g.dot(&(&normal.n * &g));
+        let per_batch: f64 = batch_chi2(&set, &layout, &g, &|_| true)
+            .iter()
+            .map(|b| b.1)
+            .sum();
+        assert!(
+            (per_batch - quadratic).abs() < 1e-6 * quadratic.abs().max(1.0),
+            "Σ batch χ² {per_batch} against the accumulated form {quadratic}"
+        );
+    }
+
+    /// The gate takes a correction of the alignments the measurements were built with, and
+    /// nothing when the reference is the truth (the sign convention of
+    /// `alignment_parameters_arcsec` is checked on the way: the truth's parameters must give a
+    /// lower held-out χ² than the built-with table).
+    #[test]
+    fn gate_takes_a_real_correction_and_nothing_against_the_truth() {
+        let (synth, set) = run(SynthEffects::default(), 11);
+        let layout = Layout::new(Vec::new());
+        let idx = indices(&layout, &[]);
+        let truth = truth_parameters(&synth);
+        let against_built = validate_flight_tables(
+            &set,
+            &layout,
+            &idx,
+            &[],
+            &[0.0; N_ALIGN],
+            "the table the measurements were built with",
+        );
+        let against_truth =
+            validate_flight_tables(&set, &layout, &idx, &[], &truth, "the true alignments");
+        let size = truth.iter().map(|x| x * x).sum::<f64>().sqrt();
+        if std::env::var("SHOW").is_ok() {
+            eprintln!(
+                "size {size:.1}″\n{}\n{}",
+                against_built.reason, against_truth.reason
+            );
+        }
+        assert!(
+            size > 5.0,
+            "the synthetic built-with table is off by {size:.1}″"
+        );
+        assert!(against_built.passed, "{}", against_built.reason);
+        assert!(
+            against_truth.chi2_reference < against_built.chi2_reference,
+            "truth {} against built-with {}",
+            against_truth.chi2_reference,
+            against_built.chi2_reference
+        );
+        assert!(!against_truth.passed, "{}", against_truth.reason);
+        assert!(
+            (0.8..1.25).contains(&against_truth.mean_square_reference),
+            "held-out mean square with the true alignments {}",
+            against_truth.mean_square_reference
+        );
+    }
+
+    /// A real effect with exact alignments as the reference: the effect's terms are taken and
+    /// the alignments, which a refit can only move by noise, are not.
+    #[test]
+    fn gate_takes_the_effect_and_leaves_exact_alignments() {
+        let effects = SynthEffects {
+            distortion_arcsec: [[8.0, 4.0, -3.0], [0.0; 3]],
+            ..SynthEffects::default()
+        };
+        let (synth, set) = run(effects, 12);
+        let dist = library(&set, [None, None], None)
+            .into_iter()
+            .find(|e| e.kind == EffectKind::FhstDistortion && e.sensor == Some(0))
+            .expect("the library has FHST1 distortion");
+        let layout = Layout::new(vec![dist]);
+        let idx = indices(&layout, &[0]);
+        let truth = truth_parameters(&synth);
+        let v = validate_flight_tables(&set, &layout, &idx, &[], &truth, "the true alignments");
+        if std::env::var("SHOW").is_ok() {
+            eprintln!("{}", v.reason);
+        }
+        let taken: Vec<&str> = v.taken.iter().map(|t| t.component.as_str()).collect();
+        assert!(
+            taken.iter().any(|t| t.starts_with("fhst_distortion")),
+            "{}",
+            v.reason
+        );
+        assert!(
+            !taken.iter().any(|t| t.ends_with("alignment")),
+            "{}",
+            v.reason
+        );
+    }
+}
