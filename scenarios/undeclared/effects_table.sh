@@ -9,6 +9,10 @@
 #   rms/floor  the expected sensor's residual RMS after the loop over its noise floor (arcsec)
 #   cal err    calibration error of that sensor before -> after (arcsec, scored against
 #              truth.json: the measurement model over the measured field, report.json)
+#   written    error of the alignment tables written (report.json written_table_error_arcsec:
+#              calibrate's -> diagnose's, every sensor with data; "worse" = a sensor more than
+#              0.5 arcsec worse in diagnose's), and the components diagnose's held-out
+#              validation took (report.json flight_tables.validation)
 #   att err    closed-loop attitude error (|rms| over the three axes, arcsec, t >= 600 s,
 #              outside slews, sim-harness summary.json) flown with the tables flown before
 #              -> flown with the diagnose tables (`sim-harness run SCEN --tables DIAG/tables`)
@@ -104,6 +108,10 @@ out = {
     "rms": {s: (rb.get(s), ra.get(s), fl.get(s)) for s in sensors},
     "cal": {s: (ce["before"].get(s), ce["after"].get(s)) for s in sensors},
     "att": (att(run), att(run + "-after")),
+    "written": {k: (v, (r.get("written_table_error_arcsec") or {}).get("after", {}).get(k),
+                    (r.get("unvalidated_table_error_arcsec") or {}).get(k))
+                for k, v in (r.get("written_table_error_arcsec") or {}).get("before", {}).items()},
+    "taken": [t["component"] for t in (r["flight_tables"].get("validation") or {}).get("taken", [])],
 }
 print(json.dumps(out))
 PY
@@ -134,6 +142,19 @@ for d in rows:
     print(f"| {d['scenario']} | {d['seed']} | {', '.join(d['expected'])} | {det} | {named} | {ps} | {rms} | {cal} | {d['att'][0]:.1f} → {d['att'][1]:.1f} |")
     ok += d["named"] and not d["extra"]
 print(f"\nnamed right (and nothing else) in {ok} of {len(rows)} runs")
+def worst(d, col=1):
+    return max((v[col] - v[0] for v in d.get("written", {}).values() if v[col] is not None and v[0] is not None), default=0.0)
+print("\n| scenario | seed | tables written: calibrate's → diagnose's [without the validation] (″) | worst Δ [without] (″) | components taken |")
+print("|---|---|---|---|---|")
+for d in rows:
+    if "error" in d:
+        continue
+    w = ", ".join(f"{s} {f(v[0])} → {f(v[1])} [{f(v[2] if len(v) > 2 else None)}]" for s, v in d.get("written", {}).items())
+    print(f"| {d['scenario']} | {d['seed']} | {w} | {worst(d):+.1f} [{worst(d, 2):+.1f}] | {', '.join(d.get('taken', [])) or 'none'} |")
+bad0 = [d for d in rows if "error" not in d and worst(d, 2) > 0.5]
+print(f"\nwithout the held-out validation: worse than calibrate's by more than 0.5″ on a sensor in {len(bad0)} of {len(rows)} runs")
+bad = [d for d in rows if "error" not in d and worst(d) > 0.5]
+print(f"\ndiagnose's written alignment table worse than calibrate's by more than 0.5″ on a sensor in {len(bad)} of {len(rows)} runs" + (": " + ", ".join(f"{d['scenario']} {d['seed']}" for d in bad) if bad else ""))
 # Per scenario over the seeds.
 print("\n| scenario | runs | named (nothing else) | params within 3σ | RMS after / floor, worst | cal err before → after, mean (″) | att err before → after, mean (″) |")
 print("|---|---|---|---|---|---|---|")

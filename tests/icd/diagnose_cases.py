@@ -16,6 +16,10 @@ Columns of the per-run table:
   unexplained sensor:regressor (size ″, Holm p); "ok" when an out-of-library effect is
              reported on its sensor (or the other tracker: only the relative FHST alignment
              is observable) against one of its expected regressors as the leading one
+  tables     FHST1–FHST2 relative alignment error (″) of the table `calibrate` writes for the
+             same telemetry → of the table diagnose writes, against the writer's injected
+             rotations (a step case: the rotation before the step); "worse" when diagnose's
+             is more than 0.5″ worse
   verdict    PASS when named, all parameters within 3σ, every out-of-library effect
              reported as unexplained against a sensible regressor, and no other
              unexplained structure (structure on any sensor against an out-of-library
@@ -159,7 +163,27 @@ def run_one(case, seed, args):
         truth = json.load(f)
     with open(os.path.join(out, "report.json")) as f:
         report = json.load(f)
-    return score(truth, report)
+    r = score(truth, report)
+    cal = run + "-cal"
+    shutil.rmtree(cal, ignore_errors=True)
+    c = subprocess.run([args.bin, "calibrate", run, "--out", cal, "--force"], capture_output=True, text=True)
+    r["tables"] = None
+    if c.returncode == 0:
+        r["tables"] = (fhst_pair_error(args.bin, os.path.join(cal, "tables", "alignment.tbl"), truth),
+                       fhst_pair_error(args.bin, os.path.join(out, "tables", "alignment.tbl"), truth))
+    v = report.get("flight_tables", {}).get("validation") or {}
+    r["taken"] = [t["component"] for t in v.get("taken", [])]
+    return r
+
+
+def fhst_pair_error(binary, table, truth):
+    """FHST1–FHST2 relative alignment error (″) of an alignment table image against the
+    writer's injected rotations (both as rotations from the prelaunch table, ACS)."""
+    t = subprocess.run([binary, "table", "inspect", "--json", table], capture_output=True, text=True, check=True)
+    rot = {name: v for name, v, _ in json.loads(t.stdout)["rotation_from_prelaunch_arcsec"]}
+    inj = truth["injected_rotation_acs_arcsec"]
+    e = [(rot["FHST2"][k] - rot["FHST1"][k]) - (inj["FHST2"][k] - inj["FHST1"][k]) for k in range(3)]
+    return sum(x * x for x in e) ** 0.5
 
 
 def main():
@@ -177,8 +201,8 @@ def main():
     seeds = [int(s) for s in args.seeds.split()]
     os.makedirs(args.work, exist_ok=True)
     results = {}
-    print("| case | seed | expected | detected | named | params within 3σ (max \\|z\\|) | unexplained | verdict |")
-    print("|---|---|---|---|---|---|---|---|")
+    print("| case | seed | expected | detected | named | params within 3σ (max \\|z\\|) | unexplained | tables: calibrate's → diagnose's FHST1–FHST2 (″), taken | verdict |")
+    print("|---|---|---|---|---|---|---|---|---|")
     for c in cases:
         for s in seeds:
             r = run_one(c, s, args)
@@ -194,8 +218,10 @@ def main():
             un = ", ".join(r["unexplained"]) or "none"
             if r["out_of_library_ok"]:
                 un += " — out-of-library " + ("ok" if all(r["out_of_library_ok"]) else "NOT reported right")
+            tb = "–" if not r.get("tables") else f"{r['tables'][0]:.1f} → {r['tables'][1]:.1f}" \
+                + (" WORSE" if r["tables"][1] > r["tables"][0] + 0.5 else "") + "; " + (", ".join(r.get("taken", [])) or "none")
             print(f"| {c} | {s} | {', '.join(r['expected']) or 'nothing'} | {', '.join(r['detected']) or 'none'} "
-                  f"| {named} | {par} | {un} | {'PASS' if r['pass'] else 'fail'} |", flush=True)
+                  f"| {named} | {par} | {un} | {tb} | {'PASS' if r['pass'] else 'fail'} |", flush=True)
     print()
     print("| case | runs | named (nothing else) | params within 3σ | out-of-library reported right | no other unexplained | pass |")
     print("|---|---|---|---|---|---|---|")
@@ -214,6 +240,9 @@ def main():
         tot[1] += len(seeds)
         print(f"| {c} | {len(seeds)} | {named}/{n} | {pk}/{pn} | {ol_s} | {nu}/{n} | {ps}/{len(seeds)} |")
     print(f"\npassed {tot[0]} of {tot[1]} runs")
+    worse = [k for k, r in results.items() if r.get("tables") and r["tables"][1] > r["tables"][0] + 0.5]
+    scored = [k for k, r in results.items() if r.get("tables")]
+    print(f"diagnose's FHST1–FHST2 alignment more than 0.5″ worse than calibrate's in {len(worse)} of {len(scored)} runs {worse if worse else ''}")
     done = [r for r in results.values() if "error" not in r]
     broken = [k for k, r in results.items() if r.get("ledger_violations")]
     print(f"evidence ledger invariant (scenarios/undeclared/ledger_check.py): violated in {len(broken)} of "

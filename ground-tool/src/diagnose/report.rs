@@ -89,6 +89,10 @@ pub struct DiagnoseReport {
     /// (with the field terms it carries), arcsec, as `calibration_error_arcsec`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub written_table_error_arcsec: Option<BeforeAfter>,
+    /// Scoring only: the same for the table diagnose would have written without its held-out
+    /// validation (every term of its flight model), for the record of what the gate changed.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub unvalidated_table_error_arcsec: Option<BTreeMap<String, f64>>,
     /// Scoring only (truth.json).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub scoring: Option<Scoring>,

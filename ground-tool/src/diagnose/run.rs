@@ -358,6 +358,11 @@ pub fn diagnose_run(
         validate_tables(&analysis, &flight_all, &cal, &calibrate_alignment);
     let validated = validation.passed;
     let ground_alignment = flight_all.ground_alignment;
+    let unvalidated = (
+        flight_all.alignment,
+        flight_all.flight_fit.expand(analysis.search.layout.total),
+        flight_all.flight_idx.clone(),
+    );
     let mut flight = if validated {
         super::flight::flight_update(
             &analysis.search,
@@ -441,10 +446,29 @@ pub fn diagnose_run(
     let alignment_out = flight.alignment;
     write_table(&p, TableId::Alignment, &alignment_out, created)?;
     written.push(p.display().to_string());
-    let (iru_out, iru_note) = iru_table_out(
-        &copt.flown_iru.unwrap_or_else(IruTable::prelaunch),
-        cal.output.as_ref(),
-    );
+    // An IRUCAL whose gyro residuals hold structure nothing explains (a bias step or ramp, a
+    // scale error against rate outside the library) is not trusted: its δM absorbed that
+    // structure (issue 22), so G stays as flown and the report says why.
+    let flown_iru_table = copt.flown_iru.unwrap_or_else(IruTable::prelaunch);
+    let gyro_unexplained = super::ledger::unexplained_items(&gyro_ledger);
+    let (iru_out, iru_note) = if gyro_unexplained.is_empty() {
+        iru_table_out(&flown_iru_table, cal.output.as_ref())
+    } else {
+        (
+            flown_iru_table,
+            format!(
+                "IRU table as flown: the gyro residuals hold unexplained structure ({}), so the IRUCAL δM is not written",
+                gyro_unexplained
+                    .iter()
+                    .map(|u| format!(
+                        "{} against {}, {:.3} {}, Holm p {:.1e}",
+                        u.sensor, u.regressor, u.size, u.unit, u.p_value
+                    ))
+                    .collect::<Vec<_>>()
+                    .join("; ")
+            ),
+        )
+    };
     // The gyro-side effects into the configuration that flew most of the run.
     let (iru_corrected, iru_applied, mut iru_ground_only) =
         super::flight::iru_update(&iru_out, &gyro_res.detected, 2 * backup_cycles > hk_cycles);
@@ -497,6 +521,7 @@ pub fn diagnose_run(
         .map_or(0.0, |f| f.time.seconds_since_j2000_tt());
     let mut rotation_error = None;
     let mut written_error = None;
+    let mut unvalidated_error = None;
     let (calibration_error, scoring) = match &truth {
         Some(t) => {
             // The final model's field corrections (transfer function, distortion) per
@@ -536,27 +561,22 @@ pub fn diagnose_run(
                 after: calibration_error_arcsec(&ground_alignment, t, &analysis.set, &field_after),
             };
             // The tables written: diagnose's with the field terms that went up (none when
-            // the validation refused them), calibrate's with none.
+            // the validation refused them), calibrate's with none; and, for the record, the
+            // table diagnose would have written without its held-out validation.
             let g_flight = flight.flight_fit.expand(res.layout.total);
-            let written_field = |k: usize| -> [f64; 2] {
-                if !validated {
-                    return [0.0; 2];
-                }
-                let m = &analysis.set.meas[k];
-                let mut out = [0.0; 2];
-                let mut cols = Vec::new();
-                for &i in &field {
-                    cols.clear();
-                    res.layout.effects[i].columns(m, &|_| None, &mut cols);
-                    let o = res.layout.offsets[i];
-                    for (p, v) in &cols {
-                        if flight.flight_idx.contains(&(o + p)) {
-                            out[0] += v[0] * g_flight[o + p];
-                            out[1] += v[1] * g_flight[o + p];
-                        }
-                    }
-                }
-                out
+            let written_field = |k: usize| {
+                table_field_arcsec(res, &analysis.set, &field, &g_flight, &flight.flight_idx, k)
+            };
+            let (unvalidated_table, g_unvalidated, unvalidated_idx) = &unvalidated;
+            let unvalidated_field = |k: usize| {
+                table_field_arcsec(
+                    res,
+                    &analysis.set,
+                    &field,
+                    g_unvalidated,
+                    unvalidated_idx,
+                    k,
+                )
             };
             written_error = Some(BeforeAfter {
                 before: calibration_error_arcsec(&calibrate_alignment, t, &analysis.set, &|_| {
@@ -564,6 +584,12 @@ pub fn diagnose_run(
                 }),
                 after: calibration_error_arcsec(&alignment_out, t, &analysis.set, &written_field),
             });
+            unvalidated_error = Some(calibration_error_arcsec(
+                unvalidated_table,
+                t,
+                &analysis.set,
+                &unvalidated_field,
+            ));
             rotation_error = Some(BeforeAfter {
                 before: rotation_error_arcsec(&cal.alignment, t),
                 after: rotation_error_arcsec(&ground_alignment, t),
@@ -636,6 +662,7 @@ pub fn diagnose_run(
         calibration_error_arcsec: calibration_error,
         calibration_rotation_error_arcsec: rotation_error,
         written_table_error_arcsec: written_error,
+        unvalidated_table_error_arcsec: unvalidated_error,
         scoring,
         plots: Vec::new(),
         notes,
@@ -656,6 +683,33 @@ pub fn diagnose_run(
         calibration: cal.output,
         gyro: gyro_res,
     })
+}
+
+/// The field correction (arcsec, sensor axes) of measurement `k` by the field effects `field`
+/// (transfer function, distortion) with the parameters of `g` that a table holds (`idx`).
+fn table_field_arcsec(
+    res: &super::search::SearchResult,
+    set: &super::measurements::MeasurementSet,
+    field: &[usize],
+    g: &nalgebra::DVector<f64>,
+    idx: &[usize],
+    k: usize,
+) -> [f64; 2] {
+    let m = &set.meas[k];
+    let mut out = [0.0; 2];
+    let mut cols = Vec::new();
+    for &i in field {
+        cols.clear();
+        res.layout.effects[i].columns(m, &|_| None, &mut cols);
+        let o = res.layout.offsets[i];
+        for (p, v) in &cols {
+            if idx.contains(&(o + p)) {
+                out[0] += v[0] * g[o + p];
+                out[1] += v[1] * g[o + p];
+            }
+        }
+    }
+    out
 }
 
 /// What a sensor's data leave untestable: no usable sample at all, data in one hold only
