@@ -18,7 +18,8 @@ Columns of the per-run table:
              is observable) against one of its expected regressors as the leading one
   tables     FHST1–FHST2 relative alignment error (″) of the table `calibrate` writes for the
              same telemetry → of the table diagnose writes, against the writer's injected
-             rotations (a step case: the rotation before the step); "worse" when diagnose's
+             rotations (a step case: the rotation after the step, which the tables fly
+             into); "worse" when diagnose's
              is more than 0.5″ worse
   verdict    PASS when named, all parameters within 3σ, every out-of-library effect
              reported as unexplained against a sensible regressor, and no other
@@ -181,7 +182,11 @@ def fhst_pair_error(binary, table, truth):
     writer's injected rotations (both as rotations from the prelaunch table, ACS)."""
     t = subprocess.run([binary, "table", "inspect", "--json", table], capture_output=True, text=True, check=True)
     rot = {name: v for name, v, _ in json.loads(t.stdout)["rotation_from_prelaunch_arcsec"]}
-    inj = truth["injected_rotation_acs_arcsec"]
+    inj = {k: list(v) for k, v in truth["injected_rotation_acs_arcsec"].items()}
+    # An alignment step: the tables fly after the run, so the truth is the alignment after it.
+    for e in truth.get("effects", []):
+        if e["effect"] == "alignment_step" and e["sensor"] in inj:
+            inj[e["sensor"]] = [a + b for a, b in zip(inj[e["sensor"]], e["rotation_acs_arcsec"])]
     e = [(rot["FHST2"][k] - rot["FHST1"][k]) - (inj["FHST2"][k] - inj["FHST1"][k]) for k in range(3)]
     return sum(x * x for x in e) ** 0.5
 
