@@ -242,3 +242,45 @@ fn outside_writer_scale_asymmetry_is_found_beside_a_bias_ramp() {
         }
     }
 }
+
+/// A gyro bias step of (0.02, −0.015, 0.02)″/s at 10,000 s into the writer's 5.7-h day, at an
+/// unknown time: named as a step (not as a ramp, which it was before the step candidate), its
+/// time within 600 s and each axis within 3σ, nothing left unexplained; and diagnose's IRU
+/// table is not written from gyro residuals with unexplained structure (there is none here).
+#[test]
+fn outside_writer_gyro_bias_step_is_named_as_a_step() {
+    let (report, truth) = write_and_diagnose(
+        "bias-step",
+        &[
+            "--plan",
+            "long",
+            "--hold-s",
+            "1200",
+            "--gyro-bias-step",
+            "10000:0.02,-0.015,0.02",
+        ],
+    );
+    assert_eq!(named(&report), ["gyro_bias_step[IRU]"], "{report:#}");
+    let d = &report["detected"][0];
+    let injected = truth["effects"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|e| e["effect"] == "gyro_bias_step")
+        .unwrap();
+    let t_step = d["parameters"]["t_step_s"].as_f64().unwrap();
+    assert!((t_step - 10_000.0).abs() < 600.0, "step at {t_step} s");
+    for ax in ["x", "y", "z"] {
+        let t = injected["parameters"][ax].as_f64().unwrap();
+        let x = d["parameters"][ax].as_f64().unwrap();
+        let s = d["sigma"][ax].as_f64().unwrap();
+        assert!(
+            (x - t).abs() <= 3.0 * s,
+            "step {ax}: {x:.4} ± {s:.4} against the writer's {t}"
+        );
+    }
+    assert!(
+        report["unexplained"].as_array().unwrap().is_empty(),
+        "{report:#}"
+    );
+}

@@ -57,6 +57,8 @@ CASES = {
     "gyro-asymmetry": ["--gyro-asym", "100,-80,120"],  # ppm, §9 row 9: 10–100 ppm
     "gyro-ramp": ["--gyro-ramp", "0.003,-0.002,0.004"],  # ″/s per hour (0.017–0.023″/s over the run)
     "gyro-ramp-x3": ["--gyro-ramp", "0.009,-0.006,0.012"],  # detection-limit probe
+    "gyro-bias-step": ["--gyro-bias-step", "10000:0.02,-0.015,0.02"],  # ″/s at an unknown time
+    "gyro-bias-step-small": ["--gyro-bias-step", "6000:0.008,-0.006,0.008"],  # detection-limit probe
     # --- outside the library
     "fhst2-ringing": ["--ringing", "FHST2:8,-6,10:40:120"],  # 14″ after each slew, 40 s, 120 s decay
     "fhst2-ringing-x2": ["--ringing", "FHST2:16,-12,20:40:120"],  # detection-limit probe

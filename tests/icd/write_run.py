@@ -539,7 +539,7 @@ def main(argv=None):
     p.add_argument("--gyro-rate3", default=None, metavar="KX,KY,KZ",
                    help="(outside the library) gyro scale nonlinearity: measured = Δθ (1 + k |ω/1°/s|³), k in ppm")
     p.add_argument("--gyro-bias-step", action="append", default=[], metavar="T_S:BX,BY,BZ",
-                   help="(outside the library) gyro bias step of (BX, BY, BZ) arcsec/s (ACS) at T_S s from the start, "
+                   help="gyro bias step (in diagnose's library: a step at an unknown time) of (BX, BY, BZ) arcsec/s (ACS) at T_S s from the start, "
                         "both triads")
     p.add_argument("--gyro-bias-transient", default=None, metavar="AX,AY,AZ:TAU_S",
                    help="gyro bias transient added from the start: a e^(−t/TAU_S), a in arcsec/s (ACS), both triads")
@@ -715,9 +715,10 @@ def main(argv=None):
     for spec in args.gyro_bias_step:
         ts, vec = spec.split(":")
         bias_steps.append((float(ts), floats(vec)))
-        effects.append({"effect": "gyro_bias_step", "sensor": "IRU", "in_library": False,
+        # In diagnose's library since 2026-11-26 (a step at an unknown time, scanned).
+        effects.append({"effect": "gyro_bias_step", "sensor": "IRU", "in_library": True,
                         "t_s": float(ts), "step_acs_arcsec_per_s": floats(vec),
-                        "unexplained_should_follow": ["time_s"]})
+                        "parameters": dict(zip("xyz", floats(vec)))})
     transient = None
     if args.gyro_bias_transient:
         amp, tau = args.gyro_bias_transient.split(":")

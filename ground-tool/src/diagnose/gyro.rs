@@ -10,8 +10,10 @@
 //! generalised least squares with the covariance of the declared bias random walk
 //! (`σ_u² min(tᵢ, tⱼ)`), the angle random walk, and the batch attitude errors (which make
 //! consecutive samples anti-correlated). Candidates: a **ramp**, an **exponential transient**
-//! `A e^{−t/τ}` (τ grid-searched, counted as one more parameter) and a **thermal bias**
-//! `k ΔT_IRU`, each with one parameter per ACS axis, kept with the same evidence rules as the
+//! `A e^{−t/τ}` (τ grid-searched, counted as one more parameter), a **step** at an unknown
+//! time (the position scanned over 39 sample indices, counted as one more parameter, its
+//! p-value × 39 for the scan) and a **thermal bias** `k ΔT_IRU`, each with one parameter per
+//! ACS axis, kept with the same evidence rules as the
 //! sensor side (F-test, ΔBIC > 10, halves within 3σ).
 //!
 //! **Scale-factor asymmetry.** For every slew, the last hold batch before and the first after
@@ -414,7 +416,37 @@ pub fn analyse(
             column: Box::new(move |s: &BiasSample| (-(s.t_s - t0) / tau_best).exp()),
             extra: 1,
         };
-        let mut candidates: Vec<&BiasModel> = vec![&thermal, &transient];
+        // A step at an unknown time: the position on a grid of STEP_POSITIONS sample indices,
+        // best by χ² given the baseline, counted as one more parameter; its p-value carries
+        // the scan (Bonferroni over the positions).
+        let mut best_step: Option<(f64, f64)> = None;
+        for q in 1..=STEP_POSITIONS {
+            let Some(at) = samples.get(q * samples.len() / (STEP_POSITIONS + 1)) else {
+                continue;
+            };
+            let t_step = at.t_s;
+            let m = BiasModel {
+                name: "gyro_bias_step",
+                unit: "arcsec/s",
+                column: Box::new(move |s: &BiasSample| f64::from(u8::from(s.t_s >= t_step))),
+                extra: 1,
+            };
+            let mut ms = base_models.clone();
+            ms.push(&m);
+            if let Some((c2, ..)) = bias_fit(&samples, w_all, &ms) {
+                if best_step.is_none_or(|(_, b)| c2 < b) {
+                    best_step = Some((t_step, c2));
+                }
+            }
+        }
+        let t_step_best = best_step.map_or(t_mid, |t| t.0);
+        let step = BiasModel {
+            name: "gyro_bias_step",
+            unit: "arcsec/s",
+            column: Box::new(move |s: &BiasSample| f64::from(u8::from(s.t_s >= t_step_best))),
+            extra: 1,
+        };
+        let mut candidates: Vec<&BiasModel> = vec![&thermal, &transient, &step];
         if !cfg.transient_declared {
             candidates.insert(0, &ramp);
         }
@@ -459,7 +491,12 @@ pub fn analyse(
                 let dof = n as f64 - (3 * (ms.len() + 1)) as f64;
                 let s2 = (c1 / dof).max(1e-9);
                 let f = ((c0 - c1) / k as f64) / s2.max(1.0);
-                let p = f_sf(f, k as f64, dof);
+                let scanned = if cand.name == "gyro_bias_step" {
+                    STEP_POSITIONS as f64
+                } else {
+                    1.0
+                };
+                let p = (f_sf(f, k as f64, dof) * scanned).min(1.0);
                 let dbic = delta_bic(c0, c1, s2, n, k + cand.extra);
                 let j = ms.len();
                 let est: Vec<f64> = betas.iter().map(|b| b[j]).collect();
@@ -496,7 +533,11 @@ pub fn analyse(
                 if !(dbic > cfg.min_delta_bic) {
                     why.push(format!("ΔBIC {dbic:.1} ≤ {}", cfg.min_delta_bic));
                 }
-                if !(hp > 0.0027) {
+                // A step happens once: one half holds it and the other cannot fit it, so the
+                // halves test neither the step nor a candidate fitted with one in the model
+                // (the step's scan has its own Bonferroni p-value).
+                let step_involved = ms.iter().any(|m| m.name == "gyro_bias_step");
+                if !step_involved && !(hp > 0.0027) {
                     why.push(format!("halves differ (χ² {hchi2:.1}, p {hp:.2e})"));
                 }
                 let ev = Evidence {
@@ -558,6 +599,10 @@ pub fn analyse(
             if cand.name == "gyro_bias_transient" {
                 parameters.insert("tau_s".into(), tau_best);
                 units.insert("tau_s".into(), "s".into());
+            }
+            if cand.name == "gyro_bias_step" {
+                parameters.insert("t_step_s".into(), t_step_best);
+                units.insert("t_step_s".into(), "s since the first frame".into());
             }
             for (ax, name) in ["ref_bias_x", "ref_bias_y", "ref_bias_z"]
                 .iter()
@@ -630,6 +675,9 @@ pub fn analyse(
     );
     out
 }
+
+/// Positions of the bias-step scan (sample indices evenly spaced, the ends excluded).
+const STEP_POSITIONS: usize = 39;
 
 /// Columns of the slew model: bias (3), δM (9), asymmetry (3).
 const NCOL: usize = 15;

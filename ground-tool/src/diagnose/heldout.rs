@@ -612,6 +612,13 @@ fn summary(
     let chi2_ref: f64 = reference_eval.rows.iter().map(|r| r.1).sum();
     let dof: usize = current.rows.iter().map(|r| r.2).sum();
     let ms = |c: f64| if dof > 0 { c / dof as f64 } else { f64::NAN };
+    let ms_text = |c: f64| {
+        if dof > 0 {
+            format!("{:.3}", c / dof as f64)
+        } else {
+            "– (no degrees of freedom left: the batches hold too few samples)".to_owned()
+        }
+    };
     let list = |t: &[ComponentTest]| {
         t.iter()
             .map(|c| {
@@ -626,22 +633,22 @@ fn summary(
     let passed = !taken.is_empty();
     let mut reason = if passed {
         format!(
-            "taken: {}; together they lower the held-out χ² by {:.0} ± {:.0} (z {:.1}) over {} batches in {} blocks; χ²/dof {:.3} against {:.3} ({reference})",
+            "taken: {}; together they lower the held-out χ² by {:.0} ± {:.0} (z {:.1}) over {} batches in {} blocks; χ²/dof {} against {} ({reference})",
             list(&taken),
             improvement.chi2_decrease,
             improvement.standard_error,
             improvement.z,
             current.rows.len(),
             folds.normals.len() - current.skipped.len(),
-            ms(chi2_new),
-            ms(chi2_ref),
+            ms_text(chi2_new),
+            ms_text(chi2_ref),
         )
     } else {
         format!(
-            "no part of diagnose's tables lowers the held-out χ² by more than {MIN_IMPROVEMENT_Z} standard errors against {reference} ({} batches in {} blocks, χ²/dof {:.3})",
+            "no part of diagnose's tables lowers the held-out χ² by more than {MIN_IMPROVEMENT_Z} standard errors against {reference} ({} batches in {} blocks, χ²/dof {})",
             reference_eval.rows.len(),
             folds.normals.len() - reference_eval.skipped.len(),
-            ms(chi2_ref),
+            ms_text(chi2_ref),
         )
     };
     if !not_taken.is_empty() {
