@@ -74,7 +74,7 @@ def main():
                   f"{max(s for r in (iru if triad == 'primary' else iru['backup'])['delta_m_sigma'] for s in r) * 1e6:.0f} ppm, "
                   f"G written {g}")
         print(f"seed {seed}: σ_u {iru['rrw_used_rad_per_s_1p5']:.2e} (declared {iru['rrw_declared_rad_per_s_1p5']:.2e}), "
-              f"fix scales {iru['fix_cov_scale']} / {iru['fix_systematic_scale']}, NIS/dof {iru['nis_mean_per_dof']:.2}, "
+              f"fix scales {iru['fix_cov_scale']} / {iru['fix_systematic_scale']} / {iru.get('fix_sun_systematic_scale')} (random / FHST / Sun), NIS/dof {iru['nis_mean_per_dof']:.2}, "
               f"gated {iru['gated_fixes']}; {iru['decision'][:160]}")
         sys.stdout.flush()
     for triad in ("primary", "backup"):

@@ -115,6 +115,10 @@ pub struct ChainFix {
     /// The part of the fix covariance that is systematic (the same for the fixes of one kind
     /// in one attitude: residual alignment, FSS transfer function), rad².
     pub systematic_cov_rad2: Matrix3<f64>,
+    /// The fix needed the Sun (FHST + FSS): its systematic part is the FSS's (transfer
+    /// function, alignment), which the likelihood scales apart from the FHST-only fixes'
+    /// residual-alignment floor ([`ChainConfig::fix_sun_systematic_scale`]).
+    pub sun: bool,
     /// Linearisation bias at this fix (rad/s, ACS): e.g. the OBC's estimate.
     pub bias_nominal_rad_per_s: Vector3<f64>,
 }
@@ -162,8 +166,10 @@ pub struct ChainConfig {
     pub estimate_rrw: bool,
     /// Scale of the random part of every fix covariance (1 = as the fine attitudes state it).
     pub fix_cov_scale: f64,
-    /// Scale of the systematic part of every fix covariance.
+    /// Scale of the systematic part of the FHST-only fixes' covariance.
     pub fix_systematic_scale: f64,
+    /// Scale of the systematic part of the covariance of the fixes that needed the Sun.
+    pub fix_sun_systematic_scale: f64,
     /// What the extension states (29–31) carry, freed: nothing, the lack-of-fit
     /// rate-proportional scale, or a bias step at a fix.
     pub extension: Extension,
@@ -205,6 +211,7 @@ impl Default for ChainConfig {
             estimate_rrw: true,
             fix_cov_scale: 1.0,
             fix_systematic_scale: 1.0,
+            fix_sun_systematic_scale: 1.0,
             extension: Extension::Off,
             bias_restarts: [0; MAX_BIAS_STEPS],
             scan_bias_steps: true,
@@ -272,8 +279,11 @@ pub struct ChainSolution {
     pub rrw_used: f64,
     /// Scale of the fixes' random covariance the likelihood chose (1 = as stated).
     pub fix_cov_scale: f64,
-    /// Scale of the fixes' systematic covariance the likelihood chose (1 = as stated).
+    /// Scale of the FHST-only fixes' systematic covariance the likelihood chose (1 = as
+    /// stated).
     pub fix_systematic_scale: f64,
+    /// Scale of the systematic covariance of the fixes that needed the Sun (1 = as stated).
+    pub fix_sun_systematic_scale: f64,
     /// Mean NIS / 3 over the fixes used (1 = the model's σ fits the data).
     pub nis_mean_per_dof: f64,
     /// Fixes with a NIS.
@@ -405,7 +415,12 @@ fn fix_random_arcsec2(fix: &ChainFix, cfg: &ChainConfig) -> Matrix3<f64> {
 
 /// The systematic part of a fix's covariance (″²).
 fn fix_systematic_arcsec2(fix: &ChainFix, cfg: &ChainConfig) -> Matrix3<f64> {
-    fix.systematic_cov_rad2 * (ARCSEC_PER_RAD * ARCSEC_PER_RAD * cfg.fix_systematic_scale)
+    let scale = if fix.sun {
+        cfg.fix_sun_systematic_scale
+    } else {
+        cfg.fix_systematic_scale
+    };
+    fix.systematic_cov_rad2 * (ARCSEC_PER_RAD * ARCSEC_PER_RAD * scale)
 }
 
 /// A fix's whole covariance (″²), as a held-out link end sees it.
@@ -870,6 +885,7 @@ pub fn solve_chain(chain: &Chain, cfg: &ChainConfig) -> Result<ChainSolution, Ch
         rrw_used: rrw,
         fix_cov_scale: cfg.fix_cov_scale,
         fix_systematic_scale: cfg.fix_systematic_scale,
+        fix_sun_systematic_scale: cfg.fix_sun_systematic_scale,
         nis_mean_per_dof: if used_ok.is_empty() {
             f64::NAN
         } else {
@@ -1156,16 +1172,24 @@ fn rate_scale_test(
 /// Fewest gyro links before the fixes' random covariance scale is estimated.
 const MIN_FIXES_FOR_SCALE: usize = 50;
 
-/// Fewest maneuver links before the fixes' systematic covariance scale is estimated.
+/// Fewest maneuver links with an end of the kind (FHST-only, or a fix that needed the Sun)
+/// before that kind's systematic covariance scale is estimated.
 const MIN_MANEUVERS_FOR_SCALE: usize = 20;
 
 /// The noise model from the data (`algorithms.md` §7a): σ_u is the declared one unless the
 /// filter's likelihood (prediction-error decomposition) is higher by more than 2 units at a
 /// larger one on a ×4 grid (up to 4⁸); the scales of the fixes' random and systematic
-/// covariance are chosen on a ×2 grid from 1/16 to 4 (the fine attitudes' stated covariance
+/// covariance are chosen on a ×2 grid from 1/64 to 4 (the fine attitudes' stated covariance
 /// carries declared sensor noise and floors that may be conservative or optimistic; the
 /// random part shows between the fixes of one hold, the systematic part only across
-/// maneuvers). Coordinate ascent: random, systematic, σ_u, random, systematic.
+/// maneuvers). The systematic part has two scales: the FHST-only fixes' (the 3″
+/// residual-alignment floor) and the Sun fixes' (the FSS transfer function and alignment),
+/// errors of different sources that one scale cannot both fit: on `gro-two-weeks-backup`
+/// the likelihood put the FHST floor at its old grid's end (1/16) and the FSS part at 1/2,
+/// and one shared scale (1/8–1/4, with the random part raised ×2 to hold the Sun-ended
+/// maneuvers) overstated the FHST-ended maneuvers, which carry δM, 2.5–4× in variance
+/// (`docs/investigations.md`). Coordinate ascent: random, systematic (FHST, Sun), σ_u, and
+/// the scales again.
 fn choose_noise(
     chain: &Chain,
     models: &[Option<LinkModel>],
@@ -1176,19 +1200,24 @@ fn choose_noise(
     let ll = |c: &ChainConfig, rrw: f64| -> Result<f64, ChainError> {
         Ok(forward(chain, models, nominal, c, rrw, History::Last)?.log_likelihood)
     };
-    let grid = [0.0625, 0.125, 0.25, 0.5, 1.0, 2.0, 4.0];
+    let grid = [0.015_625, 0.031_25, 0.0625, 0.125, 0.25, 0.5, 1.0, 2.0, 4.0];
     let mut rrw = declared;
     // A scale is estimated only from enough data to pin it (a short run keeps the stated σ).
     let fixes = chain.links.iter().flatten().count();
-    let maneuvers = chain
-        .links
-        .iter()
-        .flatten()
-        .filter(|l| l.maneuver.is_some())
-        .count();
-    let (scale_random, scale_systematic) = (
+    // Maneuver links with an end of each kind (FHST-only, Sun).
+    let mut maneuvers = [0usize; 2];
+    for (j, link) in chain.links.iter().enumerate() {
+        if link.as_ref().is_some_and(|l| l.maneuver.is_some()) {
+            let ends = [&chain.fixes[j], &chain.fixes[j + 1]];
+            for (kind, count) in maneuvers.iter_mut().enumerate() {
+                *count += usize::from(ends.iter().any(|f| usize::from(f.sun) == kind));
+            }
+        }
+    }
+    let (scale_random, scale_systematic, scale_sun) = (
         fixes >= MIN_FIXES_FOR_SCALE,
-        maneuvers >= MIN_MANEUVERS_FOR_SCALE,
+        maneuvers[0] >= MIN_MANEUVERS_FOR_SCALE,
+        maneuvers[1] >= MIN_MANEUVERS_FOR_SCALE,
     );
     for round in 0..2 {
         // The scale of one part of the fix covariance with the highest likelihood.
@@ -1216,6 +1245,12 @@ fn choose_noise(
             cfg.fix_systematic_scale,
             &|c, g| c.fix_systematic_scale = g,
             scale_systematic,
+        )?;
+        cfg.fix_sun_systematic_scale = best_scale(
+            *cfg,
+            cfg.fix_sun_systematic_scale,
+            &|c, g| c.fix_sun_systematic_scale = g,
+            scale_sun,
         )?;
         if round == 0 {
             let mut best = (declared, ll(cfg, declared)?);
@@ -1524,6 +1559,7 @@ mod tests {
                 cov_acs_rad2: Matrix3::identity() * (fix_arcsec * RAD_PER_ARCSEC).powi(2),
             },
             systematic_cov_rad2: Matrix3::zeros(),
+            sun: false,
             bias_nominal_rad_per_s: Vector3::new(0.5, 0.3, 0.45) * RAD_PER_ARCSEC,
         };
         let axes = [Vector3::x(), Vector3::y(), Vector3::z()];

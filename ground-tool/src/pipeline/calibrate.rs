@@ -252,8 +252,12 @@ pub struct IruReport {
     pub rrw_used_rad_per_s_1p5: f64,
     /// Scale of the attitude fixes' random covariance chosen by the likelihood (1 = as stated).
     pub fix_cov_scale: f64,
-    /// Scale of the fixes' systematic (per-attitude) covariance chosen by the likelihood.
+    /// Scale of the FHST-only fixes' systematic (per-attitude) covariance chosen by the
+    /// likelihood.
     pub fix_systematic_scale: f64,
+    /// Scale of the systematic covariance of the fixes that needed the Sun (FSS transfer
+    /// function and alignment) chosen by the likelihood.
+    pub fix_sun_systematic_scale: f64,
     /// Mean normalised innovation of the fixes per dof (1 = σ right).
     pub nis_mean_per_dof: f64,
     /// Fixes outside the innovation gate (not used).
@@ -906,8 +910,8 @@ fn frame_index_at(frames: &[FrameObservations], t_s: f64) -> usize {
 }
 
 /// A fine attitude centred at `t_center_s` from frames within ±`BATCH_HALF_S` restricted to
-/// `[lo_s, hi_s]`: FHST-only when the trackers give it, else FHST + FSS; with the part of its
-/// covariance that is systematic (the floors: the same for fixes of one kind in one attitude).
+/// `[lo_s, hi_s]`: FHST-only when the trackers give it, else FHST + FSS (the last value: the fix
+/// needed the Sun); with the part of its covariance that is systematic (the floors: the same for fixes of one kind in one attitude).
 ///
 /// The covariance adds what the formal one ignores: `FixFloors::fhst_cov_rad2` for a FHST-only fix
 /// (the FHST1–FHST2 relative alignment uncertainty: a fix may follow either tracker's frame),
@@ -924,7 +928,7 @@ pub(crate) fn batch_fix(
     delta_m: &Matrix3<f64>,
     floors: &FixFloors,
     allow_fss: bool,
-) -> Option<(usize, AttitudeFix, Matrix3<f64>)> {
+) -> Option<(usize, AttitudeFix, Matrix3<f64>, bool)> {
     let lo = frame_index_at(frames, (t_center_s - BATCH_HALF_S).max(lo_s));
     let hi = frame_index_at(frames, (t_center_s + BATCH_HALF_S).min(hi_s)) + 1;
     let center = frame_index_at(frames, t_center_s);
@@ -942,8 +946,8 @@ pub(crate) fn batch_fix(
         delta_m,
         AttitudeSensors::FhstOnly,
     );
-    let (sol, floor) = match fhst_only {
-        Ok(sol) => (sol, floors.fhst_cov_rad2),
+    let (sol, floor, sun) = match fhst_only {
+        Ok(sol) => (sol, floors.fhst_cov_rad2, false),
         Err(_) if !allow_fss => return None,
         Err(_) => (
             fine_attitude(
@@ -956,6 +960,7 @@ pub(crate) fn batch_fix(
             )
             .ok()?,
             Matrix3::identity() * (floors.fss_arcsec / ARCSEC_PER_RAD).powi(2),
+            true,
         ),
     };
     // Floor for systematic errors the formal covariance ignores (residual alignment error).
@@ -978,6 +983,7 @@ pub(crate) fn batch_fix(
             cov_acs_rad2: cov,
         },
         systematic,
+        sun,
     ))
 }
 

@@ -112,7 +112,7 @@ pub(crate) fn build_gyro_chain(
         let mut found: Vec<(usize, ChainFix)> = Vec::new();
         for (lo, hi) in hold_windows(ta, tb) {
             let center = 0.5 * (lo + hi);
-            if let Some((idx, fix, systematic)) = batch_fix(
+            if let Some((idx, fix, systematic, sun)) = batch_fix(
                 frames,
                 center,
                 lo,
@@ -129,6 +129,7 @@ pub(crate) fn build_gyro_chain(
                         t_s: t - t0,
                         fix,
                         systematic_cov_rad2: systematic,
+                        sun,
                         bias_nominal_rad_per_s: bias_at(t),
                     },
                 ));
@@ -340,6 +341,7 @@ pub fn irucal_stage(
         let cfg_solved = ChainConfig {
             fix_cov_scale: sol.fix_cov_scale,
             fix_systematic_scale: sol.fix_systematic_scale,
+            fix_sun_systematic_scale: sol.fix_sun_systematic_scale,
             bias_restarts: sol.bias_restarts,
             ..*cfg
         };
@@ -414,6 +416,7 @@ pub fn irucal_stage(
         rrw_used_rad_per_s_1p5: sol.rrw_used,
         fix_cov_scale: sol.fix_cov_scale,
         fix_systematic_scale: sol.fix_systematic_scale,
+        fix_sun_systematic_scale: sol.fix_sun_systematic_scale,
         nis_mean_per_dof: sol.nis_mean_per_dof,
         gated_fixes: sol.gated.len(),
         model_fit: fit.clone().err(),
