@@ -492,6 +492,14 @@ pub fn write_calibration_report(
                 iru.nis_mean_per_dof,
                 iru.gated_fixes
             );
+            for (t, chi2, dof) in &iru.misfit_fixes {
+                let _ = writeln!(
+                    md,
+                    "Hold batch at t = {:.2} h refused as a fix: its attitude fit has χ² {chi2:.0} on {dof} dof (p below {:.0e}): the gyro bias it was propagated with is wrong there (the OBC's, after a reset or a triad switch).\n",
+                    t / 3600.0,
+                    crate::pipeline::calibrate::FIX_MISFIT_P
+                );
+            }
             for b in &iru.bias_steps {
                 let arcsec = |v: &[f64; 3]| v.map(|x| x * crate::ARCSEC_PER_RAD);
                 let (st, sd) = (arcsec(&b.step_rad_per_s), arcsec(&b.sigma_rad_per_s));

@@ -45,6 +45,7 @@ use crate::calibration::iru::{AttitudeFix, GyroNoise, GyroStep, IrucalSolution};
 use crate::calibration::iru_chain::{
     BiasStepTest, Chain, ChainConfig, HeldOutValidation, RateScaleTest,
 };
+use crate::diagnose::stats::chi2_sf;
 use crate::tp::{self, Telemetry, TpReport};
 use anyhow::{bail, Context};
 use fsw_core::attitude::{rot, rotvec_from_rot, Quat};
@@ -262,6 +263,9 @@ pub struct IruReport {
     pub nis_mean_per_dof: f64,
     /// Fixes outside the innovation gate (not used).
     pub gated_fixes: usize,
+    /// Hold batches refused as fixes because their own attitude fit does not fit (χ² p below
+    /// `FIX_MISFIT_P`): time (s from the first frame), χ², dof.
+    pub misfit_fixes: Vec<(f64, f64, usize)>,
     /// Why the gyro model does not fit, when it does not.
     pub model_fit: Option<String>,
     /// The lack-of-fit test of a scale error that changes with rate.
@@ -909,6 +913,24 @@ fn frame_index_at(frames: &[FrameObservations], t_s: f64) -> usize {
         .min(frames.len().saturating_sub(1))
 }
 
+/// Fixes whose attitude fit has a χ² p-value below this are refused ([`batch_fix`]): with
+/// ≈ 10⁴ fixes in six months, ≈ 0.01 good fixes refused by chance.
+pub(crate) const FIX_MISFIT_P: f64 = 1e-6;
+
+/// Why [`batch_fix`] gives no fix.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) enum FixRefusal {
+    /// Too few frames or vectors, or an axis worse than `MAX_FIX_SIGMA_ARCSEC`.
+    NoSolution,
+    /// The fit's residuals are impossible under the stated σ (χ² p < [`FIX_MISFIT_P`]).
+    Misfit {
+        /// χ² of the attitude fit.
+        chi2: f64,
+        /// Its degrees of freedom.
+        dof: usize,
+    },
+}
+
 /// A fine attitude centred at `t_center_s` from frames within ±`BATCH_HALF_S` restricted to
 /// `[lo_s, hi_s]`: FHST-only when the trackers give it, else FHST + FSS (the last value: the fix
 /// needed the Sun); with the part of its covariance that is systematic (the floors: the same for fixes of one kind in one attitude).
@@ -928,12 +950,12 @@ pub(crate) fn batch_fix(
     delta_m: &Matrix3<f64>,
     floors: &FixFloors,
     allow_fss: bool,
-) -> Option<(usize, AttitudeFix, Matrix3<f64>, bool)> {
+) -> Result<(usize, AttitudeFix, Matrix3<f64>, bool), FixRefusal> {
     let lo = frame_index_at(frames, (t_center_s - BATCH_HALF_S).max(lo_s));
     let hi = frame_index_at(frames, (t_center_s + BATCH_HALF_S).min(hi_s)) + 1;
     let center = frame_index_at(frames, t_center_s);
     if hi <= lo + 10 || center < lo || center >= hi {
-        return None;
+        return Err(FixRefusal::NoSolution);
     }
     // FHST-only ends are best (the paper's recommendation); when the trackers do not give two
     // non-parallel vectors in the batch (Earth occultation, a single star), fall back to
@@ -948,7 +970,7 @@ pub(crate) fn batch_fix(
     );
     let (sol, floor, sun) = match fhst_only {
         Ok(sol) => (sol, floors.fhst_cov_rad2, false),
-        Err(_) if !allow_fss => return None,
+        Err(_) if !allow_fss => return Err(FixRefusal::NoSolution),
         Err(_) => (
             fine_attitude(
                 frames,
@@ -958,11 +980,22 @@ pub(crate) fn batch_fix(
                 delta_m,
                 AttitudeSensors::FhstAndFss,
             )
-            .ok()?,
+            .map_err(|_| FixRefusal::NoSolution)?,
             Matrix3::identity() * (floors.fss_arcsec / ARCSEC_PER_RAD).powi(2),
             true,
         ),
     };
+    // A fix whose own residuals are impossible under its stated σ is not a fix: its stars were
+    // carried to the batch centre with a bias the gyro did not have (the OBC's estimate just
+    // after a triad switch or a reset, 1.3″/s off for half an hour: 490″ off while claiming
+    // 8.6″, `docs/investigations.md`). Its χ² p-value below FIX_MISFIT_P refuses it, and the
+    // chain reports it.
+    if chi2_sf(sol.chi2, sol.dof as f64) < FIX_MISFIT_P {
+        return Err(FixRefusal::Misfit {
+            chi2: sol.chi2,
+            dof: sol.dof,
+        });
+    }
     // Floor for systematic errors the formal covariance ignores (residual alignment error).
     let systematic =
         floor + Matrix3::identity() * (FIX_SIGMA_FLOOR_ARCSEC / ARCSEC_PER_RAD).powi(2);
@@ -974,9 +1007,9 @@ pub(crate) fn batch_fix(
         .map(|i| cov[(i, i)].max(0.0).sqrt())
         .fold(0.0, f64::max);
     if !(sigma_max_rad * ARCSEC_PER_RAD <= MAX_FIX_SIGMA_ARCSEC) {
-        return None;
+        return Err(FixRefusal::NoSolution);
     }
-    Some((
+    Ok((
         center,
         AttitudeFix {
             m_acs_from_eci: sol.m_acs_from_eci,
@@ -1281,12 +1314,15 @@ pub fn calibrate_telemetry(
         noise,
         ..ChainConfig::default()
     };
-    let iru_stage = irucal_stage(
+    let mut iru_stage = irucal_stage(
         &gyro_chain.chain,
         &chain_cfg,
         &flown_iru,
         &mut maneuver_reports,
     );
+    if let Some(r) = iru_stage.report.as_mut() {
+        r.misfit_fixes.clone_from(&gyro_chain.misfit_fixes);
+    }
     let IruStage {
         table: new_iru,
         report: iru_report,

@@ -25,7 +25,8 @@ use fsw_core::tables::types::{matrix_from_rows, rows_from_matrix};
 use fsw_core::tables::IruTable;
 
 use super::calibrate::{
-    batch_fix, gyro_complete, steps_between, FixFloors, IruReport, ManeuverReport, BATCH_HALF_S,
+    batch_fix, gyro_complete, steps_between, FixFloors, FixRefusal, IruReport, ManeuverReport,
+    BATCH_HALF_S,
 };
 use super::observations::{FrameObservations, RateSwitch};
 use crate::calibration::iru::{GyroCalibration, IrucalSolution};
@@ -56,6 +57,9 @@ pub struct GyroChain {
     pub chain: Chain,
     /// Frame index of each fix.
     pub fix_frames: Vec<usize>,
+    /// Hold batches refused as fixes for a misfit (`calibrate::FixRefusal::Misfit`): time (s
+    /// from `t0`), χ², dof.
+    pub misfit_fixes: Vec<(f64, f64, usize)>,
 }
 
 /// The frames of each hold: between maneuvers, before the first and after the last.
@@ -107,12 +111,13 @@ pub(crate) fn build_gyro_chain(
     let zero_dm = Matrix3::zeros();
     let mut fix_frames: Vec<usize> = Vec::new();
     let mut fixes: Vec<ChainFix> = Vec::new();
+    let mut misfit_fixes = Vec::new();
     for (a, b) in holds(frames, maneuvers) {
         let (ta, tb) = (frames[a].time.seconds(), frames[b].time.seconds());
         let mut found: Vec<(usize, ChainFix)> = Vec::new();
         for (lo, hi) in hold_windows(ta, tb) {
             let center = 0.5 * (lo + hi);
-            if let Some((idx, fix, systematic, sun)) = batch_fix(
+            let made = batch_fix(
                 frames,
                 center,
                 lo,
@@ -121,7 +126,11 @@ pub(crate) fn build_gyro_chain(
                 &zero_dm,
                 floors,
                 true,
-            ) {
+            );
+            if let Err(FixRefusal::Misfit { chi2, dof }) = made {
+                misfit_fixes.push((center - t0, chi2, dof));
+            }
+            if let Ok((idx, fix, systematic, sun)) = made {
                 let t = frames[idx].time.seconds();
                 found.push((
                     idx,
@@ -153,6 +162,7 @@ pub(crate) fn build_gyro_chain(
     GyroChain {
         chain: Chain { fixes, links },
         fix_frames,
+        misfit_fixes,
     }
 }
 
@@ -419,6 +429,7 @@ pub fn irucal_stage(
         fix_sun_systematic_scale: sol.fix_sun_systematic_scale,
         nis_mean_per_dof: sol.nis_mean_per_dof,
         gated_fixes: sol.gated.len(),
+        misfit_fixes: Vec::new(),
         model_fit: fit.clone().err(),
         rate_scale: sol.rate_scale,
         bias_steps: sol.bias_steps.clone(),
