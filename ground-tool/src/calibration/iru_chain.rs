@@ -1220,20 +1220,31 @@ fn choose_noise(
         maneuvers[1] >= MIN_MANEUVERS_FOR_SCALE,
     );
     for round in 0..2 {
-        // The scale of one part of the fix covariance with the highest likelihood.
-        let best_scale =
-            |base: ChainConfig, current: f64, set: &dyn Fn(&mut ChainConfig, f64), free: bool| {
-                let mut best = (current, f64::NEG_INFINITY);
-                for &g in grid.iter().filter(|_| free) {
+        // The scale of one part of the fix covariance with the highest likelihood (the grid's
+        // passes are independent: evaluated in parallel, compared in grid order).
+        let best_scale = |base: ChainConfig,
+                          current: f64,
+                          set: &(dyn Fn(&mut ChainConfig, f64) + Sync),
+                          free: bool| {
+            use rayon::prelude::*;
+            let values: Vec<Result<f64, ChainError>> = grid
+                .par_iter()
+                .filter(|_| free)
+                .map(|&g| {
                     let mut c = base;
                     set(&mut c, g);
-                    let v = ll(&c, rrw)?;
-                    if v > best.1 {
-                        best = (g, v);
-                    }
+                    ll(&c, rrw)
+                })
+                .collect();
+            let mut best = (current, f64::NEG_INFINITY);
+            for (&g, v) in grid.iter().filter(|_| free).zip(values) {
+                let v = v?;
+                if v > best.1 {
+                    best = (g, v);
                 }
-                Ok::<f64, ChainError>(best.0)
-            };
+            }
+            Ok::<f64, ChainError>(best.0)
+        };
         cfg.fix_cov_scale = best_scale(
             *cfg,
             cfg.fix_cov_scale,
