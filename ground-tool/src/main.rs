@@ -77,13 +77,17 @@ enum Command {
     /// Sun angle, FOV position, magnitude, body rate, rate mode, velocity direction,
     /// temperatures and star id; fits a library of candidate effects (aberration, time tags,
     /// thermal/orbital alignment, FHST distortion and magnitude bias, FSS transfer function,
-    /// catalog errors, gyro bias drift, thermal bias and scale asymmetry) jointly with the
-    /// alignments and keeps an effect only on the evidence (likelihood ratio, BIC, halves).
-    /// Writes OUT/report.md, OUT/report.json, PNG plots, OUT/tables/*.tbl and
+    /// catalog errors, gyro bias drift, step, thermal bias and scale asymmetry) jointly with
+    /// the alignments and keeps an effect only on the evidence (likelihood ratio, BIC,
+    /// halves). Writes OUT/report.md, OUT/report.json, PNG plots, OUT/tables/*.tbl and
     /// OUT/tables/manifest.json for `sim-harness run ... --tables OUT/tables`, which loads
     /// the images the manifest lists: alignment.tbl and iru.tbl always, filter.tbl and
     /// star_catalog.tbl when a detected effect changes them (report.md lists what went into
-    /// each). Scores against RUN_DIR/truth.json only if it exists (labelled as scoring).
+    /// each). A table part (a sensor's alignment, an effect's terms) goes up only if it
+    /// lowers the held-out residuals against the table `calibrate` writes for the same
+    /// telemetry (report.json `flight_tables.validation`); nothing validated, calibrate's
+    /// alignment table is written. Scores against RUN_DIR/truth.json only if it exists
+    /// (labelled as scoring).
     Diagnose {
         /// Run folder with telemetry.bin.
         run_dir: std::path::PathBuf,
