@@ -284,3 +284,49 @@ fn outside_writer_gyro_bias_step_is_named_as_a_step() {
         "{report:#}"
     );
 }
+
+/// Diagnose's held-out validation of its tables (`docs/diagnose.md` §13) on the writer's
+/// clean 5.7-h day: no part of diagnose's flight model lowers the held-out residuals against
+/// the table `calibrate` writes (re-estimating alignments adds only the fit's error), so
+/// nothing is taken and diagnose's `alignment.tbl` is calibrate's, byte for byte.
+#[test]
+fn outside_writer_clean_day_writes_calibrates_alignment_table() {
+    let dir = support::write_run(
+        "diagnose-outside",
+        "clean-long",
+        &["--seed", "1", "--plan", "long", "--hold-s", "1200"],
+    );
+    let run = |cmd: &str, out: &std::path::Path| {
+        let o = Command::new(env!("CARGO_BIN_EXE_ground-tool"))
+            .arg(cmd)
+            .arg(&dir)
+            .arg("--out")
+            .arg(out)
+            .output()
+            .unwrap();
+        assert!(
+            o.status.success(),
+            "{cmd} failed: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+    };
+    let (diag, cal) = (dir.join("diag"), dir.join("cal"));
+    run("diagnose", &diag);
+    run("calibrate", &cal);
+    let report: Value =
+        serde_json::from_str(&std::fs::read_to_string(diag.join("report.json")).unwrap()).unwrap();
+    let v = &report["flight_tables"]["validation"];
+    assert_eq!(v["passed"], false, "{v:#}");
+    assert!(v["taken"].as_array().unwrap().is_empty(), "{v:#}");
+    assert!(
+        v["reason"]
+            .as_str()
+            .unwrap()
+            .contains("no part of diagnose's tables"),
+        "{v:#}"
+    );
+    let a = std::fs::read(diag.join("tables/alignment.tbl")).unwrap();
+    let b = std::fs::read(cal.join("tables/alignment.tbl")).unwrap();
+    assert_eq!(a, b, "diagnose's alignment.tbl differs from calibrate's");
+    let _ = std::fs::remove_dir_all(&dir);
+}
