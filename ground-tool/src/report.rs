@@ -495,7 +495,7 @@ pub fn write_calibration_report(
             for (t, chi2, dof) in &iru.misfit_fixes {
                 let _ = writeln!(
                     md,
-                    "Hold batch at t = {:.2} h refused as a fix: its attitude fit has χ² {chi2:.0} on {dof} dof (p below {:.0e}): the gyro bias it was propagated with is wrong there (the OBC's, after a reset or a triad switch).\n",
+                    "Hold batch at t = {:.2} h refused as a fix: its attitude fit has χ² {chi2:.0} on {dof} dof (p below {:.0e}), so its vectors do not agree under their stated σ (seen when the bias the batch is propagated with, the OBC's, is wrong, as right after a bias reset or a triad switch; misidentified stars would do the same).\n",
                     t / 3600.0,
                     crate::pipeline::calibrate::FIX_MISFIT_P
                 );

@@ -161,6 +161,19 @@ impl Normal {
         }
     }
 
+    /// This system without `part`, a system of some of its batches (the training system of
+    /// a held-out block: [`super::heldout`]).
+    #[must_use]
+    pub fn without(&self, part: &Self) -> Self {
+        Self {
+            n: &self.n - &part.n,
+            b: &self.b - &part.b,
+            chi2: self.chi2 - part.chi2,
+            rows: self.rows - part.rows,
+            nuisance: self.nuisance - part.nuisance,
+        }
+    }
+
     /// Sum of two systems (disjoint data).
     #[must_use]
     pub fn sum(&self, other: &Self) -> Self {

@@ -266,6 +266,49 @@ struct BiasModel {
     extra: usize,
 }
 
+/// An exponential transient `e^{−(t − t0)/τ}`.
+fn transient_form(t0: f64, tau: f64) -> BiasModel {
+    BiasModel {
+        name: "gyro_bias_transient",
+        unit: "arcsec/s",
+        column: Box::new(move |s: &BiasSample| (-(s.t_s - t0) / tau).exp()),
+        extra: 1,
+    }
+}
+
+/// A step at `t_step`.
+fn step_form(t_step: f64) -> BiasModel {
+    BiasModel {
+        name: "gyro_bias_step",
+        unit: "arcsec/s",
+        column: Box::new(move |s: &BiasSample| f64::from(u8::from(s.t_s >= t_step))),
+        extra: 1,
+    }
+}
+
+/// The value of a candidate's nonlinear parameter (a transient's τ, a step's time) on `grid`
+/// with the lowest χ² of `base` + `form(value)`; `None` when no fit succeeds.
+fn best_on_grid(
+    samples: &[BiasSample],
+    w: &Whitener,
+    base: &[&BiasModel],
+    grid: impl Iterator<Item = f64>,
+    form: &dyn Fn(f64) -> BiasModel,
+) -> Option<f64> {
+    let mut best: Option<(f64, f64)> = None;
+    for v in grid {
+        let m = form(v);
+        let mut ms = base.to_vec();
+        ms.push(&m);
+        if let Some((c2, ..)) = bias_fit(samples, w, &ms) {
+            if best.is_none_or(|(_, b)| c2 < b) {
+                best = Some((v, c2));
+            }
+        }
+    }
+    best.map(|b| b.0)
+}
+
 /// GLS fit of `y = b0 + Σ models` per axis: (χ², β per axis, covariance per axis, equations).
 fn bias_fit(
     samples: &[BiasSample],
@@ -391,61 +434,22 @@ pub fn analyse(
         } else {
             vec![]
         };
-        let mut best_tau: Option<(f64, f64)> = None;
-        let mut tau = 600.0;
-        while tau <= 4.0 * 86_400.0 {
-            let m = BiasModel {
-                name: "gyro_bias_transient",
-                unit: "arcsec/s",
-                column: Box::new(move |s: &BiasSample| (-(s.t_s - t0) / tau).exp()),
-                extra: 1,
-            };
-            let mut ms = base_models.clone();
-            ms.push(&m);
-            if let Some((c2, ..)) = bias_fit(&samples, w_all, &ms) {
-                if best_tau.is_none_or(|(_, b)| c2 < b) {
-                    best_tau = Some((tau, c2));
-                }
-            }
-            tau *= 1.25;
-        }
-        let tau_best = best_tau.map_or(86_400.0, |t| t.0);
-        let transient = BiasModel {
-            name: "gyro_bias_transient",
-            unit: "arcsec/s",
-            column: Box::new(move |s: &BiasSample| (-(s.t_s - t0) / tau_best).exp()),
-            extra: 1,
-        };
+        let taus = std::iter::successors(Some(600.0_f64), |t| Some(t * 1.25))
+            .take_while(|t| *t <= 4.0 * 86_400.0);
+        let tau_best = best_on_grid(&samples, w_all, &base_models, taus, &|tau| {
+            transient_form(t0, tau)
+        })
+        .unwrap_or(86_400.0);
+        let transient = transient_form(t0, tau_best);
         // A step at an unknown time: the position on a grid of STEP_POSITIONS sample indices,
         // best by χ² given the baseline, counted as one more parameter; its p-value carries
         // the scan (Bonferroni over the positions).
-        let mut best_step: Option<(f64, f64)> = None;
-        for q in 1..=STEP_POSITIONS {
-            let Some(at) = samples.get(q * samples.len() / (STEP_POSITIONS + 1)) else {
-                continue;
-            };
-            let t_step = at.t_s;
-            let m = BiasModel {
-                name: "gyro_bias_step",
-                unit: "arcsec/s",
-                column: Box::new(move |s: &BiasSample| f64::from(u8::from(s.t_s >= t_step))),
-                extra: 1,
-            };
-            let mut ms = base_models.clone();
-            ms.push(&m);
-            if let Some((c2, ..)) = bias_fit(&samples, w_all, &ms) {
-                if best_step.is_none_or(|(_, b)| c2 < b) {
-                    best_step = Some((t_step, c2));
-                }
-            }
-        }
-        let t_step_best = best_step.map_or(t_mid, |t| t.0);
-        let step = BiasModel {
-            name: "gyro_bias_step",
-            unit: "arcsec/s",
-            column: Box::new(move |s: &BiasSample| f64::from(u8::from(s.t_s >= t_step_best))),
-            extra: 1,
-        };
+        let positions = (1..=STEP_POSITIONS)
+            .filter_map(|q| samples.get(q * samples.len() / (STEP_POSITIONS + 1)))
+            .map(|s| s.t_s);
+        let t_step_best =
+            best_on_grid(&samples, w_all, &base_models, positions, &step_form).unwrap_or(t_mid);
+        let step = step_form(t_step_best);
         let mut candidates: Vec<&BiasModel> = vec![&thermal, &transient, &step];
         if !cfg.transient_declared {
             candidates.insert(0, &ramp);

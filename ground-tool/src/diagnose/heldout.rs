@@ -45,8 +45,8 @@ use super::fit::{
 };
 use super::measurements::{MeasurementSet, SENSOR_NAMES};
 use crate::calibration::iru_chain::MAX_FOLDS;
-use crate::pipeline::alignment_heldout::paired_improvement;
 pub use crate::pipeline::alignment_heldout::MIN_IMPROVEMENT_Z;
+use crate::pipeline::alignment_heldout::{batch_groups, paired_improvement};
 use fsw_core::attitude::rotvec_from_rot;
 use fsw_core::units::ARCSEC_PER_RAD;
 use nalgebra::{DVector, Matrix3};
@@ -224,16 +224,6 @@ fn folds_of_batches(set: &MeasurementSet, k: usize) -> Vec<Option<usize>> {
         .collect()
 }
 
-fn minus(total: &Normal, part: &Normal) -> Normal {
-    Normal {
-        n: &total.n - &part.n,
-        b: &total.b - &part.b,
-        chi2: total.chi2 - part.chi2,
-        rows: total.rows - part.rows,
-        nuisance: total.nuisance - part.nuisance,
-    }
-}
-
 /// Names of the parameters `params` of `layout` (alignment axes and effect labels, once each).
 fn parameter_names(layout: &Layout, params: &[usize]) -> Vec<String> {
     let mut out: Vec<String> = Vec::new();
@@ -325,7 +315,7 @@ impl Folds<'_> {
                 }
                 g
             } else {
-                let train = minus(&self.total, held_out);
+                let train = self.total.without(held_out);
                 let Some((g, at_reference)) = self.fold_fit(&train, &held, &full_sigma) else {
                     out.skipped.push(format!(
                         "block {}: the model is singular on the other blocks",
@@ -463,7 +453,7 @@ impl Folds<'_> {
 /// offset over its track, a Sun position's transfer-function error) widen it as they scatter.
 fn dispersion(pairs: &[(f64, f64, f64)], decrease: f64, separation: f64) -> f64 {
     let n = pairs.len();
-    let groups = (n / 10).clamp(2, 50).min(n);
+    let groups = batch_groups(n);
     if groups < 2 || separation <= 0.0 {
         return 1.0;
     }

@@ -541,21 +541,8 @@ pub fn diagnose_run(
                     )
                 })
                 .collect();
-            let field_after = |k: usize| -> [f64; 2] {
-                let m = &analysis.set.meas[k];
-                let mut out = [0.0; 2];
-                let mut cols = Vec::new();
-                for &i in &field {
-                    cols.clear();
-                    res.layout.effects[i].columns(m, &|_| None, &mut cols);
-                    let o = res.layout.offsets[i];
-                    for (p, v) in &cols {
-                        out[0] += v[0] * g[o + p];
-                        out[1] += v[1] * g[o + p];
-                    }
-                }
-                out
-            };
+            let field_after =
+                |k: usize| table_field_arcsec(res, &analysis.set, &field, &g, None, k);
             let ce = BeforeAfter {
                 before: calibration_error_arcsec(&cal.alignment, t, &analysis.set, &|_| [0.0; 2]),
                 after: calibration_error_arcsec(&ground_alignment, t, &analysis.set, &field_after),
@@ -565,7 +552,14 @@ pub fn diagnose_run(
             // table diagnose would have written without its held-out validation.
             let g_flight = flight.flight_fit.expand(res.layout.total);
             let written_field = |k: usize| {
-                table_field_arcsec(res, &analysis.set, &field, &g_flight, &flight.flight_idx, k)
+                table_field_arcsec(
+                    res,
+                    &analysis.set,
+                    &field,
+                    &g_flight,
+                    Some(&flight.flight_idx),
+                    k,
+                )
             };
             let (unvalidated_table, g_unvalidated, unvalidated_idx) = &unvalidated;
             let unvalidated_field = |k: usize| {
@@ -574,7 +568,7 @@ pub fn diagnose_run(
                     &analysis.set,
                     &field,
                     g_unvalidated,
-                    unvalidated_idx,
+                    Some(unvalidated_idx),
                     k,
                 )
             };
@@ -686,13 +680,14 @@ pub fn diagnose_run(
 }
 
 /// The field correction (arcsec, sensor axes) of measurement `k` by the field effects `field`
-/// (transfer function, distortion) with the parameters of `g` that a table holds (`idx`).
+/// (transfer function, distortion) with the parameters of `g` that a table holds (`idx`;
+/// `None`: all of them, the ground model).
 fn table_field_arcsec(
     res: &super::search::SearchResult,
     set: &super::measurements::MeasurementSet,
     field: &[usize],
     g: &nalgebra::DVector<f64>,
-    idx: &[usize],
+    idx: Option<&[usize]>,
     k: usize,
 ) -> [f64; 2] {
     let m = &set.meas[k];
@@ -703,7 +698,7 @@ fn table_field_arcsec(
         res.layout.effects[i].columns(m, &|_| None, &mut cols);
         let o = res.layout.offsets[i];
         for (p, v) in &cols {
-            if idx.contains(&(o + p)) {
+            if idx.is_none_or(|idx| idx.contains(&(o + p))) {
                 out[0] += v[0] * g[o + p];
                 out[1] += v[1] * g[o + p];
             }

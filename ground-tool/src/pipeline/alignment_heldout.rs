@@ -61,6 +61,13 @@ pub struct PairedImprovement {
     pub batches_improved: usize,
 }
 
+/// Groups of consecutive items for a standard error by batch means over `n` items: about
+/// ten per group, at least 2 and at most [`MAX_BATCHES`] groups (fewer than 2 when `n` < 2).
+#[must_use]
+pub(crate) fn batch_groups(n: usize) -> usize {
+    (n / 10).clamp(2, MAX_BATCHES).min(n)
+}
+
 /// Paired difference of per-epoch χ² (same epochs, same order) with its standard error by
 /// batch means. Why batch means: the errors the tables leave are correlated over minutes (one
 /// star tracked, one FSS cell), so epoch-to-epoch scatter would understate the standard error;
@@ -69,7 +76,7 @@ pub struct PairedImprovement {
 #[must_use]
 pub fn paired_improvement(chi2_new: &[f64], chi2_flown: &[f64]) -> PairedImprovement {
     let n = chi2_new.len().min(chi2_flown.len());
-    let batches = (n / 10).clamp(2, MAX_BATCHES).min(n);
+    let batches = batch_groups(n);
     if batches < 2 {
         return PairedImprovement {
             chi2_decrease: f64::NAN,
