@@ -116,69 +116,9 @@ pub fn flight_update(
             })
             .collect()
     });
-    // `always`: the alignments, the aberration scale (its table field is a switch) and the
-    // catalog offsets (every star goes up, shrunk); `gated`: the terms that go up only when
-    // determined at 3σ.
-    let mut always: Vec<usize> = (0..super::fit::N_ALIGN).collect();
-    let mut gated: Vec<usize> = Vec::new();
-    for &i in &effects {
-        let r = res.layout.range(i);
-        let (a, g): (Vec<usize>, Vec<usize>) = match res.layout.effects[i].kind {
-            EffectKind::AberrationAnnual | EffectKind::Aberration => (vec![0], Vec::new()),
-            EffectKind::TimeTagOffset => (Vec::new(), vec![0]),
-            EffectKind::FhstDistortion | EffectKind::ThermalAlignmentDrift => {
-                (Vec::new(), vec![0, 1, 2])
-            }
-            EffectKind::MagnitudeBias => (Vec::new(), vec![0, 1]),
-            // Scale, cross, cubic and (with a pitch) the cyclic sin/cos of both heads.
-            EffectKind::FssTransferFunction => (Vec::new(), (0..r.len()).collect()),
-            // The onboard catalog takes every per-star offset.
-            EffectKind::CatalogProperMotionError => ((0..r.len()).collect(), Vec::new()),
-            _ => (Vec::new(), Vec::new()),
-        };
-        always.extend(a.iter().map(|k| r.start + k));
-        gated.extend(g.iter().map(|k| r.start + k).filter(|&p| free(p)));
-    }
-    // Only terms determined at 3σ go up: an ill-determined polynomial term (a transfer
-    // function seen over a small part of the field) would make the OBC worse elsewhere. The
-    // fit is repeated without the terms that fail, until every term left passes, so that the
-    // alignments that go up were estimated with exactly the terms that go up (an FSS cubic
-    // term left out after a joint fit would leave its alignment wrong for the OBC). Terms only
-    // leave, so this ends within `gated.len()` fits.
-    let solve = |gated: &[usize]| {
-        let mut idx = always.clone();
-        idx.extend(gated);
-        // The time tags stay at their estimates against the gyro (the batch system alone
-        // does not determine their common part).
-        let mut fixed: Vec<super::fit::Fixed> = res
-            .fixed
-            .iter()
-            .filter(|f| idx.contains(&f.index))
-            .copied()
-            .collect();
-        fixed.extend(&held_alignment);
-        super::fit::solve_fixed(&res.systems.full, &res.layout, &idx, &fixed)
-    };
-    let mut flight_fit = res.final_fit.clone();
-    for _ in 0..=gated.len() {
-        let Some(fit) = solve(&gated) else {
-            break;
-        };
-        let before = gated.len();
-        gated.retain(|&i| matches!(fit.param(i), Some((x, s)) if x.abs() > 3.0 * s));
-        flight_fit = fit;
-        if gated.len() == before {
-            break;
-        }
-    }
-    let g = flight_fit.expand(res.layout.total);
-    // The alignment parameters relative to `base`: with a restriction, the reference table.
-    let mut g_table = g.clone();
-    if let Some(r) = restrict {
-        for (p, v) in r.reference_arcsec.iter().enumerate() {
-            g_table[p] -= v;
-        }
-    }
+    let (always, gated) = flight_terms(res, &effects, &free);
+    let (flight_fit, gated) = gated_fit(res, &always, gated, &held_alignment);
+    let g_table = relative_to_base(flight_fit.expand(res.layout.total), restrict);
     let p3 = |i: usize| {
         if !gated.contains(&i) {
             return 0.0;
@@ -211,12 +151,7 @@ pub fn flight_update(
     let mut applied = Vec::new();
     let mut ground_only = Vec::new();
     let mut table = adjusted_alignment(base, &g_table, &thermal_constant, counts)?;
-    let mut g_ground = res.final_fit.expand(res.layout.total);
-    if let Some(r) = restrict {
-        for (p, v) in r.reference_arcsec.iter().enumerate() {
-            g_ground[p] -= v;
-        }
-    }
+    let g_ground = relative_to_base(res.final_fit.expand(res.layout.total), restrict);
     let ground_alignment = adjusted_alignment(base, &g_ground, &[Vector3::zeros(); 4], counts)?;
     let names = super::measurements::SENSOR_NAMES;
     let refit: Vec<&str> = (1..4)
@@ -377,6 +312,92 @@ pub fn flight_update(
         applied,
         ground_only,
     })
+}
+
+/// The flight model's parameters: `always` — the alignments, the aberration scale (its table
+/// field is a switch) and the catalog offsets (every star goes up, shrunk) — and `gated`, the
+/// terms that go up only when determined at 3σ (only those `free` lets through).
+fn flight_terms(
+    res: &SearchResult,
+    effects: &[usize],
+    free: &dyn Fn(usize) -> bool,
+) -> (Vec<usize>, Vec<usize>) {
+    let mut always: Vec<usize> = (0..N_ALIGN).collect();
+    let mut gated: Vec<usize> = Vec::new();
+    for &i in effects {
+        let r = res.layout.range(i);
+        let (a, g): (Vec<usize>, Vec<usize>) = match res.layout.effects[i].kind {
+            EffectKind::AberrationAnnual | EffectKind::Aberration => (vec![0], Vec::new()),
+            EffectKind::TimeTagOffset => (Vec::new(), vec![0]),
+            EffectKind::FhstDistortion | EffectKind::ThermalAlignmentDrift => {
+                (Vec::new(), vec![0, 1, 2])
+            }
+            EffectKind::MagnitudeBias => (Vec::new(), vec![0, 1]),
+            // Scale, cross, cubic and (with a pitch) the cyclic sin/cos of both heads.
+            EffectKind::FssTransferFunction => (Vec::new(), (0..r.len()).collect()),
+            // The onboard catalog takes every per-star offset.
+            EffectKind::CatalogProperMotionError => ((0..r.len()).collect(), Vec::new()),
+            _ => (Vec::new(), Vec::new()),
+        };
+        always.extend(a.iter().map(|k| r.start + k));
+        gated.extend(g.iter().map(|k| r.start + k).filter(|&p| free(p)));
+    }
+    (always, gated)
+}
+
+/// The flight fit and the gated terms that pass. Only terms determined at 3σ go up: an
+/// ill-determined polynomial term (a transfer function seen over a small part of the field)
+/// would make the OBC worse elsewhere. The fit is repeated without the terms that fail, until
+/// every term left passes, so that the alignments that go up were estimated with exactly the
+/// terms that go up (an FSS cubic term left out after a joint fit would leave its alignment
+/// wrong for the OBC). Terms only leave, so this ends within `gated.len()` fits. The time
+/// tags stay at their estimates against the gyro (the batch system alone does not determine
+/// their common part), and `held` alignments at their values.
+fn gated_fit(
+    res: &SearchResult,
+    always: &[usize],
+    mut gated: Vec<usize>,
+    held: &[super::fit::Fixed],
+) -> (super::fit::SubFit, Vec<usize>) {
+    let solve = |gated: &[usize]| {
+        let mut idx = always.to_vec();
+        idx.extend(gated);
+        let mut fixed: Vec<super::fit::Fixed> = res
+            .fixed
+            .iter()
+            .filter(|f| idx.contains(&f.index))
+            .copied()
+            .collect();
+        fixed.extend(held);
+        super::fit::solve_fixed(&res.systems.full, &res.layout, &idx, &fixed)
+    };
+    let mut flight_fit = res.final_fit.clone();
+    for _ in 0..=gated.len() {
+        let Some(fit) = solve(&gated) else {
+            break;
+        };
+        let before = gated.len();
+        gated.retain(|&i| matches!(fit.param(i), Some((x, s)) if x.abs() > 3.0 * s));
+        flight_fit = fit;
+        if gated.len() == before {
+            break;
+        }
+    }
+    (flight_fit, gated)
+}
+
+/// The alignment parameters of `g` relative to the table the tables are built on: with a
+/// restriction, the reference table, whose parameters are subtracted.
+fn relative_to_base(
+    mut g: nalgebra::DVector<f64>,
+    restrict: Option<Restriction<'_>>,
+) -> nalgebra::DVector<f64> {
+    if let Some(r) = restrict {
+        for (p, v) in r.reference_arcsec.iter().enumerate() {
+            g[p] -= v;
+        }
+    }
+    g
 }
 
 /// The IRU table with the gyro-side effects: the scale-factor asymmetry (`gyro_scale_asymmetry`,
