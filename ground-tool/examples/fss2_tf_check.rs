@@ -50,7 +50,9 @@ fn main() -> anyhow::Result<()> {
     let mut rows = Vec::new();
     let t0 = frames[0].time.seconds();
     for f in &frames {
-        let Some(sun) = f.suns[1] else { continue };
+        let Some(sun) = f.suns[1].as_deref() else {
+            continue;
+        };
         let s = sun.meas.dir_sensor;
         let (am, bm) = (s.x.atan2(s.z), s.y.atan2(s.z));
         let (at, bt) = (

@@ -292,13 +292,7 @@ fn debug_catalog() {
     let truth = ground_tool::diagnose::scoring::read_truth(&run)
         .unwrap()
         .unwrap();
-    let t0 = o.analysis.set.meas.first().map(|_| 0.0).unwrap_or(0.0);
-    let _ = t0;
-    let tt = o
-        .calibration
-        .as_ref()
-        .map(|c| c.frames[0].time.seconds_since_j2000_tt())
-        .unwrap();
+    let tt = o.first_frame_j2000_tt_s;
     let cat = ground_tool::diagnose::scoring::catalog_truth(&truth, tt);
     let stars = &lay.effects[ci].stars;
     let idx = indices(lay, &[ci]);

@@ -207,14 +207,30 @@ pub fn unexplained_from(tests: &[structure::StructureTest], alpha: f64) -> Vec<U
 /// # Errors
 /// No usable data.
 pub fn analyse(input: &DiagnoseInput<'_>, config: &SearchConfig) -> anyhow::Result<Analysis> {
-    let mut set = MeasurementSet::build(input);
+    analyse_set(
+        MeasurementSet::build(input),
+        &input.declared_effects,
+        config,
+    )
+}
+
+/// [`analyse`] on a measurement set already built (the frames need not outlive the build:
+/// `run::diagnose_run` lets them go before the search).
+///
+/// # Errors
+/// No usable data.
+pub fn analyse_set(
+    mut set: MeasurementSet,
+    declared_effects: &[String],
+    config: &SearchConfig,
+) -> anyhow::Result<Analysis> {
     if set.meas.len() < 100 {
         anyhow::bail!(
             "diagnose needs identified FHST stars and FSS Sun samples: only {} measurements with references",
             set.meas.len()
         );
     }
-    let mut res = search(&mut set, &input.declared_effects, config)?;
+    let mut res = search(&mut set, declared_effects, config)?;
     let time_reference = time_reference::resolve(&set, &res, config);
     if let Some(tr) = &time_reference {
         time_reference::apply(&set, &mut res, tr)?;

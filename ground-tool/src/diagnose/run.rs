@@ -10,8 +10,8 @@
 //!    changes) for a closed-loop run with `sim-harness run ... --tables OUT/tables`;
 //! 5. `report.json`, `report.md`, plots; scoring against `truth.json` only if it exists.
 
-use super::gyro::{self, GyroConfig};
-use super::measurements::{DiagnoseInput, SENSOR_NAMES};
+use super::gyro::{self, GyroConfig, GyroFrame, GyroInput};
+use super::measurements::{DiagnoseInput, MeasurementSet, SENSOR_NAMES};
 use super::report::{
     markdown, write_plots, BeforeAfter, DiagnoseReport, FlightSummary, GyroSummary, Scoring,
 };
@@ -19,7 +19,7 @@ use super::scoring::{
     calibration_error_arcsec, check_parameters, matches_truth, read_truth, rotation_error_arcsec,
 };
 use super::search::SearchConfig;
-use super::{analyse, Analysis};
+use super::{analyse_set, Analysis};
 use crate::calibration::iru::GyroCalibration;
 use crate::pipeline::calibrate::{
     calibrate_telemetry, read_run, write_table, CalibrateOptions, CalibrationOutput,
@@ -51,8 +51,11 @@ pub struct DiagnoseOutput {
     pub report: DiagnoseReport,
     /// Sensor-side analysis.
     pub analysis: Analysis,
-    /// The calibration chain's output (None when it failed and the flown tables were used).
+    /// The calibration chain's output (None when it failed and the flown tables were used),
+    /// without its frames (let go before the search).
     pub calibration: Option<CalibrationOutput>,
+    /// Time of the first frame (s since J2000, TT).
+    pub first_frame_j2000_tt_s: f64,
     /// The alignment table written (the flown one when the held-out validation refused the
     /// new alignments).
     pub alignment: AlignmentTable,
@@ -75,6 +78,16 @@ struct Chain {
 impl Chain {
     fn frames(&self) -> &[crate::pipeline::observations::FrameObservations] {
         self.output.as_ref().map_or(&self.frames, |o| &o.frames)
+    }
+
+    /// Let the frames go (the chain output's included: `DiagnoseOutput::calibration` then
+    /// has none). Six months of 30-s frames are 0.37 GB; past the measurement set's build
+    /// the analysis reads only their [`GyroFrame`]s.
+    fn release_frames(&mut self) {
+        self.frames = Vec::new();
+        if let Some(o) = self.output.as_mut() {
+            o.frames = Vec::new();
+        }
     }
 }
 
@@ -303,7 +316,16 @@ pub fn diagnose_run(
         aberration_model: [annual, orbital],
         declared_effects: declared.clone(),
     };
-    let analysis = analyse(&input, &opts.search)?;
+    let set = MeasurementSet::build(&input);
+    let gyro_frames: Vec<GyroFrame> = frames.iter().map(GyroFrame::from).collect();
+    let frames_t0_j2000 = frames
+        .first()
+        .map_or(0.0, |f| f.time.seconds_since_j2000_tt());
+    let gyro_cal = input.gyro;
+    let bias_per_frame = input.bias_per_frame;
+    let mut cal = cal;
+    cal.release_frames();
+    let analysis = analyse_set(set, &declared, &opts.search)?;
     if let Some(i) = analysis
         .search
         .layout
@@ -325,8 +347,8 @@ pub fn diagnose_run(
             "no orbit in the telemetry (no ephemeris records, docs/icd.md §3.4): the declared orbital aberration and Sun parallax are modelled as an unknown circular orbit, period {period_min:.2} min found from the residuals, aberration amplitude {amplitude:.1}″ (≈ 5.3″ for a 7.7 km/s orbit)"
         ));
     }
-    notes.extend(coverage_notes(&analysis.set, frames.len(), |k| {
-        frames.get(k).is_some_and(|f| f.high_rate)
+    notes.extend(coverage_notes(&analysis.set, gyro_frames.len(), |k| {
+        gyro_frames.get(k).is_some_and(|f| f.high_rate)
     }));
     let gcfg = GyroConfig {
         alpha: opts.search.alpha,
@@ -335,7 +357,12 @@ pub fn diagnose_run(
         arw_rad_per_sqrt_s: metadata.sensors.iru_arw_rad_per_sqrt_s,
         transient_declared: declared.iter().any(|d| d == "iru_bias_transient"),
     };
-    let gyro_res = gyro::analyse(&input, &analysis.set, &analysis.search.after, &gcfg);
+    let gyro_input = GyroInput {
+        frames: &gyro_frames,
+        gyro: gyro_cal,
+        bias_per_frame: bias_per_frame.as_deref(),
+    };
+    let gyro_res = gyro::analyse(&gyro_input, &analysis.set, &analysis.search.after, &gcfg);
     let gyro_ledger = super::ledger::gyro_ledger(&gyro_res, opts.search.alpha);
 
     // Flight tables.
@@ -515,10 +542,6 @@ pub fn diagnose_run(
     };
     let counts = analysis.set.count_per_sensor();
     let truth = read_truth(run_dir)?;
-    let frames_t0_j2000 = input
-        .frames
-        .first()
-        .map_or(0.0, |f| f.time.seconds_since_j2000_tt());
     let mut rotation_error = None;
     let mut written_error = None;
     let mut unvalidated_error = None;
@@ -675,6 +698,7 @@ pub fn diagnose_run(
         alignment: alignment_out,
         filter: flight.filter,
         calibration: cal.output,
+        first_frame_j2000_tt_s: frames_t0_j2000,
         gyro: gyro_res,
     })
 }

@@ -478,7 +478,7 @@ pub fn generate(cfg: &SynthConfig) -> SynthRun {
                 };
                 let (aq, bq) = (q(am), q(bm));
                 let dir_sensor = fsw_core::fss::dir_from_angles(aq, bq);
-                suns_obs[u] = Some(SunObservation {
+                suns_obs[u] = Some(Box::new(SunObservation {
                     meas: FssMeasurement {
                         alpha_rad: aq,
                         beta_rad: bq,
@@ -487,7 +487,7 @@ pub fn generate(cfg: &SynthConfig) -> SynthRun {
                     },
                     sun_eci: sun_ref,
                     sigma_rad: noise.fss_sigma_arcsec * RAD_PER_ARCSEC,
-                });
+                }));
             }
         }
         let gyro = (k > 0).then(|| GyroStep {

@@ -193,7 +193,7 @@ mod tests {
                     gyro_split_dir_rad: nalgebra::Vector3::zeros(),
                     stars,
                     suns: [
-                        Some(SunObservation {
+                        Some(Box::new(SunObservation {
                             meas: FssMeasurement {
                                 alpha_rad: a,
                                 beta_rad: b,
@@ -202,7 +202,7 @@ mod tests {
                             },
                             sun_eci: sun,
                             sigma_rad: noise,
-                        }),
+                        })),
                         None,
                     ],
                     temperatures_c: [20.0; 5],

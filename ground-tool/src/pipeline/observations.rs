@@ -119,8 +119,10 @@ pub struct FrameObservations {
     pub gyro_split_dir_rad: Vector3<f64>,
     /// FHST1, FHST2.
     pub stars: [Option<StarObservation>; 2],
-    /// FSS1, FSS2.
-    pub suns: [Option<SunObservation>; 2],
+    /// FSS1, FSS2, boxed: most frames of most days hold no Sun (in eclipse, or out of the
+    /// FSS field), and 2 × 96 bytes inline were a quarter of a frame (six months of 30-s
+    /// frames: 0.1 GB of `None`s).
+    pub suns: [Option<Box<SunObservation>>; 2],
     /// Temperatures, °C (FHST1, FHST2, FSS1, FSS2, IRU).
     pub temperatures_c: [f64; 5],
     /// OBC attitude estimate at this frame (housekeeping), if downlinked.
@@ -363,10 +365,12 @@ pub fn build_observations(
             *slot = Some(obs);
         }
         let suns = fss_meas.map(|m| {
-            m.map(|meas| SunObservation {
-                meas,
-                sun_eci,
-                sigma_rad: noise.fss_sigma_arcsec * RAD_PER_ARCSEC,
+            m.map(|meas| {
+                Box::new(SunObservation {
+                    meas,
+                    sun_eci,
+                    sigma_rad: noise.fss_sigma_arcsec * RAD_PER_ARCSEC,
+                })
             })
         });
         if obc_q.is_none() {
@@ -666,7 +670,7 @@ impl OwnAttitude {
     fn refresh(
         &mut self,
         stars: &[Option<StarObservation>; 2],
-        suns: &[Option<SunObservation>; 2],
+        suns: &[Option<Box<SunObservation>>; 2],
         t_s: f64,
     ) {
         let ids: Vec<(Vector3<f64>, Vector3<f64>)> = stars
