@@ -209,7 +209,16 @@ fn propagate(input: &GyroInput<'_>, from: usize, to: usize, bias: &Vector3<f64>)
 
 /// The whitening of a run of bias samples, per axis: `L⁻¹ z` for the covariance `C = L Lᵀ`
 /// of the samples (the declared bias random walk `σ_u² min(tᵢ, tⱼ)`, the angle random walk,
-/// and the batch attitude errors, which make chained samples anti-correlated).
+/// and the batch attitude errors).
+///
+/// Chained samples (the end batch of one is the start batch of the next) share an attitude
+/// error, which makes them anti-correlated; the analysis does **not** model that
+/// ([`MODEL_CHAINED_ERRORS`]): the differenced attitude error then has almost no power at low
+/// frequency, and the GLS takes a slow bias structure (a step, a thermal term) as measured far
+/// better than the data measure it, because the batch attitude errors are not independent
+/// from batch to batch (the same stars, the same tracker systematic through a hold). With the
+/// anti-correlation, 5 of 20 clean runs (`scenarios/undeclared/false_alarm.sh 20 100`) named a
+/// gyro bias step or a thermal bias; without it, 0 of 20 (`docs/investigations.md`).
 ///
 /// `L⁻¹ z` is the sequence of normalised innovations of `z` under that model (Cholesky in
 /// sample order is sequential conditioning), so it is computed by a three-state Kalman filter
@@ -220,6 +229,10 @@ fn propagate(input: &GyroInput<'_>, from: usize, to: usize, bias: &Vector3<f64>)
 struct Whitener {
     axes: [Vec<WhitenStep>; 3],
 }
+
+/// Whether the whitening models the shared attitude error of chained samples (see
+/// [`Whitener`]: it does not).
+const MODEL_CHAINED_ERRORS: bool = false;
 
 /// One sample's step of the whitening filter (per axis).
 #[derive(Clone, Copy, Debug)]
@@ -236,7 +249,8 @@ struct WhitenStep {
 
 impl Whitener {
     /// `None` when an innovation variance is not positive (the covariance is not).
-    fn new(samples: &[BiasSample], cfg: &GyroConfig) -> Option<Self> {
+    /// `chained`: model the shared attitude error of chained samples.
+    fn new(samples: &[BiasSample], cfg: &GyroConfig, chained: bool) -> Option<Self> {
         let t0 = samples.first()?.t_s;
         let sigma_u = cfg.rrw_rad_per_s15 * ARCSEC_PER_RAD;
         let sigma_v = cfg.arw_rad_per_sqrt_s * ARCSEC_PER_RAD;
@@ -283,7 +297,7 @@ impl Whitener {
                     sqrt_s: var.sqrt(),
                 });
                 (p_bb, p_bbeta, p_betabeta) = (p[(0, 0)], p[(0, 2)], p[(2, 2)]);
-                previous_chained = s.chained;
+                previous_chained = chained && s.chained;
             }
         }
         Some(Self { axes })
@@ -465,9 +479,9 @@ pub fn analyse(
     let b_ref_arcsec = b_ref * ARCSEC_PER_RAD;
     let half = samples.len() / 2;
     let whiteners = (
-        Whitener::new(&samples, cfg),
-        Whitener::new(&samples[..half], cfg),
-        Whitener::new(&samples[half..], cfg),
+        Whitener::new(&samples, cfg, MODEL_CHAINED_ERRORS),
+        Whitener::new(&samples[..half], cfg, MODEL_CHAINED_ERRORS),
+        Whitener::new(&samples[half..], cfg, MODEL_CHAINED_ERRORS),
     );
     if let (true, (Some(w_all), Some(w_a), Some(w_b))) = (samples.len() >= 20, &whiteners) {
         let t0 = samples[0].t_s;
@@ -1043,8 +1057,14 @@ fn asymmetry(
 mod tests {
     use super::*;
 
-    /// The samples' covariance written out (per axis), as the model states it.
-    fn dense_covariance(samples: &[BiasSample], cfg: &GyroConfig, axis: usize) -> DMatrix<f64> {
+    /// The samples' covariance written out (per axis), as the model states it (`chained`:
+    /// with the shared attitude error of chained samples).
+    fn dense_covariance(
+        samples: &[BiasSample],
+        cfg: &GyroConfig,
+        axis: usize,
+        chained: bool,
+    ) -> DMatrix<f64> {
         let n = samples.len();
         let t0 = samples[0].t_s;
         let su = cfg.rrw_rad_per_s15 * ARCSEC_PER_RAD;
@@ -1057,7 +1077,7 @@ mod tests {
             let s = &samples[i];
             c[(i, i)] +=
                 (s.var_start[axis] + s.var_end[axis]) / (s.dt_s * s.dt_s) + sv * sv / s.dt_s;
-            if s.chained && i + 1 < n {
+            if chained && s.chained && i + 1 < n {
                 let v = -s.var_end[axis] / (s.dt_s * samples[i + 1].dt_s);
                 c[(i, i + 1)] += v;
                 c[(i + 1, i)] += v;
@@ -1067,7 +1087,8 @@ mod tests {
     }
 
     /// The filter's whitening is `L⁻¹ z` of the dense Cholesky factor, on samples with
-    /// chained runs, breaks, uneven spacing and per-axis attitude variances.
+    /// chained runs, breaks, uneven spacing and per-axis attitude variances, with and without
+    /// the chained samples' shared attitude error.
     #[test]
     fn whitener_equals_the_dense_cholesky_factor() {
         let cfg = GyroConfig {
@@ -1108,9 +1129,9 @@ mod tests {
                 Vector3::new(2.0, 2.0, 2.0)
             };
         }
-        let w = Whitener::new(&samples, &cfg).unwrap();
-        for axis in 0..3 {
-            let c = dense_covariance(&samples, &cfg, axis);
+        for (axis, chained) in [(0, true), (1, true), (2, true), (0, false), (2, false)] {
+            let w = Whitener::new(&samples, &cfg, chained).unwrap();
+            let c = dense_covariance(&samples, &cfg, axis, chained);
             let l = c.cholesky().unwrap().unpack();
             let z = DVector::from_iterator(samples.len(), samples.iter().map(|s| s.y[axis]));
             let dense = l.solve_lower_triangular(&z).unwrap();
@@ -1122,7 +1143,7 @@ mod tests {
                 .fold(0.0, f64::max);
             assert!(
                 worst < 1e-9 * dense.amax().max(1.0),
-                "axis {axis}: {worst:e}"
+                "axis {axis}, chained {chained}: {worst:e}"
             );
         }
     }

@@ -323,6 +323,9 @@ pub fn diagnose_run(
         .map_or(0.0, |f| f.time.seconds_since_j2000_tt());
     let gyro_cal = input.gyro;
     let bias_per_frame = input.bias_per_frame;
+    // The per-frame ephemerides served the build only (25 MB over six months).
+    drop(input.earth_vel_eci_km_per_s);
+    drop(input.sun_eci);
     let mut cal = cal;
     cal.release_frames();
     let analysis = analyse_set(set, &declared, &opts.search)?;
