@@ -8,8 +8,9 @@
 //! relative to a constant reference `b_ref` is `y = −z/Δt` with
 //! `z = rotvec(A_{k+1} (Φ A_k)ᵀ)` (Φ propagated with `b_ref`). Per axis, `y` is fitted by
 //! generalised least squares with the covariance of the declared bias random walk
-//! (`σ_u² min(tᵢ, tⱼ)`), the angle random walk, and the batch attitude errors (which make
-//! consecutive samples anti-correlated). Candidates: a **ramp**, an **exponential transient**
+//! (`σ_u² min(tᵢ, tⱼ)`), the angle random walk, and each sample's batch attitude errors
+//! (consecutive samples share a batch, but that anti-correlation is left out on purpose:
+//! [`Whitener`] says why), whitened by a Kalman filter in O(n). Candidates: a **ramp**, an **exponential transient**
 //! `A e^{−t/τ}` (τ grid-searched, counted as one more parameter), a **step** at an unknown
 //! time (the position scanned over 39 sample indices, counted as one more parameter, its
 //! p-value × 39 for the scan) and a **thermal bias** `k ΔT_IRU`, each with one parameter per
