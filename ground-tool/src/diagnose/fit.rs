@@ -409,7 +409,39 @@ pub fn batch_chi2(
     g: &DVector<f64>,
     use_batch: &dyn Fn(usize) -> bool,
 ) -> Vec<(usize, f64, usize)> {
-    batch_quadratic(set, layout, g, use_batch, true)
+    batch_quadratic(set, layout, g, use_batch, true, Rows::All)
+}
+
+/// [`batch_chi2`] over the trackers' rows only: what the trackers, which give the flight
+/// attitude, say of `g` (the held-out check of a tracker's alignment, [`super::heldout`]).
+#[must_use]
+pub fn batch_chi2_fhst(
+    set: &MeasurementSet,
+    layout: &Layout,
+    g: &DVector<f64>,
+    use_batch: &dyn Fn(usize) -> bool,
+) -> Vec<(usize, f64, usize)> {
+    batch_quadratic(set, layout, g, use_batch, true, Rows::Fhst)
+}
+
+/// [`batch_information`] over the trackers' rows only.
+#[must_use]
+pub fn batch_information_fhst(
+    set: &MeasurementSet,
+    layout: &Layout,
+    g: &DVector<f64>,
+    use_batch: &dyn Fn(usize) -> bool,
+) -> Vec<(usize, f64, usize)> {
+    batch_quadratic(set, layout, g, use_batch, false, Rows::Fhst)
+}
+
+/// The rows a batch quadratic takes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Rows {
+    /// Trackers and FSSs.
+    All,
+    /// Trackers only.
+    Fhst,
 }
 
 /// [`batch_chi2`] of data that are all zero: `gᵀ N_b g`, the χ² by which the batch tells the
@@ -422,7 +454,7 @@ pub fn batch_information(
     g: &DVector<f64>,
     use_batch: &dyn Fn(usize) -> bool,
 ) -> Vec<(usize, f64, usize)> {
-    batch_quadratic(set, layout, g, use_batch, false)
+    batch_quadratic(set, layout, g, use_batch, false, Rows::All)
 }
 
 fn batch_quadratic(
@@ -431,6 +463,7 @@ fn batch_quadratic(
     g: &DVector<f64>,
     use_batch: &dyn Fn(usize) -> bool,
     with_data: bool,
+    rows_taken: Rows,
 ) -> Vec<(usize, f64, usize)> {
     let mut out = Vec::new();
     let mut cols = Vec::new();
@@ -474,7 +507,10 @@ fn batch_quadratic(
         let mut nee = naa;
         let mut ne = Vector6::<f64>::zeros();
         let mut any_fss = false;
-        for m in ms.iter().filter(|m| m.sensor >= 2 && !m.outlier) {
+        for m in ms
+            .iter()
+            .filter(|m| rows_taken == Rows::All && m.sensor >= 2 && !m.outlier)
+        {
             any_fss = true;
             let r = shifted(m);
             let arow = nuisance_row(m);

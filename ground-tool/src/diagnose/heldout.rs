@@ -16,10 +16,12 @@
 //! held-out validation passed, else the flown ones), with no effect terms. The flight model is
 //! cut into *components* — each sensor's alignment, each effect's terms — and built up from the
 //! reference by forward selection: in each round every component not yet taken is added in
-//! turn, the one that lowers the held-out χ² most is taken if its paired decrease exceeds
-//! [`MIN_IMPROVEMENT_Z`] standard errors (batch means,
-//! `pipeline::alignment_heldout::paired_improvement`, the rule of calibrate's own tables), and
-//! the selection stops when none does. A component not taken stays at the reference (an
+//! turn, the one that lowers the held-out χ² most is taken if its decrease exceeds
+//! [`MIN_IMPROVEMENT_Z`] standard errors (the held-out likelihood ratio with a dispersion
+//! estimated over the attitude segments, `Folds::compare`) and, when it changes what the
+//! trackers see, the trackers' own held-out χ² falls by as much (the trackers give the flight
+//! attitude; the FSS rows, white-weighted against their batch attitude, can pull a tracker's
+//! alignment with an error of their own), and the selection stops when none does. A component not taken stays at the reference (an
 //! alignment at calibrate's, an effect term not written); nothing taken = calibrate's table.
 //!
 //! The held-out χ²: the span is cut into K ([`MAX_FOLDS`], the chain's) contiguous blocks of
@@ -40,13 +42,13 @@
 //! shrinkage and net-rotation removal [`super::flight`] applies to the uplinked catalog.
 
 use super::fit::{
-    accumulate, batch_chi2, batch_information, solve_fixed, Fixed, Layout, Normal, NUISANCE,
-    N_ALIGN,
+    accumulate, batch_chi2, batch_chi2_fhst, batch_information, batch_information_fhst,
+    solve_fixed, Fixed, Layout, Normal, NUISANCE, N_ALIGN,
 };
 use super::measurements::{MeasurementSet, SENSOR_NAMES};
 use crate::calibration::iru_chain::MAX_FOLDS;
+use crate::pipeline::alignment_heldout::paired_improvement;
 pub use crate::pipeline::alignment_heldout::MIN_IMPROVEMENT_Z;
-use crate::pipeline::alignment_heldout::{batch_groups, paired_improvement};
 use fsw_core::attitude::rotvec_from_rot;
 use fsw_core::units::ARCSEC_PER_RAD;
 use nalgebra::{DVector, Matrix3};
@@ -68,6 +70,11 @@ pub struct ComponentTest {
     pub component: String,
     /// The decrease of the held-out χ² from adding it to the components taken before.
     pub improvement: HeldOutTest,
+    /// The same over the trackers' rows alone (`None` when the component does not change
+    /// what the trackers see). A component that changes a tracker's table (a tracker's
+    /// alignment, an effect of a tracker or of every sensor) is taken only if the trackers'
+    /// held-out χ² falls too.
+    pub trackers: Option<HeldOutTest>,
 }
 
 /// A held-out comparison of two models, batch by batch (module doc).
@@ -82,8 +89,11 @@ pub struct HeldOutTest {
     pub noise_scale: f64,
     /// Standard error of the decrease from the noise: `2 √(noise_scale · separation)`.
     pub standard_error: f64,
-    /// `chi2_decrease / standard_error`.
+    /// `chi2_decrease / standard_error`, as the normal deviate of the same tail probability
+    /// when the noise scale was estimated from the data (Student's t over `groups − 1`).
     pub z: f64,
+    /// Attitude segments the noise scale came from (`dispersion`).
+    pub groups: usize,
     /// z of the same differences with the standard error by batch means (reported: it
     /// cannot exceed ≈ √m when only m of its groups see the change, a sensor tracking in a
     /// few holds).
@@ -155,6 +165,9 @@ pub fn alignment_parameters_arcsec(
 struct Component {
     name: String,
     params: Vec<usize>,
+    /// It changes a tracker's table (a tracker's alignment, an effect of a tracker or of all
+    /// sensors): the trackers' own held-out χ² must confirm it.
+    trackers: bool,
 }
 
 /// The layout of the effects that hold the parameters `idx` of `layout`, where each of `idx`
@@ -180,6 +193,7 @@ fn sub_layout(layout: &Layout, idx: &[usize]) -> (Layout, Vec<usize>, Vec<Compon
                 .copied()
                 .filter(|&i| i < N_ALIGN && i / 3 + 1 == s)
                 .collect(),
+            trackers: s < 2,
         })
         .collect();
     components.extend(sub.effects.iter().enumerate().map(|(e, effect)| {
@@ -190,6 +204,7 @@ fn sub_layout(layout: &Layout, idx: &[usize]) -> (Layout, Vec<usize>, Vec<Compon
                 .copied()
                 .filter(|i| sub.range(e).contains(i))
                 .collect(),
+            trackers: effect.sensor.is_none_or(|s| s < 2),
         }
     }));
     components.retain(|c| !c.params.is_empty());
@@ -252,6 +267,8 @@ struct Folds<'a> {
     fixed: Vec<Fixed>,
     components: Vec<Component>,
     fold: Vec<Option<usize>>,
+    /// Attitude segment of each batch ([`attitude_segments`]): the groups of the dispersion.
+    segment: Vec<usize>,
     normals: Vec<Normal>,
     total: Normal,
     g_ref: DVector<f64>,
@@ -261,6 +278,8 @@ struct Folds<'a> {
 struct Evaluation {
     /// (batch, χ², dof) over the held-out batches of every fold used, in batch order.
     rows: Vec<(usize, f64, usize)>,
+    /// The same over the trackers' rows.
+    rows_fhst: Vec<(usize, f64, usize)>,
     /// Each fold's fitted vector (None: fold not used).
     g: Vec<Option<DVector<f64>>>,
     skipped: Vec<String>,
@@ -299,6 +318,7 @@ impl Folds<'_> {
         };
         let mut out = Evaluation {
             rows: Vec::new(),
+            rows_fhst: Vec::new(),
             g: vec![None; self.normals.len()],
             skipped: Vec::new(),
             held: Vec::new(),
@@ -338,9 +358,15 @@ impl Folds<'_> {
                     .into_iter()
                     .map(|(b, c, n)| (b, c, n.saturating_sub(NUISANCE))),
             );
+            out.rows_fhst.extend(
+                batch_chi2_fhst(self.set, &self.sub, &g, &in_fold)
+                    .into_iter()
+                    .map(|(b, c, n)| (b, c, n.saturating_sub(NUISANCE))),
+            );
             out.g[f] = Some(g);
         }
         out.rows.sort_by_key(|r| r.0);
+        out.rows_fhst.sort_by_key(|r| r.0);
         out
     }
 
@@ -389,6 +415,21 @@ impl Folds<'_> {
     /// it for noise the σ understate. Why not batch means alone (the chain's rule): a change
     /// seen in m of its groups cannot get past z ≈ √m there, however large it is.
     fn compare(&self, new: &Evaluation, base: &Evaluation) -> HeldOutTest {
+        self.compare_rows(new, base, Rows::All)
+    }
+
+    /// [`Self::compare`] over the trackers' rows; `None` when the two models do not differ
+    /// there.
+    fn compare_trackers(&self, new: &Evaluation, base: &Evaluation) -> Option<HeldOutTest> {
+        let t = self.compare_rows(new, base, Rows::Trackers);
+        (t.separation > MIN_SEPARATION).then_some(t)
+    }
+
+    fn compare_rows(&self, new: &Evaluation, base: &Evaluation, which: Rows) -> HeldOutTest {
+        let (new_rows, base_rows) = match which {
+            Rows::All => (&new.rows, &base.rows),
+            Rows::Trackers => (&new.rows_fhst, &base.rows_fhst),
+        };
         // δ_b per batch.
         let mut delta: Vec<(usize, f64)> = Vec::new();
         for (f, (gn, gb)) in new.g.iter().zip(&base.g).enumerate() {
@@ -400,32 +441,33 @@ impl Folds<'_> {
                 continue;
             }
             let in_fold = |b: usize| self.fold[b] == Some(f);
-            delta.extend(
-                batch_information(self.set, &self.sub, &dg, &in_fold)
-                    .into_iter()
-                    .map(|(b, d, _)| (b, d)),
-            );
+            let info = match which {
+                Rows::All => batch_information(self.set, &self.sub, &dg, &in_fold),
+                Rows::Trackers => batch_information_fhst(self.set, &self.sub, &dg, &in_fold),
+            };
+            delta.extend(info.into_iter().map(|(b, d, _)| (b, d)));
         }
         delta.sort_by_key(|d| d.0);
-        // (χ²_new, χ²_base, δ) of the batches both evaluated, in batch order.
-        let mut pairs: Vec<(f64, f64, f64)> = Vec::new();
+        // (χ²_new, χ²_base, δ, segment) of the batches both evaluated, in batch order.
+        let mut pairs: Vec<(f64, f64, f64, usize)> = Vec::new();
         let (mut j, mut k) = (0usize, 0usize);
-        for r in &new.rows {
-            while j < base.rows.len() && base.rows[j].0 < r.0 {
+        for r in new_rows {
+            while j < base_rows.len() && base_rows[j].0 < r.0 {
                 j += 1;
             }
             while k < delta.len() && delta[k].0 < r.0 {
                 k += 1;
             }
-            if let Some(o) = base.rows.get(j).filter(|o| o.0 == r.0) {
+            if let Some(o) = base_rows.get(j).filter(|o| o.0 == r.0) {
                 let d = delta.get(k).filter(|d| d.0 == r.0).map_or(0.0, |d| d.1);
-                pairs.push((r.1, o.1, d));
+                pairs.push((r.1, o.1, d, self.segment.get(r.0).copied().unwrap_or(0)));
             }
         }
         let separation: f64 = pairs.iter().map(|p| p.2).sum();
         let decrease: f64 = pairs.iter().map(|p| p.1 - p.0).sum();
-        let noise_scale = dispersion(&pairs, decrease, separation);
+        let (noise_scale, groups) = dispersion(&pairs, decrease, separation);
         let standard_error = 2.0 * (noise_scale * separation).sqrt();
+        let z_raw = decrease / standard_error;
         let (a, b): (Vec<f64>, Vec<f64>) = pairs.iter().map(|p| (p.0, p.1)).unzip();
         HeldOutTest {
             chi2_decrease: decrease,
@@ -433,35 +475,74 @@ impl Folds<'_> {
             noise_scale,
             standard_error,
             z: if separation > MIN_SEPARATION {
-                decrease / standard_error
+                normal_equivalent(z_raw, noise_scale, groups)
             } else {
                 f64::NAN
             },
+            groups,
             batch_means_z: paired_improvement(&a, &b).z,
             batches: pairs.len(),
         }
     }
 }
 
-/// The σ² scale of the held-out differences, from their own scatter: over groups of
-/// consecutive batches (≤ 50, as batch means: the errors the tables leave are correlated over
-/// minutes), `d_g = λ δ_g + e_g` with `var e_g = 4 s² δ_g`; `λ̂ = Σd/Σδ` and
-/// `s² = Σ (d_g − λ̂ δ_g)² / (4 δ_g) / (G − 1)` over the groups that see the change. At
-/// least 1 (the σ of the measurements are a floor). This is the quasi-likelihood dispersion
-/// of the held-out likelihood ratio: a change seen in a few groups keeps its size (unlike
-/// batch means, where it cannot pass z ≈ √m), and errors the σ do not hold (a catalog star's
-/// offset over its track, a Sun position's transfer-function error) widen it as they scatter.
-fn dispersion(pairs: &[(f64, f64, f64)], decrease: f64, separation: f64) -> f64 {
-    let n = pairs.len();
-    let groups = batch_groups(n);
-    if groups < 2 || separation <= 0.0 {
-        return 1.0;
+/// The rows a held-out comparison takes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Rows {
+    /// Trackers and FSSs.
+    All,
+    /// Trackers only: what gives the flight attitude.
+    Trackers,
+}
+
+/// The attitude segment of each batch: a new one at every change of rate mode (a slew starts
+/// or ends) and after a gap of more than [`SEGMENT_GAP_S`]. The errors the tables leave are
+/// shared by a whole segment: a Sun position's transfer-function error by every FSS sample of
+/// a hold, a star's catalog error by its track, a tracker's field error by the stars of one
+/// pointing.
+fn attitude_segments(set: &MeasurementSet) -> Vec<usize> {
+    let mut out = Vec::with_capacity(set.batches.len());
+    let mut id = 0usize;
+    let mut last: Option<(bool, f64)> = None;
+    for b in &set.batches {
+        if let Some((rate, t)) = last {
+            if rate != b.high_rate || b.t_center_s - t > SEGMENT_GAP_S {
+                id += 1;
+            }
+        }
+        last = Some((b.high_rate, b.t_center_s));
+        out.push(id);
+    }
+    out
+}
+
+/// Largest gap between batches of one attitude segment (s).
+const SEGMENT_GAP_S: f64 = 600.0;
+
+/// The σ² scale of the held-out differences, from their own scatter, and the number of groups
+/// it came from: over the attitude segments ([`attitude_segments`]), `d_g = λ δ_g + e_g` with
+/// `var e_g = 4 s² δ_g`; `λ̂ = Σd/Σδ` and `s² = Σ (d_g − λ̂ δ_g)² / (4 δ_g) / (G − 1)` over the
+/// groups that see the change. At least 1 (the σ of the measurements are a floor). This is the
+/// quasi-likelihood dispersion of the held-out likelihood ratio: a change seen in a few groups
+/// keeps its size (unlike batch means, where it cannot pass z ≈ √m), and errors the σ do not
+/// hold widen it as they scatter. Why segments, not groups of ten batches: an error shared by
+/// a whole hold (a Sun position's transfer-function error, 16 min to an orbit) is common to
+/// every group inside it, and groups shorter than the hold counted it as independent draws —
+/// on 7 of the 39 effects-table runs the FSS2 alignment was taken at z > 3 and came out
+/// 6–8″ worse than calibrate's (`docs/investigations.md`).
+fn dispersion(pairs: &[(f64, f64, f64, usize)], decrease: f64, separation: f64) -> (f64, usize) {
+    if separation <= 0.0 {
+        return (1.0, 0);
     }
     let lambda = decrease / separation;
     let mut sum = 0.0;
     let mut used = 0usize;
-    for g in 0..groups {
-        let part = &pairs[g * n / groups..(g + 1) * n / groups];
+    let mut start = 0usize;
+    while start < pairs.len() {
+        let seg = pairs[start].3;
+        let end = start + pairs[start..].iter().take_while(|p| p.3 == seg).count();
+        let part = &pairs[start..end];
+        start = end;
         let d: f64 = part.iter().map(|p| p.1 - p.0).sum();
         let delta: f64 = part.iter().map(|p| p.2).sum();
         if delta > 1e-9 * separation {
@@ -470,9 +551,31 @@ fn dispersion(pairs: &[(f64, f64, f64)], decrease: f64, separation: f64) -> f64 
         }
     }
     if used < 2 {
-        return 1.0;
+        return (1.0, used);
     }
-    (sum / (used - 1) as f64).max(1.0)
+    ((sum / (used - 1) as f64).max(1.0), used)
+}
+
+/// The z of a held-out decrease whose noise scale was estimated from `groups` groups, as the
+/// normal deviate of the same tail probability: Student's t with `groups − 1` degrees of
+/// freedom when the scale came from the data (above its floor of 1), the z itself when the
+/// measurement σ set it. With a dozen holds, an estimated scale is itself uncertain by ±40 %.
+fn normal_equivalent(z: f64, noise_scale: f64, groups: usize) -> f64 {
+    use statrs::distribution::{ContinuousCDF, Normal as Gauss, StudentsT};
+    if !z.is_finite() || noise_scale <= 1.0 || groups < 3 {
+        return z;
+    }
+    let (Ok(t), Ok(n)) = (
+        StudentsT::new(0.0, 1.0, (groups - 1) as f64),
+        Gauss::new(0.0, 1.0),
+    ) else {
+        return z;
+    };
+    let tail = t.sf(z.abs());
+    if tail <= 0.0 || tail >= 0.5 {
+        return z;
+    }
+    n.inverse_cdf(1.0 - tail).copysign(z)
 }
 
 /// Validate the flight model (`flight_idx` of `layout`, with the parameters `fixed` held at
@@ -521,6 +624,7 @@ pub fn validate_flight_tables(
         fixed,
         components,
         fold,
+        segment: attitude_segments(set),
         normals,
         total,
         g_ref,
@@ -530,24 +634,37 @@ pub fn validate_flight_tables(
     let mut taken: Vec<usize> = Vec::new();
     let mut taken_tests: Vec<ComponentTest> = Vec::new();
     let mut current = folds.evaluate(&[]);
-    let mut last_round: Vec<(usize, HeldOutTest)> = Vec::new();
+    let mut last_round: Vec<(usize, HeldOutTest, Option<HeldOutTest>)> = Vec::new();
     while taken.len() < folds.components.len() {
         let candidates: Vec<usize> = (0..folds.components.len())
             .filter(|c| !taken.contains(c))
             .collect();
-        let results: Vec<(usize, HeldOutTest, Evaluation)> = candidates
+        type Tested = (usize, HeldOutTest, Option<HeldOutTest>, Evaluation);
+        let results: Vec<Tested> = candidates
             .par_iter()
             .map(|&c| {
                 let mut free = taken.clone();
                 free.push(c);
                 let e = folds.evaluate(&free);
-                (c, folds.compare(&e, &current), e)
+                let all = folds.compare(&e, &current);
+                let trackers = folds.compare_trackers(&e, &current);
+                (c, all, trackers, e)
             })
             .collect();
-        last_round = results.iter().map(|(c, imp, _)| (*c, *imp)).collect();
-        let Some((c, imp, e)) = results
+        last_round = results
+            .iter()
+            .map(|(c, imp, t, _)| (*c, *imp, *t))
+            .collect();
+        // A change the trackers see must lower the trackers' own held-out χ² as well: the
+        // FSS rows are taken against the trackers' batch attitude with white weights, and a
+        // Sun-sensor error the model lacks can pull a tracker's alignment alike in every
+        // block (`docs/investigations.md`, the segment-grouped gate).
+        let trackers_agree = |c: usize, t: &Option<HeldOutTest>| {
+            !folds.components[c].trackers || t.as_ref().is_none_or(|t| t.z > MIN_IMPROVEMENT_Z)
+        };
+        let Some((c, imp, trackers, e)) = results
             .into_iter()
-            .filter(|(_, imp, _)| imp.z.is_finite())
+            .filter(|(c, imp, t, _)| imp.z.is_finite() && trackers_agree(*c, t))
             .max_by(|a, b| a.1.z.total_cmp(&b.1.z))
         else {
             break;
@@ -559,16 +676,18 @@ pub fn validate_flight_tables(
         taken_tests.push(ComponentTest {
             component: folds.components[c].name.clone(),
             improvement: imp,
+            trackers,
         });
-        last_round.retain(|(d, _)| *d != c);
+        last_round.retain(|(d, _, _)| *d != c);
         current = e;
     }
     let not_taken: Vec<ComponentTest> = last_round
         .iter()
-        .filter(|(c, _)| !taken.contains(c))
-        .map(|(c, imp)| ComponentTest {
+        .filter(|(c, _, _)| !taken.contains(c))
+        .map(|(c, imp, t)| ComponentTest {
             component: folds.components[*c].name.clone(),
             improvement: *imp,
+            trackers: *t,
         })
         .collect();
     let taken_params: Vec<usize> = taken
@@ -612,8 +731,11 @@ fn summary(
     let list = |t: &[ComponentTest]| {
         t.iter()
             .map(|c| {
+                let trackers = c
+                    .trackers
+                    .map_or_else(String::new, |t| format!(", trackers' rows z {:.1}", t.z));
                 format!(
-                    "{} (z {:.1}, batch means {:.1})",
+                    "{} (z {:.1}, batch means {:.1}{trackers})",
                     c.component, c.improvement.z, c.improvement.batch_means_z
                 )
             })
@@ -635,7 +757,7 @@ fn summary(
         )
     } else {
         format!(
-            "no part of diagnose's tables lowers the held-out χ² by more than {MIN_IMPROVEMENT_Z} standard errors against {reference} ({} batches in {} blocks, χ²/dof {})",
+            "no part of diagnose's tables lowers the held-out χ² by more than {MIN_IMPROVEMENT_Z} standard errors against {reference} (and, for a part the trackers see, the trackers' own) ({} batches in {} blocks, χ²/dof {})",
             reference_eval.rows.len(),
             folds.normals.len() - reference_eval.skipped.len(),
             ms_text(chi2_ref),

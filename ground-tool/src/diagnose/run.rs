@@ -428,8 +428,11 @@ pub fn diagnose_run(
         flight
             .ground_only
             .extend(validation.not_taken.iter().map(|c| {
+                let trackers = c
+                    .trackers
+                    .map_or_else(String::new, |t| format!(", trackers' rows z {:.1}", t.z));
                 format!(
-                    "not written (held-out validation, z {:.1}): {}",
+                    "not written (held-out validation, z {:.1}{trackers}): {}",
                     c.improvement.z, c.component
                 )
             }));
