@@ -412,8 +412,9 @@ impl Folds<'_> {
     /// standard error from the noise: with `Δg` the folds' difference of the two models, a
     /// batch's χ² changes by `δ_b = Δgᵀ N_b Δg` in expectation (up if `base` is exact, down if
     /// `new` is) and by `2 √δ_b` σ of noise, so `Σ d_b / (2 √(s² Σ δ_b))` is the held-out
-    /// likelihood-ratio z of the two; `s²` (the models' held-out χ²/dof, at least 1) widens
-    /// it for noise the σ understate. Why not batch means alone (the chain's rule): a change
+    /// likelihood-ratio z of the two; `s²` (the dispersion over the attitude segments,
+    /// [`dispersion`], at least 1) widens it for noise the σ understate, and the z is then read
+    /// through Student's t ([`normal_equivalent`]). Why not batch means alone (the chain's rule): a change
     /// seen in m of its groups cannot get past z ≈ √m there, however large it is.
     fn compare(&self, new: &Evaluation, base: &Evaluation) -> HeldOutTest {
         self.compare_rows(new, base, Rows::All)
