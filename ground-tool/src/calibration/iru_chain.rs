@@ -523,22 +523,11 @@ struct Transition {
 }
 
 impl Transition {
-    /// `F x`.
-    fn apply(&self, x: &Vx) -> Vx {
-        let mut out = *x;
+    /// `F M` for any number of columns (`M` a state vector or a covariance).
+    fn left<const C: usize>(&self, m: &SMatrix<f64, NX, C>) -> SMatrix<f64, NX, C> {
+        let mut out = *m;
         out.fixed_rows_mut::<3>(0)
-            .copy_from(&(self.attitude_rows * x));
-        if self.sys_reset {
-            out.fixed_rows_mut::<3>(SYS).fill(0.0);
-        }
-        out
-    }
-
-    /// `F P`.
-    fn left(&self, p: &Mx) -> Mx {
-        let mut out = *p;
-        out.fixed_rows_mut::<3>(0)
-            .copy_from(&(self.attitude_rows * p));
+            .copy_from(&(self.attitude_rows * m));
         if self.sys_reset {
             out.fixed_rows_mut::<3>(SYS).fill(0.0);
         }
@@ -658,7 +647,7 @@ fn predict(
         q.fixed_view_mut::<3, 3>(SYS, SYS)
             .copy_from(&fix_systematic_arcsec2(&chain.fixes[j], cfg));
     }
-    *x = f.apply(x);
+    *x = f.left(x);
     for i in 0..3 {
         x[i] = model.map_or(0.0, |m| x[i] - m.z[i]);
     }
@@ -1957,7 +1946,7 @@ mod tests {
             let scale = p.amax();
             assert!((f.sandwich(&p) - fd * p * fd.transpose()).amax() < 1e-12 * scale * 100.0);
             assert!((f.left(&p) - fd * p).amax() < 1e-12 * scale * 10.0);
-            assert!((f.apply(&x) - fd * x).amax() < 1e-12 * x.amax() * 10.0);
+            assert!((f.left(&x) - fd * x).amax() < 1e-12 * x.amax() * 10.0);
             assert!((f.transpose_apply(&x) - fd.transpose() * x).amax() < 1e-12 * x.amax() * 10.0);
         }
         let mut h = SMatrix::<f64, 3, NX>::zeros();

@@ -412,36 +412,39 @@ pub fn batch_chi2(
     batch_quadratic(set, layout, g, use_batch, true, Rows::All)
 }
 
-/// [`batch_chi2`] over the trackers' rows only: what the trackers, which give the flight
-/// attitude, say of `g` (the held-out check of a tracker's alignment, [`super::heldout`]).
+/// [`batch_chi2`] over the rows `rows` takes: the trackers' alone say what the trackers,
+/// which give the flight attitude, see of `g` (the held-out judgement of a tracker's table,
+/// [`super::heldout`]).
 #[must_use]
-pub fn batch_chi2_fhst(
+pub fn batch_chi2_rows(
     set: &MeasurementSet,
     layout: &Layout,
     g: &DVector<f64>,
     use_batch: &dyn Fn(usize) -> bool,
+    rows: Rows,
 ) -> Vec<(usize, f64, usize)> {
-    batch_quadratic(set, layout, g, use_batch, true, Rows::Fhst)
+    batch_quadratic(set, layout, g, use_batch, true, rows)
 }
 
-/// [`batch_information`] over the trackers' rows only.
+/// [`batch_information`] over the rows `rows` takes.
 #[must_use]
-pub fn batch_information_fhst(
+pub fn batch_information_rows(
     set: &MeasurementSet,
     layout: &Layout,
     g: &DVector<f64>,
     use_batch: &dyn Fn(usize) -> bool,
+    rows: Rows,
 ) -> Vec<(usize, f64, usize)> {
-    batch_quadratic(set, layout, g, use_batch, false, Rows::Fhst)
+    batch_quadratic(set, layout, g, use_batch, false, rows)
 }
 
 /// The rows a batch quadratic takes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Rows {
+pub enum Rows {
     /// Trackers and FSSs.
     All,
-    /// Trackers only.
-    Fhst,
+    /// Trackers only: what gives the flight attitude.
+    Trackers,
 }
 
 /// [`batch_chi2`] of data that are all zero: `gᵀ N_b g`, the χ² by which the batch tells the

@@ -43,8 +43,8 @@
 //! shrinkage and net-rotation removal [`super::flight`] applies to the uplinked catalog.
 
 use super::fit::{
-    accumulate, batch_chi2, batch_chi2_fhst, batch_information, batch_information_fhst,
-    solve_fixed, Fixed, Layout, Normal, NUISANCE, N_ALIGN,
+    accumulate, batch_chi2, batch_chi2_rows, batch_information_rows, solve_fixed, Fixed, Layout,
+    Normal, Rows, NUISANCE, N_ALIGN,
 };
 use super::measurements::{MeasurementSet, SENSOR_NAMES};
 use crate::calibration::iru_chain::MAX_FOLDS;
@@ -360,7 +360,7 @@ impl Folds<'_> {
                     .map(|(b, c, n)| (b, c, n.saturating_sub(NUISANCE))),
             );
             out.rows_fhst.extend(
-                batch_chi2_fhst(self.set, &self.sub, &g, &in_fold)
+                batch_chi2_rows(self.set, &self.sub, &g, &in_fold, Rows::Trackers)
                     .into_iter()
                     .map(|(b, c, n)| (b, c, n.saturating_sub(NUISANCE))),
             );
@@ -443,10 +443,7 @@ impl Folds<'_> {
                 continue;
             }
             let in_fold = |b: usize| self.fold[b] == Some(f);
-            let info = match which {
-                Rows::All => batch_information(self.set, &self.sub, &dg, &in_fold),
-                Rows::Trackers => batch_information_fhst(self.set, &self.sub, &dg, &in_fold),
-            };
+            let info = batch_information_rows(self.set, &self.sub, &dg, &in_fold, which);
             delta.extend(info.into_iter().map(|(b, d, _)| (b, d)));
         }
         delta.sort_by_key(|d| d.0);
@@ -486,15 +483,6 @@ impl Folds<'_> {
             batches: pairs.len(),
         }
     }
-}
-
-/// The rows a held-out comparison takes.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Rows {
-    /// Trackers and FSSs.
-    All,
-    /// Trackers only: what gives the flight attitude.
-    Trackers,
 }
 
 /// The attitude segment of each batch: a new one at every change of rate mode (a slew starts
