@@ -60,6 +60,15 @@ CASES = {
     "gyro-bias-step": ["--gyro-bias-step", "10000:0.02,-0.015,0.02"],  # ″/s at an unknown time
     "gyro-bias-step-small": ["--gyro-bias-step", "6000:0.008,-0.006,0.008"],  # detection-limit probe
     # --- outside the library
+    "gyro-mode-bias": ["--gyro-mode-bias", "0.02,-0.015,0.02"],  # ″/s in high rate only (15″ over a 60° slew)
+    "gyro-mode-bias-small": ["--gyro-mode-bias", "0.006,-0.004,0.006"],  # detection-limit probe
+    "gyro-rate2-3rates": ["--slew-rates", "0.04,0.08,0.16",
+                          "--gyro-rate2", "10000,-8000,12000"],  # ppm at 1°/s: 13–307 ppm over the rates
+    "clean-3rates": ["--slew-rates", "0.04,0.08,0.16"],  # control for the rate case
+    # each axis out and back at 0.04 and at 0.16 °/s: a rate² scale is separable from an asymmetry
+    "gyro-rate2-2rates": ["--slew-rates", "0.04,0.04,0.16,0.16",
+                          "--gyro-rate2", "10000,-8000,12000"],
+    "asym-2rates": ["--slew-rates", "0.04,0.04,0.16,0.16", "--gyro-asym", "100,-80,120"],
     "fhst2-ringing": ["--ringing", "FHST2:8,-6,10:40:120"],  # 14″ after each slew, 40 s, 120 s decay
     "fhst2-ringing-x2": ["--ringing", "FHST2:16,-12,20:40:120"],  # detection-limit probe
     "fhst1-step": ["--align-step", "FHST1:10000:0,12,-8"],  # 14″ once, mid-run
@@ -118,8 +127,10 @@ def score(truth, report):
     out_ok = []
     for e in out_lib:
         sensors = {e["sensor"], OTHER_TRACKER.get(e["sensor"], e["sensor"])}
+        follows = set(e.get("unexplained_should_follow", []))
         hit = [i for i, u in enumerate(unexpl)
-               if u["sensor"] in sensors and u["regressor"] in e.get("unexplained_should_follow", [])]
+               if u["sensor"] in sensors
+               and follows & ({u["regressor"]} | set(u.get("also_follows", [])))]
         out_ok.append(bool(hit))
         # Structure of the same effect seen on the other tracker against another regressor
         # (relative alignment) is still this effect's, and so is the same structure on any

@@ -538,6 +538,8 @@ def main(argv=None):
                    help="(outside the library) gyro scale nonlinearity: measured = Δθ (1 + k (ω/1°/s)²), k in ppm")
     p.add_argument("--gyro-rate3", default=None, metavar="KX,KY,KZ",
                    help="(outside the library) gyro scale nonlinearity: measured = Δθ (1 + k |ω/1°/s|³), k in ppm")
+    p.add_argument("--gyro-mode-bias", default=None, metavar="BX,BY,BZ",
+                   help="(outside the library) gyro bias added while the IRU is in high rate mode, arcsec/s (ACS), both triads")
     p.add_argument("--gyro-bias-step", action="append", default=[], metavar="T_S:BX,BY,BZ",
                    help="gyro bias step (in diagnose's library: a step at an unknown time) of (BX, BY, BZ) arcsec/s (ACS) at T_S s from the start, "
                         "both triads")
@@ -705,12 +707,17 @@ def main(argv=None):
     if args.gyro_rate2:
         effects.append({"effect": "gyro_rate_squared_scale", "sensor": "IRU", "in_library": False,
                         "parameters_ppm_at_1deg_s": dict(zip("xyz", rate2)),
-                        "unexplained_should_follow": ["slew"]})
+                        "unexplained_should_follow": ["slew", "slew_rate"]})
     rate3 = floats(args.gyro_rate3) if args.gyro_rate3 else [0.0, 0.0, 0.0]
     if args.gyro_rate3:
         effects.append({"effect": "gyro_rate_cubed_scale", "sensor": "IRU", "in_library": False,
                         "parameters_ppm_at_1deg_s": dict(zip("xyz", rate3)),
-                        "unexplained_should_follow": ["slew"]})
+                        "unexplained_should_follow": ["slew", "slew_rate"]})
+    mode_bias = floats(args.gyro_mode_bias) if args.gyro_mode_bias else [0.0, 0.0, 0.0]
+    if args.gyro_mode_bias:
+        effects.append({"effect": "gyro_high_rate_mode_bias", "sensor": "IRU", "in_library": False,
+                        "bias_acs_arcsec_per_s": mode_bias,
+                        "unexplained_should_follow": ["rate_mode"]})
     bias_steps = []
     for spec in args.gyro_bias_step:
         ts, vec = spec.split(":")
@@ -971,6 +978,8 @@ def main(argv=None):
                    for i in range(3)]
             for cfg, chans in ((0, (1, 2, 4)), (1, (0, 3, 5))):
                 b_now = bias_at(cfg, t_mid)
+                if high:
+                    b_now = [b_now[i] + mode_bias[i] * RAD_PER_ARCSEC for i in range(3)]
                 meas = [dth[i] + b_now[i] * args.cycle_s + rng_iru.gauss(0.0, arw * math.sqrt(args.cycle_s))
                         for i in range(3)]
                 dn = scale(mv(g_inv_cfg[cfg], meas), 1.0 / (w_arcsec * RAD_PER_ARCSEC))
@@ -1220,6 +1229,7 @@ def main(argv=None):
             "scale_asymmetry_ppm": asym,
             "rate2_ppm_at_1deg_s": rate2,
             "rate3_ppm_at_1deg_s": rate3,
+            "high_rate_mode_bias_acs_arcsec_per_s": mode_bias,
             "backup_selected_at_s": t_switch,
             "bias_history": [{"t_s": tb, "primary_acs_arcsec_per_s": [x / RAD_PER_ARCSEC for x in bias_at(0, tb)],
                               "backup_acs_arcsec_per_s": [x / RAD_PER_ARCSEC for x in bias_at(1, tb)]}

@@ -42,7 +42,7 @@ use std::collections::BTreeMap;
 /// the declared noise (unknown σ: `n ln(c0/c1)`), the declared noise otherwise (known σ:
 /// `c0 − c1`). With few rows and residuals quieter than declared, `n ln(c0/c1)` would
 /// inflate a change the F test calls noise (ΔBIC 31 at LR p = 0.03 on clean data).
-fn delta_bic(c0: f64, c1: f64, s2: f64, n: usize, k: usize) -> f64 {
+pub(super) fn delta_bic(c0: f64, c1: f64, s2: f64, n: usize, k: usize) -> f64 {
     let n = n as f64;
     let gain = if s2 >= 1.0 {
         n * (c0 / c1.max(1e-9)).ln()
@@ -174,10 +174,13 @@ fn term_rms(samples: &[BiasSample], column: &dyn Fn(&BiasSample) -> f64, est: &[
 /// A batch's corrected attitude and its per-axis variance (rad²), boxed: few batches are
 /// usable (on six months of 30-s frames a few thousand of 0.5 million), so the list costs 8
 /// bytes per batch instead of 104 (issue 22).
-type BatchAttitude = Option<Box<(Matrix3<f64>, Vector3<f64>)>>;
+pub(super) type BatchAttitude = Option<Box<(Matrix3<f64>, Vector3<f64>)>>;
 
 /// The attitude of batch `i`, if usable.
-fn batch_attitude(att: &[BatchAttitude], i: usize) -> Option<(Matrix3<f64>, Vector3<f64>)> {
+pub(super) fn batch_attitude(
+    att: &[BatchAttitude],
+    i: usize,
+) -> Option<(Matrix3<f64>, Vector3<f64>)> {
     att[i].as_deref().copied()
 }
 
@@ -440,8 +443,8 @@ pub fn analyse(
         frames.iter().map(|f| f.iru_temperature_c).sum::<f64>() / frames.len().max(1) as f64;
     // Bias samples.
     let mut samples: Vec<BiasSample> = Vec::new();
-    // Bias history fitted by the accepted models (rad/s, relative to `b_ref`), per frame.
-    let mut model_bias: Option<Vec<Vector3<f64>>> = None;
+    // The hold bias history (accepted models) per frame.
+    let mut hold_bias: Option<HoldBias> = None;
     for i in 0..set.batches.len().saturating_sub(1) {
         let (a, b) = (&set.batches[i], &set.batches[i + 1]);
         if a.high_rate || b.high_rate || a.hi != b.lo {
@@ -700,35 +703,18 @@ pub fn analyse(
         out.bias_fit_after = fitted(&model);
         // The bias the slews see: the fitted history, not the constant reference (a ramp of
         // 0.009″/s per hour left the slew model's residual scale at 10–37 and hid a 100-ppm
-        // scale asymmetry; helper-20's review).
-        if !model.is_empty() {
-            if let Some((_, betas, ..)) = bias_fit(&samples, w_all, &model) {
-                model_bias = Some(
-                    frames
-                        .iter()
-                        .map(|f| {
-                            let s = BiasSample {
-                                t_s: f.time.seconds() - t_first,
-                                dt_s: 0.0,
-                                y: Vector3::zeros(),
-                                var_start: Vector3::zeros(),
-                                var_end: Vector3::zeros(),
-                                chained: false,
-                                dtemp_iru: f.iru_temperature_c - tmean_iru,
-                            };
-                            Vector3::from_fn(|ax, _| {
-                                betas[ax][0]
-                                    + model
-                                        .iter()
-                                        .enumerate()
-                                        .map(|(j, m)| betas[ax][j + 1] * (m.column)(&s))
-                                        .sum::<f64>()
-                            }) * RAD_PER_ARCSEC
-                        })
-                        .collect(),
-                );
-            }
-        }
+        // scale asymmetry; helper-20's review). Kept with its prediction variance also when
+        // no candidate was accepted (the constant hold bias): the slews compare their own
+        // bias with it (`gyro_slews::rate_mode_bias`).
+        hold_bias = hold_bias_per_frame(
+            frames,
+            &samples,
+            w_all,
+            &model,
+            t_first,
+            tmean_iru,
+            cfg.rrw_rad_per_s15 * ARCSEC_PER_RAD,
+        );
     } else {
         out.notes.push(format!(
             "bias history: {} hold-to-hold samples (need 20 and a positive-definite covariance)",
@@ -736,322 +722,94 @@ pub fn analyse(
         ));
     }
 
-    // The whitening factors are dense (samples² per axis, 0.2 GB on six months): not kept
-    // through the slews.
     drop(whiteners);
-    // Scale asymmetry from the slews.
-    asymmetry(
+    let slews = SlewInput {
         input,
         set,
-        &att,
-        &b_ref,
-        model_bias.as_deref(),
+        att: &att,
+        b_ref: &b_ref,
+        hold_bias: hold_bias.as_ref(),
         cfg,
-        &mut out,
-    );
+    };
+    super::gyro_slews::analyse(&slews, &mut out);
     out
+}
+
+/// The bias the holds measure, per frame: the bias history's fit (its constant and the
+/// accepted candidates) relative to the reference `b_ref`, with its prediction variance.
+#[derive(Clone, Debug)]
+pub(super) struct HoldBias {
+    /// Fitted bias relative to `b_ref` (rad/s, ACS), per frame.
+    pub(super) bias_rad_per_s: Vec<Vector3<f64>>,
+    /// Variance of that fit (arcsec²/s², per ACS axis), per frame: the fit's covariance
+    /// scaled by the residual χ²/dof when it is above one.
+    pub(super) var_arcsec2_per_s2: Vec<Vector3<f64>>,
+    /// A candidate beyond the constant was accepted (the slews then take this history as
+    /// their bias; otherwise the OBC's estimate at each slew's start).
+    pub(super) modelled: bool,
+}
+
+/// What the slew analysis reads ([`super::gyro_slews`]).
+pub(super) struct SlewInput<'a> {
+    pub(super) input: &'a GyroInput<'a>,
+    pub(super) set: &'a MeasurementSet,
+    pub(super) att: &'a [BatchAttitude],
+    pub(super) b_ref: &'a Vector3<f64>,
+    pub(super) hold_bias: Option<&'a HoldBias>,
+    pub(super) cfg: &'a GyroConfig,
+}
+
+/// The bias history's fit of `model` evaluated at every frame ([`HoldBias`]).
+fn hold_bias_per_frame(
+    frames: &[GyroFrame],
+    samples: &[BiasSample],
+    w: &Whitener,
+    model: &[&BiasModel],
+    t_first: f64,
+    tmean_iru: f64,
+    rrw_arcsec_per_s15: f64,
+) -> Option<HoldBias> {
+    let t_walk0 = samples.first()?.t_s;
+    let (chi2, betas, covs, n) = bias_fit(samples, w, model)?;
+    let dof = n as f64 - (3 * (model.len() + 1)) as f64;
+    let scale = if dof > 0.0 {
+        (chi2 / dof).max(1.0)
+    } else {
+        1.0
+    };
+    let mut bias_rad_per_s = Vec::with_capacity(frames.len());
+    let mut var_arcsec2_per_s2 = Vec::with_capacity(frames.len());
+    for f in frames {
+        let s = BiasSample {
+            t_s: f.time.seconds() - t_first,
+            dt_s: 0.0,
+            y: Vector3::zeros(),
+            var_start: Vector3::zeros(),
+            var_end: Vector3::zeros(),
+            chained: false,
+            dtemp_iru: f.iru_temperature_c - tmean_iru,
+        };
+        let c = DVector::from_iterator(
+            model.len() + 1,
+            std::iter::once(1.0).chain(model.iter().map(|m| (m.column)(&s))),
+        );
+        bias_rad_per_s.push(Vector3::from_fn(|ax, _| betas[ax].dot(&c)) * RAD_PER_ARCSEC);
+        // The fit's constant is the bias where the walk starts; the walk since then is in
+        // the samples' covariance, not in the fit, so it is added here.
+        let walk = rrw_arcsec_per_s15.powi(2) * (s.t_s - t_walk0).max(0.0);
+        var_arcsec2_per_s2.push(Vector3::from_fn(|ax, _| {
+            (c.transpose() * &covs[ax] * &c)[(0, 0)] * scale + walk
+        }));
+    }
+    Some(HoldBias {
+        bias_rad_per_s,
+        var_arcsec2_per_s2,
+        modelled: !model.is_empty(),
+    })
 }
 
 /// Positions of the bias-step scan (sample indices evenly spaced, the ends excluded).
 const STEP_POSITIONS: usize = 39;
-
-/// Columns of the slew model: bias (3), δM (9), asymmetry (3).
-const NCOL: usize = 15;
-/// First asymmetry column.
-const ASYM: usize = 12;
-
-#[allow(clippy::too_many_lines)]
-fn asymmetry(
-    input: &GyroInput<'_>,
-    set: &MeasurementSet,
-    att: &[BatchAttitude],
-    b_ref: &Vector3<f64>,
-    model_bias: Option<&[Vector3<f64>]>,
-    cfg: &GyroConfig,
-    out: &mut GyroAnalysis,
-) {
-    let frames = input.frames;
-    // Slews (runs of high-rate frames), each bracketed by the last usable attitude batch
-    // before its end region and the first after its start region: holds on both sides when
-    // there are (within 20 min), else the outermost batches inside the slew; kept when the
-    // gyro turned by more than 5° between them.
-    let mut slews = Vec::new();
-    let mut start = None;
-    for (i, f) in frames.iter().enumerate() {
-        match (f.high_rate, start) {
-            (true, None) => start = Some(i),
-            (false, Some(s)) => {
-                slews.push((s, i - 1));
-                start = None;
-            }
-            _ => {}
-        }
-    }
-    let usable: Vec<usize> = (0..set.batches.len())
-        .filter(|&i| att[i].is_some())
-        .collect();
-    // A telemetry gap inside a slew: the gyro increment across it is one counter difference
-    // that may have wrapped (run_check's `gyro_increment_ambiguous`), so no pair spans one.
-    let mut dts: Vec<f64> = frames
-        .iter()
-        .filter_map(|f| f.gyro)
-        .map(|g| g.dt_s)
-        .collect();
-    dts.sort_by(f64::total_cmp);
-    let median_dt = dts.get(dts.len() / 2).copied().unwrap_or(1.0);
-    let gap_free = |a: usize, b: usize| {
-        frames.get(a + 1..=b).is_some_and(|r| {
-            r.iter()
-                .all(|f| f.gyro.is_some_and(|g| g.dt_s <= 3.0 * median_dt))
-        })
-    };
-    let mut pairs = Vec::new();
-    for &(s, e) in &slews {
-        let lo = s.saturating_sub(1200);
-        let hi = e + 1200;
-        let inside: Vec<usize> = usable
-            .iter()
-            .copied()
-            .filter(|&i| set.batches[i].center >= lo && set.batches[i].center <= hi)
-            .collect();
-        let before = inside
-            .iter()
-            .copied()
-            .rfind(|&i| set.batches[i].center <= s)
-            .or_else(|| inside.first().copied());
-        let after = inside
-            .iter()
-            .copied()
-            .find(|&i| set.batches[i].center >= e)
-            .or_else(|| inside.last().copied());
-        let (Some(ia), Some(ib)) = (before, after) else {
-            continue;
-        };
-        let (ca, cb) = (set.batches[ia].center, set.batches[ib].center);
-        if cb <= ca {
-            continue;
-        }
-        if !gap_free(ca, cb) {
-            out.notes.push(format!(
-                "slew at frames {s}..{e} not used for the scale asymmetry: frames without a gyro increment (missing, or a channel the integrator declared stuck) or a step longer than 3 cycles between its end attitudes"
-            ));
-            continue;
-        }
-        let turned: Vector3<f64> = frames[ca + 1..=cb]
-            .iter()
-            .filter_map(|f| f.gyro)
-            .map(|g| g.dtheta_acs_rad)
-            .sum();
-        if turned.norm() > 5.0 * fsw_core::units::RAD_PER_DEG {
-            pairs.push((ia, ib));
-        }
-    }
-    // (z arcsec, S rows 3×9 [bias 3, scale 3, asym 3], var arcsec², angle vector rad)
-    let mut rows: Vec<(
-        Vector3<f64>,
-        nalgebra::SMatrix<f64, 3, NCOL>,
-        Vector3<f64>,
-        Vector3<f64>,
-    )> = Vec::new();
-    for &(ia, ib) in &pairs {
-        let (Some((ma, va)), Some((mb, vb))) = (batch_attitude(att, ia), batch_attitude(att, ib))
-        else {
-            continue;
-        };
-        let (ca, cb) = (set.batches[ia].center, set.batches[ib].center);
-        // With a bias history accepted, its value at the middle of the interval (exact for a
-        // ramp); else the OBC's bias at the start.
-        let bias = match model_bias.and_then(|v| v.get((ca + cb) / 2)) {
-            Some(v) => b_ref + v,
-            None => input
-                .bias_per_frame
-                .as_ref()
-                .and_then(|b| b.get(ca).copied())
-                .unwrap_or(*b_ref),
-        };
-        let mut phi_total = Matrix3::identity();
-        let mut sm = nalgebra::SMatrix::<f64, 3, NCOL>::zeros();
-        let mut angle = Vector3::zeros();
-        for k in ca + 1..=cb {
-            let Some(g) = frames[k].gyro else { continue };
-            let dth = g.dtheta_acs_rad;
-            let phi = (Matrix3::identity() + input.gyro.delta_m) * dth - bias * g.dt_s;
-            let mut u = nalgebra::SMatrix::<f64, 3, NCOL>::zeros();
-            for j in 0..3 {
-                u[(j, j)] = -g.dt_s;
-                // δM (column-major: element (j, c) multiplies Δθ_c into axis j).
-                for c in 0..3 {
-                    u[(j, 3 + 3 * c + j)] = dth[c];
-                }
-                u[(j, ASYM + j)] = -dth[j].abs();
-            }
-            let r = rot(&phi);
-            sm = r * sm + rot(&(phi * 0.5)) * u;
-            phi_total = r * phi_total;
-            angle += dth;
-        }
-        let z = rotvec_from_rot(&(mb * (phi_total * ma).transpose())) * ARCSEC_PER_RAD;
-        // S maps rad-per-unit parameters; use arcsec for z, rad/s → arcsec/s for bias, ppm.
-        let mut s_scaled = sm;
-        for i in 0..3 {
-            for j in 0..3 {
-                s_scaled[(i, j)] *= ARCSEC_PER_RAD * RAD_PER_ARCSEC; // bias in arcsec/s: S·(arcsec/s) → arcsec
-            }
-            for j in 3..NCOL {
-                s_scaled[(i, j)] *= ARCSEC_PER_RAD * 1e-6; // δM and asymmetry in ppm
-            }
-        }
-        let t = (cb - ca) as f64;
-        let proc = (cfg.arw_rad_per_sqrt_s * ARCSEC_PER_RAD).powi(2) * t
-            + (cfg.rrw_rad_per_s15 * ARCSEC_PER_RAD).powi(2) * t.powi(3) / 3.0;
-        if std::env::var_os("DIAGNOSE_DEBUG").is_some() {
-            eprintln!(
-                "interval {ca}..{cb}: angle deg {:.2?} z arcsec {:.1?} var {:.1?}",
-                (angle * fsw_core::units::DEG_PER_RAD).as_slice(),
-                z.as_slice(),
-                (va + vb).as_slice()
-            );
-        }
-        rows.push((z, s_scaled, va + vb + Vector3::repeat(proc), angle));
-    }
-    out.slews = rows.len();
-    if rows.len() < 6 {
-        out.notes.push(format!(
-            "scale asymmetry: only {} intervals with > 5° of rotation between attitude batches (need 6)",
-            rows.len()
-        ));
-        return;
-    }
-    let solve = |cols: &[usize],
-                 use_row: &dyn Fn(usize) -> bool|
-     -> Option<(f64, DVector<f64>, DMatrix<f64>, usize)> {
-        let k = cols.len();
-        let mut n = DMatrix::<f64>::zeros(k, k);
-        let mut b = DVector::<f64>::zeros(k);
-        let mut rr = 0.0;
-        let mut m = 0;
-        for (ri, (z, s, var, _)) in rows.iter().enumerate() {
-            if !use_row(ri) {
-                continue;
-            }
-            for i in 0..3 {
-                let w = 1.0 / var[i];
-                m += 1;
-                rr += w * z[i] * z[i];
-                for (a, &ca) in cols.iter().enumerate() {
-                    b[a] += w * s[(i, ca)] * z[i];
-                    for (c, &cc) in cols.iter().enumerate() {
-                        n[(a, c)] += w * s[(i, ca)] * s[(i, cc)];
-                    }
-                }
-            }
-        }
-        for a in 0..k {
-            n[(a, a)] += 1e-12;
-        }
-        let ch = n.clone().cholesky()?;
-        let x = ch.solve(&b);
-        let chi2 = (rr - x.dot(&b)).max(0.0);
-        Some((chi2, x, ch.inverse(), m))
-    };
-    let base: Vec<usize> = (0..ASYM).collect();
-    let full: Vec<usize> = (0..NCOL).collect();
-    let all = |_: usize| true;
-    let (Some((c0, x0, _, m)), Some((c1, x1, cov1, _))) = (solve(&base, &all), solve(&full, &all))
-    else {
-        out.notes
-            .push("scale asymmetry: singular slew geometry".into());
-        return;
-    };
-    let dof = m as f64 - NCOL as f64;
-    let s2 = if dof > 0.0 { (c1 / dof).max(1e-9) } else { 1.0 };
-    let f = ((c0 - c1) / 3.0) / s2.max(1.0);
-    let p = if dof > 0.0 { f_sf(f, 3.0, dof) } else { 1.0 };
-    let dbic = delta_bic(c0, c1, s2, m, 3);
-    let half = rows.len() / 2;
-    // Halves: interleaved (slews alternate axes and signs, so consecutive halves would lose
-    // observability).
-    let (ha, hb) = (solve(&full, &|i| i % 2 == 0), solve(&full, &|i| i % 2 == 1));
-    let (mut hchi2, mut hp, mut hest) = (f64::NAN, 1.0, (Vec::new(), Vec::new()));
-    if let (Some((_, xa, ca, _)), Some((_, xb, cb, _))) = (ha, hb) {
-        hchi2 = (ASYM..NCOL)
-            .map(|j| (xa[j] - xb[j]).powi(2) / (ca[(j, j)] + cb[(j, j)]))
-            .sum::<f64>();
-        hp = chi2_sf(hchi2, 3.0);
-        hest = (
-            (ASYM..NCOL).map(|j| xa[j]).collect(),
-            (ASYM..NCOL).map(|j| xb[j]).collect(),
-        );
-    }
-    let _ = half;
-    let mut why = Vec::new();
-    if !(p < cfg.alpha) {
-        why.push(format!("LR p {p:.2e} ≥ {}", cfg.alpha));
-    }
-    if !(dbic > cfg.min_delta_bic) {
-        why.push(format!("ΔBIC {dbic:.1} ≤ {}", cfg.min_delta_bic));
-    }
-    if !(hp > 0.0027) {
-        why.push(format!("halves differ (χ² {hchi2:.1}, p {hp:.2e})"));
-    }
-    let ev = Evidence {
-        effect: "gyro_scale_asymmetry[IRU]".into(),
-        k: 3,
-        delta_chi2: c0 - c1,
-        f,
-        p_value: p,
-        p_holm: p,
-        delta_bic: dbic,
-        halves_chi2: hchi2,
-        halves_p: hp,
-        halves_estimates: hest,
-        signature_excess: (f64::NAN, f64::NAN),
-        adequate: true,
-        accepted: why.is_empty(),
-        rejected_because: (!why.is_empty()).then(|| why.join("; ")),
-    };
-    if !why.is_empty() {
-        out.leftover.push(GyroLeftover {
-            evidence: ev.clone(),
-            regressor: "slew_angle_abs",
-            size: (ASYM..NCOL).map(|j| x1[j].abs()).fold(0.0, f64::max),
-            unit: "ppm",
-        });
-    }
-    for (z, s, _, angle) in &rows {
-        let j = angle.iamax();
-        let resid0 = z[j] - (0..ASYM).map(|c| s[(j, c)] * x0[c]).sum::<f64>();
-        let resid1 = z[j] - (0..NCOL).map(|c| s[(j, c)] * x1[c]).sum::<f64>();
-        out.slew_residuals
-            .push((angle[j].to_degrees(), resid0, resid1));
-    }
-    if why.is_empty() {
-        let mut parameters = BTreeMap::new();
-        let mut sigma = BTreeMap::new();
-        let mut units = BTreeMap::new();
-        for (ax, name) in ["x", "y", "z"].iter().enumerate() {
-            parameters.insert((*name).to_owned(), x1[ASYM + ax]);
-            sigma.insert(
-                (*name).to_owned(),
-                (cov1[(ASYM + ax, ASYM + ax)] * s2.max(1.0)).sqrt(),
-            );
-            units.insert(
-                (*name).to_owned(),
-                "ppm (+: over-reads both ways)".to_owned(),
-            );
-        }
-        out.detected.push(Detected {
-            effect: "gyro_scale_asymmetry".into(),
-            sensor: "IRU".into(),
-            parameters,
-            sigma,
-            units,
-            evidence: ev.clone(),
-            star_dirs: BTreeMap::new(),
-        });
-    }
-    out.candidates.push(ev);
-}
 
 #[cfg(test)]
 #[allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]

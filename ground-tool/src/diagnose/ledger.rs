@@ -349,7 +349,11 @@ fn last_reasons(res: &SearchResult) -> BTreeMap<String, String> {
 /// A rejection reason in plain words, the checks' own text after it.
 #[must_use]
 pub fn categorise(why: &str, effect: Option<&Effect>) -> String {
-    let head = if why.contains("no halves") {
+    let head = if why.starts_with("no library effect has this signature") {
+        "no library effect has this signature".to_owned()
+    } else if why.starts_with("not separable from") {
+        "not separable from another form on these data".to_owned()
+    } else if why.contains("no halves") {
         "one arc only: no halves test".to_owned()
     } else if why.starts_with("vetoed") {
         let by = why
@@ -675,7 +679,10 @@ pub fn sensor_ledger(
 #[must_use]
 pub fn gyro_ledger(g: &GyroAnalysis, alpha: f64) -> Vec<LedgerEntry> {
     let family = |effect: &str| {
-        if effect.starts_with("gyro_scale_asymmetry") {
+        if effect.starts_with("gyro_scale_asymmetry")
+            || effect.starts_with("gyro_scale_vs_rate")
+            || effect.starts_with("gyro_rate_mode_bias")
+        {
             Family::GyroSlews
         } else {
             Family::GyroBiasHistory

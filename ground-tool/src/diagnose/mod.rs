@@ -33,6 +33,7 @@ pub mod effects;
 pub mod fit;
 pub mod flight;
 pub mod gyro;
+mod gyro_slews;
 pub mod heldout;
 pub mod inject;
 pub mod ledger;
