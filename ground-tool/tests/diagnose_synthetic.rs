@@ -286,6 +286,22 @@ fn temperature_squared_is_unexplained() {
     }
 }
 
+/// An alignment that moved once (FHST2 rotated by (6, −12, 10)″ at 7,300 s, mid-hold): the
+/// change-point scan places the step within a hold of the truth and the search names it on
+/// FHST2 with its rotation within 3σ.
+#[test]
+fn fhst2_alignment_step_at_an_unknown_time() {
+    let fx = SynthEffects {
+        alignment_step: Some((1, 7_300.0, [6.0, -12.0, 10.0])),
+        ..SynthEffects::default()
+    };
+    let a = run(fx, 15, true, &[]);
+    let d = only(&a, "alignment_step", "FHST2");
+    within_3_sigma(d, &[("x", 6.0), ("y", -12.0), ("z", 10.0)]);
+    let t = d.parameters["t_step_s"];
+    assert!((t - 7_300.0).abs() < 900.0, "step at {t:.0} s");
+}
+
 /// Not in the library: a decaying structural oscillation of FHST2 after every slew is
 /// reported as unexplained against the time since the slew.
 #[test]

@@ -64,6 +64,7 @@ CASES = {
     "gyro-mode-bias-small": ["--gyro-mode-bias", "0.006,-0.004,0.006"],  # detection-limit probe
     "gyro-rate2-3rates": ["--slew-rates", "0.04,0.08,0.16",
                           "--gyro-rate2", "10000,-8000,12000"],  # ppm at 1°/s: 13–307 ppm over the rates
+    "gyro-scale-step": ["--gyro-scale-step", "10000:300,-250,300"],  # ppm from mid-run: 32″ on a 30° slew
     "clean-3rates": ["--slew-rates", "0.04,0.08,0.16"],  # control for the rate case
     # each axis out and back at 0.04 and at 0.16 °/s: a rate² scale is separable from an asymmetry
     "gyro-rate2-2rates": ["--slew-rates", "0.04,0.04,0.16,0.16",

@@ -10,8 +10,8 @@ it Meeus' low-precision formula, Astronomical Algorithms ch. 25, precessed to J2
 parallax and aberration, and FHST / FSS / IRU counts computed with the ICD's conventions.
 
 Optional undeclared effects (--time-tag, --orbit-align, --fhst-radial, --fss-transfer,
---gyro-asym, --gyro-ramp, --gyro-bias-transient, and outside diagnose's library
---gyro-rate2, --gyro-rate3, --gyro-bias-step, --ringing, --align-step) are recorded in
+--gyro-asym, --gyro-ramp, --gyro-bias-transient, --gyro-bias-step, --align-step, and outside
+diagnose's library --gyro-rate2, --gyro-rate3, --gyro-mode-bias, --gyro-scale-step, --ringing) are recorded in
 truth_icd.json "effects" with the library's parameter names; --plan long is the calibration
 day tests/icd/diagnose_cases.py flies them on, --days D repeats its slews for D days.
 
@@ -538,6 +538,8 @@ def main(argv=None):
                    help="(outside the library) gyro scale nonlinearity: measured = Δθ (1 + k (ω/1°/s)²), k in ppm")
     p.add_argument("--gyro-rate3", default=None, metavar="KX,KY,KZ",
                    help="(outside the library) gyro scale nonlinearity: measured = Δθ (1 + k |ω/1°/s|³), k in ppm")
+    p.add_argument("--gyro-scale-step", default=None, metavar="T_S:KX,KY,KZ",
+                   help="(outside the library) gyro scale factor change per ACS axis of K ppm from T_S s on: measured = Δθ (1 + k)")
     p.add_argument("--gyro-mode-bias", default=None, metavar="BX,BY,BZ",
                    help="(outside the library) gyro bias added while the IRU is in high rate mode, arcsec/s (ACS), both triads")
     p.add_argument("--gyro-bias-step", action="append", default=[], metavar="T_S:BX,BY,BZ",
@@ -559,7 +561,7 @@ def main(argv=None):
     p.add_argument("--ringing", action="append", default=[], metavar="SENSOR:AX,AY,AZ:PERIOD_S:DECAY_S",
                    help="(outside the library) mount ringing after every slew: θ = a e^(−t/T) sin(2π t/P), t since the slew ended")
     p.add_argument("--align-step", action="append", default=[], metavar="SENSOR:T_S:X,Y,Z",
-                   help="(outside the library) one-time alignment step at T_S s from the start")
+                   help="one-time alignment step at T_S s from the start (in diagnose's library: a step at an unknown time)")
     p.add_argument("--downlink-every", type=int, default=1, metavar="N",
                    help="raw frames (0x010) and housekeeping (0x011) only every N cycles (cycles k with k %% N == 0); "
                         "the IRU counters accumulate every cycle, byte 13 is the mode of the last cycle's interval; "
@@ -713,6 +715,13 @@ def main(argv=None):
         effects.append({"effect": "gyro_rate_cubed_scale", "sensor": "IRU", "in_library": False,
                         "parameters_ppm_at_1deg_s": dict(zip("xyz", rate3)),
                         "unexplained_should_follow": ["slew", "slew_rate"]})
+    scale_step = (0.0, [0.0, 0.0, 0.0])
+    if args.gyro_scale_step:
+        ts, vec = args.gyro_scale_step.split(":")
+        scale_step = (float(ts), floats(vec))
+        effects.append({"effect": "gyro_scale_step", "sensor": "IRU", "in_library": False,
+                        "t_s": float(ts), "scale_change_ppm": floats(vec),
+                        "unexplained_should_follow": ["time_s"]})
     mode_bias = floats(args.gyro_mode_bias) if args.gyro_mode_bias else [0.0, 0.0, 0.0]
     if args.gyro_mode_bias:
         effects.append({"effect": "gyro_high_rate_mode_bias", "sensor": "IRU", "in_library": False,
@@ -779,9 +788,10 @@ def main(argv=None):
         n, r = sensor_of(spec)
         ts, vec = r.split(":")
         steps.setdefault(n, []).append((float(ts), floats(vec)))
-        effects.append({"effect": "alignment_step", "sensor": n, "in_library": False,
+        # In diagnose's library since 2026-11-26 (a step at an unknown time, scanned).
+        effects.append({"effect": "alignment_step", "sensor": n, "in_library": True,
                         "t_s": float(ts), "rotation_acs_arcsec": floats(vec),
-                        "unexplained_should_follow": ["time_s"]})
+                        "parameters": dict(zip("xyz", floats(vec)))})
 
     # ---- the timeline and the attitude: A0 puts the Sun near the FSS1 boresight.
     t_start_sun = unit(sun_geocentric(t0))
@@ -975,6 +985,7 @@ def main(argv=None):
             dth = [dth[i] + asym[i] * 1e-6 * abs(dth[i])
                    + rate2[i] * 1e-6 * dth[i] * (dth[i] / args.cycle_s / RAD_PER_DEG) ** 2
                    + rate3[i] * 1e-6 * dth[i] * abs(dth[i] / args.cycle_s / RAD_PER_DEG) ** 3
+                   + (scale_step[1][i] * 1e-6 * dth[i] if t_mid >= scale_step[0] and args.gyro_scale_step else 0.0)
                    for i in range(3)]
             for cfg, chans in ((0, (1, 2, 4)), (1, (0, 3, 5))):
                 b_now = bias_at(cfg, t_mid)
@@ -1230,6 +1241,7 @@ def main(argv=None):
             "rate2_ppm_at_1deg_s": rate2,
             "rate3_ppm_at_1deg_s": rate3,
             "high_rate_mode_bias_acs_arcsec_per_s": mode_bias,
+            "scale_step": {"t_s": scale_step[0], "ppm": scale_step[1]} if args.gyro_scale_step else None,
             "backup_selected_at_s": t_switch,
             "bias_history": [{"t_s": tb, "primary_acs_arcsec_per_s": [x / RAD_PER_ARCSEC for x in bias_at(0, tb)],
                               "backup_acs_arcsec_per_s": [x / RAD_PER_ARCSEC for x in bias_at(1, tb)]}

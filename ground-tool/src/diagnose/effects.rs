@@ -83,6 +83,9 @@ pub enum EffectKind {
     /// (ECI, 6 parameters in arcsec; position `(c/n)(a sin nt − b cos nt)` for the parallax),
     /// `n` from the residuals ([`unknown_orbit_rate`]); in the baseline, never reported.
     UnknownOrbit,
+    /// The sensor's alignment rotated once, at a time found by the change-point scan
+    /// ([`super::change_point`]): 3 parameters (ACS, arcsec) on its data from then on.
+    AlignmentStep,
 }
 
 impl EffectKind {
@@ -104,6 +107,7 @@ impl EffectKind {
             Self::GenericAlignmentExtension => "generic_alignment_extension",
             Self::SecularAlignmentExtension => "secular_alignment_extension",
             Self::UnknownOrbit => "unknown_orbit",
+            Self::AlignmentStep => "alignment_step",
         }
     }
 
@@ -166,6 +170,11 @@ pub struct Effect {
     /// The sparse catalog form: only the stars whose own offset test passed
     /// ([`super::sparse_catalog`]), no net-rotation gauge.
     pub sparse: bool,
+    /// Time of an [`EffectKind::AlignmentStep`] (s since the first frame).
+    pub step_time_s: Option<f64>,
+    /// Positions the nonlinear parameter was scanned over (the step time): the candidate's
+    /// p-value is multiplied by it (1 for the others).
+    pub scan_positions: usize,
 }
 
 impl Effect {
@@ -186,7 +195,28 @@ impl Effect {
             extra_params: 0,
             hidden: false,
             sparse: false,
+            step_time_s: None,
+            scan_positions: 1,
         }
+    }
+
+    /// An alignment step of `sensor` at `t_step_s` (s since the first frame), found by a
+    /// change-point scan over `positions` positions.
+    #[must_use]
+    pub fn alignment_step(sensor: usize, t_step_s: f64, positions: usize) -> Self {
+        let mut e = Self::new(
+            EffectKind::AlignmentStep,
+            Some(sensor),
+            &[
+                ("x", "arcsec", 200.0),
+                ("y", "arcsec", 200.0),
+                ("z", "arcsec", 200.0),
+            ],
+        );
+        e.step_time_s = Some(t_step_s);
+        e.scan_positions = positions.max(1);
+        e.extra_params = 1;
+        e
     }
 
     /// The sparse catalog form: this (full) catalog effect restricted to the stars `keep`
@@ -304,6 +334,13 @@ impl Effect {
                     0,
                     v2(m.jm * m.rate_acs.cross(&m.b_acs) * (ARCSEC_PER_RAD * 1e-3)),
                 ));
+            }
+            EffectKind::AlignmentStep => {
+                if self.step_time_s.is_some_and(|t| m.t_s >= t) {
+                    for ax in 0..3 {
+                        out.push((ax, v2(alignment_col(ax))));
+                    }
+                }
             }
             EffectKind::ThermalAlignmentDrift => {
                 let dt = m.dtemp[m.sensor];
@@ -452,7 +489,7 @@ impl Effect {
             EffectKind::FssTransferFunction | EffectKind::FssCyclicError => &[R::FovH, R::FovV],
             EffectKind::CatalogProperMotionError => &[R::StarId],
             EffectKind::GenericAlignmentExtension | EffectKind::SecularAlignmentExtension => &[],
-            EffectKind::UnknownOrbit => &[R::Time],
+            EffectKind::UnknownOrbit | EffectKind::AlignmentStep => &[R::Time],
         }
     }
 }

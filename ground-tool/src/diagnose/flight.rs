@@ -10,6 +10,7 @@
 //! | `fss_transfer_function` | `corrections.fss_transfer[i] += [scale, cross/E³, 0, scale, cross/E³, 0]`, `fss_cubic[i] += [cubic/E³, cubic/E³]`, `fss_cyclic[i] = [p, s_α, c_α, s_β, c_β]` (amplitudes added when the flown pitch is the same or zero) | `fss::correct_transfer_full`: `α = α_m − (c0 α_m + c1 α_m β_m² + c2) − k_α α_m³ − s_α sin(2π α_m/p) − c_α cos(2π α_m/p)` |
 //! | `gyro_scale_asymmetry` ([`iru_update`]) | `IruTable.scale_asymmetry_{primary,backup}[j] += a_j` (ppm → unitless; ACS axis j = channel j of the configuration flown, G ≈ I) | `iru::delta_theta_from_pulses`: `Δθ = G diag(k_j (1 − a_j sgn ΔN_j)) w ΔN` |
 //! | `aberration_annual` | `FilterTable.aberration_correction = true` | annual aberration of catalog stars and the Sun |
+//! | `alignment_step` | the step's rotation (all three components) folded into the sensor's `M_AS`: the table flies the alignment after the step | `M_AS` |
 //! | `catalog_proper_motion_error` | the flown `StarCatalogTable`, each star the data determine moved by its offset (net rotation removed, shrunk by τ²/(τ² + σ²)), `u' = u + x_E e_E + x_N e_N` | the onboard catalog (identification and reference directions) |
 //!
 //! Only terms whose estimate exceeds 3σ are written (the others stay as flown); catalog offsets
@@ -147,6 +148,13 @@ pub fn flight_update(
             }
             thermal_constant[s] += k * (thermal_reference[s] - temperature_mean_c[s]);
         }
+        // An alignment step: the table flies the alignment after it (the flight goes on from
+        // the end of the span).
+        if let (EffectKind::AlignmentStep, Some(s)) = (e.kind, e.sensor) {
+            let start = res.layout.range(i).start;
+            let x = |k: usize| flight_fit.param(start + k).map_or(0.0, |(x, _)| x);
+            thermal_constant[s] += Vector3::new(x(0), x(1), x(2));
+        }
     }
     let mut applied = Vec::new();
     let mut ground_only = Vec::new();
@@ -218,6 +226,24 @@ pub fn flight_update(
                     k[1] / RAD_PER_ARCSEC,
                     k[2] / RAD_PER_ARCSEC,
                     thermal_reference[s]
+                ));
+            }
+            (EffectKind::AlignmentStep, Some(s)) => {
+                let x = |k: usize| {
+                    flight_fit
+                        .param(r.start + k)
+                        .unwrap_or((f64::NAN, f64::NAN))
+                };
+                applied.push(format!(
+                    "{label}: the alignment of {} after the step at t = {:.0} s flies (step [{:.2} ± {:.2}, {:.2} ± {:.2}, {:.2} ± {:.2}] arcsec about ACS x, y, z)",
+                    names[s],
+                    e.step_time_s.unwrap_or(f64::NAN),
+                    x(0).0,
+                    x(0).1,
+                    x(1).0,
+                    x(1).1,
+                    x(2).0,
+                    x(2).1
                 ));
             }
             (EffectKind::FssTransferFunction, Some(s)) if s >= 2 => {
@@ -332,6 +358,11 @@ fn flight_terms(
             EffectKind::FhstDistortion | EffectKind::ThermalAlignmentDrift => {
                 (Vec::new(), vec![0, 1, 2])
             }
+            // A step is one rotation: once it is accepted (and the held-out gate takes it),
+            // all three components go up, each at its estimate. Zeroing a component under
+            // 3σ would fly the alignment before the step about that axis: the writer's 12″
+            // FHST1 step about y, at 7 ± 7″ in six hours, flew 17.7″ from the truth.
+            EffectKind::AlignmentStep => ((0..3).collect(), Vec::new()),
             EffectKind::MagnitudeBias => (Vec::new(), vec![0, 1]),
             // Scale, cross, cubic and (with a pitch) the cyclic sin/cos of both heads.
             EffectKind::FssTransferFunction => (Vec::new(), (0..r.len()).collect()),

@@ -23,6 +23,7 @@
 //! | scale asymmetry | `−|Δθ_j|` (a channel reading `1 ± a` with the sign of the rate) | `slew_angle_abs` | yes: named, fitted |
 //! | scale against rate | `Δθ_j |ω_j/ω_ref|^p`, `p` on [`POWERS`] (× their number) | `slew_rate` | no: unexplained |
 //! | bias against rate mode | the baseline's high-rate bias minus the holds' bias, Wald test | `rate_mode` | no: unexplained |
+//! | scale step | the δM diagonal from slew `k` on, `k` scanned (× the positions) | `time_s` | no: unexplained |
 //!
 //! The asymmetry and the rate forms are F tests of their columns (the noise scale of the
 //! residuals when above the declared noise), with ΔBIC and interleaved halves (slews alternate
@@ -53,11 +54,15 @@ const ASYM: usize = 12;
 const POW: usize = 15;
 /// Powers of the rate tried by the scale-against-rate test.
 pub const POWERS: [f64; 4] = [0.5, 1.0, 2.0, 3.0];
+/// First scale-step column (ppm from the step on; filled per scanned position).
+const STEP: usize = POW + 3 * POWERS.len();
 /// Columns of the slew model.
-const NCOL: usize = POW + 3 * POWERS.len();
-/// Tests of the slew family (asymmetry, scale against rate, bias against rate mode): their
-/// Bonferroni factor.
-pub const SLEW_TESTS: f64 = 3.0;
+const NCOL: usize = STEP + 3;
+/// Tests of the slew family (asymmetry, scale against rate, bias against rate mode, scale
+/// step): their Bonferroni factor.
+pub const SLEW_TESTS: f64 = 4.0;
+/// Fewest slews on each side of a scanned scale step.
+const STEP_SIDE: usize = 3;
 /// Fewest slews analysed.
 const MIN_SLEWS: usize = 6;
 
@@ -138,7 +143,10 @@ pub(super) fn analyse(inp: &SlewInput<'_>, out: &mut GyroAnalysis) {
     }
     // 2. A scale that changes with the rate (outside the library): the best power on the grid.
     rate_power_test(&rows, &model, omega_ref, inp, out);
-    // 3. The slews' bias against the holds' (outside the library).
+    // 3. A scale that changed once (outside the library): the step's slew scanned.
+    let mut rows = rows;
+    scale_step_test(&mut rows, &model, inp, out);
+    // 4. The slews' bias against the holds' (outside the library).
     let Some(fit) = solve(&rows, &model, &all) else {
         return;
     };
@@ -551,7 +559,7 @@ fn rate_power_test(
         return;
     };
     ev.accepted = false;
-    if ev.rejected_because.is_none() {
+    if ev.rejected_because.is_none() || ev.p_holm < inp.cfg.alpha {
         ev.rejected_because =
             Some("no library effect has this signature: a scale that changes with the rate".into());
     }
@@ -562,6 +570,71 @@ fn rate_power_test(
             .map(|j| fit.x[model.len() + j].abs())
             .fold(0.0, f64::max),
         unit: "ppm at the reference rate",
+    });
+    out.candidates.push(ev);
+}
+
+/// A scale factor that changed once (outside the library): the δM diagonal from slew `k` on,
+/// `k` scanned over the slews (at least [`STEP_SIDE`] on each side), the best by χ², its
+/// p-value × the positions. The slews are in time order. Significant: unexplained against
+/// `time_s`, its size the largest change (ppm).
+fn scale_step_test(
+    rows: &mut [SlewRow],
+    model: &[usize],
+    inp: &SlewInput<'_>,
+    out: &mut GyroAnalysis,
+) {
+    let n = rows.len();
+    if n < 2 * STEP_SIDE {
+        return;
+    }
+    let positions = n + 1 - 2 * STEP_SIDE;
+    let cols: Vec<usize> = (STEP..STEP + 3).collect();
+    let fill = |rows: &mut [SlewRow], k: usize| {
+        for (i, r) in rows.iter_mut().enumerate() {
+            for j in 0..3 {
+                for a in 0..3 {
+                    r.s[(a, STEP + j)] = if i >= k { r.s[(a, DM + 4 * j)] } else { 0.0 };
+                }
+            }
+        }
+    };
+    let mut best: Option<(usize, Evidence, SlewFit)> = None;
+    for k in STEP_SIDE..=n - STEP_SIDE {
+        fill(rows, k);
+        let Some((ev, fit, _)) = column_test(
+            rows,
+            model,
+            &cols,
+            "gyro_scale_step[IRU]",
+            positions as f64,
+            inp,
+        ) else {
+            continue;
+        };
+        if best.as_ref().is_none_or(|b| ev.delta_chi2 > b.1.delta_chi2) {
+            best = Some((k, ev, fit));
+        }
+    }
+    let Some((k, mut ev, fit)) = best else {
+        return;
+    };
+    fill(rows, k);
+    ev.effect = format!("gyro_scale_step[IRU] (from slew {} of {n})", k + 1);
+    ev.accepted = false;
+    // A step happens once: the interleaved halves do test it (both hold slews on each side),
+    // but a failed halves check is not a reason to call it something else.
+    if ev.rejected_because.is_none() || ev.p_holm < inp.cfg.alpha {
+        ev.rejected_because =
+            Some("no library effect has this signature: a scale factor that changed once".into());
+    }
+    out.leftover.push(GyroLeftover {
+        evidence: ev.clone(),
+        regressor: "time_s",
+        size: (0..3)
+            .map(|j| fit.x[model.len() + j].abs())
+            .fold(0.0, f64::max),
+        unit: "ppm",
     });
     out.candidates.push(ev);
 }

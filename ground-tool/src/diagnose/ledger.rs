@@ -210,7 +210,7 @@ pub fn sweep(set: &MeasurementSet, res: &SearchResult, alpha: f64) -> Vec<Swept>
         let dchi2 = current.chi2 - big.chi2;
         let f = (dchi2 / k) / big.s2();
         let p = if big.dof > 0.0 {
-            f_sf(f, k, big.dof)
+            (f_sf(f, k, big.dof) * effect.scan_positions as f64).min(1.0)
         } else {
             1.0
         };

@@ -29,6 +29,7 @@
 //!
 //! [`synthetic`] makes frames with known effects for tests.
 
+pub mod change_point;
 pub mod effects;
 pub mod fit;
 pub mod flight;
@@ -149,6 +150,10 @@ pub fn effect_parameters(
     if let Some(p) = e.pitch_rad {
         v.insert("pitch_deg".into(), p.to_degrees());
         u.insert("pitch_deg".into(), "deg".into());
+    }
+    if let Some(t) = e.step_time_s {
+        v.insert("t_step_s".into(), t);
+        u.insert("t_step_s".into(), "s since the first frame".into());
     }
     (v, s, u)
 }

@@ -333,7 +333,7 @@ pub fn search(
     declared: &[String],
     config: &SearchConfig,
 ) -> anyhow::Result<SearchResult> {
-    let first = search_with_pitch(set, declared, config, None)?;
+    let first = search_with_pitch(set, declared, config, &Nonlinear::default())?;
     // The cyclic pitch is a nonlinear parameter searched on the preliminary residuals; an
     // effect not yet modelled there (a time tag, a thermal term) can hide the reticle's
     // period. Search again on the final residuals; a period found only now restarts the loop
@@ -352,23 +352,56 @@ pub fn search(
             any |= again[k].is_some();
         }
     }
-    if !any {
+    // An accepted alignment step's time, scanned again on the final residuals with the step
+    // added back: the preliminary fit's batch attitudes absorbed part of the step where the
+    // sensor dominates them (an FSS1 step at 10,000 s was placed at 12,152 s).
+    let steps = super::change_point::rescan_accepted_steps(set, &first);
+    let moved = steps
+        .iter()
+        .zip(&first_step_times(&first))
+        .any(|(new, old)| new.map(|s| s.0) != *old);
+    if !any && !moved {
         return Ok(first);
     }
     if std::env::var_os("DIAGNOSE_DEBUG").is_some() {
         eprintln!(
-            "cyclic pitch found on the final residuals (deg): {:?}; loop again",
-            again.map(|p| p.map(f64::to_degrees))
+            "cyclic pitch found on the final residuals (deg): {:?}, step times {:?}; loop again",
+            again.map(|p| p.map(f64::to_degrees)),
+            steps
         );
     }
-    search_with_pitch(set, declared, config, Some(again))
+    let forced = Nonlinear {
+        pitch: Some(again),
+        steps: moved.then_some(steps),
+    };
+    search_with_pitch(set, declared, config, &forced)
+}
+
+/// The accepted alignment steps' times per sensor.
+fn first_step_times(res: &SearchResult) -> [Option<f64>; 4] {
+    let mut out = [None; 4];
+    for &i in &res.added {
+        let e = &res.layout.effects[i];
+        if let (EffectKind::AlignmentStep, Some(s)) = (e.kind, e.sensor) {
+            out[s] = e.step_time_s;
+        }
+    }
+    out
+}
+
+/// Nonlinear parameters fixed for a second search: the FSS cyclic pitches and the alignment
+/// steps' times (time, positions of the first scan) per sensor.
+#[derive(Clone, Copy, Debug, Default)]
+struct Nonlinear {
+    pitch: Option<[Option<f64>; 2]>,
+    steps: Option<[Option<(f64, usize)>; 4]>,
 }
 
 fn search_with_pitch(
     set: &mut MeasurementSet,
     declared: &[String],
     config: &SearchConfig,
-    forced_pitch: Option<[Option<f64>; 2]>,
+    forced: &Nonlinear,
 ) -> anyhow::Result<SearchResult> {
     // Preliminary fit (alignments only) to get clean residuals for the pitch search and the
     // outlier flags.
@@ -406,7 +439,7 @@ fn search_with_pitch(
     })?;
     let pf = post_fit(set, &prelim_layout, &prelim.expand(prelim_layout.total));
     set.flag_outliers(&pf.resid);
-    let pitch = forced_pitch.unwrap_or_else(|| {
+    let pitch = forced.pitch.unwrap_or_else(|| {
         [
             cyclic_pitch(set, &pf.resid, 2),
             cyclic_pitch(set, &pf.resid, 3),
@@ -435,7 +468,15 @@ fn search_with_pitch(
             unknown_orbit.map(|n| std::f64::consts::TAU / n / 60.0)
         );
     }
-    let layout = Layout::new(super::effects::library(set, pitch, unknown_orbit));
+    // Alignment steps at the change-point scan's best time per sensor, on the preliminary
+    // residuals (`change_point`).
+    let mut library = super::effects::library(set, pitch, unknown_orbit);
+    library.extend(super::change_point::step_effects(
+        set,
+        &pf.resid,
+        forced.steps,
+    ));
+    let layout = Layout::new(library);
     let systems = accumulate_halves(set, &layout);
     let baseline: Vec<usize> = (0..layout.effects.len())
         .filter(|&i| {
@@ -529,7 +570,8 @@ fn search_with_pitch(
             let dchi2 = current.chi2 - big.chi2;
             let s2 = big.s2();
             let f = (dchi2 / k as f64) / s2;
-            let p = f_sf(f, k as f64, big.dof);
+            // A scanned nonlinear parameter (a step's time): Bonferroni over the scan.
+            let p = (f_sf(f, k as f64, big.dof) * effect.scan_positions as f64).min(1.0);
             let dbic = n_rows * (current.chi2 / big.chi2).ln()
                 - (k + effect.extra_params) as f64 * n_rows.ln();
             // Halves.
@@ -691,7 +733,9 @@ fn search_with_pitch(
                     e.delta_bic, config.min_delta_bic
                 ));
             }
-            if full && !(e.halves_p > halves_p_min) {
+            // A step happens once: the half without it cannot fit it.
+            let once = layout.effects[*c].kind == EffectKind::AlignmentStep;
+            if full && !once && !(e.halves_p > halves_p_min) {
                 why.push(format!(
                     "halves differ (χ² {:.1}, p {:.2e})",
                     e.halves_chi2, e.halves_p

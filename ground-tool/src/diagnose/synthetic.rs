@@ -50,6 +50,9 @@ pub struct SynthEffects {
     /// Not in the library: (sensor, amplitude arcsec, period s, decay s, ACS axis) oscillation
     /// of the sensor's alignment after every slew.
     pub post_slew_oscillation: Option<(usize, f64, f64, f64, usize)>,
+    /// (sensor, time s, rotation arcsec ACS): the sensor's alignment rotated once, from that
+    /// time on (`M' = Rot(θ) M`).
+    pub alignment_step: Option<(usize, f64, [f64; 3])>,
 }
 
 /// Synthetic run settings.
@@ -334,6 +337,11 @@ pub fn generate(cfg: &SynthConfig) -> SynthRun {
             let dt = dtemp[s];
             let mut th = Vector3::from(fx.thermal_arcsec_per_c[s]) * dt
                 + Vector3::from(fx.thermal_squared[s]) * (dt * dt);
+            if let Some((ss, t_step, theta)) = fx.alignment_step {
+                if ss == s && t >= t_step {
+                    th += Vector3::from(theta);
+                }
+            }
             if let Some((os, amp, per, decay, axis)) = fx.post_slew_oscillation {
                 if os == s && since.is_finite() {
                     th[axis.min(2)] +=
