@@ -859,6 +859,51 @@ fn search_with_pitch(
                             }
                         }
                     }
+                    // An alignment step's lack of fit, against the same extensions on its
+                    // sensor. A step at a scanned time is a flexible form: a ΔT² alignment
+                    // term of FHST2 (outside the library, on the simulator's temperatures)
+                    // was taken as a step at 3,512 s (Δχ² 465), the generic extension (orbit
+                    // harmonics 2–3, ΔT²) still explaining Δχ² 65 (p 8e-6) beside it and 528
+                    // alone: a smooth form that fits better alone and still adds beside the
+                    // step is the description, not the step. The secular extension (time
+                    // P1–P3) is judged by its share of the step's Δχ² only: over a sensor's
+                    // data with gaps (an FSS sees the Sun in some holds) three polynomials
+                    // mimic a step (Δχ² 2,460 alone against the step's 2,445 on the writer's
+                    // FSS1 step), and a real step whose time the data place a hold late leaves
+                    // a small secular remainder (Δχ² 67), which is reported, not a reason to
+                    // drop the step.
+                    if e.adequate && effect.kind == EffectKind::AlignmentStep {
+                        let mut with_c = model.to_vec();
+                        with_c.push(*c);
+                        for kind in [
+                            EffectKind::GenericAlignmentExtension,
+                            EffectKind::SecularAlignmentExtension,
+                        ] {
+                            let Some(ext) = layout.find(kind, effect.sensor) else {
+                                continue;
+                            };
+                            let Some((_, d, f_ext, p_ext)) = extension_test(&with_c, big.chi2, ext)
+                            else {
+                                continue;
+                            };
+                            if !(p_ext < config.alpha) {
+                                continue;
+                            }
+                            let share = (1.0 - config.adequacy_reduction) * e.delta_chi2;
+                            let alone =
+                                extension_test(model, current.chi2, ext).map_or(0.0, |t| t.1);
+                            let smooth_better = kind == EffectKind::GenericAlignmentExtension
+                                && alone >= e.delta_chi2;
+                            if e.adequate && (d > share || smooth_better) {
+                                e.adequate = false;
+                                why.push(format!(
+                                    "lack of fit: a {} still explains Δχ² {d:.1} (F {f_ext:.2}, p {p_ext:.1e}) beside the step's {:.1}, and {alone:.1} alone",
+                                    extension_terms(kind),
+                                    e.delta_chi2
+                                ));
+                            }
+                        }
+                    }
                 }
             }
             if why.is_empty() {
