@@ -174,3 +174,5 @@ for name, ds in by.items():
     aa = [d["att"][1] for d in good]
     print(f"| {name} | {len(ds)} | {named}/{len(ds)} | {pn}/{pm} | {max(ratios):.3f} | {mean(cb):.1f} → {mean(ca):.1f} | {mean(ab):.1f} → {mean(aa):.1f} |")
 PY
+# The evidence ledger's invariant on every diagnosed run (issue 22).
+python3 "$ROOT/scenarios/undeclared/ledger_check.py" "$WORK"/*-diag.json | tail -n 1 || true
