@@ -14,9 +14,10 @@
 //!    (automatic or commanded) reopens the filter's bias covariance: the new channels have
 //!    their own biases.
 //! 4. **Propagation** of the MEKF with the exact rotation-vector update.
-//! 5. **FHST1, FHST2** (not during slews: gyro-only propagation, as on GRO): counts → unit
-//!    vector in ACS; star identification on a new acquisition; sequential vector update with
-//!    χ² gating.
+//! 5. **FHST1, FHST2** (not during slews: gyro-only propagation, as on GRO, but the trackers'
+//!    new-star and lost flags are followed): counts → unit vector in ACS; star identification
+//!    on a new acquisition in a window from the attitude covariance; sequential focal-plane
+//!    update with χ² gating and the systematic floor.
 //! 6. **FSS1, FSS2**: counts → Sun vector in ACS; onboard Sun ephemeris; update in coarse
 //!    mode only (fine mode is FHST-only, as on GRO); the α/β innovation is always reported.
 //! 7. **Control**: inertial hold or rate-limited eigen-axis slew → wheel torque; IRU rate
@@ -753,12 +754,20 @@ impl FlightCore {
             let result = if self.tables.catalog().stars.is_empty() {
                 Err(StarIdError::NoCatalog)
             } else {
-                star_id::identify(
+                // The window from the attitude covariance (issue 19), at most the table's.
+                let p = &self.filter.covariance;
+                let window = star_id::StarIdWindow::from_covariance(
+                    filter_table,
+                    p.m11 + p.m22 + p.m33,
+                    fhst::measurement_sigma_rad(meas.magnitude, filter_table),
+                    FHST_UNCORRECTED_SYSTEMATIC_RAD,
+                );
+                star_id::identify_in_window(
                     &dir_acs,
                     meas.magnitude,
                     &self.filter.q_acs_from_eci,
                     self.tables.catalog(),
-                    filter_table,
+                    &window,
                 )
             };
             match result {

@@ -67,8 +67,10 @@ fn main() {
     let mut identified = 0usize;
     let mut wrong = 0usize;
     let mut stale = 0usize;
+    let mut last_counters = fsw_core::events::Counters::default();
     while let Some(r) = sim.step() {
         let hk = &r.output.housekeeping;
+        last_counters = hk.counters;
         let t = r.truth.t_s;
         // Wrong-star rate: every identification event against the truth's tracked star.
         for e in &r.output.events {
@@ -129,6 +131,7 @@ fn main() {
         let k = r.frame.fhst.iter().filter(|f| f.flags & 1 != 0).count();
         w.trackers[k.min(2)] += 1;
     }
+    let counters = last_counters;
     let n = all_nees.len().max(1) as f64;
     all_nees.sort_by(|a, b| a.partial_cmp(b).unwrap());
     let q = |p: f64| {
@@ -138,7 +141,7 @@ fn main() {
             .unwrap_or(f64::NAN)
     };
     println!(
-        "SUMMARY cycles {} nees_mean {:.2} median {:.2} p90 {:.2} p99 {:.2} contain3 {:.4} {:.4} {:.4} 3rms {:.1} {:.1} {:.1} stars_identified {} wrong_stars {} wrong_star_cycles {}",
+        "SUMMARY cycles {} nees_mean {:.2} median {:.2} p90 {:.2} p99 {:.2} contain3 {:.4} {:.4} {:.4} 3rms {:.1} {:.1} {:.1} stars_identified {} wrong_stars {} wrong_star_cycles {} unmatched {} ambiguous {}",
         all_nees.len(),
         all_nees.iter().sum::<f64>() / n,
         q(0.5),
@@ -153,5 +156,7 @@ fn main() {
         identified,
         wrong,
         stale,
+        counters.star_id_unmatched,
+        counters.star_id_ambiguous,
     );
 }

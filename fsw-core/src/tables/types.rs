@@ -519,7 +519,9 @@ pub struct FilterTable {
     /// Initial bias σ per axis, rad/s.
     /// docs/tables.md field 8; project choice (not in the paper).
     pub initial_bias_sigma_rad_per_s: f64,
-    /// Star identification: catalog match window, arcsec (≥ the 0.5° requirement).
+    /// Star identification: the widest catalog match window, arcsec (≥ the 0.5° requirement);
+    /// the window used is `5σ` of the predicted position error from the attitude covariance,
+    /// between 120″ and this value (`star_id::StarIdWindow::from_covariance`, issue 19).
     /// Paper: post-maneuver error ≤ 0.5° so that the OBC can identify stars; docs/tables.md field
     /// 9.
     pub star_id_window_arcsec: f64,
