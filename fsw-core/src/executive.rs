@@ -177,7 +177,27 @@ struct TrackerState {
     star: Option<StarMatch>,
     /// Identification was tried for this track and failed (do not retry until a new star).
     failed: bool,
+    /// Samples of the identified star offered to the filter so far (saturating at
+    /// [`TRACK_CONFIRM_SAMPLES`]).
+    offered: u8,
+    /// How many of those the χ² gate refused.
+    gated: u8,
 }
+
+/// A newly identified star is confirmed by its first this many samples.
+/// Project choice (not in the paper): docs/obc_filter.md §4.
+const TRACK_CONFIRM_SAMPLES: u8 = 5;
+
+/// A newly identified star whose first [`TRACK_CONFIRM_SAMPLES`] samples include this many
+/// gated ones is refused for the rest of its track (a displaced or misidentified star): a
+/// right star is gated with probability 0.27 % per sample (χ²₂ at 11.83), so two in five
+/// happen with probability 7e-5, while a star displaced by ~4σ passes the gate on one sample
+/// in several and, with the honest covariance, those few pull the attitude (issue 19: 34″ at
+/// a 0.03° offset). docs/obc_filter.md §4.
+const TRACK_REFUSE_GATED: u8 = 2;
+
+/// Event code (p2 of `StarIdFailed`) of a star refused after its first samples were gated.
+const STAR_REFUSED_AFTER_GATING: u32 = 5;
 
 /// The OBC attitude software state. No heap; `size_of::<FlightCore>()` is reported in
 /// `docs/performance.md` (the star catalog table dominates it).
@@ -663,6 +683,37 @@ impl FlightCore {
         }
     }
 
+    /// Count a newly identified star's first samples and refuse the track when
+    /// [`TRACK_REFUSE_GATED`] of its first [`TRACK_CONFIRM_SAMPLES`] were gated.
+    fn confirm_track(
+        &mut self,
+        tracker: usize,
+        outcome: &crate::mekf::UpdateOutcome,
+        events: &mut heapless::Vec<Event, MAX_EVENTS_PER_CYCLE>,
+    ) {
+        let Some(state) = self.trackers.get_mut(tracker) else {
+            return;
+        };
+        if state.star.is_none() || state.offered >= TRACK_CONFIRM_SAMPLES {
+            return;
+        }
+        state.offered = state.offered.saturating_add(1);
+        if outcome.rejection == Some(crate::mekf::UpdateRejection::Gated) {
+            state.gated = state.gated.saturating_add(1);
+        }
+        if state.gated >= TRACK_REFUSE_GATED {
+            state.star = None;
+            state.failed = true;
+            raise(
+                events,
+                &mut self.counters,
+                EventId::StarIdFailed,
+                to_u32(tracker),
+                STAR_REFUSED_AFTER_GATING,
+            );
+        }
+    }
+
     /// Forget a tracker's identified star when it reports a new acquisition or no valid
     /// star (the same rules as [`Self::process_fhst`], without a measurement): used while
     /// the measurements are not processed (slews). Without it a star acquired during a slew,
@@ -841,6 +892,7 @@ impl FlightCore {
         if outcome.accepted {
             self.cycles_since_star = 0;
         }
+        self.confirm_track(tracker, &outcome, events);
         #[allow(clippy::cast_possible_truncation)]
         SensorResidual {
             status,

@@ -718,7 +718,8 @@ impl Mekf {
     /// posterior variance along `uᵢ`, `λᵢRᵢ/(λᵢ + Rᵢ)`, is then `≥ f²`. Where `λᵢ ≤ f²` the
     /// sensor has nothing left to tell (`Rᵢ = λᵢ / ε`, [`FLOORED_INFORMATION_FRACTION`]).
     /// This is the posterior of a sensor whose error is `white(σ) + constant(f)`, in the
-    /// limit of many samples at one geometry (docs/obc_filter.md §3).
+    /// limit of many samples at one geometry (docs/obc_filter.md §3). The χ² gate and the
+    /// reported NIS use `h P hᵀ + (σ² + f²) I`, not the floored `R`.
     fn apply_update(
         &mut self,
         nu: &Vector2<f64>,
@@ -766,7 +767,14 @@ impl Mekf {
         let Some(s_inv) = inverse_spd2(&s) else {
             return self.reject(UpdateRejection::Singular, nu_arr, f64::NAN);
         };
-        let nis = (nu.transpose() * s_inv * nu).x;
+        // The gate tests the innovation against what it can be: the prediction's spread, the
+        // white noise and the systematic, `S_gate = h P hᵀ + (σ² + f²) I` (the floored `R` of
+        // the update would let any outlier through once `P` reaches the floor).
+        let s_gate = hph + Matrix2::identity() * (white + floor_rad * floor_rad);
+        let Some(s_gate_inv) = inverse_spd2(&s_gate) else {
+            return self.reject(UpdateRejection::Singular, nu_arr, f64::NAN);
+        };
+        let nis = (nu.transpose() * s_gate_inv * nu).x;
         if !(nis <= gate_chi2) {
             return self.reject(UpdateRejection::Gated, nu_arr, nis);
         }
