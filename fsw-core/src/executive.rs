@@ -14,9 +14,10 @@
 //!    (automatic or commanded) reopens the filter's bias covariance: the new channels have
 //!    their own biases.
 //! 4. **Propagation** of the MEKF with the exact rotation-vector update.
-//! 5. **FHST1, FHST2** (not during slews: gyro-only propagation, as on GRO): counts → unit
-//!    vector in ACS; star identification on a new acquisition; sequential vector update with
-//!    χ² gating.
+//! 5. **FHST1, FHST2** (not during slews: gyro-only propagation, as on GRO, but the trackers'
+//!    new-star and lost flags are followed): counts → unit vector in ACS; star identification
+//!    on a new acquisition in a window from the attitude covariance; sequential focal-plane
+//!    update with χ² gating and the systematic floor.
 //! 6. **FSS1, FSS2**: counts → Sun vector in ACS; onboard Sun ephemeris; update in coarse
 //!    mode only (fine mode is FHST-only, as on GRO); the α/β innovation is always reported.
 //! 7. **Control**: inertial hold or rate-limited eigen-axis slew → wheel torque; IRU rate
@@ -33,7 +34,9 @@ use crate::fhst;
 use crate::fss;
 use crate::iru::{IruConfiguration, IruIntegrator};
 use crate::mekf::Mekf;
-use crate::raw::{RawSensorFrame, TimeTag, FHST_FLAG_NEW_STAR};
+use crate::raw::{
+    RawSensorFrame, TimeTag, FHST_FLAG_NEW_STAR, FHST_FLAG_TRACKING, FHST_FLAG_VALID,
+};
 use crate::star_id::{self, StarIdError, StarMatch};
 use crate::sun_ephemeris;
 use crate::tables::types::matrix_from_rows;
@@ -54,6 +57,24 @@ const SUN_REFRESH_S: f64 = 10.0;
 
 /// A frame more than this many nominal periods after the previous one is a time-tag jump.
 const MAX_GAP_PERIODS: f64 = 10.0;
+
+/// White (sample-to-sample independent) FSS error per axis, rad: the 0.5-count electronic
+/// noise and the 0.004° quantization, `0.004° · √(0.5² + 1/12)` = 8.3″. The table's
+/// `fss_sigma_arcsec` is then the systematic part (alignment residual and transfer-function
+/// error at one Sun position), which does not average down: it is the floor of
+/// [`Mekf::update_vector_with_floor`]. Paper: resolution 0.004°, noise half a count.
+/// docs/obc_filter.md §3.
+pub const FSS_WHITE_SIGMA_RAD: f64 = 0.004 * 0.577_350_269_189_625_8 * crate::units::RAD_PER_DEG;
+
+/// Systematic FHST error per axis the OBC models but does not correct, rad: the orbital
+/// velocity aberration. `β = 7.5 km/s / c` = 5.16″ displaces a star by the part of `β`
+/// perpendicular to it; along a focal-plane axis `e` that is `β·e`, and with `β` turning
+/// once per orbit in the orbit plane (normal `n`), `E[(β·e)²] = β² (1 − (e·n)²)/2 ≤ β²/2`:
+/// at most `β/√2` = 3.65″ RMS on any axis, whatever the tracker's geometry. It changes over
+/// an orbit, slower than the filter, so it does not average down within a star track: the
+/// floor of [`Mekf::update_focal_plane_with_floor`]. algorithms.md §3.3;
+/// docs/obc_filter.md §3.
+pub const FHST_UNCORRECTED_SYSTEMATIC_RAD: f64 = 3.65 * crate::units::RAD_PER_ARCSEC;
 
 /// Filter mode, telemetry code in brackets.
 /// Paper requirements: coarse attitude (FSS + TAM + IRU, 2° 3σ), fine (FHST + IRU, 0.024° 3σ).
@@ -156,7 +177,27 @@ struct TrackerState {
     star: Option<StarMatch>,
     /// Identification was tried for this track and failed (do not retry until a new star).
     failed: bool,
+    /// Samples of the identified star offered to the filter so far (saturating at
+    /// [`TRACK_CONFIRM_SAMPLES`]).
+    offered: u8,
+    /// How many of those the χ² gate refused.
+    gated: u8,
 }
+
+/// A newly identified star is confirmed by its first this many samples.
+/// Project choice (not in the paper): docs/obc_filter.md §4.
+const TRACK_CONFIRM_SAMPLES: u8 = 5;
+
+/// A newly identified star whose first [`TRACK_CONFIRM_SAMPLES`] samples include this many
+/// gated ones is refused for the rest of its track (a displaced or misidentified star): a
+/// right star is gated with probability 0.27 % per sample (χ²₂ at 11.83), so two in five
+/// happen with probability 7e-5, while a star displaced by ~4σ passes the gate on one sample
+/// in several and, with the honest covariance, those few pull the attitude (issue 19: 34″ at
+/// a 0.03° offset). docs/obc_filter.md §4.
+const TRACK_REFUSE_GATED: u8 = 2;
+
+/// Event code (p2 of `StarIdFailed`) of a star refused after its first samples were gated.
+const STAR_REFUSED_AFTER_GATING: u32 = 5;
 
 /// The OBC attitude software state. No heap; `size_of::<FlightCore>()` is reported in
 /// `docs/performance.md` (the star catalog table dominates it).
@@ -181,6 +222,8 @@ pub struct FlightCore {
     wheel_torque_cmd_nm: Vector3<f64>,
     sun_cache: Option<(f64, Vector3<f64>)>,
     slew_angle_rad: f64,
+    /// Time since the last gyro data (a coast), s.
+    coast_s: f64,
 }
 
 impl Default for FlightCore {
@@ -234,6 +277,7 @@ impl FlightCore {
             wheel_torque_cmd_nm: Vector3::zeros(),
             sun_cache: None,
             slew_angle_rad: 0.0,
+            coast_s: 0.0,
         }
     }
 
@@ -297,7 +341,10 @@ impl FlightCore {
         // Without gyro data for a cycle, propagate with the last known body rate (a coast),
         // not with zero rate.
         let delta_theta = match increment {
-            Some(d) => d,
+            Some(d) => {
+                self.coast_s = 0.0;
+                d
+            }
             None => (self.last_rate_acs_rad_per_s + self.filter.bias_rad_per_s) * dt_s,
         };
         if dt_s > 0.0 {
@@ -317,10 +364,18 @@ impl FlightCore {
             // Out-of-range increment or step: the estimate is left untouched and counted.
             self.counters.iru_unusable_cycles = self.counters.iru_unusable_cycles.saturating_add(1);
         }
+        if initialized && increment.is_none() && self.iru.is_initialized() {
+            self.add_coast_noise(dt_s);
+        }
 
         // 5–6. Measurements. During a slew the OBC propagates on the gyros alone, as GRO
         // did: the post-maneuver error then measures the gyro calibration, and star
         // identification after the slew is what the 0.5° requirement protects.
+        if initialized && self.control_mode == ControlMode::Slew {
+            // No updates, but the trackers' track bookkeeping goes on: a star acquired
+            // during the slew is a new star, not the one identified before it.
+            self.follow_tracks(frame);
+        }
         if initialized && self.control_mode != ControlMode::Slew {
             for tracker in 0..2usize {
                 let r = self.process_fhst(frame, tracker, &mut events);
@@ -628,6 +683,53 @@ impl FlightCore {
         }
     }
 
+    /// Count a newly identified star's first samples and refuse the track when
+    /// [`TRACK_REFUSE_GATED`] of its first [`TRACK_CONFIRM_SAMPLES`] were gated.
+    fn confirm_track(
+        &mut self,
+        tracker: usize,
+        outcome: &crate::mekf::UpdateOutcome,
+        events: &mut heapless::Vec<Event, MAX_EVENTS_PER_CYCLE>,
+    ) {
+        let Some(state) = self.trackers.get_mut(tracker) else {
+            return;
+        };
+        if state.star.is_none() || state.offered >= TRACK_CONFIRM_SAMPLES {
+            return;
+        }
+        state.offered = state.offered.saturating_add(1);
+        if outcome.rejection == Some(crate::mekf::UpdateRejection::Gated) {
+            state.gated = state.gated.saturating_add(1);
+        }
+        if state.gated >= TRACK_REFUSE_GATED {
+            state.star = None;
+            state.failed = true;
+            raise(
+                events,
+                &mut self.counters,
+                EventId::StarIdFailed,
+                to_u32(tracker),
+                STAR_REFUSED_AFTER_GATING,
+            );
+        }
+    }
+
+    /// Forget a tracker's identified star when it reports a new acquisition or no valid
+    /// star (the same rules as [`Self::process_fhst`], without a measurement): used while
+    /// the measurements are not processed (slews). Without it a star acquired during a slew,
+    /// whose new-star flag is seen only in its first sample, would be taken after the slew
+    /// for the star identified before it (issue 19: 15° innovations gated for minutes after
+    /// a slew of the main job).
+    fn follow_tracks(&mut self, frame: &RawSensorFrame) {
+        for (state, sample) in self.trackers.iter_mut().zip(frame.fhst.iter()) {
+            let tracking =
+                sample.flags & FHST_FLAG_VALID != 0 && sample.flags & FHST_FLAG_TRACKING != 0;
+            if !tracking || sample.flags & FHST_FLAG_NEW_STAR != 0 {
+                *state = TrackerState::default();
+            }
+        }
+    }
+
     fn process_fhst(
         &mut self,
         frame: &RawSensorFrame,
@@ -703,12 +805,20 @@ impl FlightCore {
             let result = if self.tables.catalog().stars.is_empty() {
                 Err(StarIdError::NoCatalog)
             } else {
-                star_id::identify(
+                // The window from the attitude covariance (issue 19), at most the table's.
+                let p = &self.filter.covariance;
+                let window = star_id::StarIdWindow::from_covariance(
+                    filter_table,
+                    p.m11 + p.m22 + p.m33,
+                    fhst::measurement_sigma_rad(meas.magnitude, filter_table),
+                    FHST_UNCORRECTED_SYSTEMATIC_RAD,
+                );
+                star_id::identify_in_window(
                     &dir_acs,
                     meas.magnitude,
                     &self.filter.q_acs_from_eci,
                     self.tables.catalog(),
-                    filter_table,
+                    &window,
                 )
             };
             match result {
@@ -769,13 +879,20 @@ impl FlightCore {
             fhst::hv_from_dir(&(m_acs_from_fhst.transpose() * dir_acs))
                 .unwrap_or((meas.h_rad, meas.v_rad))
         };
-        let outcome =
-            self.filter
-                .update_focal_plane(h_rad, v_rad, &ref_eci, &m_acs_from_fhst, sigma, gate);
+        let outcome = self.filter.update_focal_plane_with_floor(
+            h_rad,
+            v_rad,
+            &ref_eci,
+            &m_acs_from_fhst,
+            sigma,
+            FHST_UNCORRECTED_SYSTEMATIC_RAD,
+            gate,
+        );
         let status = self.note_outcome(tracker, outcome.accepted, events);
         if outcome.accepted {
             self.cycles_since_star = 0;
         }
+        self.confirm_track(tracker, &outcome, events);
         #[allow(clippy::cast_possible_truncation)]
         SensorResidual {
             status,
@@ -868,14 +985,41 @@ impl FlightCore {
             };
         }
         let filter_table = self.tables.filter();
-        let sigma = filter_table.fss_sigma_arcsec / ARCSEC_PER_RAD;
+        let floor = filter_table.fss_sigma_arcsec / ARCSEC_PER_RAD;
         let gate = filter_table.gate_chi2;
-        let outcome = self.filter.update_vector(&dir_acs, &sun_eci, sigma, gate);
+        let outcome = self.filter.update_vector_with_floor(
+            &dir_acs,
+            &sun_eci,
+            FSS_WHITE_SIGMA_RAD,
+            floor,
+            gate,
+        );
         let status = self.note_outcome(index, outcome.accepted, events);
         SensorResidual {
             status,
             innovation_arcsec,
             star_id: 0,
+        }
+    }
+
+    /// Process noise of a coast (no gyro data: the increment is the last rate times `dt`).
+    /// The rate is then wrong by what the body's angular acceleration changed since the last
+    /// gyro data, at most `α = torque_limit / min(inertia)` (filter table): after a coast of
+    /// `t` the attitude error is at most `α t²/2`. That bound is taken as 1σ, so each coast
+    /// cycle adds `(α/2)² (t⁴ − (t − dt)⁴)` per axis (docs/obc_filter.md §4).
+    fn add_coast_noise(&mut self, dt_s: f64) {
+        let table = self.tables.filter();
+        let inertia_min = table
+            .inertia_kg_m2
+            .iter()
+            .fold(f64::INFINITY, |a, b| a.min(*b));
+        let alpha = table.torque_limit_nm / inertia_min;
+        let before = self.coast_s;
+        let after = before + dt_s;
+        let (a2, b2) = (after * after, before * before);
+        let var = 0.25 * alpha * alpha * (a2 * a2 - b2 * b2);
+        if self.filter.add_attitude_variance(var).is_ok() {
+            self.coast_s = after;
         }
     }
 

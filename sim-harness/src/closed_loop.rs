@@ -468,6 +468,14 @@ impl Simulation {
         ]
     }
 
+    /// HIP number of the star tracker `unit` (0 = FHST1) followed in its last sample, if any:
+    /// the truth an onboard identification is scored against (wrong-star rate).
+    #[must_use]
+    pub fn tracked_star_id(&self, unit: usize) -> Option<u32> {
+        let hip = self.fhst.get(unit)?.last_truth().hip;
+        (hip != 0).then_some(hip)
+    }
+
     /// Table images uplinked (or scheduled) in this run.
     #[must_use]
     pub fn uploads(&self) -> &[Upload] {

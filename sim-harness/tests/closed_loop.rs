@@ -286,12 +286,12 @@ fn icd_round_trip_independent_decoder() {
 /// 30 min of normal-ops (true alignments, onboard annual aberration correction): the filter
 /// reaches fine mode and the attitude error 3σ per axis is ≤ 15″ (requirement 86″).
 ///
-/// NEES band: a consistent filter gives a mean of 3. This scenario keeps the orbital
-/// aberration of the stars (≤ 5.2″), which the OBC cannot correct (it has no orbit) and does
-/// not model: it raises the mean NEES to ~10 here (1.4 without it, next test; 4 h trials
-/// give ~20). The band [1, 40] therefore accepts today's filter and catches a divergence
-/// (NEES in the hundreds to thousands, as the prelaunch-table runs show);
-/// [`normal_ops_filter_is_consistent_without_unmodelled_effects`] holds the tight band.
+/// NEES band [1.5, 6] (issue 19): a consistent filter gives a mean of 3; 1,200 scored samples
+/// correlated over minutes (a few tens of independent χ²₃ draws) put the mean within a factor
+/// 2 of it. The stars keep their orbital aberration (≤ 5.2″), which the OBC cannot correct
+/// (it has no orbit) but now models as the FHST systematic floor
+/// (`FHST_UNCORRECTED_SYSTEMATIC_RAD`, docs/obc_filter.md §3): measured 2.35 (it was ~10
+/// before the floor, with the band [1, 40]).
 #[test]
 fn e2e_normal_ops_smoke_fine_attitude() {
     let s = scenario("normal-ops", 1800.0);
@@ -318,7 +318,7 @@ fn e2e_normal_ops_smoke_fine_attitude() {
     }
     assert!(sum.fine_mode_fraction > 0.9);
     let nees = sum.filter_nees_mean.unwrap();
-    assert!((1.0..=40.0).contains(&nees), "NEES {nees}");
+    assert!((1.5..=6.0).contains(&nees), "NEES {nees}");
     assert!(sum
         .tables_loaded
         .iter()
@@ -330,14 +330,14 @@ fn e2e_normal_ops_smoke_fine_attitude() {
     );
 }
 
-/// The same 30 min without the two effects the OBC does not model (orbital aberration, FSS
-/// transfer-function errors): the filter is consistent. Band [1, 6]: 1200 scored samples
-/// correlated over minutes (a few tens of independent χ²₃ draws) put the mean within a
-/// factor 2 of 3 for a matched filter; the filter table's gyro noise (ARW 1.5e-7 rad/√s) is
-/// ten times the truth's (1.5e-8), so the OBC is conservative and its NEES sits below 3
-/// (measured 1.4).
+/// The same 30 min without the orbital aberration: the floor the OBC keeps for it
+/// (docs/obc_filter.md §3) is then an error the truth does not have, so the filter must be
+/// conservative (NEES below the consistent band), not inconsistent. Measured 0.26; before
+/// the floor the same run gave 1.4 with the table's tenfold gyro ARW, and the band was
+/// [1, 6]. The FSS transfer-function errors are removed too (the FSSs serve coarse mode only;
+/// the run stays in fine mode).
 #[test]
-fn normal_ops_filter_is_consistent_without_unmodelled_effects() {
+fn normal_ops_filter_is_conservative_without_orbital_aberration() {
     let mut s = scenario("normal-ops", 1800.0);
     s.sky.orbital_aberration = false;
     for f in [&mut s.fss1, &mut s.fss2] {
@@ -351,10 +351,10 @@ fn normal_ops_filter_is_consistent_without_unmodelled_effects() {
     let sum = run(s, &RunOptions::default()).unwrap();
     let nees = sum.filter_nees_mean.unwrap();
     eprintln!(
-        "normal-ops without unmodelled effects: NEES {nees:.2}, rms {:?}″",
+        "normal-ops without orbital aberration: NEES {nees:.2}, rms {:?}″",
         sum.attitude_error_arcsec.rms
     );
-    assert!((1.0..=6.0).contains(&nees), "NEES {nees}");
+    assert!((0.05..1.5).contains(&nees), "NEES {nees}");
 }
 
 /// gro-early-mission with the prelaunch tables through the first calibration maneuver

@@ -132,8 +132,14 @@ fn e2e_fault_fhst_wrong_star() {
         .count();
     // Every sample of the window but the first few (the tracker's own gaps) is gated.
     assert!(gated_fhst1 >= 200, "{gated_fhst1}");
-    let extra = r.counters.gated_measurements - r.baseline_counters.gated_measurements;
-    assert!(extra as usize >= gated_fhst1, "{extra} < {gated_fhst1}");
+    // The gated counter counts them. (Compared with the total, not with the excess over the
+    // fault-free run: that run's own few gated samples, 3 with the covariance of issue 19,
+    // need not recur after the fault has changed the trajectory: 239 < 240.)
+    let gated_total = r.counters.gated_measurements;
+    assert!(
+        gated_total as usize >= gated_fhst1,
+        "{gated_total} < {gated_fhst1}"
+    );
     // The wrong star moves the attitude by less than 3″ more than the fault-free run does.
     assert!(
         r.worst_axis_error_arcsec <= r.baseline_worst_axis_error_arcsec + 3.0,
@@ -144,8 +150,9 @@ fn e2e_fault_fhst_wrong_star() {
     assert_eq!(r.recovery_s, Some(0.0));
 }
 
-/// FHST1 reports a spurious new star 0.3° off: identified against the catalogue (or refused),
-/// then every sample gated.
+/// FHST1 reports a spurious new star 0.3° off: refused by the identification (the window from
+/// the covariance, issue 19) or identified and then gated or refused after its first gated
+/// samples; no displaced sample is used.
 #[test]
 fn e2e_fault_fhst_offset_star() {
     let s = load("fhst-offset-star");
@@ -164,9 +171,12 @@ fn e2e_fault_fhst_offset_star() {
         id_at_900,
         "the spurious acquisition was not (re-)identified"
     );
-    assert!(events_of(&recs, EventId::MeasurementGated)
-        .iter()
-        .any(|(t, p1, _)| *p1 == 0 && (900.0..=1140.0).contains(t)));
+    let refused = |id| {
+        events_of(&recs, id)
+            .iter()
+            .any(|(t, p1, _)| *p1 == 0 && (900.0..=1140.0).contains(t))
+    };
+    assert!(refused(EventId::MeasurementGated) || refused(EventId::StarIdFailed));
     let used = recs
         .iter()
         .filter(|r| (901.0..1140.0).contains(&r.truth.t_s))
@@ -179,8 +189,10 @@ fn e2e_fault_fhst_offset_star() {
 
 /// The spurious star over offsets from 18″ to 2°: the attitude stays inside the requirement
 /// whatever the offset. Small offsets (2–3σ of the FHST noise) pass the χ² gate and pull the
-/// attitude (measured worst 30″ at 0.02° = 72″); from 0.03° on they are gated; from 0.6° the
-/// identification fails, beyond the field edge the input is rejected.
+/// attitude (measured worst 12.8″ at 0.01°; 30″ at 0.02° before the track confirmation of
+/// issue 19, now 4.9″); from 0.02° the track is refused after its first gated samples, from
+/// ~0.03° the identification (window from the covariance, ≥ 120″) fails, beyond the field
+/// edge the input is rejected.
 #[test]
 fn e2e_fault_fhst_offset_sweep() {
     let base = load("fhst-offset-star");

@@ -519,7 +519,9 @@ pub struct FilterTable {
     /// Initial bias σ per axis, rad/s.
     /// docs/tables.md field 8; project choice (not in the paper).
     pub initial_bias_sigma_rad_per_s: f64,
-    /// Star identification: catalog match window, arcsec (≥ the 0.5° requirement).
+    /// Star identification: the widest catalog match window, arcsec (≥ the 0.5° requirement);
+    /// the window used is `5σ` of the predicted position error from the attitude covariance,
+    /// between 120″ and this value (`star_id::StarIdWindow::from_covariance`, issue 19).
     /// Paper: post-maneuver error ≤ 0.5° so that the OBC can identify stars; docs/tables.md field
     /// 9.
     pub star_id_window_arcsec: f64,
@@ -567,8 +569,12 @@ impl FilterTable {
     pub fn default_boot() -> Self {
         Self {
             cycle_period_s: 1.0,
-            arw_rad_per_sqrt_s: 1.5e-7,
-            rrw_rad_per_s_sqrt_s: 1.0e-10,
+            // σ_v of the DRIRU II model, 0.003″/√s (docs/obc_filter.md §2).
+            arw_rad_per_sqrt_s: 1.454e-8,
+            // √(σ_u² + ṙ² T): the 0.0012″/s-in-6-h random walk (3.958e-11) and the early
+            // bias transient at release (ṙ = 4.04e-12 rad/s², T = one orbit, 5,760 s),
+            // docs/obc_filter.md §2.
+            rrw_rad_per_s_sqrt_s: 3.1e-10,
             fhst_sigma_bright_arcsec: 8.0,
             fhst_sigma_faint_arcsec: 24.0,
             fss_sigma_arcsec: 60.0,
@@ -623,11 +629,22 @@ impl FilterTable {
 
     /// FHST σ (rad) for a star of the given magnitude, clamped to the 2.0–5.7 window.
     /// Paper: FHST random error 8–24″ 1σ, magnitudes 2.0–5.7.
+    ///
+    /// Between the table's two end points the σ follows the photon-noise law of a centroid,
+    /// `σ(m) = a + b · 10^{0.2 (m − 5.7)}` (σ ∝ flux^{−½} plus a floor), with `a`, `b` such that
+    /// `σ(2.0)` = `fhst_sigma_bright_arcsec` and `σ(5.7)` = `fhst_sigma_faint_arcsec`: the law
+    /// of the FHST model (`sim-harness` sensors/fhst.rs). The former linear interpolation
+    /// overstated mid-range stars by up to 25 % (m = 4: 16.6″ against 13.4″).
+    /// docs/obc_filter.md §3.
     #[must_use]
     pub fn fhst_sigma_rad(&self, magnitude: f64) -> f64 {
-        let t = ((magnitude - 2.0) / 3.7).clamp(0.0, 1.0);
-        let arcsec = self.fhst_sigma_bright_arcsec
-            + t * (self.fhst_sigma_faint_arcsec - self.fhst_sigma_bright_arcsec);
+        /// `10^{0.2 (2.0 − 5.7)}`: the bright end's flux term relative to the faint end's.
+        const BRIGHT_FLUX_TERM: f64 = 0.181_970_085_860_998_4;
+        let m = magnitude.clamp(2.0, 5.7);
+        let b = (self.fhst_sigma_faint_arcsec - self.fhst_sigma_bright_arcsec)
+            / (1.0 - BRIGHT_FLUX_TERM);
+        let a = self.fhst_sigma_faint_arcsec - b;
+        let arcsec = a + b * libm::exp10(0.2 * (m - 5.7));
         arcsec / ARCSEC_PER_RAD
     }
 }
