@@ -612,7 +612,7 @@ impl Mekf {
     /// `systematic_floor_rad` per axis that does not average down over samples (an alignment
     /// residual, a transfer-function error at a fixed Sun position): the update is weighted
     /// so that the posterior variance along each measured direction stays at or above
-    /// `systematic_floor_rad²` (see [`Mekf::apply_update`]). `0` = white noise only.
+    /// `systematic_floor_rad²` (the weighting is in the private `Mekf::apply_update`). `0` = white noise only.
     /// docs/obc_filter.md §3 (systematic floor).
     pub fn update_vector_with_floor(
         &mut self,
