@@ -26,68 +26,17 @@
 
 mod est_support;
 
+use est_support::filter_truth::{new_track, TruthIru};
 use est_support::Rng;
 use fsw_core::attitude::{attitude_error_rad, Quat};
 use fsw_core::fhst::{self, FHST_RAD_PER_COUNT};
-use fsw_core::iru::{pulse_weight_rad, IruConfiguration, IruIntegrator};
+use fsw_core::iru::{IruConfiguration, IruIntegrator};
 use fsw_core::mekf::Mekf;
-use fsw_core::raw::{
-    FhstSample, IruSample, FHST_FLAG_NEW_STAR, FHST_FLAG_TRACKING, FHST_FLAG_VALID,
-};
+use fsw_core::raw::{FhstSample, FHST_FLAG_NEW_STAR, FHST_FLAG_TRACKING, FHST_FLAG_VALID};
 use fsw_core::tables::types::matrix_from_rows;
 use fsw_core::tables::{AlignmentTable, FilterTable, IruTable};
 use fsw_core::units::ARCSEC_PER_RAD;
-use nalgebra::{Matrix3, Vector3};
-
-/// Truth gyro: channel angles and pulse counters of the primary configuration.
-struct TruthIru {
-    ginv: Matrix3<f64>,
-    angle_rad: Vector3<f64>,
-    pulsed_rad: [f64; 3],
-    counts: [u16; 6],
-}
-
-impl TruthIru {
-    /// Counters at the end of an interval spent in the given mode: a pulse per `w` of angle
-    /// not yet pulsed (the remainder carries over a mode switch).
-    fn sample(&mut self, high_rate: bool, table: &IruTable) -> IruSample {
-        let w = pulse_weight_rad(high_rate, table);
-        let ch = IruConfiguration::Primary.channels();
-        for (axis, &c) in ch.iter().enumerate() {
-            let n = ((self.angle_rad[axis] - self.pulsed_rad[axis]) / w).floor();
-            self.pulsed_rad[axis] += n * w;
-            // The register is 16 bits: it wraps.
-            self.counts[c] = self.counts[c].wrapping_add(n as i64 as u16);
-        }
-        // Unused backup channels count too (not stuck).
-        for c in [0usize, 3, 5] {
-            self.counts[c] = self.counts[c].wrapping_add(7);
-        }
-        IruSample {
-            counts: self.counts,
-            channel_failed: 0,
-            high_rate,
-        }
-    }
-}
-
-struct Track {
-    r_eci: Vector3<f64>,
-    magnitude: f64,
-    ends_at_s: u32,
-    new: bool,
-}
-
-fn new_track(rng: &mut Rng, a_true: &Matrix3<f64>, m: &Matrix3<f64>, now: u32) -> Track {
-    let lim = 3.5_f64.to_radians();
-    let s = fhst::dir_from_hv(rng.range(-lim, lim), rng.range(-lim, lim));
-    Track {
-        r_eci: a_true.transpose() * (m * s),
-        magnitude: rng.range(2.0, 5.7),
-        ends_at_s: now + 60 + (rng.next_u64() % 240) as u32,
-        new: true,
-    }
-}
+use nalgebra::Vector3;
 
 const ARCSEC: f64 = 1.0 / ARCSEC_PER_RAD;
 

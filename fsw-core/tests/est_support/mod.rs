@@ -9,6 +9,8 @@
     clippy::arithmetic_side_effects
 )]
 
+pub mod filter_truth;
+
 use fsw_core::attitude::Quat;
 use nalgebra::Vector3;
 
