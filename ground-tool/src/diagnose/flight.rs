@@ -129,11 +129,11 @@ pub fn flight_update(
             _ => 0.0,
         }
     };
-    // Thermal drift: the reference temperature of each drifting sensor, and the constant
-    // rotation `k (T_ref − T̄)` (arcsec, ACS) that moves the fit's reference (the run mean T̄)
-    // to it, folded into the alignment.
+    // Rotations folded into each sensor's alignment (arcsec, ACS): a thermal drift's constant
+    // `k (T_ref − T̄)` that moves the fit's reference temperature (the run mean T̄) to the
+    // table's, and an alignment step (the table flies the alignment after it).
     let mut thermal_reference = base.corrections.thermal_reference_c;
-    let mut thermal_constant = [Vector3::zeros(); 4];
+    let mut fixed_rotation_arcsec = [Vector3::zeros(); 4];
     for &i in &effects {
         let e = &res.layout.effects[i];
         if let (EffectKind::ThermalAlignmentDrift, Some(s)) = (e.kind, e.sensor) {
@@ -146,19 +146,19 @@ pub fn flight_update(
             if flown.iter().all(|x| *x == 0.0) {
                 thermal_reference[s] = temperature_mean_c[s];
             }
-            thermal_constant[s] += k * (thermal_reference[s] - temperature_mean_c[s]);
+            fixed_rotation_arcsec[s] += k * (thermal_reference[s] - temperature_mean_c[s]);
         }
         // An alignment step: the table flies the alignment after it (the flight goes on from
         // the end of the span).
         if let (EffectKind::AlignmentStep, Some(s)) = (e.kind, e.sensor) {
             let start = res.layout.range(i).start;
             let x = |k: usize| flight_fit.param(start + k).map_or(0.0, |(x, _)| x);
-            thermal_constant[s] += Vector3::new(x(0), x(1), x(2));
+            fixed_rotation_arcsec[s] += Vector3::new(x(0), x(1), x(2));
         }
     }
     let mut applied = Vec::new();
     let mut ground_only = Vec::new();
-    let mut table = adjusted_alignment(base, &g_table, &thermal_constant, counts)?;
+    let mut table = adjusted_alignment(base, &g_table, &fixed_rotation_arcsec, counts)?;
     let g_ground = relative_to_base(res.final_fit.expand(res.layout.total), restrict);
     let ground_alignment = adjusted_alignment(base, &g_ground, &[Vector3::zeros(); 4], counts)?;
     let names = super::measurements::SENSOR_NAMES;
