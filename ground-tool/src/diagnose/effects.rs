@@ -172,8 +172,9 @@ pub struct Effect {
     pub sparse: bool,
     /// Time of an [`EffectKind::AlignmentStep`] (s since the first frame).
     pub step_time_s: Option<f64>,
-    /// Positions the nonlinear parameter was scanned over (the step time): the candidate's
-    /// p-value is multiplied by it (1 for the others).
+    /// Positions the nonlinear parameter was scanned over (the step time), or the subsets
+    /// the sparse catalog form's stars were chosen from: the candidate's p-value is
+    /// multiplied by it (1 for the others).
     pub scan_positions: usize,
 }
 
@@ -236,6 +237,10 @@ impl Effect {
             e.star_dirs.push(self.star_dirs[k]);
         }
         e.sparse = true;
+        // The stars were chosen from every star seen by their own tests: the candidate's
+        // p-value carries the choice of k among n (Bonferroni over the subsets), so one star
+        // picked as the most deviant of a hundred is not tested as if named in advance.
+        e.scan_positions = subsets(self.stars.len(), keep.len());
         e
     }
 
@@ -961,4 +966,33 @@ pub fn library(
         out.push(e);
     }
     out
+}
+
+/// `C(n, k)`, saturating at `usize::MAX` (a look-elsewhere factor: only its size matters).
+#[must_use]
+pub fn subsets(n: usize, k: usize) -> usize {
+    let k = k.min(n.saturating_sub(k));
+    let mut c: f64 = 1.0;
+    for i in 0..k {
+        c = c * (n - i) as f64 / (i + 1) as f64;
+    }
+    if c >= usize::MAX as f64 {
+        usize::MAX
+    } else {
+        (c.round() as usize).max(1)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::subsets;
+
+    #[test]
+    fn subsets_counts_the_choices_and_saturates() {
+        assert_eq!(subsets(5, 2), 10);
+        assert_eq!(subsets(102, 1), 102);
+        assert_eq!(subsets(102, 0), 1);
+        assert_eq!(subsets(4, 4), 1);
+        assert_eq!(subsets(3000, 1500), usize::MAX);
+    }
 }

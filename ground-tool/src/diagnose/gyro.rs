@@ -11,7 +11,8 @@
 //! (`σ_u² min(tᵢ, tⱼ)`), the angle random walk, and each sample's batch attitude errors
 //! (consecutive samples share a batch, but that anti-correlation is left out on purpose:
 //! [`Whitener`] says why), whitened by a Kalman filter in O(n). Candidates: a **ramp**, an **exponential transient**
-//! `A e^{−t/τ}` (τ grid-searched, counted as one more parameter), a **step** at an unknown
+//! `A e^{−t/τ}` (τ grid-searched over 29 values, counted as one more parameter, its p-value
+//! × 29 for the scan), a **step** at an unknown
 //! time (the position scanned over 39 sample indices, counted as one more parameter, its
 //! p-value × 39 for the scan) and a **thermal bias** `k ΔT_IRU`, each with one parameter per
 //! ACS axis, kept with the same evidence rules as the
@@ -341,7 +342,16 @@ struct BiasModel {
     name: &'static str,
     unit: &'static str,
     column: Box<dyn Fn(&BiasSample) -> f64>,
+    /// Nonlinear parameters chosen on a grid (counted in the BIC).
     extra: usize,
+    /// Grid positions the nonlinear parameter was chosen from: the look-elsewhere factor of
+    /// the p-value (Bonferroni over the positions; 1 for a linear form).
+    scan_positions: usize,
+}
+
+/// The transient's τ grid: 600 s to 4 days in steps of ×1.25 (29 values).
+fn transient_taus() -> impl Iterator<Item = f64> {
+    std::iter::successors(Some(600.0_f64), |t| Some(t * 1.25)).take_while(|t| *t <= 4.0 * 86_400.0)
 }
 
 /// An exponential transient `e^{−(t − t0)/τ}`.
@@ -351,6 +361,7 @@ fn transient_form(t0: f64, tau: f64) -> BiasModel {
         unit: "arcsec/s",
         column: Box::new(move |s: &BiasSample| (-(s.t_s - t0) / tau).exp()),
         extra: 1,
+        scan_positions: transient_taus().count(),
     }
 }
 
@@ -361,6 +372,7 @@ fn step_form(t_step: f64) -> BiasModel {
         unit: "arcsec/s",
         column: Box::new(move |s: &BiasSample| f64::from(u8::from(s.t_s >= t_step))),
         extra: 1,
+        scan_positions: STEP_POSITIONS,
     }
 }
 
@@ -496,12 +508,14 @@ pub fn analyse(
             unit: "arcsec/s per hour",
             column: Box::new(move |s: &BiasSample| (s.t_s - t_mid) / 3600.0),
             extra: 0,
+            scan_positions: 1,
         };
         let thermal = BiasModel {
             name: "gyro_thermal_bias",
             unit: "arcsec/s per degC",
             column: Box::new(|s: &BiasSample| s.dtemp_iru),
             extra: 0,
+            scan_positions: 1,
         };
         // Exponential transient: τ on a grid, best by χ² given the baseline.
         let base_models: Vec<&BiasModel> = if cfg.transient_declared {
@@ -509,9 +523,7 @@ pub fn analyse(
         } else {
             vec![]
         };
-        let taus = std::iter::successors(Some(600.0_f64), |t| Some(t * 1.25))
-            .take_while(|t| *t <= 4.0 * 86_400.0);
-        let tau_best = best_on_grid(&samples, w_all, &base_models, taus, &|tau| {
+        let tau_best = best_on_grid(&samples, w_all, &base_models, transient_taus(), &|tau| {
             transient_form(t0, tau)
         })
         .unwrap_or(86_400.0);
@@ -570,12 +582,7 @@ pub fn analyse(
                 let dof = n as f64 - (3 * (ms.len() + 1)) as f64;
                 let s2 = (c1 / dof).max(1e-9);
                 let f = ((c0 - c1) / k as f64) / s2.max(1.0);
-                let scanned = if cand.name == "gyro_bias_step" {
-                    STEP_POSITIONS as f64
-                } else {
-                    1.0
-                };
-                let p = (f_sf(f, k as f64, dof) * scanned).min(1.0);
+                let p = (f_sf(f, k as f64, dof) * cand.scan_positions as f64).min(1.0);
                 let dbic = delta_bic(c0, c1, s2, n, k + cand.extra);
                 let j = ms.len();
                 let est: Vec<f64> = betas.iter().map(|b| b[j]).collect();
