@@ -18,7 +18,7 @@
 //! reference by forward selection: in each round every component not yet taken is added in
 //! turn, the one that lowers the held-out χ² most is taken if its decrease exceeds
 //! [`MIN_IMPROVEMENT_Z`] standard errors (the held-out likelihood ratio with a dispersion
-//! estimated over the attitude segments, `Folds::compare`); a component that changes a
+//! estimated over the error groups, `Folds::compare`); a component that changes a
 //! tracker's table is judged instead on the trackers' own held-out χ² (they give the flight
 //! attitude; the FSS rows, white-weighted against their batch attitude, can pull a tracker's
 //! alignment with an error of their own), all rows not preferring the reference; the
@@ -50,11 +50,13 @@ use super::measurements::{MeasurementSet, SENSOR_NAMES};
 use crate::calibration::iru_chain::MAX_FOLDS;
 use crate::pipeline::alignment_heldout::paired_improvement;
 pub use crate::pipeline::alignment_heldout::MIN_IMPROVEMENT_Z;
+use crate::pipeline::calibrate::FSS_CELL_DEG;
 use fsw_core::attitude::rotvec_from_rot;
 use fsw_core::units::ARCSEC_PER_RAD;
-use nalgebra::{DVector, Matrix3};
+use nalgebra::{DVector, Matrix3, Vector3};
 use rayon::prelude::*;
 use serde::Serialize;
+use std::collections::BTreeMap;
 
 /// A fold's training σ of a parameter beyond this multiple of the whole span's means the
 /// held-out block holds nearly all (≥ 89 %) of the information on it.
@@ -93,7 +95,7 @@ pub struct HeldOutTest {
     /// `chi2_decrease / standard_error`, as the normal deviate of the same tail probability
     /// when the noise scale was estimated from the data (Student's t over `groups − 1`).
     pub z: f64,
-    /// Attitude segments the noise scale came from (`dispersion`).
+    /// Error groups the noise scale came from (`dispersion`, `error_groups`).
     pub groups: usize,
     /// z of the same differences with the standard error by batch means (reported: it
     /// cannot exceed ≈ √m when only m of its groups see the change, a sensor tracking in a
@@ -268,8 +270,11 @@ struct Folds<'a> {
     fixed: Vec<Fixed>,
     components: Vec<Component>,
     fold: Vec<Option<usize>>,
-    /// Attitude segment of each batch ([`attitude_segments`]): the groups of the dispersion.
-    segment: Vec<usize>,
+    /// Error group of each batch ([`error_groups`], FSS cells shared): the groups of the
+    /// dispersion over all rows.
+    group_all: Vec<usize>,
+    /// The same by pointing alone: the groups over the trackers' rows.
+    group_trackers: Vec<usize>,
     normals: Vec<Normal>,
     total: Normal,
     g_ref: DVector<f64>,
@@ -412,7 +417,7 @@ impl Folds<'_> {
     /// standard error from the noise: with `Δg` the folds' difference of the two models, a
     /// batch's χ² changes by `δ_b = Δgᵀ N_b Δg` in expectation (up if `base` is exact, down if
     /// `new` is) and by `2 √δ_b` σ of noise, so `Σ d_b / (2 √(s² Σ δ_b))` is the held-out
-    /// likelihood-ratio z of the two; `s²` (the dispersion over the attitude segments,
+    /// likelihood-ratio z of the two; `s²` (the dispersion over the error groups,
     /// [`dispersion`], at least 1) widens it for noise the σ understate, and the z is then read
     /// through Student's t ([`normal_equivalent`]). Why not batch means alone (the chain's rule): a change
     /// seen in m of its groups cannot get past z ≈ √m there, however large it is.
@@ -428,9 +433,9 @@ impl Folds<'_> {
     }
 
     fn compare_rows(&self, new: &Evaluation, base: &Evaluation, which: Rows) -> HeldOutTest {
-        let (new_rows, base_rows) = match which {
-            Rows::All => (&new.rows, &base.rows),
-            Rows::Trackers => (&new.rows_fhst, &base.rows_fhst),
+        let (new_rows, base_rows, groups_of) = match which {
+            Rows::All => (&new.rows, &base.rows, &self.group_all),
+            Rows::Trackers => (&new.rows_fhst, &base.rows_fhst, &self.group_trackers),
         };
         // δ_b per batch.
         let mut delta: Vec<(usize, f64)> = Vec::new();
@@ -459,12 +464,13 @@ impl Folds<'_> {
             }
             if let Some(o) = base_rows.get(j).filter(|o| o.0 == r.0) {
                 let d = delta.get(k).filter(|d| d.0 == r.0).map_or(0.0, |d| d.1);
-                pairs.push((r.1, o.1, d, self.segment.get(r.0).copied().unwrap_or(0)));
+                pairs.push((r.1, o.1, d, groups_of.get(r.0).copied().unwrap_or(0)));
             }
         }
         let separation: f64 = pairs.iter().map(|p| p.2).sum();
         let decrease: f64 = pairs.iter().map(|p| p.1 - p.0).sum();
         let (noise_scale, groups) = dispersion(&pairs, decrease, separation);
+
         let standard_error = 2.0 * (noise_scale * separation).sqrt();
         let z_raw = decrease / standard_error;
         let (a, b): (Vec<f64>, Vec<f64>) = pairs.iter().map(|p| (p.0, p.1)).unzip();
@@ -473,7 +479,8 @@ impl Folds<'_> {
             separation,
             noise_scale,
             standard_error,
-            z: if separation > MIN_SEPARATION {
+            // One group of shared errors cannot tell the change from the error it shares.
+            z: if separation > MIN_SEPARATION && groups >= 2 {
                 normal_equivalent(z_raw, noise_scale, groups)
             } else {
                 f64::NAN
@@ -509,8 +516,94 @@ fn attitude_segments(set: &MeasurementSet) -> Vec<usize> {
 /// Largest gap between batches of one attitude segment (s).
 const SEGMENT_GAP_S: f64 = 600.0;
 
+/// Two holds closer than this (deg) in inertial pointing see the same stars and share their
+/// errors ([`error_groups`]).
+const SHARED_POINTING_DEG: f64 = 1.0;
+
+/// The groups of the dispersion: the attitude segments ([`attitude_segments`]), with the holds
+/// that share their errors merged. A plan that returns to one attitude between excursions
+/// revisits the same stars, and one that moves the Sun by a few degrees keeps it in the same
+/// part of the FSS field: the catalog errors of those stars, and the transfer-function error
+/// of that part of the field (smooth over the field: scale, cross and cubic terms), are one
+/// draw, not one per hold. Counted as independent they let an FSS2 alignment that fits the
+/// transfer-function error of its one field cell pass the gate at z 3.05 over 9 "groups" and
+/// fly 5.5″ worse than calibrate's (effects table, `catalog` seed 2; the simulator's
+/// three-rate plan, 3 of 3). Holds merge when their inertial pointing differs by less than
+/// [`SHARED_POINTING_DEG`] or, with `fss_cells`, when an FSS sees the Sun within a field cell's
+/// width ([`FSS_CELL_DEG`], calibrate's unit of the shared FSS error) in both, by their mean
+/// directions (distance, not fixed cells: a patch of a few degrees straddles a cell boundary
+/// half the time). Slews stay groups of
+/// their own: they sweep the fields, and merging through them would join every hold.
+fn error_groups(set: &MeasurementSet, fss_cells: bool) -> Vec<usize> {
+    let segment = attitude_segments(set);
+    let n_seg = segment.last().map_or(0, |s| s + 1);
+    let mut first = vec![usize::MAX; n_seg];
+    let mut last = vec![0usize; n_seg];
+    for (b, &g) in segment.iter().enumerate() {
+        first[g] = first[g].min(b);
+        last[g] = b;
+    }
+    let hold: Vec<bool> = (0..n_seg)
+        .map(|g| first[g] != usize::MAX && !set.batches[first[g]].high_rate)
+        .collect();
+    let mut parent: Vec<usize> = (0..n_seg).collect();
+    let root = |parent: &mut Vec<usize>, mut i: usize| {
+        while parent[i] != i {
+            parent[i] = parent[parent[i]];
+            i = parent[i];
+        }
+        i
+    };
+    let join = |parent: &mut Vec<usize>, i: usize, j: usize| {
+        let (ri, rj) = (root(parent, i), root(parent, j));
+        parent[ri] = rj;
+    };
+    // The same part of one FSS's field: mean Sun directions within a cell's width.
+    if fss_cells {
+        let mut sun = vec![[Vector3::<f64>::zeros(); 2]; n_seg];
+        for m in set.meas.iter().filter(|m| m.sensor >= 2 && !m.outlier) {
+            if let Some(&g) = segment.get(m.batch) {
+                sun[g][m.sensor - 2] +=
+                    Vector3::new(m.ang[0].tan(), m.ang[1].tan(), 1.0).normalize();
+            }
+        }
+        let cos_cell = FSS_CELL_DEG.to_radians().cos();
+        for i in (0..n_seg).filter(|&g| hold[g]) {
+            for j in (0..i).filter(|&g| hold[g]) {
+                let shared = (0..2).any(|k| {
+                    let (a, b) = (sun[i][k], sun[j][k]);
+                    a.norm() > 0.0 && b.norm() > 0.0 && a.normalize().dot(&b.normalize()) > cos_cell
+                });
+                if shared {
+                    join(&mut parent, i, j);
+                }
+            }
+        }
+    }
+    // The same pointing: cos θ = (tr(Rᵢ Rⱼᵀ) − 1)/2 between the middle batches.
+    let pointing: Vec<Option<Matrix3<f64>>> = (0..n_seg)
+        .map(|g| {
+            hold[g]
+                .then(|| set.batches.get((first[g] + last[g]) / 2))
+                .flatten()
+                .map(|b| b.m_acs_from_eci)
+        })
+        .collect();
+    let cos_lim = SHARED_POINTING_DEG.to_radians().cos();
+    for i in 0..n_seg {
+        let Some(ri) = pointing[i] else { continue };
+        for j in 0..i {
+            let Some(rj) = pointing[j] else { continue };
+            if ((ri * rj.transpose()).trace() - 1.0) / 2.0 > cos_lim {
+                join(&mut parent, i, j);
+            }
+        }
+    }
+    segment.iter().map(|&g| root(&mut parent, g)).collect()
+}
+
 /// The σ² scale of the held-out differences, from their own scatter, and the number of groups
-/// it came from: over the attitude segments ([`attitude_segments`]), `d_g = λ δ_g + e_g` with
+/// it came from: over the error groups ([`error_groups`]), `d_g = λ δ_g + e_g` with
 /// `var e_g = 4 s² δ_g`; `λ̂ = Σd/Σδ` and `s² = Σ (d_g − λ̂ δ_g)² / (4 δ_g) / (G − 1)` over the
 /// groups that see the change. At least 1 (the σ of the measurements are a floor). This is the
 /// quasi-likelihood dispersion of the held-out likelihood ratio: a change seen in a few groups
@@ -525,16 +618,15 @@ fn dispersion(pairs: &[(f64, f64, f64, usize)], decrease: f64, separation: f64) 
         return (1.0, 0);
     }
     let lambda = decrease / separation;
+    let mut by_group: BTreeMap<usize, (f64, f64)> = BTreeMap::new();
+    for p in pairs {
+        let e = by_group.entry(p.3).or_insert((0.0, 0.0));
+        e.0 += p.1 - p.0;
+        e.1 += p.2;
+    }
     let mut sum = 0.0;
     let mut used = 0usize;
-    let mut start = 0usize;
-    while start < pairs.len() {
-        let seg = pairs[start].3;
-        let end = start + pairs[start..].iter().take_while(|p| p.3 == seg).count();
-        let part = &pairs[start..end];
-        start = end;
-        let d: f64 = part.iter().map(|p| p.1 - p.0).sum();
-        let delta: f64 = part.iter().map(|p| p.2).sum();
+    for &(d, delta) in by_group.values() {
         if delta > 1e-9 * separation {
             sum += (d - lambda * delta).powi(2) / (4.0 * delta);
             used += 1;
@@ -614,7 +706,8 @@ pub fn validate_flight_tables(
         fixed,
         components,
         fold,
-        segment: attitude_segments(set),
+        group_all: error_groups(set, true),
+        group_trackers: error_groups(set, false),
         normals,
         total,
         g_ref,

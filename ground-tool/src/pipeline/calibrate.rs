@@ -98,7 +98,7 @@ const COARSE_MAX_SIGMA_DEG: f64 = 2.0;
 /// one-orbit holds (mean 41″); 4° → 19/20 and 9/20; 8° → 20/20 and 19/20 (mean 28″ and 30″),
 /// the FSS covariances then more conservative (mean NEES FSS1/FSS2 0.07/0.21 against
 /// 0.12/1.27 at 1°).
-const FSS_CELL_DEG: f64 = 8.0;
+pub(crate) const FSS_CELL_DEG: f64 = 8.0;
 
 /// Half-length of the fine-attitude batches (s): the paper's 10-min batches.
 pub(crate) const BATCH_HALF_S: f64 = 300.0;
