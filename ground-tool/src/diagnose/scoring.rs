@@ -59,7 +59,9 @@ pub fn read_truth(run_dir: &Path) -> anyhow::Result<Option<Truth>> {
     }
     let mut alignments_after_run = alignments;
     for (i, n) in names.iter().enumerate() {
-        if let Ok(rows) = serde_json::from_value::<[[f64; 3]; 3]>(v["alignments_after_run"][n].clone()) {
+        if let Ok(rows) =
+            serde_json::from_value::<[[f64; 3]; 3]>(v["alignments_after_run"][n].clone())
+        {
             alignments_after_run[i] = matrix_from_rows(&rows);
         }
     }

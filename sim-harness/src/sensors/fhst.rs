@@ -689,11 +689,17 @@ mod tests {
         truth.t_s = 99.0;
         f.sample(&truth, &sky, 0.0);
         let before = f.last_truth().hv_rad;
-        assert!(before[0].abs() < 1e-12 && before[1].abs() < 1e-12, "{before:?}");
+        assert!(
+            before[0].abs() < 1e-12 && before[1].abs() < 1e-12,
+            "{before:?}"
+        );
         truth.t_s = 100.0;
         f.sample(&truth, &sky, 0.0);
         let after = f.last_truth().hv_rad;
-        assert!((after[1].abs() * ARCSEC_PER_RAD - 20.0).abs() < 0.01, "{after:?}");
+        assert!(
+            (after[1].abs() * ARCSEC_PER_RAD - 20.0).abs() < 0.01,
+            "{after:?}"
+        );
         assert!(after[0].abs() < 1e-12);
         let mut thermal = noiseless();
         thermal.effects.thermal_alignment_arcsec_per_c = [2.0, 0.0, 0.0];

@@ -390,7 +390,8 @@ impl Iru {
             if fx.rate_power_scale_ppm[ch] != 0.0 && dt_s > 0.0 {
                 let w_ref = fx.rate_power_reference_deg_per_s.abs().max(1e-12) * RAD_PER_DEG;
                 let w = d.abs() / dt_s;
-                scale += fx.rate_power_scale_ppm[ch] * 1e-6 * (w / w_ref).powf(fx.rate_power_exponent);
+                scale +=
+                    fx.rate_power_scale_ppm[ch] * 1e-6 * (w / w_ref).powf(fx.rate_power_exponent);
             }
             if fx.scale_step_at_s.is_some_and(|at| t_mid >= at) {
                 scale += fx.scale_step_ppm[ch] * 1e-6;
@@ -711,7 +712,11 @@ mod tests {
         // Intervals ending at 1..=10 s have midpoints before 10 s; 11 and 12 after.
         assert!(per_s[..10].iter().all(|&n| n == 20_000), "{per_s:?}");
         assert_eq!(per_s[10..], [20_010, 20_010]);
-        assert_eq!(iru.total_pulses()[3], 20_000 * 12, "the other channel of y: no step");
+        assert_eq!(
+            iru.total_pulses()[3],
+            20_000 * 12,
+            "the other channel of y: no step"
+        );
     }
 
     /// Scale asymmetry and the high-mode scale error act on the kinematic part.
