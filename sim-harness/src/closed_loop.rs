@@ -309,6 +309,21 @@ impl Simulation {
                     Action::FilterInit(c.q_acs_from_eci.map(quat_from_array))
                 }
                 CommandKind::FilterReset => Action::FilterReset,
+                CommandKind::TableLoad if c.filter_table.is_some() => {
+                    let table = c
+                        .filter_table_image_fields(&scenario)
+                        .with_context(|| format!("{here}.filter_table"))
+                        .map_err(InputError::from)?
+                        .unwrap_or_else(fsw_core::tables::types::FilterTable::default_boot);
+                    let keys: Vec<&String> = c.filter_table.iter().flat_map(|t| t.keys()).collect();
+                    uploads.push(Upload {
+                        source: format!("scenario {here}.filter_table (fields {keys:?})"),
+                        name: "filter.tbl".into(),
+                        image: onboard::image(TableId::Filter, created, &table)?,
+                        at_s: c.at_s,
+                    });
+                    Action::Load(uploads.len() - 1)
+                }
                 CommandKind::TableLoad => {
                     let name = c.file.as_deref().unwrap_or_default();
                     let path = scenario.resolve_file(name);

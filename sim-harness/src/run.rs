@@ -8,7 +8,7 @@
 //! | `telemetry.bin` | CCSDS packets ([`crate::telemetry`]) |
 //! | `metadata.json` | what the operator declares: `scenario`, `epoch_utc`, `cycle_period_s`, `sensors` (declared noise from the scenario's sensor parameters), `declared_effects`, `boot_tables`, `uploads` |
 //! | `uploads/*.tbl` | every table image uplinked (catalog, `--tables`, timeline loads) |
-//! | `truth.json` | scoring only: true `alignments.{FHST1,FHST2,FSS1,FSS2}` (`M_AS`, row-major), IRU `delta_m` and `g` per configuration, `bias_history`, the flown `fss_transfer_function`, `present_effects`, `undeclared_effects` |
+//! | `truth.json` | scoring only: true `alignments.{FHST1,FHST2,FSS1,FSS2}` (`M_AS`, row-major; at the start, without thermal drift), `alignments_after_run` (the same with any alignment step of the run applied: what tables written after the run fly into), IRU `delta_m` and `g` per configuration, `bias_history`, the flown `fss_transfer_function`, `present_effects`, `undeclared_effects` |
 //! | `summary.json` | run statistics ([`Summary`]) |
 //!
 //! Every file is written under a `.partial` name and renamed when complete; `summary.json`
@@ -418,6 +418,9 @@ pub fn present_effects(s: &Scenario) -> Vec<String> {
         if nz(&e.magnitude_bias_arcsec_per_mag) {
             out.push(format!("{name}.magnitude_bias"));
         }
+        if e.alignment_step_at_s.is_some() && nz(&e.alignment_step_arcsec) {
+            out.push(format!("{name}.alignment_step"));
+        }
     }
     let mut fss_tf = false;
     for (name, f) in [("fss1", &s.fss1), ("fss2", &s.fss2)] {
@@ -433,6 +436,9 @@ pub fn present_effects(s: &Scenario) -> Vec<String> {
         }
         if nz(&f.effects.thermal_alignment_arcsec_per_c) {
             out.push(format!("{name}.thermal_alignment_drift"));
+        }
+        if f.effects.alignment_step_at_s.is_some() && nz(&f.effects.alignment_step_arcsec) {
+            out.push(format!("{name}.alignment_step"));
         }
     }
     if fss_tf {
@@ -456,6 +462,15 @@ pub fn present_effects(s: &Scenario) -> Vec<String> {
     }
     if nz(&i.effects.thermal_bias_deg_per_s_per_c) {
         out.push("iru.thermal_bias".into());
+    }
+    if nz(&i.effects.high_rate_bias_deg_per_s) {
+        out.push("iru.high_rate_mode_bias".into());
+    }
+    if nz(&i.effects.rate_power_scale_ppm) {
+        out.push("iru.rate_power_scale".into());
+    }
+    if i.effects.scale_step_at_s.is_some() && nz(&i.effects.scale_step_ppm) {
+        out.push("iru.scale_step".into());
     }
     if i.failure.is_some() {
         out.push("iru_channel_failure".into());
@@ -593,9 +608,23 @@ fn truth_json(sim: &Simulation, bias: &BiasRecorder) -> anyhow::Result<serde_jso
     let m = sim.true_alignments();
     let names = crate::paper::SENSOR_NAMES;
     let mut alignments = serde_json::Map::new();
+    let mut after_run = serde_json::Map::new();
     let mut thetas = serde_json::Map::new();
+    // The alignments at the end of the run (an alignment step applied if it happened within
+    // the run): the truth the tables written after the run fly into.
+    let end = s.duration_s;
+    let steps = [
+        s.fhst1.effects.alignment_step_rad(end),
+        s.fhst2.effects.alignment_step_rad(end),
+        s.fss1.effects.alignment_step_rad(end),
+        s.fss2.effects.alignment_step_rad(end),
+    ];
     for k in 0..4 {
         alignments.insert(names[k].into(), serde_json::json!(rows(&m[k])));
+        after_run.insert(
+            names[k].into(),
+            serde_json::json!(rows(&(fsw_core::attitude::rot(&steps[k]) * m[k]))),
+        );
         let theta = fsw_core::attitude::rotvec_from_rot(&(m[k] * paper.prelaunch(k).transpose()))
             * ARCSEC_PER_RAD;
         thetas.insert(
@@ -611,6 +640,7 @@ fn truth_json(sim: &Simulation, bias: &BiasRecorder) -> anyhow::Result<serde_jso
         "scenario": s.name,
         "seed": s.seed,
         "alignments": alignments,
+        "alignments_after_run": after_run,
         "misalignment_from_prelaunch_acs_arcsec": thetas,
         "iru": {
             "primary": {

@@ -49,7 +49,7 @@
 //! | `slew_to` | `q_acs_from_eci`, or `axis` ("x", "y", "z") + `angle_deg` | `SlewTo(q)`; the relative form is `q = Rot(angle · axis) ⊗ current target` (a rotation of the body about its own axis) |
 //! | `hold` | — | `Hold` (the current estimate becomes the target) |
 //! | `select_iru_config` | `config` = "primary" / "backup" | `SelectIruConfig` |
-//! | `table_load` | `file` (relative to the scenario file) | `TableLoad(image)` |
+//! | `table_load` | `file` (relative to the scenario file), or `filter_table` = { fields } (a filter-table image built from the boot values, the scenario's `filter_table` and these: e.g. a new slew rate limit) | `TableLoad(image)` |
 //! | `table_activate`, `table_abort` | `table` = "alignment", "iru", "filter", "star_catalog" | `TableActivate(id)`, `TableAbort(id)` |
 //! | `filter_initialize` | optional `q_acs_from_eci` (default: truth rotated by `[initial_estimate]`) | `FilterInitialize(q)` |
 //! | `filter_reset` | — | `FilterReset` |
@@ -307,6 +307,32 @@ pub struct TimedCommand {
     /// Table name of `table_activate` / `table_abort`.
     #[serde(default)]
     pub table: Option<String>,
+    /// A `table_load` without `file`: a filter-table image the harness builds from the boot
+    /// values, the scenario's `filter_table` fields and these (e.g.
+    /// `filter_table = { slew_rate_limit_rad_per_s = 2.7925e-3 }` for 0.16°/s slews).
+    #[serde(default)]
+    pub filter_table: Option<toml::Table>,
+}
+
+impl TimedCommand {
+    /// The filter table of a `table_load` with `filter_table`: boot values, then the
+    /// scenario's `filter_table` fields, then the command's, validated.
+    ///
+    /// # Errors
+    /// An unknown field or a value the table refuses.
+    pub fn filter_table_image_fields(
+        &self,
+        scenario: &Scenario,
+    ) -> anyhow::Result<Option<fsw_core::tables::types::FilterTable>> {
+        let Some(own) = &self.filter_table else {
+            return Ok(None);
+        };
+        let mut fields = scenario.filter_table.clone().unwrap_or_default();
+        for (k, v) in own {
+            fields.insert(k.clone(), v.clone());
+        }
+        crate::onboard::filter_table_with(&fields).map(Some)
+    }
 }
 
 /// A whole scenario.
@@ -721,9 +747,19 @@ impl Scenario {
                         (true, false) => {}
                     }
                 }
-                CommandKind::TableLoad if c.file.is_none() => {
-                    bail!("{here}: kind = \"table_load\" needs file")
-                }
+                CommandKind::TableLoad => match (&c.file, &c.filter_table) {
+                    (None, None) => {
+                        bail!("{here}: kind = \"table_load\" needs file or filter_table")
+                    }
+                    (Some(_), Some(_)) => {
+                        bail!("{here}: kind = \"table_load\" takes file or filter_table, not both")
+                    }
+                    (None, Some(_)) => {
+                        c.filter_table_image_fields(self)
+                            .with_context(|| format!("{here}.filter_table"))?;
+                    }
+                    (Some(_), None) => {}
+                },
                 CommandKind::TableActivate | CommandKind::TableAbort => {
                     let name = c.table.as_deref().ok_or_else(|| {
                         anyhow::anyhow!("{here}: this kind needs table = \"alignment\" | \"iru\" | \"filter\" | \"star_catalog\"")

@@ -86,7 +86,8 @@ pub struct DiagnoseReport {
     pub calibration_rotation_error_arcsec: Option<BeforeAfter>,
     /// Scoring only: the error of the alignment tables *written* (what flies), before = the
     /// one `calibrate` writes for the same telemetry, after = diagnose's `tables/alignment.tbl`
-    /// (with the field terms it carries), arcsec, as `calibration_error_arcsec`.
+    /// (with the field terms it carries), arcsec, as `calibration_error_arcsec` but against
+    /// the alignments at the end of the run (truth.json `alignments_after_run`: a step applied).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub written_table_error_arcsec: Option<BeforeAfter>,
     /// Scoring only: the same for the table diagnose would have written without its held-out

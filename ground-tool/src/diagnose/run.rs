@@ -601,15 +601,26 @@ pub fn diagnose_run(
                     k,
                 )
             };
+            // The tables written fly after the run: scored against the alignments at its end
+            // (an alignment step applied).
+            let t_after = t.after_run();
             written_error = Some(BeforeAfter {
-                before: calibration_error_arcsec(&calibrate_alignment, t, &analysis.set, &|_| {
-                    [0.0; 2]
-                }),
-                after: calibration_error_arcsec(&alignment_out, t, &analysis.set, &written_field),
+                before: calibration_error_arcsec(
+                    &calibrate_alignment,
+                    &t_after,
+                    &analysis.set,
+                    &|_| [0.0; 2],
+                ),
+                after: calibration_error_arcsec(
+                    &alignment_out,
+                    &t_after,
+                    &analysis.set,
+                    &written_field,
+                ),
             });
             unvalidated_error = Some(calibration_error_arcsec(
                 unvalidated_table,
-                t,
+                &t_after,
                 &analysis.set,
                 &unvalidated_field,
             ));

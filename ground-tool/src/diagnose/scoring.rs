@@ -25,6 +25,9 @@ pub struct Truth {
     pub scenario: String,
     /// True alignments (sensor order).
     pub alignments: [Matrix3<f64>; 4],
+    /// True alignments at the end of the run (truth.json `alignments_after_run`: an alignment
+    /// step applied; `alignments` when absent): what the tables written after the run fly into.
+    pub alignments_after_run: [Matrix3<f64>; 4],
     /// Undeclared effects.
     pub undeclared: Vec<String>,
     /// Present effects.
@@ -54,6 +57,14 @@ pub fn read_truth(run_dir: &Path) -> anyhow::Result<Option<Truth>> {
             .map_err(|e| anyhow::anyhow!("truth.json alignments.{n}: {e}"))?;
         alignments[i] = matrix_from_rows(&rows);
     }
+    let mut alignments_after_run = alignments;
+    for (i, n) in names.iter().enumerate() {
+        if let Ok(rows) =
+            serde_json::from_value::<[[f64; 3]; 3]>(v["alignments_after_run"][n].clone())
+        {
+            alignments_after_run[i] = matrix_from_rows(&rows);
+        }
+    }
     let list = |k: &str| -> Vec<String> {
         v[k].as_array()
             .map(|a| {
@@ -82,6 +93,7 @@ pub fn read_truth(run_dir: &Path) -> anyhow::Result<Option<Truth>> {
     Ok(Some(Truth {
         scenario,
         alignments,
+        alignments_after_run,
         undeclared: list("undeclared_effects"),
         present: list("present_effects"),
         scenario_file,
@@ -98,6 +110,18 @@ pub fn read_truth(run_dir: &Path) -> anyhow::Result<Option<Truth>> {
             })
             .unwrap_or_default(),
     }))
+}
+
+impl Truth {
+    /// The truth the tables written after the run are scored against: the alignments at the
+    /// end of the run (`alignments_after_run`).
+    #[must_use]
+    pub fn after_run(&self) -> Self {
+        Self {
+            alignments: self.alignments_after_run,
+            ..self.clone()
+        }
+    }
 }
 
 /// Alignment error vectors per sensor (ACS, arcsec), FHST-pair common rotation removed.
@@ -354,6 +378,16 @@ pub fn parameter_truth(
                 let slope = stb / stt;
                 for (i, n) in ["x", "y", "z"].iter().enumerate() {
                     out.insert((*n).into(), slope[i]);
+                }
+            }
+        }
+        "alignment_step" => {
+            let step = fhst(sensor)
+                .map(|f| f.effects.alignment_step_arcsec)
+                .or_else(|| fss(sensor).map(|f| f.effects.alignment_step_arcsec));
+            if let Some(k) = step {
+                for (i, n) in ["x", "y", "z"].iter().enumerate() {
+                    out.insert((*n).to_owned(), k[i]);
                 }
             }
         }

@@ -32,7 +32,9 @@
 //!
 //! # Effect hooks (default off)
 //! Time-tag offset (the sensor samples at `t − τ`), thermal alignment drift, focal-plane
-//! distortion (radial ρ³ and H·V), magnitude-dependent bias. Catalogue proper-motion errors
+//! distortion (radial ρ³ and H·V), magnitude-dependent bias, a one-time alignment step
+//! (`M_AS' = Rot(θ) M_AS`, θ about the ACS axes, added to the thermal rotation from the step
+//! time on). Catalogue proper-motion errors
 //! live in [`crate::truth::sky::SkyParams`].
 
 use nalgebra::{Matrix3, Vector3};
@@ -66,6 +68,24 @@ pub struct FhstEffects {
     pub hv_distortion_arcsec_at_corner: [f64; 2],
     /// Bias in (H, V) per magnitude fainter than 4.0 (arcsec/mag).
     pub magnitude_bias_arcsec_per_mag: [f64; 2],
+    /// One-time alignment step: a rotation about the ACS axes (arcsec), `M_AS' = Rot(θ) M_AS`
+    /// (the convention of diagnose's `alignment_step` and of the writer's `--align-step`),
+    /// from `alignment_step_at_s` on.
+    pub alignment_step_arcsec: [f64; 3],
+    /// Time of the alignment step (s from the scenario start); `None` = no step.
+    pub alignment_step_at_s: Option<f64>,
+}
+
+impl FhstEffects {
+    /// The alignment rotation of the step at `t_s` (rad, ACS): zero before the step time.
+    #[must_use]
+    pub fn alignment_step_rad(&self, t_s: f64) -> Vector3<f64> {
+        if self.alignment_step_at_s.is_some_and(|at| t_s >= at) {
+            Vector3::from(self.alignment_step_arcsec) * RAD_PER_ARCSEC
+        } else {
+            Vector3::zeros()
+        }
+    }
 }
 
 /// One FHST's parameters (scenario `[fhst1]`, `[fhst2]`).
@@ -279,8 +299,9 @@ impl Fhst {
         let fx = self.params.effects;
         let t = truth.t_s;
         let m_acs_from_eci = truth.m_acs_from_eci_earlier(fx.time_tag_offset_s);
-        let thermal =
-            Vector3::from(fx.thermal_alignment_arcsec_per_c) * (RAD_PER_ARCSEC * temperature_dev_c);
+        let thermal = Vector3::from(fx.thermal_alignment_arcsec_per_c)
+            * (RAD_PER_ARCSEC * temperature_dev_c)
+            + fx.alignment_step_rad(t);
         let m_acs_from_fhst = if thermal == Vector3::zeros() {
             self.m_acs_from_fhst_true
         } else {
@@ -649,6 +670,42 @@ mod tests {
         let mut f = quiet_tracker(p);
         f.sample(&TruthSnapshot::at_rest(Quat::IDENTITY), &sky, 3.0);
         assert!((f.last_truth().hv_rad[1].abs() * ARCSEC_PER_RAD - 6.0).abs() < 0.01);
+    }
+
+    /// Alignment step: nothing before its time; after it the star moves as under the thermal
+    /// hook's rotation of the same vector (both `M_AS' = Rot(θ) M_AS`, ACS): 20″ about ACS x
+    /// moves V by 20″.
+    #[test]
+    fn alignment_step_rotates_after_its_time() {
+        let sky = sky_with(&[([0.0, 0.0, 1.0], 3.0, 11)]);
+        let mut p = noiseless();
+        p.effects = FhstEffects {
+            alignment_step_arcsec: [20.0, 0.0, 0.0],
+            alignment_step_at_s: Some(100.0),
+            ..FhstEffects::default()
+        };
+        let mut truth = TruthSnapshot::at_rest(Quat::IDENTITY);
+        let mut f = quiet_tracker(p.clone());
+        truth.t_s = 99.0;
+        f.sample(&truth, &sky, 0.0);
+        let before = f.last_truth().hv_rad;
+        assert!(
+            before[0].abs() < 1e-12 && before[1].abs() < 1e-12,
+            "{before:?}"
+        );
+        truth.t_s = 100.0;
+        f.sample(&truth, &sky, 0.0);
+        let after = f.last_truth().hv_rad;
+        assert!(
+            (after[1].abs() * ARCSEC_PER_RAD - 20.0).abs() < 0.01,
+            "{after:?}"
+        );
+        assert!(after[0].abs() < 1e-12);
+        let mut thermal = noiseless();
+        thermal.effects.thermal_alignment_arcsec_per_c = [2.0, 0.0, 0.0];
+        let mut g = quiet_tracker(thermal);
+        g.sample(&truth, &sky, 10.0);
+        assert!((g.last_truth().hv_rad[1] - after[1]).abs() < 1e-15);
     }
 
     /// Paper alignment: FHST boresights ~90° apart; determinism per seed.

@@ -5,7 +5,8 @@
 //!
 //! # Geometry
 //! True alignment `M_AS,true = Rot(θ_true) M_AS,prelaunch` (default θ_true from Tables 1×2),
-//! optionally rotated by `thermal_alignment_arcsec_per_c · ΔT`. With `s = M_AS,trueᵀ A ŝ`
+//! optionally rotated by `thermal_alignment_arcsec_per_c · ΔT` and, from its time on, by a
+//! one-time alignment step (`alignment_step_arcsec`, ACS). With `s = M_AS,trueᵀ A ŝ`
 //! (apparent Sun from the spacecraft): `α = atan2(s_x, s_z)`, `β = atan2(s_y, s_z)`
 //! (fsw_core::raw). The Sun is present when `s_z > 0`, `|α|, |β| ≤ 32°` (64° × 64° FOV) and
 //! the spacecraft is not in the Earth's umbra.
@@ -138,6 +139,24 @@ pub struct FssEffects {
     pub time_tag_offset_s: f64,
     /// Alignment rotation per °C of temperature deviation, ACS (arcsec/°C).
     pub thermal_alignment_arcsec_per_c: [f64; 3],
+    /// One-time alignment step: a rotation about the ACS axes (arcsec), `M_AS' = Rot(θ) M_AS`
+    /// (diagnose's `alignment_step`, the writer's `--align-step`), from `alignment_step_at_s`
+    /// on.
+    pub alignment_step_arcsec: [f64; 3],
+    /// Time of the alignment step (s from the scenario start); `None` = no step.
+    pub alignment_step_at_s: Option<f64>,
+}
+
+impl FssEffects {
+    /// The alignment rotation of the step at `t_s` (rad, ACS): zero before the step time.
+    #[must_use]
+    pub fn alignment_step_rad(&self, t_s: f64) -> Vector3<f64> {
+        if self.alignment_step_at_s.is_some_and(|at| t_s >= at) {
+            Vector3::from(self.alignment_step_arcsec) * RAD_PER_ARCSEC
+        } else {
+            Vector3::zeros()
+        }
+    }
 }
 
 /// One FSS unit's parameters (scenario `[fss1]`, `[fss2]`).
@@ -296,8 +315,9 @@ impl Fss {
     pub fn sample(&mut self, truth: &TruthSnapshot, temperature_dev_c: f64) -> FssSample {
         let fx = self.params.effects;
         let m_acs_from_eci = truth.m_acs_from_eci_earlier(fx.time_tag_offset_s);
-        let thermal =
-            Vector3::from(fx.thermal_alignment_arcsec_per_c) * (RAD_PER_ARCSEC * temperature_dev_c);
+        let thermal = Vector3::from(fx.thermal_alignment_arcsec_per_c)
+            * (RAD_PER_ARCSEC * temperature_dev_c)
+            + fx.alignment_step_rad(truth.t_s);
         let m_acs_from_fss = if thermal == Vector3::zeros() {
             self.m_acs_from_fss_true
         } else {
@@ -391,6 +411,34 @@ mod tests {
         let mut dark = sun_at(1.0, 1.0);
         dark.in_umbra = true;
         assert_eq!(fss.sample(&dark, 0.0).flags, 0);
+    }
+
+    /// Alignment step: the counts do not move before its time; after it the Sun moves as under
+    /// the thermal hook's rotation of the same vector (both `M_AS' = Rot(θ) M_AS`, ACS).
+    #[test]
+    fn alignment_step_rotates_after_its_time() {
+        let mut p = ideal();
+        p.resolution_deg_per_count = 1.0 / 3600.0; // 1″ counts
+        let clean = Fss::with_alignment(Matrix3::identity(), p.clone(), model_rng(1, 3))
+            .sample(&sun_at(5.0, -3.0), 0.0);
+        p.effects = FssEffects {
+            alignment_step_arcsec: [0.0, 30.0, 0.0],
+            alignment_step_at_s: Some(100.0),
+            ..FssEffects::default()
+        };
+        let mut fss = Fss::with_alignment(Matrix3::identity(), p.clone(), model_rng(1, 3));
+        let mut t = sun_at(5.0, -3.0);
+        t.t_s = 99.5;
+        assert_eq!(fss.sample(&t, 0.0), clean);
+        t.t_s = 100.0;
+        let after = fss.sample(&t, 0.0);
+        let da = i32::from(after.alpha_counts) - i32::from(clean.alpha_counts);
+        assert!((da.abs() - 30).abs() <= 1, "α moved {da} counts");
+        let mut q = ideal();
+        q.resolution_deg_per_count = 1.0 / 3600.0;
+        q.effects.thermal_alignment_arcsec_per_c = [0.0, 3.0, 0.0];
+        let thermal = Fss::with_alignment(Matrix3::identity(), q, model_rng(1, 3)).sample(&t, 10.0);
+        assert_eq!(after, thermal);
     }
 
     /// Through a rotated alignment and attitude the counts still follow α = atan2(s_x, s_z).

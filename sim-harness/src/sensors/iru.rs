@@ -31,7 +31,12 @@
 //!
 //! # Effect hooks (default off)
 //! Time-tag offset (counters latched `τ` early: the kinematic increment is blended with the
-//! previous one), scale-factor asymmetry (± rates), thermally driven bias.
+//! previous one), scale-factor asymmetry (± rates), thermally driven bias, and outside
+//! diagnose's library (issue 22): a bias added only while the interval is in high-rate mode,
+//! a scale error growing as a power of the channel rate (`k (|ω|/ω_ref)^p`, ω the channel's
+//! mean rate over the interval), and a scale-factor step at a time. All per channel (raw
+//! order X1, X2, Y1, Y2, Z1, Z2; a channel reads about one ACS axis, so the writer's per-axis
+//! values go to both channels of that axis).
 
 use nalgebra::{Matrix3, Vector3};
 use rand_chacha::ChaCha8Rng;
@@ -62,7 +67,7 @@ pub struct ChannelFailure {
 }
 
 /// Undeclared effects (default off).
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, Default)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct IruEffects {
     /// Counters latched this long before the frame time (s).
@@ -71,6 +76,39 @@ pub struct IruEffects {
     pub scale_asymmetry_ppm: [f64; IRU_CHANNELS],
     /// Bias change per °C of IRU baseplate deviation (deg/s/°C), per channel.
     pub thermal_bias_deg_per_s_per_c: [f64; IRU_CHANNELS],
+    /// Bias added only while the interval is in high-rate mode (deg/s), per channel (outside
+    /// diagnose's library: reported as unexplained against `rate_mode`).
+    pub high_rate_bias_deg_per_s: [f64; IRU_CHANNELS],
+    /// Scale error growing as a power of the rate, per channel: `k (|ω|/ω_ref)^p` with `k`
+    /// this value (ppm at the reference rate), ω the channel's mean rate over the interval
+    /// (outside the library: unexplained against `slew_rate`).
+    pub rate_power_scale_ppm: [f64; IRU_CHANNELS],
+    /// Reference rate ω_ref of `rate_power_scale_ppm` (deg/s). Default 1.
+    pub rate_power_reference_deg_per_s: f64,
+    /// Exponent `p` of `rate_power_scale_ppm`. Default 2.
+    pub rate_power_exponent: f64,
+    /// Scale-factor change per channel (ppm) from `scale_step_at_s` on, both modes (outside
+    /// the library: unexplained against `time_s`).
+    pub scale_step_ppm: [f64; IRU_CHANNELS],
+    /// Time of the scale step (s from the scenario start, the interval's midpoint);
+    /// `None` = no step.
+    pub scale_step_at_s: Option<f64>,
+}
+
+impl Default for IruEffects {
+    fn default() -> Self {
+        Self {
+            time_tag_offset_s: 0.0,
+            scale_asymmetry_ppm: [0.0; IRU_CHANNELS],
+            thermal_bias_deg_per_s_per_c: [0.0; IRU_CHANNELS],
+            high_rate_bias_deg_per_s: [0.0; IRU_CHANNELS],
+            rate_power_scale_ppm: [0.0; IRU_CHANNELS],
+            rate_power_reference_deg_per_s: 1.0,
+            rate_power_exponent: 2.0,
+            scale_step_ppm: [0.0; IRU_CHANNELS],
+            scale_step_at_s: None,
+        }
+    }
 }
 
 /// IRU parameters (scenario `[iru]`).
@@ -347,9 +385,22 @@ impl Iru {
             } else {
                 0.0
             };
-            scale += p.effects.scale_asymmetry_ppm[ch] * 1e-6 * d.signum();
+            let fx = &p.effects;
+            scale += fx.scale_asymmetry_ppm[ch] * 1e-6 * d.signum();
+            if fx.rate_power_scale_ppm[ch] != 0.0 && dt_s > 0.0 {
+                let w_ref = fx.rate_power_reference_deg_per_s.abs().max(1e-12) * RAD_PER_DEG;
+                let w = d.abs() / dt_s;
+                scale +=
+                    fx.rate_power_scale_ppm[ch] * 1e-6 * (w / w_ref).powf(fx.rate_power_exponent);
+            }
+            if fx.scale_step_at_s.is_some_and(|at| t_mid >= at) {
+                scale += fx.scale_step_ppm[ch] * 1e-6;
+            }
             d *= 1.0 + scale;
-            let bias = self.bias_rad_per_s(ch, t_mid, dev_c);
+            let mut bias = self.bias_rad_per_s(ch, t_mid, dev_c);
+            if high {
+                bias += fx.high_rate_bias_deg_per_s[ch] * RAD_PER_DEG;
+            }
             let nv: f64 = StandardNormal.sample(&mut self.rng);
             let nu: f64 = StandardNormal.sample(&mut self.rng);
             self.bias_rw_rad_per_s[ch] += sigma_u * nu;
@@ -585,6 +636,87 @@ mod tests {
         }
         let sd = (sum2 / f64::from(runs as u32 * 6)).sqrt();
         assert!((sd - 0.0012).abs() < 0.0001, "{sd}″/s");
+    }
+
+    /// The high-rate-mode bias counts only in high-rate intervals: at rest, 36″/s
+    /// (0.01°/s) in high rate gives 45 pulses of 0.8″ per second, nothing in low rate.
+    #[test]
+    fn high_rate_bias_only_in_high_rate_mode() {
+        let mut p = ideal();
+        p.effects.high_rate_bias_deg_per_s = [0.01, 0.0, 0.0, 0.0, 0.0, 0.0];
+        let mut iru = ideal_iru(p);
+        for k in 1..=10 {
+            iru.sample(&Vector3::zeros(), 1.0, f64::from(k), 0.0);
+        }
+        assert_eq!(iru.total_pulses(), [0; IRU_CHANNELS], "low rate: no bias");
+        iru.command_high_rate(true);
+        iru.sample(&Vector3::zeros(), 1.0, 11.0, 0.0); // the switch takes one interval
+        for k in 12..=21 {
+            let s = iru.sample(&Vector3::zeros(), 1.0, f64::from(k), 0.0);
+            assert!(s.high_rate);
+        }
+        assert_eq!(iru.total_pulses()[0], 450);
+        assert_eq!(iru.total_pulses()[1..], [0; IRU_CHANNELS - 1]);
+    }
+
+    /// The rate-power scale: `k (|ω|/ω_ref)^p` on the channel's rate; 1000 ppm at 1°/s with
+    /// p = 2 is 1000 ppm at 1°/s and 250 ppm at 0.5°/s, either sign.
+    #[test]
+    fn rate_power_scale_grows_with_rate() {
+        let mut p = ideal();
+        p.effects.rate_power_scale_ppm = [1000.0; IRU_CHANNELS];
+        p.initial_high_rate = true;
+        let mut iru = ideal_iru(p);
+        // 1°/s on x, −0.5°/s on y, at rest on z; 0.8″ pulses.
+        iru.sample(
+            &Vector3::new(3600.0, -1800.0, 0.0).scale(RAD_PER_ARCSEC),
+            1.0,
+            1.0,
+            0.0,
+        );
+        // 3600 × 1.001 / 0.8 = 4504.5; −1800 × 1.00025 / 0.8 = −2250.56.
+        assert_eq!(iru.total_pulses()[0], 4504);
+        assert_eq!(iru.total_pulses()[2], -2251);
+        assert_eq!(iru.total_pulses()[4], 0);
+        // The exponent and the reference rate: p = 1, ω_ref = 2°/s gives 500 ppm at 1°/s.
+        let mut q = ideal();
+        q.effects.rate_power_scale_ppm = [1000.0; IRU_CHANNELS];
+        q.effects.rate_power_exponent = 1.0;
+        q.effects.rate_power_reference_deg_per_s = 2.0;
+        q.initial_high_rate = true;
+        let mut iru = ideal_iru(q);
+        iru.sample(
+            &Vector3::new(3600.0, 0.0, 0.0).scale(RAD_PER_ARCSEC),
+            1.0,
+            1.0,
+            0.0,
+        );
+        assert_eq!(iru.total_pulses()[0], 4502, "3600 × 1.0005 / 0.8 = 4502.25");
+    }
+
+    /// The scale step multiplies the kinematic part from its time on (the interval's midpoint).
+    #[test]
+    fn scale_step_from_its_time() {
+        let mut p = ideal();
+        p.effects.scale_step_ppm = [0.0, 0.0, 500.0, 0.0, 0.0, 0.0];
+        p.effects.scale_step_at_s = Some(10.0);
+        let mut iru = ideal_iru(p);
+        let rate = Vector3::new(0.0, 1000.0, 0.0).scale(RAD_PER_ARCSEC); // 20 000 pulses/s
+        let mut per_s = Vec::new();
+        let mut prev = 0;
+        for k in 1..=12 {
+            iru.sample(&rate, 1.0, f64::from(k), 0.0);
+            per_s.push(iru.total_pulses()[2] - prev);
+            prev = iru.total_pulses()[2];
+        }
+        // Intervals ending at 1..=10 s have midpoints before 10 s; 11 and 12 after.
+        assert!(per_s[..10].iter().all(|&n| n == 20_000), "{per_s:?}");
+        assert_eq!(per_s[10..], [20_010, 20_010]);
+        assert_eq!(
+            iru.total_pulses()[3],
+            20_000 * 12,
+            "the other channel of y: no step"
+        );
     }
 
     /// Scale asymmetry and the high-mode scale error act on the kinematic part.
