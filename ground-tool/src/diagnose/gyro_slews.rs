@@ -192,9 +192,17 @@ pub(super) fn analyse(inp: &SlewInput<'_>, out: &mut GyroAnalysis) {
     }
 }
 
+/// How far (frames) from a slew its bracketing attitude batches may be, and never past the
+/// neighbouring slews: where the hold between two slews has no usable batch (a tracker
+/// occulted), the nearest batch is beyond the other slew, and an interval over both would
+/// count that slew twice. The report says how many slews were left out and why (on the
+/// simulator's 24-h plans, 30 of 48: holds without a usable batch on one side).
+const SLEW_WINDOW_FRAMES: usize = 1200;
+
 /// The slews (runs of high-rate frames), each bracketed by the last usable attitude batch
 /// before its end and the first after its start: holds on both sides when there are (within
-/// 1,200 frames), else the outermost batches inside the slew; kept when the gyro turned by
+/// [`SLEW_WINDOW_FRAMES`] and not past the neighbouring slews), else the outermost batches
+/// inside the slew; kept when the gyro turned by
 /// more than 5° between them and no gyro increment between them is missing or long.
 fn slew_intervals(inp: &SlewInput<'_>, out: &mut GyroAnalysis) -> Vec<(usize, usize)> {
     let frames = inp.input.frames;
@@ -230,9 +238,21 @@ fn slew_intervals(inp: &SlewInput<'_>, out: &mut GyroAnalysis) -> Vec<(usize, us
         })
     };
     let mut pairs = Vec::new();
-    for &(s, e) in &slews {
-        let lo = s.saturating_sub(1200);
-        let hi = e + 1200;
+    // Why slews were not used, counted for the report: (no usable attitude batch around it,
+    // less than 5° turned between the batches found, a gap in the gyro data).
+    let (mut no_batch, mut small, mut gaps) = (0usize, 0usize, 0usize);
+    for (k, &(s, e)) in slews.iter().enumerate() {
+        // The holds around the slew, up to the neighbouring slews: an interval that spans
+        // another slew would count that one twice.
+        let prev_end = k
+            .checked_sub(1)
+            .and_then(|j| slews.get(j))
+            .map_or(0, |p| p.1 + 1);
+        let next_start = slews
+            .get(k + 1)
+            .map_or(usize::MAX, |n| n.0.saturating_sub(1));
+        let lo = s.saturating_sub(SLEW_WINDOW_FRAMES).max(prev_end);
+        let hi = (e + SLEW_WINDOW_FRAMES).min(next_start);
         let inside: Vec<usize> = usable
             .iter()
             .copied()
@@ -249,13 +269,16 @@ fn slew_intervals(inp: &SlewInput<'_>, out: &mut GyroAnalysis) -> Vec<(usize, us
             .find(|&i| set.batches[i].center >= e)
             .or_else(|| inside.last().copied());
         let (Some(ia), Some(ib)) = (before, after) else {
+            no_batch += 1;
             continue;
         };
         let (ca, cb) = (set.batches[ia].center, set.batches[ib].center);
         if cb <= ca {
+            no_batch += 1;
             continue;
         }
         if !gap_free(ca, cb) {
+            gaps += 1;
             out.notes.push(format!(
                 "slew at frames {s}..{e} not used for the slew tests: frames without a gyro increment (missing, or a channel the integrator declared stuck) or a step longer than 3 cycles between its end attitudes"
             ));
@@ -268,7 +291,16 @@ fn slew_intervals(inp: &SlewInput<'_>, out: &mut GyroAnalysis) -> Vec<(usize, us
             .sum();
         if turned.norm() > 5.0 * RAD_PER_DEG {
             pairs.push((ia, ib));
+        } else {
+            small += 1;
         }
+    }
+    if pairs.len() < slews.len() {
+        out.notes.push(format!(
+            "slews: {} of {} used for the slew tests; not used: {no_batch} without a usable attitude batch on both sides (within {SLEW_WINDOW_FRAMES} frames, not past the neighbouring slews), {small} with less than 5° turned between the batches around them (the batches fell inside the slew), {gaps} with a gap in the gyro data",
+            pairs.len(),
+            slews.len()
+        ));
     }
     pairs
 }
