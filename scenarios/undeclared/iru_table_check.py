@@ -1,0 +1,70 @@
+#!/usr/bin/env python3
+"""Is diagnose's IRU table ever worse than calibrate's? (issue 22: "no run where diagnose's
+written tables are worse than calibrate's ... δM error").
+
+    python3 scenarios/undeclared/iru_table_check.py [WORK=/tmp/diagnose-effects] [BIN=target/release]
+
+For every run folder `WORK/NAME-SEED` of `effects_table.sh` (with its `-diag`), runs
+`ground-tool calibrate` on the same telemetry (into `NAME-SEED-cal`, once), reads the primary
+triad's G of both `iru.tbl` images (`ground-tool table inspect --json`) and prints each one's
+RMS difference from the truth's `(I + δM) g` (truth.json `iru.primary`), in ppm. "WORSE" when
+diagnose's is more than 10 ppm above calibrate's; "as flown" when diagnose kept the flown G
+where calibrate updated it (the table not written: unexplained gyro structure).
+"""
+import glob
+import json
+import os
+import subprocess
+import sys
+
+ROOT = os.path.normpath(os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", ".."))
+WORK = sys.argv[1] if len(sys.argv) > 1 else "/tmp/diagnose-effects"
+BIN = sys.argv[2] if len(sys.argv) > 2 else os.path.join(ROOT, "target", "release")
+GT = os.path.join(BIN, "ground-tool")
+
+
+def matmul(a, b):
+    return [[sum(a[i][k] * b[k][j] for k in range(3)) for j in range(3)] for i in range(3)]
+
+
+def g_of(table):
+    out = subprocess.run([GT, "table", "inspect", "--json", table], capture_output=True, text=True, check=True)
+    return json.loads(out.stdout)["content"]["g_primary"]
+
+
+def rms_ppm(g, ref):
+    return (sum((g[i][j] - ref[i][j]) ** 2 for i in range(3) for j in range(3)) / 9.0) ** 0.5 * 1e6
+
+
+worse = kept = same = 0
+rows = 0
+for run in sorted(glob.glob(os.path.join(WORK, "*-[0-9]*"))):
+    if not os.path.isdir(run) or not run.rstrip("0123456789").endswith("-") or "-diag" in run:
+        continue
+    diag = os.path.join(run + "-diag", "tables", "iru.tbl")
+    if not (os.path.exists(os.path.join(run, "truth.json")) and os.path.exists(diag)):
+        continue
+    cal = run + "-cal"
+    if not os.path.exists(os.path.join(cal, "tables", "iru.tbl")):
+        subprocess.run([GT, "calibrate", run, "--out", cal, "--force"], capture_output=True)
+    cal_tbl = os.path.join(cal, "tables", "iru.tbl")
+    if not os.path.exists(cal_tbl):
+        print(f"{os.path.basename(run)}: calibrate wrote no IRU table")
+        continue
+    p = json.load(open(os.path.join(run, "truth.json")))["iru"]["primary"]
+    eye_dm = [[(1.0 if i == j else 0.0) + p["delta_m"][i][j] for j in range(3)] for i in range(3)]
+    truth = matmul(eye_dm, p["g"])
+    e_cal, e_diag = rms_ppm(g_of(cal_tbl), truth), rms_ppm(g_of(diag), truth)
+    e_flown = rms_ppm(p["g"], truth)
+    rows += 1
+    tag = ""
+    if e_diag > e_cal + 10.0:
+        if abs(e_diag - e_flown) < 1e-6:
+            tag, kept = "as flown (calibrate updated)", kept + 1
+        else:
+            tag, worse = "WORSE", worse + 1
+    elif abs(e_diag - e_cal) < 1e-6:
+        same += 1
+    print(f"{os.path.basename(run):24s} calibrate {e_cal:7.1f}  diagnose {e_diag:7.1f} ppm  {tag}")
+print(f"\n{rows} runs: diagnose's G the same as calibrate's in {same}, kept as flown where calibrate "
+      f"updated in {kept}, worse (its own δM, > 10 ppm) in {worse}")
