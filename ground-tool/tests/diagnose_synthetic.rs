@@ -300,6 +300,17 @@ fn fhst2_alignment_step_at_an_unknown_time() {
     within_3_sigma(d, &[("x", 6.0), ("y", -12.0), ("z", 10.0)]);
     let t = d.parameters["t_step_s"];
     assert!((t - 7_300.0).abs() < 900.0, "step at {t:.0} s");
+    // The trackers alone see only the relative rotation: the report says which rows chose
+    // the tracker.
+    let notes = ground_tool::diagnose::change_point::attribution_notes(&a.set, &a.search);
+    assert_eq!(notes.len(), 1, "{notes:?}");
+    assert!(
+        notes[0].starts_with(
+            "alignment_step[FHST2]: which tracker moved is not determined by the trackers"
+        ),
+        "{}",
+        notes[0]
+    );
 }
 
 /// Not in the library: a decaying structural oscillation of FHST2 after every slew is

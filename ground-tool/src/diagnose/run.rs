@@ -353,6 +353,10 @@ pub fn diagnose_run(
     notes.extend(coverage_notes(&analysis.set, gyro_frames.len(), |k| {
         gyro_frames.get(k).is_some_and(|f| f.high_rate)
     }));
+    notes.extend(super::change_point::attribution_notes(
+        &analysis.set,
+        &analysis.search,
+    ));
     let gcfg = GyroConfig {
         alpha: opts.search.alpha,
         min_delta_bic: opts.search.min_delta_bic,
