@@ -4,10 +4,12 @@ written tables are worse than calibrate's ... δM error").
 
     python3 scenarios/undeclared/iru_table_check.py [WORK=/tmp/diagnose-effects] [BIN=target/release]
 
-For every run folder `WORK/NAME-SEED` of `effects_table.sh` (with its `-diag`), runs
+For every run folder of `WORK` with a `-diag` beside it (`effects_table.sh`'s `NAME-SEED`, or
+`tests/icd/diagnose_cases.py`'s `CASE-sSEED`, whose `-cal` it reuses), runs
 `ground-tool calibrate` on the same telemetry (into `NAME-SEED-cal`, once), reads the primary
 triad's G of both `iru.tbl` images (`ground-tool table inspect --json`) and prints each one's
-RMS difference from the truth's `(I + δM) g` (truth.json `iru.primary`), in ppm. "WORSE" when
+RMS difference from the truth's `(I + δM) g` (`iru.primary` of truth.json or the writer's
+truth_icd.json), in ppm. "WORSE" when
 diagnose's is more than 10 ppm above calibrate's; "as flown" when diagnose kept the flown G
 where calibrate updated it (the table not written: unexplained gyro structure).
 """
@@ -36,13 +38,16 @@ def rms_ppm(g, ref):
     return (sum((g[i][j] - ref[i][j]) ** 2 for i in range(3) for j in range(3)) / 9.0) ** 0.5 * 1e6
 
 
-worse = kept = same = 0
+worse = kept = same = better = 0
 rows = 0
-for run in sorted(glob.glob(os.path.join(WORK, "*-[0-9]*"))):
-    if not os.path.isdir(run) or not run.rstrip("0123456789").endswith("-") or "-diag" in run:
+for run in sorted(glob.glob(os.path.join(WORK, "*"))):
+    if run.endswith(("-diag", "-cal", "-after")) or not os.path.exists(os.path.join(run, "telemetry.bin")):
         continue
     diag = os.path.join(run + "-diag", "tables", "iru.tbl")
-    if not (os.path.exists(os.path.join(run, "truth.json")) and os.path.exists(diag)):
+    # The simulator's truth.json, or the independent writer's truth_icd.json (same `iru` keys).
+    truth_file = next((os.path.join(run, f) for f in ("truth.json", "truth_icd.json")
+                       if os.path.exists(os.path.join(run, f))), None)
+    if truth_file is None or not os.path.exists(diag):
         continue
     cal = run + "-cal"
     if not os.path.exists(os.path.join(cal, "tables", "iru.tbl")):
@@ -51,7 +56,7 @@ for run in sorted(glob.glob(os.path.join(WORK, "*-[0-9]*"))):
     if not os.path.exists(cal_tbl):
         print(f"{os.path.basename(run)}: calibrate wrote no IRU table")
         continue
-    p = json.load(open(os.path.join(run, "truth.json")))["iru"]["primary"]
+    p = json.load(open(truth_file))["iru"]["primary"]
     eye_dm = [[(1.0 if i == j else 0.0) + p["delta_m"][i][j] for j in range(3)] for i in range(3)]
     truth = matmul(eye_dm, p["g"])
     e_cal, e_diag = rms_ppm(g_of(cal_tbl), truth), rms_ppm(g_of(diag), truth)
@@ -65,6 +70,8 @@ for run in sorted(glob.glob(os.path.join(WORK, "*-[0-9]*"))):
             tag, worse = "WORSE", worse + 1
     elif abs(e_diag - e_cal) < 1e-6:
         same += 1
+    elif e_diag < e_cal - 10.0:
+        tag, better = "better", better + 1
     print(f"{os.path.basename(run):24s} calibrate {e_cal:7.1f}  diagnose {e_diag:7.1f} ppm  {tag}")
-print(f"\n{rows} runs: diagnose's G the same as calibrate's in {same}, kept as flown where calibrate "
-      f"updated in {kept}, worse (its own δM, > 10 ppm) in {worse}")
+print(f"\n{rows} runs: diagnose's G the same as calibrate's in {same}, better by > 10 ppm in {better}, "
+      f"kept as flown where calibrate updated (worse) in {kept}, worse by a δM of its own in {worse}")
