@@ -78,16 +78,20 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
-    /// Diagnose: residual analysis that finds effects the model lacks (issue 5).
+    /// Diagnose: residual analysis that finds effects the model lacks, and the tables that fix them.
     ///
     /// Runs the calibration chain with the current model (declared effects from
     /// RUN_DIR/metadata.json), then tests every FHST/FSS residual against time, orbit phase,
     /// Sun angle, FOV position, magnitude, body rate, rate mode, velocity direction,
     /// temperatures and star id; fits a library of candidate effects (aberration, time tags,
-    /// thermal/orbital alignment, FHST distortion and magnitude bias, FSS transfer function,
-    /// catalog errors, gyro bias drift, step, thermal bias and scale asymmetry) jointly with
-    /// the alignments and keeps an effect only on the evidence (likelihood ratio, BIC,
-    /// halves). Writes OUT/report.md, OUT/report.json, PNG plots, OUT/tables/*.tbl and
+    /// thermal/orbital alignment, alignment steps at an unknown time, FHST distortion and
+    /// magnitude bias, FSS transfer function, catalog errors of every star or of a few, gyro
+    /// bias drift, step, thermal bias and scale asymmetry) jointly with the alignments and
+    /// keeps an effect only on the evidence (likelihood ratio with the scan of any searched
+    /// parameter counted, BIC, halves). Gyro errors in the slews outside the library (a scale
+    /// that grows with the rate, a scale step, a bias in high-rate mode) and every other
+    /// significant structure are reported as unexplained with their size and regressor
+    /// (report.json `unexplained`, `ledger`). Writes OUT/report.md, OUT/report.json, PNG plots, OUT/tables/*.tbl and
     /// OUT/tables/manifest.json for `sim-harness run ... --tables OUT/tables`, which loads
     /// the images the manifest lists: alignment.tbl and iru.tbl always, filter.tbl and
     /// star_catalog.tbl when a detected effect changes them (report.md lists what went into
@@ -169,7 +173,7 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
-    /// Uplink table images (fsw-core format): inspect, diff, write.
+    /// Uplink table images (fsw-core format): inspect, diff, write the paper's or the prelaunch alignment, manifest.
     Table {
         #[command(subcommand)]
         action: TableAction,
