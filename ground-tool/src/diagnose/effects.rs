@@ -968,18 +968,15 @@ pub fn library(
     out
 }
 
-/// `C(n, k)`, saturating at `usize::MAX` (a look-elsewhere factor: only its size matters).
+/// `C(n, k)` (statrs), saturating at `usize::MAX` (a look-elsewhere factor: only its size
+/// matters).
 #[must_use]
 pub fn subsets(n: usize, k: usize) -> usize {
-    let k = k.min(n.saturating_sub(k));
-    let mut c: f64 = 1.0;
-    for i in 0..k {
-        c = c * (n - i) as f64 / (i + 1) as f64;
-    }
+    let c = statrs::function::factorial::binomial(n as u64, k as u64);
     if c >= usize::MAX as f64 {
         usize::MAX
     } else {
-        (c.round() as usize).max(1)
+        (c as usize).max(1)
     }
 }
 

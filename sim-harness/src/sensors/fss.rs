@@ -151,11 +151,7 @@ impl FssEffects {
     /// The alignment rotation of the step at `t_s` (rad, ACS): zero before the step time.
     #[must_use]
     pub fn alignment_step_rad(&self, t_s: f64) -> Vector3<f64> {
-        if self.alignment_step_at_s.is_some_and(|at| t_s >= at) {
-            Vector3::from(self.alignment_step_arcsec) * RAD_PER_ARCSEC
-        } else {
-            Vector3::zeros()
-        }
+        super::alignment_step_rad(self.alignment_step_arcsec, self.alignment_step_at_s, t_s)
     }
 }
 

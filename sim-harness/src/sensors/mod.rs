@@ -110,6 +110,17 @@ impl TruthSnapshot {
     }
 }
 
+/// A one-time alignment step of a sensor (its `effects.alignment_step_arcsec` from
+/// `alignment_step_at_s` on): the rotation about the ACS axes at `t_s` (rad), zero before.
+#[must_use]
+pub fn alignment_step_rad(step_arcsec: [f64; 3], at_s: Option<f64>, t_s: f64) -> Vector3<f64> {
+    if at_s.is_some_and(|at| t_s >= at) {
+        Vector3::from(step_arcsec) * fsw_core::units::RAD_PER_ARCSEC
+    } else {
+        Vector3::zeros()
+    }
+}
+
 /// Nearest integer count of `value / per_count`, saturated to `i16`.
 #[must_use]
 pub fn quantize_i16(value: f64, per_count: f64) -> i16 {
