@@ -8,7 +8,7 @@
 //! | `telemetry.bin` | CCSDS packets ([`crate::telemetry`]) |
 //! | `metadata.json` | what the operator declares: `scenario`, `epoch_utc`, `cycle_period_s`, `sensors` (declared noise from the scenario's sensor parameters), `declared_effects`, `boot_tables`, `uploads` |
 //! | `uploads/*.tbl` | every table image uplinked (catalog, `--tables`, timeline loads) |
-//! | `truth.json` | scoring only: true `alignments.{FHST1,FHST2,FSS1,FSS2}` (`M_AS`, row-major; at the start, without thermal drift), `alignments_after_run` (the same with any alignment step of the run applied: what tables written after the run fly into), IRU `delta_m` and `g` per configuration, `bias_history`, the flown `fss_transfer_function`, `present_effects`, `undeclared_effects` |
+//! | `truth.json` | scoring only: true `alignments.{FHST1,FHST2,FSS1,FSS2}` (`M_AS`, row-major; at the start, without thermal drift), `alignments_after_run` (the same with any alignment step of the run applied: what tables written after the run fly into), IRU `delta_m` and `g` per configuration, `bias_history`, the flown `fss_transfer_function`, `scenario_as_flown` (the whole scenario, each FSS with the transfer function it flew), `present_effects`, `undeclared_effects` |
 //! | `summary.json` | run statistics ([`Summary`]) |
 //!
 //! Every file is written under a `.partial` name and renamed when complete; `summary.json`
@@ -636,9 +636,15 @@ fn truth_json(sim: &Simulation, bias: &BiasRecorder) -> anyhow::Result<serde_jso
         .iru
         .delta_m_true_primary
         .unwrap_or_else(|| rows(&paper.iru_delta_m));
+    // The whole scenario as flown (each FSS with the transfer function it flew), so that a
+    // scorer needs no scenario file of the same name to know the field functions.
+    let mut as_flown = s.clone();
+    as_flown.fss1 = s.fss1.as_flown(0, s.seed);
+    as_flown.fss2 = s.fss2.as_flown(1, s.seed);
     Ok(serde_json::json!({
         "scenario": s.name,
         "seed": s.seed,
+        "scenario_as_flown": serde_json::to_value(&as_flown)?,
         "alignments": alignments,
         "alignments_after_run": after_run,
         "misalignment_from_prelaunch_acs_arcsec": thetas,

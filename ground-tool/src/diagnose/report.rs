@@ -42,6 +42,9 @@ pub struct Scoring {
     pub detections_in_truth: Vec<(String, String, bool)>,
     /// Parameter estimates against the scenario's values.
     pub parameters: Vec<ParameterCheck>,
+    /// Where the true field functions (FSS transfer function, FHST distortion) of the table
+    /// errors came from, or why they are unknown (then counted as zero).
+    pub field_truth: String,
 }
 
 /// The whole report.
@@ -510,6 +513,7 @@ pub fn markdown(r: &DiagnoseReport) -> String {
             "\nTruth's undeclared effects: {}.\n",
             sc.truth_undeclared_effects.join(", ")
         );
+        let _ = writeln!(s, "True field functions: {}.\n", sc.field_truth);
         for (e, u, ok) in &sc.detections_in_truth {
             let _ = writeln!(
                 s,

@@ -635,6 +635,9 @@ pub fn diagnose_run(
             let sc = Scoring {
                 label: "scoring only: from truth.json, never used by the analysis".into(),
                 truth_undeclared_effects: t.undeclared.clone(),
+                field_truth: t
+                    .field_truth_note()
+                    .unwrap_or_else(|| t.scenario_source.clone()),
                 detections_in_truth: detected
                     .iter()
                     .map(|d| (d.effect.clone(), d.sensor.clone(), matches_truth(d, t)))

@@ -35,6 +35,10 @@ pub struct Truth {
     /// The scenario, if its file was found, with the FSS units as flown (a per-seed transfer
     /// function drawn with the run's seed).
     pub scenario_file: Option<sim_harness::scenario::Scenario>,
+    /// Where `scenario_file` came from: `truth.json`'s `scenario_as_flown`, a scenario file
+    /// of the run's name (older run folders), or nowhere (the field functions' truth is then
+    /// unknown and scored as zero: [`Truth::field_truth_note`]).
+    pub scenario_source: String,
     /// True gyro bias history: (s since the start, ACS bias in arcsec/s).
     pub bias_history: Vec<(f64, Vector3<f64>)>,
 }
@@ -75,21 +79,7 @@ pub fn read_truth(run_dir: &Path) -> anyhow::Result<Option<Truth>> {
             .unwrap_or_default()
     };
     let scenario = v["scenario"].as_str().unwrap_or_default().to_owned();
-    let dir = sim_harness::scenario::scenarios_dir();
-    let scenario_file = [
-        dir.join("undeclared").join(format!("{scenario}.toml")),
-        dir.join(format!("{scenario}.toml")),
-    ]
-    .iter()
-    .find(|p| p.exists())
-    .and_then(|p| sim_harness::scenario::Scenario::load(p).ok())
-    .filter(|s| s.name == scenario)
-    .map(|mut s| {
-        let seed = v["seed"].as_u64().unwrap_or_default();
-        s.fss1 = s.fss1.as_flown(0, seed);
-        s.fss2 = s.fss2.as_flown(1, seed);
-        s
-    });
+    let (scenario_file, scenario_source) = truth_scenario(&v, &scenario);
     Ok(Some(Truth {
         scenario,
         alignments,
@@ -97,6 +87,7 @@ pub fn read_truth(run_dir: &Path) -> anyhow::Result<Option<Truth>> {
         undeclared: list("undeclared_effects"),
         present: list("present_effects"),
         scenario_file,
+        scenario_source,
         bias_history: v["bias_history"]["samples"]
             .as_array()
             .map(|a| {
@@ -112,7 +103,55 @@ pub fn read_truth(run_dir: &Path) -> anyhow::Result<Option<Truth>> {
     }))
 }
 
+/// The run's scenario as flown: `truth.json`'s `scenario_as_flown`, else (run folders written
+/// before it was recorded) the scenario file of the run's name, with each FSS's transfer
+/// function drawn as the simulator drew it. Returns the scenario and where it came from.
+fn truth_scenario(
+    v: &serde_json::Value,
+    scenario: &str,
+) -> (Option<sim_harness::scenario::Scenario>, String) {
+    if let Ok(s) =
+        serde_json::from_value::<sim_harness::scenario::Scenario>(v["scenario_as_flown"].clone())
+    {
+        return (Some(s), "truth.json scenario_as_flown".into());
+    }
+    let dir = sim_harness::scenario::scenarios_dir();
+    let found = [
+        dir.join("undeclared").join(format!("{scenario}.toml")),
+        dir.join(format!("{scenario}.toml")),
+    ]
+    .into_iter()
+    .find(|p| p.exists())
+    .and_then(|p| {
+        let s = sim_harness::scenario::Scenario::load(&p).ok()?;
+        (s.name == scenario).then_some((s, p))
+    });
+    match found {
+        Some((mut s, p)) => {
+            let seed = v["seed"].as_u64().unwrap_or_default();
+            s.fss1 = s.fss1.as_flown(0, seed);
+            s.fss2 = s.fss2.as_flown(1, seed);
+            (Some(s), format!("{} (by the run's name)", p.display()))
+        }
+        None => (None, String::new()),
+    }
+}
+
 impl Truth {
+    /// A note when the scoring cannot know the true field functions (FSS transfer function,
+    /// FHST distortion): the table errors then count them as zero.
+    #[must_use]
+    pub fn field_truth_note(&self) -> Option<String> {
+        self.scenario_file.is_none().then(|| {
+            format!(
+                "scoring: truth.json has no scenario_as_flown and no scenario file named {:?} \
+                 was found: the true FSS transfer function and FHST distortion are unknown and \
+                 the table errors count them as zero",
+                self.scenario
+            )
+        })
+    }
+
     /// The truth the tables written after the run are scored against: the alignments at the
     /// end of the run (`alignments_after_run`).
     #[must_use]
@@ -550,4 +589,64 @@ pub fn check_parameters(
         }
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used, clippy::expect_used)]
+    use super::*;
+
+    /// A `truth.json` with identity alignments and the given extra fields, in a fresh folder.
+    fn truth_dir(tag: &str, extra: &[(&str, serde_json::Value)]) -> std::path::PathBuf {
+        let dir = std::env::temp_dir().join(format!("scoring-{}-{tag}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let eye = serde_json::json!([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]);
+        let mut v = serde_json::json!({
+            "seed": 3,
+            "alignments": { "FHST1": eye, "FHST2": eye, "FSS1": eye, "FSS2": eye },
+        });
+        for (k, x) in extra {
+            v[*k] = x.clone();
+        }
+        std::fs::write(dir.join("truth.json"), v.to_string()).unwrap();
+        dir
+    }
+
+    #[test]
+    fn the_field_truth_comes_from_truth_json_whatever_the_plan_is_called() {
+        // A plan flown from a file outside scenarios/ (its name matches no shipped file):
+        // truth.json's own copy of the scenario gives the transfer function it flew.
+        let file = sim_harness::scenario::scenarios_dir().join("undeclared/clean.toml");
+        let mut flown = sim_harness::scenario::Scenario::load(&file).unwrap();
+        flown.name = "a-plan-of-elsewhere".into();
+        flown.fss2 = flown.fss2.as_flown(1, 3);
+        let dir = truth_dir(
+            "as-flown",
+            &[
+                ("scenario", serde_json::json!("a-plan-of-elsewhere")),
+                ("scenario_as_flown", serde_json::to_value(&flown).unwrap()),
+            ],
+        );
+        let t = read_truth(&dir).unwrap().unwrap();
+        std::fs::remove_dir_all(&dir).unwrap();
+        assert_eq!(t.scenario_source, "truth.json scenario_as_flown");
+        assert_eq!(t.field_truth_note(), None);
+        assert_eq!(t.scenario_file.unwrap().fss2, flown.fss2);
+    }
+
+    #[test]
+    fn an_unknown_field_truth_is_said_not_scored_as_zero_in_silence() {
+        let dir = truth_dir(
+            "unknown",
+            &[("scenario", serde_json::json!("a-plan-of-elsewhere"))],
+        );
+        let t = read_truth(&dir).unwrap().unwrap();
+        std::fs::remove_dir_all(&dir).unwrap();
+        assert!(t.scenario_file.is_none());
+        let note = t.field_truth_note().unwrap();
+        assert!(
+            note.contains("a-plan-of-elsewhere") && note.contains("zero"),
+            "{note}"
+        );
+    }
 }
