@@ -11,6 +11,7 @@
 #   SCENARIO=scenarios/gro-early-mission.toml scenarios/undeclared/false_alarm.sh 20 200
 #   SCENARIO=scenarios/gro-early-mission-orbit-holds.toml scenarios/undeclared/false_alarm.sh 20 300
 #   SCENARIO=scenarios/gro-early-mission-reordered.toml scenarios/undeclared/false_alarm.sh 20 400
+#   SCENARIO=scenarios/undeclared/clean-three-rates.toml scenarios/undeclared/false_alarm.sh 20 500
 #
 # Uses the release binaries if built and current (cargo build --release -p sim-harness -p
 # ground-tool), else the dev ones (BIN=dir overrides). About 5 s per seed in the dev profile.

@@ -5,13 +5,19 @@ written tables are worse than calibrate's ... δM error").
     python3 scenarios/undeclared/iru_table_check.py [WORK=/tmp/diagnose-effects] [BIN=target/release]
 
 For every run folder of `WORK` with a `-diag` beside it (`effects_table.sh`'s `NAME-SEED`, or
-`tests/icd/diagnose_cases.py`'s `CASE-sSEED`, whose `-cal` it reuses), runs
+`tests/icd/diagnose_cases.py`'s `CASE-sSEED`, whose `-cal` it reuses; or `false_alarm.sh`'s
+`run-SEED` with `diag-SEED`), runs
 `ground-tool calibrate` on the same telemetry (into `NAME-SEED-cal`, once), reads the primary
 triad's G of both `iru.tbl` images (`ground-tool table inspect --json`) and prints each one's
 RMS difference from the truth's `(I + δM) g` (`iru.primary` of truth.json or the writer's
 truth_icd.json), in ppm. "WORSE" when
 diagnose's is more than 10 ppm above calibrate's; "as flown" when diagnose kept the flown G
 where calibrate updated it (the table not written: unexplained gyro structure).
+
+With a simulator run (truth.json) it also prints the alignment table diagnose wrote against
+calibrate's, from the report's `written_table_error_arcsec` (per sensor, RMS over the run's own
+measurements of the alignment and field-function error against the truth): "ALIGN WORSE" when
+a sensor is more than 0.5″ worse in diagnose's.
 """
 import glob
 import json
@@ -39,11 +45,15 @@ def rms_ppm(g, ref):
 
 
 worse = kept = same = better = 0
-rows = 0
+rows = align_rows = align_worse = align_better = 0
 for run in sorted(glob.glob(os.path.join(WORK, "*"))):
     if run.endswith(("-diag", "-cal", "-after")) or not os.path.exists(os.path.join(run, "telemetry.bin")):
         continue
-    diag = os.path.join(run + "-diag", "tables", "iru.tbl")
+    name = os.path.basename(run)
+    diag_dir = run + "-diag"
+    if name.startswith("run-") and not os.path.exists(diag_dir):
+        diag_dir = os.path.join(WORK, "diag-" + name[len("run-"):])
+    diag = os.path.join(diag_dir, "tables", "iru.tbl")
     # The simulator's truth.json, or the independent writer's truth_icd.json (same `iru` keys).
     truth_file = next((os.path.join(run, f) for f in ("truth.json", "truth_icd.json")
                        if os.path.exists(os.path.join(run, f))), None)
@@ -72,6 +82,19 @@ for run in sorted(glob.glob(os.path.join(WORK, "*"))):
         same += 1
     elif e_diag < e_cal - 10.0:
         tag, better = "better", better + 1
-    print(f"{os.path.basename(run):24s} calibrate {e_cal:7.1f}  diagnose {e_diag:7.1f} ppm  {tag}")
+    align = ""
+    report = os.path.join(diag_dir, "report.json")
+    w = json.load(open(report)).get("written_table_error_arcsec") if os.path.exists(report) else None
+    if w:
+        align_rows += 1
+        bad = [k for k in w["after"] if k in w["before"] and w["after"][k] > w["before"][k] + 0.5]
+        align_worse += bool(bad)
+        align_better += any(w["after"][k] < w["before"][k] - 0.5 for k in w["after"] if k in w["before"])
+        align = "  align " + ", ".join(f"{k} {w['before'][k]:.1f}->{w['after'][k]:.1f}" for k in w["after"])
+        align += "  ALIGN WORSE: " + ", ".join(bad) if bad else ""
+    print(f"{name:24s} calibrate {e_cal:7.1f}  diagnose {e_diag:7.1f} ppm  {tag}{align}")
 print(f"\n{rows} runs: diagnose's G the same as calibrate's in {same}, better by > 10 ppm in {better}, "
       f"kept as flown where calibrate updated (worse) in {kept}, worse by a δM of its own in {worse}")
+if align_rows:
+    print(f"{align_rows} simulator runs: diagnose's alignment table worse than calibrate's by > 0.5″ "
+          f"on a sensor in {align_worse}, better on a sensor in {align_better}")
