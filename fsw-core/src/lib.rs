@@ -42,4 +42,5 @@ pub mod star_id;
 pub mod sun_ephemeris;
 pub mod tables;
 pub mod telemetry;
+pub mod tm_layout;
 pub mod units;

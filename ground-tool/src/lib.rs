@@ -36,6 +36,7 @@ pub mod attitude;
 pub mod bench;
 pub mod calibration;
 pub mod diagnose;
+pub mod icd_export;
 pub mod linalg;
 pub mod paper;
 pub mod pipeline;

@@ -178,6 +178,22 @@ enum Command {
         #[command(subcommand)]
         action: TableAction,
     },
+    /// The downlink's packet descriptions for other ground systems, and a field-by-field dump.
+    ///
+    /// What it is for: Yamcs, OpenC3 COSMOS, cFS ground tools and NASA's `ccsdspy` read
+    /// packets from a description, not from docs/icd.md. `describe` writes an XTCE 1.2
+    /// mission database (`gro-telemetry.xtce.xml`: the CCSDS primary header, the CUC time
+    /// code and every field of APIDs 0x010, 0x011, 0x012, 0x020 with its unit) and one
+    /// `ccsdspy` CSV per APID (`ccsdspy/apid_0x010_raw_sensor_frame.csv`, ... for
+    /// `ccsdspy.FixedLength.from_file`), generated from the flight software's one layout. The
+    /// same files are shipped in docs/icd/. `decode` writes every field of every packet of a
+    /// telemetry.bin as this tool reads it, one CSV per APID with the same column names, to
+    /// compare with an outside decoder (tests/icd/interop_decoders.py does, for ccsdspy and
+    /// an XTCE decoder).
+    Icd {
+        #[command(subcommand)]
+        action: IcdAction,
+    },
     /// Time FFCAL on synthetic data (requirement: 10^6 pairs in <= 2 s, release build).
     Bench {
         /// Number of dot-product pairs per Gauss-Newton pass.
@@ -193,6 +209,25 @@ enum Command {
         /// Machine-readable JSON.
         #[arg(long)]
         json: bool,
+    },
+}
+
+#[derive(Subcommand)]
+enum IcdAction {
+    /// Write the XTCE database and the ccsdspy CSVs into OUT (OUT/ccsdspy/).
+    Describe {
+        /// Output folder (created; the files are overwritten).
+        #[arg(long)]
+        out: std::path::PathBuf,
+    },
+    /// Decode TELEMETRY (a telemetry.bin) into OUT/apid_0x0NN_NAME.csv, every field of every
+    /// packet kept by the reader (duplicates and damaged packets are reported, not written).
+    Decode {
+        /// The telemetry file.
+        telemetry: std::path::PathBuf,
+        /// Output folder (created; the files are overwritten).
+        #[arg(long)]
+        out: std::path::PathBuf,
     },
 }
 
@@ -233,6 +268,36 @@ enum TableAction {
         /// Tables folder.
         dir: std::path::PathBuf,
     },
+}
+
+fn run_icd(action: IcdAction) -> Result<()> {
+    match action {
+        IcdAction::Describe { out } => {
+            let written = ground_tool::icd_export::write_descriptions(&out)
+                .with_context(|| format!("writing the descriptions into {}", out.display()))?;
+            for p in written {
+                eprintln!("wrote {}", p.display());
+            }
+        }
+        IcdAction::Decode { telemetry, out } => {
+            // A file that cannot be read is bad input (exit code 2).
+            let (written, report) = ground_tool::icd_export::dump_csv(&telemetry, &out)
+                .map_err(ground_tool::run_check::InputError)?;
+            for p in written {
+                eprintln!("wrote {}", p.display());
+            }
+            if !report.is_clean() {
+                eprintln!(
+                    "warning: {}: {} packets skipped ({} octets), {} duplicates dropped: not in the CSVs",
+                    telemetry.display(),
+                    report.skipped.len(),
+                    report.skipped_octets(),
+                    report.duplicates.len()
+                );
+            }
+        }
+    }
+    Ok(())
 }
 
 fn run_table(action: TableAction) -> Result<()> {
@@ -636,6 +701,7 @@ fn run(cli: Cli) -> Result<()> {
             }
         }
         Command::Table { action } => run_table(action)?,
+        Command::Icd { action } => run_icd(action)?,
         Command::Bench {
             fhst_samples: Some(n),
             json,
