@@ -1,4 +1,6 @@
 //! End-to-end support: the calibration loop's before/after scoring ([`loop_report`]), used by
-//! the `calibration-loop` binary and by the tests in `tests/tests/`.
+//! the `calibration-loop` binary and by the tests in `tests/tests/`; the calibration Monte
+//! Carlo's shards, merge and summary ([`mc_campaign`]).
 
 pub mod loop_report;
+pub mod mc_campaign;

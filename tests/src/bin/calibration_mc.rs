@@ -13,10 +13,12 @@
 use anyhow::Context;
 use clap::Parser;
 use gro_tests::loop_report::{matrix_from_json, relative_error_and_nees};
+use gro_tests::mc_campaign::{
+    merge_shards, nums3, recorded, shard_file_name, summarise, Campaign, McSummary, Num,
+    SeedResult, ShardFile,
+};
 use ground_tool::calibration::alignment::Weighting;
 use ground_tool::pipeline::calibrate::{calibrate_run, CalibrateOptions, FhstStage};
-use nalgebra::Vector3;
-use serde::Serialize;
 use sim_harness::run::{run, RunOptions};
 use sim_harness::scenario::resolve;
 use sim_harness::{exit_code, InputError};
@@ -38,6 +40,11 @@ within 5 arcsec, the RMS error per axis against the mean stated σ and the mean 
 of the same data, and the fraction of δM elements within 3σ.\n\n\
 --work W: each seed's folder W/seed-N is created by this run (refused, exit code 2, if it \
 already exists) and removed after scoring; nothing else in W is touched.\n\n\
+On a cluster: each task flies one shard (--shard K/M: the seeds first_seed + i with i mod M = K) \
+and writes its results file (--shard-out DIR/results.shard-K-of-M.json); --merge FILES... then \
+checks that the files make one campaign (same scenario, seeds and options; every shard once) \
+and prints the same summary, bit for bit, as the unsharded run (scripts/slurm_campaign.sh runs \
+it as a Slurm job array).\n\n\
 Exit codes (every binary of the workspace): 0 success, 1 runtime failure, 2 bad input (e.g. -n 0).\n\n\
 Example: calibration-mc -n 20 --first-seed 1 --json > mc.json"
 )]
@@ -71,43 +78,43 @@ struct Args {
     /// spreads are the scenario's coefficients (`transfer_function_per_seed`).
     #[arg(long)]
     fixed_fss_tf: bool,
+    /// Fly only shard K of M (0 ≤ K < M): the seeds `first_seed + i` with `i mod M = K`, and
+    /// write their results to `--shard-out`/results.shard-K-of-M.json instead of a summary
+    /// (for a Slurm job array: `--shard $SLURM_ARRAY_TASK_ID/$SLURM_ARRAY_TASK_COUNT`).
+    #[arg(long, value_name = "K/M", conflicts_with = "merge")]
+    shard: Option<String>,
+    /// Folder of the shard's results file (default: the work folder).
+    #[arg(long, value_name = "DIR", requires = "shard")]
+    shard_out: Option<PathBuf>,
+    /// Summarise the shard files of one campaign instead of flying (every shard of one M once;
+    /// the campaign, seeds and options must agree). The summary equals the unsharded run's.
+    #[arg(long, value_name = "FILE", num_args = 1..)]
+    merge: Vec<PathBuf>,
     /// Print the result as JSON.
     #[arg(long)]
     json: bool,
 }
 
-/// One seed's scores.
-#[derive(Serialize)]
-struct SeedResult {
-    seed: u64,
-    /// Relative error w.r.t. FHST1 per sensor (FHST2, FSS1, FSS2), ACS, arcsec.
-    relative_error_arcsec: Vec<(String, [f64; 3])>,
-    /// NEES per sensor.
-    nees: Vec<(String, f64)>,
-    /// Stated 1σ of FHST2 rel FHST1, arcsec.
-    sigma_fhst2_rel_fhst1_arcsec: [f64; 3],
-    /// Cramér–Rao 1σ of FHST2 rel FHST1 from the simultaneous star pairs, arcsec.
-    crb_fhst2_rel_fhst1_arcsec: [f64; 3],
-    /// Cramér–Rao 1σ of the same from every star in gyro batches (scaled by the fit's
-    /// χ²/dof, i.e. with the noise the data show), arcsec.
-    crb_batches_fhst2_rel_fhst1_arcsec: [f64; 3],
-    /// δM error / σ, row-major (absent when IRUCAL did not run).
-    delta_m_normalised: Option<[f64; 9]>,
-}
-
-#[derive(Serialize)]
-struct McSummary {
-    scenario: String,
-    runs: usize,
-    mean_nees: Vec<(String, f64)>,
-    fhst1_fhst2_within_5_arcsec_fraction: f64,
-    fhst1_fhst2_error_rms_per_axis_arcsec: [f64; 3],
-    fhst1_fhst2_mean_stated_sigma_arcsec: [f64; 3],
-    fhst1_fhst2_mean_crb_sigma_arcsec: [f64; 3],
-    fhst1_fhst2_mean_crb_batches_sigma_arcsec: [f64; 3],
-    delta_m_mean_square_normalised: Option<f64>,
-    delta_m_within_3sigma_fraction: Option<f64>,
-    seeds: Vec<SeedResult>,
+impl Args {
+    /// The campaign these arguments describe.
+    fn campaign(&self) -> Campaign {
+        let flags = [
+            (self.shuster1982, "--shuster1982"),
+            (self.single_stage, "--single-stage"),
+            (self.star_pairs, "--star-pairs"),
+            (self.fixed_fss_tf, "--fixed-fss-tf"),
+        ];
+        Campaign {
+            scenario: self.scenario.clone(),
+            runs: self.runs,
+            first_seed: self.first_seed,
+            options: flags
+                .iter()
+                .filter(|(on, _)| *on)
+                .map(|(_, f)| (*f).to_owned())
+                .collect(),
+        }
+    }
 }
 
 fn one_seed(args: &Args, seed: u64) -> anyhow::Result<SeedResult> {
@@ -169,17 +176,17 @@ fn score_seed(
     let mut nees = Vec::new();
     for j in 1..sol.sensors.len() {
         let (e, n) = relative_error_and_nees(sol, &truth, j)?;
-        relative.push((sol.sensors[j].id.clone(), [e.x, e.y, e.z]));
-        nees.push((sol.sensors[j].id.clone(), n));
+        relative.push((sol.sensors[j].id.clone(), nums3([e.x, e.y, e.z])));
+        nees.push((sol.sensors[j].id.clone(), Num(n)));
     }
     let delta_m_normalised = match (&cal.irucal, truth["iru"]["primary"]["delta_m"].is_array()) {
         (Some(s), true) => {
             let t = matrix_from_json(&truth["iru"]["primary"]["delta_m"])?;
             let d = (s.calibration.delta_m - t).component_div(&s.sigma_delta_m);
-            let mut out = [0.0; 9];
+            let mut out = [Num(0.0); 9];
             for i in 0..3 {
                 for j in 0..3 {
-                    out[3 * i + j] = d[(i, j)];
+                    out[3 * i + j] = Num(d[(i, j)]);
                 }
             }
             Some(out)
@@ -190,16 +197,19 @@ fn score_seed(
         seed,
         relative_error_arcsec: relative,
         nees,
-        sigma_fhst2_rel_fhst1_arcsec: cal.report.ffcal.sigma_fhst2_rel_fhst1_arcsec,
-        crb_fhst2_rel_fhst1_arcsec: cal.report.ffcal.crb_sigma_fhst2_rel_fhst1_fhst_only_arcsec,
-        crb_batches_fhst2_rel_fhst1_arcsec: cal
-            .report
-            .ffcal
-            .gyro_batches
-            .as_ref()
-            .map_or([f64::NAN; 3], |g| {
-                g.crb_sigma_arcsec.map(|x| x * g.variance_factor.sqrt())
-            }),
+        sigma_fhst2_rel_fhst1_arcsec: nums3(cal.report.ffcal.sigma_fhst2_rel_fhst1_arcsec),
+        crb_fhst2_rel_fhst1_arcsec: nums3(
+            cal.report.ffcal.crb_sigma_fhst2_rel_fhst1_fhst_only_arcsec,
+        ),
+        crb_batches_fhst2_rel_fhst1_arcsec: nums3(
+            cal.report
+                .ffcal
+                .gyro_batches
+                .as_ref()
+                .map_or([f64::NAN; 3], |g| {
+                    g.crb_sigma_arcsec.map(|x| x * g.variance_factor.sqrt())
+                }),
+        ),
         delta_m_normalised,
     })
 }
@@ -207,7 +217,8 @@ fn score_seed(
 fn main() {
     let args = Args::parse();
     match monte_carlo(&args) {
-        Ok(s) => {
+        Ok(None) => {}
+        Ok(Some(s)) => {
             if args.json {
                 match serde_json::to_string_pretty(&s) {
                     Ok(j) => println!("{j}"),
@@ -227,81 +238,59 @@ fn main() {
     }
 }
 
-fn monte_carlo(args: &Args) -> anyhow::Result<McSummary> {
+/// Fly the campaign (or its shard) or merge shard files. `None` for a shard: its results
+/// file is the output.
+fn monte_carlo(args: &Args) -> anyhow::Result<Option<McSummary>> {
+    if !args.merge.is_empty() {
+        let (campaign, seeds) = merge_shards(&args.merge).map_err(InputError::from)?;
+        eprintln!(
+            "merged {} shard files: {} seeds of {}",
+            args.merge.len(),
+            seeds.len(),
+            campaign.scenario
+        );
+        return Ok(Some(summarise(&campaign.scenario, seeds)));
+    }
     if args.runs == 0 {
         return Err(InputError::msg("-n must be ≥ 1 (the number of seeds)").into());
     }
+    let shard = match &args.shard {
+        Some(text) => Some(sim_harness::campaign::parse_shard(text).map_err(InputError::from)?),
+        None => None,
+    };
     resolve(&args.scenario).map_err(InputError::from)?;
     std::fs::create_dir_all(&args.work)
         .with_context(|| format!("creating {}", args.work.display()))?;
+    let campaign = args.campaign();
+    let todo = campaign.seeds(shard.unwrap_or((0, 1)));
     let mut seeds = Vec::new();
-    for k in 0..args.runs {
-        let seed = args.first_seed + k;
-        eprintln!("[{}/{}] seed {seed} ...", k + 1, args.runs);
-        seeds.push(one_seed(args, seed).with_context(|| format!("seed {seed}"))?);
+    for (k, seed) in todo.iter().enumerate() {
+        eprintln!("[{}/{}] seed {seed} ...", k + 1, todo.len());
+        seeds.push(one_seed(args, *seed).with_context(|| format!("seed {seed}"))?);
     }
-    let n = seeds.len().max(1) as f64;
-    let mut mean_nees: Vec<(String, f64)> = Vec::new();
-    for s in &seeds {
-        for (id, v) in &s.nees {
-            match mean_nees.iter_mut().find(|(i, _)| i == id) {
-                Some((_, m)) => *m += v / n,
-                None => mean_nees.push((id.clone(), v / n)),
-            }
-        }
-    }
-    let fhst2 = |s: &SeedResult| {
-        s.relative_error_arcsec
-            .iter()
-            .find(|(id, _)| id == "FHST2")
-            .map_or([f64::NAN; 3], |(_, e)| *e)
+    // Both paths summarise the results as recorded (module doc of `mc_campaign`).
+    let seeds = recorded(&seeds)?;
+    let Some(shard) = shard else {
+        return Ok(Some(summarise(&args.scenario, seeds)));
     };
-    let within = seeds
-        .iter()
-        .filter(|s| Vector3::from(fhst2(s)).norm() <= 5.0)
-        .count() as f64
-        / n;
-    let per_axis = |f: &dyn Fn(&SeedResult) -> [f64; 3], square: bool| -> [f64; 3] {
-        let mut a = [0.0; 3];
-        for s in &seeds {
-            let v = f(s);
-            for i in 0..3 {
-                a[i] += if square { v[i] * v[i] } else { v[i] } / n;
-            }
-        }
-        if square {
-            a.map(f64::sqrt)
-        } else {
-            a
-        }
-    };
-    let dm: Vec<[f64; 9]> = seeds.iter().filter_map(|s| s.delta_m_normalised).collect();
-    let (dm_ms, dm_within) = if dm.is_empty() {
-        (None, None)
-    } else {
-        let all: Vec<f64> = dm.iter().flatten().copied().collect();
-        let k = all.len() as f64;
-        (
-            Some(all.iter().map(|x| x * x).sum::<f64>() / k),
-            Some(all.iter().filter(|x| x.abs() <= 3.0).count() as f64 / k),
-        )
-    };
-    Ok(McSummary {
-        scenario: args.scenario.clone(),
-        runs: seeds.len(),
-        mean_nees,
-        fhst1_fhst2_within_5_arcsec_fraction: within,
-        fhst1_fhst2_error_rms_per_axis_arcsec: per_axis(&fhst2, true),
-        fhst1_fhst2_mean_stated_sigma_arcsec: per_axis(&|s| s.sigma_fhst2_rel_fhst1_arcsec, false),
-        fhst1_fhst2_mean_crb_sigma_arcsec: per_axis(&|s| s.crb_fhst2_rel_fhst1_arcsec, false),
-        fhst1_fhst2_mean_crb_batches_sigma_arcsec: per_axis(
-            &|s| s.crb_batches_fhst2_rel_fhst1_arcsec,
-            false,
-        ),
-        delta_m_mean_square_normalised: dm_ms,
-        delta_m_within_3sigma_fraction: dm_within,
+    let dir = args.shard_out.as_ref().unwrap_or(&args.work);
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let path = dir.join(shard_file_name(shard));
+    let partial = dir.join(format!("{}.partial", shard_file_name(shard)));
+    let file = ShardFile {
+        campaign,
+        shard,
         seeds,
-    })
+    };
+    std::fs::write(&partial, serde_json::to_string_pretty(&file)? + "\n")
+        .with_context(|| format!("writing {}", partial.display()))?;
+    std::fs::rename(&partial, &path).with_context(|| format!("renaming to {}", path.display()))?;
+    eprintln!(
+        "wrote {} ({} seeds); summarise with --merge over every shard's file",
+        path.display(),
+        file.seeds.len()
+    );
+    Ok(None)
 }
 
 fn print_table(s: &McSummary) {
@@ -310,13 +299,10 @@ fn print_table(s: &McSummary) {
     );
     println!("|---|---|---|---|");
     for r in &s.seeds {
-        let e = r
-            .relative_error_arcsec
-            .first()
-            .map_or([f64::NAN; 3], |(_, e)| *e);
-        let nees: Vec<String> = r.nees.iter().map(|(_, v)| format!("{v:.1}")).collect();
+        let e = r.fhst2();
+        let nees: Vec<String> = r.nees.iter().map(|(_, v)| format!("{:.1}", v.0)).collect();
         let dm = r.delta_m_normalised.map_or("-".to_owned(), |d| {
-            format!("{:.1}", d.iter().fold(0.0_f64, |m, x| m.max(x.abs())))
+            format!("{:.1}", d.iter().fold(0.0_f64, |m, x| m.max(x.0.abs())))
         });
         println!(
             "| {} | [{:.1}, {:.1}, {:.1}] | {} | {} |",
@@ -331,13 +317,16 @@ fn print_table(s: &McSummary) {
     println!();
     println!("runs: {}", s.runs);
     for (id, v) in &s.mean_nees {
-        println!("mean NEES {id} rel FHST1: {v:.2} (3 = covariance right)");
+        println!(
+            "mean NEES {id} rel FHST1: {:.2} (3 = covariance right)",
+            v.0
+        );
     }
     println!(
         "FHST1-FHST2 within 5″: {:.0} % of seeds",
         100.0 * s.fhst1_fhst2_within_5_arcsec_fraction
     );
-    let f = |a: [f64; 3]| format!("[{:.1}, {:.1}, {:.1}]", a[0], a[1], a[2]);
+    let f = |a: [Num; 3]| format!("[{:.1}, {:.1}, {:.1}]", a[0].0, a[1].0, a[2].0);
     println!(
         "FHST1-FHST2 per axis: RMS error {} ″, mean stated σ {} ″; mean Cramér–Rao σ: every star in gyro batches {} ″, simultaneous star pairs {} ″",
         f(s.fhst1_fhst2_error_rms_per_axis_arcsec),
