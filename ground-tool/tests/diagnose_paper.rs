@@ -161,7 +161,7 @@ fn line(name: &str, r: Option<&Irucal>, truth: &Matrix3<f64>) -> Option<(f64, f6
 #[ignore = "a study over run folders: PAIRS=tf:notf,... (scenarios/undeclared/paper_case.sh)"]
 fn paper_case_irucal() {
     let pairs = std::env::var("PAIRS").unwrap();
-    let out_root = std::env::temp_dir().join("diagnose-paper-case");
+    let out_root = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("diagnose-paper-case");
     let mut sums: std::collections::BTreeMap<&str, (f64, f64, f64, usize)> = Default::default();
     for pair in pairs.split(',') {
         let (tf, notf) = pair.split_once(':').unwrap();

@@ -10,7 +10,10 @@ use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
 fn work_dir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("diagnose-real-{}-{name}", std::process::id()));
+    // Under target/tmp with a fixed name: a later test run replaces it, nothing accumulates.
+    let d = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("diagnose-real-{name}"));
+    let _ = std::fs::remove_dir_all(&d);
+    let _ = std::fs::remove_dir_all(d.with_extension("diag"));
     std::fs::create_dir_all(&d).unwrap();
     d
 }

@@ -26,7 +26,7 @@ fn stderr(o: &Output) -> String {
 /// the same exit code (2) as in `sim-harness`.
 #[test]
 fn table_errors_are_sentences_with_exit_code_2() {
-    let tmp = std::env::temp_dir().join(format!("rel-table-{}", std::process::id()));
+    let tmp = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("rel-table");
     let _ = std::fs::remove_dir_all(&tmp);
     std::fs::create_dir_all(&tmp).unwrap();
     let o = gt(&["table", "write-prelaunch-alignment", "a.tbl"], &tmp);

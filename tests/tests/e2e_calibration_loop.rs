@@ -15,7 +15,7 @@ use sim_harness::scenario::resolve;
 
 #[test]
 fn e2e_calibration_loop_gro_early_mission() {
-    let out = std::env::temp_dir().join(format!("gro-e2e-loop-{}", std::process::id()));
+    let out = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("gro-e2e-loop");
     let _ = std::fs::remove_dir_all(&out);
     let scenario = resolve("gro-early-mission").unwrap();
     let fly_a = out.join("a");
@@ -182,7 +182,7 @@ fn e2e_calibration_loop_gro_early_mission() {
 /// byte-identical tables and the same report (up to the output paths it names).
 #[test]
 fn calibration_is_deterministic() {
-    let out = std::env::temp_dir().join(format!("gro-e2e-determinism-{}", std::process::id()));
+    let out = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("gro-e2e-determinism");
     let _ = std::fs::remove_dir_all(&out);
     let fly = out.join("run");
     fly_prelaunch(&fly);
@@ -216,7 +216,7 @@ fn calibration_is_deterministic() {
 /// relative alignment is consistent with its stated covariance.
 #[test]
 fn calibration_without_housekeeping() {
-    let out = std::env::temp_dir().join(format!("gro-e2e-nohk-{}", std::process::id()));
+    let out = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("gro-e2e-nohk");
     let _ = std::fs::remove_dir_all(&out);
     let fly = out.join("run");
     fly_prelaunch(&fly);

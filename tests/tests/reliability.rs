@@ -20,7 +20,7 @@ fn stderr(o: &Output) -> String {
 /// deletes a seed folder it did not create.
 #[test]
 fn calibration_mc_refuses_zero_runs_and_foreign_seed_folders() {
-    let tmp = std::env::temp_dir().join(format!("rel-mc-{}", std::process::id()));
+    let tmp = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("rel-mc");
     let _ = std::fs::remove_dir_all(&tmp);
     std::fs::create_dir_all(tmp.join("w/seed-1")).unwrap();
     std::fs::write(tmp.join("w/seed-1/precious.txt"), "keep").unwrap();
@@ -46,7 +46,7 @@ fn calibration_mc_refuses_zero_runs_and_foreign_seed_folders() {
 /// not write.
 #[test]
 fn calibration_loop_runs_twice_into_its_own_folder() {
-    let tmp = std::env::temp_dir().join(format!("rel-loop-{}", std::process::id()));
+    let tmp = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("rel-loop");
     let _ = std::fs::remove_dir_all(&tmp);
     std::fs::create_dir_all(tmp.join("other")).unwrap();
     std::fs::write(tmp.join("other/notes.txt"), "mine").unwrap();

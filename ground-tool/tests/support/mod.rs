@@ -12,9 +12,10 @@ pub fn root() -> PathBuf {
         .to_path_buf()
 }
 
-/// Write a run with the writer's `flags` into a fresh temporary folder `<prefix>-<pid>-<case>`.
+/// Write a run with the writer's `flags` into a fresh folder `<prefix>-<case>` under the
+/// target's tmp folder (replaced by the next test run: nothing accumulates).
 pub fn write_run(prefix: &str, case: &str, flags: &[&str]) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("{prefix}-{}-{case}", std::process::id()));
+    let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("{prefix}-{case}"));
     let _ = std::fs::remove_dir_all(&dir);
     let out = Command::new("python3")
         .arg(root().join("tests/icd/write_run.py"))
