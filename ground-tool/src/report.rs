@@ -403,6 +403,13 @@ pub fn write_calibration_report(
         },
         v.reason
     );
+    if v.passed && !v.not_validated.is_empty() {
+        let _ = writeln!(
+            md,
+            "**Not validated, flown as before relative to the trackers:** {} (no held-out residual in any block of time: the sensor's data lie in one block, so its new alignment was never tested on data it was not fitted to).\n",
+            v.not_validated.join(", ")
+        );
+    }
     if !v.rms_new_arcsec.is_empty() {
         let _ = writeln!(
             md,

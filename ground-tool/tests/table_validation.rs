@@ -131,3 +131,65 @@ fn the_aberration_switch_is_written_only_when_the_telemetry_shows_aberration() {
         }
     }
 }
+
+/// A sensor whose data lie in one block of time is never tested on data it was not fitted to
+/// (its fit without that block fails): it keeps its flown alignment relative to the trackers,
+/// and the report names it. On the writer's nominal run FSS2 sees the Sun in the last block
+/// only.
+#[test]
+fn a_sensor_the_held_out_blocks_never_test_flies_as_before_relative_to_the_trackers() {
+    let run = support::write_run("heldout", "one-block-fss2", &[]);
+    let out = run.join("cal");
+    let r = calibrate(&run, &out, &[]);
+    let (passed, _, _, _, why) = validation(&r);
+    assert!(passed, "{why}");
+    let not_validated = &r["alignment_validation"]["not_validated"];
+    assert_eq!(not_validated, &serde_json::json!(["FSS2"]), "{r:#}");
+    let m =
+        |t: &AlignmentTable, k: usize| fsw_core::tables::types::matrix_from_rows(t.matrices()[k]);
+    let (new, flown) = (table(&out), AlignmentTable::prelaunch());
+    // FSS2 relative to FHST1: the flown one; FHST1 itself moved (the prelaunch table is
+    // hundreds of arcsec off), so this is not the flown matrix in the ACS frame.
+    let rel_new = m(&new, 0).transpose() * m(&new, 3);
+    let rel_flown = m(&flown, 0).transpose() * m(&flown, 3);
+    assert!(
+        (rel_new - rel_flown).amax() < 1e-12,
+        "{rel_new} vs {rel_flown}"
+    );
+    assert!(
+        (m(&new, 0) - m(&flown, 0)).amax() > 1e-4,
+        "FHST1 should have moved"
+    );
+    let md = std::fs::read_to_string(out.join("report.md")).unwrap();
+    assert!(
+        md.contains("Not validated, flown as before relative to the trackers:** FSS2"),
+        "{md}"
+    );
+}
+
+/// One damaged time code (the 0.5-s fine bit of one raw frame flipped) is one frame's
+/// problem, and a 2-s OBC cycle is a cycle: before, the first halved the cycle the ground
+/// inferred from the time codes and the second was capped at 1 s; either way every rate-mode
+/// switch frame became unsplittable and IRUCAL lost every maneuver (exit 0).
+#[test]
+fn the_cycle_is_read_from_the_time_codes_that_recur() {
+    for (case, flags) in [
+        ("flip", ["--flip-time-bit", "2000:15"]),
+        ("cycle-2s", ["--cycle-s", "2"]),
+    ] {
+        let run = support::write_run("cycle", case, &flags);
+        let r = calibrate(&run, &run.join("cal"), &[]);
+        assert_eq!(
+            r["data"]["rate_switch_frames_dropped"], 0,
+            "{case}: {:#}",
+            r["data"]
+        );
+        let maneuvers = r["maneuvers"].as_array().unwrap();
+        assert_eq!(maneuvers.len(), 3, "{case}");
+        assert!(
+            maneuvers.iter().all(|m| m["used"] == true),
+            "{case}: {:#}",
+            r["iru_skipped"]
+        );
+    }
+}

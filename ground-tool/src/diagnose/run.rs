@@ -176,11 +176,16 @@ pub fn iru_table_out(flown: &IruTable, chain: Option<&CalibrationOutput>) -> (Ir
 /// validation passed, else the flown one (`pipeline::calibrate::run_calibrate`); the flown one
 /// when the chain failed.
 fn calibrate_written_alignment(cal: &Chain, copt: &CalibrateOptions) -> AlignmentTable {
+    let flown = copt
+        .flown_alignment
+        .unwrap_or_else(AlignmentTable::prelaunch);
     match &cal.output {
-        Some(o) if o.report.alignment_validation.passed => cal.alignment,
-        _ => copt
-            .flown_alignment
-            .unwrap_or_else(AlignmentTable::prelaunch),
+        Some(o) => crate::pipeline::calibrate::alignment_to_fly(
+            cal.alignment,
+            flown,
+            &o.report.alignment_validation,
+        ),
+        None => flown,
     }
 }
 

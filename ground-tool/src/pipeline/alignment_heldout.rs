@@ -134,6 +134,10 @@ pub struct AlignmentValidation {
     pub rms_new_arcsec: BTreeMap<String, f64>,
     /// The same with the flown alignments (arcsec).
     pub rms_flown_arcsec: BTreeMap<String, f64>,
+    /// Sensors of the fit with no held-out residual in any used block (a sensor seen in one
+    /// block only: its fit without that block fails, so its new alignment is never tested on
+    /// data it was not fitted to). The table keeps their flown alignments.
+    pub not_validated: Vec<String>,
     /// Whether the new table may be written.
     pub passed: bool,
     /// Why, with the numbers.
@@ -258,6 +262,14 @@ pub(crate) fn validate_alignment_heldout(
         f64::NAN
     };
     let folds = blocks.len();
+    let rms_new_arcsec = rms_new.by_name(&setup.map);
+    let not_validated: Vec<String> = setup
+        .map
+        .iter()
+        .zip(SENSOR_NAMES)
+        .filter(|(j, name)| j.is_some() && !rms_new_arcsec.contains_key(*name))
+        .map(|(_, name)| name.to_owned())
+        .collect();
     let (passed, reason) = if used < 2 {
         (
             false,
@@ -301,8 +313,9 @@ pub(crate) fn validate_alignment_heldout(
         improvement,
         mean_square_normalised: mean_square,
         p_value,
-        rms_new_arcsec: rms_new.by_name(&setup.map),
+        rms_new_arcsec,
         rms_flown_arcsec: rms_flown.by_name(&setup.map),
+        not_validated,
         passed,
         reason,
     }

@@ -1695,6 +1695,62 @@ pub fn filter_update(
     Ok((Some(new), changes))
 }
 
+/// The alignment table `calibrate` writes: the new one if it passed the held-out validation,
+/// with every sensor the validation could not test flying as before ([`keep_flown`]); else
+/// the flown one again.
+#[must_use]
+pub fn alignment_to_fly(
+    new: AlignmentTable,
+    flown: AlignmentTable,
+    validation: &AlignmentValidation,
+) -> AlignmentTable {
+    match keep_flown(new, &flown, &validation.not_validated) {
+        Some(table) if validation.passed => table,
+        _ => flown,
+    }
+}
+
+/// `new` with each sensor named in `sensors` (`SENSOR_NAMES`) flying as before relative to the
+/// trackers: its flown alignment turned by the rotation the reference tracker's alignment
+/// underwent (FHST1, or FHST2 when FHST1 is itself not validated), so that its alignment
+/// relative to the reference is the flown one. Why: a sensor whose new alignment the held-out
+/// validation could not test must not move relative to the sensors that fix the attitude;
+/// keeping its flown matrix in the ACS frame while the trackers move would move it.
+/// `None` when neither tracker was validated.
+#[must_use]
+pub fn keep_flown(
+    new: AlignmentTable,
+    flown: &AlignmentTable,
+    sensors: &[String],
+) -> Option<AlignmentTable> {
+    if sensors.is_empty() {
+        return Some(new);
+    }
+    let names = SENSOR_NAMES;
+    let reference = ["FHST1", "FHST2"]
+        .into_iter()
+        .find(|r| !sensors.iter().any(|s| s == r))?;
+    let k_ref = names.iter().position(|n| *n == reference)?;
+    let m =
+        |t: &AlignmentTable, k: usize| fsw_core::tables::types::matrix_from_rows(t.matrices()[k]);
+    // R · M_ref_flown = M_ref_new.
+    let r = m(&new, k_ref) * m(flown, k_ref).transpose();
+    let mut out = new;
+    for name in sensors {
+        let Some(k) = names.iter().position(|n| n == name) else {
+            continue;
+        };
+        let kept = fsw_core::tables::types::rows_from_matrix(&(r * m(flown, k)));
+        match k {
+            0 => out.m_acs_from_fhst1 = kept,
+            1 => out.m_acs_from_fhst2 = kept,
+            2 => out.m_acs_from_fss1 = kept,
+            _ => out.m_acs_from_fss2 = kept,
+        }
+    }
+    Some(out)
+}
+
 /// Write a table image to `path`.
 ///
 /// # Errors
@@ -1784,13 +1840,15 @@ pub fn calibrate_run(
     let alignment_path: PathBuf = tables_dir.join("alignment.tbl");
     // Only a table that passed the held-out validation is uplinked; else the flown one again
     // (so that OUT/tables stays the complete set to fly), and the report says why.
-    let alignment_to_fly = if out.report.alignment_validation.passed {
-        out.alignment
-    } else {
-        options
-            .flown_alignment
-            .unwrap_or_else(AlignmentTable::prelaunch)
-    };
+    // A sensor the held-out blocks never tested keeps its flown alignment.
+    let flown_alignment = options
+        .flown_alignment
+        .unwrap_or_else(AlignmentTable::prelaunch);
+    let alignment_to_fly = alignment_to_fly(
+        out.alignment,
+        flown_alignment,
+        &out.report.alignment_validation,
+    );
     write_table(
         &alignment_path,
         TableId::Alignment,

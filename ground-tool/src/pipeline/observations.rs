@@ -406,18 +406,56 @@ fn rate_mode_switches(tm: &Telemetry, cycle_s: f64) -> Vec<(f64, bool)> {
         .collect()
 }
 
-/// The flight software's cycle (s): the shortest spacing of raw frames or events, at most 1 s.
+/// The flight software's cycle (s), from the time codes: the shortest spacing of consecutive
+/// raw frames or events that *recurs* (at least [`CYCLE_MIN_COUNT`] times and in 1 ‰ of the
+/// spacings), so that one damaged time code (a flipped fine bit makes one 0.5-s and one
+/// 1.5-s spacing) cannot halve it and turn every frame interval into a "multi-cycle" one.
+/// At most 1 s, unless events are downlinked and every event lies on that longer grid (a
+/// 2-s OBC cycle): events come at cycle times, so they tell a long cycle from decimated raw
+/// frames, whose spacing is several cycles; without events a longer spacing is read as
+/// decimation of a 1-s cycle (a switch inside is then dropped, never mis-weighted).
 fn cycle_period_s(tm: &Telemetry) -> f64 {
+    let spacing = |a: f64, b: f64| ((b - a) * 1e3).round() as i64; // ms
     let raw = tm
         .raw
         .windows(2)
-        .map(|w| w[1].time.seconds() - w[0].time.seconds());
+        .map(|w| spacing(w[0].time.seconds(), w[1].time.seconds()));
     let events = tm
         .events
         .windows(2)
-        .map(|w| w[1].0.seconds() - w[0].0.seconds());
-    raw.chain(events).filter(|d| *d > 1e-3).fold(1.0, f64::min)
+        .map(|w| spacing(w[0].0.seconds(), w[1].0.seconds()));
+    let mut counts: std::collections::BTreeMap<i64, usize> = std::collections::BTreeMap::new();
+    for d in raw.chain(events).filter(|d| *d >= 1) {
+        *counts.entry(d).or_default() += 1;
+    }
+    let total: usize = counts.values().sum();
+    let needed = CYCLE_MIN_COUNT.max(total.div_ceil(1000));
+    let Some(shortest_ms) = counts
+        .iter()
+        .find(|(_, &c)| c >= needed)
+        .or_else(|| counts.iter().next())
+        .map(|(&d, _)| d)
+    else {
+        return 1.0;
+    };
+    let shortest = shortest_ms as f64 * 1e-3;
+    if shortest <= 1.0 {
+        return shortest;
+    }
+    let t0 = tm.raw.first().map_or(0.0, |r| r.time.seconds());
+    let on_grid = |t: f64| {
+        let k = ((t - t0) / shortest).round();
+        ((t - t0) - k * shortest).abs() < 1e-3
+    };
+    if !tm.events.is_empty() && tm.events.iter().all(|(t, _)| on_grid(t.seconds())) {
+        shortest
+    } else {
+        1.0
+    }
 }
+
+/// Fewest occurrences of a spacing for it to count as the cycle ([`cycle_period_s`]).
+const CYCLE_MIN_COUNT: usize = 3;
 
 /// Frame intervals that hold an IRU rate-mode switch (docs/icd.md §3.1: byte 13 is the mode
 /// of the **last** cycle of the interval; with decimated telemetry the counter difference
