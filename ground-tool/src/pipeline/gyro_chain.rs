@@ -60,6 +60,8 @@ pub struct GyroChain {
     /// Hold batches refused as fixes for a misfit (`calibrate::FixRefusal::Misfit`): time (s
     /// from `t0`), χ², dof.
     pub misfit_fixes: Vec<(f64, f64, usize)>,
+    /// The time the misfit times count from (s, the time code's scale).
+    pub t0_s: f64,
 }
 
 /// The frames of each hold: between maneuvers, before the first and after the last.
@@ -163,6 +165,7 @@ pub(crate) fn build_gyro_chain(
         chain: Chain { fixes, links },
         fix_frames,
         misfit_fixes,
+        t0_s: t0,
     }
 }
 
@@ -234,10 +237,32 @@ impl GyroChain {
             .count();
         let missing = inside.iter().filter(|f| f.gyro.is_none()).count();
         Some(if !before || !after {
-            format!(
-                "maneuver {k}: no attitude fix {} it in the telemetry (no batch with two referenced vectors)",
-                if before { "after" } else { "before" }
-            )
+            let side = if before { "after" } else { "before" };
+            // Hold batches on the missing side that had the vectors but were refused for a
+            // misfit: say so, with the size of the misfit, rather than "no vectors".
+            let (ts, te) = (
+                frames[s].time.seconds() - self.t0_s,
+                frames[e].time.seconds() - self.t0_s,
+            );
+            let refused: Vec<&(f64, f64, usize)> = self
+                .misfit_fixes
+                .iter()
+                .filter(|(t, _, _)| if before { *t > te } else { *t < ts })
+                .collect();
+            if refused.is_empty() {
+                format!(
+                    "maneuver {k}: no attitude fix {side} it in the telemetry (no batch with two referenced vectors)"
+                )
+            } else {
+                let worst = refused
+                    .iter()
+                    .map(|(_, chi2, dof)| chi2 / (*dof).max(1) as f64)
+                    .fold(0.0, f64::max);
+                format!(
+                    "maneuver {k}: no attitude fix {side} it: {} hold batch(es) there had the vectors but were refused as fixes for a misfit (χ²/dof up to {worst:.2}): star and Sun residuals larger than the declared noise allow — a sensor noisier than metadata.json's `sensors` declare, a wrong bias, or a wrong star identification",
+                    refused.len()
+                )
+            }
         } else if dropped > 0 {
             format!("maneuver {k}: {dropped} frame(s) hold an IRU rate-mode switch that could not be split (no 0x0203 event inside, or no clean low-rate neighbour): the gyro chain breaks there")
         } else if missing > 0 {
