@@ -40,7 +40,8 @@
 //! about 10″ (integration test `est_sun`), well inside the 0.01° requirement; the remaining
 //! error is mostly the planetary perturbations (Venus, Jupiter) left out of the mean elements.
 //! The Sun seen from the spacecraft additionally differs by the LEO parallax (≤ 9.5″) and the
-//! orbital aberration (≤ 5.2″), which need the orbit and are not applied here.
+//! orbital aberration (≤ 5.2″), which need the orbit: [`apparent_sun_from`] applies them with
+//! the onboard orbit ([`crate::orbit`]).
 
 use crate::units::{RAD_PER_ARCSEC, RAD_PER_DEG, S_PER_DAY};
 use nalgebra::Vector3;
@@ -211,6 +212,30 @@ pub fn aberrate(u: &Vector3<f64>, beta: &Vector3<f64>) -> Vector3<f64> {
     } else {
         *u
     }
+}
+
+/// Apparent Sun direction (unit, J2000/ICRS) seen from an observer at `pos_eci_km` from the
+/// geocentre moving at `vel_over_c` relative to it: the geocentric Sun position
+/// (`geometric_dir_eci · distance`) minus the observer's (the LEO parallax, ≤ 9.5″),
+/// aberrated by the Earth's plus the observer's velocity (annual and orbital). The geocentric
+/// apparent direction if the difference is degenerate.
+/// algorithms.md §3.3 ("Sun vector": apparent direction from the spacecraft).
+#[must_use]
+pub fn apparent_sun_from(
+    sun: &SunState,
+    pos_eci_km: &Vector3<f64>,
+    vel_over_c: &Vector3<f64>,
+) -> Vector3<f64> {
+    let sun_km = sun.geometric_dir_eci * (sun.distance_au * crate::orbit::AU_KM);
+    let from_observer_km = sun_km - pos_eci_km;
+    let n = from_observer_km.norm();
+    if !(n.is_finite() && n > 0.0) {
+        return sun.dir_eci;
+    }
+    aberrate(
+        &(from_observer_km / n),
+        &(sun.earth_velocity_over_c + vel_over_c),
+    )
 }
 
 /// Inverse of [`aberrate`] to first order: the mean direction whose apparent direction is
