@@ -723,9 +723,7 @@ impl FlightCore {
         match (annual, orbital) {
             (None, None) => dir,
             (Some(beta), None) | (None, Some(beta)) => sun_ephemeris::aberrate(&dir, &beta),
-            (Some(earth), Some(spacecraft)) => {
-                sun_ephemeris::aberrate(&dir, &(earth + spacecraft))
-            }
+            (Some(earth), Some(spacecraft)) => sun_ephemeris::aberrate(&dir, &(earth + spacecraft)),
         }
     }
 

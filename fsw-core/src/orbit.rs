@@ -211,7 +211,10 @@ pub fn gravity_accel_km_per_s2(pos_eci_km: &Vector3<f64>) -> Vector3<f64> {
     let r2 = pos_eci_km.norm_squared();
     let r = libm::sqrt(r2);
     let z2_over_r2 = pos_eci_km.z * pos_eci_km.z / r2;
-    let k = -1.5 * J2_EARTH * MU_EARTH_KM3_PER_S2 * EARTH_EQUATORIAL_RADIUS_KM
+    let k = -1.5
+        * J2_EARTH
+        * MU_EARTH_KM3_PER_S2
+        * EARTH_EQUATORIAL_RADIUS_KM
         * EARTH_EQUATORIAL_RADIUS_KM
         / (r2 * r2 * r);
     let point = -pos_eci_km * (MU_EARTH_KM3_PER_S2 / (r2 * r));
@@ -227,7 +230,10 @@ pub fn gravity_accel_km_per_s2(pos_eci_km: &Vector3<f64>) -> Vector3<f64> {
 /// bound (speed at or above escape) or the inputs are degenerate.
 /// docs/tables.md (Table 5 field 2: "a bound orbit, perigee ≥ 6478 km"); two-body relations.
 #[must_use]
-pub fn perigee_radius_km(pos_eci_km: &Vector3<f64>, vel_eci_km_per_s: &Vector3<f64>) -> Option<f64> {
+pub fn perigee_radius_km(
+    pos_eci_km: &Vector3<f64>,
+    vel_eci_km_per_s: &Vector3<f64>,
+) -> Option<f64> {
     let r = pos_eci_km.norm();
     let v2 = vel_eci_km_per_s.norm_squared();
     let energy = 0.5 * v2 - MU_EARTH_KM3_PER_S2 / r;

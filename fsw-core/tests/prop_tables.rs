@@ -33,8 +33,7 @@ use fsw_core::tables::image::{
 use fsw_core::tables::types::{matrix_from_rows, rows_from_matrix, ROTATION_TOLERANCE};
 use fsw_core::tables::{
     AlignmentTable, CatalogStar, FilterTable, IruTable, OrbitTable, SensorCorrections,
-    StarCatalogTable,
-    TableError, TableId, TableSet, TableStatus, MAX_CATALOG_STARS,
+    StarCatalogTable, TableError, TableId, TableSet, TableStatus, MAX_CATALOG_STARS,
 };
 use fsw_core::units::RAD_PER_ARCSEC;
 use nalgebra::{Matrix3, Vector3};
@@ -769,7 +768,12 @@ fn check_usable(set: &TableSet, id: TableId) -> Result<(), TestCaseError> {
             }
             prop_assert!(
                 status == fsw_core::orbit::OrbitStatus::Valid
-                    || matches!(status, fsw_core::orbit::OrbitStatus::Invalid(fsw_core::orbit::OrbitInvalid::Diverged)),
+                    || matches!(
+                        status,
+                        fsw_core::orbit::OrbitStatus::Invalid(
+                            fsw_core::orbit::OrbitInvalid::Diverged
+                        )
+                    ),
                 "{:?}",
                 status
             );

@@ -16,8 +16,8 @@ use super::image::{
     decode_catalog_into, decode_payload, encode_image, parse_image, TableError, TableId,
 };
 use super::types::{
-    check_alignment_change, check_iru_change, AlignmentTable, FilterTable, IruTable,
-    OrbitTable, StarCatalogTable,
+    check_alignment_change, check_iru_change, AlignmentTable, FilterTable, IruTable, OrbitTable,
+    StarCatalogTable,
 };
 use crate::raw::TimeTag;
 
