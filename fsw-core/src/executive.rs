@@ -711,20 +711,15 @@ impl FlightCore {
     /// filter table `aberration_correction`) plus the spacecraft's (orbital, when it applies
     /// this cycle), algorithms.md §3.3.
     fn reference_star(&self, star: &StarMatch, time: TimeTag) -> Vector3<f64> {
-        let dir = star.star.dir();
-        let annual = if self.tables.filter().aberration_correction {
-            sun_ephemeris::earth_velocity_over_c(time.seconds_since_j2000_tt()).ok()
-        } else {
-            None
-        };
         let orbital = self
             .orbital_fix
             .map(|fix| fix.vel_eci_km_per_s / C_KM_PER_S);
-        match (annual, orbital) {
-            (None, None) => dir,
-            (Some(beta), None) | (None, Some(beta)) => sun_ephemeris::aberrate(&dir, &beta),
-            (Some(earth), Some(spacecraft)) => sun_ephemeris::aberrate(&dir, &(earth + spacecraft)),
-        }
+        sun_ephemeris::star_reference_dir(
+            &star.star.dir(),
+            time.seconds_since_j2000_tt(),
+            self.tables.filter().aberration_correction,
+            orbital.as_ref(),
+        )
     }
 
     fn note_rejected(

@@ -214,6 +214,31 @@ pub fn aberrate(u: &Vector3<f64>, beta: &Vector3<f64>) -> Vector3<f64> {
     }
 }
 
+/// The OBC's reference direction of a catalog star (unit, J2000/ICRS) at `t_s` seconds since
+/// J2000 TT: `dir` aberrated by the Earth's velocity (the annual part, when `annual`) plus
+/// `observer_vel_over_c` (the spacecraft's velocity relative to the geocentre over c, the
+/// orbital part, when given); `dir` itself when neither applies (or the ephemeris fails).
+/// algorithms.md §3.3 (`β` = Earth's ~29.8 km/s plus the orbital ~7.5 km/s).
+#[must_use]
+pub fn star_reference_dir(
+    dir: &Vector3<f64>,
+    t_s_since_j2000_tt: f64,
+    annual: bool,
+    observer_vel_over_c: Option<&Vector3<f64>>,
+) -> Vector3<f64> {
+    let earth = if annual {
+        earth_velocity_over_c(t_s_since_j2000_tt).ok()
+    } else {
+        None
+    };
+    match (earth, observer_vel_over_c) {
+        (None, None) => *dir,
+        (Some(beta), None) => aberrate(dir, &beta),
+        (None, Some(beta)) => aberrate(dir, beta),
+        (Some(earth), Some(observer)) => aberrate(dir, &(earth + observer)),
+    }
+}
+
 /// Apparent Sun direction (unit, J2000/ICRS) seen from an observer at `pos_eci_km` from the
 /// geocentre moving at `vel_over_c` relative to it: the geocentric Sun position
 /// (`geometric_dir_eci · distance`) minus the observer's (the LEO parallax, ≤ 9.5″),
