@@ -1141,18 +1141,16 @@ impl FlightCore {
     /// velocity (algorithms.md §3.3, "Sun vector").
     fn sun_direction(&mut self, time: TimeTag) -> Option<Vector3<f64>> {
         let t = time.seconds_since_j2000_tt();
-        let sun = match self.sun_cache {
-            Some((t_cached, state)) if (t - t_cached).abs() <= SUN_REFRESH_S => state,
-            _ => {
-                let state = sun_ephemeris::sun_state(t).ok()?;
-                self.sun_cache = Some((t, state));
-                state
-            }
-        };
+        let fresh =
+            matches!(&self.sun_cache, Some((t_cached, _)) if (t - t_cached).abs() <= SUN_REFRESH_S);
+        if !fresh {
+            self.sun_cache = Some((t, sun_ephemeris::sun_state(t).ok()?));
+        }
+        let (_, sun) = self.sun_cache.as_ref()?;
         Some(match &self.orbital_fix {
             None => sun.dir_eci,
             Some(fix) => sun_ephemeris::apparent_sun_from(
-                &sun,
+                sun,
                 &fix.pos_eci_km,
                 &(fix.vel_eci_km_per_s / C_KM_PER_S),
             ),

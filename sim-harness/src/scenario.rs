@@ -341,7 +341,9 @@ impl TimedCommand {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct OnboardOrbitUplink {
-    /// First uplink (s from the epoch; load + activate).
+    /// First uplink (s from the epoch; load + activate). Default 1 s: at t = 0 the catalog,
+    /// filter and alignment loads and activations already fill the OBC's eight events of the
+    /// cycle (`fsw_core::events::MAX_EVENTS_PER_CYCLE`), and the orbit's would be dropped.
     pub at_s: f64,
     /// Uplink a fresh state every this many seconds after the first (0 = once). The OBC
     /// refuses a state older than 2 days (`fsw_core::orbit::MAX_STATE_AGE_S`).
@@ -376,7 +378,7 @@ impl Default for OnboardOrbitUplink {
             toml::Value::Float(ORBIT_ON_FHST_FLOOR_ARCSEC),
         );
         Self {
-            at_s: 0.0,
+            at_s: 1.0,
             every_s: 0.0,
             state_age_s: 0.0,
             pos_error_km: [0.0; 3],
