@@ -145,10 +145,10 @@ pub enum OrbitStatus {
     /// Project choice (module docs): bounded work per cycle.
     CatchingUp,
     /// The state at the cycle time is available (2).
-    /// Module docs.
+    /// Project choice (module docs).
     Valid,
     /// Not usable until a new table is loaded (3).
-    /// Module docs.
+    /// Project choice (module docs).
     Invalid(OrbitInvalid),
 }
 
@@ -172,10 +172,10 @@ impl OrbitStatus {
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum OrbitError {
     /// The orbit is not valid at the last cycle time; the status says why.
-    /// Module docs.
+    /// Project choice (module docs).
     NotValid {
         /// The status at the last cycle.
-        /// Module docs.
+        /// Project choice (module docs).
         status: OrbitStatus,
     },
 }
@@ -307,7 +307,7 @@ impl OnboardOrbit {
     }
 
     /// The status at the last [`Self::advance_to`].
-    /// Module docs.
+    /// Project choice (module docs).
     #[must_use]
     pub fn status(&self) -> OrbitStatus {
         self.status
@@ -321,7 +321,7 @@ impl OnboardOrbit {
     }
 
     /// The state at the last cycle time.
-    /// Module docs.
+    /// Project choice (module docs).
     ///
     /// # Errors
     /// [`OrbitError::NotValid`] with the status when the orbit is not valid.
@@ -341,7 +341,7 @@ impl OnboardOrbit {
     /// Propagate towards `t_s` (seconds since J2000 TT, the cycle time): at most
     /// [`MAX_STEPS_PER_CYCLE`] grid steps and one interpolating step (module docs).
     /// Returns the new status; an invalid orbit stays invalid until [`Self::load`].
-    /// Module docs (bounded work, catching up, invalid states).
+    /// Project choice (module docs: bounded work, catching up, invalid states).
     pub fn advance_to(&mut self, t_s: f64) -> OrbitStatus {
         let Some(mut grid) = self.grid else {
             self.status = OrbitStatus::NoTable;
