@@ -971,6 +971,77 @@ mod tests {
     }
 
     #[test]
+    fn orbit_table_validation_names_the_field() {
+        let v = libm::sqrt(crate::orbit::MU_EARTH_KM3_PER_S2 / 6833.0);
+        let good = OrbitTable {
+            epoch_s_since_j2000_tt: -2.7e8,
+            pos_eci_km: [6833.0, 0.0, 0.0],
+            vel_eci_km_per_s: [0.0, v * 0.88, v * 0.475],
+        };
+        assert_eq!(good.validate(), Ok(()));
+        assert_eq!(
+            OrbitTable::none().validate(),
+            Err(TableError::OutOfRange { field: 1 })
+        );
+        type Case = (fn(&mut OrbitTable), TableError);
+        let cases: [Case; 8] = [
+            (
+                |t| t.epoch_s_since_j2000_tt = f64::NAN,
+                TableError::NotFinite { field: 0 },
+            ),
+            (
+                |t| t.epoch_s_since_j2000_tt = 2.0e9,
+                TableError::OutOfRange { field: 0 },
+            ),
+            (
+                |t| t.pos_eci_km[2] = f64::INFINITY,
+                TableError::NotFinite { field: 1 },
+            ),
+            // 6400 km: below 100 km altitude.
+            (
+                |t| t.pos_eci_km = [6400.0, 0.0, 0.0],
+                TableError::OutOfRange { field: 1 },
+            ),
+            (
+                |t| t.pos_eci_km = [60_000.0, 0.0, 0.0],
+                TableError::OutOfRange { field: 1 },
+            ),
+            (
+                |t| t.vel_eci_km_per_s[0] = f64::NAN,
+                TableError::NotFinite { field: 2 },
+            ),
+            // Above the escape speed (10.8 km/s at 6833 km): not bound.
+            (
+                |t| t.vel_eci_km_per_s = [0.0, 11.0, 0.0],
+                TableError::OutOfRange { field: 2 },
+            ),
+            // Radial fall: perigee inside the Earth.
+            (
+                |t| t.vel_eci_km_per_s = [-1.0, 0.5, 0.0],
+                TableError::OutOfRange { field: 2 },
+            ),
+        ];
+        for (i, (set, err)) in cases.iter().enumerate() {
+            let mut t = good;
+            set(&mut t);
+            assert_eq!(t.validate(), Err(*err), "case {i}");
+        }
+    }
+
+    #[test]
+    fn filter_floor_field_validated() {
+        let mut f = FilterTable::default_boot();
+        assert!(!f.orbital_aberration_correction);
+        assert!((f.fhst_uncorrected_systematic_arcsec - 3.65).abs() < 1e-12);
+        f.fhst_uncorrected_systematic_arcsec = 0.0;
+        assert_eq!(f.validate(), Ok(()));
+        f.fhst_uncorrected_systematic_arcsec = -0.1;
+        assert_eq!(f.validate(), Err(TableError::OutOfRange { field: 22 }));
+        f.fhst_uncorrected_systematic_arcsec = f64::NAN;
+        assert_eq!(f.validate(), Err(TableError::NotFinite { field: 22 }));
+    }
+
+    #[test]
     fn iru_asymmetry_validated_and_bounded_by_the_change_check() {
         let base = IruTable::prelaunch();
         assert_eq!(base.validate(), Ok(()));
