@@ -1242,6 +1242,8 @@ fn write_fuzz_seeds() {
         "modified-filter",
         "small-catalog",
         "boot-catalog",
+        "gro-orbit",
+        "eccentric-orbit",
     ];
     for ((_, img), name) in base_images().iter().zip(names) {
         for flags in [0u8, 1, 3] {
