@@ -12,6 +12,9 @@
 //! `STEP_COST_HOOKS=1` the alignment and IRU tables carry every sensor correction (distortion,
 //! magnitude bias, thermal drift on all four sensors, the FSS transfer function with its cubic
 //! and cyclic terms, gyro scale asymmetry; small values), activated before the measured cycles.
+//! With `STEP_COST_ORBIT=1` an orbit table (GRO's orbit, epoch at the first frame) and the
+//! filter table with `orbital_aberration_correction` on are activated first: every cycle then
+//! propagates the onboard orbit and applies the orbital aberration (issue 19).
 
 // Host measurement tooling, not flight code: the flight-code lints are relaxed here.
 #![allow(
@@ -46,6 +49,9 @@ fn main() {
         .unwrap_or(10_000);
     let scenario = synthetic::build(cycles + 2);
     let mut core = synthetic::boot(&scenario);
+    if std::env::var_os("STEP_COST_ORBIT").is_some_and(|v| !v.is_empty()) {
+        activate_orbit(&mut core, &scenario.frames[0]);
+    }
     if std::env::var_os("STEP_COST_HOOKS").is_some_and(|v| !v.is_empty()) {
         activate_hooks(&mut core, &scenario.frames[1]);
     } else {
@@ -93,4 +99,38 @@ fn activate_hooks(core: &mut FlightCore, frame: &RawSensorFrame) {
     );
     assert_eq!(core.tables().alignment(), &al, "{:?}", out.events);
     assert_eq!(core.tables().iru(), &iru);
+}
+
+/// Load and activate an orbit table (circular, a = 6833 km, i = 28.48°, epoch at `frame`) and
+/// the active filter table with the orbital aberration correction on.
+fn activate_orbit(core: &mut FlightCore, frame: &RawSensorFrame) {
+    use fsw_core::executive::Command;
+    use fsw_core::raw::TimeTag;
+    use fsw_core::tables::image::encode_image;
+    use fsw_core::tables::{OrbitTable, TableId};
+    let v = (fsw_core::orbit::MU_EARTH_KM3_PER_S2 / 6833.0).sqrt();
+    let i = 28.48_f64.to_radians();
+    let orbit = OrbitTable {
+        epoch_s_since_j2000_tt: frame.time.seconds_since_j2000_tt(),
+        pos_eci_km: [0.0, -6833.0 * i.cos(), -6833.0 * i.sin()],
+        vel_eci_km_per_s: [v, 0.0, 0.0],
+    };
+    let mut filter = *core.tables().filter();
+    filter.orbital_aberration_correction = true;
+    filter.fhst_uncorrected_systematic_arcsec = 0.02;
+    let mut a = vec![0u8; 2048];
+    let mut b = vec![0u8; 2048];
+    let na = encode_image(TableId::Orbit, TimeTag::default(), &orbit, &mut a).expect("fits");
+    let nb = encode_image(TableId::Filter, TimeTag::default(), &filter, &mut b).expect("fits");
+    let out = core.step(
+        frame,
+        &[
+            Command::TableLoad(&a[..na]),
+            Command::TableActivate(TableId::Orbit),
+            Command::TableLoad(&b[..nb]),
+            Command::TableActivate(TableId::Filter),
+        ],
+    );
+    assert_eq!(core.tables().orbit(), &orbit, "{:?}", out.events);
+    assert!(core.tables().filter().orbital_aberration_correction);
 }

@@ -80,11 +80,21 @@ pub enum EventId {
     /// A command was refused. p1 = command code, p2 = reason.
     /// docs/icd.md §3.3.
     CommandRejected = 0x0701,
+    /// The filter table asks for the orbital aberration correction but the onboard orbit is
+    /// not valid: annual aberration only (raised once per status while it lasts). p1 = orbit
+    /// status ([`crate::orbit::OrbitStatus::code`]: 0 no table, 1 catching up, 3 invalid),
+    /// p2 = invalid reason ([`crate::orbit::OrbitInvalid::code`], 0 otherwise).
+    /// docs/icd.md §3.3.
+    OrbitalCorrectionUnavailable = 0x0801,
+    /// The orbital aberration correction and the Sun parallax are applied (first cycle of a
+    /// run). p1 = age of the orbit state, s since the table epoch (saturated, 0 if before).
+    /// docs/icd.md §3.3.
+    OrbitalCorrectionApplied = 0x0802,
 }
 
 impl EventId {
     /// Every event id (for the uniqueness test and the ICD table).
-    pub const ALL: [EventId; 20] = [
+    pub const ALL: [EventId; 22] = [
         Self::TableLoaded,
         Self::TableRejected,
         Self::TableActivated,
@@ -105,6 +115,8 @@ impl EventId {
         Self::SlewStarted,
         Self::SlewCompleted,
         Self::CommandRejected,
+        Self::OrbitalCorrectionUnavailable,
+        Self::OrbitalCorrectionApplied,
     ];
 
     /// On-wire code.

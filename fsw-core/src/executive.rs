@@ -8,24 +8,34 @@
 //!    (otherwise count, raise `TimeTagAnomaly`, and use the nominal period).
 //! 2. **Commands** in the order given (at most [`MAX_COMMANDS_PER_CYCLE`]): table
 //!    load/activate/abort (activation therefore always happens at a cycle boundary, before
-//!    any table is used in the cycle), IRU configuration, filter init/reset, slew/hold.
-//! 3. **IRU**: pulse integration (paper `G`; algorithms.md §5); a failed selected channel
+//!    any table is used in the cycle; an activated orbit table restarts the onboard orbit),
+//!    IRU configuration, filter init/reset, slew/hold.
+//! 3. **Orbit** (only once an orbit table was activated): the onboard orbit propagated to the
+//!    frame time ([`crate::orbit`], at most 9 RK4 steps). With the filter table's
+//!    `orbital_aberration_correction` on, a valid orbit gives this cycle's star and Sun
+//!    references the orbital aberration and the Sun parallax; an orbit that is not valid
+//!    leaves them annual-only, said once by event 0x0801 (0x0802 when applied again).
+//! 4. **IRU**: pulse integration (paper `G`; algorithms.md §5); a failed selected channel
 //!    switches to the backup configuration automatically. Any configuration change
 //!    (automatic or commanded) reopens the filter's bias covariance: the new channels have
 //!    their own biases.
-//! 4. **Propagation** of the MEKF with the exact rotation-vector update.
-//! 5. **FHST1, FHST2** (not during slews: gyro-only propagation, as on GRO, but the trackers'
+//! 5. **Propagation** of the MEKF with the exact rotation-vector update.
+//! 6. **FHST1, FHST2** (not during slews: gyro-only propagation, as on GRO, but the trackers'
 //!    new-star and lost flags are followed): counts → unit vector in ACS; star identification
 //!    on a new acquisition in a window from the attitude covariance; sequential focal-plane
-//!    update with χ² gating and the systematic floor.
-//! 6. **FSS1, FSS2**: counts → Sun vector in ACS; onboard Sun ephemeris; update in coarse
-//!    mode only (fine mode is FHST-only, as on GRO); the α/β innovation is always reported.
-//! 7. **Control**: inertial hold or rate-limited eigen-axis slew → wheel torque; IRU rate
+//!    update with χ² gating and the systematic floor (filter table
+//!    `fhst_uncorrected_systematic_arcsec`).
+//! 7. **FSS1, FSS2**: counts → Sun vector in ACS; onboard Sun ephemeris (seen from the
+//!    spacecraft when the orbital correction applies); update in coarse mode only (fine mode
+//!    is FHST-only, as on GRO); the α/β innovation is always reported.
+//! 8. **Control**: inertial hold or rate-limited eigen-axis slew → wheel torque; IRU rate
 //!    mode request (high for slews).
-//! 8. **Housekeeping**.
+//! 9. **Housekeeping** (the onboard orbit is not in it: the 230-octet record of
+//!    `docs/icd.md` §3.2 has no room without changing its length for outside decoders).
 //!
 //! Worst case per cycle: one star identification per tracker (a linear scan of at most
-//! `MAX_CATALOG_STARS` stars, only on a new acquisition), four 2-component filter updates.
+//! `MAX_CATALOG_STARS` stars, only on a new acquisition), four 2-component filter updates,
+//! nine RK4 steps of the orbit.
 
 use crate::attitude::{rot, Quat};
 use crate::control::Controller;
@@ -34,15 +44,16 @@ use crate::fhst;
 use crate::fss;
 use crate::iru::{IruConfiguration, IruIntegrator};
 use crate::mekf::Mekf;
+use crate::orbit::{OnboardOrbit, OrbitState, OrbitStatus, C_KM_PER_S};
 use crate::raw::{
     RawSensorFrame, TimeTag, FHST_FLAG_NEW_STAR, FHST_FLAG_TRACKING, FHST_FLAG_VALID,
 };
 use crate::star_id::{self, StarIdError, StarMatch};
 use crate::sun_ephemeris;
-use crate::tables::types::matrix_from_rows;
+use crate::tables::types::{matrix_from_rows, ORBITAL_ABERRATION_RMS_PER_AXIS_ARCSEC};
 use crate::tables::{TableId, TableSet};
 use crate::telemetry::{MeasurementStatus, ObcHousekeeping, SensorResidual};
-use crate::units::ARCSEC_PER_RAD;
+use crate::units::{ARCSEC_PER_RAD, RAD_PER_ARCSEC};
 use nalgebra::{Matrix3, Vector3};
 
 /// Largest number of commands processed in one cycle (further ones are refused).
@@ -66,15 +77,17 @@ const MAX_GAP_PERIODS: f64 = 10.0;
 /// docs/obc_filter.md §3.
 pub const FSS_WHITE_SIGMA_RAD: f64 = 0.004 * 0.577_350_269_189_625_8 * crate::units::RAD_PER_DEG;
 
-/// Systematic FHST error per axis the OBC models but does not correct, rad: the orbital
-/// velocity aberration. `β = 7.5 km/s / c` = 5.16″ displaces a star by the part of `β`
-/// perpendicular to it; along a focal-plane axis `e` that is `β·e`, and with `β` turning
-/// once per orbit in the orbit plane (normal `n`), `E[(β·e)²] = β² (1 − (e·n)²)/2 ≤ β²/2`:
-/// at most `β/√2` = 3.65″ RMS on any axis, whatever the tracker's geometry. It changes over
-/// an orbit, slower than the filter, so it does not average down within a star track: the
-/// floor of [`Mekf::update_focal_plane_with_floor`]. algorithms.md §3.3;
-/// docs/obc_filter.md §3.
-pub const FHST_UNCORRECTED_SYSTEMATIC_RAD: f64 = 3.65 * crate::units::RAD_PER_ARCSEC;
+/// Systematic FHST error per axis the OBC models but does not correct without the orbital
+/// correction, rad: the orbital velocity aberration. `β = 7.5 km/s / c` = 5.16″ displaces a
+/// star by the part of `β` perpendicular to it; along a focal-plane axis `e` that is `β·e`,
+/// and with `β` turning once per orbit in the orbit plane (normal `n`),
+/// `E[(β·e)²] = β² (1 − (e·n)²)/2 ≤ β²/2`: at most `β/√2` = 3.65″ RMS on any axis, whatever
+/// the tracker's geometry. It changes over an orbit, slower than the filter, so it does not
+/// average down within a star track: the floor of [`Mekf::update_focal_plane_with_floor`].
+/// The boot value of the filter table's `fhst_uncorrected_systematic_arcsec`, which the OBC
+/// uses (docs/tables.md field 22). algorithms.md §3.3; docs/obc_filter.md §3.
+pub const FHST_UNCORRECTED_SYSTEMATIC_RAD: f64 =
+    ORBITAL_ABERRATION_RMS_PER_AXIS_ARCSEC * crate::units::RAD_PER_ARCSEC;
 
 /// Filter mode, telemetry code in brackets.
 /// Paper requirements: coarse attitude (FSS + TAM + IRU, 2° 3σ), fine (FHST + IRU, 0.024° 3σ).
@@ -220,8 +233,15 @@ pub struct FlightCore {
     slew_count: u32,
     last_rate_acs_rad_per_s: Vector3<f64>,
     wheel_torque_cmd_nm: Vector3<f64>,
-    sun_cache: Option<(f64, Vector3<f64>)>,
+    sun_cache: Option<(f64, sun_ephemeris::SunState)>,
     slew_angle_rad: f64,
+    /// The onboard orbit (phase 3).
+    orbit: OnboardOrbit,
+    /// This cycle's orbit state when the orbital correction applies (flag on, orbit valid).
+    orbital_fix: Option<OrbitState>,
+    /// The last orbital-correction event raised (0x0801 with its status and reason, or
+    /// 0x0802), so that each is raised once per run; `None` with the flag off.
+    orbital_reported: Option<(EventId, u32, u32)>,
     /// Time since the last gyro data (a coast), s.
     coast_s: f64,
 }
@@ -277,6 +297,9 @@ impl FlightCore {
             wheel_torque_cmd_nm: Vector3::zeros(),
             sun_cache: None,
             slew_angle_rad: 0.0,
+            orbit: OnboardOrbit::new(),
+            orbital_fix: None,
+            orbital_reported: None,
             coast_s: 0.0,
         }
     }
@@ -335,7 +358,10 @@ impl FlightCore {
             self.execute(cmd, &mut events);
         }
 
-        // 3–4. IRU and propagation.
+        // 3. Orbit.
+        self.advance_orbit(frame.time, &mut events);
+
+        // 4–5. IRU and propagation.
         let increment = self.integrate_iru(frame, &mut events);
         let initialized = self.filter_mode != FilterMode::Uninitialized;
         // Without gyro data for a cycle, propagate with the last known body rate (a coast),
@@ -368,7 +394,7 @@ impl FlightCore {
             self.add_coast_noise(dt_s);
         }
 
-        // 5–6. Measurements. During a slew the OBC propagates on the gyros alone, as GRO
+        // 6–7. Measurements. During a slew the OBC propagates on the gyros alone, as GRO
         // did: the post-maneuver error then measures the gyro calibration, and star
         // identification after the slew is what the 0.5° requirement protects.
         if initialized && self.control_mode == ControlMode::Slew {
@@ -392,10 +418,10 @@ impl FlightCore {
         }
         self.update_filter_mode(&residuals, &mut events);
 
-        // 7. Control.
+        // 8. Control.
         self.control(&mut events);
 
-        // 8. Housekeeping.
+        // 9. Housekeeping.
         let housekeeping = self.housekeeping(frame.time, residuals);
         CycleOutput {
             housekeeping,
@@ -473,6 +499,10 @@ impl FlightCore {
                     if id == TableId::StarCatalog || id == TableId::Alignment {
                         // Stars identified with the old catalog/alignment are re-identified.
                         self.trackers = [TrackerState::default(); 2];
+                    }
+                    if id == TableId::Orbit {
+                        // A new state vector: the propagation restarts from its epoch.
+                        self.orbit.load(self.tables.orbit());
                     }
                 }
                 Err(reason) => raise(
@@ -618,16 +648,78 @@ impl FlightCore {
         rot(&(self.last_rate_acs_rad_per_s * offset_s)) * dir_acs
     }
 
-    fn reference_star(&self, star: &StarMatch, time: TimeTag) -> Vector3<f64> {
-        let dir = star.star.dir();
-        if self.tables.filter().aberration_correction {
-            match sun_ephemeris::earth_velocity_over_c(time.seconds_since_j2000_tt()) {
-                Ok(beta) => sun_ephemeris::aberrate(&dir, &beta),
-                Err(_) => dir,
-            }
+    /// Phase 3: the onboard orbit to the frame time (once an orbit table was activated) and,
+    /// with the filter table's orbital correction on, this cycle's orbit state for the
+    /// references, or the fallback to annual aberration said by event 0x0801 (once per status
+    /// while it lasts; 0x0802 when the correction applies again).
+    fn advance_orbit(
+        &mut self,
+        time: TimeTag,
+        events: &mut heapless::Vec<Event, MAX_EVENTS_PER_CYCLE>,
+    ) {
+        self.orbital_fix = None;
+        let t_s = time.seconds_since_j2000_tt();
+        let status = if self.tables.has_orbit() {
+            self.orbit.advance_to(t_s)
         } else {
-            dir
+            OrbitStatus::NoTable
+        };
+        if !self.tables.filter().orbital_aberration_correction {
+            self.orbital_reported = None;
+            return;
         }
+        let (report, p1) = match (status, self.orbit.state()) {
+            (OrbitStatus::Valid, Ok(state)) => {
+                self.orbital_fix = Some(state);
+                // Saturating float-to-integer cast; a state epoch after now reads 0.
+                #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
+                let age_s = (t_s - self.orbit.epoch_s_since_j2000_tt()) as u32;
+                ((EventId::OrbitalCorrectionApplied, 0, 0), age_s)
+            }
+            (status, _) => {
+                let reason = match status {
+                    OrbitStatus::Invalid(why) => why.code(),
+                    _ => 0,
+                };
+                let key = (EventId::OrbitalCorrectionUnavailable, status.code(), reason);
+                (key, status.code())
+            }
+        };
+        if self.orbital_reported != Some(report) {
+            self.orbital_reported = Some(report);
+            let (id, _, p2) = report;
+            raise(events, &mut self.counters, id, p1, p2);
+        }
+    }
+
+    /// The FHST systematic floor, rad: the filter table's `fhst_uncorrected_systematic_arcsec`
+    /// (what the table's corrections leave), with the orbital aberration's
+    /// [`ORBITAL_ABERRATION_RMS_PER_AXIS_ARCSEC`] added in quadrature while the orbital
+    /// correction is asked for but not applied (no valid orbit).
+    fn fhst_floor_rad(&self) -> f64 {
+        let table = self.tables.filter();
+        let floor = table.fhst_uncorrected_systematic_arcsec;
+        let arcsec = if table.orbital_aberration_correction && self.orbital_fix.is_none() {
+            libm::hypot(floor, ORBITAL_ABERRATION_RMS_PER_AXIS_ARCSEC)
+        } else {
+            floor
+        };
+        arcsec * RAD_PER_ARCSEC
+    }
+
+    /// The catalog star's reference direction: aberrated by the Earth's velocity (annual,
+    /// filter table `aberration_correction`) plus the spacecraft's (orbital, when it applies
+    /// this cycle), algorithms.md §3.3.
+    fn reference_star(&self, star: &StarMatch, time: TimeTag) -> Vector3<f64> {
+        let orbital = self
+            .orbital_fix
+            .map(|fix| fix.vel_eci_km_per_s / C_KM_PER_S);
+        sun_ephemeris::star_reference_dir(
+            &star.star.dir(),
+            time.seconds_since_j2000_tt(),
+            self.tables.filter().aberration_correction,
+            orbital.as_ref(),
+        )
     }
 
     fn note_rejected(
@@ -811,7 +903,7 @@ impl FlightCore {
                     filter_table,
                     p.m11 + p.m22 + p.m33,
                     fhst::measurement_sigma_rad(meas.magnitude, filter_table),
-                    FHST_UNCORRECTED_SYSTEMATIC_RAD,
+                    self.fhst_floor_rad(),
                 );
                 star_id::identify_in_window(
                     &dir_acs,
@@ -872,6 +964,7 @@ impl FlightCore {
         let filter_table = self.tables.filter();
         let sigma = fhst::measurement_sigma_rad(meas.magnitude, filter_table);
         let gate = filter_table.gate_chi2;
+        let floor = self.fhst_floor_rad();
         // Focal-plane update (H, V): the measurement space of the tracker.
         let (h_rad, v_rad) = if offset_s == 0.0 {
             (meas.h_rad, meas.v_rad)
@@ -885,7 +978,7 @@ impl FlightCore {
             &ref_eci,
             &m_acs_from_fhst,
             sigma,
-            FHST_UNCORRECTED_SYSTEMATIC_RAD,
+            floor,
             gate,
         );
         let status = self.note_outcome(tracker, outcome.accepted, events);
@@ -1040,18 +1133,28 @@ impl FlightCore {
         block += Matrix3::identity() * var;
     }
 
-    /// Onboard Sun direction, re-evaluated at most every [`SUN_REFRESH_S`] (the Sun moves
-    /// 0.04″/s, so a 10 s old direction is 0.4″ off: far below the FSS noise).
+    /// Onboard Sun direction, the ephemeris re-evaluated at most every [`SUN_REFRESH_S`]
+    /// (the Sun moves 0.04″/s, so a 10 s old direction is 0.4″ off: far below the FSS
+    /// noise). Apparent from the geocentre (annual aberration), or from the spacecraft when
+    /// the orbital correction applies this cycle: the Sun's geocentric position minus the
+    /// spacecraft's (parallax ≤ 9.5″), aberrated by the Earth's plus the spacecraft's
+    /// velocity (algorithms.md §3.3, "Sun vector").
     fn sun_direction(&mut self, time: TimeTag) -> Option<Vector3<f64>> {
         let t = time.seconds_since_j2000_tt();
-        if let Some((t_cached, dir)) = self.sun_cache {
-            if (t - t_cached).abs() <= SUN_REFRESH_S {
-                return Some(dir);
-            }
+        let fresh =
+            matches!(&self.sun_cache, Some((t_cached, _)) if (t - t_cached).abs() <= SUN_REFRESH_S);
+        if !fresh {
+            self.sun_cache = Some((t, sun_ephemeris::sun_state(t).ok()?));
         }
-        let dir = sun_ephemeris::sun_dir_eci(t).ok()?;
-        self.sun_cache = Some((t, dir));
-        Some(dir)
+        let (_, sun) = self.sun_cache.as_ref()?;
+        Some(match &self.orbital_fix {
+            None => sun.dir_eci,
+            Some(fix) => sun_ephemeris::apparent_sun_from(
+                sun,
+                &fix.pos_eci_km,
+                &(fix.vel_eci_km_per_s / C_KM_PER_S),
+            ),
+        })
     }
 
     fn update_filter_mode(

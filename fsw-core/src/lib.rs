@@ -37,6 +37,7 @@ pub mod fhst;
 pub mod fss;
 pub mod iru;
 pub mod mekf;
+pub mod orbit;
 pub mod raw;
 pub mod star_id;
 pub mod sun_ephemeris;

@@ -40,7 +40,8 @@
 //! about 10″ (integration test `est_sun`), well inside the 0.01° requirement; the remaining
 //! error is mostly the planetary perturbations (Venus, Jupiter) left out of the mean elements.
 //! The Sun seen from the spacecraft additionally differs by the LEO parallax (≤ 9.5″) and the
-//! orbital aberration (≤ 5.2″), which need the orbit and are not applied here.
+//! orbital aberration (≤ 5.2″), which need the orbit: [`apparent_sun_from`] applies them with
+//! the onboard orbit ([`crate::orbit`]).
 
 use crate::units::{RAD_PER_ARCSEC, RAD_PER_DEG, S_PER_DAY};
 use nalgebra::Vector3;
@@ -211,6 +212,55 @@ pub fn aberrate(u: &Vector3<f64>, beta: &Vector3<f64>) -> Vector3<f64> {
     } else {
         *u
     }
+}
+
+/// The OBC's reference direction of a catalog star (unit, J2000/ICRS) at `t_s` seconds since
+/// J2000 TT: `dir` aberrated by the Earth's velocity (the annual part, when `annual`) plus
+/// `observer_vel_over_c` (the spacecraft's velocity relative to the geocentre over c, the
+/// orbital part, when given); `dir` itself when neither applies (or the ephemeris fails).
+/// algorithms.md §3.3 (`β` = Earth's ~29.8 km/s plus the orbital ~7.5 km/s).
+#[must_use]
+pub fn star_reference_dir(
+    dir: &Vector3<f64>,
+    t_s_since_j2000_tt: f64,
+    annual: bool,
+    observer_vel_over_c: Option<&Vector3<f64>>,
+) -> Vector3<f64> {
+    let earth = if annual {
+        earth_velocity_over_c(t_s_since_j2000_tt).ok()
+    } else {
+        None
+    };
+    match (earth, observer_vel_over_c) {
+        (None, None) => *dir,
+        (Some(beta), None) => aberrate(dir, &beta),
+        (None, Some(beta)) => aberrate(dir, beta),
+        (Some(earth), Some(observer)) => aberrate(dir, &(earth + observer)),
+    }
+}
+
+/// Apparent Sun direction (unit, J2000/ICRS) seen from an observer at `pos_eci_km` from the
+/// geocentre moving at `vel_over_c` relative to it: the geocentric Sun position
+/// (`geometric_dir_eci · distance`) minus the observer's (the LEO parallax, ≤ 9.5″),
+/// aberrated by the Earth's plus the observer's velocity (annual and orbital). The geocentric
+/// apparent direction if the difference is degenerate.
+/// algorithms.md §3.3 ("Sun vector": apparent direction from the spacecraft).
+#[must_use]
+pub fn apparent_sun_from(
+    sun: &SunState,
+    pos_eci_km: &Vector3<f64>,
+    vel_over_c: &Vector3<f64>,
+) -> Vector3<f64> {
+    let sun_km = sun.geometric_dir_eci * (sun.distance_au * crate::orbit::AU_KM);
+    let from_observer_km = sun_km - pos_eci_km;
+    let n = from_observer_km.norm();
+    if !(n.is_finite() && n > 0.0) {
+        return sun.dir_eci;
+    }
+    aberrate(
+        &(from_observer_km / n),
+        &(sun.earth_velocity_over_c + vel_over_c),
+    )
 }
 
 /// Inverse of [`aberrate`] to first order: the mean direction whose apparent direction is

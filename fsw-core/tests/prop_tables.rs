@@ -32,8 +32,8 @@ use fsw_core::tables::image::{
 };
 use fsw_core::tables::types::{matrix_from_rows, rows_from_matrix, ROTATION_TOLERANCE};
 use fsw_core::tables::{
-    AlignmentTable, CatalogStar, FilterTable, IruTable, SensorCorrections, StarCatalogTable,
-    TableError, TableId, TableSet, TableStatus, MAX_CATALOG_STARS,
+    AlignmentTable, CatalogStar, FilterTable, IruTable, OrbitTable, SensorCorrections,
+    StarCatalogTable, TableError, TableId, TableSet, TableStatus, MAX_CATALOG_STARS,
 };
 use fsw_core::units::RAD_PER_ARCSEC;
 use nalgebra::{Matrix3, Vector3};
@@ -753,6 +753,35 @@ fn check_usable(set: &TableSet, id: TableId) -> Result<(), TestCaseError> {
                 prop_assert!((s.dir().norm() - 1.0).abs() <= 1e-6);
             }
         }
+        TableId::Orbit => {
+            // An accepted orbit propagates: valid at its epoch and an orbit later, finite,
+            // still above the Earth.
+            let t = set.orbit();
+            prop_assert_eq!(t.validate(), Ok(()));
+            let mut o = fsw_core::orbit::OnboardOrbit::new();
+            o.load(t);
+            let t0 = t.epoch_s_since_j2000_tt;
+            prop_assert_eq!(o.advance_to(t0), fsw_core::orbit::OrbitStatus::Valid);
+            let mut status = o.status();
+            for k in 1..=600 {
+                status = o.advance_to(t0 + 10.0 * f64::from(k));
+            }
+            prop_assert!(
+                status == fsw_core::orbit::OrbitStatus::Valid
+                    || matches!(
+                        status,
+                        fsw_core::orbit::OrbitStatus::Invalid(
+                            fsw_core::orbit::OrbitInvalid::Diverged
+                        )
+                    ),
+                "{:?}",
+                status
+            );
+            if let Ok(state) = o.state() {
+                prop_assert!(state.pos_eci_km.iter().all(|x| x.is_finite()));
+                prop_assert!(state.pos_eci_km.norm() >= fsw_core::orbit::MIN_RADIUS_KM * 0.99);
+            }
+        }
     }
     Ok(())
 }
@@ -762,6 +791,7 @@ fn actives_equal(a: &TableSet, b: &TableSet) -> bool {
         && a.iru() == b.iru()
         && a.filter() == b.filter()
         && a.catalog() == b.catalog()
+        && a.orbit() == b.orbit()
 }
 
 fn active_status(s: &TableStatus) -> (u32, TimeTag, u16) {
@@ -941,7 +971,31 @@ fn base_images() -> Vec<(TableId, Vec<u8>)> {
             TableId::StarCatalog,
             image_of(TableId::StarCatalog, zero, &StarCatalogTable::default()),
         ),
+        (TableId::Orbit, image_of(TableId::Orbit, zero, &gro_orbit())),
+        (
+            TableId::Orbit,
+            image_of(
+                TableId::Orbit,
+                CREATED,
+                &OrbitTable {
+                    epoch_s_since_j2000_tt: -2.1e8,
+                    pos_eci_km: [-7000.0, 12_000.0, 3000.0],
+                    vel_eci_km_per_s: [-4.0, -2.0, 1.0],
+                },
+            ),
+        ),
     ]
+}
+
+/// GRO's orbit at release (a = 6833 km, i = 28.48°, circular), epoch 1991-04-07.
+fn gro_orbit() -> OrbitTable {
+    let v = (fsw_core::orbit::MU_EARTH_KM3_PER_S2 / 6833.0).sqrt();
+    let i = 28.48_f64.to_radians();
+    OrbitTable {
+        epoch_s_since_j2000_tt: -275_920_000.0,
+        pos_eci_km: [6833.0, 0.0, 0.0],
+        vel_eci_km_per_s: [0.0, v * i.cos(), v * i.sin()],
+    }
 }
 
 /// Cases per base image: two bases per table type, 10 000 each = 20 000 per table type.
@@ -1188,6 +1242,8 @@ fn write_fuzz_seeds() {
         "modified-filter",
         "small-catalog",
         "boot-catalog",
+        "gro-orbit",
+        "eccentric-orbit",
     ];
     for ((_, img), name) in base_images().iter().zip(names) {
         for flags in [0u8, 1, 3] {

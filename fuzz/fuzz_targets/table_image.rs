@@ -42,6 +42,7 @@ fn validate_active(set: &TableSet, id: TableId) -> Result<(), TableError> {
         TableId::Iru => set.iru().validate(),
         TableId::Filter => set.filter().validate(),
         TableId::StarCatalog => set.catalog().validate(),
+        TableId::Orbit => set.orbit().validate(),
     }
 }
 

@@ -17,7 +17,7 @@ use fsw_core::raw::TimeTag;
 use fsw_core::tables::image::{decode_payload, encode_image, parse_image, ImageHeader};
 use fsw_core::tables::types::{matrix_from_rows, rows_from_matrix, SensorCorrections};
 use fsw_core::tables::{
-    AlignmentTable, FilterTable, IruTable, StarCatalogTable, TableError, TableId,
+    AlignmentTable, FilterTable, IruTable, OrbitTable, StarCatalogTable, TableError, TableId,
 };
 
 use crate::ARCSEC_PER_RAD;
@@ -74,6 +74,8 @@ pub enum AnyTable {
     Filter(FilterTable),
     /// Star catalog.
     StarCatalog(Box<StarCatalogTable>),
+    /// Onboard orbit (state vector at an epoch).
+    Orbit(OrbitTable),
 }
 
 impl AnyTable {
@@ -87,6 +89,7 @@ impl AnyTable {
             Self::Iru(t) => t.validate(),
             Self::Filter(t) => t.validate(),
             Self::StarCatalog(t) => t.validate(),
+            Self::Orbit(t) => t.validate(),
         }
     }
 
@@ -98,6 +101,7 @@ impl AnyTable {
             Self::Iru(t) => serde_json::to_value(t),
             Self::Filter(t) => serde_json::to_value(t),
             Self::StarCatalog(t) => serde_json::to_value(t),
+            Self::Orbit(t) => serde_json::to_value(t),
         };
         v.unwrap_or(serde_json::Value::Null)
     }
@@ -120,6 +124,7 @@ pub fn decode_image(bytes: &[u8], what: &str) -> Result<(ImageHeader, AnyTable),
         TableId::StarCatalog => {
             AnyTable::StarCatalog(Box::new(decode_payload(payload).map_err(image_err)?))
         }
+        TableId::Orbit => AnyTable::Orbit(decode_payload(payload).map_err(image_err)?),
     };
     Ok((header, table))
 }
@@ -282,6 +287,7 @@ pub fn write_image(table: &AnyTable, created: TimeTag) -> Result<Vec<u8>, TableT
         AnyTable::StarCatalog(t) => {
             encode_image(TableId::StarCatalog, created, t.as_ref(), &mut buf)
         }
+        AnyTable::Orbit(t) => encode_image(TableId::Orbit, created, t, &mut buf),
     };
     let len = encoded.map_err(|e| TableToolError::Image {
         what: "new image".into(),

@@ -17,8 +17,9 @@
 //!    interval with `∫ω dt`.
 //!
 //! # Start-up uplinks (t = 0, in this order, before the scenario's own t = 0 commands)
-//! Onboard star catalog ([`crate::onboard`]), the true-alignment table if
-//! `fly_true_alignments`, every `--tables` image (load + activate each), then
+//! Onboard star catalog ([`crate::onboard`]), the filter table of `filter_table` and
+//! `[onboard_orbit]`, the true-alignment table if `fly_true_alignments`, the orbit tables of
+//! `[onboard_orbit]` (at their own times), every `--tables` image (load + activate each), then
 //! `FilterInitialize(Rot(error) · A_true)` (scenario `[initial_estimate]`).
 //!
 //! # Scoring per cycle
@@ -206,7 +207,7 @@ impl Simulation {
                 },
             );
         }
-        if let Some(overrides) = &scenario.filter_table {
+        if let Some(overrides) = &scenario.startup_filter_table() {
             let table = onboard::filter_table_with(overrides).map_err(InputError::from)?;
             push_upload(
                 &mut uploads,
@@ -240,6 +241,34 @@ impl Simulation {
                     at_s: 0.0,
                 },
             );
+        }
+        if let Some(uplink) = &scenario.onboard_orbit {
+            for (k, at_s) in uplink
+                .uplink_times_s(scenario.duration_s)
+                .into_iter()
+                .enumerate()
+            {
+                let epoch_t_s = at_s - uplink.state_age_s;
+                let table = onboard::truth_orbit_table(&scenario, &clock, epoch_t_s, uplink)
+                    .map_err(InputError::from)?;
+                push_upload(
+                    &mut uploads,
+                    &mut timeline,
+                    Upload {
+                        source: format!(
+                            "onboard orbit from the truth at t = {epoch_t_s} s (errors {:?} km, {:?} km/s)",
+                            uplink.pos_error_km, uplink.vel_error_km_per_s
+                        ),
+                        name: format!("orbit_{k}.tbl"),
+                        image: onboard::image(
+                            TableId::Orbit,
+                            clock.time_tag(at_s).unwrap_or_default(),
+                            &table,
+                        )?,
+                        at_s,
+                    },
+                );
+            }
         }
         if let Some(dir) = tables_dir {
             // The images the folder's manifest lists, checked (crate::manifest).

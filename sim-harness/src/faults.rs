@@ -484,10 +484,10 @@ pub struct FaultReport {
     pub counters: Counters,
     /// OBC counters at the end of the run without faults.
     pub baseline_counters: Counters,
-    /// Active table CRCs just before the first fault (alignment, IRU, filter, catalog).
-    pub table_crc_before: [u32; 4],
+    /// Active table CRCs just before the first fault (alignment, IRU, filter, catalog, orbit).
+    pub table_crc_before: [u32; 5],
     /// Active table CRCs at the end.
-    pub table_crc_after: [u32; 4],
+    pub table_crc_after: [u32; 5],
     /// Dumps of the active tables at the end equal to those just before the first fault.
     pub tables_unchanged: bool,
     /// `TableActivated` events at or after the fault start.
@@ -503,8 +503,8 @@ struct Flight {
     trace: Vec<(f64, [f64; 3], u8)>,
     events: Vec<(f64, EventId)>,
     counters: Counters,
-    crc_before: [u32; 4],
-    crc_after: [u32; 4],
+    crc_before: [u32; 5],
+    crc_after: [u32; 5],
     dump_before: Vec<Vec<u8>>,
     dump_after: Vec<Vec<u8>>,
     slew_end_errors: Vec<(f64, f64)>,
@@ -523,7 +523,7 @@ fn dumps(sim: &Simulation) -> Vec<Vec<u8>> {
         .collect()
 }
 
-fn crcs(sim: &Simulation) -> [u32; 4] {
+fn crcs(sim: &Simulation) -> [u32; 5] {
     sim.fsw().tables().status().map(|s| s.active_crc)
 }
 
@@ -533,8 +533,8 @@ fn fly(scenario: Scenario, snapshot_at_s: f64) -> anyhow::Result<Flight> {
         trace: Vec::new(),
         events: Vec::new(),
         counters: Counters::default(),
-        crc_before: [0; 4],
-        crc_after: [0; 4],
+        crc_before: [0; 5],
+        crc_after: [0; 5],
         dump_before: Vec::new(),
         dump_after: Vec::new(),
         slew_end_errors: Vec::new(),

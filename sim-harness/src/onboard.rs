@@ -25,15 +25,17 @@ use anyhow::Context;
 use nalgebra::Matrix3;
 
 use crate::data::{CsvTable, HIPPARCOS_CSV};
-use crate::scenario::Scenario;
+use crate::scenario::{OnboardOrbitUplink, Scenario};
+use crate::truth::orbit::Orbit;
 use crate::truth::sky::{Sky, SkyParams, HIPPARCOS_EPOCH_J2000_TT_S};
+use crate::truth::time::SimClock;
 use crate::truth::time::S_PER_JULIAN_YEAR;
 use fsw_core::raw::TimeTag;
 use fsw_core::tables::image::encode_image;
 use fsw_core::tables::types::rows_from_matrix;
 use fsw_core::tables::{
-    AlignmentTable, CatalogStar, FilterTable, SensorCorrections, StarCatalogTable, TableId,
-    MAX_CATALOG_STARS,
+    AlignmentTable, CatalogStar, FilterTable, OrbitTable, SensorCorrections, StarCatalogTable,
+    TableId, MAX_CATALOG_STARS,
 };
 
 /// Room for the largest image (catalog: ≤ 4096 × 21 octets + header).
@@ -111,6 +113,41 @@ pub fn true_alignment_table(m_acs_from_sensor_true: &[Matrix3<f64>; 4]) -> Align
         m_acs_from_fss2: rows_from_matrix(&m_acs_from_sensor_true[3]),
         corrections: SensorCorrections::default(),
     }
+}
+
+/// The orbit table the ground would uplink for the state at `epoch_t_s` (s from the
+/// scenario epoch): the truth orbit sampled as the closed loop samples it (one cycle at a
+/// time from t = 0), plus the `[onboard_orbit]` errors, validated by the OBC's rules.
+///
+/// # Errors
+/// A state the OBC's `OrbitTable::validate` refuses (named).
+pub fn truth_orbit_table(
+    scenario: &Scenario,
+    clock: &SimClock,
+    epoch_t_s: f64,
+    uplink: &OnboardOrbitUplink,
+) -> anyhow::Result<OrbitTable> {
+    let mut orbit = Orbit::new(&scenario.orbit);
+    if epoch_t_s > 0.0 {
+        let mut k = 1_u64;
+        #[allow(clippy::cast_precision_loss)]
+        while (k as f64) * scenario.step_s < epoch_t_s {
+            orbit.advance_to((k as f64) * scenario.step_s);
+            k += 1;
+        }
+    }
+    orbit.advance_to(epoch_t_s);
+    let s = orbit.state();
+    let table = OrbitTable {
+        epoch_s_since_j2000_tt: clock.j2000_tt_s(epoch_t_s),
+        pos_eci_km: (s.pos_eci_km + nalgebra::Vector3::from(uplink.pos_error_km)).into(),
+        vel_eci_km_per_s: (s.vel_eci_km_per_s + nalgebra::Vector3::from(uplink.vel_error_km_per_s))
+            .into(),
+    };
+    table.validate().map_err(|e| {
+        anyhow::anyhow!("onboard_orbit: the OBC would refuse the state at t = {epoch_t_s} s: {e}")
+    })?;
+    Ok(table)
 }
 
 /// The boot filter table with the scenario's `filter_table` fields laid over it, validated.

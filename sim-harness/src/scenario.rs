@@ -327,11 +327,80 @@ impl TimedCommand {
         let Some(own) = &self.filter_table else {
             return Ok(None);
         };
-        let mut fields = scenario.filter_table.clone().unwrap_or_default();
+        let mut fields = scenario.startup_filter_table().unwrap_or_default();
         for (k, v) in own {
             fields.insert(k.clone(), v.clone());
         }
         crate::onboard::filter_table_with(&fields).map(Some)
+    }
+}
+
+/// `[onboard_orbit]`: the ground uplinks the onboard orbit (fsw-core's orbit table,
+/// docs/tables.md Table 5) built from the truth orbit, as orbit determination from tracking
+/// would give it, and turns on the filter table's orbital aberration correction.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct OnboardOrbitUplink {
+    /// First uplink (s from the epoch; load + activate). Default 1 s: at t = 0 the catalog,
+    /// filter and alignment loads and activations already fill the OBC's eight events of the
+    /// cycle (`fsw_core::events::MAX_EVENTS_PER_CYCLE`), and the orbit's would be dropped.
+    pub at_s: f64,
+    /// Uplink a fresh state every this many seconds after the first (0 = once). The OBC
+    /// refuses a state older than 2 days (`fsw_core::orbit::MAX_STATE_AGE_S`).
+    pub every_s: f64,
+    /// Age of the state at each uplink (s): its epoch is the uplink time minus this (a state
+    /// determined before the uplink; the OBC catches it up at 80 s of orbit per cycle).
+    pub state_age_s: f64,
+    /// Error added to the truth position (km, J2000), to test robustness.
+    pub pos_error_km: [f64; 3],
+    /// Error added to the truth velocity (km/s, J2000), to test robustness.
+    pub vel_error_km_per_s: [f64; 3],
+    /// Filter-table fields laid over the scenario's `filter_table` (and the boot values):
+    /// by default `orbital_aberration_correction = true` and
+    /// `fhst_uncorrected_systematic_arcsec` = [`ORBIT_ON_FHST_FLOOR_ARCSEC`]
+    /// (docs/obc_filter.md §3). The scenario's own `filter_table` keys win over these.
+    pub filter_table: toml::Table,
+}
+
+/// The FHST systematic floor recommended with the orbital correction on (arcsec): what the
+/// onboard ephemerides leave of the aberration (docs/obc_filter.md §3).
+pub const ORBIT_ON_FHST_FLOOR_ARCSEC: f64 = 0.02;
+
+impl Default for OnboardOrbitUplink {
+    fn default() -> Self {
+        let mut filter_table = toml::Table::new();
+        filter_table.insert(
+            "orbital_aberration_correction".into(),
+            toml::Value::Boolean(true),
+        );
+        filter_table.insert(
+            "fhst_uncorrected_systematic_arcsec".into(),
+            toml::Value::Float(ORBIT_ON_FHST_FLOOR_ARCSEC),
+        );
+        Self {
+            at_s: 1.0,
+            every_s: 0.0,
+            state_age_s: 0.0,
+            pos_error_km: [0.0; 3],
+            vel_error_km_per_s: [0.0; 3],
+            filter_table,
+        }
+    }
+}
+
+impl OnboardOrbitUplink {
+    /// The uplink times within `[0, duration_s]`.
+    #[must_use]
+    pub fn uplink_times_s(&self, duration_s: f64) -> Vec<f64> {
+        let mut out = vec![self.at_s];
+        if self.every_s > 0.0 {
+            let mut t = self.at_s + self.every_s;
+            while t <= duration_s {
+                out.push(t);
+                t += self.every_s;
+            }
+        }
+        out
     }
 }
 
@@ -384,6 +453,10 @@ pub struct Scenario {
     /// Example: `filter_table = { aberration_correction = true }`.
     #[serde(default)]
     pub filter_table: Option<toml::Table>,
+    /// Uplink the onboard orbit from the truth and turn on the orbital aberration correction
+    /// (`[onboard_orbit]`, [`OnboardOrbitUplink`]); absent = no orbit on board, as before.
+    #[serde(default)]
+    pub onboard_orbit: Option<OnboardOrbitUplink>,
     /// Effects the operator declares (metadata.json `declared_effects`); `None` = the
     /// physical ones every GRO analyst knows about ([`DEFAULT_DECLARED_EFFECTS`]).
     #[serde(default)]
@@ -594,6 +667,22 @@ impl Scenario {
     ///
     /// # Errors
     /// The first offending field, by its TOML path.
+    /// The filter-table fields uplinked at t = 0 over the boot values: the
+    /// `[onboard_orbit]` ones (the orbital correction on), then the scenario's
+    /// `filter_table`; `None` = no filter-table upload.
+    #[must_use]
+    pub fn startup_filter_table(&self) -> Option<toml::Table> {
+        let mut fields = match (&self.onboard_orbit, &self.filter_table) {
+            (None, None) => return None,
+            (Some(o), _) => o.filter_table.clone(),
+            (None, Some(_)) => toml::Table::new(),
+        };
+        for (k, v) in self.filter_table.iter().flatten() {
+            fields.insert(k.clone(), v.clone());
+        }
+        Some(fields)
+    }
+
     pub fn validate(&self) -> anyhow::Result<()> {
         let pos = |name: &str, v: f64| -> anyhow::Result<()> {
             if !(v.is_finite() && v > 0.0) {
@@ -682,6 +771,26 @@ impl Scenario {
             }
         }
         pos("orbit.max_step_s", self.orbit.max_step_s)?;
+        if let Some(o) = &self.onboard_orbit {
+            if !(o.at_s >= 0.0 && o.at_s <= self.duration_s.max(0.0)) {
+                bail!(
+                    "onboard_orbit.at_s must be in [0, duration_s], got {}",
+                    o.at_s
+                );
+            }
+            if !(o.every_s == 0.0 || o.every_s >= 60.0) {
+                bail!(
+                    "onboard_orbit.every_s must be 0 (once) or ≥ 60 s, got {}",
+                    o.every_s
+                );
+            }
+            if !(o.at_s - o.state_age_s >= -86_400.0) {
+                bail!(
+                    "onboard_orbit.state_age_s ({}) puts the state more than a day before the epoch",
+                    o.state_age_s
+                );
+            }
+        }
         if !(0.0..1.0).contains(&self.orbit.eccentricity) {
             bail!(
                 "orbit.eccentricity must be in [0, 1), got {}",

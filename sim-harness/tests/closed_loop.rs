@@ -495,3 +495,71 @@ fn monte_carlo_shards_merge_to_the_campaign() {
         whole.post_maneuver_error_deg
     );
 }
+
+/// `normal-ops-orbit` (issue 19): the OBC says what it applies. With the orbital correction
+/// on, 0x0801 "no orbit table" at t = 0, 0x0801 "catching up" when the one-hour-old state
+/// arrives at 1 s, 0x0802 once it is caught up (46 cycles at 80 s of orbit per cycle), and
+/// nothing more over 30 min; fine mode and the smoke test's 3σ bound (15″) as normal-ops.
+/// A state 7 h old (beyond the 6-h catch-up) is refused on board: 0x0801 "invalid, gap too
+/// large", never 0x0802, and the OBC flies on with annual aberration only.
+#[test]
+fn e2e_normal_ops_orbit_events_and_fallback() {
+    use fsw_core::events::EventId;
+    let events_of = |s: Scenario| {
+        let mut sim = Simulation::new(s, None).unwrap();
+        let mut out = Vec::new();
+        let mut last = None;
+        while let Some(r) = sim.step() {
+            for e in &r.output.events {
+                if matches!(
+                    e.id,
+                    EventId::OrbitalCorrectionUnavailable | EventId::OrbitalCorrectionApplied
+                ) {
+                    out.push((r.cycle, e.id, e.p1, e.p2));
+                }
+            }
+            last = Some(r);
+        }
+        (out, last.unwrap())
+    };
+    let (events, last) = events_of(scenario("normal-ops-orbit", 1800.0));
+    eprintln!("normal-ops-orbit events: {events:?}");
+    assert_eq!(events.len(), 3, "{events:?}");
+    assert_eq!(
+        (events[0].0, events[0].1, events[0].2),
+        (0, EventId::OrbitalCorrectionUnavailable, 0)
+    );
+    assert_eq!(
+        (events[1].0, events[1].1, events[1].2),
+        (1, EventId::OrbitalCorrectionUnavailable, 1)
+    );
+    assert_eq!(events[2].1, EventId::OrbitalCorrectionApplied);
+    assert_eq!(events[2].0, 46);
+    assert!((3600..3700).contains(&events[2].2), "age {} s", events[2].2);
+    assert_eq!(last.output.housekeeping.filter_mode, 2);
+
+    let sum = run(scenario("normal-ops-orbit", 1800.0), &RunOptions::default()).unwrap();
+    for k in 0..3 {
+        assert!(sum.attitude_error_arcsec.three_sigma[k] <= 15.0);
+    }
+    let orbit_tables: Vec<_> = sum
+        .tables_loaded
+        .iter()
+        .filter(|t| t.table == "orbit")
+        .collect();
+    assert_eq!(orbit_tables.len(), 1);
+    assert!(orbit_tables[0].accepted && orbit_tables[0].activated_at_s == Some(1.0));
+
+    let mut stale = scenario("normal-ops-orbit", 600.0);
+    if let Some(o) = stale.onboard_orbit.as_mut() {
+        o.state_age_s = 7.0 * 3600.0;
+    }
+    let (events, last) = events_of(stale);
+    eprintln!("7-h-old state: {events:?}");
+    assert!(events
+        .iter()
+        .all(|e| e.1 == EventId::OrbitalCorrectionUnavailable));
+    assert_eq!(events.last().map(|e| (e.2, e.3)), Some((3, 2)));
+    assert_eq!(events.len(), 2, "{events:?}");
+    assert_eq!(last.output.housekeeping.filter_mode, 2);
+}

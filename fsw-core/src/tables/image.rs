@@ -35,7 +35,7 @@ pub const CRC_LEN: usize = 4;
 pub const IMAGE_CRC: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
 
 /// Which table an image holds. Discriminants are the on-wire ids.
-/// docs/tables.md (offset 4); project choice (not in the paper): four tables.
+/// docs/tables.md (offset 4); project choice (not in the paper): five tables.
 #[derive(
     Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, serde::Serialize, serde::Deserialize,
 )]
@@ -54,16 +54,20 @@ pub enum TableId {
     /// The onboard star catalog.
     /// docs/tables.md (Table 4: star catalog); Hipparcos subset.
     StarCatalog = 4,
+    /// The onboard orbit (state vector at an epoch), propagated on board.
+    /// docs/tables.md (Table 5: orbit); algorithms.md §3.3 (orbital aberration, parallax).
+    Orbit = 5,
 }
 
 impl TableId {
     /// All table ids, in id order.
-    /// docs/tables.md (table ids 1–4).
-    pub const ALL: [TableId; 4] = [
+    /// docs/tables.md (table ids 1–5).
+    pub const ALL: [TableId; 5] = [
         TableId::Alignment,
         TableId::Iru,
         TableId::Filter,
         TableId::StarCatalog,
+        TableId::Orbit,
     ];
 
     /// From the on-wire id.
@@ -75,11 +79,12 @@ impl TableId {
             2 => Some(Self::Iru),
             3 => Some(Self::Filter),
             4 => Some(Self::StarCatalog),
+            5 => Some(Self::Orbit),
             _ => None,
         }
     }
 
-    /// Index 0..4 for per-table arrays.
+    /// Index 0..5 for per-table arrays.
     /// Project choice (not in the paper): dense arrays indexed by id − 1.
     #[must_use]
     pub fn index(self) -> usize {
@@ -88,6 +93,7 @@ impl TableId {
             Self::Iru => 1,
             Self::Filter => 2,
             Self::StarCatalog => 3,
+            Self::Orbit => 4,
         }
     }
 
@@ -100,6 +106,7 @@ impl TableId {
             Self::Iru => "iru",
             Self::Filter => "filter",
             Self::StarCatalog => "star_catalog",
+            Self::Orbit => "orbit",
         }
     }
 }
@@ -263,7 +270,7 @@ impl core::fmt::Display for TableError {
             ),
             Self::UnknownTableId { found } => write!(
                 f,
-                "octet 4 (table id) holds {found}, not 1 alignment, 2 IRU, 3 filter or 4 star catalog [reason 4]"
+                "octet 4 (table id) holds {found}, not 1 alignment, 2 IRU, 3 filter, 4 star catalog or 5 orbit [reason 4]"
             ),
             Self::WrongTableId { expected, found } => write!(
                 f,

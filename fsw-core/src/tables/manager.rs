@@ -16,7 +16,7 @@ use super::image::{
     decode_catalog_into, decode_payload, encode_image, parse_image, TableError, TableId,
 };
 use super::types::{
-    check_alignment_change, check_iru_change, AlignmentTable, FilterTable, IruTable,
+    check_alignment_change, check_iru_change, AlignmentTable, FilterTable, IruTable, OrbitTable,
     StarCatalogTable,
 };
 use crate::raw::TimeTag;
@@ -104,14 +104,15 @@ impl<T: Clone> Slot<T> {
     }
 }
 
-/// The four tables with their double buffers.
-/// docs/tables.md (tables 1–4, "Lifecycle").
+/// The five tables with their double buffers.
+/// docs/tables.md (tables 1–5, "Lifecycle").
 #[derive(Clone, Debug, PartialEq)]
 pub struct TableSet {
     alignment: Slot<AlignmentTable>,
     iru: Slot<IruTable>,
     filter: Slot<FilterTable>,
     catalog: Slot<StarCatalogTable>,
+    orbit: Slot<OrbitTable>,
 }
 
 impl Default for TableSet {
@@ -134,7 +135,8 @@ fn crc_of(bytes: &[u8]) -> u32 {
 
 impl TableSet {
     /// Boot tables: the paper's prelaunch alignments (Table 1) and IRU G, default filter
-    /// settings, and an empty star catalog (a catalog must be uplinked before fine mode).
+    /// settings, an empty star catalog (a catalog must be uplinked before fine mode) and no
+    /// orbit (an orbit table must be uplinked before the orbital aberration correction).
     #[must_use]
     pub fn boot() -> Self {
         Self {
@@ -142,6 +144,7 @@ impl TableSet {
             iru: Slot::new(IruTable::prelaunch()),
             filter: Slot::new(FilterTable::default_boot()),
             catalog: Slot::new(StarCatalogTable::default()),
+            orbit: Slot::new(OrbitTable::none()),
         }
     }
 
@@ -169,16 +172,29 @@ impl TableSet {
     pub fn catalog(&self) -> &StarCatalogTable {
         &self.catalog.active
     }
+    /// Active orbit table ([`OrbitTable::none`] until one is activated).
+    /// docs/tables.md (Table 5: orbit).
+    #[must_use]
+    pub fn orbit(&self) -> &OrbitTable {
+        &self.orbit.active
+    }
+    /// Whether an orbit table has been activated since boot (the boot table holds no orbit).
+    /// docs/tables.md (Table 5: "boot: none").
+    #[must_use]
+    pub fn has_orbit(&self) -> bool {
+        self.orbit.activations > 0
+    }
 
     /// Status of every table, in [`TableId::ALL`] order.
     /// docs/icd.md §3.2 (table CRCs, pending mask).
     #[must_use]
-    pub fn status(&self) -> [TableStatus; 4] {
+    pub fn status(&self) -> [TableStatus; 5] {
         [
             self.alignment.status(),
             self.iru.status(),
             self.filter.status(),
             self.catalog.status(),
+            self.orbit.status(),
         ]
     }
 
@@ -231,6 +247,10 @@ impl TableSet {
                 self.catalog.inactive = None;
                 self.catalog.rejections = self.catalog.rejections.saturating_add(1);
             }
+            TableId::Orbit => {
+                self.orbit.inactive = None;
+                self.orbit.rejections = self.orbit.rejections.saturating_add(1);
+            }
         }
     }
 
@@ -274,6 +294,11 @@ impl TableSet {
                 slot.1 = created;
                 slot.2 = crc;
             }
+            TableId::Orbit => {
+                let t: OrbitTable = decode_payload(payload)?;
+                t.validate()?;
+                self.orbit.inactive = Some((t, created, crc));
+            }
         }
         Ok(())
     }
@@ -300,7 +325,7 @@ impl TableSet {
                 Some((t, _, _)) => check_iru_change(t, &self.iru.active, &self.filter.active),
                 None => return Err(None),
             },
-            TableId::Filter | TableId::StarCatalog => Ok(()),
+            TableId::Filter | TableId::StarCatalog | TableId::Orbit => Ok(()),
         };
         if let Err(e) = recheck {
             self.reject(id);
@@ -311,6 +336,7 @@ impl TableSet {
             TableId::Iru => self.iru.activate(),
             TableId::Filter => self.filter.activate(),
             TableId::StarCatalog => self.catalog.activate(),
+            TableId::Orbit => self.orbit.activate(),
         };
         if done {
             Ok(())
@@ -327,6 +353,7 @@ impl TableSet {
             TableId::Iru => self.iru.inactive.take().is_some(),
             TableId::Filter => self.filter.inactive.take().is_some(),
             TableId::StarCatalog => self.catalog.inactive.take().is_some(),
+            TableId::Orbit => self.orbit.inactive.take().is_some(),
         }
     }
 
@@ -354,6 +381,7 @@ impl TableSet {
             TableId::StarCatalog => {
                 encode_image(id, self.catalog.active_created, &self.catalog.active, out)
             }
+            TableId::Orbit => encode_image(id, self.orbit.active_created, &self.orbit.active, out),
         }
     }
 }

@@ -1,6 +1,6 @@
 //! # Uplinkable tables (paper: calibrated alignments uplinked to the OBC on 1991-05-14)
 //!
-//! [`image`] is the binary format, [`types`] the four tables and their validation,
+//! [`image`] is the binary format, [`types`] the five tables and their validation,
 //! [`manager`] the load/validate/activate services. Byte layout: `docs/tables.md`.
 
 pub mod image;
@@ -10,6 +10,6 @@ pub mod types;
 pub use image::{TableError, TableId};
 pub use manager::{TableSet, TableStatus};
 pub use types::{
-    AlignmentTable, CatalogStar, FilterTable, IruTable, SensorCorrections, StarCatalogTable,
-    MAX_CATALOG_STARS,
+    AlignmentTable, CatalogStar, FilterTable, IruTable, OrbitTable, SensorCorrections,
+    StarCatalogTable, MAX_CATALOG_STARS,
 };

@@ -487,6 +487,14 @@ impl IruTable {
 // Filter table
 // ------------------------------------------------------------------------------------------
 
+/// RMS per focal-plane axis of the orbital velocity aberration, arcsec: `β = 7.5 km/s / c`
+/// = 5.16″ turning once per orbit in the orbit plane gives `E[(β·e)²] ≤ β²/2` on any axis
+/// `e`, i.e. at most `β/√2` = 3.65″ (derivation in docs/obc_filter.md §3). The boot
+/// [`FilterTable::fhst_uncorrected_systematic_arcsec`], and what the OBC adds back while the
+/// orbital correction is requested but the onboard orbit is not valid.
+/// algorithms.md §3.3 ("LEO orbital ≤ 5.2″"); docs/obc_filter.md §3.
+pub const ORBITAL_ABERRATION_RMS_PER_AXIS_ARCSEC: f64 = 3.65;
+
 /// Kalman filter, star identification and attitude control settings.
 /// docs/tables.md (Table 3: filter); mostly project choices, sources per field.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -561,6 +569,21 @@ pub struct FilterTable {
     /// updates instead of gating them out.
     /// docs/tables.md field 20; effects 9–10 of algorithms.md §9 (gyro scale errors).
     pub gyro_scale_uncertainty: f64,
+    /// Apply the orbital part of the velocity aberration to catalog stars and the Sun (the
+    /// spacecraft's velocity from the onboard orbit, [`crate::orbit`]) and the Sun parallax
+    /// (the Sun seen from the spacecraft, not from the geocentre). Independent of
+    /// [`Self::aberration_correction`] (the annual part). When the onboard orbit is not valid
+    /// the OBC applies the annual part only and says so (events 0x0801/0x0802). Boot false.
+    /// algorithms.md §3.3 ("LEO orbital ≤ 5.2″", "Sun vector"); docs/tables.md field 21.
+    pub orbital_aberration_correction: bool,
+    /// Systematic FHST error per focal-plane axis that the OBC models but does not correct,
+    /// arcsec (0..=60): the floor of the FHST updates and of the star-identification window
+    /// (`Mekf::update_focal_plane_with_floor`). Boot 3.65 = `β_orbit/√2`, the uncorrected
+    /// orbital aberration; with [`Self::orbital_aberration_correction`] on, what the onboard
+    /// ephemerides leave (0.02, docs/obc_filter.md §3). While the orbital correction is
+    /// requested but the orbit is not valid the OBC adds the 3.65″ back in quadrature.
+    /// docs/tables.md field 22; docs/obc_filter.md §3 (derivation).
+    pub fhst_uncorrected_systematic_arcsec: f64,
 }
 
 impl FilterTable {
@@ -593,10 +616,12 @@ impl FilterTable {
             torque_limit_nm: 0.5,
             slew_complete_rad: 0.05 * RAD_PER_DEG,
             gyro_scale_uncertainty: 1.0e-3,
+            orbital_aberration_correction: false,
+            fhst_uncorrected_systematic_arcsec: ORBITAL_ABERRATION_RMS_PER_AXIS_ARCSEC,
         }
     }
 
-    /// Content checks; field numbers are the declaration order 0..=20.
+    /// Content checks; field numbers are the declaration order 0..=22.
     /// docs/tables.md (Table 3: filter, ranges).
     ///
     /// # Errors
@@ -624,6 +649,7 @@ impl FilterTable {
         check_range(self.torque_limit_nm, 1e-3, 100.0, 18)?;
         check_range(self.slew_complete_rad, 1e-6, 0.5, 19)?;
         check_range(self.gyro_scale_uncertainty, 0.0, 0.05, 20)?;
+        check_range(self.fhst_uncorrected_systematic_arcsec, 0.0, 60.0, 22)?;
         Ok(())
     }
 
@@ -718,6 +744,72 @@ impl StarCatalogTable {
             }
         }
         Ok(())
+    }
+}
+
+// ------------------------------------------------------------------------------------------
+// Orbit table
+// ------------------------------------------------------------------------------------------
+
+/// The onboard orbit: the spacecraft state at an epoch, as the ground's orbit determination
+/// gives it from tracking; the OBC propagates it ([`crate::orbit`]).
+/// docs/tables.md (Table 5: orbit); algorithms.md §3.3 (orbital aberration, Sun parallax).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct OrbitTable {
+    /// Epoch of the state, seconds since J2000.0 TT (the time of
+    /// [`crate::raw::TimeTag::seconds_since_j2000_tt`]); within ±50 years of J2000 (the onboard
+    /// Sun ephemeris's span).
+    /// docs/tables.md (Table 5, field 0).
+    pub epoch_s_since_j2000_tt: f64,
+    /// Position at the epoch, J2000/GCRS axes, km; radius
+    /// [`crate::orbit::MIN_RADIUS_KM`]..=[`crate::orbit::MAX_RADIUS_KM`].
+    /// docs/tables.md (Table 5, field 1).
+    pub pos_eci_km: [f64; 3],
+    /// Velocity at the epoch, J2000/GCRS axes, km/s: a bound orbit (below the escape speed)
+    /// whose perigee radius is at least [`crate::orbit::MIN_RADIUS_KM`].
+    /// docs/tables.md (Table 5, field 2).
+    pub vel_eci_km_per_s: [f64; 3],
+}
+
+impl OrbitTable {
+    /// The boot table: no orbit (all zero). It does not validate and is never propagated:
+    /// the OBC has no orbit until one is uplinked.
+    /// docs/tables.md (Table 5: "boot: none").
+    #[must_use]
+    pub fn none() -> Self {
+        Self {
+            epoch_s_since_j2000_tt: 0.0,
+            pos_eci_km: [0.0; 3],
+            vel_eci_km_per_s: [0.0; 3],
+        }
+    }
+
+    /// Content checks. Fields: 0 epoch, 1 position, 2 velocity.
+    /// docs/tables.md (Table 5: ranges).
+    ///
+    /// # Errors
+    /// The first failed check: [`TableError::NotFinite`] or [`TableError::OutOfRange`] with
+    /// the field number.
+    pub fn validate(&self) -> Result<(), TableError> {
+        /// ±50 Julian years of J2000, s: the onboard Sun ephemeris's span.
+        const MAX_EPOCH_S: f64 = 50.0 * 365.25 * 86_400.0;
+        check_range(self.epoch_s_since_j2000_tt, -MAX_EPOCH_S, MAX_EPOCH_S, 0)?;
+        check_finite(&self.pos_eci_km, 1)?;
+        check_finite(&self.vel_eci_km_per_s, 2)?;
+        let r = Vector3::from(self.pos_eci_km);
+        let v = Vector3::from(self.vel_eci_km_per_s);
+        let r_km = r.norm();
+        check_range(
+            r_km,
+            crate::orbit::MIN_RADIUS_KM,
+            crate::orbit::MAX_RADIUS_KM,
+            1,
+        )?;
+        match crate::orbit::perigee_radius_km(&r, &v) {
+            Some(rp) if rp >= crate::orbit::MIN_RADIUS_KM => Ok(()),
+            _ => Err(TableError::OutOfRange { field: 2 }),
+        }
     }
 }
 
@@ -876,6 +968,77 @@ mod tests {
         let expect = rot(&(Vector3::from(k) * 5.0)) * matrix_from_rows(&a.m_acs_from_fhst2);
         assert!((matrix_from_rows(&m) - expect).norm() < 1e-15);
         assert_eq!(a.m_acs_from_sensor_rows_at(0, 22.0), a.m_acs_from_fhst1);
+    }
+
+    #[test]
+    fn orbit_table_validation_names_the_field() {
+        let v = libm::sqrt(crate::orbit::MU_EARTH_KM3_PER_S2 / 6833.0);
+        let good = OrbitTable {
+            epoch_s_since_j2000_tt: -2.7e8,
+            pos_eci_km: [6833.0, 0.0, 0.0],
+            vel_eci_km_per_s: [0.0, v * 0.88, v * 0.475],
+        };
+        assert_eq!(good.validate(), Ok(()));
+        assert_eq!(
+            OrbitTable::none().validate(),
+            Err(TableError::OutOfRange { field: 1 })
+        );
+        type Case = (fn(&mut OrbitTable), TableError);
+        let cases: [Case; 8] = [
+            (
+                |t| t.epoch_s_since_j2000_tt = f64::NAN,
+                TableError::NotFinite { field: 0 },
+            ),
+            (
+                |t| t.epoch_s_since_j2000_tt = 2.0e9,
+                TableError::OutOfRange { field: 0 },
+            ),
+            (
+                |t| t.pos_eci_km[2] = f64::INFINITY,
+                TableError::NotFinite { field: 1 },
+            ),
+            // 6400 km: below 100 km altitude.
+            (
+                |t| t.pos_eci_km = [6400.0, 0.0, 0.0],
+                TableError::OutOfRange { field: 1 },
+            ),
+            (
+                |t| t.pos_eci_km = [60_000.0, 0.0, 0.0],
+                TableError::OutOfRange { field: 1 },
+            ),
+            (
+                |t| t.vel_eci_km_per_s[0] = f64::NAN,
+                TableError::NotFinite { field: 2 },
+            ),
+            // Above the escape speed (10.8 km/s at 6833 km): not bound.
+            (
+                |t| t.vel_eci_km_per_s = [0.0, 11.0, 0.0],
+                TableError::OutOfRange { field: 2 },
+            ),
+            // Radial fall: perigee inside the Earth.
+            (
+                |t| t.vel_eci_km_per_s = [-1.0, 0.5, 0.0],
+                TableError::OutOfRange { field: 2 },
+            ),
+        ];
+        for (i, (set, err)) in cases.iter().enumerate() {
+            let mut t = good;
+            set(&mut t);
+            assert_eq!(t.validate(), Err(*err), "case {i}");
+        }
+    }
+
+    #[test]
+    fn filter_floor_field_validated() {
+        let mut f = FilterTable::default_boot();
+        assert!(!f.orbital_aberration_correction);
+        assert!((f.fhst_uncorrected_systematic_arcsec - 3.65).abs() < 1e-12);
+        f.fhst_uncorrected_systematic_arcsec = 0.0;
+        assert_eq!(f.validate(), Ok(()));
+        f.fhst_uncorrected_systematic_arcsec = -0.1;
+        assert_eq!(f.validate(), Err(TableError::OutOfRange { field: 22 }));
+        f.fhst_uncorrected_systematic_arcsec = f64::NAN;
+        assert_eq!(f.validate(), Err(TableError::NotFinite { field: 22 }));
     }
 
     #[test]
