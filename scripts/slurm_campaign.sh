@@ -75,13 +75,17 @@ cleanup() {
 }
 trap cleanup EXIT
 echo "== starting munged, slurmctld, slurmd (logs in $WORK/log)"
-mkdir -p /etc/munge /run/munge /var/lib/munge /var/log/munge
-[ -s /etc/munge/munge.key ] || dd if=/dev/urandom bs=1 count=1024 of=/etc/munge/munge.key 2>/dev/null
-chmod 400 /etc/munge/munge.key
-if ! pgrep -x munged >/dev/null; then
-  munged --force
-  started+=("$(pgrep -n -x munged)")
-fi
+start_munge() {
+  mkdir -p /etc/munge /run/munge /var/lib/munge /var/log/munge &&
+    { [ -s /etc/munge/munge.key ] || dd if=/dev/urandom bs=1 count=1024 of=/etc/munge/munge.key 2>/dev/null; } &&
+    chmod 400 /etc/munge/munge.key || return 1
+  if ! pgrep -x munged >/dev/null; then
+    munged --force || return 1
+    started+=("$(pgrep -n -x munged)")
+  fi
+}
+start_munge || { echo "munge could not be started here (root needed)" >&2; exit 3; }
+command -v slurmctld >/dev/null || { echo "no slurmctld" >&2; exit 3; }
 slurmctld -D -f "$SLURM_CONF" >"$WORK/log/slurmctld.out" 2>&1 &
 started+=($!)
 slurmd -D -f "$SLURM_CONF" >"$WORK/log/slurmd.out" 2>&1 &
