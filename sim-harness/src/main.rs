@@ -245,7 +245,7 @@ fn main_inner(cli: Cli) -> anyhow::Result<()> {
                 eprintln!(
                     "{name}: {} cycles, {:.0} s simulated in {:.2} s ({:.0}x real time)\n\
                      attitude error (t >= 600 s, outside slews): rms [{:.2}, {:.2}, {:.2}] arcsec, max {:.2} arcsec; NEES mean {}\n\
-                     post-maneuver errors (deg): {:?}\n\
+                     post-maneuver errors (deg): {}\n\
                      wrote {}",
                     summary.cycles,
                     summary.sim_seconds,
@@ -258,11 +258,7 @@ fn main_inner(cli: Cli) -> anyhow::Result<()> {
                     summary
                         .filter_nees_mean
                         .map_or_else(|| "n/a".to_owned(), |n| format!("{n:.2}")),
-                    summary
-                        .post_maneuver_error_deg
-                        .iter()
-                        .map(|x| (x * 1e4).round() / 1e4)
-                        .collect::<Vec<_>>(),
+                    post_maneuver_text(&summary.post_maneuver_error_deg),
                     out.display()
                 );
             }
@@ -386,4 +382,34 @@ fn main() -> ExitCode {
             ExitCode::from(exit_code(&e))
         }
     }
+}
+
+/// The post-maneuver errors for people: every value when there are a few, else the count,
+/// median, 95th percentile and largest (with the slew number); all of them are in
+/// summary.json.
+fn post_maneuver_text(errors_deg: &[f64]) -> String {
+    const LIST_UP_TO: usize = 12;
+    if errors_deg.len() <= LIST_UP_TO {
+        let v: Vec<String> = errors_deg.iter().map(|x| format!("{x:.4}")).collect();
+        return format!("[{}]", v.join(", "));
+    }
+    let mut sorted = errors_deg.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    let at =
+        |q: f64| sorted[((q * (sorted.len() - 1) as f64).round() as usize).min(sorted.len() - 1)];
+    let (k_max, max) =
+        errors_deg
+            .iter()
+            .enumerate()
+            .fold(
+                (0, f64::NEG_INFINITY),
+                |(k, m), (i, &x)| if x > m { (i, x) } else { (k, m) },
+            );
+    format!(
+        "{} slews: median {:.4}, 95th percentile {:.4}, largest {max:.4} (slew {}); all in summary.json",
+        errors_deg.len(),
+        at(0.5),
+        at(0.95),
+        k_max + 1
+    )
 }
