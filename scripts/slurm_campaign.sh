@@ -26,7 +26,7 @@
 set -euo pipefail
 N=${1:-4}
 SHARDS=${2:-2}
-WORK=${3:-/tmp/slurm-campaign}
+WORK=$(realpath -m "${3:-/tmp/slurm-campaign}")  # absolute: it goes into slurm.conf
 SCENARIO=${4:-gro-early-mission}
 ROOT=$(cd "$(dirname "$0")/.." && pwd)
 case $N$SHARDS in *[!0-9]*) echo "N and SHARDS must be whole numbers" >&2; exit 2 ;; esac
@@ -34,7 +34,9 @@ case $N$SHARDS in *[!0-9]*) echo "N and SHARDS must be whole numbers" >&2; exit 
 
 if ! command -v slurmctld >/dev/null || ! command -v munged >/dev/null; then
   echo "== installing slurm-wlm and munge (apt)"
-  DEBIAN_FRONTEND=noninteractive apt-get install -y -q slurm-wlm munge >/dev/null ||
+  { DEBIAN_FRONTEND=noninteractive apt-get install -y -q slurm-wlm munge >/dev/null 2>&1 ||
+    { apt-get update -q >/dev/null 2>&1 &&
+      DEBIAN_FRONTEND=noninteractive apt-get install -y -q slurm-wlm munge >/dev/null; }; } ||
     { echo "could not install slurm-wlm and munge with apt" >&2; exit 3; }
 fi
 echo "== building calibration-mc"

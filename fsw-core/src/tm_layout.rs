@@ -757,9 +757,9 @@ mod tests {
             bias_acs_rad_per_s: [1e-6, -2e-6, 3e-6],
             covariance_diag: [1e-9, 2e-9, 3e-9, 4e-15, 5e-15, 6e-15],
             filter_mode: 2,
-            control_mode: 1,
+            control_mode: 5,
             iru_config: 1,
-            iru_high_rate_cmd: 1,
+            iru_high_rate_cmd: 7,
             wheel_torque_cmd_nm: [0.25, -0.5, 0.125],
             residuals: [0, 1, 2, 3].map(|i| SensorResidual {
                 status: statuses[i],

@@ -110,10 +110,14 @@ fn truth_scenario(
     v: &serde_json::Value,
     scenario: &str,
 ) -> (Option<sim_harness::scenario::Scenario>, String) {
-    if let Ok(s) =
-        serde_json::from_value::<sim_harness::scenario::Scenario>(v["scenario_as_flown"].clone())
-    {
-        return (Some(s), "truth.json scenario_as_flown".into());
+    let mut unreadable = String::new();
+    if !v["scenario_as_flown"].is_null() {
+        match serde_json::from_value::<sim_harness::scenario::Scenario>(
+            v["scenario_as_flown"].clone(),
+        ) {
+            Ok(s) => return (Some(s), "truth.json scenario_as_flown".into()),
+            Err(e) => unreadable = format!("truth.json scenario_as_flown unreadable ({e}); "),
+        }
     }
     let dir = sim_harness::scenario::scenarios_dir();
     let found = [
@@ -131,9 +135,12 @@ fn truth_scenario(
             let seed = v["seed"].as_u64().unwrap_or_default();
             s.fss1 = s.fss1.as_flown(0, seed);
             s.fss2 = s.fss2.as_flown(1, seed);
-            (Some(s), format!("{} (by the run's name)", p.display()))
+            (
+                Some(s),
+                format!("{unreadable}{} (by the run's name)", p.display()),
+            )
         }
-        None => (None, String::new()),
+        None => (None, unreadable),
     }
 }
 
@@ -144,9 +151,13 @@ impl Truth {
     pub fn field_truth_note(&self) -> Option<String> {
         self.scenario_file.is_none().then(|| {
             format!(
-                "scoring: truth.json has no scenario_as_flown and no scenario file named {:?} \
-                 was found: the true FSS transfer function and FHST distortion are unknown and \
-                 the table errors count them as zero",
+                "scoring: {}no scenario file named {:?} was found: the true FSS transfer \
+                 function and FHST distortion are unknown and the table errors count them as zero",
+                if self.scenario_source.is_empty() {
+                    "truth.json has no scenario_as_flown and ".to_owned()
+                } else {
+                    self.scenario_source.clone()
+                },
                 self.scenario
             )
         })

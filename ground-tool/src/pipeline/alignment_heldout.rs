@@ -270,7 +270,18 @@ pub(crate) fn validate_alignment_heldout(
         .filter(|(j, name)| j.is_some() && !rms_new_arcsec.contains_key(*name))
         .map(|(_, name)| name.to_owned())
         .collect();
-    let (passed, reason) = if used < 2 {
+    let no_tracker = ["FHST1", "FHST2"]
+        .iter()
+        .all(|t| not_validated.iter().any(|n| n == t));
+    let (passed, reason) = if no_tracker {
+        (
+            false,
+            format!(
+                "neither tracker has a held-out residual ({}): the alignments cannot be validated on data they were not fitted to",
+                skipped.join("; ")
+            ),
+        )
+    } else if used < 2 {
         (
             false,
             format!(

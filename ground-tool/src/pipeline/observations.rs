@@ -410,10 +410,14 @@ fn rate_mode_switches(tm: &Telemetry, cycle_s: f64) -> Vec<(f64, bool)> {
 /// raw frames or events that *recurs* (at least [`CYCLE_MIN_COUNT`] times and in 1 ‰ of the
 /// spacings), so that one damaged time code (a flipped fine bit makes one 0.5-s and one
 /// 1.5-s spacing) cannot halve it and turn every frame interval into a "multi-cycle" one.
-/// At most 1 s, unless events are downlinked and every event lies on that longer grid (a
-/// 2-s OBC cycle): events come at cycle times, so they tell a long cycle from decimated raw
-/// frames, whose spacing is several cycles; without events a longer spacing is read as
-/// decimation of a 1-s cycle (a switch inside is then dropped, never mis-weighted).
+/// At most 1 s, unless at least [`CYCLE_MIN_EVENTS_ON_GRID`] events are downlinked and every
+/// one lies on that longer grid (a 2-s OBC cycle): events come at cycle times, so they tell a
+/// long cycle from decimated raw frames, whose spacing is several cycles. With fewer events,
+/// or one off the grid, a longer spacing is read as decimation of a 1-s cycle and a switch
+/// inside it is dropped. Left: a 1-s cycle decimated to 2 s whose events all fall on even
+/// seconds reads as a 2-s cycle, and a 0.5-s cycle downlinked every second with sparse events
+/// as 1 s; both would weight a switch frame with one mode (metadata.json's `cycle_period_s`
+/// is not used: the ICD makes it informational).
 fn cycle_period_s(tm: &Telemetry) -> f64 {
     let spacing = |a: f64, b: f64| ((b - a) * 1e3).round() as i64; // ms
     let raw = tm
@@ -447,7 +451,9 @@ fn cycle_period_s(tm: &Telemetry) -> f64 {
         let k = ((t - t0) / shortest).round();
         ((t - t0) - k * shortest).abs() < 1e-3
     };
-    if !tm.events.is_empty() && tm.events.iter().all(|(t, _)| on_grid(t.seconds())) {
+    if tm.events.len() >= CYCLE_MIN_EVENTS_ON_GRID
+        && tm.events.iter().all(|(t, _)| on_grid(t.seconds()))
+    {
         shortest
     } else {
         1.0
@@ -456,6 +462,11 @@ fn cycle_period_s(tm: &Telemetry) -> f64 {
 
 /// Fewest occurrences of a spacing for it to count as the cycle ([`cycle_period_s`]).
 const CYCLE_MIN_COUNT: usize = 3;
+
+/// Fewest events, all on a grid longer than 1 s, for that grid to be read as the cycle
+/// ([`cycle_period_s`]): a few events can fall on even seconds of a 1-s cycle by chance, and
+/// reading decimation as a long cycle would mis-weight a switch frame instead of dropping it.
+const CYCLE_MIN_EVENTS_ON_GRID: usize = 10;
 
 /// Frame intervals that hold an IRU rate-mode switch (docs/icd.md §3.1: byte 13 is the mode
 /// of the **last** cycle of the interval; with decimated telemetry the counter difference
