@@ -187,6 +187,26 @@ pub struct Counters {
     pub events_dropped: u32,
 }
 
+impl Counters {
+    /// The counters in their housekeeping wire order (offset 173, ten `u32`).
+    /// docs/icd.md §3.2 (counters).
+    #[must_use]
+    pub fn wire_order(&self) -> [u32; 10] {
+        [
+            self.cycles,
+            self.rejected_inputs,
+            self.gated_measurements,
+            self.accepted_measurements,
+            self.stars_identified,
+            self.star_id_unmatched,
+            self.star_id_ambiguous,
+            self.time_tag_anomalies,
+            self.iru_unusable_cycles,
+            self.events_dropped,
+        ]
+    }
+}
+
 /// Push an event into a cycle's list, counting it if the list is full.
 /// Project choice (not in the paper): events never block the cycle; overflow is counted.
 pub fn raise(

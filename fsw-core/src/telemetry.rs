@@ -465,19 +465,7 @@ pub fn encode_housekeeping(h: &ObcHousekeeping, out: &mut [u8]) -> Result<usize,
         w.u32(r.star_id);
     }
     w.u8(h.iru_excluded_mask);
-    let c = &h.counters;
-    for v in [
-        c.cycles,
-        c.rejected_inputs,
-        c.gated_measurements,
-        c.accepted_measurements,
-        c.stars_identified,
-        c.star_id_unmatched,
-        c.star_id_ambiguous,
-        c.time_tag_anomalies,
-        c.iru_unusable_cycles,
-        c.events_dropped,
-    ] {
+    for v in h.counters.wire_order() {
         w.u32(v);
     }
     for v in h.table_crc {

@@ -595,19 +595,7 @@ pub fn visit_housekeeping<F: FnMut(FieldValue) + ?Sized>(h: &ObcHousekeeping, ou
         out(Unsigned(u64::from(r.star_id)));
     }
     out(Unsigned(u64::from(h.iru_excluded_mask)));
-    let c = &h.counters;
-    for n in [
-        c.cycles,
-        c.rejected_inputs,
-        c.gated_measurements,
-        c.accepted_measurements,
-        c.stars_identified,
-        c.star_id_unmatched,
-        c.star_id_ambiguous,
-        c.time_tag_anomalies,
-        c.iru_unusable_cycles,
-        c.events_dropped,
-    ] {
+    for n in h.counters.wire_order() {
         out(Unsigned(u64::from(n)));
     }
     for crc in h.table_crc {

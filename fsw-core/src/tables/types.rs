@@ -189,6 +189,17 @@ impl AlignmentTable {
         ]
     }
 
+    /// The four alignment matrices, mutable, in the order of [`Self::matrices`].
+    /// docs/tables.md (fields 0–3 in this order).
+    pub fn matrices_mut(&mut self) -> [&mut Mat3Rows; 4] {
+        [
+            &mut self.m_acs_from_fhst1,
+            &mut self.m_acs_from_fhst2,
+            &mut self.m_acs_from_fss1,
+            &mut self.m_acs_from_fss2,
+        ]
+    }
+
     /// The paper's prelaunch alignments (Table 1), the boot table.
     #[must_use]
     pub fn prelaunch() -> Self {

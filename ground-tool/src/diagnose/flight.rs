@@ -521,13 +521,7 @@ fn adjusted_alignment(
     // is a change of gauge, not information about it).
     for (s, &c) in counts.iter().enumerate() {
         if c < 50 {
-            let rows = *base.matrices()[s];
-            match s {
-                0 => table.m_acs_from_fhst1 = rows,
-                1 => table.m_acs_from_fhst2 = rows,
-                2 => table.m_acs_from_fss1 = rows,
-                _ => table.m_acs_from_fss2 = rows,
-            }
+            *table.matrices_mut()[s] = *base.matrices()[s];
         }
     }
     Ok(table)

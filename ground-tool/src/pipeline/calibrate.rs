@@ -1740,13 +1740,7 @@ pub fn keep_flown(
         let Some(k) = names.iter().position(|n| n == name) else {
             continue;
         };
-        let kept = fsw_core::tables::types::rows_from_matrix(&(r * m(flown, k)));
-        match k {
-            0 => out.m_acs_from_fhst1 = kept,
-            1 => out.m_acs_from_fhst2 = kept,
-            2 => out.m_acs_from_fss1 = kept,
-            _ => out.m_acs_from_fss2 = kept,
-        }
+        *out.matrices_mut()[k] = fsw_core::tables::types::rows_from_matrix(&(r * m(flown, k)));
     }
     Some(out)
 }
