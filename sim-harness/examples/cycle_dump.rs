@@ -1,10 +1,20 @@
-//! Per-cycle dump for filter debugging: args SCENARIO TABLES_DIR T0 T1 [EVERY]; prints t, filter
-//! and control modes, each sensor's residual status and innovation (″), the error and σ (″).
+//! Per-cycle dump for filter debugging: args SCENARIO TABLES_DIR T0 T1 [EVERY] [--seed N];
+//! prints t, filter and control modes, each sensor's residual status and innovation (″), the
+//! error and σ (″). The seed must be the one the tables were calibrated on (the truth's
+//! misalignments and noise draws follow it).
 use sim_harness::closed_loop::Simulation;
 use sim_harness::scenario;
 fn main() {
-    let a: Vec<String> = std::env::args().collect();
-    let s = scenario::resolve(&a[1]).unwrap();
+    let mut a: Vec<String> = std::env::args().collect();
+    let seed = a.iter().position(|x| x == "--seed").map(|i| {
+        let n: u64 = a[i + 1].parse().expect("--seed N");
+        a.drain(i..=i + 1);
+        n
+    });
+    let mut s = scenario::resolve(&a[1]).unwrap();
+    if let Some(seed) = seed {
+        s.seed = seed;
+    }
     let tables = Some(a[2].as_str())
         .filter(|x| !x.is_empty())
         .map(std::path::PathBuf::from);

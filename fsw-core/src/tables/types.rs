@@ -506,6 +506,13 @@ impl IruTable {
 /// algorithms.md §3.3 ("LEO orbital ≤ 5.2″"); docs/obc_filter.md §3.
 pub const ORBITAL_ABERRATION_RMS_PER_AXIS_ARCSEC: f64 = 3.65;
 
+/// What the orbital aberration leaves per focal-plane axis with the onboard correction on,
+/// arcsec: the onboard orbit's velocity error over a day ((12.4 + 15 + 1) m/s) over `c`
+/// (docs/obc_filter.md §8). The recommended
+/// [`FilterTable::fhst_uncorrected_systematic_arcsec`] with
+/// [`FilterTable::orbital_aberration_correction`] on, before any alignment term.
+pub const ORBITAL_ABERRATION_RESIDUAL_CORRECTED_ARCSEC: f64 = 0.02;
+
 /// Kalman filter, star identification and attitude control settings.
 /// docs/tables.md (Table 3: filter); mostly project choices, sources per field.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]

@@ -359,6 +359,9 @@ pub struct CalibrationReport {
     /// Validation of the filter-table change, when there is one (the flown filter table is
     /// kept when it fails).
     pub filter_validation: Option<AberrationSwitchValidation>,
+    /// The FHST systematic floor derived for the alignments that fly
+    /// ([`super::filter_floor`]); `None` before `calibrate_run` decides which alignments fly.
+    pub fhst_floor: Option<super::filter_floor::FhstFloor>,
 }
 
 /// Data counts.
@@ -1352,6 +1355,7 @@ pub fn calibrate_telemetry(
         filter_changes,
         alignment_validation,
         filter_validation,
+        fhst_floor: None,
     };
     Ok(CalibrationOutput {
         report,
@@ -1695,6 +1699,34 @@ pub fn filter_update(
     Ok((Some(new), changes))
 }
 
+/// The FHST floor for the alignments that fly ([`super::filter_floor`]), recorded in the
+/// report with a note saying why it is not written (the module's docs).
+/// Why here and not in [`filter_stage`]: the floor depends on which alignment table flies,
+/// which the held-out validation decides after the chain.
+fn floor_stage(out: &mut CalibrationOutput, alignment_to_fly: &AlignmentTable, flown: &FilterTable) {
+    use super::filter_floor::{fhst_floor, relative_alignment_change_arcsec, FloorInputs};
+    let base = out.filter.unwrap_or(*flown);
+    let floor = fhst_floor(&FloorInputs {
+        filter: &base,
+        alignment: alignment_to_fly,
+        relative_covariance_arcsec2: out
+            .report
+            .ffcal
+            .relative_covariance_to_fhst1_arcsec2
+            .get("FHST2"),
+        relative_error_arcsec: relative_alignment_change_arcsec(alignment_to_fly, &out.alignment),
+    });
+    let mut floor = floor;
+    floor.flown_arcsec = base.fhst_uncorrected_systematic_arcsec;
+    if floor.floor_arcsec > floor.flown_arcsec + 0.1 {
+        floor.note = Some(format!(
+            "not written: the OBC carries {:.2}″ per focal-plane axis, the systematic error its FHST updates keep is {:.2}″; expect the onboard attitude σ to be optimistic with two trackers in the field. A larger floor is not written because the onboard floored update freezes the noise of a new star's first samples (docs/obc_filter.md §9)",
+            floor.flown_arcsec, floor.floor_arcsec
+        ));
+    }
+    out.report.fhst_floor = Some(floor);
+}
+
 /// The alignment table `calibrate` writes: the new one if it passed the held-out validation,
 /// with every sensor the validation could not test flying as before ([`keep_flown`]); else
 /// the flown one again.
@@ -1849,6 +1881,11 @@ pub fn calibrate_run(
         &alignment_to_fly,
         created,
     )?;
+    floor_stage(
+        &mut out,
+        &alignment_to_fly,
+        &options.flown_filter.unwrap_or_else(FilterTable::default_boot),
+    );
     out.report
         .tables
         .insert("alignment".into(), "tables/alignment.tbl".into());

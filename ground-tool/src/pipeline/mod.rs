@@ -5,6 +5,7 @@
 
 pub mod alignment_heldout;
 pub mod calibrate;
+pub mod filter_floor;
 pub mod flown;
 pub mod fss_consider;
 pub mod fss_systematic;
