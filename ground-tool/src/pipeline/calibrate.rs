@@ -1703,7 +1703,11 @@ pub fn filter_update(
 /// report with a note saying why it is not written (the module's docs).
 /// Why here and not in [`filter_stage`]: the floor depends on which alignment table flies,
 /// which the held-out validation decides after the chain.
-fn floor_stage(out: &mut CalibrationOutput, alignment_to_fly: &AlignmentTable, flown: &FilterTable) {
+fn floor_stage(
+    out: &mut CalibrationOutput,
+    alignment_to_fly: &AlignmentTable,
+    flown: &FilterTable,
+) {
     use super::filter_floor::{fhst_floor, relative_alignment_change_arcsec, FloorInputs};
     let base = out.filter.unwrap_or(*flown);
     let floor = fhst_floor(&FloorInputs {
@@ -1884,7 +1888,9 @@ pub fn calibrate_run(
     floor_stage(
         &mut out,
         &alignment_to_fly,
-        &options.flown_filter.unwrap_or_else(FilterTable::default_boot),
+        &options
+            .flown_filter
+            .unwrap_or_else(FilterTable::default_boot),
     );
     out.report
         .tables
