@@ -96,7 +96,7 @@ pub fn fhst_floor(inputs: &FloorInputs<'_>) -> FhstFloor {
     };
     let c = inputs
         .relative_covariance_arcsec2
-        .map_or_else(Matrix3::zeros, |c| matrix_from_rows(c));
+        .map_or_else(Matrix3::zeros, matrix_from_rows);
     let d = inputs.relative_error_arcsec;
     let matrices = inputs.alignment.matrices();
     let mut alignment_sq = 0.0_f64;
