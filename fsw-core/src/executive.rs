@@ -972,13 +972,14 @@ impl FlightCore {
             fhst::hv_from_dir(&(m_acs_from_fhst.transpose() * dir_acs))
                 .unwrap_or((meas.h_rad, meas.v_rad))
         };
-        let outcome = self.filter.update_focal_plane_with_floor(
+        let outcome = self.filter.update_focal_plane_consider(
             h_rad,
             v_rad,
             &ref_eci,
             &m_acs_from_fhst,
             sigma,
             floor,
+            tracker,
             gate,
         );
         let status = self.note_outcome(tracker, outcome.accepted, events);

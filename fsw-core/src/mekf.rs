@@ -54,7 +54,17 @@
 use crate::attitude::{skew, Quat};
 use crate::fhst::{hv_from_dir, hv_jacobian};
 use crate::tables::types::FilterTable;
-use nalgebra::{Matrix2, Matrix2x3, Matrix3, Matrix3x2, Matrix6, Matrix6x2, Vector2, Vector3};
+use nalgebra::{
+    Matrix2, Matrix2x3, Matrix2x4, Matrix3, Matrix3x2, Matrix3x4, Matrix6, Matrix6x2, Matrix6x4,
+    Vector2, Vector3,
+};
+
+/// Correlation time of the FHSTs' systematic errors (consider states), s: a quarter of GRO's
+/// 96-min orbit, after which the uncorrected orbital aberration's direction has turned by 90°
+/// (the part of the systematic error that changes; the residual alignment part is constant
+/// and is kept by the first samples of each new geometry instead). docs/obc_filter.md §10.
+/// Project choice (not in the paper).
+pub const FHST_SYSTEMATIC_CORRELATION_S: f64 = 1440.0;
 
 /// Below this rotation angle (rad) the propagation uses Taylor series (no trig).
 const SERIES_LIMIT_RAD: f64 = 0.01;
@@ -181,6 +191,19 @@ pub struct Mekf {
     /// Error-state covariance, `[δθ (rad); δb (rad/s)]`.
     /// `P` of algorithms.md §2.
     pub covariance: Matrix6<f64>,
+    /// Cross-covariance of the error state with the FHSTs' systematic errors, which are
+    /// consider states (Schmidt–Kalman: carried, never estimated): rows `[δθ (rad); δb
+    /// (rad/s)]`, columns FHST1 H, FHST1 V, FHST2 H, FHST2 V (rad). Their own variance is the
+    /// systematic σ² the caller passes with each update (stationary first-order Gauss–Markov,
+    /// [`FHST_SYSTEMATIC_CORRELATION_S`]).
+    /// docs/obc_filter.md §10.
+    pub cross_covariance_fhst_systematic: Matrix6x4<f64>,
+    /// The systematic σ (rad) that [`Self::cross_covariance_fhst_systematic`] was built with:
+    /// when an update brings another σ (a table load, the onboard orbit becoming valid), the
+    /// cross-covariance is scaled by the ratio, which keeps the joint covariance of state and
+    /// consider states positive semi-definite.
+    /// docs/obc_filter.md §10.
+    pub fhst_systematic_sigma_rad: f64,
     /// Update statistics.
     /// docs/icd.md §3.2 (counters).
     pub counters: UpdateCounters,
@@ -354,6 +377,8 @@ impl Mekf {
                 t.initial_attitude_sigma_rad,
                 t.initial_bias_sigma_rad_per_s,
             ),
+            cross_covariance_fhst_systematic: Matrix6x4::zeros(),
+            fhst_systematic_sigma_rad: 0.0,
             counters: UpdateCounters::default(),
         }
     }
@@ -399,6 +424,8 @@ impl Mekf {
             q_acs_from_eci: q_acs_from_eci.normalized(),
             bias_rad_per_s: *bias_rad_per_s,
             covariance: initial_covariance(sa, sb),
+            cross_covariance_fhst_systematic: Matrix6x4::zeros(),
+            fhst_systematic_sigma_rad: 0.0,
             counters: self.counters,
         };
         Ok(())
@@ -435,6 +462,7 @@ impl Mekf {
             return Err(MekfError::InvalidInput);
         }
         self.covariance = initial_covariance(sa, sb);
+        self.cross_covariance_fhst_systematic = Matrix6x4::zeros();
         Ok(())
     }
 
@@ -465,6 +493,9 @@ impl Mekf {
             return Err(MekfError::NumericalFault);
         }
         self.covariance = p;
+        self.cross_covariance_fhst_systematic
+            .fixed_view_mut::<3, 4>(3, 0)
+            .fill(0.0);
         Ok(())
     }
 
@@ -568,9 +599,22 @@ impl Mekf {
         if !covariance_ok(&np) {
             return Err(MekfError::NumericalFault);
         }
+        // Consider states: `P_xc⁻ = Φ P_xc a`, `a = exp(−Δt/τ)` (their own Gauss–Markov
+        // decay; their noise is independent of the gyro's).
+        let c = &self.cross_covariance_fhst_systematic;
+        let decay = libm::exp(-dt_s / FHST_SYSTEMATIC_CORRELATION_S);
+        let (c_top, c_bot) = cross_halves(c);
+        let mut nc = Matrix6x4::zeros();
+        nc.fixed_view_mut::<3, 4>(0, 0)
+            .copy_from(&((phi11 * c_top + phi12 * c_bot) * decay));
+        nc.fixed_view_mut::<3, 4>(3, 0).copy_from(&(c_bot * decay));
+        if !all_finite(nc.as_slice()) {
+            return Err(MekfError::NumericalFault);
+        }
         let dq = Quat::new(phi.x * hs, phi.y * hs, phi.z * hs, hc);
         self.q_acs_from_eci = dq.compose(&self.q_acs_from_eci).normalized();
         self.covariance = np;
+        self.cross_covariance_fhst_systematic = nc;
         Ok(())
     }
 
@@ -791,6 +835,9 @@ impl Mekf {
         if !covariance_ok(&np) {
             return self.reject(UpdateRejection::NumericalFault, nu_arr, nis);
         }
+        // A measurement free of the FHST systematic errors: `P_xc⁺ = (I − K H) P_xc`.
+        let c = &self.cross_covariance_fhst_systematic;
+        let nc = c - k * (h * cross_halves(c).0);
         let dx = k * nu;
         let dtheta = Vector3::new(dx.x, dx.y, dx.z);
         let dbias = Vector3::new(dx.w, dx.a, dx.b);
@@ -801,6 +848,129 @@ impl Mekf {
         self.q_acs_from_eci = q.normalized();
         self.bias_rad_per_s += dbias;
         self.covariance = np;
+        self.cross_covariance_fhst_systematic = nc;
+        self.counters.accepted = self.counters.accepted.saturating_add(1);
+        UpdateOutcome {
+            accepted: true,
+            innovation_rad: nu_arr,
+            nis,
+            rejection: None,
+        }
+    }
+
+    /// FHST focal-plane update with the tracker's systematic error as a consider state
+    /// (Schmidt–Kalman): `ν = h δθ + c_k + v`, `c_k` (2, rad) the systematic error of tracker
+    /// `tracker` (0 = FHST1, 1 = FHST2) in its H, V axes with variance `systematic_rad²`,
+    /// `v` white with `sigma_rad²`. Inputs as [`Mekf::update_focal_plane`].
+    ///
+    /// `M = P Hᵀ + P_xc Eᵀ`, `S = H P Hᵀ + H P_xc Eᵀ + E P_cx Hᵀ + (f² + σ²) I`, `K = M S⁻¹`,
+    /// `P⁺ = P − K S Kᵀ`, `P_xc⁺ = P_xc − K (H P_xc + f² E)` (`E` selects the tracker's two
+    /// columns); the NIS and the gate use this `S`. Unlike the floor of
+    /// [`Mekf::update_focal_plane_with_floor`], every sample of a star is weighted as the
+    /// white + systematic model says: the white noise of the first samples keeps averaging
+    /// down, and a state error from elsewhere (a slew, the other tracker) is corrected at the
+    /// rate the samples allow (docs/obc_filter.md §9–10).
+    #[allow(clippy::too_many_arguments)]
+    pub fn update_focal_plane_consider(
+        &mut self,
+        h_rad: f64,
+        v_rad: f64,
+        ref_dir_eci: &Vector3<f64>,
+        m_acs_from_sensor: &Matrix3<f64>,
+        sigma_rad: f64,
+        systematic_rad: f64,
+        tracker: usize,
+        gate_chi2: f64,
+    ) -> UpdateOutcome {
+        let Some(r) = unit(ref_dir_eci) else {
+            return self.reject(UpdateRejection::InvalidInput, [0.0; 2], f64::NAN);
+        };
+        let ok = h_rad.is_finite()
+            && v_rad.is_finite()
+            && all_finite(m_acs_from_sensor.as_slice())
+            && tracker < 2
+            && systematic_rad.is_finite()
+            && systematic_rad >= 0.0
+            && positive_finite(sigma_rad)
+            && positive_finite(gate_chi2);
+        if !ok {
+            return self.reject(UpdateRejection::InvalidInput, [0.0; 2], f64::NAN);
+        }
+        let b_hat = self.q_acs_from_eci.to_dcm() * r;
+        let mt = m_acs_from_sensor.transpose();
+        let s_hat = mt * b_hat;
+        let Some((h_pred, v_pred)) = hv_from_dir(&s_hat) else {
+            return self.reject(UpdateRejection::Geometry, [0.0; 2], f64::NAN);
+        };
+        let nu = Vector2::new(h_rad - h_pred, v_rad - v_pred);
+        let nu_arr = [nu.x, nu.y];
+        let h = hv_jacobian(&s_hat) * mt * skew(&b_hat);
+        if !all_finite(nu.as_slice()) || !all_finite(h.as_slice()) {
+            return self.reject(UpdateRejection::InvalidInput, [0.0; 2], f64::NAN);
+        }
+        // Consider states of another σ: `P_xc` scales with it.
+        let c_scaled = if systematic_rad == self.fhst_systematic_sigma_rad {
+            self.cross_covariance_fhst_systematic
+        } else if self.fhst_systematic_sigma_rad > 0.0 {
+            self.cross_covariance_fhst_systematic
+                * (systematic_rad / self.fhst_systematic_sigma_rad)
+        } else {
+            Matrix6x4::zeros()
+        };
+        let p = &self.covariance;
+        let c = &c_scaled;
+        let ht = h.transpose();
+        let pht_top: Matrix3x2<f64> = p.fixed_view::<3, 3>(0, 0) * ht;
+        let pht_bot: Matrix3x2<f64> = p.fixed_view::<3, 3>(3, 0) * ht;
+        let mut m = Matrix6x2::zeros();
+        m.fixed_view_mut::<3, 2>(0, 0).copy_from(&pht_top);
+        m.fixed_view_mut::<3, 2>(3, 0).copy_from(&pht_bot);
+        // The tracker's two columns, and `f² E` (constant offsets: no runtime index).
+        // (`copy_from` into owned matrices: `into_owned` of these views keeps a panic path
+        // that the no-panic link check finds.)
+        let mut ck = Matrix6x2::zeros();
+        let f2e = if tracker == 0 {
+            ck.copy_from(&c.fixed_view::<6, 2>(0, 0));
+            Matrix2x4::new(1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0)
+        } else {
+            ck.copy_from(&c.fixed_view::<6, 2>(0, 2));
+            Matrix2x4::new(0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0)
+        };
+        let hph = h * pht_top;
+        let hck = h * ck.fixed_view::<3, 2>(0, 0);
+        let numeric = 0.5 * (hph.m11 + hph.m22) / MAX_VARIANCE_REDUCTION;
+        let white = (sigma_rad * sigma_rad).max(numeric);
+        let f2 = systematic_rad * systematic_rad;
+        let s = hph + hck + hck.transpose() + Matrix2::identity() * (white + f2);
+        let s = (s + s.transpose()) * 0.5;
+        let Some(s_inv) = inverse_spd2(&s) else {
+            return self.reject(UpdateRejection::Singular, nu_arr, f64::NAN);
+        };
+        let nis = (nu.transpose() * s_inv * nu).x;
+        if !(nis <= gate_chi2) {
+            return self.reject(UpdateRejection::Gated, nu_arr, nis);
+        }
+        let m = m + ck;
+        let k = m * s_inv;
+        let np = p - k * s * k.transpose();
+        let np = (np + np.transpose()) * 0.5;
+        if !covariance_ok(&np) {
+            return self.reject(UpdateRejection::NumericalFault, nu_arr, nis);
+        }
+        let hc: Matrix2x4<f64> = h * cross_halves(c).0 + f2e * f2;
+        let nc = c - k * hc;
+        let dx = k * nu;
+        let dtheta = Vector3::new(dx.x, dx.y, dx.z);
+        let dbias = Vector3::new(dx.w, dx.a, dx.b);
+        let q = quat_from_small_rotation(&dtheta).compose(&self.q_acs_from_eci);
+        if !(q.is_finite() && all_finite(dbias.as_slice()) && all_finite(nc.as_slice())) {
+            return self.reject(UpdateRejection::NumericalFault, nu_arr, nis);
+        }
+        self.q_acs_from_eci = q.normalized();
+        self.bias_rad_per_s += dbias;
+        self.covariance = np;
+        self.cross_covariance_fhst_systematic = nc;
+        self.fhst_systematic_sigma_rad = systematic_rad;
         self.counters.accepted = self.counters.accepted.saturating_add(1);
         UpdateOutcome {
             accepted: true,
@@ -844,6 +1014,16 @@ fn eigenvectors_sym2(m: &Matrix2<f64>) -> Matrix2<f64> {
     Matrix2::new(cs, -sn, sn, cs)
 }
 
+/// The δθ and δb rows of the consider cross-covariance, as owned 3×4 matrices (`copy_from`:
+/// `into_owned` of these views keeps a panic path that the no-panic link check finds).
+fn cross_halves(c: &Matrix6x4<f64>) -> (Matrix3x4<f64>, Matrix3x4<f64>) {
+    let mut top = Matrix3x4::zeros();
+    let mut bot = Matrix3x4::zeros();
+    top.copy_from(&c.fixed_view::<3, 4>(0, 0));
+    bot.copy_from(&c.fixed_view::<3, 4>(3, 0));
+    (top, bot)
+}
+
 /// `x > 0` and finite (false for NaN).
 fn positive_finite(x: f64) -> bool {
     x > 0.0 && x.is_finite()
@@ -870,6 +1050,100 @@ fn covariance_ok(p: &Matrix6<f64>) -> bool {
 mod tests {
     use super::*;
     use crate::attitude::{attitude_error_rad, rot};
+
+    /// One static star on one tracker, white σ 12″, the systematic σ 3.65″ declared and none
+    /// present, 600 samples after a 60″ prior error, over 20 noise sequences: the consider
+    /// update averages every sample (error ≈ 12/√600 = 0.5″), the floored update keeps the
+    /// first `σ²/f²` ≈ 11 samples' noise (≈ 3.6″) (docs/obc_filter.md §9–10). The consider
+    /// σ stays near the declared systematic (the samples cannot tell it is absent).
+    #[test]
+    fn consider_update_keeps_averaging_where_the_floored_update_freezes() {
+        let t = table();
+        let arcsec = crate::units::RAD_PER_ARCSEC;
+        let (sigma, f) = (12.0 * arcsec, 3.65 * arcsec);
+        let r = Vector3::new(0.01, 0.02, 1.0).normalize();
+        let m = Matrix3::identity();
+        let (h_true, v_true) = hv_from_dir(&r).unwrap();
+        let mut state: u64 = 0x1234_5678;
+        let mut gauss = || {
+            // 12 uniforms (Irwin–Hall): enough for a test of averages.
+            let mut acc = -6.0;
+            for _ in 0..12 {
+                state = state
+                    .wrapping_mul(6_364_136_223_846_793_005)
+                    .wrapping_add(1_442_695_040_888_963_407);
+                acc += (state >> 11) as f64 / (1u64 << 53) as f64;
+            }
+            acc
+        };
+        let (mut sq_consider, mut sq_floor, mut sigma_consider) = (0.0, 0.0, f64::INFINITY);
+        let trials = 20;
+        for _ in 0..trials {
+            let q0 = quat_from_small_rotation(&(Vector3::new(40.0, -45.0, 0.0) * arcsec));
+            let mut a = Mekf::new();
+            a.initialize(&q0, &t).unwrap();
+            a.covariance
+                .fixed_view_mut::<3, 3>(0, 0)
+                .fill_diagonal((60.0 * arcsec).powi(2));
+            // A converged bias (0.001″/s): the test is about the attitude's averaging.
+            a.covariance
+                .fixed_view_mut::<3, 3>(3, 3)
+                .fill_diagonal((1e-3 * arcsec).powi(2));
+            let mut b = a;
+            for _ in 0..600 {
+                let (h, v) = (h_true + sigma * gauss(), v_true + sigma * gauss());
+                a.propagate(&Vector3::zeros(), 1.0, &t).unwrap();
+                b.propagate(&Vector3::zeros(), 1.0, &t).unwrap();
+                a.update_focal_plane_consider(h, v, &r, &m, sigma, f, 0, 1e6);
+                b.update_focal_plane_with_floor(h, v, &r, &m, sigma, f, 1e6);
+            }
+            let ea = attitude_error_rad(&Quat::IDENTITY, &a.q_acs_from_eci);
+            let eb = attitude_error_rad(&Quat::IDENTITY, &b.q_acs_from_eci);
+            sq_consider += ea.x * ea.x + ea.y * ea.y;
+            sq_floor += eb.x * eb.x + eb.y * eb.y;
+            let s = a.attitude_sigma_rad();
+            sigma_consider = sigma_consider.min(s.x.min(s.y));
+        }
+        let rms = |sq: f64| (sq / (2.0 * f64::from(trials))).sqrt() / arcsec;
+        let (rc, rf) = (rms(sq_consider), rms(sq_floor));
+        assert!(
+            rc < 1.2,
+            "consider: RMS error {rc:.2}″ (white-noise average 0.5″)"
+        );
+        assert!(
+            rf > 2.0,
+            "floor: RMS error {rf:.2}″ (the freeze this test shows)"
+        );
+        assert!(
+            sigma_consider > 0.7 * f,
+            "consider σ {:.2}″ below the declared systematic",
+            sigma_consider / arcsec
+        );
+    }
+
+    /// A new systematic σ (the onboard orbit becoming valid: 3.65″ → 0.02″) scales the
+    /// cross-covariance: the next updates keep `P` positive definite and the filter keeps
+    /// taking stars (without the scaling it lost definiteness and gated every star).
+    #[test]
+    fn consider_update_survives_a_change_of_the_systematic_sigma() {
+        let t = table();
+        let arcsec = crate::units::RAD_PER_ARCSEC;
+        let r = Vector3::new(0.01, 0.02, 1.0).normalize();
+        let m = Matrix3::identity();
+        let (h, v) = hv_from_dir(&r).unwrap();
+        let mut f = Mekf::new();
+        f.initialize(&Quat::IDENTITY, &t).unwrap();
+        for k in 0..400 {
+            let sys = if k < 200 { 3.65 } else { 0.02 };
+            f.propagate(&Vector3::zeros(), 1.0, &t).unwrap();
+            let o =
+                f.update_focal_plane_consider(h, v, &r, &m, 8.0 * arcsec, sys * arcsec, 0, 11.83);
+            assert!(o.accepted, "sample {k}: {o:?}");
+        }
+        let p = f.covariance;
+        assert!(p.symmetric_eigen().eigenvalues.iter().all(|&e| e > 0.0));
+        assert!((f.fhst_systematic_sigma_rad - 0.02 * arcsec).abs() < 1e-15);
+    }
 
     fn table() -> FilterTable {
         FilterTable::default_boot()

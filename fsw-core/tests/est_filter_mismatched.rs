@@ -174,13 +174,14 @@ fn run(
             let meas = fhst::measure(&sample, &rows[i], &[0.0; 3]).unwrap();
             let sig = fhst::measurement_sigma_rad(meas.magnitude, &filter_table);
             // The reference is the catalog (mean) direction: the OBC knows no orbit.
-            filter.update_focal_plane_with_floor(
+            filter.update_focal_plane_consider(
                 meas.h_rad,
                 meas.v_rad,
                 &u,
                 &ms[i],
                 sig,
                 floor_rad,
+                i,
                 filter_table.gate_chi2,
             );
         }
