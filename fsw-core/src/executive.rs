@@ -83,7 +83,8 @@ pub const FSS_WHITE_SIGMA_RAD: f64 = 0.004 * 0.577_350_269_189_625_8 * crate::un
 /// and with `β` turning once per orbit in the orbit plane (normal `n`),
 /// `E[(β·e)²] = β² (1 − (e·n)²)/2 ≤ β²/2`: at most `β/√2` = 3.65″ RMS on any axis, whatever
 /// the tracker's geometry. It changes over an orbit, slower than the filter, so it does not
-/// average down within a star track: the floor of [`Mekf::update_focal_plane_with_floor`].
+/// average down within a star track: the σ of the FHSTs' consider states in
+/// [`Mekf::update_focal_plane_consider`] (Gauss–Markov over a quarter orbit).
 /// The boot value of the filter table's `fhst_uncorrected_systematic_arcsec`, which the OBC
 /// uses (docs/tables.md field 22). algorithms.md §3.3; docs/obc_filter.md §3.
 pub const FHST_UNCORRECTED_SYSTEMATIC_RAD: f64 =

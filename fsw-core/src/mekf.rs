@@ -35,6 +35,14 @@
 //!   `T = P − K (HP)`, `P⁺ = T − (T Hᵀ − σ²K) Kᵀ` (exactly the Joseph product, ~180
 //!   multiplications), then symmetrised. An update whose `P⁺` is not finite with a positive
 //!   diagonal is discarded (state unchanged).
+//! * FHST updates ([`Mekf::update_focal_plane_consider`]) carry each tracker's systematic
+//!   error (H, V; σ the table's `fhst_uncorrected_systematic_arcsec`) as consider states
+//!   (Schmidt–Kalman: `P_xc`, 6×4, carried, the states never estimated), first-order
+//!   Gauss–Markov with [`FHST_SYSTEMATIC_CORRELATION_S`]; every other update and the
+//!   propagation keep `P_xc` consistent. Why not a floor on `P` (the
+//!   [`Mekf::update_focal_plane_with_floor`] form, kept for comparison): a floor stops taking
+//!   information once the variance reaches it, after a few samples of a new star, and keeps
+//!   their white noise in the attitude (docs/obc_filter.md §9–10).
 //! * Reset: `q̂ ← normalize(δq(δθ̂) ⊗ q̂)`, `b̂ ← b̂ + δb̂`. The covariance reset
 //!   `T P Tᵀ, T = blkdiag(I − ½[δθ̂×], I)` (Mueller 2017, algorithms.md §12) is second order
 //!   and omitted.

@@ -13,9 +13,11 @@
 //! * Tracking as in `est_filter.rs` (one star per tracker, 1–5 min tracks), 1 Hz, 4 h.
 //!
 //! Asserted over three seeds: mean NEES (3 dof) in [1.5, 6] and ≥ 97 % of cycles within 3σ
-//! per axis in each, with the executive's systematic floor (`FHST_UNCORRECTED_SYSTEMATIC_RAD`)
-//! or, with misaligned trackers, a floor that also carries the alignment σ; and that the same
-//! filter without a floor is inconsistent on this truth (NEES > 6).
+//! per axis in each, with the FHST updates the executive makes
+//! (`Mekf::update_focal_plane_consider`, the trackers' systematic errors as consider states)
+//! at the executive's systematic σ (`FHST_UNCORRECTED_SYSTEMATIC_RAD`) or, with misaligned
+//! trackers, a σ that also carries the alignment; and that the same filter without it is
+//! inconsistent on this truth (NEES > 6). ("floor" in the test names: the systematic σ.)
 #![allow(
     clippy::unwrap_used,
     clippy::expect_used,

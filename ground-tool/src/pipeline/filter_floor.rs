@@ -27,15 +27,13 @@
 //!
 //! # Reported, not written
 //! `calibrate` reports the floor (`report.json` `fhst_floor`) and does not write it into the
-//! filter table. Measured on the main job (seeds 1–5): writing it (6.3″ instead of 3.65″)
-//! brings the 3σ containment to ≥ 97 % on four seeds of five (was three) but makes the
-//! fine-attitude 3×RMS 20 % worse (mean 48.5 / 47.2 / 22.6″ → 57.8 / 53.4 / 26.4″). The
-//! cause is on board: the floored update stops taking information once the attitude
-//! variance along a measured direction reaches `f²`, which happens after `σ²/f²` samples of
-//! a new star, so the white noise of those few samples stays in the attitude, and a larger
-//! `f` freezes fewer, noisier samples (`docs/investigations.md`, "The onboard floor freezes
-//! the first samples"). The floor will be written once the OBC carries the trackers'
-//! systematic errors as consider states.
+//! filter table. Measured on the main job (seeds 1–5, 2026-11-27): with the OBC's consider
+//! states (docs/obc_filter.md §10) and the boot 3.65″ the fine-mode NEES is 1.55–2.25 and the
+//! 3σ containment ≥ 99.5 % on every axis; with this floor written (6.1–6.3″) the NEES falls to
+//! 0.65–1.08 (pessimistic) for no gain in accuracy: FFCAL's σ overstates the relative error
+//! the calibration actually leaves (seed 2: 5.1″ projected against ≈ 2–5″ realised). Under
+//! the earlier floored update, writing it fixed the containment but cost 20 % of the 3×RMS
+//! (docs/obc_filter.md §9).
 //!
 //! The full relative σ goes to each tracker (not half of it): the filter cannot tell which
 //! tracker is wrong, and with one tracker in the field the attitude follows that tracker.
