@@ -286,12 +286,16 @@ fn icd_round_trip_independent_decoder() {
 /// 30 min of normal-ops (true alignments, onboard annual aberration correction): the filter
 /// reaches fine mode and the attitude error 3σ per axis is ≤ 15″ (requirement 86″).
 ///
-/// NEES band [1.5, 6] (issue 19): a consistent filter gives a mean of 3; 1,200 scored samples
-/// correlated over minutes (a few tens of independent χ²₃ draws) put the mean within a factor
-/// 2 of it. The stars keep their orbital aberration (≤ 5.2″), which the OBC cannot correct
-/// (it has no orbit) but now models as the FHST systematic floor
-/// (`FHST_UNCORRECTED_SYSTEMATIC_RAD`, docs/obc_filter.md §3): measured 2.35 (it was ~10
-/// before the floor, with the band [1, 40]).
+/// NEES: the upper end (6) catches an optimistic filter (σ understated by √2 or more), the
+/// lower end (0.75) one whose σ is overstated by 2× or more. Why not issue 19's [1.5, 6] here:
+/// the error of these 30 min is mostly the stars' orbital aberration (≤ 5.2″, not corrected
+/// without an onboard orbit), which the OBC carries as the FHSTs' consider states with a
+/// correlation time of 24 min (docs/obc_filter.md §10): 30 min hold about one draw of it, so
+/// the mean NEES is about one draw's (measured 1.01 on seed 1). The band [1.5, 6] needs many
+/// correlation times: it is asserted on the 4-h mismatched filter test (three seeds,
+/// `fsw-core/tests/est_filter_mismatched.rs`) and measured on one day and two weeks of
+/// `normal-ops` (docs/obc_filter.md §10). Before the consider states the floored update gave
+/// 2.35 here, partly from the frozen noise of each star's first samples (§9).
 #[test]
 fn e2e_normal_ops_smoke_fine_attitude() {
     let s = scenario("normal-ops", 1800.0);
@@ -318,7 +322,7 @@ fn e2e_normal_ops_smoke_fine_attitude() {
     }
     assert!(sum.fine_mode_fraction > 0.9);
     let nees = sum.filter_nees_mean.unwrap();
-    assert!((1.5..=6.0).contains(&nees), "NEES {nees}");
+    assert!((0.75..=6.0).contains(&nees), "NEES {nees}");
     assert!(sum
         .tables_loaded
         .iter()
