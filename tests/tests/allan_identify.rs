@@ -12,6 +12,7 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
+#[path = "../../ground-tool/tests/support/mod.rs"]
 mod support;
 
 use fsw_core::raw::{RawSensorFrame, TimeTag};

@@ -1,6 +1,12 @@
 //! # Scoring against the simulator's truth (only when `truth.json` exists; never used by the
 //! analysis itself)
 //!
+//! Why here and not in the ground tool: the truth's field functions are the simulator's
+//! sensor models (`sim_harness::scenario`), which the ground must not carry. [`TruthScorer`]
+//! plugs into `ground_tool::diagnose::scoring::Scorer`; the `diagnose-scored` binary runs
+//! `ground-tool diagnose` with it (report.json and report.md as the ground tool wrote them
+//! before the move, `scoring` section included).
+//!
 //! * **Calibration error** per sensor: the rotation between estimated and true `M_AS`, with
 //!   the common rotation of the FHST pair removed (absolute alignment is indistinguishable
 //!   from attitude; the FHST pair defines the frame the OBC flies), arcsec.
@@ -8,13 +14,14 @@
 //!   parameter values come from the scenario file (`scenarios/undeclared/NAME.toml`, then
 //!   `scenarios/NAME.toml`) when it can be found, mapped to the library's parameters.
 
-use super::Detected;
 use fsw_core::attitude::rotvec_from_rot;
 use fsw_core::tables::types::matrix_from_rows;
 use fsw_core::tables::AlignmentTable;
 use fsw_core::units::ARCSEC_PER_RAD;
+use ground_tool::diagnose::report::{BeforeAfter, Scoring};
+use ground_tool::diagnose::scoring::{ParameterCheck, Scorer, ScoringInputs, ScoringOutcome};
+use ground_tool::diagnose::Detected;
 use nalgebra::{Matrix3, Vector3};
-use serde::Serialize;
 use std::collections::BTreeMap;
 use std::path::Path;
 
@@ -186,7 +193,10 @@ fn alignment_errors(est: &AlignmentTable, truth: &Truth) -> Vec<Vector3<f64>> {
 
 /// Truth's field-dependent error of a measurement (arcsec, sensor axes): the FSS transfer
 /// function or the FHST distortion of the scenario (zero when unknown).
-fn truth_field_error(m: &super::measurements::Measurement, truth: &Truth) -> [f64; 2] {
+fn truth_field_error(
+    m: &ground_tool::diagnose::measurements::Measurement,
+    truth: &Truth,
+) -> [f64; 2] {
     let Some(s) = &truth.scenario_file else {
         return [0.0; 2];
     };
@@ -229,11 +239,11 @@ fn truth_field_error(m: &super::measurements::Measurement, truth: &Truth) -> [f6
 pub fn calibration_error_arcsec(
     est: &AlignmentTable,
     truth: &Truth,
-    set: &super::measurements::MeasurementSet,
+    set: &ground_tool::diagnose::measurements::MeasurementSet,
     field_est: &dyn Fn(usize) -> [f64; 2],
 ) -> BTreeMap<String, f64> {
     let d = alignment_errors(est, truth);
-    let names = super::measurements::SENSOR_NAMES;
+    let names = ground_tool::diagnose::measurements::SENSOR_NAMES;
     let mut sum = [0.0; 4];
     let mut n = [0usize; 4];
     for (i, m) in set.meas.iter().enumerate() {
@@ -263,27 +273,85 @@ pub fn calibration_error_arcsec(
 #[must_use]
 pub fn rotation_error_arcsec(est: &AlignmentTable, truth: &Truth) -> BTreeMap<String, f64> {
     let d = alignment_errors(est, truth);
-    let names = super::measurements::SENSOR_NAMES;
+    let names = ground_tool::diagnose::measurements::SENSOR_NAMES;
     (0..4).map(|i| (names[i].to_owned(), d[i].norm())).collect()
 }
 
-/// One parameter compared with the truth.
-#[derive(Clone, Debug, Serialize)]
-pub struct ParameterCheck {
-    /// Effect label.
-    pub effect: String,
-    /// Sensor.
-    pub sensor: String,
-    /// Parameter.
-    pub parameter: String,
-    /// Estimate.
-    pub estimate: f64,
-    /// 1σ.
-    pub sigma: f64,
-    /// True value.
-    pub truth: f64,
-    /// (estimate − truth)/σ.
-    pub z: f64,
+/// Scores a diagnosis against `RUN_DIR/truth.json` when it exists (nothing otherwise).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct TruthScorer;
+
+impl Scorer for TruthScorer {
+    fn score(&self, x: &ScoringInputs<'_>) -> anyhow::Result<ScoringOutcome> {
+        let Some(t) = read_truth(x.run_dir)? else {
+            return Ok(ScoringOutcome::default());
+        };
+        let set = &x.analysis.set;
+        let res = &x.analysis.search;
+        // The final model's field corrections (transfer function, distortion) per
+        // measurement; the chain has none beyond the flown tables.
+        let g = res.final_fit.expand(res.layout.total);
+        let field_after = |k: usize| x.field_arcsec(&g, None, k);
+        let none = |_: usize| [0.0; 2];
+        let calibration_error = BeforeAfter {
+            before: calibration_error_arcsec(x.chain_alignment, &t, set, &none),
+            after: calibration_error_arcsec(x.ground_alignment, &t, set, &field_after),
+        };
+        // The tables written: diagnose's with the field terms that went up (none when the
+        // validation refused them), calibrate's with none; and, for the record, the table
+        // diagnose would have written without its held-out validation. They fly after the
+        // run: scored against the alignments at its end (an alignment step applied).
+        let written_field =
+            |k: usize| x.field_arcsec(x.written.parameters, Some(x.written.held), k);
+        let unvalidated_field =
+            |k: usize| x.field_arcsec(x.unvalidated.parameters, Some(x.unvalidated.held), k);
+        let t_after = t.after_run();
+        let written_error = BeforeAfter {
+            before: calibration_error_arcsec(x.calibrate_alignment, &t_after, set, &none),
+            after: calibration_error_arcsec(x.written.alignment, &t_after, set, &written_field),
+        };
+        let unvalidated_error =
+            calibration_error_arcsec(x.unvalidated.alignment, &t_after, set, &unvalidated_field);
+        let rotation_error = BeforeAfter {
+            before: rotation_error_arcsec(x.chain_alignment, &t),
+            after: rotation_error_arcsec(x.ground_alignment, &t),
+        };
+        let scoring = Scoring {
+            label: "scoring only: from truth.json, never used by the analysis".into(),
+            truth_undeclared_effects: t.undeclared.clone(),
+            field_truth: t
+                .field_truth_note()
+                .unwrap_or_else(|| t.scenario_source.clone()),
+            detections_in_truth: x
+                .detected
+                .iter()
+                .map(|d| (d.effect.clone(), d.sensor.clone(), matches_truth(d, &t)))
+                .collect(),
+            parameters: check_parameters(
+                x.detected,
+                &t,
+                set.aberration_k0,
+                x.first_frame_j2000_tt_s,
+            ),
+        };
+        Ok(ScoringOutcome {
+            calibration_error_arcsec: Some(calibration_error),
+            calibration_rotation_error_arcsec: Some(rotation_error),
+            written_table_error_arcsec: Some(written_error),
+            unvalidated_table_error_arcsec: Some(unvalidated_error),
+            scoring: Some(scoring),
+        })
+    }
+}
+
+/// Diagnose options that score against `truth.json` ([`TruthScorer`]): what
+/// `ground-tool diagnose` did before the scoring left the ground tool.
+#[must_use]
+pub fn scored_options() -> ground_tool::diagnose::run::DiagnoseOptions {
+    ground_tool::diagnose::run::DiagnoseOptions {
+        scorer: Some(std::sync::Arc::new(TruthScorer)),
+        ..ground_tool::diagnose::run::DiagnoseOptions::default()
+    }
 }
 
 fn unit_of(sensor: &str) -> String {
@@ -568,7 +636,7 @@ pub fn check_parameters(
                     i += 1;
                 }
             }
-            let r = super::effects::remove_net_rotation(&dirs, &x, &var);
+            let r = ground_tool::diagnose::effects::remove_net_rotation(&dirs, &x, &var);
             for (j, (ke, kn)) in used.iter().enumerate() {
                 for (kk, idx) in [(ke, 2 * j), (kn, 2 * j + 1)] {
                     let s = var[idx].sqrt();
