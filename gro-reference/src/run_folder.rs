@@ -38,6 +38,16 @@ pub const DEFAULT_DECLARED_EFFECTS: [&str; 5] = [
     "iru_bias_transient",
 ];
 
+/// A `declared_effects` list as the file means it: the list given, or
+/// [`DEFAULT_DECLARED_EFFECTS`] when absent.
+#[must_use]
+pub fn declared_or_default(list: Option<&[String]>) -> Vec<String> {
+    list.map_or_else(
+        || DEFAULT_DECLARED_EFFECTS.map(str::to_owned).to_vec(),
+        <[String]>::to_vec,
+    )
+}
+
 /// The paper's inherent FSS error after calibration (§4.3: 0.022°), arcsec: the ground's
 /// `fss_systematic_arcsec` when the metadata does not declare one.
 pub const PAPER_FSS_SYSTEMATIC_ARCSEC: f64 = 0.022 * 3600.0;
@@ -93,12 +103,7 @@ impl Metadata {
     /// ([`DEFAULT_DECLARED_EFFECTS`]) when `declared_effects` is absent.
     #[must_use]
     pub fn declared(&self) -> Vec<String> {
-        self.declared_effects.clone().unwrap_or_else(|| {
-            DEFAULT_DECLARED_EFFECTS
-                .iter()
-                .map(|s| (*s).to_owned())
-                .collect()
-        })
+        declared_or_default(self.declared_effects.as_deref())
     }
 
     /// Whether the operator's model includes `effect` (absent list = the GRO defaults).

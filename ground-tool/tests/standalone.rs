@@ -32,8 +32,7 @@ fn closure(lock: &toml::Table, name: &str) -> BTreeSet<String> {
 #[test]
 fn ground_tool_does_not_depend_on_the_simulator() {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../Cargo.lock");
-    let text = std::fs::read_to_string(&path)
-        .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     let lock: toml::Table = text
         .parse()
         .unwrap_or_else(|e| panic!("{}: {e}", path.display()));

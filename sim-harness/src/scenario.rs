@@ -646,15 +646,10 @@ impl Scenario {
         }
     }
 
-    /// The declared effects (metadata.json).
+    /// The declared effects (metadata.json): the list given, else the metadata's default.
     #[must_use]
     pub fn declared_effects(&self) -> Vec<String> {
-        self.declared_effects.clone().unwrap_or_else(|| {
-            DEFAULT_DECLARED_EFFECTS
-                .iter()
-                .map(|s| (*s).to_owned())
-                .collect()
-        })
+        gro_reference::run_folder::declared_or_default(self.declared_effects.as_deref())
     }
 
     /// Check values serde cannot.
