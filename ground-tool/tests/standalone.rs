@@ -9,7 +9,7 @@ fn closure(lock: &toml::Table, name: &str) -> BTreeSet<String> {
     let mut deps: BTreeMap<String, Vec<String>> = BTreeMap::new();
     for p in lock["package"].as_array().into_iter().flatten() {
         let n = p["name"].as_str().unwrap_or_default().to_owned();
-        let d = p
+        let d: Vec<String> = p
             .get("dependencies")
             .and_then(|d| d.as_array())
             .into_iter()
