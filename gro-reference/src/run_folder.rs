@@ -127,9 +127,18 @@ impl Metadata {
         }
         let text = std::fs::read_to_string(&path)
             .with_context(|| format!("reading {}", path.display()))?;
-        serde_json::from_str(&text)
-            .with_context(|| format!("{} is not valid metadata (docs/icd.md §5)", path.display()))
-            .map_err(|e| InputError(e).into())
+        // The path of the offending key (`uploads[0].accepted`): serde_json alone gives only
+        // a line and column.
+        let mut de = serde_json::Deserializer::from_str(&text);
+        serde_path_to_error::deserialize(&mut de).map_err(|e| {
+            let field = e.path().to_string();
+            InputError::msg(format!(
+                "{} is not valid metadata (docs/icd.md §5): field `{field}`: {}",
+                path.display(),
+                e.inner()
+            ))
+            .into()
+        })
     }
 
     /// The file's JSON: keys in sorted order at every level (the order `json!` gave the
