@@ -9,7 +9,7 @@ static GLOBAL: tikv_jemallocator::Jemalloc = tikv_jemallocator::Jemalloc;
 
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
-use sim_harness::outdir::OutputDir;
+use gro_reference::outdir::OutputDir;
 
 #[derive(Parser)]
 #[command(
@@ -389,7 +389,7 @@ fn run_table(action: TableAction) -> Result<()> {
             println!("wrote {} ({} bytes)", out.display(), img.len());
         }
         TableAction::Manifest { dir } => {
-            let m = sim_harness::manifest::write_for_all(&dir, "ground-tool table manifest")?;
+            let m = gro_reference::manifest::write_for_all(&dir, "ground-tool table manifest")?;
             for e in &m.tables {
                 println!(
                     "{}: {} table, {} octets, CRC-32 {}",
@@ -398,7 +398,7 @@ fn run_table(action: TableAction) -> Result<()> {
             }
             println!(
                 "wrote {}",
-                dir.join(sim_harness::manifest::MANIFEST).display()
+                dir.join(gro_reference::manifest::MANIFEST).display()
             );
         }
     }
@@ -432,7 +432,7 @@ fn run_calibrate(
 ) -> Result<()> {
     use ground_tool::calibration::alignment::Weighting;
     use ground_tool::pipeline::calibrate::{calibrate_run, CalibrateOptions};
-    let meta = ground_tool::pipeline::flown::metadata_json(run_dir);
+    let meta = ground_tool::pipeline::flown::metadata_or_default(run_dir);
     let (flown_alignment, flown_iru, flown_filter) =
         ground_tool::pipeline::flown::flown_tables(run_dir, &meta, tables)?;
     let dir = OutputDir::begin(
@@ -484,73 +484,7 @@ fn run_diagnose(
     tables: Option<&std::path::Path>,
     json: bool,
 ) -> Result<()> {
-    use ground_tool::diagnose::run::{diagnose_run, DiagnoseOptions};
-    let options = DiagnoseOptions {
-        tables: tables.map(std::path::Path::to_path_buf),
-        ..DiagnoseOptions::default()
-    };
-    let dir = OutputDir::begin(
-        out_target,
-        "ground-tool diagnose",
-        force,
-        &[Some(run_dir), tables]
-            .into_iter()
-            .flatten()
-            .collect::<Vec<_>>(),
-    )?;
-    let out = dir.path();
-    ground_tool::run_check::check_run_dir(run_dir, out)?;
-    // Diagnose's refusals (too few frames, a singular fit) are about the data: exit code 2;
-    // an I/O error (writing the report) stays a runtime failure.
-    let result = diagnose_run(run_dir, out, &options).map_err(|e| {
-        if e.chain().any(|c| c.is::<std::io::Error>()) || sim_harness::is_input_error(&e) {
-            e
-        } else {
-            ground_tool::run_check::InputError(e.context(format!(
-                "{}: the telemetry does not support a diagnosis",
-                run_dir.display()
-            )))
-            .into()
-        }
-    })?;
-    // The folder is new: its images are exactly the ones this diagnose wrote.
-    sim_harness::manifest::write_for_all(&out.join("tables"), "ground-tool diagnose")?;
-    // Diagnose names the files it wrote by the temporary folder's path: name them by OUT.
-    let (tmp, target) = (out.display().to_string(), out_target.display().to_string());
-    for f in ["report.json", "report.md"] {
-        let p = out.join(f);
-        if let Ok(text) = std::fs::read_to_string(&p) {
-            std::fs::write(&p, text.replace(&tmp, &target))
-                .with_context(|| format!("cannot write {}", p.display()))?;
-        }
-    }
-    dir.commit()?;
-    for note in &result.report.notes {
-        eprintln!("note: {note}");
-    }
-    if json {
-        let text = serde_json::to_string_pretty(&result.report)?;
-        println!("{}", text.replace(&tmp, &target));
-    } else {
-        let r = &result.report;
-        for d in &r.detected {
-            eprintln!(
-                "detected: {} [{}] (ΔBIC {:.1})",
-                d.effect, d.sensor, d.evidence.delta_bic
-            );
-        }
-        for u in &r.unexplained {
-            eprintln!(
-                "unexplained: {} {} follows {} ({:.2}\", p {:.1e})",
-                u.sensor, u.axis, u.regressor, u.size, u.p_value
-            );
-        }
-        eprintln!(
-            "wrote {}/report.md, report.json and tables/",
-            out_target.display()
-        );
-    }
-    Ok(())
+    ground_tool::diagnose::run::diagnose_command(run_dir, out_target, force, tables, json, None)
 }
 
 /// `ground-tool allan`: read the telemetry, identify the gyro noise, write the outputs.
@@ -571,7 +505,7 @@ fn run_allan(
         ))
         .into());
     }
-    let meta = ground_tool::pipeline::flown::metadata_json(run_dir);
+    let meta = ground_tool::pipeline::flown::metadata_or_default(run_dir);
     let (_, flown_iru, _) = ground_tool::pipeline::flown::flown_tables(run_dir, &meta, tables)?;
     let iru = flown_iru.unwrap_or_else(fsw_core::tables::IruTable::prelaunch);
     let tm = ground_tool::tp::read_file(&run_dir.join("telemetry.bin"))
@@ -637,8 +571,8 @@ fn main() -> std::process::ExitCode {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e:#}");
-            // Chosen from the error's type (sim_harness::InputError = bad input), not its text.
-            std::process::ExitCode::from(sim_harness::exit_code(&e))
+            // Chosen from the error's type (gro_reference::InputError = bad input), not its text.
+            std::process::ExitCode::from(gro_reference::exit_code(&e))
         }
     }
 }

@@ -62,8 +62,8 @@ pub struct Finding {
 }
 
 /// An input that breaks the ICD so that no meaningful result can be computed (exit code 2):
-/// one type for every binary of the workspace ([`sim_harness::exit_code`]).
-pub use sim_harness::InputError;
+/// one type for every binary of the workspace ([`gro_reference::exit_code`]).
+pub use gro_reference::InputError;
 
 /// Check the declared figures of `metadata.json` against their physical ranges: the FHST and
 /// FSS 1σ figures finite and > 0 (they are measurement weights); the gyro's random walks,
@@ -84,7 +84,10 @@ pub fn validate_metadata(path: &std::path::Path, m: &Metadata) -> Result<(), Inp
     ];
     let non_negative = [
         ("sensors.iru_arw_rad_per_sqrt_s", n.iru_arw_rad_per_sqrt_s),
-        ("sensors.fss_systematic_arcsec", n.fss_systematic_arcsec),
+        (
+            "sensors.fss_systematic_arcsec",
+            n.fss_systematic_or_paper_arcsec(),
+        ),
         (
             "sensors.iru_rrw_rad_per_s_sqrt_s",
             n.iru_rrw_rad_per_s_sqrt_s,
@@ -194,7 +197,7 @@ fn utc_naive_1958_s(text: &str) -> Option<f64> {
 
 /// Check a decoded run (`metadata`: the parsed `metadata.json`, if any).
 #[must_use]
-pub fn check(tm: &Telemetry, metadata: Option<&serde_json::Value>) -> Vec<Finding> {
+pub fn check(tm: &Telemetry, metadata: Option<&Metadata>) -> Vec<Finding> {
     let mut out = Vec::new();
     let r = &tm.report;
     if !r.skipped.is_empty()
@@ -290,10 +293,7 @@ pub fn check(tm: &Telemetry, metadata: Option<&serde_json::Value>) -> Vec<Findin
         ));
         return out;
     }
-    if let Some(epoch) = metadata
-        .and_then(|m| m.get("epoch_utc"))
-        .and_then(|e| e.as_str())
-    {
+    if let Some(epoch) = metadata.and_then(|m| m.epoch_utc.as_deref()) {
         match utc_naive_1958_s(epoch) {
             None => out.push(warn(
                 "epoch_utc_unreadable",
@@ -531,10 +531,7 @@ pub fn check_run_dir(
     let Ok(tm) = crate::tp::read_file(&run_dir.join("telemetry.bin")) else {
         return Ok(Vec::new());
     };
-    let metadata: Option<serde_json::Value> =
-        std::fs::read_to_string(run_dir.join("metadata.json"))
-            .ok()
-            .and_then(|t| serde_json::from_str(&t).ok());
+    let metadata = Metadata::read(run_dir).ok();
     let findings = check(&tm, metadata.as_ref());
     for f in &findings {
         if f.severity == Severity::Warning {

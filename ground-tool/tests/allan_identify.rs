@@ -23,7 +23,15 @@ use ground_tool::calibration::allan::{
 };
 use ground_tool::tp::Telemetry;
 use rand_distr::{Distribution, StandardNormal};
-use sim_harness::sensors::model_rng;
+
+/// A seeded ChaCha8 stream: the draws `sim_harness::sensors::model_rng` gives, without the
+/// simulator (the ground tool's tests do not depend on it).
+fn model_rng(seed: u64, stream: u64) -> rand_chacha::ChaCha8Rng {
+    use rand::SeedableRng;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    rng.set_stream(stream);
+    rng
+}
 
 /// Per-channel noise of the synthetic gyro, rad/√s and rad/s/√s.
 const ARW: f64 = 2.0e-7;

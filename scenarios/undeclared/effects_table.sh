@@ -24,14 +24,16 @@
 #   scenarios/undeclared/effects_table.sh [SEEDS="1 2 3"] [WORK=/tmp/diagnose-effects]
 #   ONLY="fss-transfer fhst1-time-tag" scenarios/undeclared/effects_table.sh "1 2"
 #
-# Uses the release binaries if built (cargo build --release -p sim-harness -p ground-tool),
+# Uses the release binaries if built (cargo build --release -p sim-harness -p ground-tool -p tests),
 # else the dev ones (BIN=dir overrides). About 2 s per line with release binaries.
 set -euo pipefail
 SEEDS=${1:-"1 2 3"}
 WORK=${2:-/tmp/diagnose-effects}
 ROOT=$(cd "$(dirname "$0")/../.." && pwd)
 BIN=${BIN:-$ROOT/target/release}
-if ! { [ -x "$BIN/sim-harness" ] && "$BIN/ground-tool" diagnose --help >/dev/null 2>&1; }; then
+# The scoring against truth.json is the tests crate's (`diagnose-scored`: ground-tool diagnose
+# plus the scores; the ground tool never reads the truth): cargo build --release -p sim-harness -p tests.
+if ! { [ -x "$BIN/sim-harness" ] && [ -x "$BIN/diagnose-scored" ]; }; then
   BIN=$ROOT/target/debug
 fi
 mkdir -p "$WORK"
@@ -43,7 +45,7 @@ for f in "$ROOT"/scenarios/undeclared/*.toml; do
   for seed in $SEEDS; do
     run=$WORK/$name-$seed
     "$BIN/sim-harness" run "$f" --out "$run" --seed "$seed" --force -q >/dev/null 2>&1
-    if ! "$BIN/ground-tool" diagnose "$run" --out "$run-diag" --force --json >"$run-diag.json" 2>"$run-diag.err"; then
+    if ! "$BIN/diagnose-scored" "$run" --out "$run-diag" --force --json >"$run-diag.json" 2>"$run-diag.err"; then
       echo "{\"scenario\": \"$name\", \"seed\": $seed, \"error\": \"diagnose failed\"}" >>"$WORK/lines.jsonl"
       continue
     fi

@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """The evidence ledger's invariant, checked on report.json files (issue 22; the complete check
-from the raw test results is `ledger::violations`, run by ground-tool/tests/diagnose_ledger.rs).
+from the raw test results is `ledger::violations`, run by tests/tests/diagnose_ledger.rs).
 
     python3 scenarios/undeclared/ledger_check.py DIAG/report.json ...   # or the --json outputs
 

@@ -31,5 +31,5 @@ for seed in $SEEDS; do
   pairs+=("$WORK/tf-$seed:$WORK/notf-$seed")
 done
 cd "$ROOT"
-PAIRS=$(IFS=,; echo "${pairs[*]}") cargo test -q --release -p ground-tool --test diagnose_paper -- --ignored --nocapture 2>&1 |
+PAIRS=$(IFS=,; echo "${pairs[*]}") cargo test -q --release -p tests --test diagnose_paper -- --ignored --nocapture 2>&1 |
   grep -v '^running\|^test \|^$\|test result'

@@ -6,7 +6,7 @@
 //! | file | content |
 //! |---|---|
 //! | `telemetry.bin` | CCSDS packets ([`crate::telemetry`]) |
-//! | `metadata.json` | what the operator declares: `scenario`, `epoch_utc`, `cycle_period_s`, `sensors` (declared noise from the scenario's sensor parameters), `declared_effects`, `boot_tables`, `uploads` |
+//! | `metadata.json` | what the operator declares ([`gro_reference::run_folder::Metadata`], schema `docs/schema/metadata.schema.json`): `scenario`, `epoch_utc`, `cycle_period_s`, `sensors` (declared noise from the scenario's sensor parameters), `declared_effects`, `boot_tables`, `uploads` |
 //! | `uploads/*.tbl` | every table image uplinked (catalog, `--tables`, timeline loads) |
 //! | `truth.json` | scoring only: true `alignments.{FHST1,FHST2,FSS1,FSS2}` (`M_AS`, row-major; at the start, without thermal drift), `alignments_after_run` (the same with any alignment step of the run applied: what tables written after the run fly into), IRU `delta_m` and `g` per configuration, `bias_history`, the flown `fss_transfer_function`, `scenario_as_flown` (the whole scenario, each FSS with the transfer function it flew), `present_effects`, `undeclared_effects` |
 //! | `summary.json` | run statistics ([`Summary`]) |
@@ -45,6 +45,9 @@ use fsw_core::raw::IRU_CHANNELS;
 use fsw_core::tables::TableId;
 use fsw_core::telemetry::EphemerisRecord;
 use fsw_core::units::{ARCSEC_PER_RAD, RAD_PER_ARCSEC, RAD_PER_DEG};
+use gro_reference::run_folder::{
+    DeclaredNoise, HeadSpread, Metadata, TransferSpreads, UnitSpread, Upload, METADATA_FILE,
+};
 
 /// Start of the scored window (s): the filter has converged from its initial error.
 pub const SCORE_START_S: f64 = 600.0;
@@ -496,7 +499,7 @@ pub fn undeclared_effects(s: &Scenario) -> Vec<String> {
 /// quadrature; FSS noise in counts, and as an angle (noise ⊕ quantization ⊕ rms of the
 /// transfer-function error over ±25°); IRU random walks in SI units.
 #[must_use]
-pub fn declared_noise(s: &Scenario) -> serde_json::Value {
+pub fn declared_noise(s: &Scenario) -> DeclaredNoise {
     let f = &s.fhst1;
     let q2 = f.resolution_arcsec_per_count.powi(2) / 12.0;
     let corner = f.fov_half_width_deg * RAD_PER_DEG * std::f64::consts::SQRT_2;
@@ -509,63 +512,67 @@ pub fn declared_noise(s: &Scenario) -> serde_json::Value {
         + count_arcsec.powi(2) / 12.0
         + tf_rms[0].powi(2))
     .sqrt();
-    let mut v = serde_json::json!({
-        "fhst_sigma_arcsec": [bright, faint],
-        "fss_noise_counts": fss.noise_counts_1sigma,
-        "fss_sigma_arcsec": fss_sigma,
-        "iru_arw_rad_per_sqrt_s": s.iru.angle_random_walk_arcsec_per_sqrt_s * RAD_PER_ARCSEC,
-        "iru_rrw_rad_per_s_sqrt_s": s.iru.bias_random_walk_arcsec_per_s15 * RAD_PER_ARCSEC,
-    });
-    // The level of a declared transfer function is part of the declaration (an undeclared
-    // one leaves the ground at its default, the paper's 0.022°).
-    if fss_transfer_declared(s) {
-        v["fss_systematic_arcsec"] =
-            serde_json::json!((0.5 * (tf_rms[0].powi(2) + tf_rms[1].powi(2))).sqrt());
+    DeclaredNoise {
+        fhst_sigma_arcsec: [bright, faint],
+        fss_noise_counts: Some(fss.noise_counts_1sigma),
+        fss_sigma_arcsec: fss_sigma,
+        // The level of a declared transfer function is part of the declaration (an
+        // undeclared one leaves the ground at its default, the paper's 0.022°).
+        fss_systematic_arcsec: fss_transfer_declared(s)
+            .then(|| (0.5 * (tf_rms[0].powi(2) + tf_rms[1].powi(2))).sqrt()),
+        iru_arw_rad_per_sqrt_s: s.iru.angle_random_walk_arcsec_per_sqrt_s * RAD_PER_ARCSEC,
+        iru_rrw_rad_per_s_sqrt_s: s.iru.bias_random_walk_arcsec_per_s15 * RAD_PER_ARCSEC,
     }
-    v
 }
 
-fn metadata_json(sim: &Simulation, scorer: &Scorer) -> serde_json::Value {
+/// `metadata.json`: what the operator declares (the one definition,
+/// [`gro_reference::run_folder::Metadata`]).
+fn metadata(sim: &Simulation, scorer: &Scorer) -> Metadata {
     let s = sim.scenario();
-    let uploads: Vec<_> = scorer
+    let uploads = scorer
         .tables
         .iter()
-        .map(|t| {
-            serde_json::json!({
-                "table": t.table,
-                "file": t.file,
-                "source": t.source,
-                "loaded_at_s": t.loaded_at_s,
-                "accepted": t.accepted,
-                "activated_at_s": t.activated_at_s,
-                "activated_utc": t.activated_at_s.map(|a| utc_string(sim.clock().epoch(a))),
-                "crc32": t.crc32,
-            })
+        .map(|t| Upload {
+            table: t.table.clone(),
+            file: Some(t.file.clone()),
+            source: t.source.clone(),
+            loaded_at_s: Some(t.loaded_at_s),
+            accepted: t.accepted,
+            activated_at_s: t.activated_at_s,
+            activated_utc: t.activated_at_s.map(|a| utc_string(sim.clock().epoch(a))),
+            crc32: Some(t.crc32),
         })
         .collect();
-    let mut v = serde_json::json!({
-        "scenario": s.name,
-        "description": s.description,
-        "seed": s.seed,
-        "epoch_utc": s.epoch_utc,
-        "cycle_period_s": s.step_s,
-        "duration_s": s.duration_s,
-        "telemetry_every_n_cycles": s.telemetry_every_n_cycles,
-        "ephemeris_period_s": s.ephemeris_period_s,
-        "sensors": declared_noise(s),
-        "declared_effects": s.declared_effects(),
-        "boot_tables": {
-            "alignment": "fsw-core boot table: paper Table 1 prelaunch alignments",
-            "iru": "fsw-core boot table: paper prelaunch G, k = 1",
-            "filter": "fsw-core boot table: FilterTable::default_boot (docs/tables.md)",
-            "star_catalog": "empty (the catalog is uplinked at t = 0)",
-        },
-        "uploads": uploads,
-    });
-    if let Some(spreads) = declared_fss_spreads(s) {
-        v["fss_transfer_function_sigma"] = spreads;
+    let boot_tables = [
+        (
+            "alignment",
+            "fsw-core boot table: paper Table 1 prelaunch alignments",
+        ),
+        ("iru", "fsw-core boot table: paper prelaunch G, k = 1"),
+        (
+            "filter",
+            "fsw-core boot table: FilterTable::default_boot (docs/tables.md)",
+        ),
+        ("star_catalog", "empty (the catalog is uplinked at t = 0)"),
+    ]
+    .into_iter()
+    .map(|(k, v)| (k.to_owned(), v.to_owned()))
+    .collect();
+    Metadata {
+        scenario: s.name.clone(),
+        description: Some(s.description.clone()),
+        seed: Some(s.seed),
+        epoch_utc: Some(s.epoch_utc.clone()),
+        cycle_period_s: Some(s.step_s),
+        duration_s: Some(s.duration_s),
+        telemetry_every_n_cycles: Some(s.telemetry_every_n_cycles),
+        ephemeris_period_s: Some(s.ephemeris_period_s),
+        sensors: declared_noise(s),
+        declared_effects: Some(s.declared_effects()),
+        fss_transfer_function_sigma: declared_fss_spreads(s),
+        boot_tables: Some(boot_tables),
+        uploads,
     }
-    v
 }
 
 /// Whether the scenario declares the FSS transfer function (its level and spreads are then
@@ -582,24 +589,28 @@ fn fss_transfer_declared(s: &Scenario) -> bool {
 /// ([`crate::sensors::fss::FssHeadErrors::drawn`]) and of which a fixed unit is one member.
 /// Only with a declared transfer function.
 #[must_use]
-pub fn declared_fss_spreads(s: &Scenario) -> Option<serde_json::Value> {
+pub fn declared_fss_spreads(s: &Scenario) -> Option<TransferSpreads> {
     if !fss_transfer_declared(s) {
         return None;
     }
-    let head = |h: &crate::sensors::fss::FssHeadErrors| {
-        serde_json::json!({
-            "offset_arcsec": h.offset_arcsec.abs(),
-            "scale_ppm": h.scale_ppm.abs(),
-            "cyclic_arcsec": h.cyclic_arcsec.abs(),
-            "cyclic_pitch_deg": h.cyclic_pitch_deg,
-            "cross_arcsec_at_corner": h.cross_arcsec_at_corner.abs(),
-            "cubic_arcsec_at_edge": h.cubic_arcsec_at_edge.abs(),
-        })
+    let head = |h: &crate::sensors::fss::FssHeadErrors| HeadSpread {
+        offset_arcsec: h.offset_arcsec.abs(),
+        scale_ppm: h.scale_ppm.abs(),
+        cyclic_arcsec: h.cyclic_arcsec.abs(),
+        cyclic_pitch_deg: h.cyclic_pitch_deg,
+        cross_arcsec_at_corner: h.cross_arcsec_at_corner.abs(),
+        cubic_arcsec_at_edge: h.cubic_arcsec_at_edge.abs(),
     };
-    Some(serde_json::json!({
-        "FSS1": { "alpha": head(&s.fss1.alpha), "beta": head(&s.fss1.beta) },
-        "FSS2": { "alpha": head(&s.fss2.alpha), "beta": head(&s.fss2.beta) },
-    }))
+    let unit = |f: &FssParams| UnitSpread {
+        alpha: head(&f.alpha),
+        beta: head(&f.beta),
+    };
+    Some(
+        [("FSS1", unit(&s.fss1)), ("FSS2", unit(&s.fss2))]
+            .into_iter()
+            .map(|(k, v)| (k.to_owned(), v))
+            .collect(),
+    )
 }
 
 fn truth_json(sim: &Simulation, bias: &BiasRecorder) -> anyhow::Result<serde_json::Value> {
@@ -907,7 +918,8 @@ pub fn run(scenario: Scenario, opts: &RunOptions) -> anyhow::Result<Summary> {
     }
     let (packets, bytes) = (tm.packets(), tm.bytes());
     tm.finish().context("writing telemetry.bin")?;
-    folder.write_json("metadata.json", &metadata_json(&sim, &scorer))?;
+    // As a JSON value: its keys sorted, as the `json!` writer had them (the same bytes).
+    folder.write_json(METADATA_FILE, &metadata(&sim, &scorer).to_json_value()?)?;
     folder.write_json("truth.json", &truth_json(&sim, &bias)?)?;
     let cycles = sim.cycle_count();
     let summary = summary(&sim, scorer, wall, cycles, aliasing, packets, bytes);
@@ -956,9 +968,7 @@ mod tests {
     #[test]
     fn fss_systematic_declared_with_the_transfer_function() {
         let mut s = crate::scenario::resolve("gro-early-mission").unwrap();
-        let unit = declared_noise(&s)["fss_systematic_arcsec"]
-            .as_f64()
-            .unwrap();
+        let unit = declared_noise(&s).fss_systematic_arcsec.unwrap();
         let expect = (0.5
             * (s.fss1.transfer_function_rms_arcsec().powi(2)
                 + s.fss2.transfer_function_rms_arcsec().powi(2)))
@@ -969,17 +979,15 @@ mod tests {
         );
         s.fss1.transfer_function_per_seed = true;
         s.fss2.transfer_function_per_seed = true;
-        let population = declared_noise(&s)["fss_systematic_arcsec"]
-            .as_f64()
-            .unwrap();
+        let population = declared_noise(&s).fss_systematic_arcsec.unwrap();
         assert!(population != unit && population > 1.0);
         let spreads = declared_fss_spreads(&s).unwrap();
         assert_eq!(
-            spreads["FSS1"]["beta"]["scale_ppm"].as_f64(),
+            spreads.get("FSS1").map(|u| u.beta.scale_ppm),
             Some(s.fss1.beta.scale_ppm.abs())
         );
         s.declared_effects = Some(vec!["aberration".into()]);
-        assert!(declared_noise(&s).get("fss_systematic_arcsec").is_none());
+        assert!(declared_noise(&s).fss_systematic_arcsec.is_none());
         assert!(declared_fss_spreads(&s).is_none());
     }
 }

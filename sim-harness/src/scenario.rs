@@ -508,15 +508,9 @@ pub struct Scenario {
     pub base_dir: Option<PathBuf>,
 }
 
-/// Effects declared when a scenario does not say (`declared_effects`): stellar and solar
-/// aberration (annual and orbital), Sun parallax, the FSS transfer-function errors, the early IRU bias drift.
-pub const DEFAULT_DECLARED_EFFECTS: [&str; 5] = [
-    "aberration",
-    "orbital_aberration",
-    "sun_parallax",
-    "fss_transfer_function",
-    "iru_bias_transient",
-];
+/// Effects declared when a scenario does not say (`declared_effects`): the metadata's own
+/// default, defined with the run-folder contract (`gro_reference::run_folder`).
+pub use gro_reference::run_folder::DEFAULT_DECLARED_EFFECTS;
 
 /// Longest `duration_s` accepted (s): one year. Why: runs are simulated cycle by cycle
 /// (≈ 0.01 ms each) and write ≈ 300 octets of telemetry per cycle; a longer value is a typo
@@ -652,15 +646,10 @@ impl Scenario {
         }
     }
 
-    /// The declared effects (metadata.json).
+    /// The declared effects (metadata.json): the list given, else the metadata's default.
     #[must_use]
     pub fn declared_effects(&self) -> Vec<String> {
-        self.declared_effects.clone().unwrap_or_else(|| {
-            DEFAULT_DECLARED_EFFECTS
-                .iter()
-                .map(|s| (*s).to_owned())
-                .collect()
-        })
+        gro_reference::run_folder::declared_or_default(self.declared_effects.as_deref())
     }
 
     /// Check values serde cannot.

@@ -142,7 +142,7 @@ fn e2e_calibration_loop_gro_early_mission() {
     // after, every correction within 3σ of zero, and no filter change. With the boot tables
     // assumed instead, the "before" residuals would be the prelaunch ones (223″ on FHST1).
     let fly_b = out.join("b");
-    let meta = ground_tool::pipeline::flown::metadata_json(&fly_b);
+    let meta = ground_tool::pipeline::flown::metadata_or_default(&fly_b);
     let (fa, fi, ff) = ground_tool::pipeline::flown::flown_tables(&fly_b, &meta, None).unwrap();
     assert!(fa.is_some() && fi.is_some() && ff.is_some_and(|f| f.aberration_correction));
     let again = calibrate_run(

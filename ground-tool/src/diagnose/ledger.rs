@@ -26,7 +26,7 @@
 //! the hidden lack-of-fit extensions included, F test Holm-corrected over them), as are the
 //! slew arcs' left-over columns and the gyro's last round. [`violations`] checks the
 //! invariant from the raw test results (not from the ledger's own bookkeeping), and the tests
-//! (`ground-tool/tests/diagnose_ledger.rs`) run it over synthetic cases and the fixtures.
+//! (`tests/tests/diagnose_ledger.rs`) run it over synthetic cases and the fixtures.
 
 use super::effects::{Effect, EffectKind};
 use super::fit::{indices, post_fit, solve_fixed};

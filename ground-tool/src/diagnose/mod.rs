@@ -25,9 +25,11 @@
 //!    an accepted effect or in `unexplained` with its size, regressor and the reason nothing
 //!    was named (the candidates are tested once more against the final model for it);
 //! 8. [`report`]: `report.md` with before/after plots against the guilty regressor and
-//!    `report.json`; scoring against `truth.json` only when it exists ([`scoring`]).
+//!    `report.json`; scoring against the simulator's truth is not the ground's: [`scoring`]
+//!    is the seam the evaluation binary `diagnose-scored` (`tests` crate) plugs into.
 //!
-//! [`synthetic`] makes frames with known effects for tests.
+//! Frames with known effects for tests (`synthetic`), effects injected into real run folders
+//! (`inject`) and the scorer live in the `tests` crate (`gro_tests::diagnose`).
 
 pub mod change_point;
 pub mod effects;
@@ -36,7 +38,6 @@ pub mod flight;
 pub mod gyro;
 mod gyro_slews;
 pub mod heldout;
-pub mod inject;
 pub mod ledger;
 pub mod measurements;
 pub mod report;
@@ -46,7 +47,6 @@ pub mod search;
 pub mod sparse_catalog;
 pub mod stats;
 pub mod structure;
-pub mod synthetic;
 pub mod time_reference;
 
 use measurements::{DiagnoseInput, MeasurementSet, SENSOR_NAMES};

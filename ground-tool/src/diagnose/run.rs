@@ -13,18 +13,16 @@
 use super::gyro::{self, GyroConfig, GyroFrame, GyroInput};
 use super::measurements::{DiagnoseInput, MeasurementSet, SENSOR_NAMES};
 use super::report::{
-    markdown, write_plots, BeforeAfter, DiagnoseReport, FlightSummary, GyroSummary, Scoring,
+    markdown, write_plots, BeforeAfter, DiagnoseReport, FlightSummary, GyroSummary,
 };
-use super::scoring::{
-    calibration_error_arcsec, check_parameters, matches_truth, read_truth, rotation_error_arcsec,
-};
+use super::scoring::{Scorer, ScoringInputs, ScoringOutcome, TableFit};
 use super::search::SearchConfig;
 use super::{analyse_set, Analysis};
 use crate::calibration::iru::GyroCalibration;
 use crate::pipeline::calibrate::{
     calibrate_telemetry, read_run, write_table, CalibrateOptions, CalibrationOutput,
 };
-use crate::pipeline::flown::{flown_catalog, flown_tables, metadata_json};
+use crate::pipeline::flown::{flown_catalog, flown_tables};
 use crate::tp;
 use anyhow::Context;
 use fsw_core::tables::{AlignmentTable, FilterTable, IruTable, TableId};
@@ -42,6 +40,9 @@ pub struct DiagnoseOptions {
     pub tables: Option<PathBuf>,
     /// Search settings.
     pub search: SearchConfig,
+    /// Scores the result against a truth the ground does not have ([`super::scoring`]);
+    /// `None` (the ground tool): no scoring.
+    pub scorer: Option<std::sync::Arc<dyn Scorer>>,
 }
 
 /// Everything a diagnose run produced.
@@ -235,13 +236,12 @@ pub fn diagnose_run(
     opts: &DiagnoseOptions,
 ) -> anyhow::Result<DiagnoseOutput> {
     let (tm, metadata) = read_run(run_dir)?;
-    let meta_raw = metadata_json(run_dir);
     let declared = metadata.declared();
-    let flown_catalog = flown_catalog(run_dir, &meta_raw, opts.tables.as_deref())?;
+    let flown_catalog = flown_catalog(run_dir, &metadata, opts.tables.as_deref())?;
     let annual = declared.iter().any(|d| d == "aberration");
     let orbital = declared.iter().any(|d| d == "orbital_aberration");
     let (flown_alignment, flown_iru, flown_filter) =
-        flown_tables(run_dir, &meta_raw, opts.tables.as_deref())?;
+        flown_tables(run_dir, &metadata, opts.tables.as_deref())?;
     let mut copt = CalibrateOptions {
         flown_alignment,
         flown_iru,
@@ -275,10 +275,10 @@ pub fn diagnose_run(
     let frames = cal.frames();
     let mut earth = Vec::with_capacity(frames.len());
     let mut sun = Vec::with_capacity(frames.len());
-    let mut eph: Option<sim_harness::truth::sun::SunEphemeris> = None;
+    let mut eph: Option<gro_reference::sun::SunEphemeris> = None;
     for f in frames {
         let t = f.time.seconds_since_j2000_tt();
-        let e = eph.get_or_insert_with(|| sim_harness::truth::sun::SunEphemeris::new(t, 600.0));
+        let e = eph.get_or_insert_with(|| gro_reference::sun::SunEphemeris::new(t, 600.0));
         let st = e.state(t);
         earth.push(st.earth_vel_bary_eci_km_per_s);
         let (p, v) = f.orbit.unwrap_or((Vector3::zeros(), Vector3::zeros()));
@@ -556,107 +556,31 @@ pub fn diagnose_run(
             .collect()
     };
     let counts = analysis.set.count_per_sensor();
-    let truth = read_truth(run_dir)?;
-    let mut rotation_error = None;
-    let mut written_error = None;
-    let mut unvalidated_error = None;
-    let (calibration_error, scoring) = match &truth {
-        Some(t) => {
-            // The final model's field corrections (transfer function, distortion) per
-            // measurement; the chain has none beyond the flown tables.
-            let res = &analysis.search;
-            let g = res.final_fit.expand(res.layout.total);
-            let field: Vec<usize> = res
-                .baseline
-                .iter()
-                .chain(&res.added)
-                .copied()
-                .filter(|&i| {
-                    matches!(
-                        res.layout.effects[i].kind,
-                        super::effects::EffectKind::FssTransferFunction
-                            | super::effects::EffectKind::FhstDistortion
-                    )
-                })
-                .collect();
-            let field_after =
-                |k: usize| table_field_arcsec(res, &analysis.set, &field, &g, None, k);
-            let ce = BeforeAfter {
-                before: calibration_error_arcsec(&cal.alignment, t, &analysis.set, &|_| [0.0; 2]),
-                after: calibration_error_arcsec(&ground_alignment, t, &analysis.set, &field_after),
-            };
-            // The tables written: diagnose's with the field terms that went up (none when
-            // the validation refused them), calibrate's with none; and, for the record, the
-            // table diagnose would have written without its held-out validation.
-            let g_flight = flight.flight_fit.expand(res.layout.total);
-            let written_field = |k: usize| {
-                table_field_arcsec(
-                    res,
-                    &analysis.set,
-                    &field,
-                    &g_flight,
-                    Some(&flight.flight_idx),
-                    k,
-                )
-            };
-            let (unvalidated_table, g_unvalidated, unvalidated_idx) = &unvalidated;
-            let unvalidated_field = |k: usize| {
-                table_field_arcsec(
-                    res,
-                    &analysis.set,
-                    &field,
-                    g_unvalidated,
-                    Some(unvalidated_idx),
-                    k,
-                )
-            };
-            // The tables written fly after the run: scored against the alignments at its end
-            // (an alignment step applied).
-            let t_after = t.after_run();
-            written_error = Some(BeforeAfter {
-                before: calibration_error_arcsec(
-                    &calibrate_alignment,
-                    &t_after,
-                    &analysis.set,
-                    &|_| [0.0; 2],
-                ),
-                after: calibration_error_arcsec(
-                    &alignment_out,
-                    &t_after,
-                    &analysis.set,
-                    &written_field,
-                ),
-            });
-            unvalidated_error = Some(calibration_error_arcsec(
-                unvalidated_table,
-                &t_after,
-                &analysis.set,
-                &unvalidated_field,
-            ));
-            rotation_error = Some(BeforeAfter {
-                before: rotation_error_arcsec(&cal.alignment, t),
-                after: rotation_error_arcsec(&ground_alignment, t),
-            });
-            let sc = Scoring {
-                label: "scoring only: from truth.json, never used by the analysis".into(),
-                truth_undeclared_effects: t.undeclared.clone(),
-                field_truth: t
-                    .field_truth_note()
-                    .unwrap_or_else(|| t.scenario_source.clone()),
-                detections_in_truth: detected
-                    .iter()
-                    .map(|d| (d.effect.clone(), d.sensor.clone(), matches_truth(d, t)))
-                    .collect(),
-                parameters: check_parameters(
-                    &detected,
-                    t,
-                    analysis.set.aberration_k0,
-                    frames_t0_j2000,
-                ),
-            };
-            (Some(ce), Some(sc))
-        }
-        None => (None, None),
+    let (g_flight, g_unvalidated) = (
+        flight.flight_fit.expand(analysis.search.layout.total),
+        &unvalidated.1,
+    );
+    let outcome = match &opts.scorer {
+        Some(scorer) => scorer.score(&ScoringInputs {
+            run_dir,
+            analysis: &analysis,
+            detected: &detected,
+            chain_alignment: &cal.alignment,
+            ground_alignment: &ground_alignment,
+            calibrate_alignment: &calibrate_alignment,
+            written: TableFit {
+                alignment: &alignment_out,
+                parameters: &g_flight,
+                held: &flight.flight_idx,
+            },
+            unvalidated: TableFit {
+                alignment: &unvalidated.0,
+                parameters: g_unvalidated,
+                held: &unvalidated.2,
+            },
+            first_frame_j2000_tt_s: frames_t0_j2000,
+        })?,
+        None => ScoringOutcome::default(),
     };
     let mut report = DiagnoseReport {
         run_dir: run_dir.display().to_string(),
@@ -705,11 +629,11 @@ pub fn diagnose_run(
             },
             validation: Some(validation),
         },
-        calibration_error_arcsec: calibration_error,
-        calibration_rotation_error_arcsec: rotation_error,
-        written_table_error_arcsec: written_error,
-        unvalidated_table_error_arcsec: unvalidated_error,
-        scoring,
+        calibration_error_arcsec: outcome.calibration_error_arcsec,
+        calibration_rotation_error_arcsec: outcome.calibration_rotation_error_arcsec,
+        written_table_error_arcsec: outcome.written_table_error_arcsec,
+        unvalidated_table_error_arcsec: outcome.unvalidated_table_error_arcsec,
+        scoring: outcome.scoring,
         plots: Vec::new(),
         notes,
     };
@@ -732,32 +656,90 @@ pub fn diagnose_run(
     })
 }
 
-/// The field correction (arcsec, sensor axes) of measurement `k` by the field effects `field`
-/// (transfer function, distortion) with the parameters of `g` that a table holds (`idx`;
-/// `None`: all of them, the ground model).
-fn table_field_arcsec(
-    res: &super::search::SearchResult,
-    set: &super::measurements::MeasurementSet,
-    field: &[usize],
-    g: &nalgebra::DVector<f64>,
-    idx: Option<&[usize]>,
-    k: usize,
-) -> [f64; 2] {
-    let m = &set.meas[k];
-    let mut out = [0.0; 2];
-    let mut cols = Vec::new();
-    for &i in field {
-        cols.clear();
-        res.layout.effects[i].columns(m, &|_| None, &mut cols);
-        let o = res.layout.offsets[i];
-        for (p, v) in &cols {
-            if idx.is_none_or(|idx| idx.contains(&(o + p))) {
-                out[0] += v[0] * g[o + p];
-                out[1] += v[1] * g[o + p];
-            }
+/// `ground-tool diagnose RUN_DIR --out OUT`: check the run, diagnose it into a temporary
+/// sibling of `OUT` and rename it into place, write the tables' manifest, print the findings
+/// (or `report.json` with `json`). One definition for the ground tool (no scorer) and the
+/// evaluation binary `diagnose-scored` of the `tests` crate (a scorer against `truth.json`).
+///
+/// # Errors
+/// As [`diagnose_run`]; a refusal about the data is an [`crate::run_check::InputError`]
+/// (exit code 2), an I/O error a runtime failure.
+pub fn diagnose_command(
+    run_dir: &std::path::Path,
+    out_target: &std::path::Path,
+    force: bool,
+    tables: Option<&std::path::Path>,
+    json: bool,
+    scorer: Option<std::sync::Arc<dyn Scorer>>,
+) -> anyhow::Result<()> {
+    use gro_reference::outdir::OutputDir;
+    let options = DiagnoseOptions {
+        tables: tables.map(std::path::Path::to_path_buf),
+        scorer,
+        ..DiagnoseOptions::default()
+    };
+    let dir = OutputDir::begin(
+        out_target,
+        "ground-tool diagnose",
+        force,
+        &[Some(run_dir), tables]
+            .into_iter()
+            .flatten()
+            .collect::<Vec<_>>(),
+    )?;
+    let out = dir.path();
+    crate::run_check::check_run_dir(run_dir, out)?;
+    // Diagnose's refusals (too few frames, a singular fit) are about the data: exit code 2;
+    // an I/O error (writing the report) stays a runtime failure.
+    let result = diagnose_run(run_dir, out, &options).map_err(|e| {
+        if e.chain().any(|c| c.is::<std::io::Error>()) || gro_reference::is_input_error(&e) {
+            e
+        } else {
+            crate::run_check::InputError(e.context(format!(
+                "{}: the telemetry does not support a diagnosis",
+                run_dir.display()
+            )))
+            .into()
+        }
+    })?;
+    // The folder is new: its images are exactly the ones this diagnose wrote.
+    gro_reference::manifest::write_for_all(&out.join("tables"), "ground-tool diagnose")?;
+    // Diagnose names the files it wrote by the temporary folder's path: name them by OUT.
+    let (tmp, target) = (out.display().to_string(), out_target.display().to_string());
+    for f in ["report.json", "report.md"] {
+        let p = out.join(f);
+        if let Ok(text) = std::fs::read_to_string(&p) {
+            std::fs::write(&p, text.replace(&tmp, &target))
+                .with_context(|| format!("cannot write {}", p.display()))?;
         }
     }
-    out
+    dir.commit()?;
+    for note in &result.report.notes {
+        eprintln!("note: {note}");
+    }
+    if json {
+        let text = serde_json::to_string_pretty(&result.report)?;
+        println!("{}", text.replace(&tmp, &target));
+    } else {
+        let r = &result.report;
+        for d in &r.detected {
+            eprintln!(
+                "detected: {} [{}] (ΔBIC {:.1})",
+                d.effect, d.sensor, d.evidence.delta_bic
+            );
+        }
+        for u in &r.unexplained {
+            eprintln!(
+                "unexplained: {} {} follows {} ({:.2}\", p {:.1e})",
+                u.sensor, u.axis, u.regressor, u.size, u.p_value
+            );
+        }
+        eprintln!(
+            "wrote {}/report.md, report.json and tables/",
+            out_target.display()
+        );
+    }
+    Ok(())
 }
 
 /// What a sensor's data leave untestable: no usable sample at all, data in one hold only

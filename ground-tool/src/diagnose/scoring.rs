@@ -1,271 +1,21 @@
-//! # Scoring against the simulator's truth (only when `truth.json` exists; never used by the
-//! analysis itself)
+//! # The seam where a scorer against the simulator's truth plugs into `diagnose`
 //!
-//! * **Calibration error** per sensor: the rotation between estimated and true `M_AS`, with
-//!   the common rotation of the FHST pair removed (absolute alignment is indistinguishable
-//!   from attitude; the FHST pair defines the frame the OBC flies), arcsec.
-//! * **Effect truth**: `truth.json` lists the present and undeclared effects by name; the
-//!   parameter values come from the scenario file (`scenarios/undeclared/NAME.toml`, then
-//!   `scenarios/NAME.toml`) when it can be found, mapped to the library's parameters.
+//! Why a seam and not the scorer: scoring needs the truth's field functions (the simulated
+//! FSS transfer function, FHST distortion) and the scenario, i.e. the simulator's own models.
+//! A ground tool that carried them would let errors common to truth and ground cancel unseen,
+//! and no real ground system has them. So the analysis never scores: `ground-tool diagnose`
+//! writes no `scoring` section, and the evaluation binary `diagnose-scored` of the `tests`
+//! crate (`gro_tests::diagnose::scoring`) runs the same diagnosis with a [`Scorer`] that
+//! reads `truth.json`. What a scorer sees is [`ScoringInputs`]; what it returns is
+//! [`ScoringOutcome`], written into `report.json` and `report.md` labelled as scoring.
 
-use super::Detected;
-use fsw_core::attitude::rotvec_from_rot;
-use fsw_core::tables::types::matrix_from_rows;
+use super::report::{BeforeAfter, Scoring};
+use super::search::SearchResult;
+use super::{Analysis, Detected};
 use fsw_core::tables::AlignmentTable;
-use fsw_core::units::ARCSEC_PER_RAD;
-use nalgebra::{Matrix3, Vector3};
 use serde::Serialize;
 use std::collections::BTreeMap;
 use std::path::Path;
-
-/// Truth read from `truth.json`.
-#[derive(Clone, Debug)]
-pub struct Truth {
-    /// Scenario name.
-    pub scenario: String,
-    /// True alignments (sensor order).
-    pub alignments: [Matrix3<f64>; 4],
-    /// True alignments at the end of the run (truth.json `alignments_after_run`: an alignment
-    /// step applied; `alignments` when absent): what the tables written after the run fly into.
-    pub alignments_after_run: [Matrix3<f64>; 4],
-    /// Undeclared effects.
-    pub undeclared: Vec<String>,
-    /// Present effects.
-    pub present: Vec<String>,
-    /// The scenario, if its file was found, with the FSS units as flown (a per-seed transfer
-    /// function drawn with the run's seed).
-    pub scenario_file: Option<sim_harness::scenario::Scenario>,
-    /// Where `scenario_file` came from: `truth.json`'s `scenario_as_flown`, a scenario file
-    /// of the run's name (older run folders), or nowhere (the field functions' truth is then
-    /// unknown and scored as zero: [`Truth::field_truth_note`]).
-    pub scenario_source: String,
-    /// True gyro bias history: (s since the start, ACS bias in arcsec/s).
-    pub bias_history: Vec<(f64, Vector3<f64>)>,
-}
-
-/// Read `truth.json` (None when absent).
-///
-/// # Errors
-/// A present but malformed file.
-pub fn read_truth(run_dir: &Path) -> anyhow::Result<Option<Truth>> {
-    let path = run_dir.join("truth.json");
-    if !path.exists() {
-        return Ok(None);
-    }
-    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&path)?)
-        .map_err(|e| anyhow::anyhow!("{} is not valid JSON: {e}", path.display()))?;
-    let names = ["FHST1", "FHST2", "FSS1", "FSS2"];
-    let mut alignments = [Matrix3::identity(); 4];
-    for (i, n) in names.iter().enumerate() {
-        let rows: [[f64; 3]; 3] = serde_json::from_value(v["alignments"][n].clone())
-            .map_err(|e| anyhow::anyhow!("truth.json alignments.{n}: {e}"))?;
-        alignments[i] = matrix_from_rows(&rows);
-    }
-    let mut alignments_after_run = alignments;
-    for (i, n) in names.iter().enumerate() {
-        if let Ok(rows) =
-            serde_json::from_value::<[[f64; 3]; 3]>(v["alignments_after_run"][n].clone())
-        {
-            alignments_after_run[i] = matrix_from_rows(&rows);
-        }
-    }
-    let list = |k: &str| -> Vec<String> {
-        v[k].as_array()
-            .map(|a| {
-                a.iter()
-                    .filter_map(|x| x.as_str().map(str::to_owned))
-                    .collect()
-            })
-            .unwrap_or_default()
-    };
-    let scenario = v["scenario"].as_str().unwrap_or_default().to_owned();
-    let (scenario_file, scenario_source) = truth_scenario(&v, &scenario);
-    Ok(Some(Truth {
-        scenario,
-        alignments,
-        alignments_after_run,
-        undeclared: list("undeclared_effects"),
-        present: list("present_effects"),
-        scenario_file,
-        scenario_source,
-        bias_history: v["bias_history"]["samples"]
-            .as_array()
-            .map(|a| {
-                a.iter()
-                    .filter_map(|x| {
-                        let b: [f64; 3] =
-                            serde_json::from_value(x["bias_acs_rad_per_s"].clone()).ok()?;
-                        Some((x["t_s"].as_f64()?, Vector3::from(b) * ARCSEC_PER_RAD))
-                    })
-                    .collect()
-            })
-            .unwrap_or_default(),
-    }))
-}
-
-/// The run's scenario as flown: `truth.json`'s `scenario_as_flown`, else (run folders written
-/// before it was recorded) the scenario file of the run's name, with each FSS's transfer
-/// function drawn as the simulator drew it. Returns the scenario and where it came from.
-fn truth_scenario(
-    v: &serde_json::Value,
-    scenario: &str,
-) -> (Option<sim_harness::scenario::Scenario>, String) {
-    let mut unreadable = String::new();
-    if !v["scenario_as_flown"].is_null() {
-        match serde_json::from_value::<sim_harness::scenario::Scenario>(
-            v["scenario_as_flown"].clone(),
-        ) {
-            Ok(s) => return (Some(s), "truth.json scenario_as_flown".into()),
-            Err(e) => unreadable = format!("truth.json scenario_as_flown unreadable ({e}); "),
-        }
-    }
-    let dir = sim_harness::scenario::scenarios_dir();
-    let found = [
-        dir.join("undeclared").join(format!("{scenario}.toml")),
-        dir.join(format!("{scenario}.toml")),
-    ]
-    .into_iter()
-    .find(|p| p.exists())
-    .and_then(|p| {
-        let s = sim_harness::scenario::Scenario::load(&p).ok()?;
-        (s.name == scenario).then_some((s, p))
-    });
-    match found {
-        Some((mut s, p)) => {
-            let seed = v["seed"].as_u64().unwrap_or_default();
-            s.fss1 = s.fss1.as_flown(0, seed);
-            s.fss2 = s.fss2.as_flown(1, seed);
-            (
-                Some(s),
-                format!("{unreadable}{} (by the run's name)", p.display()),
-            )
-        }
-        None => (None, unreadable),
-    }
-}
-
-impl Truth {
-    /// A note when the scoring cannot know the true field functions (FSS transfer function,
-    /// FHST distortion): the table errors then count them as zero.
-    #[must_use]
-    pub fn field_truth_note(&self) -> Option<String> {
-        self.scenario_file.is_none().then(|| {
-            format!(
-                "scoring: {}no scenario file named {:?} was found: the true FSS transfer \
-                 function and FHST distortion are unknown and the table errors count them as zero",
-                if self.scenario_source.is_empty() {
-                    "truth.json has no scenario_as_flown and ".to_owned()
-                } else {
-                    self.scenario_source.clone()
-                },
-                self.scenario
-            )
-        })
-    }
-
-    /// The truth the tables written after the run are scored against: the alignments at the
-    /// end of the run (`alignments_after_run`).
-    #[must_use]
-    pub fn after_run(&self) -> Self {
-        Self {
-            alignments: self.alignments_after_run,
-            ..self.clone()
-        }
-    }
-}
-
-/// Alignment error vectors per sensor (ACS, arcsec), FHST-pair common rotation removed.
-fn alignment_errors(est: &AlignmentTable, truth: &Truth) -> Vec<Vector3<f64>> {
-    let m: Vec<Matrix3<f64>> = est.matrices().iter().map(|r| matrix_from_rows(r)).collect();
-    let e: Vec<Vector3<f64>> = (0..4)
-        .map(|i| rotvec_from_rot(&(m[i] * truth.alignments[i].transpose())) * ARCSEC_PER_RAD)
-        .collect();
-    let common = (e[0] + e[1]) * 0.5;
-    e.iter().map(|x| x - common).collect()
-}
-
-/// Truth's field-dependent error of a measurement (arcsec, sensor axes): the FSS transfer
-/// function or the FHST distortion of the scenario (zero when unknown).
-fn truth_field_error(m: &super::measurements::Measurement, truth: &Truth) -> [f64; 2] {
-    let Some(s) = &truth.scenario_file else {
-        return [0.0; 2];
-    };
-    let [a, b] = m.ang;
-    match m.sensor {
-        0 | 1 => {
-            let fx = if m.sensor == 0 {
-                &s.fhst1.effects
-            } else {
-                &s.fhst2.effects
-            };
-            let f = 4.0 * fsw_core::units::RAD_PER_DEG;
-            let rho2 = a * a + b * b;
-            let k3 = fx.radial_distortion_arcsec_at_4deg / f.powi(3);
-            let hv = a * b / (f * f);
-            [
-                k3 * rho2 * a + fx.hv_distortion_arcsec_at_corner[0] * hv,
-                k3 * rho2 * b + fx.hv_distortion_arcsec_at_corner[1] * hv,
-            ]
-        }
-        _ => {
-            let f = if m.sensor == 2 { &s.fss1 } else { &s.fss2 };
-            [
-                (f.alpha.apply(a, b) - a) * ARCSEC_PER_RAD,
-                (f.beta.apply(b, a) - b) * ARCSEC_PER_RAD,
-            ]
-        }
-    }
-}
-
-/// Calibration error per sensor (arcsec per axis): the RMS, over the run's own measurements
-/// of that sensor, of the error of the calibrated measurement model — the alignment error
-/// (FHST-pair common rotation removed: absolute alignment is indistinguishable from
-/// attitude) plus the error of the modelled field function (FSS transfer function, FHST
-/// distortion) against the truth's. `field_est` gives the model's field correction of a
-/// measurement (arcsec). Rotations the data do not constrain (an FSS rolled about the Sun
-/// line) and a transfer polynomial that trades with the alignment over the part of the field
-/// the Sun visits do not count; sensors without measurements are not scored.
-#[must_use]
-pub fn calibration_error_arcsec(
-    est: &AlignmentTable,
-    truth: &Truth,
-    set: &super::measurements::MeasurementSet,
-    field_est: &dyn Fn(usize) -> [f64; 2],
-) -> BTreeMap<String, f64> {
-    let d = alignment_errors(est, truth);
-    let names = super::measurements::SENSOR_NAMES;
-    let mut sum = [0.0; 4];
-    let mut n = [0usize; 4];
-    for (i, m) in set.meas.iter().enumerate() {
-        if m.outlier {
-            continue;
-        }
-        // M_est = Rot(d) M_true ⇒ predicted angles change by −J Mᵀ (b × d).
-        let align = -(m.jm
-            * m.b_acs
-                .cross(&(d[m.sensor] * fsw_core::units::RAD_PER_ARCSEC)))
-            * ARCSEC_PER_RAD;
-        let fe = field_est(i);
-        let ft = truth_field_error(m, truth);
-        let e0 = align.x + fe[0] - ft[0];
-        let e1 = align.y + fe[1] - ft[1];
-        sum[m.sensor] += 0.5 * (e0 * e0 + e1 * e1);
-        n[m.sensor] += 1;
-    }
-    (0..4)
-        .filter(|&i| n[i] > 0)
-        .map(|i| (names[i].to_owned(), (sum[i] / n[i] as f64).sqrt()))
-        .collect()
-}
-
-/// Full rotation angle of the alignment error per sensor (arcsec), FHST-pair common rotation
-/// removed.
-#[must_use]
-pub fn rotation_error_arcsec(est: &AlignmentTable, truth: &Truth) -> BTreeMap<String, f64> {
-    let d = alignment_errors(est, truth);
-    let names = super::measurements::SENSOR_NAMES;
-    (0..4).map(|i| (names[i].to_owned(), d[i].norm())).collect()
-}
 
 /// One parameter compared with the truth.
 #[derive(Clone, Debug, Serialize)]
@@ -286,378 +36,111 @@ pub struct ParameterCheck {
     pub z: f64,
 }
 
-fn unit_of(sensor: &str) -> String {
-    sensor.to_ascii_lowercase()
+/// A table written (or that would have been written) with the parameters of the fit it holds.
+#[derive(Clone, Copy, Debug)]
+pub struct TableFit<'a> {
+    /// The alignment table.
+    pub alignment: &'a AlignmentTable,
+    /// The fit's parameter vector (the layout's whole length).
+    pub parameters: &'a nalgebra::DVector<f64>,
+    /// The parameters the table holds ([`super::flight`]).
+    pub held: &'a [usize],
 }
 
-/// Does a detection name an effect that is in the truth for that unit?
-#[must_use]
-pub fn matches_truth(d: &Detected, truth: &Truth) -> bool {
-    let name = match d.effect.as_str() {
-        "aberration_annual" | "aberration" => "aberration".to_owned(),
-        "aberration_orbital" => "orbital_aberration".to_owned(),
-        "gyro_scale_asymmetry" => "iru.scale_asymmetry".to_owned(),
-        "gyro_thermal_bias" => "iru.thermal_bias".to_owned(),
-        "gyro_bias_transient" | "gyro_bias_ramp" => "iru_bias_transient".to_owned(),
-        "orbit_periodic_alignment" | "thermal_alignment_drift" => {
-            format!("{}.thermal_alignment_drift", unit_of(&d.sensor))
-        }
-        "catalog_proper_motion_error" => "catalog_proper_motion_error".to_owned(),
-        "fss_transfer_function" => "fss_transfer_function".to_owned(),
-        other => format!("{}.{other}", unit_of(&d.sensor)),
-    };
-    truth.present.iter().any(|p| *p == name)
+/// What a finished diagnosis offers a scorer: the tables at each stage and the model.
+#[derive(Clone, Copy, Debug)]
+pub struct ScoringInputs<'a> {
+    /// The run folder (its `truth.json`, if any, is the scorer's business).
+    pub run_dir: &'a Path,
+    /// The sensor-side analysis (measurements, search, final fit).
+    pub analysis: &'a Analysis,
+    /// Every detected effect, sensor and gyro side.
+    pub detected: &'a [Detected],
+    /// The calibration chain's alignments (before diagnose's model).
+    pub chain_alignment: &'a AlignmentTable,
+    /// The ground model's alignments (the final fit).
+    pub ground_alignment: &'a AlignmentTable,
+    /// The table `calibrate` writes for the same telemetry.
+    pub calibrate_alignment: &'a AlignmentTable,
+    /// The table diagnose wrote, with its fit.
+    pub written: TableFit<'a>,
+    /// The table diagnose would have written without its held-out validation.
+    pub unvalidated: TableFit<'a>,
+    /// Time of the first frame (s since J2000, TT).
+    pub first_frame_j2000_tt_s: f64,
 }
 
-/// Truth values of a detection's parameters (from the scenario file).
-#[must_use]
-pub fn parameter_truth(
-    d: &Detected,
-    truth: &Truth,
-    aberration_k0: [f64; 2],
-) -> BTreeMap<String, f64> {
-    let mut out = BTreeMap::new();
-    let Some(s) = &truth.scenario_file else {
-        return out;
-    };
-    let fhst = |n: &str| {
-        if n == "FHST1" {
-            Some(&s.fhst1)
-        } else if n == "FHST2" {
-            Some(&s.fhst2)
-        } else {
-            None
-        }
-    };
-    let fss = |n: &str| {
-        if n == "FSS1" {
-            Some(&s.fss1)
-        } else if n == "FSS2" {
-            Some(&s.fss2)
-        } else {
-            None
-        }
-    };
-    let sensor = d.sensor.as_str();
-    match d.effect.as_str() {
-        "aberration_annual" => {
-            out.insert("k_annual_minus_applied".into(), 1.0 - aberration_k0[0]);
-        }
-        "aberration_orbital" => {
-            let k = if s.sky.orbital_aberration { 1.0 } else { 0.0 };
-            out.insert("k_orbital_minus_applied".into(), k - aberration_k0[1]);
-        }
-        "aberration" => {
-            let k = if s.sky.orbital_aberration { 1.0 } else { 0.0 };
-            out.insert("k_annual_minus_applied".into(), 1.0 - aberration_k0[0]);
-            out.insert("k_orbital_minus_applied".into(), k - aberration_k0[1]);
-        }
-        "time_tag_offset" => {
-            let tau = fhst(sensor)
-                .map(|f| f.effects.time_tag_offset_s)
-                .or_else(|| fss(sensor).map(|f| f.effects.time_tag_offset_s));
-            if let Some(t) = tau {
-                out.insert("tau".into(), t * 1e3);
-            }
-        }
-        "thermal_alignment_drift" => {
-            let k = fhst(sensor)
-                .map(|f| f.effects.thermal_alignment_arcsec_per_c)
-                .or_else(|| fss(sensor).map(|f| f.effects.thermal_alignment_arcsec_per_c));
-            if let Some(k) = k {
-                for (i, n) in ["x", "y", "z"].iter().enumerate() {
-                    out.insert((*n).to_owned(), k[i]);
-                }
-            }
-        }
-        "fhst_distortion" => {
-            if let Some(f) = fhst(sensor) {
-                out.insert(
-                    "radial_at_4deg".into(),
-                    f.effects.radial_distortion_arcsec_at_4deg,
-                );
-                out.insert(
-                    "hv_h_at_corner".into(),
-                    f.effects.hv_distortion_arcsec_at_corner[0],
-                );
-                out.insert(
-                    "hv_v_at_corner".into(),
-                    f.effects.hv_distortion_arcsec_at_corner[1],
-                );
-            }
-        }
-        "magnitude_bias" => {
-            if let Some(f) = fhst(sensor) {
-                out.insert(
-                    "h_per_mag".into(),
-                    f.effects.magnitude_bias_arcsec_per_mag[0],
-                );
-                out.insert(
-                    "v_per_mag".into(),
-                    f.effects.magnitude_bias_arcsec_per_mag[1],
-                );
-            }
-        }
-        "fss_transfer_function" => {
-            if let Some(f) = fss(sensor) {
-                for (head, h) in [("alpha", &f.alpha), ("beta", &f.beta)] {
-                    out.insert(format!("{head}_scale"), h.scale_ppm);
-                    out.insert(format!("{head}_cross_at_corner"), h.cross_arcsec_at_corner);
-                    out.insert(format!("{head}_cubic_at_edge"), h.cubic_arcsec_at_edge);
-                    out.insert(format!("{head}_cyclic_sin"), h.cyclic_arcsec);
-                    out.insert(format!("{head}_cyclic_cos"), 0.0);
-                }
-                out.insert("pitch_deg".into(), f.alpha.cyclic_pitch_deg);
-            }
-        }
-        "gyro_scale_asymmetry" => {
-            let a = s.iru.effects.scale_asymmetry_ppm;
-            for (n, ch) in [("x", 1), ("y", 2), ("z", 4)] {
-                out.insert(n.into(), a[ch]);
-            }
-        }
-        "gyro_bias_ramp" => {
-            // Least-squares slope of the true bias over the run (arcsec/s per hour).
-            let h = &truth.bias_history;
-            if h.len() >= 3 {
-                let n = h.len() as f64;
-                let tm = h.iter().map(|(t, _)| t / 3600.0).sum::<f64>() / n;
-                let bm = h.iter().map(|(_, b)| b).sum::<Vector3<f64>>() / n;
-                let stt: f64 = h.iter().map(|(t, _)| (t / 3600.0 - tm).powi(2)).sum();
-                let stb: Vector3<f64> = h.iter().map(|(t, b)| (b - bm) * (t / 3600.0 - tm)).sum();
-                let slope = stb / stt;
-                for (i, n) in ["x", "y", "z"].iter().enumerate() {
-                    out.insert((*n).into(), slope[i]);
-                }
-            }
-        }
-        "alignment_step" => {
-            let step = fhst(sensor)
-                .map(|f| f.effects.alignment_step_arcsec)
-                .or_else(|| fss(sensor).map(|f| f.effects.alignment_step_arcsec));
-            if let Some(k) = step {
-                for (i, n) in ["x", "y", "z"].iter().enumerate() {
-                    out.insert((*n).to_owned(), k[i]);
-                }
-            }
-        }
-        "gyro_thermal_bias" => {
-            let k = s.iru.effects.thermal_bias_deg_per_s_per_c;
-            for (n, ch) in [("x", 1), ("y", 2), ("z", 4)] {
-                out.insert(n.into(), k[ch] * 3600.0);
-            }
-        }
-        _ => {}
+impl ScoringInputs<'_> {
+    /// The field correction (arcsec, sensor axes) of measurement `k` by the model's field
+    /// effects (transfer function, distortion) with the parameters of `g` a table holds
+    /// (`held`; `None`: all of them, the ground model).
+    #[must_use]
+    pub fn field_arcsec(
+        &self,
+        g: &nalgebra::DVector<f64>,
+        held: Option<&[usize]>,
+        k: usize,
+    ) -> [f64; 2] {
+        field_arcsec(&self.analysis.search, &self.analysis.set, g, held, k)
     }
-    out
 }
 
-/// True per-star catalog offsets (HIP → (east, north) arcsec) at `j2000_tt_s`: the truth
-/// sky (the scenario's proper-motion errors) against the catalog the ground uses.
+/// What a scorer returns: each field goes into `report.json` under its name.
+#[derive(Clone, Debug, Default)]
+pub struct ScoringOutcome {
+    /// `calibration_error_arcsec`: the chain's and the ground model's alignments.
+    pub calibration_error_arcsec: Option<BeforeAfter>,
+    /// `calibration_rotation_error_arcsec`.
+    pub calibration_rotation_error_arcsec: Option<BeforeAfter>,
+    /// `written_table_error_arcsec`: calibrate's table and diagnose's.
+    pub written_table_error_arcsec: Option<BeforeAfter>,
+    /// `unvalidated_table_error_arcsec`.
+    pub unvalidated_table_error_arcsec: Option<BTreeMap<String, f64>>,
+    /// `scoring`.
+    pub scoring: Option<Scoring>,
+}
+
+/// Scores a finished diagnosis against a truth the ground does not have.
+pub trait Scorer: std::fmt::Debug + Send + Sync {
+    /// The scores of this run (`ScoringOutcome::default()`: nothing to score, e.g. no
+    /// `truth.json`).
+    ///
+    /// # Errors
+    /// A truth file that exists but cannot be read.
+    fn score(&self, inputs: &ScoringInputs<'_>) -> anyhow::Result<ScoringOutcome>;
+}
+
+/// The field correction (arcsec, sensor axes) of measurement `k` by the field effects of the
+/// search's model (transfer function, distortion) with the parameters of `g` that a table
+/// holds (`held`; `None`: all of them, the ground model).
 #[must_use]
-pub fn catalog_truth(truth: &Truth, j2000_tt_s: f64) -> BTreeMap<u32, [f64; 2]> {
-    use sim_harness::truth::sky::{Sky, SkyParams};
-    let mut out = BTreeMap::new();
-    let Some(s) = &truth.scenario_file else {
-        return out;
-    };
-    if s.sky.proper_motion_error_sigma_mas_per_yr <= 0.0 && s.sky.proper_motion_scale == 1.0 {
-        return out;
-    }
-    let Ok(table) =
-        sim_harness::data::CsvTable::parse(sim_harness::data::HIPPARCOS_CSV, "hipparcos")
-    else {
-        return out;
-    };
-    let (Ok(sky_true), Ok(sky_ground)) = (
-        Sky::from_csv(&table, &s.sky),
-        Sky::from_csv(&table, &SkyParams::default()),
-    ) else {
-        return out;
-    };
-    let origin = Vector3::zeros();
-    for st in sky_ground.stars() {
-        let Some(t) = sky_true.index_of_hip(st.hip).and_then(|i| sky_true.star(i)) else {
-            continue;
-        };
-        let u = st.astrometric_dir_eci(j2000_tt_s, &origin);
-        let v = t.astrometric_dir_eci(j2000_tt_s, &origin);
-        let east = Vector3::z().cross(&u);
-        if east.norm() < 1e-9 {
+pub fn field_arcsec(
+    res: &SearchResult,
+    set: &super::measurements::MeasurementSet,
+    g: &nalgebra::DVector<f64>,
+    held: Option<&[usize]>,
+    k: usize,
+) -> [f64; 2] {
+    let m = &set.meas[k];
+    let mut out = [0.0; 2];
+    let mut cols = Vec::new();
+    for &i in res.baseline.iter().chain(&res.added) {
+        if !matches!(
+            res.layout.effects[i].kind,
+            super::effects::EffectKind::FssTransferFunction
+                | super::effects::EffectKind::FhstDistortion
+        ) {
             continue;
         }
-        let east = east.normalize();
-        let north = u.cross(&east);
-        let d = v - u;
-        out.insert(
-            st.hip,
-            [
-                d.dot(&east) * ARCSEC_PER_RAD,
-                d.dot(&north) * ARCSEC_PER_RAD,
-            ],
-        );
-    }
-    out
-}
-
-/// Compare every detection's parameters with the truth (catalog offsets per star).
-#[must_use]
-pub fn check_parameters(
-    detected: &[Detected],
-    truth: &Truth,
-    aberration_k0: [f64; 2],
-    j2000_tt_s: f64,
-) -> Vec<ParameterCheck> {
-    let mut out = Vec::new();
-    let mut catalog: Option<BTreeMap<u32, [f64; 2]>> = None;
-    for d in detected {
-        let mut truths = parameter_truth(d, truth, aberration_k0);
-        if d.effect == "catalog_proper_motion_error" {
-            let cat = catalog.get_or_insert_with(|| catalog_truth(truth, j2000_tt_s));
-            for k in d.parameters.keys() {
-                let Some(rest) = k.strip_prefix("HIP") else {
-                    continue;
-                };
-                let mut parts = rest.split('_');
-                let (Some(h), Some(dir)) = (
-                    parts.next().and_then(|h| h.parse::<u32>().ok()),
-                    parts.next(),
-                ) else {
-                    continue;
-                };
-                if let Some(t) = cat.get(&h) {
-                    truths.insert(k.clone(), if dir == "east" { t[0] } else { t[1] });
-                }
-            }
-        }
-        if d.effect == "catalog_proper_motion_error" {
-            // Offsets are known up to a common rotation: compare after removing the net
-            // rotation of (estimate − truth).
-            let keys: Vec<String> = truths.keys().cloned().collect();
-            let mut dirs = Vec::new();
-            let mut x = Vec::new();
-            let mut var = Vec::new();
-            let mut used = Vec::new();
-            let mut i = 0;
-            while i + 1 < keys.len() {
-                let (ke, kn) = (&keys[i], &keys[i + 1]);
-                let hip = ke
-                    .trim_start_matches("HIP")
-                    .split('_')
-                    .next()
-                    .unwrap_or_default()
-                    .to_owned();
-                if ke.ends_with("_east")
-                    && kn.ends_with("_north")
-                    && kn.starts_with(&format!("HIP{hip}_"))
-                {
-                    if let (Some(u), Some(e), Some(n), Some(se), Some(sn)) = (
-                        d.star_dirs.get(&hip),
-                        d.parameters.get(ke),
-                        d.parameters.get(kn),
-                        d.sigma.get(ke),
-                        d.sigma.get(kn),
-                    ) {
-                        dirs.push(*u);
-                        x.extend([e - truths[ke], n - truths[kn]]);
-                        var.extend([se * se, sn * sn]);
-                        used.push((ke.clone(), kn.clone()));
-                    }
-                    i += 2;
-                } else {
-                    i += 1;
-                }
-            }
-            let r = super::effects::remove_net_rotation(&dirs, &x, &var);
-            for (j, (ke, kn)) in used.iter().enumerate() {
-                for (kk, idx) in [(ke, 2 * j), (kn, 2 * j + 1)] {
-                    let s = var[idx].sqrt();
-                    out.push(ParameterCheck {
-                        effect: d.effect.clone(),
-                        sensor: d.sensor.clone(),
-                        parameter: format!("{kk} (net rotation removed)"),
-                        estimate: truths[kk] + r[idx],
-                        sigma: s,
-                        truth: truths[kk],
-                        z: r[idx] / s,
-                    });
-                }
-            }
-            continue;
-        }
-        for (k, t) in truths {
-            if let (Some(&e), Some(&s)) = (d.parameters.get(&k), d.sigma.get(&k)) {
-                out.push(ParameterCheck {
-                    effect: d.effect.clone(),
-                    sensor: d.sensor.clone(),
-                    parameter: k,
-                    estimate: e,
-                    sigma: s,
-                    truth: t,
-                    z: (e - t) / s,
-                });
+        cols.clear();
+        res.layout.effects[i].columns(m, &|_| None, &mut cols);
+        let o = res.layout.offsets[i];
+        for (p, v) in &cols {
+            if held.is_none_or(|h| h.contains(&(o + p))) {
+                out[0] += v[0] * g[o + p];
+                out[1] += v[1] * g[o + p];
             }
         }
     }
     out
-}
-
-#[cfg(test)]
-mod tests {
-    #![allow(clippy::unwrap_used, clippy::expect_used)]
-    use super::*;
-
-    /// A `truth.json` with identity alignments and the given extra fields, in a fresh folder.
-    fn truth_dir(tag: &str, extra: &[(&str, serde_json::Value)]) -> std::path::PathBuf {
-        let dir = std::env::temp_dir().join(format!("scoring-{}-{tag}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let eye = serde_json::json!([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]);
-        let mut v = serde_json::json!({
-            "seed": 3,
-            "alignments": { "FHST1": eye, "FHST2": eye, "FSS1": eye, "FSS2": eye },
-        });
-        for (k, x) in extra {
-            v[*k] = x.clone();
-        }
-        std::fs::write(dir.join("truth.json"), v.to_string()).unwrap();
-        dir
-    }
-
-    #[test]
-    fn the_field_truth_comes_from_truth_json_whatever_the_plan_is_called() {
-        // A plan flown from a file outside scenarios/ (its name matches no shipped file):
-        // truth.json's own copy of the scenario gives the transfer function it flew.
-        let file = sim_harness::scenario::scenarios_dir().join("undeclared/clean.toml");
-        let mut flown = sim_harness::scenario::Scenario::load(&file).unwrap();
-        flown.name = "a-plan-of-elsewhere".into();
-        flown.fss2 = flown.fss2.as_flown(1, 3);
-        let dir = truth_dir(
-            "as-flown",
-            &[
-                ("scenario", serde_json::json!("a-plan-of-elsewhere")),
-                ("scenario_as_flown", serde_json::to_value(&flown).unwrap()),
-            ],
-        );
-        let t = read_truth(&dir).unwrap().unwrap();
-        std::fs::remove_dir_all(&dir).unwrap();
-        assert_eq!(t.scenario_source, "truth.json scenario_as_flown");
-        assert_eq!(t.field_truth_note(), None);
-        assert_eq!(t.scenario_file.unwrap().fss2, flown.fss2);
-    }
-
-    #[test]
-    fn an_unknown_field_truth_is_said_not_scored_as_zero_in_silence() {
-        let dir = truth_dir(
-            "unknown",
-            &[("scenario", serde_json::json!("a-plan-of-elsewhere"))],
-        );
-        let t = read_truth(&dir).unwrap().unwrap();
-        std::fs::remove_dir_all(&dir).unwrap();
-        assert!(t.scenario_file.is_none());
-        let note = t.field_truth_note().unwrap();
-        assert!(
-            note.contains("a-plan-of-elsewhere") && note.contains("zero"),
-            "{note}"
-        );
-    }
 }

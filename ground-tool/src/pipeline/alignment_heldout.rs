@@ -421,7 +421,7 @@ pub(crate) fn validate_aberration_switch(
     frames: &[FrameObservations],
     setup: &AlignmentSetup<'_>,
 ) -> AberrationSwitchValidation {
-    use sim_harness::truth::sun::SunEphemeris;
+    use gro_reference::sun::SunEphemeris;
     let (per_epoch_new, dof, used) = heldout_fhst_pairs_chi2(frames, setup, &mut |_, u| *u);
     let mut eph: Option<SunEphemeris> = None;
     // First order: u_app = u + β − (u·β) u, so u = u_app − β + (u_app·β) u_app (2 mas).

@@ -29,8 +29,8 @@ use super::fss_consider::{consider_covariance, TransferSpreads};
 use super::fss_systematic::{estimate_fss_systematic, FssSystematicEstimate};
 use super::gyro_chain::{build_gyro_chain, irucal_stage, BackupIruReport, IruStage};
 use super::observations::{
-    build_observations, fine_attitude, AttitudeSensors, DeclaredNoise, FrameObservations,
-    IdentifyOptions, RateSwitch,
+    build_observations, fine_attitude, AttitudeSensors, FrameObservations, IdentifyOptions,
+    RateSwitch,
 };
 use super::star_batches::star_batch_samples;
 use crate::calibration::adjust::{preserve_obc_attitude, BoresightFrame};
@@ -53,9 +53,9 @@ use fsw_core::tables::image::encode_image;
 use fsw_core::tables::types::{matrix_from_rows, rows_from_matrix};
 use fsw_core::tables::{AlignmentTable, FilterTable, IruTable, TableId};
 use fsw_core::units::{ARCSEC_PER_RAD, RAD_PER_ARCSEC};
+use gro_reference::sky::{Sky, SkyParams};
 use nalgebra::{Matrix3, Vector3};
 use serde::Serialize;
-use sim_harness::truth::sky::{Sky, SkyParams};
 use std::path::{Path, PathBuf};
 
 /// Sensor names in table order.
@@ -107,44 +107,9 @@ pub(crate) const BATCH_HALF_S: f64 = 300.0;
 /// 733 arcsec, so the FSS prior must not constrain a change of that size.
 const PRIOR_SIGMA_ARCSEC: [f64; 4] = [60.0, 60.0, 1800.0, 1800.0];
 
-/// What the operator declares about a run (`metadata.json`); every field has a default.
-#[derive(Clone, Debug, Default, serde::Deserialize)]
-#[serde(default)]
-pub struct Metadata {
-    /// Scenario name.
-    pub scenario: String,
-    /// Declared noise figures.
-    pub sensors: DeclaredNoise,
-    /// Declared effects the operator's model includes; `None` (absent) = the GRO defaults
-    /// ([`super::flown::DEFAULT_DECLARED_EFFECTS`]).
-    pub declared_effects: Option<Vec<String>>,
-    /// 1σ spreads of the FSS transfer-function coefficients per unit; FFCAL carries them as
-    /// consider parameters ([`super::fss_consider`]). Absent = the per-cell weights alone.
-    pub fss_transfer_function_sigma: Option<super::fss_consider::TransferSpreads>,
-}
-
-impl Metadata {
-    /// The effects the operator's model includes: the list given, or the GRO defaults
-    /// ([`super::flown::DEFAULT_DECLARED_EFFECTS`]) when `declared_effects` is absent.
-    #[must_use]
-    pub fn declared(&self) -> Vec<String> {
-        self.declared_effects.clone().unwrap_or_else(|| {
-            super::flown::DEFAULT_DECLARED_EFFECTS
-                .iter()
-                .map(|s| (*s).to_owned())
-                .collect()
-        })
-    }
-
-    /// Whether the operator's model includes `effect` (absent list = the GRO defaults).
-    #[must_use]
-    pub fn declares(&self, effect: &str) -> bool {
-        match &self.declared_effects {
-            Some(list) => list.iter().any(|e| e == effect),
-            None => super::flown::DEFAULT_DECLARED_EFFECTS.contains(&effect),
-        }
-    }
-}
+/// What the operator declares about a run (`metadata.json`): the one definition, shared with
+/// the simulator that writes it (`gro_reference::run_folder`, docs/icd.md §5).
+pub use gro_reference::run_folder::Metadata;
 
 /// Options of the chain.
 #[derive(Clone, Debug)]
@@ -501,24 +466,19 @@ fn rows(m: &Matrix3<f64>) -> [[f64; 3]; 3] {
 /// # Errors
 /// Parse errors of the embedded CSV (a build defect).
 pub fn load_catalog() -> anyhow::Result<Sky> {
-    let text = include_str!("../../../data/hipparcos_mag6p5.csv");
-    let table = sim_harness::data::CsvTable::parse(text, "data/hipparcos_mag6p5.csv")?;
+    let table = gro_reference::data::CsvTable::parse(
+        gro_reference::data::HIPPARCOS_CSV,
+        "data/hipparcos_mag6p5.csv",
+    )?;
     Sky::from_csv(&table, &SkyParams::default())
 }
 
 /// Read `metadata.json` if present (defaults otherwise).
 ///
 /// # Errors
-/// A present but malformed file.
+/// A present but malformed file ([`crate::run_check::InputError`], naming the file).
 pub fn read_metadata(run_dir: &Path) -> anyhow::Result<Metadata> {
-    let path = run_dir.join("metadata.json");
-    if !path.exists() {
-        return Ok(Metadata::default());
-    }
-    let text =
-        std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
-    serde_json::from_str(&text)
-        .with_context(|| format!("{} is not valid metadata (docs/icd.md §5)", path.display()))
+    Metadata::read(run_dir)
 }
 
 /// The FSS field cell of a sensor-frame Sun direction ([`FSS_CELL_DEG`] on each head angle).
@@ -1189,7 +1149,7 @@ pub fn calibrate_telemetry(
 
     // FFCAL. A sensor never seen together with another one (e.g. an FSS the Sun never
     // visited) is left out and keeps its flown alignment (reported as not observed).
-    let declared_fss_sys = metadata.sensors.fss_systematic_arcsec;
+    let declared_fss_sys = metadata.sensors.fss_systematic_or_paper_arcsec();
     let (map, observed) = observed_sensors(&frames, declared_fss_sys, &mut summary)?;
     let flown: Vec<Matrix3<f64>> = flown_alignment
         .matrices()
@@ -1627,7 +1587,7 @@ impl FixFloors {
                 * (0.25 / ARCSEC_PER_RAD.powi(2)),
             fss_arcsec: metadata
                 .sensors
-                .fss_systematic_arcsec
+                .fss_systematic_or_paper_arcsec()
                 .hypot(fss_alignment_sigma),
         }
     }
@@ -1813,7 +1773,7 @@ pub fn read_run(run_dir: &Path) -> anyhow::Result<(Telemetry, Metadata)> {
         .into());
     }
     let tm = tp::read_file(&telemetry_path).map_err(|e| crate::run_check::InputError(e.into()))?;
-    let metadata = read_metadata(run_dir).map_err(crate::run_check::InputError::from)?;
+    let metadata = read_metadata(run_dir)?;
     crate::run_check::validate_metadata(&run_dir.join("metadata.json"), &metadata)?;
     Ok((tm, metadata))
 }
@@ -1909,7 +1869,7 @@ pub fn calibrate_run(
             .insert("filter".into(), "tables/filter.tbl".into());
         files.push("filter.tbl".to_owned());
     }
-    // The tables to fly, named (sim_harness::manifest): exactly those the report lists.
-    sim_harness::manifest::write(&tables_dir, &files, "ground-tool calibrate")?;
+    // The tables to fly, named (gro_reference::manifest): exactly those the report lists.
+    gro_reference::manifest::write(&tables_dir, &files, "ground-tool calibrate")?;
     Ok(out)
 }

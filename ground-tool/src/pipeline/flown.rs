@@ -10,20 +10,21 @@ use std::path::Path;
 
 use fsw_core::tables::{AlignmentTable, FilterTable, IruTable, StarCatalogTable};
 
-use super::calibrate::{decode_table_image, read_table_image};
+use super::calibrate::{decode_table_image, read_table_image, Metadata};
 use crate::run_check::InputError;
+use gro_reference::run_folder::METADATA_FILE;
 
 /// The effects every GRO analyst's model includes when `metadata.json` does not list
-/// `declared_effects`: the list `sim-harness` declares by default (one definition).
-pub use sim_harness::scenario::DEFAULT_DECLARED_EFFECTS;
+/// `declared_effects`: part of the file's contract, defined with it (one definition, which
+/// the simulator declares by default too).
+pub use gro_reference::run_folder::DEFAULT_DECLARED_EFFECTS;
 
-/// `metadata.json` as JSON (`Null` when absent or unreadable: every field has a default).
+/// `metadata.json` for the callers that need only its uploads and epoch before the chain's
+/// own strict read (`read_run`): the defaults when it is absent or unreadable (the chain then
+/// reports an unreadable file, naming the field).
 #[must_use]
-pub fn metadata_json(run_dir: &Path) -> serde_json::Value {
-    std::fs::read_to_string(run_dir.join("metadata.json"))
-        .ok()
-        .and_then(|t| serde_json::from_str(&t).ok())
-        .unwrap_or(serde_json::Value::Null)
+pub fn metadata_or_default(run_dir: &Path) -> Metadata {
+    Metadata::read(run_dir).unwrap_or_default()
 }
 
 /// The image files of the activated, accepted uploads of `table` ("alignment", "iru",
@@ -34,27 +35,23 @@ pub fn metadata_json(run_dir: &Path) -> serde_json::Value {
 /// (reading it as "the boot table was flown" would calibrate against the wrong table).
 fn activated_uploads(
     run_dir: &Path,
-    meta: &serde_json::Value,
+    meta: &Metadata,
     table: &str,
 ) -> Result<Vec<std::path::PathBuf>, InputError> {
     let mut out = Vec::new();
-    for (i, u) in meta["uploads"].as_array().into_iter().flatten().enumerate() {
-        if u["activated_at_s"].is_null()
-            || u["accepted"].as_bool() == Some(false)
-            || u["table"].as_str() != Some(table)
-        {
+    for (i, u) in meta.uploads.iter().enumerate() {
+        if !u.flown() || u.table != table {
             continue;
         }
-        let Some(f) = u["file"].as_str() else {
+        let (Some(f), Some(at_s)) = (&u.file, u.activated_at_s) else {
             continue;
         };
         let p = run_dir.join(f);
         if !p.is_file() {
             return Err(InputError::msg(format!(
-                "{}: uploads[{i}] lists {} ({table} table, activated at t = {} s) but the file is missing: the table the OBC flew cannot be known. Restore the file, or give the flown tables with --tables DIR",
-                run_dir.join("metadata.json").display(),
+                "{}: uploads[{i}] lists {} ({table} table, activated at t = {at_s:?} s) but the file is missing: the table the OBC flew cannot be known. Restore the file, or give the flown tables with --tables DIR",
+                run_dir.join(METADATA_FILE).display(),
                 p.display(),
-                u["activated_at_s"]
             )));
         }
         out.push(p);
@@ -67,13 +64,13 @@ fn activated_uploads(
 /// boot table.
 fn flown<T: serde::de::DeserializeOwned + serde::Serialize>(
     run_dir: &Path,
-    meta: &serde_json::Value,
+    meta: &Metadata,
     tables: Option<&Path>,
     table: &str,
 ) -> anyhow::Result<Option<T>> {
     match tables {
         Some(dir) => {
-            let (listed, _) = sim_harness::manifest::read(dir)?;
+            let (listed, _) = gro_reference::manifest::read(dir)?;
             listed
                 .iter()
                 .rev()
@@ -106,7 +103,7 @@ fn flown<T: serde::de::DeserializeOwned + serde::Serialize>(
 /// A table image that does not parse (the message names the file).
 pub fn flown_tables(
     run_dir: &Path,
-    meta: &serde_json::Value,
+    meta: &Metadata,
     tables: Option<&Path>,
 ) -> anyhow::Result<(
     Option<AlignmentTable>,
@@ -127,7 +124,7 @@ pub fn flown_tables(
 /// As [`flown_tables`].
 pub fn flown_catalog(
     run_dir: &Path,
-    meta: &serde_json::Value,
+    meta: &Metadata,
     tables: Option<&Path>,
 ) -> anyhow::Result<Option<StarCatalogTable>> {
     if let Some(dir) = tables {
@@ -141,23 +138,7 @@ pub fn flown_catalog(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::pipeline::calibrate::{filter_update, Metadata};
-
-    #[test]
-    fn absent_declared_effects_are_the_gro_defaults_an_empty_list_is_none() {
-        let meta =
-            |v: serde_json::Value| -> Metadata { serde_json::from_value(v).unwrap_or_default() };
-        let absent = meta(serde_json::json!({})).declared();
-        assert_eq!(absent, DEFAULT_DECLARED_EFFECTS.map(str::to_owned).to_vec());
-        let empty = meta(serde_json::json!({ "declared_effects": [] })).declared();
-        assert!(empty.is_empty());
-        let m: Metadata = serde_json::from_value(serde_json::json!({})).unwrap_or_default();
-        assert!(m.declares("aberration"));
-        let m: Metadata =
-            serde_json::from_value(serde_json::json!({ "declared_effects": ["sun_parallax"] }))
-                .unwrap_or_default();
-        assert!(!m.declares("aberration") && m.declares("sun_parallax"));
-    }
+    use crate::pipeline::calibrate::filter_update;
 
     /// The chain proposes the onboard annual-aberration correction only when the operator's
     /// model includes aberration and the flown table leaves it off.
@@ -198,19 +179,21 @@ mod tests {
         };
         assert!(write("uploads/01_alignment.tbl", &moved).is_ok());
         assert!(write("uploads/02_alignment.tbl", &AlignmentTable::prelaunch()).is_ok());
-        let meta = serde_json::json!({ "uploads": [
+        let meta: Metadata = serde_json::from_value(serde_json::json!({ "uploads": [
             { "table": "alignment", "file": "uploads/01_alignment.tbl", "activated_at_s": 0.0, "accepted": true },
             { "table": "alignment", "file": "uploads/02_alignment.tbl", "activated_at_s": null, "accepted": true },
-        ]});
+        ]}))
+        .unwrap_or_default();
+        assert_eq!(meta.uploads.len(), 2);
         let (a, i, f) = flown_tables(&dir, &meta, None).unwrap_or((None, None, None));
         assert_eq!(a, Some(moved));
         assert!(i.is_none() && f.is_none());
         let (a, _, _) =
-            flown_tables(&dir, &serde_json::json!({}), None).unwrap_or((None, None, None));
+            flown_tables(&dir, &Metadata::default(), None).unwrap_or((None, None, None));
         assert!(a.is_none(), "no uploads: the boot table");
         // --tables that does not exist: refused, not read as "the boot tables".
         let r = flown_tables(&dir, &meta, Some(&dir.join("none")));
-        assert!(matches!(&r, Err(e) if sim_harness::is_input_error(e)));
+        assert!(matches!(&r, Err(e) if gro_reference::is_input_error(e)));
         // --tables with a manifest that lists no alignment: only that folder counts.
         let _ = std::fs::create_dir_all(dir.join("t"));
         assert!(crate::pipeline::calibrate::write_table(
@@ -220,7 +203,9 @@ mod tests {
             0.0
         )
         .is_ok());
-        assert!(sim_harness::manifest::write(&dir.join("t"), &["iru.tbl".into()], "test").is_ok());
+        assert!(
+            gro_reference::manifest::write(&dir.join("t"), &["iru.tbl".into()], "test").is_ok()
+        );
         let (a, i, _) =
             flown_tables(&dir, &meta, Some(&dir.join("t"))).unwrap_or((None, None, None));
         assert!(
@@ -231,7 +216,7 @@ mod tests {
         let _ = std::fs::remove_file(dir.join("uploads/01_alignment.tbl"));
         let r = flown_tables(&dir, &meta, None);
         assert!(matches!(&r, Err(e)
-            if sim_harness::is_input_error(e) && format!("{e:#}").contains("missing")));
+            if gro_reference::is_input_error(e) && format!("{e:#}").contains("missing")));
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

@@ -18,92 +18,18 @@
 //! are left as they are; what the covariance then says is what the Sun's path through this
 //! run's field leaves of an error of the declared kind.
 
-use std::collections::BTreeMap;
-
 use anyhow::Context;
 use nalgebra::{DMatrix, DVector, Vector3};
-use serde::{Deserialize, Serialize};
 
 use crate::calibration::alignment::{
     ffcal, AlignmentData, FfcalConfig, FfcalSolution, SensorObservation, SensorSpec,
 };
-use crate::{ARCSEC_PER_RAD, RAD_PER_ARCSEC};
+use crate::RAD_PER_ARCSEC;
 
-/// The field edge the cross and cubic terms are scaled to (rad).
-const EDGE_RAD: f64 = 32.0 * std::f64::consts::PI / 180.0;
-
-/// 1σ spreads of one head's transfer-function coefficients (arcsec unless named).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
-pub struct HeadSpread {
-    /// Null offset (arcsec).
-    pub offset_arcsec: f64,
-    /// Scale factor (ppm of the head angle).
-    pub scale_ppm: f64,
-    /// Cyclic reticle error amplitude (arcsec); its phase is unknown.
-    pub cyclic_arcsec: f64,
-    /// Period of the cyclic error (deg); 0 = no cyclic term.
-    pub cyclic_pitch_deg: f64,
-    /// Cross-axis term at the 32° corner (arcsec).
-    pub cross_arcsec_at_corner: f64,
-    /// Edge term at 32° (arcsec).
-    pub cubic_arcsec_at_edge: f64,
-}
-
-impl HeadSpread {
-    /// The head-angle error (arcsec) of each coefficient at 1σ, for the head angle `own` and
-    /// the other head's `other` (rad). The cyclic amplitude of unknown phase is a sine and a
-    /// cosine of σ/√2 each (the same mean square).
-    #[must_use]
-    pub fn one_sigma_terms(&self, own_rad: f64, other_rad: f64) -> [f64; 6] {
-        let (x, y) = (own_rad / EDGE_RAD, other_rad / EDGE_RAD);
-        let phase = if self.cyclic_pitch_deg > 0.0 {
-            2.0 * std::f64::consts::PI * own_rad.to_degrees() / self.cyclic_pitch_deg
-        } else {
-            0.0
-        };
-        let cyc = if self.cyclic_pitch_deg > 0.0 {
-            self.cyclic_arcsec.abs() * std::f64::consts::FRAC_1_SQRT_2
-        } else {
-            0.0
-        };
-        [
-            self.offset_arcsec.abs(),
-            self.scale_ppm.abs() * 1e-6 * own_rad * ARCSEC_PER_RAD,
-            cyc * phase.sin(),
-            cyc * phase.cos(),
-            self.cross_arcsec_at_corner.abs() * x * y * y,
-            self.cubic_arcsec_at_edge.abs() * x * x * x,
-        ]
-    }
-
-    /// Whether any spread is nonzero.
-    #[must_use]
-    pub fn any(&self) -> bool {
-        [
-            self.offset_arcsec,
-            self.scale_ppm,
-            self.cyclic_arcsec,
-            self.cross_arcsec_at_corner,
-            self.cubic_arcsec_at_edge,
-        ]
-        .iter()
-        .any(|v| *v != 0.0)
-    }
-}
-
-/// One FSS unit's spreads (metadata `fss_transfer_function_sigma.FSS1`, `.FSS2`).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
-pub struct UnitSpread {
-    /// α head.
-    pub alpha: HeadSpread,
-    /// β head.
-    pub beta: HeadSpread,
-}
-
-/// The declared spreads by FSS name (`FSS1`, `FSS2`).
-pub type TransferSpreads = BTreeMap<String, UnitSpread>;
+/// The declared spreads (`metadata.json` `fss_transfer_function_sigma`) and what each means as
+/// a head-angle error at 1σ (`HeadSpread::one_sigma_terms`): defined with the run folder
+/// (`gro_reference::run_folder`), the one definition the simulator writes.
+pub use gro_reference::run_folder::{HeadSpread, TransferSpreads, UnitSpread};
 
 /// A sensor-frame Sun direction with `d_alpha`, `d_beta` (rad) added to its head angles
 /// (`α = atan2(x, z)`, `β = atan2(y, z)`, the FSS convention of fsw_core::raw).
@@ -203,27 +129,6 @@ pub fn consider_covariance(
 #[allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 mod tests {
     use super::*;
-
-    /// The terms at known points: the scale at 10°, the edge and corner terms at (32°, 32°),
-    /// the cyclic pair's mean square equal to the amplitude's.
-    #[test]
-    fn one_sigma_terms_at_known_points() {
-        let h = HeadSpread {
-            offset_arcsec: -3.0,
-            scale_ppm: 150.0,
-            cyclic_arcsec: 6.0,
-            cyclic_pitch_deg: 2.0,
-            cross_arcsec_at_corner: -30.0,
-            cubic_arcsec_at_edge: 20.0,
-        };
-        let t = h.one_sigma_terms(10f64.to_radians(), 0.0);
-        assert!((t[0] - 3.0).abs() < 1e-12);
-        assert!((t[1] - 150e-6 * 36_000.0).abs() < 1e-9);
-        assert!((t[2] * t[2] + t[3] * t[3] - 18.0).abs() < 1e-9);
-        let c = h.one_sigma_terms(EDGE_RAD, EDGE_RAD);
-        assert!((c[4] - 30.0).abs() < 1e-9 && (c[5] - 20.0).abs() < 1e-9);
-        assert!(!HeadSpread::default().any() && h.any());
-    }
 
     /// A moved direction has exactly the head angles asked for.
     #[test]

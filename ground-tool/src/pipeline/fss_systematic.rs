@@ -134,7 +134,15 @@ mod tests {
     use fsw_core::fhst::FhstMeasurement;
     use fsw_core::fss::FssMeasurement;
     use rand_distr::{Distribution, StandardNormal};
-    use sim_harness::sensors::model_rng;
+
+    /// A seeded ChaCha8 stream (the simulator's `model_rng`: the same draws as before the
+    /// ground stopped depending on the simulator).
+    fn model_rng(seed: u64, stream: u64) -> rand_chacha::ChaCha8Rng {
+        use rand::SeedableRng;
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        rng.set_stream(stream);
+        rng
+    }
 
     const RAD_PER_ARCSEC: f64 = 1.0 / ARCSEC_PER_RAD;
 

@@ -29,49 +29,13 @@ use fsw_core::raw::TimeTag;
 use fsw_core::tables::{AlignmentTable, IruTable};
 use fsw_core::telemetry::EphemerisRecord;
 use fsw_core::units::{RAD_PER_ARCSEC, RAD_PER_DEG};
+use gro_reference::sky::Sky;
+use gro_reference::sun::SunEphemeris;
 use nalgebra::{Matrix3, Vector3};
-use sim_harness::truth::sky::Sky;
-use sim_harness::truth::sun::SunEphemeris;
 
-/// Declared sensor accuracies (from `metadata.json`, defaults are the paper's figures).
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-#[serde(default)]
-pub struct DeclaredNoise {
-    /// FHST 1σ per axis for a magnitude-2.0 and a magnitude-5.7 star, arcsec.
-    pub fhst_sigma_arcsec: [f64; 2],
-    /// FSS 1σ per axis, arcsec (calibrated accuracy, transfer-function residual included).
-    pub fss_sigma_arcsec: f64,
-    /// FSS error that depends on where the Sun is in the field and so does not average down
-    /// over samples at one position (transfer-function residual), 1σ per axis, arcsec. Paper
-    /// §4.3: an inherent 0.022° remained after calibration.
-    pub fss_systematic_arcsec: f64,
-    /// Gyro angle random walk, rad/√s.
-    pub iru_arw_rad_per_sqrt_s: f64,
-    /// Gyro rate random walk, rad/s^1.5.
-    pub iru_rrw_rad_per_s_sqrt_s: f64,
-}
-
-impl Default for DeclaredNoise {
-    fn default() -> Self {
-        Self {
-            fhst_sigma_arcsec: [8.0, 24.0],
-            fss_sigma_arcsec: 0.02 * 3600.0,
-            fss_systematic_arcsec: 0.022 * 3600.0,
-            iru_arw_rad_per_sqrt_s: 1.5e-7,
-            iru_rrw_rad_per_s_sqrt_s: 1.0e-10,
-        }
-    }
-}
-
-impl DeclaredNoise {
-    /// FHST σ (rad) for a magnitude, linear between the bright and faint figures.
-    #[must_use]
-    pub fn fhst_sigma_rad(&self, magnitude: f64) -> f64 {
-        let t = ((magnitude - 2.0) / 3.7).clamp(0.0, 1.0);
-        let [bright, faint] = self.fhst_sigma_arcsec;
-        (bright + t * (faint - bright)) * RAD_PER_ARCSEC
-    }
-}
+/// Declared sensor accuracies (`metadata.json` `sensors`; absent figures are the paper's):
+/// defined once with the run folder (`gro_reference::run_folder`).
+pub use gro_reference::run_folder::DeclaredNoise;
 
 /// An FHST observation with its identification.
 #[derive(Clone, Copy, Debug, PartialEq)]

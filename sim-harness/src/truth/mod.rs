@@ -1,10 +1,9 @@
 //! # Truth models: time, orbit, Sun, sky, rigid-body dynamics
 //!
 //! Everything the sensors see is computed here, in J2000/ICRS axes (`eci`), km, km/s, rad.
-pub mod aberration;
+//! The reference physics the ground uses as well (time scales, Sun ephemeris, sky,
+//! aberration) lives in `gro-reference` and is re-exported here under its old paths; the
+//! orbit and the rigid body are the simulator's own.
+pub use gro_reference::{aberration, sky, sun, time};
 pub mod dynamics;
 pub mod orbit;
-pub mod sky;
-pub mod sun;
-pub mod time;
-mod vsop87_earth;

@@ -2,7 +2,7 @@
 //!
 //! Why: the FHST truth must see every star where it really appears — catalogue position
 //! (ICRS, epoch J1991.25 TT) moved by its proper motion to the date, displaced by annual
-//! parallax and by velocity aberration (annual + orbital, [`super::aberration`]). The onboard
+//! parallax and by velocity aberration (annual + orbital, [`crate::aberration`]). The onboard
 //! software does not correct aberration by default; finding it is the ground's job.
 //!
 //! # Magnitude system (decision)
@@ -451,7 +451,7 @@ impl ExclusionParams {
 mod tests {
     use super::*;
     use crate::data::data_dir;
-    use crate::truth::sun::sun_state;
+    use crate::sun::sun_state;
     use fsw_core::units::ARCSEC_PER_RAD;
 
     fn sky() -> Sky {

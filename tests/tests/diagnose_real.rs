@@ -4,8 +4,8 @@
 //! `scenarios/undeclared/effects_table.sh` and `false_alarm.sh` (docs/diagnose.md).
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
-use ground_tool::diagnose::inject::{inject_run, Injected};
-use ground_tool::diagnose::run::{diagnose_run, DiagnoseOptions, DiagnoseOutput};
+use gro_tests::diagnose::inject::{inject_run, Injected};
+use ground_tool::diagnose::run::{diagnose_run, DiagnoseOutput};
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
@@ -47,7 +47,7 @@ fn clean_run() -> &'static Path {
 
 fn diagnose(run: &Path) -> DiagnoseOutput {
     let out = run.with_extension("diag");
-    diagnose_run(run, &out, &DiagnoseOptions::default()).unwrap()
+    diagnose_run(run, &out, &gro_tests::diagnose::scoring::scored_options()).unwrap()
 }
 
 fn names(o: &DiagnoseOutput) -> Vec<String> {

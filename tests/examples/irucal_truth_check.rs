@@ -4,7 +4,7 @@
 //! errors, the stars far from the truth, and the OBC's bias error.
 //!
 //! ```text
-//! cargo run --release -p ground-tool --example irucal_truth_check -- [SCENARIO] [SEED]
+//! cargo run --release -p tests --example irucal_truth_check -- [SCENARIO] [SEED]
 //! ```
 use fsw_core::attitude::rotvec_from_rot;
 use fsw_core::units::ARCSEC_PER_RAD;

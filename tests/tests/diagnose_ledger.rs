@@ -7,12 +7,13 @@
 //! catches a dropped test.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
+#[path = "../../ground-tool/tests/support/mod.rs"]
 mod support;
 
+use gro_tests::diagnose::synthetic::{generate, SynthConfig, SynthEffects};
 use ground_tool::diagnose::ledger::{self, Family, LedgerEntry, Outcome, RawTests};
-use ground_tool::diagnose::run::{diagnose_run, DiagnoseOptions};
+use ground_tool::diagnose::run::diagnose_run;
 use ground_tool::diagnose::search::SearchConfig;
-use ground_tool::diagnose::synthetic::{generate, SynthConfig, SynthEffects};
 use ground_tool::diagnose::{analyse, Analysis};
 
 const ALPHA: f64 = 1.0e-3;
@@ -161,7 +162,12 @@ fn ledger_invariant_holds_on_the_writer_fixtures() {
         let mut all = vec!["--seed", "1"];
         all.extend_from_slice(&flags);
         let dir = support::write_run("diagnose-ledger", case, &all);
-        let o = diagnose_run(&dir, &dir.join("diag"), &DiagnoseOptions::default()).unwrap();
+        let o = diagnose_run(
+            &dir,
+            &dir.join("diag"),
+            &gro_tests::diagnose::scoring::scored_options(),
+        )
+        .unwrap();
         let a = &o.analysis;
         let raw = RawTests {
             gyro: Some(&o.gyro),
@@ -310,7 +316,7 @@ fn three_bad_stars_are_named_by_the_sparse_form() {
 /// Study (docs/diagnose.md §10): three bad stars (10–15″) among the ≈ 100 seen, seeds 22–26,
 /// with and without the sparse form: what is named, and how the ledger ends the catalog test.
 #[test]
-#[ignore = "study: cargo test --release -p ground-tool --test diagnose_ledger sparse_catalog_study -- --ignored --nocapture"]
+#[ignore = "study: cargo test --release -p tests --test diagnose_ledger sparse_catalog_study -- --ignored --nocapture"]
 fn sparse_catalog_study() {
     let offsets = [[12.0, -6.0], [-8.0, 10.0], [10.0, 8.0]];
     for seed in 22..=26 {

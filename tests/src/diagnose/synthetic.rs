@@ -10,10 +10,6 @@
 //! the ground tool builds them (aberration applied or not), so an undeclared effect is one
 //! that is in the truth and not in the references/tables.
 
-use crate::calibration::iru::{GyroCalibration, GyroStep};
-use crate::pipeline::observations::{
-    DeclaredNoise, FrameObservations, RateSwitch, StarObservation, SunObservation,
-};
 use fsw_core::attitude::{rot, Quat};
 use fsw_core::fhst::FhstMeasurement;
 use fsw_core::fss::FssMeasurement;
@@ -21,11 +17,15 @@ use fsw_core::raw::TimeTag;
 use fsw_core::tables::types::{matrix_from_rows, rows_from_matrix};
 use fsw_core::tables::AlignmentTable;
 use fsw_core::units::{ARCSEC_PER_RAD, RAD_PER_ARCSEC, RAD_PER_DEG};
+use ground_tool::calibration::iru::{GyroCalibration, GyroStep};
+use ground_tool::pipeline::observations::{
+    DeclaredNoise, FrameObservations, RateSwitch, StarObservation, SunObservation,
+};
 use nalgebra::{Matrix3, Vector3};
 use sim_harness::sensors::fss::FssHeadErrors;
 use sim_harness::truth::aberration::aberrate;
 
-use super::measurements::DiagnoseInput;
+use ground_tool::diagnose::measurements::DiagnoseInput;
 
 /// Effects switched on in the synthetic truth (zero = off).
 #[derive(Clone, Debug, Default)]

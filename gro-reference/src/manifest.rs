@@ -33,7 +33,7 @@ pub const MANIFEST: &str = "manifest.json";
 pub const FORMAT: &str = "gro-tables-manifest-1";
 
 /// One listed image.
-#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct Entry {
     /// File name inside the tables folder.
     pub file: String,
@@ -48,7 +48,7 @@ pub struct Entry {
 }
 
 /// `manifest.json`.
-#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct Manifest {
     /// [`FORMAT`].
     pub format: String,

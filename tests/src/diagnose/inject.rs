@@ -16,8 +16,8 @@
 //! `truth.json` gets the injected effect appended to `present_effects` and
 //! `undeclared_effects`; `metadata.json` is copied unchanged (the operator does not know).
 
-use crate::tp;
 use anyhow::Context;
+use ground_tool::tp;
 use sim_harness::telemetry::PacketWriter;
 use std::path::Path;
 
@@ -111,7 +111,7 @@ pub fn inject_run(src: &Path, dst: &Path, effect: Injected) -> anyhow::Result<()
             }
             Injected::MagneticTwicePerOrbit {
                 amplitude_arcsec, ..
-            } => match crate::pipeline::observations::interpolate_orbit(&tm.ephemeris, t) {
+            } => match ground_tool::pipeline::observations::interpolate_orbit(&tm.ephemeris, t) {
                 Some((p, v)) => {
                     let h = p.cross(&v);
                     let node = nalgebra::Vector3::z().cross(&h).normalize();

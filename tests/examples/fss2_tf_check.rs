@@ -6,7 +6,7 @@
 //! samples at epochs with an identified star, which are the ones used).
 //!
 //! ```text
-//! cargo run --release -p ground-tool --example fss2_tf_check -- RUN_DIR SCENARIO
+//! cargo run --release -p tests --example fss2_tf_check -- RUN_DIR SCENARIO
 //! ```
 use fsw_core::tables::types::{AlignmentTable, IruTable};
 use fsw_core::units::ARCSEC_PER_RAD;
@@ -101,7 +101,7 @@ fn main() -> anyhow::Result<()> {
             e[1] / mf
         );
     }
-    let sys2 = md.sensors.fss_systematic_arcsec.powi(2);
+    let sys2 = md.sensors.fss_systematic_or_paper_arcsec().powi(2);
     let sig2 = md.sensors.fss_sigma_arcsec.powi(2);
     for (label, used_only, holds_only) in [
         (

@@ -8,8 +8,8 @@
 //! (within 5 % of the successive-difference floor) afterwards.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
+use gro_tests::diagnose::synthetic::{generate, SynthConfig, SynthEffects};
 use ground_tool::diagnose::search::SearchConfig;
-use ground_tool::diagnose::synthetic::{generate, SynthConfig, SynthEffects};
 use ground_tool::diagnose::{analyse, Analysis, Detected};
 use sim_harness::sensors::fss::FssHeadErrors;
 
@@ -335,7 +335,7 @@ fn post_slew_oscillation_is_unexplained() {
 }
 
 #[test]
-#[ignore = "study: cargo test -p ground-tool --test diagnose_synthetic clean_study -- --ignored --nocapture"]
+#[ignore = "study: cargo test -p tests --test diagnose_synthetic clean_study -- --ignored --nocapture"]
 fn clean_study() {
     let n: u64 = std::env::var("SEEDS")
         .map(|v| v.parse().unwrap())

@@ -1,16 +1,16 @@
 //! Diagnose on sim-harness run folders (studies; the CLI is `ground-tool diagnose`).
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
-use ground_tool::diagnose::run::{diagnose_run, DiagnoseOptions};
+use ground_tool::diagnose::run::diagnose_run;
 
-/// `RUN_DIR=... OUT=... cargo test -p ground-tool --test diagnose_run -- --ignored --nocapture`
+/// `RUN_DIR=... OUT=... cargo test -p tests --test diagnose_run -- --ignored --nocapture`
 #[test]
 #[ignore = "needs a run folder: RUN_DIR=... OUT=..."]
 fn diagnose_env_run() {
     let run = std::path::PathBuf::from(std::env::var("RUN_DIR").unwrap());
     let out = std::path::PathBuf::from(std::env::var("OUT").unwrap());
     let t = std::time::Instant::now();
-    let o = diagnose_run(&run, &out, &DiagnoseOptions::default()).unwrap();
+    let o = diagnose_run(&run, &out, &gro_tests::diagnose::scoring::scored_options()).unwrap();
     eprintln!("diagnose took {:?}", t.elapsed());
     eprintln!("{}", serde_json::to_string_pretty(&serde_json::json!({
         "detected": o.report.detected.iter().map(|d| (d.effect.clone(), d.sensor.clone(), if d.parameters.len() < 14 { serde_json::json!({"p": d.parameters, "s": d.sigma}) } else { serde_json::json!(d.parameters.len()) })).collect::<Vec<_>>(),
@@ -92,7 +92,7 @@ fn debug_run_batches() {
     eprintln!("{line}");
 }
 
-/// `RUNS=/tmp/a,/tmp/b OUT_ROOT=/tmp/o cargo test -p ground-tool --test diagnose_run summary -- --ignored --nocapture`
+/// `RUNS=/tmp/a,/tmp/b OUT_ROOT=/tmp/o cargo test -p tests --test diagnose_run summary -- --ignored --nocapture`
 #[test]
 #[ignore = "needs run folders: RUNS=dir1,dir2 OUT_ROOT=..."]
 fn summary_runs() {
@@ -102,7 +102,11 @@ fn summary_runs() {
         let run = std::path::PathBuf::from(run);
         let name = run.file_name().unwrap().to_string_lossy().to_string();
         let t = std::time::Instant::now();
-        match diagnose_run(&run, &out_root.join(&name), &DiagnoseOptions::default()) {
+        match diagnose_run(
+            &run,
+            &out_root.join(&name),
+            &gro_tests::diagnose::scoring::scored_options(),
+        ) {
             Err(e) => eprintln!("== {name}: ERROR {e:#}"),
             Ok(o) => {
                 let r = &o.report;
@@ -213,7 +217,7 @@ fn debug_fss_truth_fit() {
     let o = diagnose_run(
         &run,
         &std::path::PathBuf::from("/tmp/dg/dbg"),
-        &DiagnoseOptions::default(),
+        &gro_tests::diagnose::scoring::scored_options(),
     )
     .unwrap();
     let res = &o.analysis.search;
@@ -281,7 +285,7 @@ fn debug_catalog() {
     let o = diagnose_run(
         &run,
         &std::path::PathBuf::from("/tmp/dg/dbg"),
-        &DiagnoseOptions::default(),
+        &gro_tests::diagnose::scoring::scored_options(),
     )
     .unwrap();
     let res = &o.analysis.search;
@@ -289,11 +293,11 @@ fn debug_catalog() {
     let ci = lay
         .find(EffectKind::CatalogProperMotionError, None)
         .unwrap();
-    let truth = ground_tool::diagnose::scoring::read_truth(&run)
+    let truth = gro_tests::diagnose::scoring::read_truth(&run)
         .unwrap()
         .unwrap();
     let tt = o.first_frame_j2000_tt_s;
-    let cat = ground_tool::diagnose::scoring::catalog_truth(&truth, tt);
+    let cat = gro_tests::diagnose::scoring::catalog_truth(&truth, tt);
     let stars = &lay.effects[ci].stars;
     let idx = indices(lay, &[ci]);
     let fits: Vec<SubFit> = [&res.systems.full, &res.systems.first, &res.systems.second]
@@ -326,12 +330,12 @@ fn debug_catalog() {
 }
 
 /// Not in the library, on real harness telemetry:
-/// `SRC=/tmp/clean OUT_ROOT=/tmp/o cargo test -p ground-tool --test diagnose_run inject -- --ignored --nocapture`
+/// `SRC=/tmp/clean OUT_ROOT=/tmp/o cargo test -p tests --test diagnose_run inject -- --ignored --nocapture`
 /// (SRC = a run of scenarios/undeclared/clean.toml).
 #[test]
 #[ignore = "needs a run folder: SRC=... OUT_ROOT=..."]
 fn inject_non_library_effects() {
-    use ground_tool::diagnose::inject::{inject_run, Injected};
+    use gro_tests::diagnose::inject::{inject_run, Injected};
     let src = std::path::PathBuf::from(std::env::var("SRC").unwrap());
     let out_root = std::path::PathBuf::from(std::env::var("OUT_ROOT").unwrap());
     for (name, effect) in [
@@ -364,7 +368,7 @@ fn inject_non_library_effects() {
         let o = diagnose_run(
             &run,
             &out_root.join(format!("inject-{name}-diag")),
-            &DiagnoseOptions::default(),
+            &gro_tests::diagnose::scoring::scored_options(),
         )
         .unwrap();
         eprintln!("== {name}: {effect:?}");

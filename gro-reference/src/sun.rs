@@ -5,7 +5,7 @@
 //!
 //! # Algorithm
 //! 1. Earth heliocentric L, B, R from truncated VSOP87D (mean ecliptic and equinox of date,
-//!    [`super::vsop87_earth`]); τ = Julian millennia TT from J2000 (TDB − TT ignored, 1.7 ms).
+//!    [`crate::vsop87_earth`]); τ = Julian millennia TT from J2000 (TDB − TT ignored, 1.7 ms).
 //! 2. Geometric geocentric Sun: λ = L + π, β = −B, the FK5 correction of Meeus (ch. 25,
 //!    Δλ = −0.09033″, Δβ = 0.03916″(cos λ′ − sin λ′)), ecliptic of date → mean equator of
 //!    date with the IAU 1976 mean obliquity, then IAU 1976 precession (ζ, z, θ of Lieske 1977)
@@ -17,7 +17,7 @@
 //!    velocity of ~13 m/s). Earth barycentric = heliocentric + Sun barycentric.
 //! 5. Astrometric Sun: light time τ = |r|/c, Sun taken at t − τ (`−v_sun τ`, ≤ 0.006″).
 //! 6. Apparent: relativistic aberration with the observer's barycentric velocity
-//!    ([`super::aberration::aberrate`]); from a spacecraft also subtract its position
+//!    ([`crate::aberration::aberrate`]); from a spacecraft also subtract its position
 //!    (parallax ≤ 9.5″) and add its velocity to the Earth's.
 //!
 //! Accuracy against DE421 (Skyfield, `data/sun_reference.csv`): see the `val_` tests.
@@ -355,7 +355,7 @@ impl SunEphemeris {
 mod tests {
     use super::*;
     use crate::data::{data_dir, CsvTable};
-    use crate::truth::time::JD_J2000;
+    use crate::time::JD_J2000;
     use fsw_core::units::ARCSEC_PER_RAD;
 
     fn angle_arcsec(a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {

@@ -4,7 +4,7 @@
 //!
 //! A study over run folders (`scenarios/undeclared/paper_case.sh` flies them and calls this):
 //!
-//! `PAIRS=/tmp/tf-1:/tmp/notf-1,... cargo test --release -p ground-tool --test diagnose_paper -- --ignored --nocapture`
+//! `PAIRS=/tmp/tf-1:/tmp/notf-1,... cargo test --release -p tests --test diagnose_paper -- --ignored --nocapture`
 //!
 //! Each pair is the same scenario and seed flown with the harness's FSS transfer-function
 //! errors (the default truth) and without them (every head coefficient zero: the ceiling a
@@ -25,9 +25,9 @@
 
 use fsw_core::tables::{AlignmentTable, SensorCorrections};
 use fsw_core::units::RAD_PER_ARCSEC;
+use gro_tests::diagnose::scoring::read_truth;
 use ground_tool::diagnose::effects::FSS_EDGE_RAD;
-use ground_tool::diagnose::run::{diagnose_run, DiagnoseOptions};
-use ground_tool::diagnose::scoring::read_truth;
+use ground_tool::diagnose::run::diagnose_run;
 use ground_tool::pipeline::calibrate::{calibrate_telemetry, read_metadata, CalibrateOptions};
 use nalgebra::Matrix3;
 use std::path::Path;
@@ -171,7 +171,7 @@ fn paper_case_irucal() {
         let d = diagnose_run(
             tf,
             &out_root.join(tf.file_name().unwrap()),
-            &DiagnoseOptions::default(),
+            &gro_tests::diagnose::scoring::scored_options(),
         )
         .unwrap();
         let diag = fss_only(&d.alignment.corrections);

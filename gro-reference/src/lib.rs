@@ -1,0 +1,30 @@
+//! # gro-reference: what the simulator and the ground share, and nothing else
+//!
+//! Why a crate of its own: `ground-tool` must not carry the simulator (a real ground system
+//! does not, and code common to truth and ground hides its own errors), yet both sides need
+//! the same reference physics and the same file contract. This crate holds exactly that:
+//!
+//! - reference physics, in J2000/ICRS axes (`eci`), km, km/s, rad: [`time`] (UTC/TAI/TT
+//!   scales, the telemetry time code), [`sun`] (VSOP87 Earth, apparent Sun), [`sky`]
+//!   (Hipparcos with proper motion, parallax, aberration, cone search), [`aberration`];
+//! - reference data: [`data`] (the `data/` CSV reader, the Hipparcos subset embedded once);
+//! - the run-folder contract: [`run_folder`] (`metadata.json`, with its JSON Schema in
+//!   `docs/schema/`), [`manifest`] (`tables/manifest.json`), [`outdir`] (whole-or-nothing
+//!   output folders), [`exit`] (exit codes from the error's type).
+//!
+//! What may import it: `sim-harness` (which re-exports these modules under their old paths),
+//! `ground-tool` and `tests`. It imports only `fsw-core` (units, time codes, table images).
+//! `docs/architecture.md` has the picture.
+
+pub mod aberration;
+pub mod data;
+pub mod exit;
+pub mod manifest;
+pub mod outdir;
+pub mod run_folder;
+pub mod sky;
+pub mod sun;
+pub mod time;
+mod vsop87_earth;
+
+pub use exit::{exit_code, is_input_error, InputError};
