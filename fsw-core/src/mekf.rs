@@ -917,9 +917,8 @@ impl Mekf {
             return self.reject(UpdateRejection::InvalidInput, [0.0; 2], f64::NAN);
         }
         // Consider states of another σ: `P_xc` scales with it.
-        let c_scaled = if systematic_rad == self.fhst_systematic_sigma_rad {
-            self.cross_covariance_fhst_systematic
-        } else if self.fhst_systematic_sigma_rad > 0.0 {
+        // (The same σ scales by exactly 1.)
+        let c_scaled = if self.fhst_systematic_sigma_rad > 0.0 {
             self.cross_covariance_fhst_systematic
                 * (systematic_rad / self.fhst_systematic_sigma_rad)
         } else {
