@@ -1,6 +1,7 @@
 //! The ground tool stands on its own (issue 18): nothing it is built from, tests included,
 //! is the simulator. Read from `Cargo.lock` (every dependency kind, dev-dependencies too);
 //! `.ci/run` checks the same with `cargo tree -p ground-tool -e normal,build`.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
 use std::collections::{BTreeMap, BTreeSet};
 

@@ -374,7 +374,7 @@ pub fn matches_truth(d: &Detected, truth: &Truth) -> bool {
         "fss_transfer_function" => "fss_transfer_function".to_owned(),
         other => format!("{}.{other}", unit_of(&d.sensor)),
     };
-    truth.present.iter().any(|p| *p == name)
+    truth.present.contains(&name)
 }
 
 /// Truth values of a detection's parameters (from the scenario file).

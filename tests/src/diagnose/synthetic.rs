@@ -498,7 +498,7 @@ pub fn generate(cfg: &SynthConfig) -> SynthRun {
                 }));
             }
         }
-        let gyro = (k > 0).then(|| GyroStep {
+        let gyro = (k > 0).then_some(GyroStep {
             dtheta_acs_rad: prev_rate,
             dt_s: 1.0,
         });
