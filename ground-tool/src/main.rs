@@ -460,11 +460,15 @@ fn run_calibrate(
         maneuvers_s: (!maneuvers.is_empty()).then_some(maneuvers),
         ..CalibrateOptions::default()
     };
+    // The OBC's bias at every housekeeping packet, for the bias plots: taken (and its decoded
+    // telemetry dropped) before the chain decodes the file, so the peak memory stays the
+    // chain's. A file that cannot be read is left to the chain, whose message says why.
+    let obc_bias = ground_tool::report::ObcBiasSeries::read(run_dir).ok();
     let result = calibrate_run(run_dir, out, &options)?;
     let flown = options
         .flown_alignment
         .unwrap_or_else(fsw_core::tables::AlignmentTable::prelaunch);
-    ground_tool::report::write_calibration_report(out, &result, &flown)?;
+    ground_tool::report::write_calibration_report(out, &result, &flown, obc_bias.as_ref())?;
     dir.commit()?;
     if json {
         println!("{}", serde_json::to_string_pretty(&result.report)?);

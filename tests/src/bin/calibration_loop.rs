@@ -153,11 +153,13 @@ fn run_loop(args: &Args) -> anyhow::Result<()> {
         "[2/3] calibrating from {}/telemetry.bin ...",
         args.out.join("1-fly-prelaunch").display()
     );
+    let obc_bias = ground_tool::report::ObcBiasSeries::read(&fly_a)?;
     let calibration = calibrate_run(&fly_a, &cal, &CalibrateOptions::default())?;
     ground_tool::report::write_calibration_report(
         &cal,
         &calibration,
         &fsw_core::tables::AlignmentTable::prelaunch(),
+        Some(&obc_bias),
     )?;
     eprintln!(
         "[3/3] flying again with the uplinked tables {}/tables ...",
