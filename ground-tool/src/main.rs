@@ -77,6 +77,10 @@ enum Command {
         /// Print report.json to stdout.
         #[arg(long)]
         json: bool,
+        /// No progress on stderr (it is also hidden when stderr is not a terminal); the
+        /// output files are the same either way.
+        #[arg(long, short)]
+        quiet: bool,
     },
     /// Diagnose: residual analysis that finds effects the model lacks, and the tables that fix them.
     ///
@@ -117,6 +121,10 @@ enum Command {
         /// Print report.json to stdout.
         #[arg(long)]
         json: bool,
+        /// No progress on stderr (it is also hidden when stderr is not a terminal); the
+        /// output files are the same either way.
+        #[arg(long, short)]
+        quiet: bool,
     },
     /// Gyro noise by Allan deviation of the inertial holds: ARW, bias instability, RRW.
     ///
@@ -166,6 +174,10 @@ enum Command {
         /// Print allan.json to stdout.
         #[arg(long)]
         json: bool,
+        /// No progress on stderr (it is also hidden when stderr is not a terminal); the
+        /// output files are the same either way.
+        #[arg(long, short)]
+        quiet: bool,
     },
     /// Reproduce the paper's numbers from data/gro_paper.toml.
     Paper {
@@ -429,8 +441,10 @@ fn run_calibrate(
     fhst_stage: ground_tool::pipeline::calibrate::FhstStage,
     maneuvers: Vec<(f64, f64)>,
     json: bool,
+    quiet: bool,
 ) -> Result<()> {
     use ground_tool::calibration::alignment::Weighting;
+    let progress = ground_tool::progress::Session::start("ground-tool calibrate", !quiet);
     use ground_tool::pipeline::calibrate::{calibrate_run, CalibrateOptions};
     let meta = ground_tool::pipeline::flown::metadata_json(run_dir);
     let (flown_alignment, flown_iru, flown_filter) =
@@ -463,13 +477,19 @@ fn run_calibrate(
     // The OBC's bias at every housekeeping packet, for the bias plots: taken (and its decoded
     // telemetry dropped) before the chain decodes the file, so the peak memory stays the
     // chain's. A file that cannot be read is left to the chain, whose message says why.
+    ground_tool::progress::step("the OBC's bias from every housekeeping packet (for the plots)");
     let obc_bias = ground_tool::report::ObcBiasSeries::read(run_dir).ok();
     let result = calibrate_run(run_dir, out, &options)?;
+    // Whose spacecraft these tables are for (sim_harness::provenance): `sim-harness run
+    // --tables` warns when it flies them on another.
+    sim_harness::provenance::write(&out.join("tables"), run_dir, &meta, "ground-tool calibrate")?;
     let flown = options
         .flown_alignment
         .unwrap_or_else(fsw_core::tables::AlignmentTable::prelaunch);
+    ground_tool::progress::step("report.md, report.json and the plots");
     ground_tool::report::write_calibration_report(out, &result, &flown, obc_bias.as_ref())?;
     dir.commit()?;
+    drop(progress);
     if json {
         println!("{}", serde_json::to_string_pretty(&result.report)?);
     } else {
@@ -487,8 +507,10 @@ fn run_diagnose(
     force: bool,
     tables: Option<&std::path::Path>,
     json: bool,
+    quiet: bool,
 ) -> Result<()> {
     use ground_tool::diagnose::run::{diagnose_run, DiagnoseOptions};
+    let progress = ground_tool::progress::Session::start("ground-tool diagnose", !quiet);
     let options = DiagnoseOptions {
         tables: tables.map(std::path::Path::to_path_buf),
         ..DiagnoseOptions::default()
@@ -519,6 +541,12 @@ fn run_diagnose(
     })?;
     // The folder is new: its images are exactly the ones this diagnose wrote.
     sim_harness::manifest::write_for_all(&out.join("tables"), "ground-tool diagnose")?;
+    sim_harness::provenance::write(
+        &out.join("tables"),
+        run_dir,
+        &ground_tool::pipeline::flown::metadata_json(run_dir),
+        "ground-tool diagnose",
+    )?;
     // Diagnose names the files it wrote by the temporary folder's path: name them by OUT.
     let (tmp, target) = (out.display().to_string(), out_target.display().to_string());
     for f in ["report.json", "report.md"] {
@@ -529,6 +557,7 @@ fn run_diagnose(
         }
     }
     dir.commit()?;
+    drop(progress);
     for note in &result.report.notes {
         eprintln!("note: {note}");
     }
@@ -565,6 +594,7 @@ fn run_allan(
     tables: Option<&std::path::Path>,
     options: ground_tool::calibration::allan::AllanOptions,
     json: bool,
+    quiet: bool,
 ) -> Result<()> {
     use ground_tool::calibration::allan;
     use ground_tool::run_check::{InputError, Severity};
@@ -578,6 +608,8 @@ fn run_allan(
     let meta = ground_tool::pipeline::flown::metadata_json(run_dir);
     let (_, flown_iru, _) = ground_tool::pipeline::flown::flown_tables(run_dir, &meta, tables)?;
     let iru = flown_iru.unwrap_or_else(fsw_core::tables::IruTable::prelaunch);
+    let progress = ground_tool::progress::Session::start("ground-tool allan", !quiet);
+    ground_tool::progress::step("reading the telemetry");
     let tm = ground_tool::tp::read_file(&run_dir.join("telemetry.bin"))
         .map_err(|e| InputError(e.into()))?;
     if let Some(f) = ground_tool::run_check::check(&tm, Some(&meta))
@@ -586,6 +618,7 @@ fn run_allan(
     {
         return Err(InputError::msg(format!("{}: {}", run_dir.display(), f.message)).into());
     }
+    ground_tool::progress::step("Allan deviation of the holds and the noise fit");
     let report = allan::identify_gyro_noise(&tm, &iru, &options).map_err(|e| {
         InputError(anyhow::Error::new(e).context(format!(
             "{}: the telemetry does not support a gyro noise identification",
@@ -601,8 +634,10 @@ fn run_allan(
             .flatten()
             .collect::<Vec<_>>(),
     )?;
+    ground_tool::progress::step("allan.json, allan.md and the plot");
     allan::write_outputs(dir.path(), &report, &run_dir.display().to_string())?;
     dir.commit()?;
+    drop(progress);
     if json {
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
@@ -659,6 +694,7 @@ fn run(cli: Cli) -> Result<()> {
             fhst_stage,
             maneuvers,
             json,
+            quiet,
         } => run_calibrate(
             &run_dir,
             &out,
@@ -669,6 +705,7 @@ fn run(cli: Cli) -> Result<()> {
             fhst_stage,
             maneuvers,
             json,
+            quiet,
         )?,
         Command::Diagnose {
             run_dir,
@@ -676,7 +713,8 @@ fn run(cli: Cli) -> Result<()> {
             force,
             tables,
             json,
-        } => run_diagnose(&run_dir, &out, force, tables.as_deref(), json)?,
+            quiet,
+        } => run_diagnose(&run_dir, &out, force, tables.as_deref(), json, quiet)?,
         Command::Allan {
             run_dir,
             out,
@@ -685,6 +723,7 @@ fn run(cli: Cli) -> Result<()> {
             signal,
             tables,
             json,
+            quiet,
         } => run_allan(
             &run_dir,
             &out,
@@ -692,6 +731,7 @@ fn run(cli: Cli) -> Result<()> {
             tables.as_deref(),
             ground_tool::calibration::allan::AllanOptions { confidence, signal },
             json,
+            quiet,
         )?,
         Command::Paper { json } => {
             let r = ground_tool::paper::reproduce()?;

@@ -434,8 +434,14 @@ impl ObcBiasSeries {
     /// The series of a decoded telemetry.
     #[must_use]
     pub fn from_telemetry(tm: &crate::tp::Telemetry) -> Self {
+        Self::from_housekeeping(&tm.housekeeping)
+    }
+
+    /// The series of housekeeping records.
+    #[must_use]
+    pub fn from_housekeeping(housekeeping: &[fsw_core::telemetry::ObcHousekeeping]) -> Self {
         let mut s = Self::default();
-        for h in &tm.housekeeping {
+        for h in housekeeping {
             s.t_s.push(h.time.seconds());
             s.bias_rad_per_s.push(h.bias_acs_rad_per_s);
             s.sigma_rad_per_s.push([3, 4, 5].map(|k| {
@@ -450,17 +456,17 @@ impl ObcBiasSeries {
         s
     }
 
-    /// The series of `run_dir/telemetry.bin`. The telemetry is decoded and dropped here, so
-    /// that a caller can take the series before the chain decodes the file again: the
-    /// chain's peak memory is not raised by a second copy.
+    /// The series of `run_dir/telemetry.bin` ([`crate::tp::read_housekeeping`]: the
+    /// housekeeping alone, the same packets the chain keeps). A caller takes it before the
+    /// chain decodes the file, so the chain's peak memory is not raised by it.
     ///
     /// # Errors
     /// The file cannot be read (the message names it).
     pub fn read(run_dir: &Path) -> anyhow::Result<Self> {
         let path = run_dir.join("telemetry.bin");
-        let tm = crate::tp::read_file(&path)
+        let hk = crate::tp::read_housekeeping(&path)
             .with_context(|| format!("reading {} for the OBC bias plot", path.display()))?;
-        Ok(Self::from_telemetry(&tm))
+        Ok(Self::from_housekeeping(&hk))
     }
 }
 
@@ -520,6 +526,9 @@ fn mean(v: &[(f64, f64)]) -> f64 {
 const BEFORE: RGBColor = RGBColor(200, 60, 40);
 const AFTER: RGBColor = RGBColor(30, 90, 200);
 const GREY: RGBColor = RGBColor(120, 120, 120);
+/// Quantile of the bias history panels' y range: 0.1 % of the samples may lie beyond it
+/// (the OBC's first hours from its initial bias on a six-month run; 19 samples of a 5-h run).
+const HISTORY_QUANTILE: f64 = 0.001;
 /// Quantile of the difference panels' y range ([`figure::Panel::y_quantile`]).
 const DIFF_QUANTILE: f64 = 0.05;
 /// The OBC's series in the bias plots (the same in every axis panel, so one legend serves).
@@ -721,8 +730,16 @@ fn bias_plots(
         panels.push(Panel {
             title: format!("axis {name} (ACS)"),
             y_label: "bias (arcsec/s)".into(),
-            y_quantile: None,
+            // The OBC's first minutes from its initial bias are clipped only on long runs.
+            y_quantile: Some(HISTORY_QUANTILE),
+            // The OBC over the ground: over months the ground's thousands of fixes would
+            // cover a line drawn under them.
             layers: vec![
+                Layer {
+                    label: Some("ground (calibration filter, smoothed) ±1σ at its fixes".into()),
+                    color: GROUND,
+                    kind: Kind::Bars(ground_bars.clone()),
+                },
                 Layer {
                     label: Some(if full_rate {
                         "OBC filter, every housekeeping packet".into()
@@ -731,11 +748,6 @@ fn bias_plots(
                     }),
                     color: OBC,
                     kind: obc_kind,
-                },
-                Layer {
-                    label: Some("ground (calibration filter, smoothed) ±1σ at its fixes".into()),
-                    color: GROUND,
-                    kind: Kind::Bars(ground_bars.clone()),
                 },
             ],
         });

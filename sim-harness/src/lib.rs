@@ -21,6 +21,7 @@ pub mod manifest;
 pub mod onboard;
 pub mod outdir;
 pub mod paper;
+pub mod provenance;
 pub mod run;
 pub mod scenario;
 pub mod sensors;

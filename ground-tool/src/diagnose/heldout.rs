@@ -970,7 +970,7 @@ mod tests {
             validate_flight_tables(&set, &layout, &idx, &[], &truth, "the true alignments");
         let size = truth.iter().map(|x| x * x).sum::<f64>().sqrt();
         if std::env::var("SHOW").is_ok() {
-            eprintln!(
+            crate::note!(
                 "size {size:.1}″\n{}\n{}",
                 against_built.reason, against_truth.reason
             );
@@ -1012,7 +1012,7 @@ mod tests {
         let truth = truth_parameters(&synth);
         let v = validate_flight_tables(&set, &layout, &idx, &[], &truth, "the true alignments");
         if std::env::var("SHOW").is_ok() {
-            eprintln!("{}", v.reason);
+            crate::note!("{}", v.reason);
         }
         let taken: Vec<&str> = v.taken.iter().map(|t| t.component.as_str()).collect();
         assert!(

@@ -189,19 +189,19 @@ pub fn with_sparse_catalog(
         t.selected = true;
     }
     if std::env::var_os("DIAGNOSE_DEBUG").is_some() {
-        eprintln!(
+        crate::note!(
             "per-star catalog screen: {} of {} stars pass",
             keep.len(),
             tests.len()
         );
         if let Some(t) = tests.iter().min_by(|a, b| a.p_value.total_cmp(&b.p_value)) {
-            eprintln!(
+            crate::note!(
                 "  min p star HIP {} Δχ² {:.1} p {:.2e}",
                 t.hip, t.delta_chi2, t.p_value
             );
         }
         for t in tests.iter().take(keep.len()) {
-            eprintln!(
+            crate::note!(
                 "  selected HIP {} Δχ² {:.1} p {:.2e} Holm {:.2e}",
                 t.hip, t.delta_chi2, t.p_value, t.p_holm
             );
@@ -294,10 +294,10 @@ mod tests {
         let (n, ks, b2, b3) = summary(&p_all);
         let (m, ks_old, b2_old, b3_old) = summary(&p_with_fss);
         if show {
-            eprintln!(
+            crate::note!(
                 "trackers only: {n} star tests, KS+ {ks:.3}, below 0.01 {b2}, below 0.001 {b3}"
             );
-            eprintln!("with the FSS rows: {m} tests, KS+ {ks_old:.3}, below 0.01 {b2_old}, below 0.001 {b3_old}");
+            crate::note!("with the FSS rows: {m} tests, KS+ {ks_old:.3}, below 0.01 {b2_old}, below 0.001 {b3_old}");
         }
         let crit = 1.52 / (n as f64).sqrt();
         let bound = |x: f64| x * n as f64 + 3.1 * (x * n as f64).sqrt() + 1.0;

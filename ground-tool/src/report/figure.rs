@@ -477,6 +477,8 @@ pub fn draw(path: &Path, fig: &Figure) -> anyhow::Result<()> {
                 Kind::Bars(p) => {
                     let style = color.stroke_width(1);
                     let cl = |y: f64| y.clamp(y_range.0, y_range.1);
+                    // Thousands of fixes: small dots, so that what is drawn over them shows.
+                    let r = if p.len() > 200 { 1 } else { 3 };
                     for &(x, y, s) in p.iter().filter(|(x, y, s)| finite(*x, *y) && s.is_finite()) {
                         chart
                             .draw_series(std::iter::once(PathElement::new(
@@ -487,7 +489,7 @@ pub fn draw(path: &Path, fig: &Figure) -> anyhow::Result<()> {
                         chart
                             .draw_series(std::iter::once(Circle::new(
                                 (x, cl(y)),
-                                3,
+                                r,
                                 color.filled(),
                             )))
                             .map_err(err)?;

@@ -155,6 +155,12 @@ fn run_loop(args: &Args) -> anyhow::Result<()> {
     );
     let obc_bias = ground_tool::report::ObcBiasSeries::read(&fly_a)?;
     let calibration = calibrate_run(&fly_a, &cal, &CalibrateOptions::default())?;
+    sim_harness::provenance::write(
+        &cal.join("tables"),
+        &args.out.join("1-fly-prelaunch"),
+        &ground_tool::pipeline::flown::metadata_json(&fly_a),
+        "calibration-loop",
+    )?;
     ground_tool::report::write_calibration_report(
         &cal,
         &calibration,
