@@ -235,7 +235,7 @@ impl Check {
             s.as_deref()
                 .map_or("an undeclared scenario".to_owned(), |n| format!("`{n}`"))
         };
-        let consequence = "its attitude error says nothing about these tables (README, \"Feeding your own telemetry\"): judge them on the data they were calibrated on";
+        let consequence = "this run's attitude error says nothing about these tables (README, \"Feeding your own telemetry\"): judge them on the data they were calibrated on";
         match self {
             Self::Same => None,
             Self::Missing => Some(format!(
@@ -248,7 +248,7 @@ impl Check {
                 flown.name
             )),
             Self::Unknown { scenario } => Some(format!(
-                "warning: {file}: `spacecraft` is absent: these tables were calibrated on telemetry of {} that this simulator did not write, not on the spacecraft of `{}` flown now; {consequence}",
+                "warning: {file}: `spacecraft` is absent: these tables were calibrated on telemetry of {} that carries no simulator spacecraft identity (telemetry this simulator did not write, or a run from before it wrote one), so they may belong to another spacecraft than that of `{}` flown now; if so, {consequence}",
                 name(scenario),
                 flown.name
             )),
@@ -258,7 +258,7 @@ impl Check {
                 flown_id,
                 parts,
             } => Some(format!(
-                "warning: {file}: `spacecraft.id` {source_id} (scenario {}) is not the spacecraft of `{}` flown now ({flown_id}): the true {} parameters differ, so the tables are wrong for this spacecraft and {consequence}",
+                "warning: {file}: `spacecraft.id` {source_id} (scenario {}) is not the spacecraft of `{}` flown now ({flown_id}): the true {} parameters differ, so the tables are not this spacecraft's and {consequence}",
                 name(scenario),
                 flown.name,
                 parts.join(", ")
@@ -346,7 +346,10 @@ mod tests {
                 scenario: Some("mine".into())
             }
         );
-        assert!(c.message(&dir, &early).unwrap().contains("did not write"));
+        assert!(c
+            .message(&dir, &early)
+            .unwrap()
+            .contains("no simulator spacecraft identity"));
         // A damaged file.
         std::fs::write(dir.join(PROVENANCE), "{").unwrap();
         assert!(matches!(check(&dir, &early), Check::Unreadable(_)));
