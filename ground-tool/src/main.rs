@@ -281,7 +281,9 @@ enum IcdAction {
     },
     /// Decode TELEMETRY (a telemetry.bin) into OUT/apid_0x0NN_NAME.csv, every field of every
     /// packet kept by the reader (duplicates and damaged packets are reported, not written).
-    #[command(after_help = "Example: ground-tool icd decode runs/a/telemetry.bin --out runs/a-csv")]
+    #[command(
+        after_help = "Example: ground-tool icd decode runs/a/telemetry.bin --out runs/a-csv"
+    )]
     Decode {
         /// The telemetry file.
         telemetry: std::path::PathBuf,

@@ -36,8 +36,10 @@ fn with_active(f: impl FnOnce(&mut Active)) {
 /// Ends the displayed step: its line with the duration stays above the spinner.
 fn finish_step(a: &mut Active) {
     if let Some((name, started)) = a.step.take() {
-        a.bar
-            .println(format!("  done: {name} ({:.1} s)", started.elapsed().as_secs_f64()));
+        a.bar.println(format!(
+            "  done: {name} ({:.1} s)",
+            started.elapsed().as_secs_f64()
+        ));
     }
 }
 

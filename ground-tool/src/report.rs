@@ -7,9 +7,9 @@
 pub mod figure;
 
 use crate::pipeline::calibrate::{BiasHistoryPoint, CalibrationOutput, SENSOR_NAMES};
-use figure::{Figure, Kind, Layer, Panel};
 use crate::pipeline::observations::FrameObservations;
 use anyhow::Context;
+use figure::{Figure, Kind, Layer, Panel};
 use fsw_core::tables::types::matrix_from_rows;
 use fsw_core::tables::AlignmentTable;
 use fsw_core::units::ARCSEC_PER_RAD;
@@ -548,9 +548,7 @@ fn write_plots(
 ) -> anyhow::Result<Vec<PlotEntry>> {
     let t0 = out.frames.first().map_or(0.0, |f| f.time.seconds());
     let t_end = out.frames.last().map_or(0.0, |f| f.time.seconds()) - t0;
-    let obc_end = obc
-        .and_then(|o| o.t_s.last())
-        .map_or(0.0, |t| t - t0);
+    let obc_end = obc.and_then(|o| o.t_s.last()).map_or(0.0, |t| t - t0);
     let span_s = t_end.max(obc_end).max(1.0);
     let axis = TimeAxis::for_span(span_s);
     let x_range = Some((0.0, span_s / axis.div));
@@ -571,7 +569,9 @@ fn write_plots(
             continue;
         }
         let scale = |v: Vec<(f64, f64)>| -> Vec<(f64, f64)> {
-            v.into_iter().map(|(t, r)| (t * 3600.0 / axis.div, r)).collect()
+            v.into_iter()
+                .map(|(t, r)| (t * 3600.0 / axis.div, r))
+                .collect()
         };
         let (b, a) = (scale(b), scale(a));
         let (rb, ra, mb, ma) = (rms(&b), rms(&a), mean(&b), mean(&a));

@@ -335,10 +335,19 @@ mod tests {
         let m = c.message(&dir, &ops).unwrap();
         assert!(m.starts_with("warning:"), "{m}");
         assert!(m.contains(PROVENANCE) && m.contains("spacecraft.id"), "{m}");
-        assert!(m.contains("`gro-early-mission`") && m.contains("`normal-ops`"), "{m}");
+        assert!(
+            m.contains("`gro-early-mission`") && m.contains("`normal-ops`"),
+            "{m}"
+        );
         assert!(m.contains("FHST1, IRU"), "{m}");
         // Telemetry the simulator did not write (no spacecraft in its metadata).
-        write(&dir, Path::new("mine"), &serde_json::json!({"scenario": "mine"}), "t").unwrap();
+        write(
+            &dir,
+            Path::new("mine"),
+            &serde_json::json!({"scenario": "mine"}),
+            "t",
+        )
+        .unwrap();
         let c = check(&dir, &early);
         assert_eq!(
             c,

@@ -21,7 +21,11 @@ use sim_harness::run::{run, RunOptions};
 use sim_harness::scenario::resolve;
 use std::path::Path;
 
-fn fly(scenario: sim_harness::scenario::Scenario, out: &Path, tables: Option<&Path>) -> sim_harness::run::Summary {
+fn fly(
+    scenario: sim_harness::scenario::Scenario,
+    out: &Path,
+    tables: Option<&Path>,
+) -> sim_harness::run::Summary {
     run(
         scenario,
         &RunOptions {
@@ -60,7 +64,10 @@ fn report_links_every_plot_and_tables_know_their_spacecraft() {
         .filter(|n| n.ends_with(".png"))
         .collect();
     for p in &pngs {
-        assert!(md.contains(&format!("]({p})")), "{p} is not linked from report.md");
+        assert!(
+            md.contains(&format!("]({p})")),
+            "{p} is not linked from report.md"
+        );
     }
     let links: Vec<&str> = md
         .split("](")
@@ -68,7 +75,10 @@ fn report_links_every_plot_and_tables_know_their_spacecraft() {
         .filter_map(|s| s.split(')').next())
         .collect();
     for l in &links {
-        assert!(cal.join(l).is_file(), "report.md links {l}, which is not in the folder");
+        assert!(
+            cal.join(l).is_file(),
+            "report.md links {l}, which is not in the folder"
+        );
     }
     assert!(pngs.contains(&"bias_history.png".to_owned()), "{pngs:?}");
     assert!(pngs.contains(&"bias_difference.png".to_owned()), "{pngs:?}");
@@ -86,7 +96,9 @@ fn report_links_every_plot_and_tables_know_their_spacecraft() {
             assert!(md.contains(&format!("Did calibration reduce the {pair} residual?")));
         } else {
             assert!(
-                md.contains(&format!("Did calibration reduce the {pair} residual? — not plotted")),
+                md.contains(&format!(
+                    "Did calibration reduce the {pair} residual? — not plotted"
+                )),
                 "{pair} without data is not listed as not plotted"
             );
         }
@@ -127,7 +139,10 @@ fn report_links_every_plot_and_tables_know_their_spacecraft() {
         .tables_provenance_warning
         .expect("tables of gro-early-mission flown on another spacecraft");
     assert!(w.starts_with("warning:"), "{w}");
-    assert!(w.contains("provenance.json") && w.contains("spacecraft.id"), "{w}");
+    assert!(
+        w.contains("provenance.json") && w.contains("spacecraft.id"),
+        "{w}"
+    );
     assert!(w.contains("true FSS1 parameters differ"), "{w}");
     // The same warning is in the run's summary.json.
     let summary: serde_json::Value = serde_json::from_str(

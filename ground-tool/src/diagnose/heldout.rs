@@ -972,7 +972,8 @@ mod tests {
         if std::env::var("SHOW").is_ok() {
             crate::note!(
                 "size {size:.1}″\n{}\n{}",
-                against_built.reason, against_truth.reason
+                against_built.reason,
+                against_truth.reason
             );
         }
         assert!(

@@ -197,13 +197,18 @@ pub fn with_sparse_catalog(
         if let Some(t) = tests.iter().min_by(|a, b| a.p_value.total_cmp(&b.p_value)) {
             crate::note!(
                 "  min p star HIP {} Δχ² {:.1} p {:.2e}",
-                t.hip, t.delta_chi2, t.p_value
+                t.hip,
+                t.delta_chi2,
+                t.p_value
             );
         }
         for t in tests.iter().take(keep.len()) {
             crate::note!(
                 "  selected HIP {} Δχ² {:.1} p {:.2e} Holm {:.2e}",
-                t.hip, t.delta_chi2, t.p_value, t.p_holm
+                t.hip,
+                t.delta_chi2,
+                t.p_value,
+                t.p_holm
             );
         }
     }

@@ -381,7 +381,9 @@ pub fn irucal_stage(
             bias_restarts: sol.bias_restarts,
             ..*cfg
         };
-        crate::progress::step(&format!("IRUCAL: held-out validation of the {triad:?} triad's G"));
+        crate::progress::step(&format!(
+            "IRUCAL: held-out validation of the {triad:?} triad's G"
+        ));
         let validation = validate_heldout(chain, &cfg_solved, triad, sol.rrw_used, &mask);
         match validation {
             Ok(v) if v.passed => {

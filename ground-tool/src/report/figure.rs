@@ -369,9 +369,7 @@ pub fn draw(path: &Path, fig: &Figure) -> anyhow::Result<()> {
     let height = TITLE_H + n * PANEL_H + X_DESC_H;
     let root = BitMapBackend::new(path, (PANELS_W + LEGEND_W, height)).into_drawing_area();
     root.fill(&WHITE).map_err(err)?;
-    let body = root
-        .titled(&fig.title, ("sans-serif", 22))
-        .map_err(err)?;
+    let body = root.titled(&fig.title, ("sans-serif", 22)).map_err(err)?;
     let (left, right) = body.split_horizontally(PANELS_W);
     draw_legend(&right.margin(8, 0, 4, 4), fig)?;
 
@@ -407,9 +405,7 @@ pub fn draw(path: &Path, fig: &Figure) -> anyhow::Result<()> {
         rest = below;
         let last = i + 1 == fig.panels.len();
         let y_range = padded(
-            shared
-                .or_else(|| y_range_of(panel))
-                .unwrap_or((-1.0, 1.0)),
+            shared.or_else(|| y_range_of(panel)).unwrap_or((-1.0, 1.0)),
             0.06,
         );
         let mut off_scale = 0;
@@ -455,7 +451,10 @@ pub fn draw(path: &Path, fig: &Figure) -> anyhow::Result<()> {
                 Kind::Dots(p) => {
                     let pts = thin_points(p, x_range, y_range, cols, rows);
                     chart
-                        .draw_series(pts.iter().map(|&(x, y)| Circle::new((x, y), 2, color.filled())))
+                        .draw_series(
+                            pts.iter()
+                                .map(|&(x, y)| Circle::new((x, y), 2, color.filled())),
+                        )
                         .map_err(err)?;
                 }
                 Kind::Rings(p) => {
@@ -521,7 +520,11 @@ mod tests {
         let pts: Vec<(f64, f64)> = (0..100_000)
             .map(|i| {
                 let x = f64::from(i);
-                let y = if i == 43_210 { 50.0 } else { (x / 5000.0).sin() };
+                let y = if i == 43_210 {
+                    50.0
+                } else {
+                    (x / 5000.0).sin()
+                };
                 (x, y)
             })
             .collect();
@@ -543,7 +546,13 @@ mod tests {
     fn a_line_breaks_at_gaps_and_points_thin_per_cell() {
         let pts = vec![(0.0, 1.0), (1.0, 2.0), (100.0, 3.0), (101.0, 4.0)];
         let segs = thin_line(&pts, (0.0, 101.0), 1000, 10.0);
-        assert_eq!(segs, vec![vec![(0.0, 1.0), (1.0, 2.0)], vec![(100.0, 3.0), (101.0, 4.0)]]);
+        assert_eq!(
+            segs,
+            vec![
+                vec![(0.0, 1.0), (1.0, 2.0)],
+                vec![(100.0, 3.0), (101.0, 4.0)]
+            ]
+        );
         // Three points in one cell, one in another.
         let cloud = vec![(0.1, 0.1), (0.2, 0.2), (0.15, 0.12), (9.9, 9.9)];
         let kept = thin_points(&cloud, (0.0, 10.0), (0.0, 10.0), 10, 10);
