@@ -21,6 +21,7 @@ pub mod data;
 pub mod exit;
 pub mod manifest;
 pub mod outdir;
+pub mod provenance;
 pub mod run_folder;
 pub mod sky;
 pub mod sun;

@@ -96,6 +96,11 @@ pub struct Metadata {
     /// Table images loaded during the run, in load order; the last activated and accepted one
     /// of each table is the table flown (docs/icd.md §5, "Flown tables").
     pub uploads: Vec<Upload>,
+    /// The simulated spacecraft's identity (its sensors and gyro): the ground copies it
+    /// beside the tables it calibrates (`tables/provenance.json`,
+    /// [`crate::provenance`]); absent in telemetry the simulator did not write.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub spacecraft: Option<crate::provenance::Spacecraft>,
 }
 
 impl Metadata {

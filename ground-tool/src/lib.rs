@@ -31,6 +31,8 @@
 //! - [`bench`]: FFCAL throughput check (`ground-tool bench`).
 //! - [`table`]: uplink table images (inspect, diff, write) in `fsw_core::tables` format.
 //! - [`synth`]: deterministic synthetic data (tests, benchmarks).
+//! - [`report`]: `report.md` and the PNG plots of a calibration; [`progress`]: the long
+//!   steps named on stderr.
 
 pub mod attitude;
 pub mod bench;
@@ -40,6 +42,7 @@ pub mod icd_export;
 pub mod linalg;
 pub mod paper;
 pub mod pipeline;
+pub mod progress;
 pub mod report;
 pub mod run_check;
 pub mod synth;

@@ -20,6 +20,9 @@ in-flight attitude sensor calibration, 1991).\n\n\
 Typical loop:\n  sim-harness run gro-early-mission --out runs/a      # fly with the prelaunch tables\n  \
 ground-tool calibrate runs/a --out runs/a-cal        # TP -> FADS -> FFCAL -> adjustment -> IRUCAL -> tables\n  \
 sim-harness run gro-early-mission --out runs/b --tables runs/a-cal/tables   # fly again\n\n\
+Every command reads a run folder (telemetry.bin, optional metadata.json; docs/icd.md) or table \
+images; none estimates anything from the simulator's truth.json (diagnose adds a scoring section \
+when one is there). `COMMAND --help` says what each reads and writes, with an example.\n\n\
 Output folders (calibrate, diagnose): written as a temporary sibling .OUT.tmp-PID and renamed \
 into place, so OUT holds one whole result or its previous content; OUT/tables/manifest.json names \
 the tables to fly (with their CRC-32), and `sim-harness run --tables OUT/tables` loads only those. \
@@ -37,9 +40,22 @@ struct Cli {
 enum Command {
     /// Calibrate from a run folder: TP -> DA/FADS -> FFCAL -> adjustment -> IRUCAL -> tables.
     ///
-    /// Reads RUN_DIR/telemetry.bin (docs/icd.md) and RUN_DIR/metadata.json (optional); never
-    /// truth.json. Writes OUT/report.json, OUT/report.md, PNG plots, OUT/tables/*.tbl
-    /// (binary images that fsw-core loads) and OUT/tables/manifest.json (the tables to fly).
+    /// Finds the sensor alignments (FFCAL, then the paper's adjustment that keeps the OBC's
+    /// attitude frame) and the gyro scale factors and misalignments (IRUCAL) from the
+    /// telemetry alone, validates each new table on held-out blocks of time, and writes the
+    /// tables to uplink.
+    ///
+    /// Reads RUN_DIR/telemetry.bin (docs/icd.md) and RUN_DIR/metadata.json (optional: declared
+    /// noise and effects, the spacecraft's identity); never truth.json. Writes OUT/report.md
+    /// (with the plots it links, each under the question it answers), OUT/report.json, the
+    /// PNG plots (residuals of every sensor pair before and after, the gyro bias history and
+    /// the OBC's bias minus the ground's), OUT/tables/*.tbl (binary images that fsw-core
+    /// loads), OUT/tables/manifest.json (the tables to fly) and OUT/tables/provenance.json
+    /// (the run and spacecraft they were calibrated on; `sim-harness run --tables` warns when
+    /// it flies them on another). Progress goes to stderr when it is a terminal (--quiet: none).
+    #[command(
+        after_help = "Example: ground-tool calibrate runs/a --out runs/a-cal && sim-harness run gro-early-mission --out runs/b --tables runs/a-cal/tables"
+    )]
     Calibrate {
         /// Run folder with telemetry.bin.
         run_dir: std::path::PathBuf,
@@ -77,6 +93,10 @@ enum Command {
         /// Print report.json to stdout.
         #[arg(long)]
         json: bool,
+        /// No progress on stderr (it is also hidden when stderr is not a terminal); the
+        /// output files are the same either way.
+        #[arg(long, short)]
+        quiet: bool,
     },
     /// Diagnose: residual analysis that finds effects the model lacks, and the tables that fix them.
     ///
@@ -99,7 +119,9 @@ enum Command {
     /// lowers the held-out residuals against the table `calibrate` writes for the same
     /// telemetry (report.json `flight_tables.validation`); nothing validated, calibrate's
     /// alignment table is written. Scores against RUN_DIR/truth.json only if it exists
-    /// (labelled as scoring).
+    /// (labelled as scoring). OUT/tables/provenance.json names the run and spacecraft the
+    /// tables were made for. Progress goes to stderr when it is a terminal (--quiet: none).
+    #[command(after_help = "Example: ground-tool diagnose runs/a --out runs/a-diag")]
     Diagnose {
         /// Run folder with telemetry.bin.
         run_dir: std::path::PathBuf,
@@ -117,6 +139,10 @@ enum Command {
         /// Print report.json to stdout.
         #[arg(long)]
         json: bool,
+        /// No progress on stderr (it is also hidden when stderr is not a terminal); the
+        /// output files are the same either way.
+        #[arg(long, short)]
+        quiet: bool,
     },
     /// Gyro noise by Allan deviation of the inertial holds: ARW, bias instability, RRW.
     ///
@@ -143,6 +169,9 @@ enum Command {
     /// OUT/allan.png (log-log σ(τ) per axis with the interval bars, the fitted model, and the
     /// fitted ARW and RRW lines dashed). Exit code 2 when the run has no usable holds, too few
     /// samples, or holds cut by gaps (the message gives the counts).
+    #[command(
+        after_help = "Example: sim-harness run scenarios/inertial-hold-long.toml --out runs/hold && ground-tool allan runs/hold --out runs/hold-allan"
+    )]
     Allan {
         /// Run folder with telemetry.bin.
         run_dir: std::path::PathBuf,
@@ -166,14 +195,32 @@ enum Command {
         /// Print allan.json to stdout.
         #[arg(long)]
         json: bool,
+        /// No progress on stderr (it is also hidden when stderr is not a terminal); the
+        /// output files are the same either way.
+        #[arg(long, short)]
+        quiet: bool,
     },
     /// Reproduce the paper's numbers from data/gro_paper.toml.
+    ///
+    /// Recomputes what the paper's tables imply (Table 3 = Table 1 x Table 2, the rotation
+    /// angles of the alignment changes, the FHST boresight separation, the adjustment that
+    /// preserves the OBC's attitude frame, the IRU maneuver plan's covariance) and prints
+    /// them beside the published figures. Reads the paper's facts built into the binary
+    /// (data/gro_paper.toml); writes only to stdout (a table, or JSON with --json).
+    #[command(after_help = "Example: ground-tool paper --json > paper.json")]
     Paper {
         /// Machine-readable JSON instead of the table.
         #[arg(long)]
         json: bool,
     },
-    /// Uplink table images (fsw-core format): inspect, diff, write the paper's or the prelaunch alignment, manifest.
+    /// Uplink table images (fsw-core format): inspect, diff, write-paper-alignment, write-prelaunch-alignment, manifest.
+    ///
+    /// The images are the binary tables the OBC loads (header, payload, CRC-32;
+    /// docs/tables.md). `inspect` and `diff` read images and print; the `write-*` actions
+    /// write one image file; `manifest` writes DIR/manifest.json for a folder made by hand.
+    #[command(
+        after_help = "Examples:\n  ground-tool table inspect runs/a-cal/tables/alignment.tbl\n  ground-tool table diff prelaunch.tbl runs/a-cal/tables/alignment.tbl (prelaunch.tbl from write-prelaunch-alignment)\n  ground-tool table write-paper-alignment paper.tbl"
+    )]
     Table {
         #[command(subcommand)]
         action: TableAction,
@@ -190,11 +237,19 @@ enum Command {
     /// telemetry.bin as this tool reads it, one CSV per APID with the same column names, to
     /// compare with an outside decoder (tests/icd/interop_decoders.py does, for ccsdspy and
     /// an XTCE decoder).
+    #[command(
+        after_help = "Examples:\n  ground-tool icd describe --out icd\n  ground-tool icd decode runs/a/telemetry.bin --out runs/a-csv"
+    )]
     Icd {
         #[command(subcommand)]
         action: IcdAction,
     },
     /// Time FFCAL on synthetic data (requirement: 10^6 pairs in <= 2 s, release build).
+    ///
+    /// Generates deterministic synthetic dot-product pairs (or, with --fhst-samples, star
+    /// samples for the gyro-batch FHST stage), times the fit and prints the figures (JSON with
+    /// --json). Reads and writes no file. Build with --release: a debug build is far slower.
+    #[command(after_help = "Example: cargo run --release -p ground-tool -- bench --json")]
     Bench {
         /// Number of dot-product pairs per Gauss-Newton pass.
         #[arg(long, default_value_t = 1_000_000)]
@@ -215,6 +270,10 @@ enum Command {
 #[derive(Subcommand)]
 enum IcdAction {
     /// Write the XTCE database and the ccsdspy CSVs into OUT (OUT/ccsdspy/).
+    ///
+    /// Reads nothing (the layout is the flight software's); writes
+    /// OUT/gro-telemetry.xtce.xml and OUT/ccsdspy/apid_0x0NN_NAME.csv, one per APID.
+    #[command(after_help = "Example: ground-tool icd describe --out icd")]
     Describe {
         /// Output folder (created; the files are overwritten).
         #[arg(long)]
@@ -222,6 +281,9 @@ enum IcdAction {
     },
     /// Decode TELEMETRY (a telemetry.bin) into OUT/apid_0x0NN_NAME.csv, every field of every
     /// packet kept by the reader (duplicates and damaged packets are reported, not written).
+    #[command(
+        after_help = "Example: ground-tool icd decode runs/a/telemetry.bin --out runs/a-csv"
+    )]
     Decode {
         /// The telemetry file.
         telemetry: std::path::PathBuf,
@@ -234,6 +296,11 @@ enum IcdAction {
 #[derive(Subcommand)]
 enum TableAction {
     /// Check and print one image (header, CRC, OBC validation, content).
+    ///
+    /// Reads FILE; prints the header, the OBC's own validation verdict, the rotation of each
+    /// alignment from prelaunch and the content (JSON with --json). Exit code 2 when the OBC
+    /// would reject the table.
+    #[command(after_help = "Example: ground-tool table inspect runs/a-cal/tables/alignment.tbl")]
     Inspect {
         /// Image file.
         file: std::path::PathBuf,
@@ -242,6 +309,12 @@ enum TableAction {
         json: bool,
     },
     /// Differences between two images of the same table.
+    ///
+    /// Reads A and B; prints every field that differs, the rotation between the alignments
+    /// and the largest G change (JSON with --json).
+    #[command(
+        after_help = "Example: ground-tool table diff prelaunch.tbl runs/a-cal/tables/alignment.tbl (prelaunch.tbl from write-prelaunch-alignment)"
+    )]
     Diff {
         /// First image.
         a: std::path::PathBuf,
@@ -252,11 +325,17 @@ enum TableAction {
         json: bool,
     },
     /// Write the alignment table the paper uplinked on 1991-05-14 (Table 1 x Table 2).
+    ///
+    /// Writes the image file OUT (overwritten), built from the paper's facts in the binary.
+    #[command(after_help = "Example: ground-tool table write-paper-alignment paper.tbl")]
     WritePaperAlignment {
         /// Output image file.
         out: std::path::PathBuf,
     },
     /// Write the prelaunch (boot) alignment table.
+    ///
+    /// Writes the image file OUT (overwritten): paper Table 1, the table the OBC boots with.
+    #[command(after_help = "Example: ground-tool table write-prelaunch-alignment prelaunch.tbl")]
     WritePrelaunchAlignment {
         /// Output image file.
         out: std::path::PathBuf,
@@ -264,6 +343,7 @@ enum TableAction {
     /// Write DIR/manifest.json listing every *.tbl image of DIR (each checked, with its
     /// CRC-32), for a tables folder made by hand: check first that DIR holds exactly the
     /// images to fly. `calibrate` and `diagnose` write the manifest themselves.
+    #[command(after_help = "Example: ground-tool table manifest my-tables/")]
     Manifest {
         /// Tables folder.
         dir: std::path::PathBuf,
@@ -429,8 +509,10 @@ fn run_calibrate(
     fhst_stage: ground_tool::pipeline::calibrate::FhstStage,
     maneuvers: Vec<(f64, f64)>,
     json: bool,
+    quiet: bool,
 ) -> Result<()> {
     use ground_tool::calibration::alignment::Weighting;
+    let progress = ground_tool::progress::Session::start("ground-tool calibrate", !quiet);
     use ground_tool::pipeline::calibrate::{calibrate_run, CalibrateOptions};
     let meta = ground_tool::pipeline::flown::metadata_or_default(run_dir);
     let (flown_alignment, flown_iru, flown_filter) =
@@ -460,12 +542,22 @@ fn run_calibrate(
         maneuvers_s: (!maneuvers.is_empty()).then_some(maneuvers),
         ..CalibrateOptions::default()
     };
+    // The OBC's bias at every housekeeping packet, for the bias plots: taken (and its decoded
+    // telemetry dropped) before the chain decodes the file, so the peak memory stays the
+    // chain's. A file that cannot be read is left to the chain, whose message says why.
+    ground_tool::progress::step("the OBC's bias from every housekeeping packet (for the plots)");
+    let obc_bias = ground_tool::report::ObcBiasSeries::read(run_dir).ok();
     let result = calibrate_run(run_dir, out, &options)?;
+    // Whose spacecraft these tables are for (gro_reference::provenance): `sim-harness run
+    // --tables` warns when it flies them on another.
+    gro_reference::provenance::write(&out.join("tables"), run_dir, &meta, "ground-tool calibrate")?;
     let flown = options
         .flown_alignment
         .unwrap_or_else(fsw_core::tables::AlignmentTable::prelaunch);
-    ground_tool::report::write_calibration_report(out, &result, &flown)?;
+    ground_tool::progress::step("report.md, report.json and the plots");
+    ground_tool::report::write_calibration_report(out, &result, &flown, obc_bias.as_ref())?;
     dir.commit()?;
+    drop(progress);
     if json {
         println!("{}", serde_json::to_string_pretty(&result.report)?);
     } else {
@@ -483,8 +575,11 @@ fn run_diagnose(
     force: bool,
     tables: Option<&std::path::Path>,
     json: bool,
+    quiet: bool,
 ) -> Result<()> {
-    ground_tool::diagnose::run::diagnose_command(run_dir, out_target, force, tables, json, None)
+    ground_tool::diagnose::run::diagnose_command(
+        run_dir, out_target, force, tables, json, quiet, None,
+    )
 }
 
 /// `ground-tool allan`: read the telemetry, identify the gyro noise, write the outputs.
@@ -495,6 +590,7 @@ fn run_allan(
     tables: Option<&std::path::Path>,
     options: ground_tool::calibration::allan::AllanOptions,
     json: bool,
+    quiet: bool,
 ) -> Result<()> {
     use ground_tool::calibration::allan;
     use ground_tool::run_check::{InputError, Severity};
@@ -508,6 +604,8 @@ fn run_allan(
     let meta = ground_tool::pipeline::flown::metadata_or_default(run_dir);
     let (_, flown_iru, _) = ground_tool::pipeline::flown::flown_tables(run_dir, &meta, tables)?;
     let iru = flown_iru.unwrap_or_else(fsw_core::tables::IruTable::prelaunch);
+    let progress = ground_tool::progress::Session::start("ground-tool allan", !quiet);
+    ground_tool::progress::step("reading the telemetry");
     let tm = ground_tool::tp::read_file(&run_dir.join("telemetry.bin"))
         .map_err(|e| InputError(e.into()))?;
     if let Some(f) = ground_tool::run_check::check(&tm, Some(&meta))
@@ -516,6 +614,7 @@ fn run_allan(
     {
         return Err(InputError::msg(format!("{}: {}", run_dir.display(), f.message)).into());
     }
+    ground_tool::progress::step("Allan deviation of the holds and the noise fit");
     let report = allan::identify_gyro_noise(&tm, &iru, &options).map_err(|e| {
         InputError(anyhow::Error::new(e).context(format!(
             "{}: the telemetry does not support a gyro noise identification",
@@ -531,8 +630,10 @@ fn run_allan(
             .flatten()
             .collect::<Vec<_>>(),
     )?;
+    ground_tool::progress::step("allan.json, allan.md and the plot");
     allan::write_outputs(dir.path(), &report, &run_dir.display().to_string())?;
     dir.commit()?;
+    drop(progress);
     if json {
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
@@ -589,6 +690,7 @@ fn run(cli: Cli) -> Result<()> {
             fhst_stage,
             maneuvers,
             json,
+            quiet,
         } => run_calibrate(
             &run_dir,
             &out,
@@ -599,6 +701,7 @@ fn run(cli: Cli) -> Result<()> {
             fhst_stage,
             maneuvers,
             json,
+            quiet,
         )?,
         Command::Diagnose {
             run_dir,
@@ -606,7 +709,8 @@ fn run(cli: Cli) -> Result<()> {
             force,
             tables,
             json,
-        } => run_diagnose(&run_dir, &out, force, tables.as_deref(), json)?,
+            quiet,
+        } => run_diagnose(&run_dir, &out, force, tables.as_deref(), json, quiet)?,
         Command::Allan {
             run_dir,
             out,
@@ -615,6 +719,7 @@ fn run(cli: Cli) -> Result<()> {
             signal,
             tables,
             json,
+            quiet,
         } => run_allan(
             &run_dir,
             &out,
@@ -622,6 +727,7 @@ fn run(cli: Cli) -> Result<()> {
             tables.as_deref(),
             ground_tool::calibration::allan::AllanOptions { confidence, signal },
             json,
+            quiet,
         )?,
         Command::Paper { json } => {
             let r = ground_tool::paper::reproduce()?;

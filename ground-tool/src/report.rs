@@ -4,9 +4,12 @@
 //! alignment calibration (its Figure 2) and the gyro bias history against the OBC's filter
 //! bias (its Figures 3–4).
 
-use crate::pipeline::calibrate::{CalibrationOutput, SENSOR_NAMES};
+pub mod figure;
+
+use crate::pipeline::calibrate::{BiasHistoryPoint, CalibrationOutput, SENSOR_NAMES};
 use crate::pipeline::observations::FrameObservations;
 use anyhow::Context;
+use figure::{Figure, Kind, Layer, Panel};
 use fsw_core::tables::types::matrix_from_rows;
 use fsw_core::tables::AlignmentTable;
 use fsw_core::units::ARCSEC_PER_RAD;
@@ -35,7 +38,8 @@ pub struct Series {
     pub color: RGBColor,
 }
 
-/// Scatter/line plot of several series to a PNG.
+/// Scatter plot of several series to a PNG, in one panel with the legend beside it (outside
+/// the data area).
 ///
 /// # Errors
 /// Drawing or I/O failure.
@@ -46,71 +50,29 @@ pub fn plot_series(
     y_label: &str,
     series: &[Series],
 ) -> anyhow::Result<()> {
-    register_font();
-    let all: Vec<(f64, f64)> = series
-        .iter()
-        .flat_map(|s| s.points.iter().copied())
-        .filter(|(x, y)| x.is_finite() && y.is_finite())
-        .collect();
-    let (mut x0, mut x1, mut y0, mut y1) = (
-        f64::INFINITY,
-        f64::NEG_INFINITY,
-        f64::INFINITY,
-        f64::NEG_INFINITY,
-    );
-    for (x, y) in &all {
-        x0 = x0.min(*x);
-        x1 = x1.max(*x);
-        y0 = y0.min(*y);
-        y1 = y1.max(*y);
-    }
-    if all.is_empty() {
-        (x0, x1, y0, y1) = (0.0, 1.0, -1.0, 1.0);
-    }
-    if x1 <= x0 {
-        x1 = x0 + 1.0;
-    }
-    if y1 <= y0 {
-        y1 = y0 + 1.0;
-    }
-    let pad = 0.05 * (y1 - y0);
-    let root = BitMapBackend::new(path, (1000, 560)).into_drawing_area();
-    root.fill(&WHITE).map_err(|e| anyhow::anyhow!("{e}"))?;
-    let mut chart = ChartBuilder::on(&root)
-        .caption(title, ("sans-serif", 22))
-        .margin(12)
-        .x_label_area_size(45)
-        .y_label_area_size(70)
-        .build_cartesian_2d(x0..x1, (y0 - pad)..(y1 + pad))
-        .map_err(|e| anyhow::anyhow!("{e}"))?;
-    chart
-        .configure_mesh()
-        .x_desc(x_label)
-        .y_desc(y_label)
-        .label_style(("sans-serif", 14))
-        .draw()
-        .map_err(|e| anyhow::anyhow!("{e}"))?;
-    for s in series {
-        let color = s.color;
-        chart
-            .draw_series(
-                s.points
+    figure::draw(
+        path,
+        &Figure {
+            title: title.to_owned(),
+            x_label: x_label.to_owned(),
+            x_range: None,
+            shared_y: false,
+            panels: vec![Panel {
+                title: String::new(),
+                y_label: y_label.to_owned(),
+                y_quantile: None,
+                layers: series
                     .iter()
-                    .map(|&(x, y)| Circle::new((x, y), 2, color.filled())),
-            )
-            .map_err(|e| anyhow::anyhow!("{e}"))?
-            .label(s.label.clone())
-            .legend(move |(x, y)| Circle::new((x, y), 4, color.filled()));
-    }
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .label_font(("sans-serif", 14))
-        .draw()
-        .map_err(|e| anyhow::anyhow!("{e}"))?;
-    root.present().map_err(|e| anyhow::anyhow!("{e}"))?;
-    Ok(())
+                    .map(|s| Layer {
+                        label: Some(s.label.clone()),
+                        color: s.color,
+                        kind: Kind::Dots(s.points.clone()),
+                    })
+                    .collect(),
+            }],
+            notes: Vec::new(),
+        },
+    )
 }
 
 /// Dot-product residual (arcsec) of sensors `i`, `j` at one frame for a set of alignments:
@@ -174,135 +136,23 @@ pub fn pair_series(
 
 /// Write `report.md`, `report.json` and the plots of a calibration into `out_dir`.
 ///
+/// `obc_bias` is the OBC's bias from every housekeeping packet ([`ObcBiasSeries::read`]); the
+/// bias plots then show it at full rate over the whole run, else only at the ground's epochs
+/// (from `report.bias_history`).
+///
 /// # Errors
 /// I/O or plotting failure.
 pub fn write_calibration_report(
     out_dir: &Path,
     out: &CalibrationOutput,
     flown: &AlignmentTable,
+    obc_bias: Option<&ObcBiasSeries>,
 ) -> anyhow::Result<()> {
     std::fs::create_dir_all(out_dir).with_context(|| format!("creating {}", out_dir.display()))?;
     let json = serde_json::to_string_pretty(&out.report)?;
     std::fs::write(out_dir.join("report.json"), json)?;
 
-    let mut plots = Vec::new();
-    for (i, j) in [(0usize, 1usize), (0, 2), (1, 3), (0, 3)] {
-        let (b, a) = pair_series(&out.frames, i, j, flown, &out.alignment);
-        if b.len() < 10 {
-            continue;
-        }
-        let name = format!("residual_{}_{}.png", SENSOR_NAMES[i], SENSOR_NAMES[j]).to_lowercase();
-        plot_series(
-            &out_dir.join(&name),
-            &format!(
-                "{}–{} dot-product residual (paper Fig. 2)",
-                SENSOR_NAMES[i], SENSOR_NAMES[j]
-            ),
-            "time (h)",
-            "residual (arcsec)",
-            &[
-                Series {
-                    label: "before (flown tables)".into(),
-                    points: b,
-                    color: RGBColor(200, 60, 40),
-                },
-                Series {
-                    label: "after (calibrated)".into(),
-                    points: a,
-                    color: RGBColor(30, 90, 200),
-                },
-            ],
-        )?;
-        plots.push(name);
-    }
-    if !out.report.bias_history.is_empty() {
-        let mut series = Vec::new();
-        let colors = [
-            RGBColor(200, 60, 40),
-            RGBColor(30, 150, 60),
-            RGBColor(30, 90, 200),
-        ];
-        let light = [
-            RGBColor(240, 160, 150),
-            RGBColor(150, 220, 160),
-            RGBColor(150, 180, 240),
-        ];
-        for (axis, name) in ["x", "y", "z"].iter().enumerate() {
-            series.push(Series {
-                label: format!("ground {name}"),
-                points: out
-                    .report
-                    .bias_history
-                    .iter()
-                    .map(|p| (p.t_s / 3600.0, p.bias_rad_per_s[axis] * ARCSEC_PER_RAD))
-                    .collect(),
-                color: colors[axis],
-            });
-            series.push(Series {
-                label: format!("OBC filter {name}"),
-                points: out
-                    .report
-                    .bias_history
-                    .iter()
-                    .filter_map(|p| {
-                        p.obc_bias_rad_per_s
-                            .map(|b| (p.t_s / 3600.0, b[axis] * ARCSEC_PER_RAD))
-                    })
-                    .collect(),
-                color: light[axis],
-            });
-        }
-        plot_series(
-            &out_dir.join("bias_history.png"),
-            "Gyro bias history (paper Figs. 3–4)",
-            "time (h)",
-            "bias (arcsec/s)",
-            &series,
-        )?;
-        plots.push("bias_history.png".into());
-        // The OBC's bias minus the ground's, with the ground's ±1σ band (what the onboard
-        // filter still carries after its own convergence).
-        let mut diff = Vec::new();
-        for (axis, name) in ["x", "y", "z"].iter().enumerate() {
-            let pts: Vec<(f64, f64, f64)> = out
-                .report
-                .bias_history
-                .iter()
-                .filter_map(|p| {
-                    p.obc_bias_rad_per_s.map(|b| {
-                        (
-                            p.t_s / 3600.0,
-                            (b[axis] - p.bias_rad_per_s[axis]) * ARCSEC_PER_RAD,
-                            p.sigma_rad_per_s[axis] * ARCSEC_PER_RAD,
-                        )
-                    })
-                })
-                .collect();
-            diff.push(Series {
-                label: format!("OBC − ground {name}"),
-                points: pts.iter().map(|(t, d, _)| (*t, *d)).collect(),
-                color: colors[axis],
-            });
-            diff.push(Series {
-                label: format!("ground ±1σ {name}"),
-                points: pts
-                    .iter()
-                    .flat_map(|(t, _, s)| [(*t, *s), (*t, -*s)])
-                    .collect(),
-                color: light[axis],
-            });
-        }
-        if diff.iter().any(|s| !s.points.is_empty()) {
-            plot_series(
-                &out_dir.join("bias_difference.png"),
-                "OBC bias minus the ground's (smoothed, calibration filter)",
-                "time (h)",
-                "bias difference (arcsec/s)",
-                &diff,
-            )?;
-            plots.push("bias_difference.png".into());
-        }
-    }
+    let plots = write_plots(out_dir, out, flown, obc_bias)?;
 
     let r = &out.report;
     let mut md = String::new();
@@ -546,10 +396,7 @@ pub fn write_calibration_report(
     for c in &r.filter_changes {
         let _ = writeln!(md, "- filter table change: {c}");
     }
-    let _ = writeln!(md, "\n## Plots\n");
-    for p in &plots {
-        let _ = writeln!(md, "![{p}]({p})");
-    }
+    write_plots_section(&mut md, &plots);
     std::fs::write(out_dir.join("report.md"), md)?;
     Ok(())
 }
@@ -567,5 +414,522 @@ fn write_delta_m(md: &mut String, delta_m: &[[f64; 3]; 3], sigma: &[[f64; 3]; 3]
             row[2] * 1e6,
             sig[2] * 1e6
         );
+    }
+}
+
+/// The OBC filter's gyro bias from every housekeeping packet (APID 0x011): what the onboard
+/// computer believed at each downlinked cycle, to plot at full rate against the ground's.
+#[derive(Clone, Debug, Default)]
+pub struct ObcBiasSeries {
+    /// Packet times, s (the telemetry's time scale, as `FrameObservations::time`).
+    pub t_s: Vec<f64>,
+    /// Bias in ACS, rad/s.
+    pub bias_rad_per_s: Vec<[f64; 3]>,
+    /// 1σ of the bias from the packet's covariance diagonal, rad/s (NaN where the variance
+    /// is not a non-negative number).
+    pub sigma_rad_per_s: Vec<[f64; 3]>,
+}
+
+impl ObcBiasSeries {
+    /// The series of a decoded telemetry.
+    #[must_use]
+    pub fn from_telemetry(tm: &crate::tp::Telemetry) -> Self {
+        Self::from_housekeeping(&tm.housekeeping)
+    }
+
+    /// The series of housekeeping records.
+    #[must_use]
+    pub fn from_housekeeping(housekeeping: &[fsw_core::telemetry::ObcHousekeeping]) -> Self {
+        let mut s = Self::default();
+        for h in housekeeping {
+            s.t_s.push(h.time.seconds());
+            s.bias_rad_per_s.push(h.bias_acs_rad_per_s);
+            s.sigma_rad_per_s.push([3, 4, 5].map(|k| {
+                let v = h.covariance_diag[k];
+                if v.is_finite() && v >= 0.0 {
+                    v.sqrt()
+                } else {
+                    f64::NAN
+                }
+            }));
+        }
+        s
+    }
+
+    /// The series of `run_dir/telemetry.bin` ([`crate::tp::read_housekeeping`]: the
+    /// housekeeping alone, the same packets the chain keeps). A caller takes it before the
+    /// chain decodes the file, so the chain's peak memory is not raised by it.
+    ///
+    /// # Errors
+    /// The file cannot be read (the message names it).
+    pub fn read(run_dir: &Path) -> anyhow::Result<Self> {
+        let path = run_dir.join("telemetry.bin");
+        let hk = crate::tp::read_housekeeping(&path)
+            .with_context(|| format!("reading {} for the OBC bias plot", path.display()))?;
+        Ok(Self::from_housekeeping(&hk))
+    }
+}
+
+/// A plot written, with the question it answers and the numbers that answer it.
+#[derive(Clone, Debug)]
+pub struct PlotEntry {
+    /// File name inside the report folder.
+    pub file: String,
+    /// The one question the plot answers at a glance.
+    pub question: String,
+    /// The answer in numbers (from the same data as the plot).
+    pub answer: String,
+}
+
+/// The sensor pairs of the residual plots: every pair of the four sensors.
+pub const SENSOR_PAIRS: [(usize, usize); 6] = [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)];
+
+/// Fewest common epochs of a pair that get a residual plot.
+pub const MIN_PAIR_SAMPLES: usize = 10;
+
+/// File name of the residual plot of sensors `i`, `j`.
+#[must_use]
+pub fn pair_plot_name(i: usize, j: usize) -> String {
+    format!("residual_{}_{}.png", SENSOR_NAMES[i], SENSOR_NAMES[j]).to_lowercase()
+}
+
+/// Time axis of the plots: hours, or days beyond three days.
+struct TimeAxis {
+    div: f64,
+    label: &'static str,
+}
+
+impl TimeAxis {
+    fn for_span(span_s: f64) -> Self {
+        if span_s > 3.0 * 86_400.0 {
+            Self {
+                div: 86_400.0,
+                label: "time since the first frame (days)",
+            }
+        } else {
+            Self {
+                div: 3600.0,
+                label: "time since the first frame (h)",
+            }
+        }
+    }
+}
+
+fn rms(v: &[(f64, f64)]) -> f64 {
+    (v.iter().map(|p| p.1 * p.1).sum::<f64>() / v.len().max(1) as f64).sqrt()
+}
+
+fn mean(v: &[(f64, f64)]) -> f64 {
+    v.iter().map(|p| p.1).sum::<f64>() / v.len().max(1) as f64
+}
+
+const BEFORE: RGBColor = RGBColor(200, 60, 40);
+const AFTER: RGBColor = RGBColor(30, 90, 200);
+const GREY: RGBColor = RGBColor(120, 120, 120);
+/// Quantile of the bias history panels' y range: 0.1 % of the samples may lie beyond it
+/// (the OBC's first hours from its initial bias on a six-month run; 19 samples of a 5-h run).
+const HISTORY_QUANTILE: f64 = 0.001;
+/// Quantile of the difference panels' y range ([`figure::Panel::y_quantile`]).
+const DIFF_QUANTILE: f64 = 0.05;
+/// The OBC's series in the bias plots (the same in every axis panel, so one legend serves).
+const OBC: RGBColor = RGBColor(90, 140, 230);
+/// The OBC's own ±1σ.
+const OBC_SIGMA: RGBColor = RGBColor(170, 195, 240);
+/// The ground's estimates.
+const GROUND: RGBColor = RGBColor(180, 30, 30);
+
+/// Every plot of the calibration report: the six pairs' residuals (where they have common
+/// epochs), the bias history and the OBC − ground bias difference.
+fn write_plots(
+    out_dir: &Path,
+    out: &CalibrationOutput,
+    flown: &AlignmentTable,
+    obc: Option<&ObcBiasSeries>,
+) -> anyhow::Result<Vec<PlotEntry>> {
+    let t0 = out.frames.first().map_or(0.0, |f| f.time.seconds());
+    let t_end = out.frames.last().map_or(0.0, |f| f.time.seconds()) - t0;
+    let obc_end = obc.and_then(|o| o.t_s.last()).map_or(0.0, |t| t - t0);
+    let span_s = t_end.max(obc_end).max(1.0);
+    let axis = TimeAxis::for_span(span_s);
+    let x_range = Some((0.0, span_s / axis.div));
+    let mut plots = Vec::new();
+    for (i, j) in SENSOR_PAIRS {
+        let (b, a) = pair_series(&out.frames, i, j, flown, &out.alignment);
+        let pair = format!("{}–{}", SENSOR_NAMES[i], SENSOR_NAMES[j]);
+        let file = pair_plot_name(i, j);
+        if b.len() < MIN_PAIR_SAMPLES || a.len() < MIN_PAIR_SAMPLES {
+            plots.push(PlotEntry {
+                file: String::new(),
+                question: format!("Did calibration reduce the {pair} residual?"),
+                answer: format!(
+                    "not plotted: {} frames hold both sensors' referenced vectors (a plot needs {MIN_PAIR_SAMPLES})",
+                    b.len().min(a.len())
+                ),
+            });
+            continue;
+        }
+        let scale = |v: Vec<(f64, f64)>| -> Vec<(f64, f64)> {
+            v.into_iter()
+                .map(|(t, r)| (t * 3600.0 / axis.div, r))
+                .collect()
+        };
+        let (b, a) = (scale(b), scale(a));
+        let (rb, ra, mb, ma) = (rms(&b), rms(&a), mean(&b), mean(&a));
+        let n_epochs = b.len();
+        let answer = format!(
+            "RMS {rb:.1}″ → {ra:.1}″ (mean {mb:+.1}″ → {ma:+.1}″) over {} common epochs",
+            a.len()
+        );
+        figure::draw(
+            &out_dir.join(&file),
+            &Figure {
+                title: format!("{pair} dot-product residual before and after calibration (paper Fig. 2)"),
+                x_label: axis.label.to_owned(),
+                x_range,
+                shared_y: true,
+                panels: vec![
+                    Panel {
+                        title: "before: the flown (prelaunch) alignments".into(),
+                        y_label: "residual (arcsec)".into(),
+                        y_quantile: None,
+                        layers: vec![
+                            Layer {
+                                label: None,
+                                color: GREY,
+                                kind: Kind::HLine(0.0),
+                            },
+                            Layer {
+                                label: Some(format!("before (flown tables): RMS {rb:.1}″, mean {mb:+.1}″")),
+                                color: BEFORE,
+                                kind: Kind::Dots(b),
+                            },
+                        ],
+                    },
+                    Panel {
+                        title: "after: the calibrated alignments (same scale)".into(),
+                        y_label: "residual (arcsec)".into(),
+                        y_quantile: None,
+                        layers: vec![
+                            Layer {
+                                label: None,
+                                color: GREY,
+                                kind: Kind::HLine(0.0),
+                            },
+                            Layer {
+                                label: Some(format!("after (calibrated): RMS {ra:.1}″, mean {ma:+.1}″")),
+                                color: AFTER,
+                                kind: Kind::Dots(a),
+                            },
+                        ],
+                    },
+                ],
+                notes: vec![
+                    format!("{n_epochs} epochs with both sensors' referenced vectors."),
+                    "Residual: (r_i·r_j − b_i·b_j) / sin(angle), the angle error the pair sees; 0 = the two sensors agree with the references.".into(),
+                ],
+            },
+        )?;
+        plots.push(PlotEntry {
+            file,
+            question: format!("Did calibration reduce the {pair} residual?"),
+            answer,
+        });
+    }
+    plots.extend(bias_plots(out_dir, out, obc, t0, &axis, x_range)?);
+    Ok(plots)
+}
+
+/// The ground's bias at its epochs, linearly interpolated at `t` (relative s) within their
+/// span: between two fixes with no measurement in between, the smoothed random-walk bias is
+/// the straight line between them.
+fn interpolate_ground(points: &[BiasHistoryPoint], t: f64, axis: usize) -> Option<f64> {
+    let k = points.partition_point(|p| p.t_s <= t);
+    let (a, b) = (points.get(k.checked_sub(1)?)?, points.get(k));
+    match b {
+        Some(b) if b.t_s > a.t_s => {
+            let w = (t - a.t_s) / (b.t_s - a.t_s);
+            Some(a.bias_rad_per_s[axis] * (1.0 - w) + b.bias_rad_per_s[axis] * w)
+        }
+        _ => (t == a.t_s).then_some(a.bias_rad_per_s[axis]),
+    }
+}
+
+/// `bias_history.png` (OBC at every housekeeping packet, ground at its epochs with ±1σ, one
+/// panel per axis over the whole run) and `bias_difference.png` (OBC − ground).
+fn bias_plots(
+    out_dir: &Path,
+    out: &CalibrationOutput,
+    obc: Option<&ObcBiasSeries>,
+    t0: f64,
+    axis: &TimeAxis,
+    x_range: Option<(f64, f64)>,
+) -> anyhow::Result<Vec<PlotEntry>> {
+    let ground = &out.report.bias_history;
+    let mut plots = Vec::new();
+    if ground.is_empty() && obc.is_none_or(|o| o.t_s.is_empty()) {
+        plots.push(PlotEntry {
+            file: String::new(),
+            question: "Does the OBC's gyro bias follow the ground's over the whole run?".into(),
+            answer: "not plotted: no ground bias history (no IRU chain) and no housekeeping".into(),
+        });
+        return Ok(plots);
+    }
+    let as_x = |t_rel_s: f64| t_rel_s / axis.div;
+    let arcsec = ARCSEC_PER_RAD;
+    // The OBC at full rate (relative s), or at the ground's epochs without a series.
+    let obc_points: Vec<(f64, [f64; 3], [f64; 3])> = match obc {
+        Some(o) => o
+            .t_s
+            .iter()
+            .zip(&o.bias_rad_per_s)
+            .zip(&o.sigma_rad_per_s)
+            .map(|((t, b), s)| (t - t0, *b, *s))
+            .collect(),
+        None => ground
+            .iter()
+            .filter_map(|p| p.obc_bias_rad_per_s.map(|b| (p.t_s, b, [f64::NAN; 3])))
+            .collect(),
+    };
+    let full_rate = obc.is_some();
+    // Connect housekeeping samples closer than 10 typical spacings (a gap in the downlink
+    // breaks the line).
+    let gap = {
+        let mut d: Vec<f64> = obc_points.windows(2).map(|w| w[1].0 - w[0].0).collect();
+        d.sort_by(f64::total_cmp);
+        as_x(10.0 * d.get(d.len() / 2).copied().unwrap_or(1.0).max(1.0))
+    };
+    let names = ["x", "y", "z"];
+    let mut panels = Vec::new();
+    let mut diff_panels = Vec::new();
+    let mut diff_rms = [f64::NAN; 3];
+    let mut within = [0usize; 3];
+    let mut compared = [0usize; 3];
+    for (k, name) in names.iter().enumerate() {
+        let obc_line: Vec<(f64, f64)> = obc_points
+            .iter()
+            .map(|(t, b, _)| (as_x(*t), b[k] * arcsec))
+            .collect();
+        let ground_bars: Vec<(f64, f64, f64)> = ground
+            .iter()
+            .map(|p| {
+                (
+                    as_x(p.t_s),
+                    p.bias_rad_per_s[k] * arcsec,
+                    p.sigma_rad_per_s[k] * arcsec,
+                )
+            })
+            .collect();
+        let obc_kind = if full_rate {
+            Kind::Line {
+                points: obc_line,
+                gap,
+            }
+        } else {
+            Kind::Rings(obc_line)
+        };
+        panels.push(Panel {
+            title: format!("axis {name} (ACS)"),
+            y_label: "bias (arcsec/s)".into(),
+            // The OBC's first minutes from its initial bias are clipped only on long runs.
+            y_quantile: Some(HISTORY_QUANTILE),
+            // The OBC over the ground: over months the ground's thousands of fixes would
+            // cover a line drawn under them.
+            layers: vec![
+                Layer {
+                    label: Some("ground (calibration filter, smoothed) ±1σ at its fixes".into()),
+                    color: GROUND,
+                    kind: Kind::Bars(ground_bars.clone()),
+                },
+                Layer {
+                    label: Some(if full_rate {
+                        "OBC filter, every housekeeping packet".into()
+                    } else {
+                        "OBC filter at the ground's epochs".into()
+                    }),
+                    color: OBC,
+                    kind: obc_kind,
+                },
+            ],
+        });
+        // OBC − ground wherever both exist (ground interpolated between its fixes), with the
+        // OBC's own ±1σ, and the ground's ±1σ around zero at its fixes.
+        let diff: Vec<(f64, f64)> = obc_points
+            .iter()
+            .filter_map(|(t, b, _)| {
+                interpolate_ground(ground, *t, k).map(|g| (as_x(*t), (b[k] - g) * arcsec))
+            })
+            .collect();
+        let obc_sigma: Vec<(f64, f64)> = obc_points
+            .iter()
+            .filter(|(t, _, s)| s[k].is_finite() && interpolate_ground(ground, *t, k).is_some())
+            .map(|(t, _, s)| (as_x(*t), s[k] * arcsec))
+            .collect();
+        for (t, b, s) in &obc_points {
+            if let (Some(g), true) = (interpolate_ground(ground, *t, k), s[k].is_finite()) {
+                compared[k] += 1;
+                if (b[k] - g).abs() <= s[k] {
+                    within[k] += 1;
+                }
+            }
+        }
+        diff_rms[k] = rms(&diff);
+        let mut layers = vec![Layer {
+            label: None,
+            color: GREY,
+            kind: Kind::HLine(0.0),
+        }];
+        if !obc_sigma.is_empty() {
+            layers.push(Layer {
+                label: Some("± the OBC's own 1σ (housekeeping covariance)".into()),
+                color: OBC_SIGMA,
+                kind: Kind::Line {
+                    points: obc_sigma.clone(),
+                    gap,
+                },
+            });
+            layers.push(Layer {
+                label: Some("± the OBC's own 1σ (housekeeping covariance)".into()),
+                color: OBC_SIGMA,
+                kind: Kind::Line {
+                    points: obc_sigma.iter().map(|&(t, s)| (t, -s)).collect(),
+                    gap,
+                },
+            });
+        }
+        layers.push(Layer {
+            label: Some("0 ± the ground's 1σ at its fixes".into()),
+            color: GREY,
+            kind: Kind::Bars(ground_bars.iter().map(|&(t, _, s)| (t, 0.0, s)).collect()),
+        });
+        layers.push(Layer {
+            label: Some(if full_rate {
+                "OBC − ground (ground interpolated between its fixes)".into()
+            } else {
+                "OBC − ground at the ground's fixes".into()
+            }),
+            color: OBC,
+            kind: if full_rate {
+                Kind::Line { points: diff, gap }
+            } else {
+                Kind::Dots(diff)
+            },
+        });
+        diff_panels.push(Panel {
+            title: format!("axis {name} (ACS)"),
+            y_label: "OBC − ground (arcsec/s)".into(),
+            // The OBC's first convergence (minutes) would flatten the hours after it; the
+            // whole of it is in bias_history.png.
+            y_quantile: Some(DIFF_QUANTILE),
+            layers,
+        });
+    }
+    let source = if full_rate {
+        format!(
+            "OBC: {} housekeeping packets; ground: {} fixes of the calibration filter (RTS-smoothed).",
+            obc_points.len(),
+            ground.len()
+        )
+    } else {
+        format!(
+            "OBC: only at the ground's {} fixes (no housekeeping series given).",
+            ground.len()
+        )
+    };
+    figure::draw(
+        &out_dir.join("bias_history.png"),
+        &Figure {
+            title: "Gyro bias: the OBC's estimate and the ground's over the whole run (paper Figs. 3–4)".into(),
+            x_label: axis.label.to_owned(),
+            x_range,
+            shared_y: false,
+            panels,
+            notes: vec![source.clone()],
+        },
+    )?;
+    let span = |pts: &[BiasHistoryPoint]| {
+        pts.first()
+            .zip(pts.last())
+            .map_or("no ground fixes".to_owned(), |(a, b)| {
+                format!(
+                    "{} ground fixes from {:.2} to {:.2} {}",
+                    pts.len(),
+                    as_x(a.t_s),
+                    as_x(b.t_s),
+                    if axis.div > 3600.0 { "days" } else { "h" }
+                )
+            })
+    };
+    plots.push(PlotEntry {
+        file: "bias_history.png".into(),
+        question: "Does the OBC's gyro bias follow the ground's over the whole run?".into(),
+        answer: format!(
+            "{}; OBC at {} ({})",
+            span(ground),
+            if full_rate {
+                "every housekeeping packet"
+            } else {
+                "the ground's epochs only"
+            },
+            obc_points.len()
+        ),
+    });
+    if ground.is_empty() {
+        return Ok(plots);
+    }
+    let f = |v: f64| format!("{v:.4}");
+    let fraction = |k: usize| {
+        if compared[k] == 0 {
+            "n/a".to_owned()
+        } else {
+            format!("{:.0} %", 100.0 * within[k] as f64 / compared[k] as f64)
+        }
+    };
+    let answer = format!(
+        "RMS of OBC − ground x / y / z: {} / {} / {}″/s; within the OBC's own 1σ: {} / {} / {} of the samples",
+        f(diff_rms[0]),
+        f(diff_rms[1]),
+        f(diff_rms[2]),
+        fraction(0),
+        fraction(1),
+        fraction(2)
+    );
+    figure::draw(
+        &out_dir.join("bias_difference.png"),
+        &Figure {
+            title: "OBC bias minus the ground's, with both uncertainties".into(),
+            x_label: axis.label.to_owned(),
+            x_range,
+            shared_y: false,
+            panels: diff_panels,
+            notes: vec![source, answer.clone()],
+        },
+    )?;
+    plots.push(PlotEntry {
+        file: "bias_difference.png".into(),
+        question: "How far is the OBC's bias from the ground's, and does the OBC's own 1σ cover the difference?".into(),
+        answer,
+    });
+    Ok(plots)
+}
+
+/// The `## Plots` section: every plot written, under its question, with the answer in
+/// numbers; then the plots not written and why.
+fn write_plots_section(md: &mut String, plots: &[PlotEntry]) {
+    let _ = writeln!(md, "\n## Plots\n");
+    let _ = writeln!(
+        md,
+        "Each plot answers one question; the numbers under it are the answer from the same data.\n"
+    );
+    for p in plots.iter().filter(|p| !p.file.is_empty()) {
+        let _ = writeln!(md, "### {}\n", p.question);
+        let _ = writeln!(md, "{}\n", p.answer);
+        let _ = writeln!(md, "![{}]({})\n", p.question, p.file);
+    }
+    let missing: Vec<&PlotEntry> = plots.iter().filter(|p| p.file.is_empty()).collect();
+    if !missing.is_empty() {
+        let _ = writeln!(md, "Not plotted:\n");
+        for p in missing {
+            let _ = writeln!(md, "- {} — {}", p.question, p.answer);
+        }
     }
 }

@@ -535,7 +535,7 @@ pub fn check_run_dir(
     let findings = check(&tm, metadata.as_ref());
     for f in &findings {
         if f.severity == Severity::Warning {
-            eprintln!("warning: {}", f.message);
+            crate::note!("warning: {}", f.message);
         }
     }
     std::fs::create_dir_all(out)?;

@@ -21,6 +21,7 @@ pub mod closed_loop;
 pub mod faults;
 pub mod onboard;
 pub mod paper;
+pub mod provenance;
 pub mod run;
 pub mod scenario;
 pub mod sensors;

@@ -82,7 +82,12 @@ enum Cmd {
         /// DIR/manifest.json lists, each checked against its CRC-32: the tables/ folder
         /// written by `ground-tool calibrate` or `diagnose`. A folder without a manifest is
         /// refused (exit code 2); `ground-tool table manifest DIR` writes one for a folder
-        /// made by hand. Other *.tbl files in DIR are not loaded.
+        /// made by hand. Other *.tbl files in DIR are not loaded. When DIR/provenance.json
+        /// (written beside the tables by the ground tool) says they were calibrated on
+        /// another spacecraft than the scenario's — other true sensor or gyro parameters — or
+        /// on telemetry without a simulator spacecraft identity, a warning says so on stderr
+        /// and in summary.json `tables_provenance_warning`: the run's attitude error then says
+        /// nothing about those tables.
         #[arg(long, value_name = "DIR")]
         tables: Option<PathBuf>,
         /// Print summary.json to stdout.

@@ -6,10 +6,10 @@
 //! | file | content |
 //! |---|---|
 //! | `telemetry.bin` | CCSDS packets ([`crate::telemetry`]) |
-//! | `metadata.json` | what the operator declares ([`gro_reference::run_folder::Metadata`], schema `docs/schema/metadata.schema.json`): `scenario`, `epoch_utc`, `cycle_period_s`, `sensors` (declared noise from the scenario's sensor parameters), `declared_effects`, `boot_tables`, `uploads` |
+//! | `metadata.json` | what the operator declares ([`gro_reference::run_folder::Metadata`], schema `docs/schema/metadata.schema.json`): `scenario`, `epoch_utc`, `cycle_period_s`, `sensors` (declared noise from the scenario's sensor parameters), `declared_effects`, `boot_tables`, `uploads`, and the simulated spacecraft's identity `spacecraft` ([`crate::provenance`]) |
 //! | `uploads/*.tbl` | every table image uplinked (catalog, `--tables`, timeline loads) |
 //! | `truth.json` | scoring only: true `alignments.{FHST1,FHST2,FSS1,FSS2}` (`M_AS`, row-major; at the start, without thermal drift), `alignments_after_run` (the same with any alignment step of the run applied: what tables written after the run fly into), IRU `delta_m` and `g` per configuration, `bias_history`, the flown `fss_transfer_function`, `scenario_as_flown` (the whole scenario, each FSS with the transfer function it flew), `present_effects`, `undeclared_effects` |
-//! | `summary.json` | run statistics ([`Summary`]) |
+//! | `summary.json` | run statistics ([`Summary`]); with `--tables`, `tables_provenance_warning` when the tables may belong to another spacecraft ([`crate::provenance`]) |
 //!
 //! Every file is written under a `.partial` name and renamed when complete; `summary.json`
 //! is renamed last, so a folder with a `summary.json` is a finished run.
@@ -222,6 +222,10 @@ pub struct Summary {
     pub iru_counter_aliasing_frames: u64,
     /// Largest true wheel momentum (N·m·s).
     pub max_wheel_momentum_nms: f64,
+    /// With `--tables`: why the tables may not belong to the spacecraft flown
+    /// ([`crate::provenance`]; absent when they were calibrated on it, or no tables).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tables_provenance_warning: Option<String>,
 }
 
 /// The scoring state of a run.
@@ -572,6 +576,9 @@ fn metadata(sim: &Simulation, scorer: &Scorer) -> Metadata {
         fss_transfer_function_sigma: declared_fss_spreads(s),
         boot_tables: Some(boot_tables),
         uploads,
+        // The spacecraft's identity, which the ground copies beside the tables it calibrates
+        // (crate::provenance): `--tables` then says when tables meet another spacecraft.
+        spacecraft: crate::provenance::spacecraft_of(s).ok(),
     }
 }
 
@@ -877,7 +884,24 @@ fn summary(
         telemetry_bytes: bytes,
         iru_counter_aliasing_frames: aliasing,
         max_wheel_momentum_nms: scorer.max_wheel,
+        tables_provenance_warning: None,
     }
+}
+
+/// The provenance check of a `--tables` folder against the spacecraft flown
+/// ([`crate::provenance`]): its message, printed on stderr once per folder and process (a
+/// Monte Carlo campaign flies the same folder in every run), or `None` when the tables were
+/// calibrated on this spacecraft.
+fn tables_provenance(dir: &Path, flown: &Scenario) -> Option<String> {
+    static PRINTED: std::sync::Mutex<Vec<PathBuf>> = std::sync::Mutex::new(Vec::new());
+    let msg = crate::provenance::check(dir, flown).message(dir, flown)?;
+    if let Ok(mut printed) = PRINTED.lock() {
+        if !printed.iter().any(|p| p == dir) {
+            printed.push(dir.to_path_buf());
+            eprintln!("{msg}");
+        }
+    }
+    Some(msg)
 }
 
 /// Fly a scenario; with `opts.out_dir`, write the run folder (module doc).
@@ -886,6 +910,10 @@ fn summary(
 /// [`crate::InputError`] for bad inputs (tables, parameters); I/O and internal errors.
 pub fn run(scenario: Scenario, opts: &RunOptions) -> anyhow::Result<Summary> {
     let mut sim = Simulation::new(scenario, opts.tables_dir.as_deref())?;
+    let provenance_warning = opts
+        .tables_dir
+        .as_deref()
+        .and_then(|dir| tables_provenance(dir, sim.scenario()));
     let mut scorer = Scorer::new(&sim);
     let pb = progress_bar(opts.progress, sim.cycle_count());
     let Some(dir) = opts.out_dir.as_deref() else {
@@ -898,9 +926,9 @@ pub fn run(scenario: Scenario, opts: &RunOptions) -> anyhow::Result<Summary> {
         }
         let cycles = sim.cycle_count();
         let (packets, bytes) = (tm.packets(), tm.bytes());
-        return Ok(summary(
-            &sim, scorer, wall, cycles, aliasing, packets, bytes,
-        ));
+        let mut s = summary(&sim, scorer, wall, cycles, aliasing, packets, bytes);
+        s.tables_provenance_warning = provenance_warning;
+        return Ok(s);
     };
     let mut folder = RunFolder::new(dir)?;
     for (i, up) in sim.uploads().iter().enumerate() {
@@ -922,7 +950,8 @@ pub fn run(scenario: Scenario, opts: &RunOptions) -> anyhow::Result<Summary> {
     folder.write_json(METADATA_FILE, &metadata(&sim, &scorer).to_json_value()?)?;
     folder.write_json("truth.json", &truth_json(&sim, &bias)?)?;
     let cycles = sim.cycle_count();
-    let summary = summary(&sim, scorer, wall, cycles, aliasing, packets, bytes);
+    let mut summary = summary(&sim, scorer, wall, cycles, aliasing, packets, bytes);
+    summary.tables_provenance_warning = provenance_warning;
     folder.write_json("summary.json", &summary)?;
     folder.commit()?;
     Ok(summary)

@@ -138,7 +138,7 @@ pub fn step_effects(
                 }
             };
             if std::env::var_os("DIAGNOSE_DEBUG").is_some() {
-                eprintln!(
+                crate::note!(
                     "alignment step candidate sensor {s}: t {t:.0} s over {positions} positions"
                 );
             }

@@ -643,7 +643,7 @@ impl MeasurementSet {
                 / trim;
             let mad = lim;
             if std::env::var_os("DIAGNOSE_DEBUG").is_some() {
-                eprintln!(
+                crate::note!(
                     "noise sensor {sensor}: pairs {} mad {mad} keep {} scale {scale} floor {floor}",
                     z.len(),
                     keep.len()

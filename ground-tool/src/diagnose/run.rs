@@ -235,6 +235,7 @@ pub fn diagnose_run(
     out_dir: &Path,
     opts: &DiagnoseOptions,
 ) -> anyhow::Result<DiagnoseOutput> {
+    crate::progress::step("reading the telemetry");
     let (tm, metadata) = read_run(run_dir)?;
     let declared = metadata.declared();
     let flown_catalog = flown_catalog(run_dir, &metadata, opts.tables.as_deref())?;
@@ -321,6 +322,7 @@ pub fn diagnose_run(
         aberration_model: [annual, orbital],
         declared_effects: declared.clone(),
     };
+    crate::progress::step("residuals of every FHST and FSS measurement");
     let set = MeasurementSet::build(&input);
     let gyro_frames: Vec<GyroFrame> = frames.iter().map(GyroFrame::from).collect();
     let frames_t0_j2000 = frames
@@ -333,6 +335,7 @@ pub fn diagnose_run(
     drop(input.sun_eci);
     let mut cal = cal;
     cal.release_frames();
+    crate::progress::step("residual structure and the effect library (joint fit)");
     let analysis = analyse_set(set, &declared, &opts.search)?;
     if let Some(i) = analysis
         .search
@@ -374,6 +377,7 @@ pub fn diagnose_run(
         gyro: gyro_cal,
         bias_per_frame: bias_per_frame.as_deref(),
     };
+    crate::progress::step("gyro residuals in the slews");
     let gyro_res = gyro::analyse(&gyro_input, &analysis.set, &analysis.search.after, &gcfg);
     let gyro_ledger = super::ledger::gyro_ledger(&gyro_res, opts.search.alpha);
 
@@ -392,6 +396,7 @@ pub fn diagnose_run(
     // (`super::heldout`): the tables are rebuilt from the reference with only the components
     // the validation took; nothing taken, calibrate's alignment table is written. Every term
     // left out is listed as not written.
+    crate::progress::step("held-out validation of the tables");
     let calibrate_alignment = calibrate_written_alignment(&cal, &copt);
     let (validation, reference_arcsec) =
         validate_tables(&analysis, &flight_all, &cal, &calibrate_alignment);
@@ -523,7 +528,7 @@ pub fn diagnose_run(
                 "IRU table not corrected: with the gyro effects ({}) it does not validate ({e:?}); the chain's IRU table is written instead",
                 iru_applied.join(", ")
             );
-            eprintln!("warning: {why}");
+            crate::note!("warning: {why}");
             iru_ground_only.push(why);
             (iru_out, Vec::new())
         }
@@ -637,6 +642,7 @@ pub fn diagnose_run(
         plots: Vec::new(),
         notes,
     };
+    crate::progress::step("report and plots");
     report.plots = write_plots(out_dir, &analysis, &detected, &gyro_res)?;
     std::fs::write(
         out_dir.join("report.json"),
@@ -670,9 +676,11 @@ pub fn diagnose_command(
     force: bool,
     tables: Option<&std::path::Path>,
     json: bool,
+    quiet: bool,
     scorer: Option<std::sync::Arc<dyn Scorer>>,
 ) -> anyhow::Result<()> {
     use gro_reference::outdir::OutputDir;
+    let progress = crate::progress::Session::start("ground-tool diagnose", !quiet);
     let options = DiagnoseOptions {
         tables: tables.map(std::path::Path::to_path_buf),
         scorer,
@@ -704,6 +712,12 @@ pub fn diagnose_command(
     })?;
     // The folder is new: its images are exactly the ones this diagnose wrote.
     gro_reference::manifest::write_for_all(&out.join("tables"), "ground-tool diagnose")?;
+    gro_reference::provenance::write(
+        &out.join("tables"),
+        run_dir,
+        &crate::pipeline::flown::metadata_or_default(run_dir),
+        "ground-tool diagnose",
+    )?;
     // Diagnose names the files it wrote by the temporary folder's path: name them by OUT.
     let (tmp, target) = (out.display().to_string(), out_target.display().to_string());
     for f in ["report.json", "report.md"] {
@@ -714,6 +728,7 @@ pub fn diagnose_command(
         }
     }
     dir.commit()?;
+    drop(progress);
     for note in &result.report.notes {
         eprintln!("note: {note}");
     }

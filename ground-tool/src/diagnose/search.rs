@@ -249,7 +249,7 @@ pub fn cyclic_pitch(set: &MeasurementSet, resid: &[[f64; 2]], sensor: usize) -> 
     gains.sort_by(f64::total_cmp);
     let median = gains.get(gains.len() / 2).copied().unwrap_or(0.0);
     if std::env::var_os("DIAGNOSE_DEBUG").is_some() {
-        eprintln!("pitch search sensor {sensor}: best {best:?} median {median}");
+        crate::note!("pitch search sensor {sensor}: best {best:?} median {median}");
     }
     best.filter(|(_, g)| *g > 30.0_f64.max(3.0 * median))
         .map(|(p, _)| p * fsw_core::units::RAD_PER_DEG)
@@ -364,7 +364,7 @@ pub fn search(
         return Ok(first);
     }
     if std::env::var_os("DIAGNOSE_DEBUG").is_some() {
-        eprintln!(
+        crate::note!(
             "cyclic pitch found on the final residuals (deg): {:?}, step times {:?}; loop again",
             again.map(|p| p.map(f64::to_degrees)),
             steps
@@ -447,7 +447,7 @@ fn search_with_pitch(
     });
 
     if std::env::var_os("DIAGNOSE_DEBUG").is_some() {
-        eprintln!(
+        crate::note!(
             "cyclic pitch (deg): {:?}",
             pitch.map(|p| p.map(f64::to_degrees))
         );
@@ -463,7 +463,7 @@ fn search_with_pitch(
         None
     };
     if std::env::var_os("DIAGNOSE_DEBUG").is_some() {
-        eprintln!(
+        crate::note!(
             "unknown orbit: period {:?} min",
             unknown_orbit.map(|n| std::f64::consts::TAU / n / 60.0)
         );
@@ -686,7 +686,7 @@ fn search_with_pitch(
                                 )
                             })
                             .collect();
-                        eprintln!("halves {}: {}", effect.label(), z.join(" "));
+                        crate::note!("halves {}: {}", effect.label(), z.join(" "));
                     }
                     let d = &xa - &xb;
                     hchi2 = d.dot(&(&inv * &d));
@@ -951,7 +951,7 @@ fn search_with_pitch(
             let test = extension_test(model, current.chi2, ext);
             if std::env::var_os("DIAGNOSE_DEBUG").is_some() {
                 if let Some((_, d, _, p)) = &test {
-                    eprintln!("joint lack of fit sensor {s}: Δχ² {d:.1}, p {p:.2e}");
+                    crate::note!("joint lack of fit sensor {s}: Δχ² {d:.1}, p {p:.2e}");
                 }
             }
             let suspects: Vec<usize> = (0..added.len())

@@ -189,21 +189,26 @@ pub fn with_sparse_catalog(
         t.selected = true;
     }
     if std::env::var_os("DIAGNOSE_DEBUG").is_some() {
-        eprintln!(
+        crate::note!(
             "per-star catalog screen: {} of {} stars pass",
             keep.len(),
             tests.len()
         );
         if let Some(t) = tests.iter().min_by(|a, b| a.p_value.total_cmp(&b.p_value)) {
-            eprintln!(
+            crate::note!(
                 "  min p star HIP {} Δχ² {:.1} p {:.2e}",
-                t.hip, t.delta_chi2, t.p_value
+                t.hip,
+                t.delta_chi2,
+                t.p_value
             );
         }
         for t in tests.iter().take(keep.len()) {
-            eprintln!(
+            crate::note!(
                 "  selected HIP {} Δχ² {:.1} p {:.2e} Holm {:.2e}",
-                t.hip, t.delta_chi2, t.p_value, t.p_holm
+                t.hip,
+                t.delta_chi2,
+                t.p_value,
+                t.p_holm
             );
         }
     }

@@ -774,7 +774,7 @@ mod tests {
         let rate = |p: &[f64]| p.iter().filter(|&&v| v < 0.01).count() as f64 / p.len() as f64;
         if show {
             for (j, name) in ["cubic", "binned"].iter().enumerate() {
-                eprintln!(
+                crate::note!(
                     "{name}: KS {:.3} / old {:.3} (crit {:.3}), rejected at 1 %: {:.3} / old {:.3}",
                     ks_uniform(p[j][0].clone()),
                     ks_uniform(p[j][1].clone()),
@@ -783,7 +783,7 @@ mod tests {
                     rate(&p[j][1])
                 );
             }
-            eprintln!("z var {z_var}");
+            crate::note!("z var {z_var}");
         }
         assert!((z_var - 1.0).abs() < 0.03, "standardized variance {z_var}");
         for (j, name) in ["cubic", "binned"].iter().enumerate() {

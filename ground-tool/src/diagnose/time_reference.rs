@@ -547,7 +547,7 @@ pub fn resolve(
     if debug {
         for a in &arcs {
             let (b0, b1) = (&set.batches[a.first], &set.batches[a.last]);
-            eprintln!(
+            crate::note!(
                 "arc: batches {}..={} t {:.0}..{:.0} s, usable {}",
                 a.first,
                 a.last,
@@ -585,7 +585,7 @@ pub fn resolve(
                 })
         });
         if debug {
-            eprintln!("arcs pass {pass}: model {:?}, τ {:?}", tr.model, tr.tau_ms);
+            crate::note!("arcs pass {pass}: model {:?}, τ {:?}", tr.model, tr.tau_ms);
         }
         if converged || pass == MAX_PASSES {
             return Some(tr);
@@ -608,7 +608,7 @@ fn select(systems: &[ArcSystem], config: &SearchConfig, debug: bool) -> Option<T
         }
     }
     if debug {
-        eprintln!(
+        crate::note!(
             "arcs with data {}; turning samples {turning:?}",
             systems.len()
         );
@@ -642,7 +642,7 @@ fn select(systems: &[ArcSystem], config: &SearchConfig, debug: bool) -> Option<T
                     .collect(),
                 None => vec!["singular".to_owned()],
             };
-            eprintln!(
+            crate::note!(
                 "arc {k}: rows {}, turning {:?}: {}",
                 s.rows,
                 s.turning,

@@ -1130,6 +1130,7 @@ pub fn calibrate_telemetry(
         .unwrap_or_else(AlignmentTable::prelaunch);
     let flown_iru = options.flown_iru.unwrap_or_else(IruTable::prelaunch);
     let sky = load_catalog()?;
+    crate::progress::step("identifying stars against the catalog (flown alignments)");
     let frames = build_observations(
         tm,
         &flown_alignment,
@@ -1140,7 +1141,7 @@ pub fn calibrate_telemetry(
     );
     let mut summary = DataSummary::of_frames(&frames);
     if tm.ephemeris.is_empty() {
-        eprintln!("warning: no ephemeris packets (APID 0x020): orbital aberration and Sun parallax are not corrected");
+        crate::note!("warning: no ephemeris packets (APID 0x020): orbital aberration and Sun parallax are not corrected");
     }
 
     // The batches that give the interval end attitudes (and the FHST gyro batches) carry their
@@ -1175,11 +1176,12 @@ pub fn calibrate_telemetry(
             summary.stars_identified, summary.sun_samples
         ),
     };
+    crate::progress::step("FFCAL: the alignments");
     let fit = setup.fit(&[&frames], metadata.fss_transfer_function_sigma.as_ref())?;
     if let (Some((FhstStage::StarPairs, _)), FhstStage::GyroBatches, Err(e)) =
         (&fit.fhst_stage, options.fhst_stage, &fit.batch_rel)
     {
-        eprintln!("warning: FHST stage from the simultaneous star pairs: {e}");
+        crate::note!("warning: FHST stage from the simultaneous star pairs: {e}");
     }
     let AlignmentFit {
         data,
@@ -1228,6 +1230,7 @@ pub fn calibrate_telemetry(
     // The full fit's data are not needed any more: free them before the folds build theirs
     // (six months: 2 × 134 MB).
     drop((data, fhst_data));
+    crate::progress::step("held-out validation of the alignments");
     let alignment_validation = validate_alignment_heldout(&frames, &setup);
     let mut new_alignment = flown_alignment;
     let ortho = |m: &Matrix3<f64>| rows(&Quat::from_dcm(m).to_dcm());
@@ -1244,6 +1247,7 @@ pub fn calibrate_telemetry(
     // The first pass's frames are not needed any more: free them before the second pass
     // (six months of 30-s frames are ~0.5 GB each).
     drop(frames);
+    crate::progress::step("identifying stars again with the calibrated alignments");
     let frames_cal = build_observations(
         tm,
         &new_alignment,
@@ -1270,6 +1274,7 @@ pub fn calibrate_telemetry(
         .iter()
         .filter(|f| f.rate_switch == RateSwitch::Dropped)
         .count();
+    crate::progress::step("IRUCAL: attitude fixes and the gyro chain");
     let gyro_chain = build_gyro_chain(&frames_cal, &maneuvers, &obc_bias_at, &fhst_floor, t0);
     let mut maneuver_reports =
         maneuver_reports(&frames_cal, &maneuvers, &gyro_chain, &obc_bias_at, t0);
@@ -1297,6 +1302,7 @@ pub fn calibrate_telemetry(
         .as_ref()
         .map(|sol| bias_history(sol, tm, t0))
         .unwrap_or_default();
+    crate::progress::step("filter table: validation of the proposed change");
     let (new_filter, filter_changes, filter_validation) =
         filter_stage(options, metadata, &frames_cal, &setup)?;
     let report = CalibrationReport {
@@ -1814,6 +1820,7 @@ pub fn calibrate_run(
     out_dir: &Path,
     options: &CalibrateOptions,
 ) -> anyhow::Result<CalibrationOutput> {
+    crate::progress::step("reading the telemetry");
     let (tm, metadata) = read_run(run_dir)?;
     // The chain's refusals are about the data (too few frames, stars or Sun samples): exit 2.
     let mut out = calibrate_telemetry(&tm, &metadata, options).map_err(|e| {

@@ -339,6 +339,7 @@ pub fn irucal_stage(
         ));
         return stage;
     }
+    crate::progress::step("IRUCAL: calibration filter and smoother, change-point scan");
     let sol = match solve_chain(chain, cfg) {
         Ok(s) => s,
         Err(e) => {
@@ -380,6 +381,9 @@ pub fn irucal_stage(
             bias_restarts: sol.bias_restarts,
             ..*cfg
         };
+        crate::progress::step(&format!(
+            "IRUCAL: held-out validation of the {triad:?} triad's G"
+        ));
         let validation = validate_heldout(chain, &cfg_solved, triad, sol.rrw_used, &mask);
         match validation {
             Ok(v) if v.passed => {

@@ -23,7 +23,10 @@ Steps: (1) sim-harness flies SCENARIO with the boot (prelaunch, paper Table 1) t
 scenario's true misalignments and IRU errors; (2) ground-tool calibrates from OUT/1-fly-prelaunch/telemetry.bin \
 only (TP -> FADS -> FFCAL -> adjustment -> IRUCAL); (3) the new tables OUT/2-calibration/tables/*.tbl are \
 uplinked and the same scenario (same seed) is flown again; (4) the comparison is printed and written to \
-OUT/report.md and OUT/report.json (truth is used only here, for scoring).\n\n\
+OUT/report.md and OUT/report.json (truth is used only here, for scoring). The calibration's own report is \
+OUT/2-calibration/report.md, which links its PNG plots (the residuals of every sensor pair before and after, \
+the gyro bias history over the whole flight, the OBC's bias minus the ground's), each under the question it \
+answers; OUT/2-calibration/tables/provenance.json names the flight and spacecraft the tables were made for.\n\n\
 OUT is written as a temporary sibling .OUT.tmp-PID and renamed into place at the end: it holds one \
 whole loop or its previous content. A previous calibration-loop output is replaced (so the same \
 command can be run again); any other non-empty OUT is refused unless --force; a second loop into \
@@ -153,11 +156,19 @@ fn run_loop(args: &Args) -> anyhow::Result<()> {
         "[2/3] calibrating from {}/telemetry.bin ...",
         args.out.join("1-fly-prelaunch").display()
     );
+    let obc_bias = ground_tool::report::ObcBiasSeries::read(&fly_a)?;
     let calibration = calibrate_run(&fly_a, &cal, &CalibrateOptions::default())?;
+    gro_reference::provenance::write(
+        &cal.join("tables"),
+        &args.out.join("1-fly-prelaunch"),
+        &ground_tool::pipeline::flown::metadata_or_default(&fly_a),
+        "calibration-loop",
+    )?;
     ground_tool::report::write_calibration_report(
         &cal,
         &calibration,
         &fsw_core::tables::AlignmentTable::prelaunch(),
+        Some(&obc_bias),
     )?;
     eprintln!(
         "[3/3] flying again with the uplinked tables {}/tables ...",

@@ -32,6 +32,9 @@ struct Cli {
     /// Print report.json to stdout.
     #[arg(long)]
     json: bool,
+    /// No progress on stderr.
+    #[arg(long, short)]
+    quiet: bool,
 }
 
 fn main() -> std::process::ExitCode {
@@ -42,6 +45,7 @@ fn main() -> std::process::ExitCode {
         cli.force,
         cli.tables.as_deref(),
         cli.json,
+        cli.quiet,
         Some(std::sync::Arc::new(
             gro_tests::diagnose::scoring::TruthScorer,
         )),
