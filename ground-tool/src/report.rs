@@ -396,6 +396,17 @@ pub fn write_calibration_report(
     for c in &r.filter_changes {
         let _ = writeln!(md, "- filter table change: {c}");
     }
+    if let Some(f) = &r.fhst_floor {
+        let _ = writeln!(
+            md,
+            "- FHST systematic per focal-plane axis: {:.2}″ derived (orbital aberration {:.2}″ ⊕ {}); the filter table flies {:.2}″{}",
+            f.floor_arcsec,
+            f.aberration_arcsec,
+            f.source,
+            f.flown_arcsec,
+            f.note.as_ref().map_or(String::new(), |n| format!(": {n}"))
+        );
+    }
     write_plots_section(&mut md, &plots);
     std::fs::write(out_dir.join("report.md"), md)?;
     Ok(())
