@@ -533,6 +533,8 @@ const HISTORY_QUANTILE: f64 = 0.001;
 const DIFF_QUANTILE: f64 = 0.05;
 /// The OBC's series in the bias plots (the same in every axis panel, so one legend serves).
 const OBC: RGBColor = RGBColor(90, 140, 230);
+/// The OBC's full-rate series in the history (lighter: the ground's fixes go over it).
+const OBC_BAND: RGBColor = RGBColor(125, 165, 235);
 /// The OBC's own ±1σ.
 const OBC_SIGMA: RGBColor = RGBColor(170, 195, 240);
 /// The ground's estimates.
@@ -732,22 +734,22 @@ fn bias_plots(
             y_label: "bias (arcsec/s)".into(),
             // The OBC's first minutes from its initial bias are clipped only on long runs.
             y_quantile: Some(HISTORY_QUANTILE),
-            // The OBC over the ground: over months the ground's thousands of fixes would
-            // cover a line drawn under them.
+            // The OBC's full-rate band underneath, the ground's smoothed fixes on top (over
+            // months a thin dark trail through the OBC's noise; small dots beyond 200 fixes).
             layers: vec![
-                Layer {
-                    label: Some("ground (calibration filter, smoothed) ±1σ at its fixes".into()),
-                    color: GROUND,
-                    kind: Kind::Bars(ground_bars.clone()),
-                },
                 Layer {
                     label: Some(if full_rate {
                         "OBC filter, every housekeeping packet".into()
                     } else {
                         "OBC filter at the ground's epochs".into()
                     }),
-                    color: OBC,
+                    color: OBC_BAND,
                     kind: obc_kind,
+                },
+                Layer {
+                    label: Some("ground (calibration filter, smoothed) ±1σ at its fixes".into()),
+                    color: GROUND,
+                    kind: Kind::Bars(ground_bars.clone()),
                 },
             ],
         });
