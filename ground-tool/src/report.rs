@@ -535,8 +535,8 @@ const DIFF_QUANTILE: f64 = 0.05;
 const OBC: RGBColor = RGBColor(90, 140, 230);
 /// The OBC's full-rate series in the history (lighter: the ground's fixes go over it).
 const OBC_BAND: RGBColor = RGBColor(125, 165, 235);
-/// The OBC's own ±1σ.
-const OBC_SIGMA: RGBColor = RGBColor(170, 195, 240);
+/// The OBC's own ±1σ (drawn over the difference).
+const OBC_SIGMA: RGBColor = RGBColor(230, 140, 20);
 /// The ground's estimates.
 const GROUND: RGBColor = RGBColor(180, 30, 30);
 
@@ -780,24 +780,6 @@ fn bias_plots(
             color: GREY,
             kind: Kind::HLine(0.0),
         }];
-        if !obc_sigma.is_empty() {
-            layers.push(Layer {
-                label: Some("± the OBC's own 1σ (housekeeping covariance)".into()),
-                color: OBC_SIGMA,
-                kind: Kind::Line {
-                    points: obc_sigma.clone(),
-                    gap,
-                },
-            });
-            layers.push(Layer {
-                label: Some("± the OBC's own 1σ (housekeeping covariance)".into()),
-                color: OBC_SIGMA,
-                kind: Kind::Line {
-                    points: obc_sigma.iter().map(|&(t, s)| (t, -s)).collect(),
-                    gap,
-                },
-            });
-        }
         layers.push(Layer {
             label: Some("0 ± the ground's 1σ at its fixes".into()),
             color: GREY,
@@ -816,6 +798,26 @@ fn bias_plots(
                 Kind::Dots(diff)
             },
         });
+        // The OBC's ±1σ over the difference: where the difference fills the band (months
+        // of it), the band's edges must still show.
+        if !obc_sigma.is_empty() {
+            layers.push(Layer {
+                label: Some("± the OBC's own 1σ (housekeeping covariance)".into()),
+                color: OBC_SIGMA,
+                kind: Kind::Line {
+                    points: obc_sigma.clone(),
+                    gap,
+                },
+            });
+            layers.push(Layer {
+                label: Some("± the OBC's own 1σ (housekeeping covariance)".into()),
+                color: OBC_SIGMA,
+                kind: Kind::Line {
+                    points: obc_sigma.iter().map(|&(t, s)| (t, -s)).collect(),
+                    gap,
+                },
+            });
+        }
         diff_panels.push(Panel {
             title: format!("axis {name} (ACS)"),
             y_label: "OBC − ground (arcsec/s)".into(),
