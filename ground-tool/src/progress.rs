@@ -4,7 +4,8 @@
 //! word (issue 21), so a user could not tell a slow step from a hung one. The chain's steps
 //! now name themselves ([`step`]); a command that wants them shown starts a [`Session`]
 //! (`calibrate`, `diagnose`, `allan`), which draws one spinner line on stderr with the step and
-//! its elapsed time and, when a step ends, leaves a line with the step's duration above it.
+//! its elapsed time and, when a step of a second or more ends, leaves a line with the step's
+//! duration above it.
 //!
 //! What it must not do: change any output. It writes to stderr only, and only when stderr is
 //! a terminal and `--quiet` was not given (otherwise [`Session::start`] installs nothing and
@@ -33,13 +34,19 @@ fn with_active(f: impl FnOnce(&mut Active)) {
     }
 }
 
-/// Ends the displayed step: its line with the duration stays above the spinner.
+/// Steps shorter than this leave no line (a short run would otherwise list a dozen instant
+/// steps).
+const LOG_STEPS_LONGER_THAN: Duration = Duration::from_secs(1);
+
+/// Ends the displayed step: a step that took a while leaves a line with its duration above
+/// the spinner.
 fn finish_step(a: &mut Active) {
     if let Some((name, started)) = a.step.take() {
-        a.bar.println(format!(
-            "  done: {name} ({:.1} s)",
-            started.elapsed().as_secs_f64()
-        ));
+        let took = started.elapsed();
+        if took >= LOG_STEPS_LONGER_THAN {
+            a.bar
+                .println(format!("  done: {name} ({:.1} s)", took.as_secs_f64()));
+        }
     }
 }
 

@@ -544,8 +544,10 @@ const HISTORY_QUANTILE: f64 = 0.001;
 const DIFF_QUANTILE: f64 = 0.05;
 /// The OBC's series in the bias plots (the same in every axis panel, so one legend serves).
 const OBC: RGBColor = RGBColor(90, 140, 230);
-/// The OBC's own ±1σ.
-const OBC_SIGMA: RGBColor = RGBColor(170, 195, 240);
+/// The OBC's full-rate series in the history (lighter: the ground's fixes go over it).
+const OBC_BAND: RGBColor = RGBColor(125, 165, 235);
+/// The OBC's own ±1σ (drawn over the difference).
+const OBC_SIGMA: RGBColor = RGBColor(230, 140, 20);
 /// The ground's estimates.
 const GROUND: RGBColor = RGBColor(180, 30, 30);
 
@@ -743,22 +745,22 @@ fn bias_plots(
             y_label: "bias (arcsec/s)".into(),
             // The OBC's first minutes from its initial bias are clipped only on long runs.
             y_quantile: Some(HISTORY_QUANTILE),
-            // The OBC over the ground: over months the ground's thousands of fixes would
-            // cover a line drawn under them.
+            // The OBC's full-rate band underneath, the ground's smoothed fixes on top (over
+            // months a thin dark trail through the OBC's noise; small dots beyond 200 fixes).
             layers: vec![
-                Layer {
-                    label: Some("ground (calibration filter, smoothed) ±1σ at its fixes".into()),
-                    color: GROUND,
-                    kind: Kind::Bars(ground_bars.clone()),
-                },
                 Layer {
                     label: Some(if full_rate {
                         "OBC filter, every housekeeping packet".into()
                     } else {
                         "OBC filter at the ground's epochs".into()
                     }),
-                    color: OBC,
+                    color: OBC_BAND,
                     kind: obc_kind,
+                },
+                Layer {
+                    label: Some("ground (calibration filter, smoothed) ±1σ at its fixes".into()),
+                    color: GROUND,
+                    kind: Kind::Bars(ground_bars.clone()),
                 },
             ],
         });
@@ -789,24 +791,6 @@ fn bias_plots(
             color: GREY,
             kind: Kind::HLine(0.0),
         }];
-        if !obc_sigma.is_empty() {
-            layers.push(Layer {
-                label: Some("± the OBC's own 1σ (housekeeping covariance)".into()),
-                color: OBC_SIGMA,
-                kind: Kind::Line {
-                    points: obc_sigma.clone(),
-                    gap,
-                },
-            });
-            layers.push(Layer {
-                label: Some("± the OBC's own 1σ (housekeeping covariance)".into()),
-                color: OBC_SIGMA,
-                kind: Kind::Line {
-                    points: obc_sigma.iter().map(|&(t, s)| (t, -s)).collect(),
-                    gap,
-                },
-            });
-        }
         layers.push(Layer {
             label: Some("0 ± the ground's 1σ at its fixes".into()),
             color: GREY,
@@ -825,6 +809,26 @@ fn bias_plots(
                 Kind::Dots(diff)
             },
         });
+        // The OBC's ±1σ over the difference: where the difference fills the band (months
+        // of it), the band's edges must still show.
+        if !obc_sigma.is_empty() {
+            layers.push(Layer {
+                label: Some("± the OBC's own 1σ (housekeeping covariance)".into()),
+                color: OBC_SIGMA,
+                kind: Kind::Line {
+                    points: obc_sigma.clone(),
+                    gap,
+                },
+            });
+            layers.push(Layer {
+                label: Some("± the OBC's own 1σ (housekeeping covariance)".into()),
+                color: OBC_SIGMA,
+                kind: Kind::Line {
+                    points: obc_sigma.iter().map(|&(t, s)| (t, -s)).collect(),
+                    gap,
+                },
+            });
+        }
         diff_panels.push(Panel {
             title: format!("axis {name} (ACS)"),
             y_label: "OBC − ground (arcsec/s)".into(),
