@@ -734,22 +734,64 @@ impl Mekf {
         systematic_floor_rad: f64,
         gate_chi2: f64,
     ) -> UpdateOutcome {
-        let Some(r) = unit(ref_dir_eci) else {
-            return self.reject(UpdateRejection::InvalidInput, [0.0; 2], f64::NAN);
-        };
+        match self.focal_plane_innovation(h_rad, v_rad, ref_dir_eci, m_acs_from_sensor) {
+            Ok((nu, h)) => self.apply_update(&nu, &h, sigma_rad, systematic_floor_rad, gate_chi2),
+            Err(reason) => self.reject(reason, [0.0; 2], f64::NAN),
+        }
+    }
+
+    /// The focal-plane innovation `ν = (H − Ĥ, V − V̂)` and its Jacobian `h` (module docs) of
+    /// a star at the current estimate; the rejection when an input is not finite or the star
+    /// is behind the tracker.
+    fn focal_plane_innovation(
+        &self,
+        h_rad: f64,
+        v_rad: f64,
+        ref_dir_eci: &Vector3<f64>,
+        m_acs_from_sensor: &Matrix3<f64>,
+    ) -> Result<(Vector2<f64>, Matrix2x3<f64>), UpdateRejection> {
+        let r = unit(ref_dir_eci).ok_or(UpdateRejection::InvalidInput)?;
         let ok = h_rad.is_finite() && v_rad.is_finite() && all_finite(m_acs_from_sensor.as_slice());
         if !ok {
-            return self.reject(UpdateRejection::InvalidInput, [0.0; 2], f64::NAN);
+            return Err(UpdateRejection::InvalidInput);
         }
         let b_hat = self.q_acs_from_eci.to_dcm() * r;
         let mt = m_acs_from_sensor.transpose();
         let s_hat = mt * b_hat;
-        let Some((h_pred, v_pred)) = hv_from_dir(&s_hat) else {
-            return self.reject(UpdateRejection::Geometry, [0.0; 2], f64::NAN);
-        };
+        let (h_pred, v_pred) = hv_from_dir(&s_hat).ok_or(UpdateRejection::Geometry)?;
         let nu = Vector2::new(h_rad - h_pred, v_rad - v_pred);
         let h = hv_jacobian(&s_hat) * mt * skew(&b_hat);
-        self.apply_update(&nu, &h, sigma_rad, systematic_floor_rad, gate_chi2)
+        Ok((nu, h))
+    }
+
+    /// Commit an accepted update: the state correction `dx = K ν` reset into `q̂` and `b̂`,
+    /// the new covariance and cross-covariance; rejected (state unchanged) if any of them is
+    /// not finite.
+    fn commit_update(
+        &mut self,
+        dx: &nalgebra::Vector6<f64>,
+        np: Matrix6<f64>,
+        nc: Matrix6x4<f64>,
+        nu_arr: [f64; 2],
+        nis: f64,
+    ) -> UpdateOutcome {
+        let dtheta = Vector3::new(dx.x, dx.y, dx.z);
+        let dbias = Vector3::new(dx.w, dx.a, dx.b);
+        let q = quat_from_small_rotation(&dtheta).compose(&self.q_acs_from_eci);
+        if !(q.is_finite() && all_finite(dbias.as_slice()) && all_finite(nc.as_slice())) {
+            return self.reject(UpdateRejection::NumericalFault, nu_arr, nis);
+        }
+        self.q_acs_from_eci = q.normalized();
+        self.bias_rad_per_s += dbias;
+        self.covariance = np;
+        self.cross_covariance_fhst_systematic = nc;
+        self.counters.accepted = self.counters.accepted.saturating_add(1);
+        UpdateOutcome {
+            accepted: true,
+            innovation_rad: nu_arr,
+            nis,
+            rejection: None,
+        }
     }
 
     fn reject(&mut self, reason: UpdateRejection, nu: [f64; 2], nis: f64) -> UpdateOutcome {
@@ -846,24 +888,7 @@ impl Mekf {
         // A measurement free of the FHST systematic errors: `P_xc⁺ = (I − K H) P_xc`.
         let c = &self.cross_covariance_fhst_systematic;
         let nc = c - k * (h * cross_halves(c).0);
-        let dx = k * nu;
-        let dtheta = Vector3::new(dx.x, dx.y, dx.z);
-        let dbias = Vector3::new(dx.w, dx.a, dx.b);
-        let q = quat_from_small_rotation(&dtheta).compose(&self.q_acs_from_eci);
-        if !(q.is_finite() && all_finite(dbias.as_slice())) {
-            return self.reject(UpdateRejection::NumericalFault, nu_arr, nis);
-        }
-        self.q_acs_from_eci = q.normalized();
-        self.bias_rad_per_s += dbias;
-        self.covariance = np;
-        self.cross_covariance_fhst_systematic = nc;
-        self.counters.accepted = self.counters.accepted.saturating_add(1);
-        UpdateOutcome {
-            accepted: true,
-            innovation_rad: nu_arr,
-            nis,
-            rejection: None,
-        }
+        self.commit_update(&(k * nu), np, nc, nu_arr, nis)
     }
 
     /// FHST focal-plane update with the tracker's systematic error as a consider state
@@ -890,13 +915,7 @@ impl Mekf {
         tracker: usize,
         gate_chi2: f64,
     ) -> UpdateOutcome {
-        let Some(r) = unit(ref_dir_eci) else {
-            return self.reject(UpdateRejection::InvalidInput, [0.0; 2], f64::NAN);
-        };
-        let ok = h_rad.is_finite()
-            && v_rad.is_finite()
-            && all_finite(m_acs_from_sensor.as_slice())
-            && tracker < 2
+        let ok = tracker < 2
             && systematic_rad.is_finite()
             && systematic_rad >= 0.0
             && positive_finite(sigma_rad)
@@ -904,15 +923,12 @@ impl Mekf {
         if !ok {
             return self.reject(UpdateRejection::InvalidInput, [0.0; 2], f64::NAN);
         }
-        let b_hat = self.q_acs_from_eci.to_dcm() * r;
-        let mt = m_acs_from_sensor.transpose();
-        let s_hat = mt * b_hat;
-        let Some((h_pred, v_pred)) = hv_from_dir(&s_hat) else {
-            return self.reject(UpdateRejection::Geometry, [0.0; 2], f64::NAN);
-        };
-        let nu = Vector2::new(h_rad - h_pred, v_rad - v_pred);
+        let (nu, h) =
+            match self.focal_plane_innovation(h_rad, v_rad, ref_dir_eci, m_acs_from_sensor) {
+                Ok(x) => x,
+                Err(reason) => return self.reject(reason, [0.0; 2], f64::NAN),
+            };
         let nu_arr = [nu.x, nu.y];
-        let h = hv_jacobian(&s_hat) * mt * skew(&b_hat);
         if !all_finite(nu.as_slice()) || !all_finite(h.as_slice()) {
             return self.reject(UpdateRejection::InvalidInput, [0.0; 2], f64::NAN);
         }
@@ -966,25 +982,11 @@ impl Mekf {
         }
         let hc: Matrix2x4<f64> = h * cross_halves(c).0 + f2e * f2;
         let nc = c - k * hc;
-        let dx = k * nu;
-        let dtheta = Vector3::new(dx.x, dx.y, dx.z);
-        let dbias = Vector3::new(dx.w, dx.a, dx.b);
-        let q = quat_from_small_rotation(&dtheta).compose(&self.q_acs_from_eci);
-        if !(q.is_finite() && all_finite(dbias.as_slice()) && all_finite(nc.as_slice())) {
-            return self.reject(UpdateRejection::NumericalFault, nu_arr, nis);
+        let outcome = self.commit_update(&(k * nu), np, nc, nu_arr, nis);
+        if outcome.accepted {
+            self.fhst_systematic_sigma_rad = systematic_rad;
         }
-        self.q_acs_from_eci = q.normalized();
-        self.bias_rad_per_s += dbias;
-        self.covariance = np;
-        self.cross_covariance_fhst_systematic = nc;
-        self.fhst_systematic_sigma_rad = systematic_rad;
-        self.counters.accepted = self.counters.accepted.saturating_add(1);
-        UpdateOutcome {
-            accepted: true,
-            innovation_rad: nu_arr,
-            nis,
-            rejection: None,
-        }
+        outcome
     }
 }
 

@@ -135,8 +135,9 @@ pub fn fhst_floor(inputs: &FloorInputs<'_>) -> FhstFloor {
     }
 }
 
-/// The FHST2-relative-to-FHST1 rotation (ACS, arcsec) that takes the flown table's relative
-/// alignment to the new table's: the estimated error of the flown one.
+/// The FHST2-relative-to-FHST1 rotation θ (ACS, arcsec, the paper's `Rot(θ)`,
+/// `fsw_core::attitude::rotvec_from_rot`) that takes the flown table's relative alignment to
+/// the new table's: the estimated error of the flown one.
 #[must_use]
 pub fn relative_alignment_change_arcsec(
     flown: &AlignmentTable,
@@ -146,18 +147,8 @@ pub fn relative_alignment_change_arcsec(
         let m = t.matrices();
         matrix_from_rows(m[1]) * matrix_from_rows(m[0]).transpose()
     };
-    let r = rel(new) * rel(flown).transpose();
-    // Rotation vector from the skew part and the trace (robust at small angles, where an
-    // arccos of the trace alone loses the angle to rounding).
-    let w = Vector3::new(
-        r[(2, 1)] - r[(1, 2)],
-        r[(0, 2)] - r[(2, 0)],
-        r[(1, 0)] - r[(0, 1)],
-    ) * 0.5;
-    let s = w.norm();
-    let angle = s.atan2((r.trace() - 1.0) * 0.5);
-    let scale = if s > 1e-15 { angle / s } else { 1.0 };
-    w * scale * fsw_core::units::ARCSEC_PER_RAD
+    fsw_core::attitude::rotvec_from_rot(&(rel(new) * rel(flown).transpose()))
+        * fsw_core::units::ARCSEC_PER_RAD
 }
 
 #[cfg(test)]
@@ -224,12 +215,10 @@ mod tests {
         let f = FilterTable::default_boot();
         let flown = AlignmentTable::prelaunch();
         let mut new = flown;
-        // Turn FHST2 by 40″ about ACS z.
-        let r = nalgebra::Rotation3::from_scaled_axis(
-            Vector3::z() * (40.0 / fsw_core::units::ARCSEC_PER_RAD),
-        );
+        // Turn FHST2 by Rot(40″ about ACS z).
+        let r = fsw_core::attitude::rot(&(Vector3::z() * (40.0 / fsw_core::units::ARCSEC_PER_RAD)));
         new.m_acs_from_fhst2 = fsw_core::tables::types::rows_from_matrix(
-            &(r.matrix() * matrix_from_rows(&flown.m_acs_from_fhst2)),
+            &(r * matrix_from_rows(&flown.m_acs_from_fhst2)),
         );
         let d = relative_alignment_change_arcsec(&flown, &new);
         // The prelaunch matrices are orthonormal to ~1e-8 (rounded rows): a milli-arcsecond.
