@@ -887,7 +887,7 @@ impl Mekf {
         }
         // A measurement free of the FHST systematic errors: `P_xc⁺ = (I − K H) P_xc`.
         let c = &self.cross_covariance_fhst_systematic;
-        let nc = c - k * (h * cross_halves(c).0);
+        let nc = c - k * (h * cross_top(c));
         self.commit_update(&(k * nu), np, nc, nu_arr, nis)
     }
 
@@ -980,7 +980,7 @@ impl Mekf {
         if !covariance_ok(&np) {
             return self.reject(UpdateRejection::NumericalFault, nu_arr, nis);
         }
-        let hc: Matrix2x4<f64> = h * cross_halves(c).0 + f2e * f2;
+        let hc: Matrix2x4<f64> = h * cross_top(c) + f2e * f2;
         let nc = c - k * hc;
         let outcome = self.commit_update(&(k * nu), np, nc, nu_arr, nis);
         if outcome.accepted {
@@ -1031,6 +1031,13 @@ fn cross_halves(c: &Matrix6x4<f64>) -> (Matrix3x4<f64>, Matrix3x4<f64>) {
     top.copy_from(&c.fixed_view::<3, 4>(0, 0));
     bot.copy_from(&c.fixed_view::<3, 4>(3, 0));
     (top, bot)
+}
+
+/// The δθ rows of the consider cross-covariance (what a measurement's `h` multiplies).
+fn cross_top(c: &Matrix6x4<f64>) -> Matrix3x4<f64> {
+    let mut top = Matrix3x4::zeros();
+    top.copy_from(&c.fixed_view::<3, 4>(0, 0));
+    top
 }
 
 /// `x > 0` and finite (false for NaN).
