@@ -396,6 +396,9 @@ pub fn write_calibration_report(
     for c in &r.filter_changes {
         let _ = writeln!(md, "- filter table change: {c}");
     }
+    for g in r.filter_tuning.iter().filter(|g| !g.written) {
+        let _ = writeln!(md, "- filter table `{}`: {}", g.field.field(), g.reason);
+    }
     if let Some(f) = &r.fhst_floor {
         let _ = writeln!(
             md,

@@ -135,6 +135,35 @@ fn e2e_calibration_loop_gro_early_mission() {
     // the boot filter table had it off).
     assert!(!calibration.report.filter_changes.is_empty());
     assert!(cal.join("tables").join("filter.tbl").exists());
+    // The slew uncertainty follows IRUCAL (`pipeline::filter_tuning`): written below the boot
+    // 1e-3, and every element of G's true residual error after the uplink (true δM minus the
+    // uplinked one) within 3k of zero, so the OBC's post-slew σ covers it.
+    let slew = &calibration.report.filter_tuning[0];
+    assert_eq!(
+        slew.field,
+        ground_tool::pipeline::filter_tuning::FilterTerm::SlewUncertainty
+    );
+    let k = slew.derived.expect("derived slew uncertainty");
+    assert!(slew.written && k < 1e-3, "{}", slew.reason);
+    let true_dm =
+        gro_tests::loop_report::matrix_from_json(&truth["iru"]["primary"]["delta_m"]).unwrap();
+    let iru = calibration.report.iru.as_ref().expect("IRU report");
+    for i in 0..3 {
+        for j in 0..3 {
+            let left = true_dm[(i, j)] - iru.delta_m_uplinked[i][j];
+            assert!(
+                left.abs() <= 3.0 * k,
+                "G residual [{i}][{j}] {:.0} ppm against k {:.0} ppm",
+                left * 1e6,
+                k * 1e6
+            );
+        }
+    }
+    // The gyro noise of the holds agrees with the boot table (the simulator's own noise):
+    // σ_v and σ_u are kept.
+    assert!(calibration.report.filter_tuning[1..]
+        .iter()
+        .all(|t| !t.written));
 
     // The loop again, on the second flight, with no --tables: the chain takes the flown
     // tables from the run's activated uploads (`pipeline::flown`), so it starts from the

@@ -989,7 +989,7 @@ fn excluded_masks(tm: &Telemetry) -> Vec<u8> {
 }
 
 /// The median frame spacing, s.
-fn median_spacing_s(tm: &Telemetry) -> Option<f64> {
+pub fn median_spacing_s(tm: &Telemetry) -> Option<f64> {
     let mut dt: Vec<f64> = tm
         .raw
         .windows(2)

@@ -324,6 +324,9 @@ pub struct CalibrationReport {
     /// Validation of the filter-table change, when there is one (the flown filter table is
     /// kept when it fails).
     pub filter_validation: Option<AberrationSwitchValidation>,
+    /// The filter table's gyro terms derived from the calibration and the decision on each,
+    /// written or not, with why (`super::filter_tuning`).
+    pub filter_tuning: Vec<super::filter_tuning::TermDecision>,
     /// The FHST systematic floor derived for the alignments that fly
     /// ([`super::filter_floor`]); `None` before `calibrate_run` decides which alignments fly.
     pub fhst_floor: Option<super::filter_floor::FhstFloor>,
@@ -1303,8 +1306,19 @@ pub fn calibrate_telemetry(
         .map(|sol| bias_history(sol, tm, t0))
         .unwrap_or_default();
     crate::progress::step("filter table: validation of the proposed change");
-    let (new_filter, filter_changes, filter_validation) =
-        filter_stage(options, metadata, &frames_cal, &setup)?;
+    let FilterStage {
+        table: new_filter,
+        changes: filter_changes,
+        aberration_validation: filter_validation,
+        terms: filter_tuning,
+    } = filter_stage(
+        options,
+        metadata,
+        &frames_cal,
+        &setup,
+        iru_report.as_ref(),
+        (tm, &flown_iru),
+    )?;
     let report = CalibrationReport {
         telemetry: tm.report.clone(),
         data: summary,
@@ -1321,6 +1335,7 @@ pub fn calibrate_telemetry(
         filter_changes,
         alignment_validation,
         filter_validation,
+        filter_tuning,
         fhst_floor: None,
     };
     Ok(CalibrationOutput {
@@ -1599,9 +1614,10 @@ impl FixFloors {
     }
 }
 
-/// The filter table to write, the changes with why, and their validation: the one change
-/// [`filter_update`] makes (aberration on) is written only if the telemetry shows it is needed
-/// (`alignment_heldout::validate_aberration_switch`).
+/// The filter table to write, the changes with why, their validation, and the decisions on
+/// the gyro terms: the aberration switch [`filter_update`] makes is written only if the
+/// telemetry shows it is needed (`alignment_heldout::validate_aberration_switch`); the slew
+/// uncertainty only through the IRU table's held-out validation (`super::filter_tuning`).
 ///
 /// # Errors
 /// The new table fails the OBC's validation.
@@ -1610,28 +1626,61 @@ fn filter_stage(
     metadata: &Metadata,
     frames: &[FrameObservations],
     setup: &AlignmentSetup<'_>,
-) -> anyhow::Result<(
-    Option<FilterTable>,
-    Vec<String>,
-    Option<AberrationSwitchValidation>,
-)> {
-    let (new_filter, mut filter_changes) = filter_update(
-        &options
-            .flown_filter
-            .unwrap_or_else(FilterTable::default_boot),
-        metadata,
-    )?;
+    iru: Option<&IruReport>,
+    gyro_data: (&Telemetry, &IruTable),
+) -> anyhow::Result<FilterStage> {
+    let flown = options
+        .flown_filter
+        .unwrap_or_else(FilterTable::default_boot);
+    let (new_filter, mut filter_changes) = filter_update(&flown, metadata)?;
     let filter_validation = new_filter
         .as_ref()
         .map(|_| validate_aberration_switch(frames, setup));
-    let new_filter = match &filter_validation {
+    let mut new_filter = match &filter_validation {
         Some(v) if !v.passed => {
             filter_changes.push(format!("not written: {}", v.reason));
             None
         }
         _ => new_filter,
     };
-    Ok((new_filter, filter_changes, filter_validation))
+    let slew = super::filter_tuning::slew_uncertainty(flown.gyro_scale_uncertainty, iru);
+    let [arw, rrw] = super::filter_tuning::noise_terms(&flown, gyro_data.0, gyro_data.1);
+    let [bright, faint] = super::filter_tuning::fhst_noise_terms(&flown, frames);
+    let mut terms = vec![slew, arw, rrw, bright, faint];
+    for term in terms.iter_mut().filter(|t| t.written) {
+        let mut table = new_filter.unwrap_or(flown);
+        if !term.apply(&mut table) {
+            continue;
+        }
+        if let Err(e) = table.validate() {
+            term.written = false;
+            term.reason = format!(
+                "not written: the table would not validate ({e:?}); {}",
+                term.reason
+            );
+            continue;
+        }
+        filter_changes.push(format!("{}: {}", term.field.field(), term.reason));
+        new_filter = Some(table);
+    }
+    Ok(FilterStage {
+        table: new_filter,
+        changes: filter_changes,
+        aberration_validation: filter_validation,
+        terms,
+    })
+}
+
+/// What [`filter_stage`] decides.
+struct FilterStage {
+    /// The new filter table, when one is written.
+    table: Option<FilterTable>,
+    /// The changes written (or refused), with why.
+    changes: Vec<String>,
+    /// The aberration switch's validation, when proposed.
+    aberration_validation: Option<AberrationSwitchValidation>,
+    /// The decisions on the gyro terms, written or not.
+    terms: Vec<super::filter_tuning::TermDecision>,
 }
 
 /// The filter table the OBC should fly, when it differs from the flown one, and why.

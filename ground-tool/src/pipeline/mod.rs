@@ -5,7 +5,9 @@
 
 pub mod alignment_heldout;
 pub mod calibrate;
+pub mod fhst_noise;
 pub mod filter_floor;
+pub mod filter_tuning;
 pub mod flown;
 pub mod fss_consider;
 pub mod fss_systematic;

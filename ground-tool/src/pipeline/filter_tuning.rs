@@ -1,0 +1,729 @@
+//! # The filter table's gyro terms from what the ground has measured of the gyros
+//!
+//! Why: the OBC filter carries three gyro numbers in its table: the slew uncertainty
+//! `gyro_scale_uncertainty` (how far a turn of θ may be wrong, `k θ`, through the gyros'
+//! scale factors and misalignments), the angle random walk σ_v and the rate random walk σ_u.
+//! The boot values are prelaunch knowledge. After a calibration the ground knows better, and a
+//! filter that keeps prelaunch uncertainty after the G matrix is calibrated is pessimistic
+//! after every slew (its NEES over the steady cycles falls below 1.5; `docs/obc_filter.md`
+//! §11); one that keeps a noise figure the holds contradict is wrong the other way. Every
+//! change here is written only through a held-out test, like the other tables.
+//!
+//! # Slew uncertainty from IRUCAL (rule)
+//! A residual error `E` of the flown G turns a rotation `θ u` into an attitude error `E u θ`,
+//! whose variance on axis `i` is `Σ_j var(E_ij) u_j² θ² ≤ max_j var(E_ij) θ²`. So the
+//! isotropic `k` that bounds every slew axis is the largest element σ of `E`:
+//! * an element of δM that is uplinked leaves its estimation error, σ_ij;
+//! * an element not uplinked (not significant at 3σ) leaves the whole true δM_ij, whose mean
+//!   square given the estimate is `δM_ij² + σ_ij²`;
+//! * every σ is scaled by `√max(1, m)`, `m` the held-out mean square of the normalised
+//!   residuals of the IRU table's validation (the held-out maneuvers say how true σ is).
+//!
+//! `k` is written only when the IRU table passed its held-out validation, no rate-dependent
+//! scale error was found (δM cannot hold it), every triad that flew slews was calibrated, and
+//! the new `k` differs from the flown one by more than [`MIN_RELATIVE_CHANGE`]. Otherwise the
+//! flown `k` stays and the report says why, with the derived value.
+
+use super::calibrate::IruReport;
+use fsw_core::tables::types::FilterTable;
+use serde::Serialize;
+
+/// A derived value is written only when it differs from the flown one by more than this
+/// fraction: below it the filter's σ changes by less than the NEES band's resolution.
+pub const MIN_RELATIVE_CHANGE: f64 = 0.2;
+
+/// The table's range of `gyro_scale_uncertainty` (`FilterTable::validate`).
+const MAX_GYRO_SCALE_UNCERTAINTY: f64 = 0.05;
+
+/// The filter-table field a decision is about (serialised as the field's name).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+pub enum FilterTerm {
+    /// `gyro_scale_uncertainty`.
+    #[serde(rename = "gyro_scale_uncertainty")]
+    SlewUncertainty,
+    /// `arw_rad_per_sqrt_s` (σ_v).
+    #[serde(rename = "arw_rad_per_sqrt_s")]
+    Arw,
+    /// `rrw_rad_per_s_sqrt_s` (σ_u).
+    #[serde(rename = "rrw_rad_per_s_sqrt_s")]
+    Rrw,
+    /// `fhst_sigma_bright_arcsec` (σ(2.0)).
+    #[serde(rename = "fhst_sigma_bright_arcsec")]
+    FhstBright,
+    /// `fhst_sigma_faint_arcsec` (σ(5.7)).
+    #[serde(rename = "fhst_sigma_faint_arcsec")]
+    FhstFaint,
+}
+
+impl FilterTerm {
+    /// The filter-table field's name.
+    #[must_use]
+    pub fn field(self) -> &'static str {
+        match self {
+            Self::SlewUncertainty => "gyro_scale_uncertainty",
+            Self::Arw => "arw_rad_per_sqrt_s",
+            Self::Rrw => "rrw_rad_per_s_sqrt_s",
+            Self::FhstBright => "fhst_sigma_bright_arcsec",
+            Self::FhstFaint => "fhst_sigma_faint_arcsec",
+        }
+    }
+
+    /// The field of `table`.
+    fn field_mut(self, table: &mut FilterTable) -> &mut f64 {
+        match self {
+            Self::SlewUncertainty => &mut table.gyro_scale_uncertainty,
+            Self::Arw => &mut table.arw_rad_per_sqrt_s,
+            Self::Rrw => &mut table.rrw_rad_per_s_sqrt_s,
+            Self::FhstBright => &mut table.fhst_sigma_bright_arcsec,
+            Self::FhstFaint => &mut table.fhst_sigma_faint_arcsec,
+        }
+    }
+}
+
+/// One derived filter-table gyro term and the decision on it.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct TermDecision {
+    /// Filter-table field.
+    pub field: FilterTerm,
+    /// The flown value.
+    pub flown: f64,
+    /// The value the ground derives, when it can.
+    pub derived: Option<f64>,
+    /// Whether `derived` is written into the new table.
+    pub written: bool,
+    /// Why, with the numbers.
+    pub reason: String,
+}
+
+impl TermDecision {
+    /// Write the derived value into `table` when the decision is to write it; true if it did.
+    pub fn apply(&self, table: &mut FilterTable) -> bool {
+        match (self.written, self.derived) {
+            (true, Some(v)) => {
+                *self.field.field_mut(table) = v;
+                true
+            }
+            _ => false,
+        }
+    }
+}
+
+/// The largest residual element σ of a triad's G after the calibration (rule in the module
+/// doc), and where it is: `(k, row, column)`.
+fn residual_element_sigma(
+    delta_m: &[[f64; 3]; 3],
+    sigma: &[[f64; 3]; 3],
+    uplinked: &[[f64; 3]; 3],
+    scale: f64,
+) -> (f64, usize, usize) {
+    let mut best = (0.0, 0, 0);
+    for i in 0..3 {
+        for j in 0..3 {
+            let s = scale * sigma[i][j];
+            let left = if uplinked[i][j] == 0.0 {
+                delta_m[i][j].hypot(s)
+            } else {
+                s
+            };
+            if left > best.0 {
+                best = (left, i, j);
+            }
+        }
+    }
+    best
+}
+
+/// `gyro_scale_uncertainty` from IRUCAL's report (module doc); the backup triad counts when
+/// it flew slews (then `IruReport::backup` holds its calibration).
+#[must_use]
+pub fn slew_uncertainty(flown_k: f64, iru: Option<&IruReport>) -> TermDecision {
+    let mut d = TermDecision {
+        field: FilterTerm::SlewUncertainty,
+        flown: flown_k,
+        derived: None,
+        written: false,
+        reason: String::new(),
+    };
+    let Some(r) = iru else {
+        d.reason = "kept: no IRU calibration (too few maneuvers), nothing new is known of the gyros' scale factors and misalignments".to_owned();
+        return d;
+    };
+    let Some(v) = r.validation.as_ref() else {
+        d.reason = format!(
+            "kept: the IRU calibration has no held-out validation ({})",
+            r.decision
+        );
+        return d;
+    };
+    let scale = v.mean_square_normalised.max(1.0).sqrt();
+    let (k_primary, i, j) =
+        residual_element_sigma(&r.delta_m, &r.delta_m_sigma, &r.delta_m_uplinked, scale);
+    let mut k = k_primary;
+    let mut origin = format!(
+        "primary triad's δM[{i}][{j}]: σ {:.0} ppm × {scale:.2} (held-out √m.s.){}",
+        r.delta_m_sigma[i][j] * 1e6,
+        if r.delta_m_uplinked[i][j] == 0.0 {
+            format!(
+                " ⊕ its estimate {:.0} ppm (not uplinked)",
+                r.delta_m[i][j] * 1e6
+            )
+        } else {
+            String::new()
+        }
+    );
+    if let Some(b) = r.backup.as_ref() {
+        let bs = b
+            .validation
+            .as_ref()
+            .map_or(1.0, |bv| bv.mean_square_normalised.max(1.0).sqrt());
+        let (kb, bi, bj) =
+            residual_element_sigma(&b.delta_m, &b.delta_m_sigma, &b.delta_m_uplinked, bs);
+        if kb > k {
+            k = kb;
+            origin = format!(
+                "backup triad's δM[{bi}][{bj}]: σ {:.0} ppm × {bs:.2}",
+                b.delta_m_sigma[bi][bj] * 1e6
+            );
+        }
+    }
+    let k = k.min(MAX_GYRO_SCALE_UNCERTAINTY);
+    d.derived = Some(k);
+    let why_not = if !v.passed {
+        Some(format!(
+            "the IRU table failed its held-out validation ({})",
+            v.reason
+        ))
+    } else if !r.g_updated {
+        Some(format!(
+            "G is not updated ({}), so the flown G flies on",
+            r.decision
+        ))
+    } else if r.rate_scale.significant {
+        Some(format!(
+            "a rate-dependent scale error is significant (p = {:.3}): δM cannot hold it, so slews keep the flown uncertainty",
+            r.rate_scale.p_value
+        ))
+    } else if r
+        .backup
+        .as_ref()
+        .is_some_and(|b| b.validation.as_ref().is_some_and(|bv| !bv.passed))
+    {
+        Some("the backup triad flew slews and its δM failed its held-out validation".to_owned())
+    } else if (k - flown_k).abs() <= MIN_RELATIVE_CHANGE * flown_k {
+        Some(format!(
+            "within {:.0} % of the flown value",
+            MIN_RELATIVE_CHANGE * 100.0
+        ))
+    } else {
+        None
+    };
+    match why_not {
+        Some(w) => {
+            d.reason = format!("kept {flown_k:.2e}: {w}; derived {k:.2e} from the {origin}");
+        }
+        None => {
+            d.written = true;
+            d.reason = format!(
+                "{flown_k:.2e} -> {k:.2e}: the largest residual error of G after the calibration, from the {origin}; the IRU table passed its held-out validation ({})",
+                v.reason
+            );
+        }
+    }
+    d
+}
+
+/// Confidence of the Allan-deviation intervals the noise decisions use.
+const NOISE_CONFIDENCE: f64 = 0.95;
+
+/// Bootstrap replicas of the whole-data Allan fit (`allan::analyse_segments_with`); the two
+/// folds use point estimates only.
+const NOISE_REPLICAS: usize = crate::calibration::allan::BOOTSTRAP_REPLICAS;
+
+/// Above this many samples per axis the whole data's intervals are the χ² ones (no
+/// bootstrap): they are optimistic (≈ 75–85 % coverage at 95 %, `allan` module doc) but at
+/// this size far narrower than the [`MIN_RELATIVE_CHANGE`] both folds must show, which then
+/// decides; the bootstrap costs ≈ 25 s CPU on six months of 30-s frames (≈ 5·10⁵ samples
+/// per axis), the χ² intervals a few.
+const BOOTSTRAP_MAX_SAMPLES: usize = 1 << 17;
+
+/// One axis's noise figures per channel, rad/√s (N) or rad/s/√s (K): the whole data's value
+/// and interval, and each held-out fold's value (`None` when the term is not detected).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct AxisNoiseEvidence {
+    /// Axis (X, Y, Z).
+    pub axis: &'static str,
+    /// Rate samples (all folds).
+    pub samples: usize,
+    /// Whole data: [value, low, high] when detected.
+    pub whole: Option<[f64; 3]>,
+    /// Fold A (even hold segments) and fold B (odd ones): value when detected.
+    pub folds: [Option<f64>; 2],
+    /// Why the whole data give no evidence although they were analysed, when so.
+    pub note: Option<String>,
+}
+
+/// The two held-out folds of a set of hold segments: alternate segments when there are at
+/// least four (each fold then spans the run, so a slow trend falls in both), else each
+/// segment's first and second halves.
+fn folds(segments: &[Vec<f64>]) -> [Vec<Vec<f64>>; 2] {
+    use crate::calibration::allan::MIN_SEGMENT_SAMPLES;
+    let mut out = [Vec::new(), Vec::new()];
+    if segments.len() >= 4 {
+        for (i, s) in segments.iter().enumerate() {
+            out[i % 2].push(s.clone());
+        }
+    } else {
+        for s in segments {
+            let half = s.len() / 2;
+            if half >= MIN_SEGMENT_SAMPLES {
+                out[0].push(s[..half].to_vec());
+                out[1].push(s[half..].to_vec());
+            }
+        }
+    }
+    out
+}
+
+/// One term's [value, low, high] of the fit, when detected.
+fn detected(t: &crate::calibration::allan::NoiseTerm) -> Option<[f64; 3]> {
+    t.detected.then_some([t.value, t.low, t.high])
+}
+
+/// The filter's σ_u from a fit: `√(K² + R² T)` with `T` = [`RAMP_HORIZON_S`] ([value, low,
+/// high]): the rate random walk plus a rate ramp (the early bias transient) taken as a walk
+/// over one orbit, as the boot table's σ_u is derived (docs/obc_filter.md §2). An undetected
+/// ramp enters with its upper bound at all three places, so a σ_u is never lowered below a
+/// ramp the data cannot exclude. `None` when K is not detected.
+/// `common_ramp`: a ramp the channel difference cancels (seen in the OBC's own bias, in the
+/// fit's units), taken when larger than the fit's.
+fn filter_rrw(fit: &crate::calibration::allan::NoiseFit, common_ramp: f64) -> Option<[f64; 3]> {
+    let k = detected(&fit.rrw_rad_per_s_sqrt_s)?;
+    let r = &fit.rate_ramp_rad_per_s2;
+    let ramp = detected(r)
+        .unwrap_or([r.high; 3])
+        .map(|x| x.max(common_ramp));
+    Some([0, 1, 2].map(|i| (k[i] * k[i] + ramp[i] * ramp[i] * RAMP_HORIZON_S).sqrt()))
+}
+
+/// Housekeeping after the first housekeeping packet that the OBC-bias ramp ignores, s: the
+/// filter's bias converges over the first tens of minutes.
+pub const OBC_BIAS_SETTLE_S: f64 = 3600.0;
+
+/// The largest rate ramp of the OBC's own bias estimate over the run (housekeeping, ACS
+/// axes, least-squares slope after [`OBC_BIAS_SETTLE_S`]), rad/s². Why: a drift common to
+/// both channels of an axis cancels in their difference, which the Allan analysis uses, but
+/// moves the bias the filter must follow; the OBC's estimate sees it. `None` with fewer than
+/// 100 packets spanning at least [`RAMP_HORIZON_S`] after the settling time.
+#[must_use]
+pub fn obc_bias_ramp(tm: &crate::tp::Telemetry) -> Option<f64> {
+    let t0 = tm.housekeeping.first()?.time.seconds() + OBC_BIAS_SETTLE_S;
+    let pts: Vec<(f64, [f64; 3])> = tm
+        .housekeeping
+        .iter()
+        .map(|h| (h.time.seconds(), h.bias_acs_rad_per_s))
+        .filter(|(t, b)| *t >= t0 && b.iter().all(|x| x.is_finite()))
+        .collect();
+    let span = pts.last()?.0 - pts.first()?.0;
+    if pts.len() < 100 || span < RAMP_HORIZON_S {
+        return None;
+    }
+    let n = pts.len() as f64;
+    let t_mean = pts.iter().map(|p| p.0).sum::<f64>() / n;
+    let stt: f64 = pts.iter().map(|p| (p.0 - t_mean).powi(2)).sum();
+    (0..3)
+        .map(|i| {
+            let b_mean = pts.iter().map(|p| p.1[i]).sum::<f64>() / n;
+            let stb: f64 = pts.iter().map(|p| (p.0 - t_mean) * (p.1[i] - b_mean)).sum();
+            (stb / stt).abs()
+        })
+        .reduce(f64::max)
+}
+
+/// The time over which a rate ramp is carried as a random walk, s: one GRO orbit, the
+/// horizon of the boot table's σ_u (docs/obc_filter.md §2).
+pub const RAMP_HORIZON_S: f64 = 5760.0;
+
+/// One axis's evidence for σ_v and σ_u from the rate segments of its channel-pair difference
+/// (per channel = ÷ √2): the whole data with bootstrap intervals, and the two folds' point
+/// estimates; or why not (a fold too short, or the fit failed).
+fn axis_evidence(
+    axis: &'static str,
+    segments: &[Vec<f64>],
+    tau0_s: f64,
+    common_ramp: f64,
+) -> Result<[AxisNoiseEvidence; 2], String> {
+    use crate::calibration::allan::{analyse_segments_with, MIN_TOTAL_SAMPLES};
+    let per_channel = std::f64::consts::SQRT_2;
+    let samples: usize = segments.iter().map(Vec::len).sum();
+    let [fa, fb] = folds(segments);
+    let fold_samples = |f: &[Vec<f64>]| f.iter().map(Vec::len).sum::<usize>();
+    if fold_samples(&fa).min(fold_samples(&fb)) < MIN_TOTAL_SAMPLES {
+        return Err(format!(
+            "axis {axis}: {samples} hold samples in {} segment(s), fewer than {MIN_TOTAL_SAMPLES} per held-out fold",
+            segments.len()
+        ));
+    }
+    let replicas = if samples <= BOOTSTRAP_MAX_SAMPLES {
+        NOISE_REPLICAS
+    } else {
+        0
+    };
+    let (_, whole) = analyse_segments_with(axis, segments, tau0_s, NOISE_CONFIDENCE, replicas)
+        .map_err(|e| format!("axis {axis}: the Allan fit failed ({e})"))?;
+    let fold_fits =
+        [&fa, &fb].map(|f| analyse_segments_with(axis, f, tau0_s, NOISE_CONFIDENCE, 0).ok());
+    // The common ramp is per body axis; the fit's figures are of the pair difference.
+    let ramp = common_ramp * per_channel;
+    let term = |f: &crate::calibration::allan::NoiseFit, rrw: bool| {
+        if rrw {
+            filter_rrw(f, ramp)
+        } else {
+            detected(&f.arw_rad_per_sqrt_s)
+        }
+    };
+    Ok([false, true].map(|rrw| AxisNoiseEvidence {
+        axis,
+        samples,
+        note: None,
+        whole: term(&whole, rrw).map(|v| v.map(|x| x / per_channel)),
+        folds: [0, 1].map(|k| {
+            fold_fits[k]
+                .as_ref()
+                .and_then(|(_, f)| term(f, rrw))
+                .map(|v| v[0] / per_channel)
+        }),
+    }))
+}
+
+/// The noise evidence of every axis for both terms, from the pair difference of each axis's
+/// channels in the low-rate holds (`allan::hold_segments`; per channel = ÷ √2), or why there
+/// is none.
+fn noise_evidence(
+    tm: &crate::tp::Telemetry,
+    iru: &fsw_core::tables::IruTable,
+    common_ramp: f64,
+) -> Result<[Vec<AxisNoiseEvidence>; 2], String> {
+    use crate::calibration::allan::{hold_segments, median_spacing_s, AXES};
+    let tau0_s = median_spacing_s(tm).ok_or("no raw frames")?;
+    let mut arw = Vec::new();
+    let mut rrw = Vec::new();
+    let mut why_not = Vec::new();
+    for (axis, a, b) in AXES {
+        let seg = hold_segments(tm, iru, (a, Some(b)), tau0_s);
+        match axis_evidence(axis, &seg.used, tau0_s, common_ramp) {
+            Ok([a, r]) => {
+                arw.push(a);
+                rrw.push(r);
+            }
+            Err(e) => why_not.push(e),
+        }
+    }
+    if arw.is_empty() {
+        return Err(why_not.join("; "));
+    }
+    Ok([arw, rrw])
+}
+
+/// The decision on one noise term (σ_v or σ_u) from the axes' evidence. An axis votes to
+/// change the flown value `f` when the whole data's interval excludes `f` and both held-out
+/// folds detect the term on the same side of `f`, each by more than [`MIN_RELATIVE_CHANGE`].
+/// Raised when any axis votes up (to the largest such axis's value: the filter must not be
+/// optimistic on any axis); lowered only when `may_lower`, at least `lower_needs` axes have
+/// evidence and every one of them votes down (to the largest of them).
+pub fn noise_decision(
+    field: FilterTerm,
+    flown: f64,
+    evidence: &[AxisNoiseEvidence],
+    may_lower: bool,
+    lower_needs: usize,
+) -> TermDecision {
+    let vote = |e: &AxisNoiseEvidence| -> Option<(f64, bool)> {
+        let [v, lo, hi] = e.whole?;
+        let [Some(a), Some(b)] = e.folds else {
+            return None;
+        };
+        let up = lo > flown
+            && a > flown * (1.0 + MIN_RELATIVE_CHANGE)
+            && b > flown * (1.0 + MIN_RELATIVE_CHANGE);
+        let down = hi < flown
+            && a < flown * (1.0 - MIN_RELATIVE_CHANGE)
+            && b < flown * (1.0 - MIN_RELATIVE_CHANGE);
+        (up || down).then_some((v, up))
+    };
+    let votes: Vec<Option<(f64, bool)>> = evidence.iter().map(vote).collect();
+    let up = votes
+        .iter()
+        .flatten()
+        .filter(|(_, up)| *up)
+        .map(|(v, _)| *v)
+        .fold(None, |m: Option<f64>, v| Some(m.map_or(v, |m| m.max(v))));
+    let all_down =
+        votes.len() >= lower_needs.max(1) && votes.iter().all(|v| matches!(v, Some((_, false))));
+    let derived = up
+        .or_else(|| all_down.then(|| votes.iter().flatten().map(|(v, _)| *v).fold(0.0, f64::max)));
+    let describe = |e: &AxisNoiseEvidence| {
+        let fold = |f: Option<f64>| f.map_or("not detected".to_owned(), |v| format!("{v:.3e}"));
+        match e.whole {
+            Some([v, lo, hi]) => format!(
+                "{}: {v:.3e} [{lo:.3e}, {hi:.3e}], folds {} / {}",
+                e.axis,
+                fold(e.folds[0]),
+                fold(e.folds[1])
+            ),
+            None => format!(
+                "{}: {}",
+                e.axis,
+                e.note.as_deref().unwrap_or("not detected")
+            ),
+        }
+    };
+    let evidence_text = evidence.iter().map(describe).collect::<Vec<_>>().join("; ");
+    let mut d = TermDecision {
+        field,
+        flown,
+        derived,
+        written: false,
+        reason: String::new(),
+    };
+    d.reason = match (up, all_down && may_lower) {
+        (Some(v), _) => {
+            d.written = true;
+            format!(
+                "{flown:.3e} -> {v:.3e}: the data exclude the flown value and both held-out folds agree (95 %: {evidence_text})"
+            )
+        }
+        (None, true) => {
+            let v = derived.unwrap_or(flown);
+            d.written = true;
+            format!(
+                "{flown:.3e} -> {v:.3e}: every axis's evidence lies below the flown value and both held-out folds agree (95 %: {evidence_text})"
+            )
+        }
+        (None, false) if all_down => format!(
+            "kept {flown:.3e}: the data show less ({evidence_text}), but this term is not lowered from flight data"
+        ),
+        (None, false) => format!(
+            "kept {flown:.3e}: no axis where the whole data exclude it and both held-out folds differ by > {:.0} % on the same side (95 %: {evidence_text})",
+            MIN_RELATIVE_CHANGE * 100.0
+        ),
+    };
+    d
+}
+
+/// The FHST noise law's end points (`fhst_sigma_bright_arcsec`, `fhst_sigma_faint_arcsec`)
+/// from the stars' second differences (`super::fhst_noise`), each through the two-fold
+/// held-out test of [`noise_decision`]; lowered only when every tracker with data agrees.
+#[must_use]
+pub fn fhst_noise_terms(
+    flown: &FilterTable,
+    frames: &[super::observations::FrameObservations],
+) -> [TermDecision; 2] {
+    match super::fhst_noise::fhst_noise_evidence(frames) {
+        Ok([bright, faint]) => [
+            noise_decision(
+                FilterTerm::FhstBright,
+                flown.fhst_sigma_bright_arcsec,
+                &bright,
+                true,
+                bright.len(),
+            ),
+            noise_decision(
+                FilterTerm::FhstFaint,
+                flown.fhst_sigma_faint_arcsec,
+                &faint,
+                true,
+                faint.len(),
+            ),
+        ],
+        Err(why) => [
+            (FilterTerm::FhstBright, flown.fhst_sigma_bright_arcsec),
+            (FilterTerm::FhstFaint, flown.fhst_sigma_faint_arcsec),
+        ]
+        .map(|(field, f)| TermDecision {
+            field,
+            flown: f,
+            derived: None,
+            written: false,
+            reason: format!("kept {f:.3e}: too few star samples for a held-out test ({why})"),
+        }),
+    }
+}
+
+/// σ_v (`arw_rad_per_sqrt_s`) and σ_u (`rrw_rad_per_s_sqrt_s`, [`filter_rrw`]: the rate
+/// random walk with any rate ramp the holds show or cannot exclude) from the Allan deviation
+/// of the low-rate holds, each through the two-fold held-out test of [`noise_decision`],
+/// lowered only when all three axes agree. Without enough hold data both are kept, with the
+/// reason.
+#[must_use]
+pub fn noise_terms(
+    flown: &FilterTable,
+    tm: &crate::tp::Telemetry,
+    iru: &fsw_core::tables::IruTable,
+) -> [TermDecision; 2] {
+    let obc_ramp = obc_bias_ramp(tm);
+    match noise_evidence(tm, iru, obc_ramp.unwrap_or(0.0)) {
+        Ok([arw, rrw]) => {
+            let mut rrw_decision = noise_decision(
+                FilterTerm::Rrw,
+                flown.rrw_rad_per_s_sqrt_s,
+                &rrw,
+                obc_ramp.is_some(),
+                3,
+            );
+            if obc_ramp.is_none() && !rrw_decision.written {
+                rrw_decision.reason.push_str(
+                    "; never lowered without the OBC's bias history (housekeeping over an orbit): a drift common to both channels of an axis cancels in their difference",
+                );
+            }
+            [
+                noise_decision(FilterTerm::Arw, flown.arw_rad_per_sqrt_s, &arw, true, 3),
+                rrw_decision,
+            ]
+        }
+        Err(why) => [
+            (FilterTerm::Arw, flown.arw_rad_per_sqrt_s),
+            (FilterTerm::Rrw, flown.rrw_rad_per_s_sqrt_s),
+        ]
+        .map(|(field, f)| TermDecision {
+            field,
+            flown: f,
+            derived: None,
+            written: false,
+            reason: format!("kept {f:.3e}: too little hold data for a held-out test ({why})"),
+        }),
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn residual_sigma_takes_the_whole_estimate_of_elements_not_uplinked() {
+        let dm = [[4e-4, 0.0, 1.7e-4], [0.0; 3], [0.0; 3]];
+        let sigma = [[3e-5, 3e-5, 6e-5], [3e-5; 3], [3e-5; 3]];
+        let up = [[4e-4, 0.0, 0.0], [0.0; 3], [0.0; 3]];
+        let (k, i, j) = residual_element_sigma(&dm, &sigma, &up, 1.0);
+        assert_eq!((i, j), (0, 2));
+        assert!((k - 1.7e-4f64.hypot(6e-5)).abs() < 1e-12);
+        // Uplinked: only the estimation error is left; the held-out scale multiplies σ.
+        let up_all = dm;
+        let (k, _, _) = residual_element_sigma(&dm, &sigma, &up_all, 1.5);
+        assert!((k - 1.5 * 6e-5).abs() < 1e-12);
+    }
+
+    fn evidence(whole: Option<[f64; 3]>, folds: [Option<f64>; 2]) -> AxisNoiseEvidence {
+        AxisNoiseEvidence {
+            axis: "X",
+            samples: 10_000,
+            whole,
+            folds,
+            note: None,
+        }
+    }
+
+    #[test]
+    fn noise_is_raised_only_when_the_interval_and_both_folds_agree() {
+        let f = 1.0e-8;
+        let up = evidence(Some([3e-8, 2.8e-8, 3.2e-8]), [Some(3.1e-8), Some(2.9e-8)]);
+        let d = noise_decision(
+            FilterTerm::Arw,
+            f,
+            &[up.clone(), evidence(None, [None; 2])],
+            true,
+            3,
+        );
+        assert!(d.written && d.derived == Some(3e-8), "{}", d.reason);
+        // One fold within 20 % of the flown value: kept.
+        let split = evidence(Some([3e-8, 2.8e-8, 3.2e-8]), [Some(3.1e-8), Some(1.1e-8)]);
+        let d = noise_decision(FilterTerm::Arw, f, &[split], true, 3);
+        assert!(!d.written && d.derived.is_none(), "{}", d.reason);
+        // The whole interval contains the flown value: kept.
+        let wide = evidence(Some([3e-8, 0.9e-8, 5e-8]), [Some(3.1e-8), Some(2.9e-8)]);
+        assert!(!noise_decision(FilterTerm::Arw, f, &[wide], true, 3).written);
+        // The largest axis wins.
+        let up2 = evidence(Some([5e-8, 4.5e-8, 5.5e-8]), [Some(5e-8), Some(5.1e-8)]);
+        let d = noise_decision(FilterTerm::Arw, f, &[up, up2], true, 3);
+        assert_eq!(d.derived, Some(5e-8));
+    }
+
+    #[test]
+    fn noise_is_lowered_only_when_every_axis_agrees_and_the_term_may_be_lowered() {
+        let f = 1.0e-8;
+        let down = evidence(Some([3e-9, 2.8e-9, 3.2e-9]), [Some(3.1e-9), Some(2.9e-9)]);
+        let three = vec![down.clone(), down.clone(), down.clone()];
+        let d = noise_decision(FilterTerm::Arw, f, &three, true, 3);
+        assert!(d.written && d.derived == Some(3e-9), "{}", d.reason);
+        let d = noise_decision(FilterTerm::Rrw, f, &three, false, 3);
+        assert!(!d.written, "{}", d.reason);
+        assert!(d.reason.contains("not lowered"));
+        let two = vec![down.clone(), down, evidence(None, [None; 2])];
+        assert!(!noise_decision(FilterTerm::Arw, f, &two, true, 3).written);
+    }
+
+    /// White rate noise of `n` rad/√s sampled at 1 s plus the low-rate pulse quantization,
+    /// as the pair difference of two channels (√2 n).
+    fn white_segments(n: f64, lens: &[usize], seed: u64) -> Vec<Vec<f64>> {
+        let mut state = seed;
+        let mut normal = move || {
+            // Sum of 12 uniforms − 6: a unit normal to the precision this test needs.
+            (0..12)
+                .map(|_| {
+                    state = state
+                        .wrapping_mul(6_364_136_223_846_793_005)
+                        .wrapping_add(1_442_695_040_888_963_407);
+                    (state >> 11) as f64 / (1u64 << 53) as f64
+                })
+                .sum::<f64>()
+                - 6.0
+        };
+        lens.iter()
+            .map(|&len| {
+                (0..len)
+                    .map(|_| std::f64::consts::SQRT_2 * n * normal())
+                    .collect()
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_noisier_gyro_than_the_table_is_found_on_both_folds_and_written() {
+        let flown = 1.454e-8;
+        let truth = 4.0 * flown;
+        let segs = white_segments(truth, &[3000, 2500, 2800, 3100, 2600, 2900], 7);
+        let [arw, _] = axis_evidence("X", &segs, 1.0, 0.0).unwrap();
+        let d = noise_decision(FilterTerm::Arw, flown, &[arw], true, 3);
+        let v = d.derived.expect("derived");
+        assert!(d.written, "{}", d.reason);
+        assert!((v / truth - 1.0).abs() < 0.2, "{v:e} against {truth:e}");
+        // The same noise as the table: kept.
+        let segs = white_segments(flown, &[3000, 2500, 2800, 3100, 2600, 2900], 8);
+        let [arw, _] = axis_evidence("X", &segs, 1.0, 0.0).unwrap();
+        assert!(!noise_decision(FilterTerm::Arw, flown, &[arw], true, 3).written);
+    }
+
+    #[test]
+    fn too_little_hold_data_is_refused_with_the_count() {
+        let segs = white_segments(1e-8, &[900, 800], 3);
+        let e = axis_evidence("Y", &segs, 1.0, 0.0).unwrap_err();
+        assert!(e.contains("1700 hold samples"), "{e}");
+    }
+
+    #[test]
+    fn folds_alternate_segments_or_halve_them() {
+        let segs: Vec<Vec<f64>> = (0..5).map(|k| vec![k as f64; 100]).collect();
+        let [a, b] = folds(&segs);
+        assert_eq!((a.len(), b.len()), (3, 2));
+        assert_eq!(a[1][0], 2.0);
+        let [a, b] = folds(&segs[..2]);
+        assert_eq!(
+            (a.len(), b.len()),
+            (0, 0),
+            "halves of 50 < 64 samples are dropped"
+        );
+        let long = vec![vec![1.0; 1000]];
+        let [a, b] = folds(&long);
+        assert_eq!((a[0].len(), b[0].len()), (500, 500));
+    }
+}
