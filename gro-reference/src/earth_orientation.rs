@@ -36,9 +36,10 @@ use fsw_core::units::{RAD_PER_ARCSEC, RAD_PER_DEG};
 /// its header and `data/README.md`).
 pub const UT1_UTC_CSV: &str = include_str!("../../data/ut1_utc_1991.csv");
 
-/// Earth's rotation rate relative to the equinox (rad/s), IERS Conventions 2010 table 1.1;
-/// used only for the ITRS-frame velocity.
-pub const EARTH_ROTATION_RATE_RAD_PER_S: f64 = 7.292_115_146_706_979e-5;
+/// Rate of Greenwich sidereal time per second of UT1 (rad/s): 1.002 737 909 35 turns per
+/// UT1 day (the IAU 1982 GMST rate, Meeus eq. 12.4's 360.985 647 366 29°/d). Used to carry
+/// GAST over a few minutes in [`crate::field::FieldEvaluator`].
+pub const SIDEREAL_RATE_RAD_PER_S: f64 = 360.985_647_366_29 / 86_400.0 * RAD_PER_DEG;
 
 /// MJD (UTC) of 1991-01-01, the first row of [`UT1_UTC_CSV`].
 const UT1_TABLE_FIRST_MJD: f64 = 48_257.0;
@@ -165,11 +166,22 @@ pub fn m_itrs_from_gcrs(epoch: Epoch) -> Matrix3<f64> {
 /// buys.
 #[must_use]
 pub fn m_itrs_from_gcrs_with_dut1(epoch: Epoch, ut1_minus_utc_s: f64) -> Matrix3<f64> {
+    r3(gast_with_dut1_rad(epoch, ut1_minus_utc_s)) * m_tod_from_gcrs(epoch)
+}
+
+/// Precession and nutation `N · P`: GCRS → true equator and equinox of date.
+#[must_use]
+pub fn m_tod_from_gcrs(epoch: Epoch) -> Matrix3<f64> {
     let t_cy = j2000_tt_s(epoch) / S_PER_JULIAN_CENTURY;
     let eps = mean_obliquity_rad(t_cy);
     let (dpsi, deps) = nutation_rad(t_cy);
-    let n = r1(-(eps + deps)) * r3(-dpsi) * r1(eps);
-    r3(gast_with_dut1_rad(epoch, ut1_minus_utc_s)) * n * m_mod_from_j2000(t_cy)
+    r1(-(eps + deps)) * r3(-dpsi) * r1(eps) * m_mod_from_j2000(t_cy)
+}
+
+/// Passive rotation about z by GAST: true equator of date → ITRS (no polar motion).
+#[must_use]
+pub fn m_itrs_from_tod(gast_rad: f64) -> Matrix3<f64> {
+    r3(gast_rad)
 }
 
 /// Earth-fixed position of a GCRS position at `epoch` (km in, km out).

@@ -66,9 +66,11 @@ use anyhow::{bail, Context};
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
+use crate::sensors::css::CssParams;
 use crate::sensors::fhst::FhstParams;
 use crate::sensors::fss::FssParams;
 use crate::sensors::iru::IruParams;
+use crate::sensors::tam::TamParams;
 use crate::sensors::thermal::ThermalParams;
 use crate::truth::dynamics::DynamicsParams;
 use crate::truth::orbit::OrbitParams;
@@ -494,6 +496,16 @@ pub struct Scenario {
     /// IRU.
     #[serde(default)]
     pub iru: IruParams,
+    /// TAM1, the primary magnetometer ([`crate::sensors::tam`]); default: the paper's
+    /// determined bias [0, 0, −4] mG.
+    #[serde(default = "TamParams::primary_default")]
+    pub tam1: TamParams,
+    /// TAM2, the secondary magnetometer.
+    #[serde(default)]
+    pub tam2: TamParams,
+    /// Coarse Sun sensors ([`crate::sensors::css`]).
+    #[serde(default)]
+    pub css: CssParams,
     /// Thermal nodes.
     #[serde(default)]
     pub thermal: ThermalSet,
@@ -734,6 +746,9 @@ impl Scenario {
             bail!("initial_estimate.axis_acs must not be zero");
         }
         crate::truth::time::epoch_from_iso(&self.epoch_utc).context("epoch_utc")?;
+        self.tam1.validate("tam1")?;
+        self.tam2.validate("tam2")?;
+        self.css.validate()?;
         let q = self.initial.q_acs_from_eci;
         let n = q.iter().map(|x| x * x).sum::<f64>().sqrt();
         if !(n.is_finite() && (n - 1.0).abs() < 1e-3) {
