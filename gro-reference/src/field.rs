@@ -118,10 +118,27 @@ impl SphericalField {
     }
 }
 
-/// Gauss → Schmidt factors S_{n,m} (Wertz H-14), computed once.
-fn schmidt() -> &'static [[f64; N1]; N1] {
-    static FACTORS: std::sync::OnceLock<[[f64; N1]; N1]> = std::sync::OnceLock::new();
-    FACTORS.get_or_init(schmidt_factors)
+/// Constant tables of the synthesis: the Gauss → Schmidt factors `S_{n,m}` and the
+/// recursion constants `K^{n,m}`, computed once.
+struct SynthesisTables {
+    schmidt: [[f64; N1]; N1],
+    k: [[f64; N1]; N1],
+}
+
+fn tables() -> &'static SynthesisTables {
+    static TABLES: std::sync::OnceLock<SynthesisTables> = std::sync::OnceLock::new();
+    TABLES.get_or_init(|| {
+        let mut k = [[0.0; N1]; N1];
+        for n in 2..N1 {
+            for m in 0..n {
+                k[n][m] = ((n - 1) * (n - 1) - m * m) as f64 / ((2 * n - 1) * (2 * n - 3)) as f64;
+            }
+        }
+        SynthesisTables {
+            schmidt: schmidt_factors(),
+            k,
+        }
+    })
 }
 
 /// Gauss → Schmidt factors S_{n,m} (Wertz H-14).
@@ -166,56 +183,60 @@ impl GaussCoefficients {
     /// a removable singularity; the error there is ~1e-9 relative).
     #[must_use]
     pub fn field_spherical_nt(&self, r_km: f64, colat_rad: f64, lon_rad: f64) -> SphericalField {
-        const POLE_GUARD_RAD: f64 = 1e-9;
-        let theta = colat_rad.clamp(POLE_GUARD_RAD, core::f64::consts::PI - POLE_GUARD_RAD);
-        let (st, ct) = theta.sin_cos();
-        // Gauss-normalised P^{n,m} and dP^{n,m}/dθ (Wertz H-10 .. H-13).
-        let mut p = [[0.0; N1]; N1];
-        let mut dp = [[0.0; N1]; N1];
-        p[0][0] = 1.0;
-        for n in 1..N1 {
-            for m in 0..=n {
-                if m == n {
-                    p[n][n] = st * p[n - 1][n - 1];
-                    dp[n][n] = st * dp[n - 1][n - 1] + ct * p[n - 1][n - 1];
-                } else {
-                    let (p2, dp2, k) = if n >= 2 {
-                        let k =
-                            ((n - 1) * (n - 1) - m * m) as f64 / ((2 * n - 1) * (2 * n - 3)) as f64;
-                        (p[n - 2][m], dp[n - 2][m], k)
-                    } else {
-                        (0.0, 0.0, 0.0)
-                    };
-                    p[n][m] = ct * p[n - 1][m] - k * p2;
-                    dp[n][m] = ct * dp[n - 1][m] - st * p[n - 1][m] - k * dp2;
-                }
-            }
-        }
+        let (st, ct) = colat_rad.sin_cos();
+        let (sl, cl) = lon_rad.sin_cos();
+        self.synthesise(r_km, st, ct, sl, cl)
+    }
+
+    /// The synthesis from the trigonometric values of the colatitude (`st` = sin θ,
+    /// `ct` = cos θ) and the longitude (`sl`, `cl`). One pass over n keeps three rows of
+    /// the Gauss-normalised `P^{n,m}` and `dP^{n,m}/dθ` (Wertz H-10 .. H-13); cos mφ and
+    /// sin mφ by the angle-addition recurrence. No allocation, no transcendental call.
+    fn synthesise(&self, r_km: f64, st: f64, ct: f64, sl: f64, cl: f64) -> SphericalField {
+        const POLE_GUARD: f64 = 1e-9;
+        let st = st.max(POLE_GUARD);
+        let tab = tables();
         let mut cos_m = [0.0; N1];
         let mut sin_m = [0.0; N1];
-        for m in 0..N1 {
-            let (s, c) = (m as f64 * lon_rad).sin_cos();
-            sin_m[m] = s;
-            cos_m[m] = c;
+        cos_m[0] = 1.0;
+        for m in 1..N1 {
+            cos_m[m] = cos_m[m - 1] * cl - sin_m[m - 1] * sl;
+            sin_m[m] = sin_m[m - 1] * cl + cos_m[m - 1] * sl;
         }
-        let s = schmidt();
+        // Rows n − 2, n − 1 and n of P and dP/dθ.
+        let (mut p2, mut dp2) = ([0.0; N1], [0.0; N1]);
+        let (mut p1, mut dp1) = ([0.0; N1], [0.0; N1]);
+        p1[0] = 1.0;
         let ratio = IGRF_REFERENCE_RADIUS_KM / r_km;
         let mut ratio_pow = ratio * ratio; // (a/r)^{n+2} for n = 0
         let (mut b_r, mut b_theta, mut b_phi) = (0.0, 0.0, 0.0);
         for n in 1..N1 {
+            let mut p = [0.0; N1];
+            let mut dp = [0.0; N1];
+            for m in 0..n {
+                let k = tab.k[n][m];
+                p[m] = ct * p1[m] - k * p2[m];
+                dp[m] = ct * dp1[m] - st * p1[m] - k * dp2[m];
+            }
+            p[n] = st * p1[n - 1];
+            dp[n] = st * dp1[n - 1] + ct * p1[n - 1];
             ratio_pow *= ratio;
             let (mut sr, mut st_sum, mut sp) = (0.0, 0.0, 0.0);
             for m in 0..=n {
-                let g = s[n][m] * self.g_nt[n][m];
-                let h = s[n][m] * self.h_nt[n][m];
+                let g = tab.schmidt[n][m] * self.g_nt[n][m];
+                let h = tab.schmidt[n][m] * self.h_nt[n][m];
                 let gh = g * cos_m[m] + h * sin_m[m];
-                sr += gh * p[n][m];
-                st_sum += gh * dp[n][m];
-                sp += m as f64 * (-g * sin_m[m] + h * cos_m[m]) * p[n][m];
+                sr += gh * p[m];
+                st_sum += gh * dp[m];
+                sp += m as f64 * (-g * sin_m[m] + h * cos_m[m]) * p[m];
             }
             b_r += ratio_pow * (n + 1) as f64 * sr;
             b_theta -= ratio_pow * st_sum;
             b_phi -= ratio_pow * sp;
+            p2 = p1;
+            dp2 = dp1;
+            p1 = p;
+            dp1 = dp;
         }
         SphericalField {
             b_r_nt: b_r,
@@ -227,10 +248,16 @@ impl GaussCoefficients {
     /// The field on ITRS (Earth-fixed) axes (nT) at the ITRS position `pos_itrs_km`.
     #[must_use]
     pub fn field_itrs_nt(&self, pos_itrs_km: &Vector3<f64>) -> Vector3<f64> {
-        let (r, colat, lon) = spherical_from_cartesian(pos_itrs_km);
-        let b = self.field_spherical_nt(r, colat, lon);
-        let (st, ct) = colat.sin_cos();
-        let (sl, cl) = lon.sin_cos();
+        let r = pos_itrs_km.norm();
+        let rho = pos_itrs_km.x.hypot(pos_itrs_km.y);
+        let (st, ct) = (rho / r, pos_itrs_km.z / r);
+        // On the axis the longitude is arbitrary: take 0.
+        let (sl, cl) = if rho > 0.0 {
+            (pos_itrs_km.y / rho, pos_itrs_km.x / rho)
+        } else {
+            (0.0, 1.0)
+        };
+        let b = self.synthesise(r, st, ct, sl, cl);
         let r_hat = Vector3::new(st * cl, st * sl, ct);
         let theta_hat = Vector3::new(ct * cl, ct * sl, -st);
         let phi_hat = Vector3::new(-sl, cl, 0.0);
@@ -414,6 +441,8 @@ struct EvaluatorCache {
     coeffs: GaussCoefficients,
     m_tod_from_gcrs: Matrix3<f64>,
     gast_rad: f64,
+    /// The model's span relative to `epoch` (s): `[first − epoch, last − epoch]`.
+    span_s: (f64, f64),
 }
 
 impl FieldEvaluator {
@@ -456,22 +485,23 @@ impl FieldEvaluator {
             .as_ref()
             .is_none_or(|c| (epoch - c.epoch).to_seconds().abs() > self.refresh_s);
         if stale {
+            let (first, last) = self.model.span();
             self.cache = Some(EvaluatorCache {
                 epoch,
                 coeffs: self.model.coefficients_at(epoch)?,
                 m_tod_from_gcrs: m_tod_from_gcrs(epoch),
                 gast_rad: gast_rad(epoch),
+                span_s: ((first - epoch).to_seconds(), (last - epoch).to_seconds()),
             });
         }
         let Some(c) = self.cache.as_ref() else {
             return self.model.coefficients_at(epoch).map(|_| Vector3::zeros());
         };
+        let dt_s = (epoch - c.epoch).to_seconds();
         // Still refuse outside the model's span when the cache straddles its end.
-        let (first, last) = self.model.span();
-        if epoch < first || epoch > last {
+        if !(c.span_s.0..=c.span_s.1).contains(&dt_s) {
             self.model.coefficients_at(epoch)?;
         }
-        let dt_s = (epoch - c.epoch).to_seconds();
         let m = m_itrs_from_tod(c.gast_rad + SIDEREAL_RATE_RAD_PER_S * dt_s) * c.m_tod_from_gcrs;
         Ok(field_gcrs_with_rotation_nt(&c.coeffs, &m, pos_gcrs_km))
     }
@@ -504,7 +534,7 @@ mod tests {
 
     #[test]
     fn schmidt_factors_match_closed_forms() {
-        let s = schmidt_factors();
+        let s = tables().schmidt;
         // Schmidt P₂⁰ = (3cos²θ − 1)/2, P₂¹ = √3 cos θ sin θ, P₂² = (√3/2) sin²θ,
         // P₃⁰ = (5cos³θ − 3cos θ)/2, P₃³ = (√10/4) sin³θ over the Gauss forms.
         assert!((s[2][0] - 1.5).abs() < 1e-15);
@@ -590,7 +620,7 @@ mod tests {
         let mut eval = FieldEvaluator::new(model.clone(), FieldEvaluator::DEFAULT_REFRESH_S);
         let epoch0 = epoch_from_iso("1991-04-09T00:00:00Z").unwrap();
         let mut max = 0.0_f64;
-        let mut t = 0.0;
+        let mut t: f64 = 0.0;
         while t < 2.0 * 86_400.0 {
             let u = t * 0.001_117;
             let pos = Vector3::new(u.cos(), u.sin() * 0.88, u.sin() * 0.48) * 6_833.0;
@@ -702,5 +732,55 @@ mod tests {
              with UT1 = UTC instead: max {max0:.2} nT, rms {rms0:.2} nT"
         );
         assert!(max < 0.1, "GCRS field max {max} nT");
+    }
+}
+
+#[cfg(test)]
+mod timing {
+    use super::*;
+    use crate::time::epoch_from_iso;
+
+    #[test]
+    #[ignore = "timing only"]
+    fn timing_field() {
+        let model = FieldModel::dgrf_1990_1995().unwrap();
+        let epoch0 = epoch_from_iso("1991-04-09T00:00:00Z").unwrap();
+        let c = model.coefficients_at(epoch0).unwrap();
+        let n = 200_000;
+        let t = std::time::Instant::now();
+        let mut acc = 0.0;
+        for k in 0..n {
+            let u: f64 = f64::from(k) * 1e-3;
+            acc += c
+                .field_itrs_nt(&Vector3::new(u.cos() * 6833.0, u.sin() * 6000.0, 3000.0))
+                .x;
+        }
+        eprintln!(
+            "synthesis {:.0} ns",
+            t.elapsed().as_nanos() as f64 / f64::from(n)
+        );
+        let mut ev = FieldEvaluator::new(model, 600.0);
+        let t = std::time::Instant::now();
+        for k in 0..n {
+            let u: f64 = f64::from(k) * 1e-3;
+            let e = epoch0 + hifitime::Unit::Second * f64::from(k);
+            acc += ev
+                .field_gcrs_nt(e, &Vector3::new(u.cos() * 6833.0, u.sin() * 6000.0, 3000.0))
+                .unwrap()
+                .x;
+        }
+        eprintln!(
+            "evaluator {:.0} ns",
+            t.elapsed().as_nanos() as f64 / f64::from(n)
+        );
+        let t = std::time::Instant::now();
+        for k in 0..n {
+            let e = epoch0 + hifitime::Unit::Second * f64::from(k);
+            acc += (e - epoch0).to_seconds();
+        }
+        eprintln!(
+            "hifitime add+sub {:.0} ns {acc}",
+            t.elapsed().as_nanos() as f64 / f64::from(n)
+        );
     }
 }

@@ -506,6 +506,9 @@ pub struct Scenario {
     /// Coarse Sun sensors ([`crate::sensors::css`]).
     #[serde(default)]
     pub css: CssParams,
+    /// Sample the field, TAMs and CSSs into the record ([`crate::magnetics`]).
+    #[serde(default)]
+    pub magnetics: crate::magnetics::MagneticsParams,
     /// Thermal nodes.
     #[serde(default)]
     pub thermal: ThermalSet,

@@ -144,3 +144,85 @@ fn val_bias_and_transfer_matrix_recovered_by_least_squares_over_one_orbit() {
     assert!(worst_b < 4.0, "bias off by {worst_b} σ");
     assert!(worst_t < 4.0, "T off by {worst_t} σ");
 }
+
+/// Layer 3: the closed loop samples the field, the TAMs and the CSSs into its record. Over
+/// the first 3000 s of gro-early-mission (an inertial hold and a slew): each TAM1 reading
+/// minus the model applied to the record's own truth and field is the noise plus
+/// quantisation (mean ≈ 0, σ = √(0.2² + 0.3²/12) = 0.218 mG); the field is the truth
+/// field; the CSS eye nearest the Sun reads ≈ k cos θ outside the umbra. With
+/// `[magnetics] enabled = false` (the default) the record is empty.
+#[test]
+fn val_closed_loop_records_tam_and_css_samples() {
+    use sim_harness::closed_loop::Simulation;
+    let mut s = sim_harness::scenario::resolve("gro-early-mission").unwrap();
+    s.duration_s = 3_000.0;
+    assert!(!s.magnetics.enabled, "off by default");
+    s.magnetics.enabled = true;
+    let clock = SimClock::new(epoch_from_iso(&s.epoch_utc).unwrap());
+    let mut sim = Simulation::new(s.clone(), None).unwrap();
+    let tam1 = sim.magnetics().unwrap().tam()[0].clone();
+    let mut field = TruthField::new().unwrap();
+    let (mut n, mut sum, mut sum2) = (0.0, Vector3::zeros(), Vector3::zeros());
+    let mut max_field_diff = 0.0_f64;
+    let mut lit_cycles = 0;
+    let mut max_css_err = 0.0_f64;
+    while let Some(rec) = sim.step() {
+        let m = rec.magnetics;
+        let b = m.field_eci_nt.unwrap();
+        let mine = field
+            .field_eci_nt(&clock, rec.truth.t_s, &rec.truth.pos_eci_km)
+            .unwrap();
+        max_field_diff = max_field_diff.max((b - mine).norm());
+        assert!(m.tam[0].valid && m.tam[1].valid);
+        let ideal =
+            tam1.ideal_reading_milligauss(&(rec.truth.m_acs_from_eci * b), &Vector3::zeros());
+        let e = tam1.reading_milligauss(&m.tam[0]) - ideal;
+        sum += e;
+        sum2 += e.component_mul(&e);
+        n += 1.0;
+        // CSS: the eye with the largest cos θ to the Sun, when lit.
+        if !rec.truth.in_umbra {
+            let sun_acs = rec.truth.m_acs_from_eci * rec.truth.sun_dir_app_eci;
+            let (i, c) = s
+                .css
+                .normals_acs
+                .iter()
+                .map(|v| Vector3::from(*v).normalize().dot(&sun_acs))
+                .enumerate()
+                .fold((0, f64::MIN), |a, (i, c)| if c > a.1 { (i, c) } else { a });
+            let counts = f64::from(m.css.counts[i]);
+            // Albedo adds ≤ 0.3·(R/r)²·k = 262 counts; noise 2 counts.
+            let err = counts - s.css.counts_at_normal_incidence * c;
+            max_css_err = max_css_err.max(err.abs());
+            assert!(
+                (-10.0..=270.0).contains(&err),
+                "CSS eye {i}: {counts} vs cos {c}"
+            );
+            lit_cycles += 1;
+        }
+    }
+    let mean = sum / n;
+    let sd = (sum2 / n - mean.component_mul(&mean)).map(f64::sqrt);
+    let sigma = (0.2_f64.powi(2) + 0.3_f64.powi(2) / 12.0).sqrt();
+    eprintln!(
+        "loop TAM1 residual: mean [{:.4}, {:.4}, {:.4}] mG, sd [{:.4}, {:.4}, {:.4}] mG (expect {sigma:.3}); field vs own evaluation max {max_field_diff:.2e} nT; CSS brightest-eye excess max {max_css_err:.0} counts over {lit_cycles} lit cycles",
+        mean.x, mean.y, mean.z, sd.x, sd.y, sd.z
+    );
+    for k in 0..3 {
+        assert!(mean[k].abs() < 4.0 * sigma / n.sqrt(), "mean {mean}");
+        assert!((sd[k] - sigma).abs() < 0.1 * sigma, "sd {sd}");
+    }
+    // The loop's evaluator and this one cache on different epochs: ≤ 1e-3 nT apart.
+    assert!(max_field_diff < 0.01);
+    assert!(lit_cycles > 0);
+
+    let mut off = s;
+    off.magnetics.enabled = false;
+    let mut sim = Simulation::new(off, None).unwrap();
+    assert!(sim.magnetics().is_none());
+    let rec = sim.step().unwrap();
+    assert_eq!(
+        rec.magnetics,
+        sim_harness::magnetics::MagneticsRecord::default()
+    );
+}
