@@ -38,7 +38,9 @@
 //! model itself omits the crustal and external fields (of order 100 nT at 450 km, see
 //! `docs/algorithms.md` §10a), which no comparison with another IGRF code can show.
 //!
-//! Cost: one evaluation is ~66 coefficient pairs, 11 `sin_cos` and ~400 flops (≈ 1 µs).
+//! Cost: one synthesis is one pass over the 65 coefficient pairs with no transcendental call
+//! (about 4,400 instructions measured under callgrind, `docs/magnetics.md` §3); the GCRS
+//! rotation adds a matrix product, and [`FieldEvaluator`] one `sin_cos` per call.
 
 use hifitime::Epoch;
 use nalgebra::{Matrix3, Vector3};

@@ -59,6 +59,13 @@
 //! (kinds, fields and effects: [`crate::faults`]; examples: `scenarios/faults/`):
 //! `fhst_dropout`, `fhst_wrong_star`, `fss_glint`, `iru_channel_failure`, `time_tag_jump`,
 //! `table_upload` (damaged or valid alignment images), `filter_reset`.
+//!
+//! # Magnetometers and coarse Sun sensors
+//! `[tam1]` (primary; default bias = the paper's [0, 0, −4] mG), `[tam2]`
+//! ([`crate::sensors::tam::TamParams`], units in the key names: `bias_milligauss`,
+//! `scale_ppm`, `misalignment_arcsec`, ...), `[css]` ([`crate::sensors::css::CssParams`]) and
+//! `[magnetics] enabled` (sample them into the record, default off: [`crate::magnetics`],
+//! `docs/magnetics.md`).
 
 use std::path::{Path, PathBuf};
 
