@@ -226,3 +226,42 @@ fn val_closed_loop_records_tam_and_css_samples() {
         sim_harness::magnetics::MagneticsRecord::default()
     );
 }
+
+/// The scenario keys: defaults (TAM1 carries the paper's bias, TAM2 none, magnetics off),
+/// a misspelt key named, a bad value refused naming its key.
+#[test]
+fn scenario_keys_defaults_and_refusals() {
+    let s = Scenario::from_toml_str("name = \"m\"\nduration_s = 10\n", "t").unwrap();
+    assert_eq!(s.tam1.bias_milligauss, [0.0, 0.0, -4.0]);
+    assert_eq!(s.tam2.bias_milligauss, [0.0; 3]);
+    assert_eq!(s.css.normals_acs.len(), 6);
+    assert!(!s.magnetics.enabled);
+    let s = Scenario::from_toml_str(
+        "name = \"m\"\nduration_s = 10\n[tam2]\nbias_milligauss = [1.0, 2.0, 3.0]\n[magnetics]\nenabled = true\n",
+        "t",
+    )
+    .unwrap();
+    assert_eq!(s.tam2.bias_milligauss, [1.0, 2.0, 3.0]);
+    assert!(s.magnetics.enabled);
+    let err = Scenario::from_toml_str(
+        "name = \"m\"\nduration_s = 10\n[tam1]\nbias_mg = [0.0, 0.0, 1.0]\n",
+        "t",
+    )
+    .unwrap_err();
+    assert!(format!("{err:#}").contains("bias_mg"), "{err:#}");
+    let err = Scenario::from_toml_str(
+        "name = \"m\"\nduration_s = 10\n[tam1]\nresolution_milligauss_per_count = 0.0\n",
+        "t",
+    )
+    .unwrap_err();
+    assert!(
+        format!("{err:#}").contains("tam1.resolution_milligauss_per_count"),
+        "{err:#}"
+    );
+    let err = Scenario::from_toml_str(
+        "name = \"m\"\nduration_s = 10\n[css]\nearth_albedo = 2.0\n",
+        "t",
+    )
+    .unwrap_err();
+    assert!(format!("{err:#}").contains("css.earth_albedo"), "{err:#}");
+}
