@@ -6,7 +6,8 @@
 //!
 //! - reference physics, in J2000/ICRS axes (`eci`), km, km/s, rad: [`time`] (UTC/TAI/TT
 //!   scales, the telemetry time code), [`sun`] (VSOP87 Earth, apparent Sun), [`sky`]
-//!   (Hipparcos with proper motion, parallax, aberration, cone search), [`aberration`];
+//!   (Hipparcos with proper motion, parallax, aberration, cone search), [`aberration`],
+//!   [`field`] (IGRF synthesis, DGRF 1990/1995) and [`earth_orientation`] (GCRS ↔ ITRS);
 //! - reference data: [`data`] (the `data/` CSV reader, the Hipparcos subset embedded once);
 //! - the run-folder contract: [`run_folder`] (`metadata.json`, with its JSON Schema in
 //!   `docs/schema/`), [`manifest`] (`tables/manifest.json`), [`outdir`] (whole-or-nothing
@@ -18,7 +19,9 @@
 
 pub mod aberration;
 pub mod data;
+pub mod earth_orientation;
 pub mod exit;
+pub mod field;
 pub mod manifest;
 pub mod outdir;
 pub mod provenance;

@@ -122,19 +122,19 @@ fn earth_lbr_of_date(tau: f64) -> (f64, f64, f64) {
 }
 
 /// Passive rotation about x by `a` (rad).
-fn r1(a: f64) -> Matrix3<f64> {
+pub(crate) fn r1(a: f64) -> Matrix3<f64> {
     let (s, c) = a.sin_cos();
     Matrix3::new(1.0, 0.0, 0.0, 0.0, c, s, 0.0, -s, c)
 }
 
 /// Passive rotation about y by `a` (rad).
-fn r2(a: f64) -> Matrix3<f64> {
+pub(crate) fn r2(a: f64) -> Matrix3<f64> {
     let (s, c) = a.sin_cos();
     Matrix3::new(c, 0.0, -s, 0.0, 1.0, 0.0, s, 0.0, c)
 }
 
 /// Passive rotation about z by `a` (rad).
-fn r3(a: f64) -> Matrix3<f64> {
+pub(crate) fn r3(a: f64) -> Matrix3<f64> {
     let (s, c) = a.sin_cos();
     Matrix3::new(c, s, 0.0, -s, c, 0.0, 0.0, 0.0, 1.0)
 }

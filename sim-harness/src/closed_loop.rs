@@ -9,6 +9,9 @@
 //!    the spacecraft, umbra).
 //! 2. Thermal nodes; FHST1/2 and FSS1/2 sample the truth at t_k; the IRU sample is the one
 //!    that closed the interval [t_{k−1}, t_k] (initial counters at k = 0).
+//!    With `[magnetics] enabled`, TAM1/2 and the CSSs ([`crate::magnetics`]) are sampled
+//!    after the flight software's step into the record only (their own random streams; the
+//!    OBC does not see them yet).
 //! 3. The commands due at t_k (at most `MAX_COMMANDS_PER_CYCLE`, the rest wait a cycle) and
 //!    `FlightCore::step(frame, commands)`.
 //! 4. The FSW's IRU rate-mode request goes to the IRU (it applies from the next interval,
@@ -69,6 +72,9 @@ pub struct CycleRecord {
     pub nees: Option<f64>,
     /// Number of commands sent to the OBC this cycle.
     pub commands_sent: usize,
+    /// The field, TAM and CSS samples of this cycle ([`crate::magnetics`]; the flight
+    /// software does not see them yet).
+    pub magnetics: crate::magnetics::MagneticsRecord,
 }
 
 /// One scheduled action.
@@ -121,6 +127,7 @@ pub struct Simulation {
     error_rotation: Quat,
     faults: Vec<Fault>,
     fault_state: FaultState,
+    magnetics: Option<crate::magnetics::Magnetics>,
 }
 
 fn quat_from_array([x, y, z, w]: [f64; 4]) -> Quat {
@@ -443,8 +450,15 @@ impl Simulation {
             error_rotation,
             faults: scenario.faults.clone(),
             fault_state: FaultState::new(&scenario.faults),
+            magnetics: crate::magnetics::Magnetics::of_scenario(&scenario)?,
             scenario,
         })
+    }
+
+    /// The magnetometers and coarse Sun sensors, `None` with `[magnetics] enabled = false`.
+    #[must_use]
+    pub fn magnetics(&self) -> Option<&crate::magnetics::Magnetics> {
+        self.magnetics.as_ref()
     }
 
     /// The scenario.
@@ -689,6 +703,11 @@ impl Simulation {
             }
         }
         let output = self.fsw.step(&frame, &commands[..n]);
+        let magnetics = self
+            .magnetics
+            .as_mut()
+            .map(|m| m.sample(&self.clock, &truth))
+            .unwrap_or_default();
 
         let (attitude_error_acs_rad, nees) = if output.housekeeping.filter_mode == 0 {
             (Vector3::zeros(), None)
@@ -713,6 +732,7 @@ impl Simulation {
             attitude_error_acs_rad,
             nees,
             commands_sent: n,
+            magnetics,
         };
         self.cycle += 1;
         Some(record)

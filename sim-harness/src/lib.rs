@@ -12,13 +12,15 @@
 //! Modules: [`truth`] and [`sensors`] (phase 1), [`scenario`] (TOML), [`onboard`] (what the
 //! ground uplinks at t = 0), [`closed_loop`] (truth → FlightCore → wheels), [`telemetry`]
 //! (CCSDS packets), [`run`] (run folder, scores, bench), [`campaign`] (Monte Carlo, merge),
-//! [`faults`] (fault injection, `[[faults]]`).
+//! [`faults`] (fault injection, `[[faults]]`), [`magnetics`] (field, TAMs and CSSs sampled into
+//! the record).
 /// The reference data reader, the tables manifest and the output folders are shared with the
 /// ground (`gro-reference`), re-exported under their old paths.
 pub use gro_reference::{data, manifest, outdir};
 pub mod campaign;
 pub mod closed_loop;
 pub mod faults;
+pub mod magnetics;
 pub mod onboard;
 pub mod paper;
 pub mod provenance;

@@ -8,7 +8,7 @@
 //! | `telemetry.bin` | CCSDS packets ([`crate::telemetry`]) |
 //! | `metadata.json` | what the operator declares ([`gro_reference::run_folder::Metadata`], schema `docs/schema/metadata.schema.json`): `scenario`, `epoch_utc`, `cycle_period_s`, `sensors` (declared noise from the scenario's sensor parameters), `declared_effects`, `boot_tables`, `uploads`, and the simulated spacecraft's identity `spacecraft` ([`crate::provenance`]) |
 //! | `uploads/*.tbl` | every table image uplinked (catalog, `--tables`, timeline loads) |
-//! | `truth.json` | scoring only: true `alignments.{FHST1,FHST2,FSS1,FSS2}` (`M_AS`, row-major; at the start, without thermal drift), `alignments_after_run` (the same with any alignment step of the run applied: what tables written after the run fly into), IRU `delta_m` and `g` per configuration, `bias_history`, the flown `fss_transfer_function`, `scenario_as_flown` (the whole scenario, each FSS with the transfer function it flew), `present_effects`, `undeclared_effects` |
+//! | `truth.json` | scoring only: true `alignments.{FHST1,FHST2,FSS1,FSS2}` (`M_AS`, row-major; at the start, without thermal drift), `alignments_after_run` (the same with any alignment step of the run applied: what tables written after the run fly into), IRU `delta_m` and `g` per configuration, `bias_history`, the flown `fss_transfer_function`, `scenario_as_flown` (the whole scenario, each FSS with the transfer function it flew), `present_effects`, `undeclared_effects`, `tam` (the magnetometers' true errors, [`crate::sensors::tam::truth_json`]: `tam.bias_mG` is the primary TAM's bias) |
 //! | `summary.json` | run statistics ([`Summary`]); with `--tables`, `tables_provenance_warning` when the tables may belong to another spacecraft ([`crate::provenance`]) |
 //!
 //! Every file is written under a `.partial` name and renamed when complete; `summary.json`
@@ -695,6 +695,7 @@ fn truth_json(sim: &Simulation, bias: &BiasRecorder) -> anyhow::Result<serde_jso
         },
         "present_effects": present_effects(s),
         "undeclared_effects": undeclared_effects(s),
+        "tam": crate::sensors::tam::truth_json(&s.tam1, &s.tam2),
     }))
 }
 

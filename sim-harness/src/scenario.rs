@@ -59,6 +59,13 @@
 //! (kinds, fields and effects: [`crate::faults`]; examples: `scenarios/faults/`):
 //! `fhst_dropout`, `fhst_wrong_star`, `fss_glint`, `iru_channel_failure`, `time_tag_jump`,
 //! `table_upload` (damaged or valid alignment images), `filter_reset`.
+//!
+//! # Magnetometers and coarse Sun sensors
+//! `[tam1]` (primary; default bias = the paper's [0, 0, −4] mG), `[tam2]`
+//! ([`crate::sensors::tam::TamParams`], units in the key names: `bias_milligauss`,
+//! `scale_ppm`, `misalignment_arcsec`, ...), `[css]` ([`crate::sensors::css::CssParams`]) and
+//! `[magnetics] enabled` (sample them into the record, default off: [`crate::magnetics`],
+//! `docs/magnetics.md`).
 
 use std::path::{Path, PathBuf};
 
@@ -66,9 +73,11 @@ use anyhow::{bail, Context};
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
+use crate::sensors::css::CssParams;
 use crate::sensors::fhst::FhstParams;
 use crate::sensors::fss::FssParams;
 use crate::sensors::iru::IruParams;
+use crate::sensors::tam::TamParams;
 use crate::sensors::thermal::ThermalParams;
 use crate::truth::dynamics::DynamicsParams;
 use crate::truth::orbit::OrbitParams;
@@ -494,6 +503,19 @@ pub struct Scenario {
     /// IRU.
     #[serde(default)]
     pub iru: IruParams,
+    /// TAM1, the primary magnetometer ([`crate::sensors::tam`]); default: the paper's
+    /// determined bias [0, 0, −4] mG.
+    #[serde(default = "TamParams::primary_default")]
+    pub tam1: TamParams,
+    /// TAM2, the secondary magnetometer.
+    #[serde(default)]
+    pub tam2: TamParams,
+    /// Coarse Sun sensors ([`crate::sensors::css`]).
+    #[serde(default)]
+    pub css: CssParams,
+    /// Sample the field, TAMs and CSSs into the record ([`crate::magnetics`]).
+    #[serde(default)]
+    pub magnetics: crate::magnetics::MagneticsParams,
     /// Thermal nodes.
     #[serde(default)]
     pub thermal: ThermalSet,
@@ -734,6 +756,9 @@ impl Scenario {
             bail!("initial_estimate.axis_acs must not be zero");
         }
         crate::truth::time::epoch_from_iso(&self.epoch_utc).context("epoch_utc")?;
+        self.tam1.validate("tam1")?;
+        self.tam2.validate("tam2")?;
+        self.css.validate()?;
         let q = self.initial.q_acs_from_eci;
         let n = q.iter().map(|x| x * x).sum::<f64>().sqrt();
         if !(n.is_finite() && (n - 1.0).abs() < 1e-3) {

@@ -1,14 +1,17 @@
-//! # Truth sensor models: FHST, FSS, DRIRU II and temperatures
+//! # Truth sensor models: FHST, FSS, DRIRU II, temperatures, TAMs and CSSs
 //!
 //! Each model turns a [`TruthSnapshot`] into the integer words of
-//! [`fsw_core::raw::RawSensorFrame`]. Every error parameter is a serde field with a default
+//! [`fsw_core::raw::RawSensorFrame`] (the TAMs and CSSs into their own readings,
+//! [`tam::TamReading`] and [`css::CssReading`], until the raw frame carries them). Every error parameter is a serde field with a default
 //! (scenario TOML); "undeclared" effects the ground is meant to discover default to off.
 //! Randomness comes from one `ChaCha8Rng` per model, seeded from the scenario seed and a
 //! fixed stream number ([`model_rng`]), so adding a model never changes another's draws.
 
+pub mod css;
 pub mod fhst;
 pub mod fss;
 pub mod iru;
+pub mod tam;
 pub mod thermal;
 
 use nalgebra::{Matrix3, Vector3};
@@ -27,6 +30,10 @@ pub mod stream {
     pub const IRU: u64 = 5;
     /// FSS1's drawn transfer function (FSS2 is `FSS1_TRANSFER + 1`).
     pub const FSS1_TRANSFER: u64 = 6;
+    /// TAM1, the primary magnetometer (TAM2 is `TAM1 + 1`).
+    pub const TAM1: u64 = 8;
+    /// The coarse Sun sensor set.
+    pub const CSS: u64 = 10;
 }
 
 /// A deterministic generator for model `stream` of scenario `seed`.
@@ -164,5 +171,25 @@ mod tests {
         let c: u64 = model_rng(7, stream::FSS1).random();
         assert_eq!(a, b);
         assert_ne!(a, c);
+    }
+
+    /// Every stream number is distinct (FHST1/2, FSS1/2, IRU, FSS1/2 transfer, TAM1/2, CSS),
+    /// so a new model never shares (and shifts) another's draws.
+    #[test]
+    fn stream_numbers_are_distinct() {
+        let all = [
+            stream::FHST1,
+            stream::FHST1 + 1,
+            stream::FSS1,
+            stream::FSS1 + 1,
+            stream::IRU,
+            stream::FSS1_TRANSFER,
+            stream::FSS1_TRANSFER + 1,
+            stream::TAM1,
+            stream::TAM1 + 1,
+            stream::CSS,
+        ];
+        let set: std::collections::BTreeSet<u64> = all.iter().copied().collect();
+        assert_eq!(set.len(), all.len());
     }
 }

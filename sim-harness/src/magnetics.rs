@@ -1,0 +1,100 @@
+//! # The magnetometers and coarse Sun sensors in the closed loop (issue 20, first layers)
+//!
+//! Why: the coarse attitude, Sun acquisition and the ground's TAM calibration (later layers)
+//! need TAM and CSS samples taken with the truth of every cycle. Until the raw frame and the
+//! telemetry carry them (a later step with format versioning, `docs/icd.md` unchanged), the
+//! samples go into the simulation's own record ([`crate::closed_loop::CycleRecord`]
+//! `magnetics`), with the true field they were taken from.
+//!
+//! Per cycle (when `[magnetics] enabled = true`; **off by default**, because the field
+//! synthesis adds about a fifth to the simulator's cost per cycle and the README's measured
+//! real-time factor is for the loop without it; `docs/magnetics.md`): the field at the truth position
+//! ([`crate::truth::field`]), TAM1 and TAM2 ([`crate::sensors::tam`]; the torquer bars'
+//! dipole is zero: there are none yet) and the CSS set ([`crate::sensors::css`]). Each model
+//! draws from its own random stream, so the FHST, FSS and IRU draws and therefore
+//! `telemetry.bin` do not change; the flight software does not see these samples.
+//! `docs/magnetics.md` has the measured numbers.
+
+use nalgebra::Vector3;
+use serde::{Deserialize, Serialize};
+
+use crate::scenario::Scenario;
+use crate::sensors::css::{Css, CssReading};
+use crate::sensors::tam::{Tam, TamReading};
+use crate::sensors::TruthSnapshot;
+use crate::truth::field::TruthField;
+use crate::truth::time::SimClock;
+
+/// Scenario `[magnetics]`.
+#[derive(Clone, Debug, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MagneticsParams {
+    /// Sample the field, the TAMs and the CSSs every cycle into the record (default off).
+    pub enabled: bool,
+}
+
+/// One cycle's magnetics: the truth field and the readings.
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
+pub struct MagneticsRecord {
+    /// The true geomagnetic field at the spacecraft (nT, `eci` axes); `None` outside the field
+    /// model's span or with magnetics disabled.
+    pub field_eci_nt: Option<Vector3<f64>>,
+    /// TAM1 (primary) and TAM2 readings.
+    pub tam: [TamReading; 2],
+    /// The CSS set's reading.
+    pub css: CssReading,
+}
+
+/// The field model and the sensors of the loop.
+#[derive(Clone, Debug)]
+pub struct Magnetics {
+    field: TruthField,
+    tam: [Tam; 2],
+    css: Css,
+}
+
+impl Magnetics {
+    /// The models of scenario `s` (its seed), `None` when `[magnetics] enabled = false`.
+    ///
+    /// # Errors
+    /// A malformed embedded field model (a build defect).
+    pub fn of_scenario(s: &Scenario) -> anyhow::Result<Option<Self>> {
+        if !s.magnetics.enabled {
+            return Ok(None);
+        }
+        Ok(Some(Self {
+            field: TruthField::new()?,
+            tam: [
+                Tam::new(0, s.tam1.clone(), s.seed),
+                Tam::new(1, s.tam2.clone(), s.seed),
+            ],
+            css: Css::new(s.css.clone(), s.seed),
+        }))
+    }
+
+    /// The TAMs.
+    #[must_use]
+    pub fn tam(&self) -> &[Tam; 2] {
+        &self.tam
+    }
+
+    /// The CSS set.
+    #[must_use]
+    pub fn css(&self) -> &Css {
+        &self.css
+    }
+
+    /// Sample everything at the truth of this cycle. Allocates nothing.
+    pub fn sample(&mut self, clock: &SimClock, truth: &TruthSnapshot) -> MagneticsRecord {
+        let field_eci_nt = self.field.field_eci_nt(clock, truth.t_s, &truth.pos_eci_km);
+        let no_dipole = Vector3::zeros();
+        MagneticsRecord {
+            field_eci_nt,
+            tam: [
+                self.tam[0].sample(truth, field_eci_nt.as_ref(), &no_dipole),
+                self.tam[1].sample(truth, field_eci_nt.as_ref(), &no_dipole),
+            ],
+            css: self.css.sample(truth),
+        }
+    }
+}
