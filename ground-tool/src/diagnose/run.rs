@@ -536,6 +536,33 @@ pub fn diagnose_run(
     iru_out
         .validate()
         .map_err(|e| anyhow::anyhow!("diagnose: the IRU table does not validate ({e:?})"))?;
+    // The filter-table terms calibrate tuned from the flight (`pipeline::filter_tuning`), as
+    // calibrate wrote them; the slew uncertainty only when G is calibrate's (it was derived
+    // from that G's residual error).
+    for t in cal
+        .output
+        .iter()
+        .flat_map(|o| o.report.filter_tuning.iter())
+        .filter(|t| t.written)
+    {
+        use crate::pipeline::filter_tuning::FilterTerm;
+        if t.field == FilterTerm::SlewUncertainty && !gyro_unexplained.is_empty() {
+            notes.push(format!(
+                "filter.{} not written: G stays as flown, and calibrate's value was derived for its own G",
+                t.field.field()
+            ));
+            continue;
+        }
+        let mut f = flight.filter.unwrap_or(filter_flown);
+        if t.apply(&mut f) && f.validate().is_ok() {
+            flight.filter = Some(f);
+            flight.applied.push(format!(
+                "calibration chain: filter.{}: {}",
+                t.field.field(),
+                t.reason
+            ));
+        }
+    }
     let p = out_dir.join("tables").join("iru.tbl");
     write_table(&p, TableId::Iru, &iru_out, created)?;
     written.push(p.display().to_string());
