@@ -31,7 +31,7 @@
 //!    `super::filter_tuning` writes an end point only when the interval excludes the flown
 //!    value and both folds differ from it by more than 20 % on the same side.
 
-use super::filter_tuning::AxisNoiseEvidence;
+use super::filter_tuning::NoiseEvidence;
 use super::observations::FrameObservations;
 use fsw_core::fhst::{FHST_MAGNITUDE_MAX, FHST_MAGNITUDE_MIN, FHST_RAD_PER_COUNT};
 use fsw_core::units::ARCSEC_PER_RAD;
@@ -236,7 +236,7 @@ fn law_misfit(chi2: f64, dof: usize) -> Option<String> {
 /// and in each fold (the message counts them).
 pub fn fhst_noise_evidence(
     frames: &[FrameObservations],
-) -> Result<[Vec<AxisNoiseEvidence>; 2], String> {
+) -> Result<[Vec<NoiseEvidence>; 2], String> {
     const Z95: f64 = 1.959_964;
     let names = ["FHST1", "FHST2"];
     let mut bright = Vec::new();
@@ -274,7 +274,7 @@ pub fn fhst_noise_evidence(
                     )
                 })
             });
-            out.push(AxisNoiseEvidence {
+            out.push(NoiseEvidence {
                 axis: name,
                 samples: all.len(),
                 whole: note.is_none().then_some([v, v - Z95 * s, v + Z95 * s]),

@@ -1,13 +1,23 @@
-//! # The filter table's gyro terms from what the ground has measured of the gyros
+//! # The filter table's noise terms from what the ground has measured in flight
 //!
-//! Why: the OBC filter carries three gyro numbers in its table: the slew uncertainty
+//! Why: the OBC filter weighs its data by five numbers of its table: the slew uncertainty
 //! `gyro_scale_uncertainty` (how far a turn of θ may be wrong, `k θ`, through the gyros'
-//! scale factors and misalignments), the angle random walk σ_v and the rate random walk σ_u.
-//! The boot values are prelaunch knowledge. After a calibration the ground knows better, and a
-//! filter that keeps prelaunch uncertainty after the G matrix is calibrated is pessimistic
-//! after every slew (its NEES over the steady cycles falls below 1.5; `docs/obc_filter.md`
-//! §11); one that keeps a noise figure the holds contradict is wrong the other way. Every
-//! change here is written only through a held-out test, like the other tables.
+//! scale factors and misalignments), the gyro's angle random walk σ_v and rate random walk
+//! σ_u, and the end points of the FHST noise law σ(m). The boot values are prelaunch
+//! knowledge. After a calibration the ground knows better: a filter that keeps prelaunch
+//! uncertainty after the G matrix is calibrated is pessimistic after every slew, and one that
+//! keeps a noise figure the flight contradicts is wrong one way or the other
+//! (`docs/obc_filter.md` §11). Every change here is written only through a held-out test, like
+//! the other tables.
+//!
+//! # Noise terms (rule, [`noise_decision`])
+//! Per axis (gyro) or tracker (FHST): the whole data's value with its 95 % interval, and the
+//! value of each of two held-out folds. An axis votes for a change when the interval excludes
+//! the flown value and both folds differ from it by more than [`MIN_RELATIVE_CHANGE`] on the
+//! same side. A term is raised when any axis votes up (to the largest: the filter must not
+//! be optimistic on any axis) and lowered only when every axis with evidence votes down.
+//! σ_v and σ_u come from the Allan deviation of the holds ([`noise_terms`]), the FHST law
+//! from the stars' second differences (`super::fhst_noise`, [`fhst_noise_terms`]).
 //!
 //! # Slew uncertainty from IRUCAL (rule)
 //! A residual error `E` of the flown G turns a rotation `θ u` into an attitude error `E u θ`,
@@ -246,11 +256,12 @@ const NOISE_REPLICAS: usize = crate::calibration::allan::BOOTSTRAP_REPLICAS;
 /// per axis), the χ² intervals a few.
 const BOOTSTRAP_MAX_SAMPLES: usize = 1 << 17;
 
-/// One axis's noise figures per channel, rad/√s (N) or rad/s/√s (K): the whole data's value
-/// and interval, and each held-out fold's value (`None` when the term is not detected).
+/// One axis's (or tracker's) evidence on a noise term, in the table field's unit (per gyro
+/// channel for σ_v and σ_u): the whole data's value and interval, and each held-out fold's
+/// value (`None` when the term is not detected).
 #[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct AxisNoiseEvidence {
-    /// Axis (X, Y, Z).
+pub struct NoiseEvidence {
+    /// Gyro axis (X, Y, Z) or tracker (FHST1, FHST2).
     pub axis: &'static str,
     /// Rate samples (all folds).
     pub samples: usize,
@@ -351,7 +362,7 @@ fn axis_evidence(
     segments: &[Vec<f64>],
     tau0_s: f64,
     common_ramp: f64,
-) -> Result<[AxisNoiseEvidence; 2], String> {
+) -> Result<[NoiseEvidence; 2], String> {
     use crate::calibration::allan::{analyse_segments_with, MIN_TOTAL_SAMPLES};
     let per_channel = std::f64::consts::SQRT_2;
     let samples: usize = segments.iter().map(Vec::len).sum();
@@ -381,7 +392,7 @@ fn axis_evidence(
             detected(&f.arw_rad_per_sqrt_s)
         }
     };
-    Ok([false, true].map(|rrw| AxisNoiseEvidence {
+    Ok([false, true].map(|rrw| NoiseEvidence {
         axis,
         samples,
         note: None,
@@ -402,7 +413,7 @@ fn noise_evidence(
     tm: &crate::tp::Telemetry,
     iru: &fsw_core::tables::IruTable,
     common_ramp: f64,
-) -> Result<[Vec<AxisNoiseEvidence>; 2], String> {
+) -> Result<[Vec<NoiseEvidence>; 2], String> {
     use crate::calibration::allan::{hold_segments, median_spacing_s, AXES};
     let tau0_s = median_spacing_s(tm).ok_or("no raw frames")?;
     let mut arw = Vec::new();
@@ -433,11 +444,11 @@ fn noise_evidence(
 pub fn noise_decision(
     field: FilterTerm,
     flown: f64,
-    evidence: &[AxisNoiseEvidence],
+    evidence: &[NoiseEvidence],
     may_lower: bool,
     lower_needs: usize,
 ) -> TermDecision {
-    let vote = |e: &AxisNoiseEvidence| -> Option<(f64, bool)> {
+    let vote = |e: &NoiseEvidence| -> Option<(f64, bool)> {
         let [v, lo, hi] = e.whole?;
         let [Some(a), Some(b)] = e.folds else {
             return None;
@@ -461,7 +472,7 @@ pub fn noise_decision(
         votes.len() >= lower_needs.max(1) && votes.iter().all(|v| matches!(v, Some((_, false))));
     let derived = up
         .or_else(|| all_down.then(|| votes.iter().flatten().map(|(v, _)| *v).fold(0.0, f64::max)));
-    let describe = |e: &AxisNoiseEvidence| {
+    let describe = |e: &NoiseEvidence| {
         let fold = |f: Option<f64>| f.map_or("not detected".to_owned(), |v| format!("{v:.3e}"));
         match e.whole {
             Some([v, lo, hi]) => format!(
@@ -549,7 +560,7 @@ pub fn fhst_noise_terms(
     }
 }
 
-/// σ_v (`arw_rad_per_sqrt_s`) and σ_u (`rrw_rad_per_s_sqrt_s`, [`filter_rrw`]: the rate
+/// σ_v (`arw_rad_per_sqrt_s`) and σ_u (`rrw_rad_per_s_sqrt_s`, `filter_rrw`: the rate
 /// random walk with any rate ramp the holds show or cannot exclude) from the Allan deviation
 /// of the low-rate holds, each through the two-fold held-out test of [`noise_decision`],
 /// lowered only when all three axes agree. Without enough hold data both are kept, with the
@@ -613,8 +624,8 @@ mod tests {
         assert!((k - 1.5 * 6e-5).abs() < 1e-12);
     }
 
-    fn evidence(whole: Option<[f64; 3]>, folds: [Option<f64>; 2]) -> AxisNoiseEvidence {
-        AxisNoiseEvidence {
+    fn evidence(whole: Option<[f64; 3]>, folds: [Option<f64>; 2]) -> NoiseEvidence {
+        NoiseEvidence {
             axis: "X",
             samples: 10_000,
             whole,
