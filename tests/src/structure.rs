@@ -32,7 +32,13 @@ use syn::visit::Visit;
 pub const MAX_FN_LINES: usize = 150;
 
 /// The crates whose sources are checked, as folders under the workspace root.
-pub const CRATES: [&str; 5] = ["fsw-core", "gro-reference", "sim-harness", "ground-tool", "tests"];
+pub const CRATES: [&str; 5] = [
+    "fsw-core",
+    "gro-reference",
+    "sim-harness",
+    "ground-tool",
+    "tests",
+];
 
 /// One function's measured length.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -545,7 +551,10 @@ mod tests {
             ("", "pub mod a; pub mod b; pub mod c; pub use a::X;"),
             ("a", "use crate::b::Y; pub struct X; fn f() { crate::X; }"),
             ("b", "pub struct Y; fn g() { super::c::h(); }"),
-            ("c", "use super::a::X as Z; pub fn h() {} #[cfg(test)] mod tests { use crate::b::Y; }"),
+            (
+                "c",
+                "use super::a::X as Z; pub fn h() {} #[cfg(test)] mod tests { use crate::b::Y; }",
+            ),
         ]
         .into_iter()
         .map(|(k, v)| (m(k), v.to_string()))
