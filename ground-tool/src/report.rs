@@ -6,7 +6,9 @@
 
 pub mod figure;
 
-use crate::pipeline::calibrate::{BiasHistoryPoint, CalibrationOutput, SENSOR_NAMES};
+use crate::pipeline::calibrate::{
+    BiasHistoryPoint, CalibrationOutput, CalibrationReport, SENSOR_NAMES,
+};
 use crate::pipeline::observations::FrameObservations;
 use anyhow::Context;
 use figure::{Figure, Kind, Layer, Panel};
@@ -156,6 +158,19 @@ pub fn write_calibration_report(
 
     let r = &out.report;
     let mut md = String::new();
+    md_header(&mut md, r);
+    md_alignments(&mut md, r);
+    md_alignment_validation(&mut md, r);
+    md_maneuvers(&mut md, r);
+    md_iru(&mut md, r);
+    md_tables(&mut md, r);
+    write_plots_section(&mut md, &plots);
+    std::fs::write(out_dir.join("report.md"), md)?;
+    Ok(())
+}
+
+/// The header: what the telemetry and the data held.
+fn md_header(md: &mut String, r: &CalibrationReport) {
     let _ = writeln!(md, "# Calibration report\n");
     let _ = writeln!(
         md,
@@ -169,6 +184,10 @@ pub fn write_calibration_report(
         r.data.stars_identified[0], r.data.stars_identified[1], r.data.stars_unidentified[0], r.data.stars_unidentified[1],
         r.data.sun_samples[0], r.data.sun_samples[1], r.data.ffcal_epochs
     );
+}
+
+/// The alignments: FFCAL per sensor, its stages and σ, the FSS error left, the adjustment.
+fn md_alignments(md: &mut String, r: &CalibrationReport) {
     let _ = writeln!(
         md,
         "## Alignments (FFCAL, {:?} weighting, {} passes)\n",
@@ -242,6 +261,10 @@ pub fn write_calibration_report(
         "\nAdjustment (paper appendix): common rotation removed [{:.1}, {:.1}, {:.1}]″ so that the OBC's two-tracker attitude frame M_AN is unchanged.\n",
         r.adjustment_theta_acs_arcsec[0], r.adjustment_theta_acs_arcsec[1], r.adjustment_theta_acs_arcsec[2]
     );
+}
+
+/// The alignment table's held-out validation.
+fn md_alignment_validation(md: &mut String, r: &CalibrationReport) {
     let v = &r.alignment_validation;
     let _ = writeln!(
         md,
@@ -272,6 +295,10 @@ pub fn write_calibration_report(
         }
         let _ = writeln!(md);
     }
+}
+
+/// The IRU section: the maneuvers found and why any was not used.
+fn md_maneuvers(md: &mut String, r: &CalibrationReport) {
     let _ = writeln!(md, "## IRU\n");
     let used = r.maneuvers.iter().filter(|m| m.used).count();
     let _ = writeln!(
@@ -319,6 +346,10 @@ pub fn write_calibration_report(
             );
         }
     }
+}
+
+/// IRUCAL: δM with 1σ, the bias, the estimator, refused fixes, bias steps, the G decisions.
+fn md_iru(md: &mut String, r: &CalibrationReport) {
     match (&r.iru, &r.iru_skipped) {
         (Some(iru), _) => {
             let _ = writeln!(
@@ -326,7 +357,7 @@ pub fn write_calibration_report(
                 "\nδM (ppm) with 1σ, primary triad, from {} gyro links:\n",
                 iru.links
             );
-            write_delta_m(&mut md, &iru.delta_m, &iru.delta_m_sigma);
+            write_delta_m(md, &iru.delta_m, &iru.delta_m_sigma);
             let _ = writeln!(
                 md,
                 "\nBias at the last fix (ACS, arcsec/s): [{:.5}, {:.5}, {:.5}] ± [{:.5}, {:.5}, {:.5}].\n",
@@ -380,7 +411,7 @@ pub fn write_calibration_report(
                     "Backup triad (X1, Y2, Z2; {:.0}° of rotation in the links), δM (ppm) with 1σ:\n",
                     b.rotation_deg
                 );
-                write_delta_m(&mut md, &b.delta_m, &b.delta_m_sigma);
+                write_delta_m(md, &b.delta_m, &b.delta_m_sigma);
                 let _ = writeln!(md, "\n**Backup G:** {}\n", b.decision);
             }
         }
@@ -389,6 +420,10 @@ pub fn write_calibration_report(
         }
         _ => {}
     }
+}
+
+/// The tables written, the filter changes and the derived FHST floor.
+fn md_tables(md: &mut String, r: &CalibrationReport) {
     let _ = writeln!(md, "## Tables\n");
     for (k, v) in &r.tables {
         let _ = writeln!(md, "- {k}: `{v}`");
@@ -407,9 +442,6 @@ pub fn write_calibration_report(
             f.note.as_ref().map_or(String::new(), |n| format!(": {n}"))
         );
     }
-    write_plots_section(&mut md, &plots);
-    std::fs::write(out_dir.join("report.md"), md)?;
-    Ok(())
 }
 
 /// δM (ppm) with its 1σ, one row per line.
