@@ -575,6 +575,30 @@ fn housekeeping_findings(tm: &Telemetry, out: &mut Vec<Finding>) {
     }
 }
 
+/// The output folder of a command over `run_dir` (and a `tables` folder), begun as a
+/// temporary sibling of `out_target` ([`gro_reference::outdir::OutputDir`]), with the run
+/// folder and the tables folder given as its inputs (which the output may not replace).
+///
+/// # Errors
+/// As [`gro_reference::outdir::OutputDir::begin`].
+pub fn begin_output(
+    out_target: &std::path::Path,
+    command: &str,
+    force: bool,
+    run_dir: &std::path::Path,
+    tables: Option<&std::path::Path>,
+) -> anyhow::Result<gro_reference::outdir::OutputDir> {
+    gro_reference::outdir::OutputDir::begin(
+        out_target,
+        command,
+        force,
+        &[Some(run_dir), tables]
+            .into_iter()
+            .flatten()
+            .collect::<Vec<_>>(),
+    )
+}
+
 /// Read and check a run folder; print the findings to stderr and write them to
 /// `out/input_check.json`.
 ///

@@ -912,22 +912,14 @@ pub fn diagnose_command(
     quiet: bool,
     scorer: Option<std::sync::Arc<dyn Scorer>>,
 ) -> anyhow::Result<()> {
-    use gro_reference::outdir::OutputDir;
     let progress = crate::progress::Session::start("ground-tool diagnose", !quiet);
     let options = DiagnoseOptions {
         tables: tables.map(std::path::Path::to_path_buf),
         scorer,
         ..DiagnoseOptions::default()
     };
-    let dir = OutputDir::begin(
-        out_target,
-        "ground-tool diagnose",
-        force,
-        &[Some(run_dir), tables]
-            .into_iter()
-            .flatten()
-            .collect::<Vec<_>>(),
-    )?;
+    let dir =
+        crate::run_check::begin_output(out_target, "ground-tool diagnose", force, run_dir, tables)?;
     let out = dir.path();
     crate::run_check::check_run_dir(run_dir, out)?;
     // Diagnose's refusals (too few frames, a singular fit) are about the data: exit code 2;
