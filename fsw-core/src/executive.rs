@@ -46,11 +46,11 @@ use crate::iru::{IruConfiguration, IruIntegrator};
 use crate::mekf::Mekf;
 use crate::orbit::{OnboardOrbit, OrbitState, OrbitStatus, C_KM_PER_S};
 use crate::raw::{
-    RawSensorFrame, TimeTag, FHST_FLAG_NEW_STAR, FHST_FLAG_TRACKING, FHST_FLAG_VALID,
+    FhstSample, RawSensorFrame, TimeTag, FHST_FLAG_NEW_STAR, FHST_FLAG_TRACKING, FHST_FLAG_VALID,
 };
 use crate::star_id::{self, StarIdError, StarMatch};
 use crate::sun_ephemeris;
-use crate::tables::types::{matrix_from_rows, ORBITAL_ABERRATION_RMS_PER_AXIS_ARCSEC};
+use crate::tables::types::{matrix_from_rows, Mat3Rows, ORBITAL_ABERRATION_RMS_PER_AXIS_ARCSEC};
 use crate::tables::{TableId, TableSet};
 use crate::telemetry::{MeasurementStatus, ObcHousekeeping, SensorResidual};
 use crate::units::{ARCSEC_PER_RAD, RAD_PER_ARCSEC};
@@ -196,6 +196,19 @@ struct TrackerState {
     offered: u8,
     /// How many of those the χ² gate refused.
     gated: u8,
+}
+
+/// A tracker's corrections from the active alignment table (see
+/// `FlightCore::fhst_corrections`).
+struct FhstCorrections {
+    /// The tracker's alignment rows at its temperature.
+    rows: Mat3Rows,
+    /// Focal-plane distortion coefficients.
+    distortion: [f64; 3],
+    /// Magnitude-dependent bias, rad/mag.
+    magnitude_bias: [f64; 2],
+    /// Time-tag offset, s.
+    offset_s: f64,
 }
 
 /// A newly identified star is confirmed by its first this many samples.
@@ -823,72 +836,73 @@ impl FlightCore {
         }
     }
 
-    fn process_fhst(
-        &mut self,
-        frame: &RawSensorFrame,
-        tracker: usize,
-        events: &mut heapless::Vec<Event, MAX_EVENTS_PER_CYCLE>,
-    ) -> SensorResidual {
-        let Some(sample) = frame.fhst.get(tracker) else {
-            return SensorResidual::default();
-        };
+    /// A tracker's corrections from the active alignment table: its alignment at its
+    /// temperature (thermal drift; none = the stored rows), distortion, magnitude bias and
+    /// time offset.
+    fn fhst_corrections(&self, frame: &RawSensorFrame, tracker: usize) -> FhstCorrections {
         let alignment = self.tables.alignment();
-        // The tracker's alignment at its temperature (thermal drift; none = the stored rows).
         let drifted = alignment.drifted_rows_at(tracker, frame_temperature_c(frame, tracker));
-        let m_acs_from_fhst_rows = match &drifted {
+        let rows = match drifted {
             Some(rows) => rows,
-            None if tracker == 0 => &alignment.m_acs_from_fhst1,
-            None => &alignment.m_acs_from_fhst2,
+            None if tracker == 0 => alignment.m_acs_from_fhst1,
+            None => alignment.m_acs_from_fhst2,
         };
-        let m_acs_from_fhst = matrix_from_rows(m_acs_from_fhst_rows);
-        let distortion = alignment
-            .corrections
-            .fhst_distortion
-            .get(tracker)
-            .copied()
-            .unwrap_or([0.0; 3]);
-        let magnitude_bias = alignment
-            .corrections
-            .fhst_magnitude_bias_rad_per_mag
-            .get(tracker)
-            .copied()
-            .unwrap_or([0.0; 2]);
-        let offset_s = alignment
-            .corrections
-            .time_offset_s
-            .get(tracker)
-            .copied()
-            .unwrap_or(0.0);
-        let meas = match fhst::measure_corrected(
-            sample,
-            m_acs_from_fhst_rows,
-            &distortion,
-            &magnitude_bias,
-        ) {
+        let c = &alignment.corrections;
+        FhstCorrections {
+            rows,
+            distortion: c.fhst_distortion.get(tracker).copied().unwrap_or([0.0; 3]),
+            magnitude_bias: c
+                .fhst_magnitude_bias_rad_per_mag
+                .get(tracker)
+                .copied()
+                .unwrap_or([0.0; 2]),
+            offset_s: c.time_offset_s.get(tracker).copied().unwrap_or(0.0),
+        }
+    }
+
+    /// The corrected measurement of a tracker's sample; a refused sample is noted (no data
+    /// also forgets the track) and its residual returned instead.
+    fn measure_fhst(
+        &mut self,
+        sample: &FhstSample,
+        tracker: usize,
+        corr: &FhstCorrections,
+        events: &mut heapless::Vec<Event, MAX_EVENTS_PER_CYCLE>,
+    ) -> Result<fhst::FhstMeasurement, SensorResidual> {
+        match fhst::measure_corrected(sample, &corr.rows, &corr.distortion, &corr.magnitude_bias) {
             Ok(m) => {
                 if let Some(r) = self.rejected_run.get_mut(tracker) {
                     *r = false;
                 }
-                m
+                Ok(m)
             }
             Err(reject) => {
                 if reject.is_no_data() {
                     if let Some(t) = self.trackers.get_mut(tracker) {
                         *t = TrackerState::default();
                     }
-                    return SensorResidual::default();
+                    return Err(SensorResidual::default());
                 }
                 self.note_rejected(tracker, u32::from(reject.code()), events);
-                return SensorResidual {
+                Err(SensorResidual {
                     status: MeasurementStatus::Rejected,
                     ..SensorResidual::default()
-                };
+                })
             }
-        };
-        let dir_acs = self.time_align(meas.dir_acs, offset_s);
+        }
+    }
 
-        // Identify on a new acquisition (or if not yet identified for this track).
-        let new_star = sample.flags & FHST_FLAG_NEW_STAR != 0;
+    /// The tracker's track after this sample: a new acquisition forgets the star; a track
+    /// not yet identified (and not failed) is identified in the window the attitude
+    /// covariance allows, with its event and counters.
+    fn identify_track(
+        &mut self,
+        tracker: usize,
+        new_star: bool,
+        dir_acs: &Vector3<f64>,
+        magnitude: f64,
+        events: &mut heapless::Vec<Event, MAX_EVENTS_PER_CYCLE>,
+    ) -> TrackerState {
         let mut state = self.trackers.get(tracker).copied().unwrap_or_default();
         if new_star {
             state = TrackerState::default();
@@ -903,12 +917,12 @@ impl FlightCore {
                 let window = star_id::StarIdWindow::from_covariance(
                     filter_table,
                     p.m11 + p.m22 + p.m33,
-                    fhst::measurement_sigma_rad(meas.magnitude, filter_table),
+                    fhst::measurement_sigma_rad(magnitude, filter_table),
                     self.fhst_floor_rad(),
                 );
                 star_id::identify_in_window(
-                    &dir_acs,
-                    meas.magnitude,
+                    dir_acs,
+                    magnitude,
                     &self.filter.q_acs_from_eci,
                     self.tables.catalog(),
                     &window,
@@ -929,29 +943,64 @@ impl FlightCore {
                 }
                 Err(e) => {
                     state.failed = true;
-                    let code = match e {
-                        StarIdError::NoMatch => {
-                            self.counters.star_id_unmatched =
-                                self.counters.star_id_unmatched.saturating_add(1);
-                            1
-                        }
-                        StarIdError::Ambiguous { .. } => {
-                            self.counters.star_id_ambiguous =
-                                self.counters.star_id_ambiguous.saturating_add(1);
-                            2
-                        }
-                        StarIdError::NoCatalog | StarIdError::InvalidInput => u32::from(e.code()),
-                    };
-                    raise(
-                        events,
-                        &mut self.counters,
-                        EventId::StarIdFailed,
-                        to_u32(tracker),
-                        code,
-                    );
+                    self.note_star_id_failed(tracker, e, events);
                 }
             }
         }
+        state
+    }
+
+    /// Counts a failed identification by its kind and raises its event.
+    fn note_star_id_failed(
+        &mut self,
+        tracker: usize,
+        e: StarIdError,
+        events: &mut heapless::Vec<Event, MAX_EVENTS_PER_CYCLE>,
+    ) {
+        let code = match e {
+            StarIdError::NoMatch => {
+                self.counters.star_id_unmatched = self.counters.star_id_unmatched.saturating_add(1);
+                1
+            }
+            StarIdError::Ambiguous { .. } => {
+                self.counters.star_id_ambiguous = self.counters.star_id_ambiguous.saturating_add(1);
+                2
+            }
+            StarIdError::NoCatalog | StarIdError::InvalidInput => u32::from(e.code()),
+        };
+        raise(
+            events,
+            &mut self.counters,
+            EventId::StarIdFailed,
+            to_u32(tracker),
+            code,
+        );
+    }
+
+    /// One FHST sample: (1) the tracker's corrections, (2) the corrected measurement,
+    /// time-aligned, (3) the track identified, (4) the focal-plane update against the
+    /// identified star, its outcome noted and the track confirmed.
+    fn process_fhst(
+        &mut self,
+        frame: &RawSensorFrame,
+        tracker: usize,
+        events: &mut heapless::Vec<Event, MAX_EVENTS_PER_CYCLE>,
+    ) -> SensorResidual {
+        let Some(sample) = frame.fhst.get(tracker) else {
+            return SensorResidual::default();
+        };
+        // 1. Corrections.
+        let corr = self.fhst_corrections(frame, tracker);
+        let m_acs_from_fhst = matrix_from_rows(&corr.rows);
+        // 2. The measurement.
+        let meas = match self.measure_fhst(sample, tracker, &corr, events) {
+            Ok(m) => m,
+            Err(residual) => return residual,
+        };
+        let dir_acs = self.time_align(meas.dir_acs, corr.offset_s);
+        // 3. Identify on a new acquisition (or if not yet identified for this track).
+        let new_star = sample.flags & FHST_FLAG_NEW_STAR != 0;
+        let state = self.identify_track(tracker, new_star, &dir_acs, meas.magnitude, events);
         if let Some(t) = self.trackers.get_mut(tracker) {
             *t = state;
         }
@@ -961,13 +1010,13 @@ impl FlightCore {
                 ..SensorResidual::default()
             };
         };
+        // 4. Focal-plane update (H, V): the measurement space of the tracker.
         let ref_eci = self.reference_star(&star, frame.time);
         let filter_table = self.tables.filter();
         let sigma = fhst::measurement_sigma_rad(meas.magnitude, filter_table);
         let gate = filter_table.gate_chi2;
         let floor = self.fhst_floor_rad();
-        // Focal-plane update (H, V): the measurement space of the tracker.
-        let (h_rad, v_rad) = if offset_s == 0.0 {
+        let (h_rad, v_rad) = if corr.offset_s == 0.0 {
             (meas.h_rad, meas.v_rad)
         } else {
             fhst::hv_from_dir(&(m_acs_from_fhst.transpose() * dir_acs))

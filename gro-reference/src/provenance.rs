@@ -41,21 +41,13 @@ use fsw_core::tables::image::IMAGE_CRC;
 use serde::{Deserialize, Serialize};
 
 use crate::run_folder::Metadata;
+pub use crate::run_folder::Spacecraft;
 
 /// File name of the provenance inside a tables folder.
 pub const PROVENANCE: &str = "provenance.json";
 
 /// Value of the file's `format` key.
 pub const FORMAT: &str = "gro-tables-provenance-1";
-
-/// The simulated spacecraft's identity (`metadata.json` `spacecraft`).
-#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
-pub struct Spacecraft {
-    /// CRC-32 of all the parts, `sim-%08x`.
-    pub id: String,
-    /// CRC-32 of each part's parameters (their JSON serialisation), `%08x`.
-    pub parts: BTreeMap<String, String>,
-}
 
 /// Keys of a part that are its state when the run starts, not what it is: left out of the
 /// identity (with every key ending in `_at_s`, the time of an event in the run).

@@ -100,7 +100,7 @@ pub struct Metadata {
     /// beside the tables it calibrates (`tables/provenance.json`,
     /// [`crate::provenance`]); absent in telemetry the simulator did not write.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub spacecraft: Option<crate::provenance::Spacecraft>,
+    pub spacecraft: Option<Spacecraft>,
 }
 
 impl Metadata {
@@ -352,6 +352,17 @@ pub fn schemas() -> Vec<(&'static str, String)> {
             pretty(schemars::schema_for!(crate::manifest::Manifest)),
         ),
     ]
+}
+
+// Computed and compared in `crate::provenance`; defined here, with the file it is part of, so
+// that the run-folder contract does not import the provenance module that reads it.
+/// The simulated spacecraft's identity (`metadata.json` `spacecraft`).
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
+pub struct Spacecraft {
+    /// CRC-32 of all the parts, `sim-%08x`.
+    pub id: String,
+    /// CRC-32 of each part's parameters (their JSON serialisation), `%08x`.
+    pub parts: BTreeMap<String, String>,
 }
 
 #[cfg(test)]

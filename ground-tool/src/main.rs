@@ -9,7 +9,6 @@ static GLOBAL: tikv_jemallocator::Jemalloc = tikv_jemallocator::Jemalloc;
 
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
-use gro_reference::outdir::OutputDir;
 
 #[derive(Parser)]
 #[command(
@@ -517,14 +516,12 @@ fn run_calibrate(
     let meta = ground_tool::pipeline::flown::metadata_or_default(run_dir);
     let (flown_alignment, flown_iru, flown_filter) =
         ground_tool::pipeline::flown::flown_tables(run_dir, &meta, tables)?;
-    let dir = OutputDir::begin(
+    let dir = ground_tool::run_check::begin_output(
         out_target,
         "ground-tool calibrate",
         force,
-        &[Some(run_dir), tables]
-            .into_iter()
-            .flatten()
-            .collect::<Vec<_>>(),
+        run_dir,
+        tables,
     )?;
     let out = dir.path();
     ground_tool::run_check::check_run_dir(run_dir, out)?;
@@ -621,14 +618,12 @@ fn run_allan(
             run_dir.display()
         )))
     })?;
-    let dir = OutputDir::begin(
+    let dir = ground_tool::run_check::begin_output(
         out_target,
         "ground-tool allan",
         force,
-        &[Some(run_dir), tables]
-            .into_iter()
-            .flatten()
-            .collect::<Vec<_>>(),
+        run_dir,
+        tables,
     )?;
     ground_tool::progress::step("allan.json, allan.md and the plot");
     allan::write_outputs(dir.path(), &report, &run_dir.display().to_string())?;

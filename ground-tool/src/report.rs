@@ -6,7 +6,9 @@
 
 pub mod figure;
 
-use crate::pipeline::calibrate::{BiasHistoryPoint, CalibrationOutput, SENSOR_NAMES};
+use crate::pipeline::calibrate::{
+    BiasHistoryPoint, CalibrationOutput, CalibrationReport, SENSOR_NAMES,
+};
 use crate::pipeline::observations::FrameObservations;
 use anyhow::Context;
 use figure::{Figure, Kind, Layer, Panel};
@@ -156,6 +158,19 @@ pub fn write_calibration_report(
 
     let r = &out.report;
     let mut md = String::new();
+    md_header(&mut md, r);
+    md_alignments(&mut md, r);
+    md_alignment_validation(&mut md, r);
+    md_maneuvers(&mut md, r);
+    md_iru(&mut md, r);
+    md_tables(&mut md, r);
+    write_plots_section(&mut md, &plots);
+    std::fs::write(out_dir.join("report.md"), md)?;
+    Ok(())
+}
+
+/// The header: what the telemetry and the data held.
+fn md_header(md: &mut String, r: &CalibrationReport) {
     let _ = writeln!(md, "# Calibration report\n");
     let _ = writeln!(
         md,
@@ -169,6 +184,10 @@ pub fn write_calibration_report(
         r.data.stars_identified[0], r.data.stars_identified[1], r.data.stars_unidentified[0], r.data.stars_unidentified[1],
         r.data.sun_samples[0], r.data.sun_samples[1], r.data.ffcal_epochs
     );
+}
+
+/// The alignments: FFCAL per sensor, its stages and σ, the FSS error left, the adjustment.
+fn md_alignments(md: &mut String, r: &CalibrationReport) {
     let _ = writeln!(
         md,
         "## Alignments (FFCAL, {:?} weighting, {} passes)\n",
@@ -242,6 +261,10 @@ pub fn write_calibration_report(
         "\nAdjustment (paper appendix): common rotation removed [{:.1}, {:.1}, {:.1}]″ so that the OBC's two-tracker attitude frame M_AN is unchanged.\n",
         r.adjustment_theta_acs_arcsec[0], r.adjustment_theta_acs_arcsec[1], r.adjustment_theta_acs_arcsec[2]
     );
+}
+
+/// The alignment table's held-out validation.
+fn md_alignment_validation(md: &mut String, r: &CalibrationReport) {
     let v = &r.alignment_validation;
     let _ = writeln!(
         md,
@@ -272,6 +295,10 @@ pub fn write_calibration_report(
         }
         let _ = writeln!(md);
     }
+}
+
+/// The IRU section: the maneuvers found and why any was not used.
+fn md_maneuvers(md: &mut String, r: &CalibrationReport) {
     let _ = writeln!(md, "## IRU\n");
     let used = r.maneuvers.iter().filter(|m| m.used).count();
     let _ = writeln!(
@@ -319,6 +346,10 @@ pub fn write_calibration_report(
             );
         }
     }
+}
+
+/// IRUCAL: δM with 1σ, the bias, the estimator, refused fixes, bias steps, the G decisions.
+fn md_iru(md: &mut String, r: &CalibrationReport) {
     match (&r.iru, &r.iru_skipped) {
         (Some(iru), _) => {
             let _ = writeln!(
@@ -326,7 +357,7 @@ pub fn write_calibration_report(
                 "\nδM (ppm) with 1σ, primary triad, from {} gyro links:\n",
                 iru.links
             );
-            write_delta_m(&mut md, &iru.delta_m, &iru.delta_m_sigma);
+            write_delta_m(md, &iru.delta_m, &iru.delta_m_sigma);
             let _ = writeln!(
                 md,
                 "\nBias at the last fix (ACS, arcsec/s): [{:.5}, {:.5}, {:.5}] ± [{:.5}, {:.5}, {:.5}].\n",
@@ -380,7 +411,7 @@ pub fn write_calibration_report(
                     "Backup triad (X1, Y2, Z2; {:.0}° of rotation in the links), δM (ppm) with 1σ:\n",
                     b.rotation_deg
                 );
-                write_delta_m(&mut md, &b.delta_m, &b.delta_m_sigma);
+                write_delta_m(md, &b.delta_m, &b.delta_m_sigma);
                 let _ = writeln!(md, "\n**Backup G:** {}\n", b.decision);
             }
         }
@@ -389,6 +420,10 @@ pub fn write_calibration_report(
         }
         _ => {}
     }
+}
+
+/// The tables written, the filter changes and the derived FHST floor.
+fn md_tables(md: &mut String, r: &CalibrationReport) {
     let _ = writeln!(md, "## Tables\n");
     for (k, v) in &r.tables {
         let _ = writeln!(md, "- {k}: `{v}`");
@@ -410,9 +445,6 @@ pub fn write_calibration_report(
             f.note.as_ref().map_or(String::new(), |n| format!(": {n}"))
         );
     }
-    write_plots_section(&mut md, &plots);
-    std::fs::write(out_dir.join("report.md"), md)?;
-    Ok(())
 }
 
 /// δM (ppm) with its 1σ, one row per line.
@@ -691,7 +723,6 @@ fn bias_plots(
         return Ok(plots);
     }
     let as_x = |t_rel_s: f64| t_rel_s / axis.div;
-    let arcsec = ARCSEC_PER_RAD;
     // The OBC at full rate (relative s), or at the ground's epochs without a series.
     let obc_points: Vec<(f64, [f64; 3], [f64; 3])> = match obc {
         Some(o) => o
@@ -721,125 +752,13 @@ fn bias_plots(
     let mut within = [0usize; 3];
     let mut compared = [0usize; 3];
     for (k, name) in names.iter().enumerate() {
-        let obc_line: Vec<(f64, f64)> = obc_points
-            .iter()
-            .map(|(t, b, _)| (as_x(*t), b[k] * arcsec))
-            .collect();
-        let ground_bars: Vec<(f64, f64, f64)> = ground
-            .iter()
-            .map(|p| {
-                (
-                    as_x(p.t_s),
-                    p.bias_rad_per_s[k] * arcsec,
-                    p.sigma_rad_per_s[k] * arcsec,
-                )
-            })
-            .collect();
-        let obc_kind = if full_rate {
-            Kind::Line {
-                points: obc_line,
-                gap,
-            }
-        } else {
-            Kind::Rings(obc_line)
-        };
-        panels.push(Panel {
-            title: format!("axis {name} (ACS)"),
-            y_label: "bias (arcsec/s)".into(),
-            // The OBC's first minutes from its initial bias are clipped only on long runs.
-            y_quantile: Some(HISTORY_QUANTILE),
-            // The OBC's full-rate band underneath, the ground's smoothed fixes on top (over
-            // months a thin dark trail through the OBC's noise; small dots beyond 200 fixes).
-            layers: vec![
-                Layer {
-                    label: Some(if full_rate {
-                        "OBC filter, every housekeeping packet".into()
-                    } else {
-                        "OBC filter at the ground's epochs".into()
-                    }),
-                    color: OBC_BAND,
-                    kind: obc_kind,
-                },
-                Layer {
-                    label: Some("ground (calibration filter, smoothed) ±1σ at its fixes".into()),
-                    color: GROUND,
-                    kind: Kind::Bars(ground_bars.clone()),
-                },
-            ],
-        });
-        // OBC − ground wherever both exist (ground interpolated between its fixes), with the
-        // OBC's own ±1σ, and the ground's ±1σ around zero at its fixes.
-        let diff: Vec<(f64, f64)> = obc_points
-            .iter()
-            .filter_map(|(t, b, _)| {
-                interpolate_ground(ground, *t, k).map(|g| (as_x(*t), (b[k] - g) * arcsec))
-            })
-            .collect();
-        let obc_sigma: Vec<(f64, f64)> = obc_points
-            .iter()
-            .filter(|(t, _, s)| s[k].is_finite() && interpolate_ground(ground, *t, k).is_some())
-            .map(|(t, _, s)| (as_x(*t), s[k] * arcsec))
-            .collect();
-        for (t, b, s) in &obc_points {
-            if let (Some(g), true) = (interpolate_ground(ground, *t, k), s[k].is_finite()) {
-                compared[k] += 1;
-                if (b[k] - g).abs() <= s[k] {
-                    within[k] += 1;
-                }
-            }
-        }
-        diff_rms[k] = rms(&diff);
-        let mut layers = vec![Layer {
-            label: None,
-            color: GREY,
-            kind: Kind::HLine(0.0),
-        }];
-        layers.push(Layer {
-            label: Some("0 ± the ground's 1σ at its fixes".into()),
-            color: GREY,
-            kind: Kind::Bars(ground_bars.iter().map(|&(t, _, s)| (t, 0.0, s)).collect()),
-        });
-        layers.push(Layer {
-            label: Some(if full_rate {
-                "OBC − ground (ground interpolated between its fixes)".into()
-            } else {
-                "OBC − ground at the ground's fixes".into()
-            }),
-            color: OBC,
-            kind: if full_rate {
-                Kind::Line { points: diff, gap }
-            } else {
-                Kind::Dots(diff)
-            },
-        });
-        // The OBC's ±1σ over the difference: where the difference fills the band (months
-        // of it), the band's edges must still show.
-        if !obc_sigma.is_empty() {
-            layers.push(Layer {
-                label: Some("± the OBC's own 1σ (housekeeping covariance)".into()),
-                color: OBC_SIGMA,
-                kind: Kind::Line {
-                    points: obc_sigma.clone(),
-                    gap,
-                },
-            });
-            layers.push(Layer {
-                label: Some("± the OBC's own 1σ (housekeeping covariance)".into()),
-                color: OBC_SIGMA,
-                kind: Kind::Line {
-                    points: obc_sigma.iter().map(|&(t, s)| (t, -s)).collect(),
-                    gap,
-                },
-            });
-        }
-        diff_panels.push(Panel {
-            title: format!("axis {name} (ACS)"),
-            y_label: "OBC − ground (arcsec/s)".into(),
-            // The OBC's first convergence (minutes) would flatten the hours after it; the
-            // whole of it is in bias_history.png.
-            y_quantile: Some(DIFF_QUANTILE),
-            layers,
-        });
+        let (panel, diff_panel, rms_k, within_k, compared_k) =
+            bias_axis_panels(k, name, &obc_points, ground, full_rate, gap, axis);
+        panels.push(panel);
+        diff_panels.push(diff_panel);
+        diff_rms[k] = rms_k;
+        within[k] = within_k;
+        compared[k] = compared_k;
     }
     let source = if full_rate {
         format!(
@@ -928,6 +847,144 @@ fn bias_plots(
         answer,
     });
     Ok(plots)
+}
+
+/// Axis `k`'s two panels of the bias plots: the OBC's bias and the ground's, and OBC −
+/// ground with both 1σ; also the RMS of the difference and how many OBC samples were
+/// compared and within their own 1σ.
+#[allow(clippy::too_many_arguments)]
+fn bias_axis_panels(
+    k: usize,
+    name: &str,
+    obc_points: &[(f64, [f64; 3], [f64; 3])],
+    ground: &[BiasHistoryPoint],
+    full_rate: bool,
+    gap: f64,
+    axis: &TimeAxis,
+) -> (Panel, Panel, f64, usize, usize) {
+    let as_x = |t_rel_s: f64| t_rel_s / axis.div;
+    let arcsec = ARCSEC_PER_RAD;
+    let (mut within, mut compared) = (0usize, 0usize);
+    let obc_line: Vec<(f64, f64)> = obc_points
+        .iter()
+        .map(|(t, b, _)| (as_x(*t), b[k] * arcsec))
+        .collect();
+    let ground_bars: Vec<(f64, f64, f64)> = ground
+        .iter()
+        .map(|p| {
+            (
+                as_x(p.t_s),
+                p.bias_rad_per_s[k] * arcsec,
+                p.sigma_rad_per_s[k] * arcsec,
+            )
+        })
+        .collect();
+    let obc_kind = if full_rate {
+        Kind::Line {
+            points: obc_line,
+            gap,
+        }
+    } else {
+        Kind::Rings(obc_line)
+    };
+    let panel = Panel {
+        title: format!("axis {name} (ACS)"),
+        y_label: "bias (arcsec/s)".into(),
+        // The OBC's first minutes from its initial bias are clipped only on long runs.
+        y_quantile: Some(HISTORY_QUANTILE),
+        // The OBC's full-rate band underneath, the ground's smoothed fixes on top (over
+        // months a thin dark trail through the OBC's noise; small dots beyond 200 fixes).
+        layers: vec![
+            Layer {
+                label: Some(if full_rate {
+                    "OBC filter, every housekeeping packet".into()
+                } else {
+                    "OBC filter at the ground's epochs".into()
+                }),
+                color: OBC_BAND,
+                kind: obc_kind,
+            },
+            Layer {
+                label: Some("ground (calibration filter, smoothed) ±1σ at its fixes".into()),
+                color: GROUND,
+                kind: Kind::Bars(ground_bars.clone()),
+            },
+        ],
+    };
+    // OBC − ground wherever both exist (ground interpolated between its fixes), with the
+    // OBC's own ±1σ, and the ground's ±1σ around zero at its fixes.
+    let diff: Vec<(f64, f64)> = obc_points
+        .iter()
+        .filter_map(|(t, b, _)| {
+            interpolate_ground(ground, *t, k).map(|g| (as_x(*t), (b[k] - g) * arcsec))
+        })
+        .collect();
+    let obc_sigma: Vec<(f64, f64)> = obc_points
+        .iter()
+        .filter(|(t, _, s)| s[k].is_finite() && interpolate_ground(ground, *t, k).is_some())
+        .map(|(t, _, s)| (as_x(*t), s[k] * arcsec))
+        .collect();
+    for (t, b, s) in obc_points {
+        if let (Some(g), true) = (interpolate_ground(ground, *t, k), s[k].is_finite()) {
+            compared += 1;
+            if (b[k] - g).abs() <= s[k] {
+                within += 1;
+            }
+        }
+    }
+    let diff_rms = rms(&diff);
+    let mut layers = vec![Layer {
+        label: None,
+        color: GREY,
+        kind: Kind::HLine(0.0),
+    }];
+    layers.push(Layer {
+        label: Some("0 ± the ground's 1σ at its fixes".into()),
+        color: GREY,
+        kind: Kind::Bars(ground_bars.iter().map(|&(t, _, s)| (t, 0.0, s)).collect()),
+    });
+    layers.push(Layer {
+        label: Some(if full_rate {
+            "OBC − ground (ground interpolated between its fixes)".into()
+        } else {
+            "OBC − ground at the ground's fixes".into()
+        }),
+        color: OBC,
+        kind: if full_rate {
+            Kind::Line { points: diff, gap }
+        } else {
+            Kind::Dots(diff)
+        },
+    });
+    // The OBC's ±1σ over the difference: where the difference fills the band (months
+    // of it), the band's edges must still show.
+    if !obc_sigma.is_empty() {
+        layers.push(Layer {
+            label: Some("± the OBC's own 1σ (housekeeping covariance)".into()),
+            color: OBC_SIGMA,
+            kind: Kind::Line {
+                points: obc_sigma.clone(),
+                gap,
+            },
+        });
+        layers.push(Layer {
+            label: Some("± the OBC's own 1σ (housekeeping covariance)".into()),
+            color: OBC_SIGMA,
+            kind: Kind::Line {
+                points: obc_sigma.iter().map(|&(t, s)| (t, -s)).collect(),
+                gap,
+            },
+        });
+    }
+    let diff_panel = Panel {
+        title: format!("axis {name} (ACS)"),
+        y_label: "OBC − ground (arcsec/s)".into(),
+        // The OBC's first convergence (minutes) would flatten the hours after it; the
+        // whole of it is in bias_history.png.
+        y_quantile: Some(DIFF_QUANTILE),
+        layers,
+    };
+    (panel, diff_panel, diff_rms, within, compared)
 }
 
 /// The `## Plots` section: every plot written, under its question, with the answer in

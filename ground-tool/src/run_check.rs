@@ -17,11 +17,11 @@
 //!   unchanged long enough to be declared stuck, slews without high-rate frames, gaps, damage
 //!   the reader repaired, housekeeping that matches no raw frame.
 
-use crate::pipeline::calibrate::Metadata;
 use crate::pipeline::observations::interpolate_orbit;
 use crate::tp::Telemetry;
 use fsw_core::raw::{FHST_FLAG_TRACKING, FHST_FLAG_VALID, FSS_FLAG_SUN_ALPHA, FSS_FLAG_SUN_BETA};
 use fsw_core::tables::IruTable;
+use gro_reference::run_folder::Metadata;
 use serde::Serialize;
 
 /// TAI seconds since 1958 of 1972-01-01: earlier time codes are taken for mission elapsed
@@ -200,6 +200,37 @@ fn utc_naive_1958_s(text: &str) -> Option<f64> {
 pub fn check(tm: &Telemetry, metadata: Option<&Metadata>) -> Vec<Finding> {
     let mut out = Vec::new();
     let r = &tm.report;
+    // 1. What the reader repaired or dropped; a jump of the time codes stops the check.
+    reader_findings(r, &mut out);
+    if let Some(f) = time_code_jump(r) {
+        out.push(f);
+        return out;
+    }
+    // 2. Raw frames, with TAI-1958 time codes and the metadata's epoch.
+    let Some(first) = tm.raw.first() else {
+        out.push(no_raw_frames(r));
+        return out;
+    };
+    let t0 = first.time.seconds();
+    if let Some(f) = time_codes_not_tai1958(t0) {
+        out.push(f);
+        return out;
+    }
+    epoch_findings(t0, metadata, &mut out);
+    // 3. Orbit coverage, sensors, the IRU, gaps, housekeeping.
+    orbit_coverage(tm, &mut out);
+    unusable_sensors(tm, &mut out);
+    let backup = tm.housekeeping.first().is_some_and(|h| h.iru_config == 1);
+    let active: [usize; 3] = if backup { [0, 3, 5] } else { [1, 2, 4] };
+    iru_findings(tm, t0, active, &mut out);
+    gap_findings(tm, t0, active, &mut out);
+    housekeeping_findings(tm, &mut out);
+    out
+}
+
+/// What the reader repaired (skipped regions, duplicates, time reversals) and the packets it
+/// dropped for a damaged time code.
+fn reader_findings(r: &crate::tp::TpReport, out: &mut Vec<Finding>) {
     if !r.skipped.is_empty()
         || !r.duplicates.is_empty()
         || !r.time_reversals.is_empty()
@@ -244,55 +275,64 @@ pub fn check(tm: &Telemetry, metadata: Option<&Metadata>) -> Vec<Finding> {
             ),
         ));
     }
-    if let Some(j) = r.time_jumps.first() {
-        out.push(error(
-            "time_code_jump",
-            format!(
-                "telemetry.bin: at offset {} the time codes of APID 0x{:03x} jump back by {:.0} s ({} → {} TAI) while the packet sequence continues ({} such jump(s) in all): a block of packets carries shifted time codes (a clock reset or a time-stamping error), not a few reordered packets; sorting by time would interleave two stretches of flight into one wrong timeline. Correct the time codes of the packets from offset {} on, or cut the file there and calibrate each part separately (docs/icd.md §4)",
-                j.offset,
-                j.apid,
-                j.from_s - j.to_s,
-                date_of(j.from_s),
-                date_of(j.to_s),
-                r.time_jumps.len(),
-                j.offset
-            ),
-        ));
-        return out;
-    }
-    let Some(first) = tm.raw.first() else {
-        let mut reasons: Vec<&str> = r.skipped.iter().map(|s| s.reason.as_str()).collect();
-        reasons.dedup();
-        reasons.truncate(3);
-        out.push(error(
-            "no_raw_frames",
-            format!(
-                "telemetry.bin ({} octets) holds no raw sensor frame (APID 0x010: a 60-octet packet, 6 octets primary header with version 0, type TM, secondary header flag 1 + 6 octets CUC time + 48 octets user data, docs/icd.md §2–3.1); the reader decoded {} housekeeping, {} event and {} ephemeris packets and skipped {} octets{}",
-                r.file_len,
-                r.packets_housekeeping,
-                r.packets_event,
-                r.packets_ephemeris,
-                r.skipped_octets(),
-                if reasons.is_empty() {
-                    String::new()
-                } else {
-                    format!(" ({})", reasons.join("; "))
-                }
-            ),
-        ));
-        return out;
-    };
-    let t0 = first.time.seconds();
-    if t0 < EARLIEST_PLAUSIBLE_TAI1958_S {
-        out.push(error(
+}
+
+/// A block of packets whose time codes jump back while the sequence continues: an error.
+fn time_code_jump(r: &crate::tp::TpReport) -> Option<Finding> {
+    let j = r.time_jumps.first()?;
+    Some(error(
+        "time_code_jump",
+        format!(
+            "telemetry.bin: at offset {} the time codes of APID 0x{:03x} jump back by {:.0} s ({} → {} TAI) while the packet sequence continues ({} such jump(s) in all): a block of packets carries shifted time codes (a clock reset or a time-stamping error), not a few reordered packets; sorting by time would interleave two stretches of flight into one wrong timeline. Correct the time codes of the packets from offset {} on, or cut the file there and calibrate each part separately (docs/icd.md §4)",
+            j.offset,
+            j.apid,
+            j.from_s - j.to_s,
+            date_of(j.from_s),
+            date_of(j.to_s),
+            r.time_jumps.len(),
+            j.offset
+        ),
+    ))
+}
+
+/// No raw sensor frame at all: an error naming what the reader found instead.
+fn no_raw_frames(r: &crate::tp::TpReport) -> Finding {
+    let mut reasons: Vec<&str> = r.skipped.iter().map(|s| s.reason.as_str()).collect();
+    reasons.dedup();
+    reasons.truncate(3);
+    error(
+        "no_raw_frames",
+        format!(
+            "telemetry.bin ({} octets) holds no raw sensor frame (APID 0x010: a 60-octet packet, 6 octets primary header with version 0, type TM, secondary header flag 1 + 6 octets CUC time + 48 octets user data, docs/icd.md §2–3.1); the reader decoded {} housekeeping, {} event and {} ephemeris packets and skipped {} octets{}",
+            r.file_len,
+            r.packets_housekeeping,
+            r.packets_event,
+            r.packets_ephemeris,
+            r.skipped_octets(),
+            if reasons.is_empty() {
+                String::new()
+            } else {
+                format!(" ({})", reasons.join("; "))
+            }
+        ),
+    )
+}
+
+/// Time codes that are not TAI seconds since 1958 (a run-relative clock): an error.
+fn time_codes_not_tai1958(t0: f64) -> Option<Finding> {
+    (t0 < EARLIEST_PLAUSIBLE_TAI1958_S).then(|| {
+        error(
             "time_codes_not_tai1958",
             format!(
                 "the first raw frame's time code is {t0:.0} s, i.e. {} TAI: time codes are TAI seconds since 1958-01-01T00:00:00 TAI (docs/icd.md §2), not seconds since the start of the run; the Sun and the stars are placed from them. Add the TAI seconds of the run start (e.g. 1991-04-09T00:00:00 UTC = 1049846426 s)",
                 date_of(t0)
             ),
-        ));
-        return out;
-    }
+        )
+    })
+}
+
+/// The metadata's `epoch_utc` against the first raw frame's time code.
+fn epoch_findings(t0: f64, metadata: Option<&Metadata>, out: &mut Vec<Finding>) {
     if let Some(epoch) = metadata.and_then(|m| m.epoch_utc.as_deref()) {
         match utc_naive_1958_s(epoch) {
             None => out.push(warn(
@@ -321,6 +361,10 @@ pub fn check(tm: &Telemetry, metadata: Option<&Metadata>) -> Vec<Finding> {
             }
         }
     }
+}
+
+/// Raw frames without an orbit (ephemeris records too far apart).
+fn orbit_coverage(tm: &Telemetry, out: &mut Vec<Finding>) {
     let n = tm.raw.len();
     // Orbit coverage.
     if !tm.ephemeris.is_empty() {
@@ -343,6 +387,11 @@ pub fn check(tm: &Telemetry, metadata: Option<&Metadata>) -> Vec<Finding> {
             ));
         }
     }
+}
+
+/// Sensors with no usable sample in the whole run.
+fn unusable_sensors(tm: &Telemetry, out: &mut Vec<Finding>) {
+    let n = tm.raw.len();
     // Sensors never usable.
     let names = ["FHST1", "FHST2", "FSS1", "FSS2"];
     for (i, name) in names.iter().enumerate() {
@@ -382,9 +431,10 @@ pub fn check(tm: &Telemetry, metadata: Option<&Metadata>) -> Vec<Finding> {
             ));
         }
     }
-    // IRU: stuck channels of the active configuration, and slews without high rate.
-    let backup = tm.housekeeping.first().is_some_and(|h| h.iru_config == 1);
-    let active: [usize; 3] = if backup { [0, 3, 5] } else { [1, 2, 4] };
+}
+
+/// IRU: stuck channels of the `active` configuration, and slews without high-rate frames.
+fn iru_findings(tm: &Telemetry, t0: f64, active: [usize; 3], out: &mut Vec<Finding>) {
     let channel = ["X1", "X2", "Y1", "Y2", "Z1", "Z2"];
     let stuck_cycles = usize::from(IruTable::prelaunch().stuck_cycles);
     for &c in &active {
@@ -436,6 +486,10 @@ pub fn check(tm: &Telemetry, metadata: Option<&Metadata>) -> Vec<Finding> {
             ));
         }
     }
+}
+
+/// Gaps in the raw frames, and gaps across which the gyro counter difference has wrapped.
+fn gap_findings(tm: &Telemetry, t0: f64, active: [usize; 3], out: &mut Vec<Finding>) {
     // Gaps.
     let mut steps: Vec<f64> = tm
         .raw
@@ -495,6 +549,10 @@ pub fn check(tm: &Telemetry, metadata: Option<&Metadata>) -> Vec<Finding> {
             ));
         }
     }
+}
+
+/// Housekeeping that never lines up with a raw frame.
+fn housekeeping_findings(tm: &Telemetry, out: &mut Vec<Finding>) {
     // Housekeeping that never lines up with a raw frame.
     if !tm.housekeeping.is_empty() {
         let matched = tm
@@ -515,7 +573,30 @@ pub fn check(tm: &Telemetry, metadata: Option<&Metadata>) -> Vec<Finding> {
             ));
         }
     }
-    out
+}
+
+/// The output folder of a command over `run_dir` (and a `tables` folder), begun as a
+/// temporary sibling of `out_target` ([`gro_reference::outdir::OutputDir`]), with the run
+/// folder and the tables folder given as its inputs (which the output may not replace).
+///
+/// # Errors
+/// As [`gro_reference::outdir::OutputDir::begin`].
+pub fn begin_output(
+    out_target: &std::path::Path,
+    command: &str,
+    force: bool,
+    run_dir: &std::path::Path,
+    tables: Option<&std::path::Path>,
+) -> anyhow::Result<gro_reference::outdir::OutputDir> {
+    gro_reference::outdir::OutputDir::begin(
+        out_target,
+        command,
+        force,
+        &[Some(run_dir), tables]
+            .into_iter()
+            .flatten()
+            .collect::<Vec<_>>(),
+    )
 }
 
 /// Read and check a run folder; print the findings to stderr and write them to

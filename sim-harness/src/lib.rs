@@ -29,6 +29,7 @@ pub mod scenario;
 pub mod sensors;
 pub mod telemetry;
 pub mod truth;
+pub mod uplink;
 
 /// Exit codes and the bad-input error, one definition for every binary of the workspace
 /// (`gro_reference::exit`).

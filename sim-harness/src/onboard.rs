@@ -21,6 +21,7 @@
 //! The alignment table whose four `M_AS` equal the truth's (without thermal drift), no
 //! corrections: what a perfect calibration would uplink.
 
+pub use crate::uplink::{filter_table_with, image, image_table_id};
 use anyhow::Context;
 use nalgebra::Matrix3;
 
@@ -30,16 +31,10 @@ use crate::truth::orbit::Orbit;
 use crate::truth::sky::{Sky, SkyParams, HIPPARCOS_EPOCH_J2000_TT_S};
 use crate::truth::time::SimClock;
 use crate::truth::time::S_PER_JULIAN_YEAR;
-use fsw_core::raw::TimeTag;
-use fsw_core::tables::image::encode_image;
 use fsw_core::tables::types::rows_from_matrix;
 use fsw_core::tables::{
-    AlignmentTable, CatalogStar, FilterTable, OrbitTable, SensorCorrections, StarCatalogTable,
-    TableId, MAX_CATALOG_STARS,
+    AlignmentTable, CatalogStar, OrbitTable, SensorCorrections, StarCatalogTable, MAX_CATALOG_STARS,
 };
-
-/// Room for the largest image (catalog: ≤ 4096 × 21 octets + header).
-const IMAGE_CAPACITY: usize = 20 + 10 + MAX_CATALOG_STARS * 24 + 4;
 
 /// Read the scenario's catalogue file (or the embedded one).
 ///
@@ -150,57 +145,11 @@ pub fn truth_orbit_table(
     Ok(table)
 }
 
-/// The boot filter table with the scenario's `filter_table` fields laid over it, validated.
-///
-/// # Errors
-/// An unknown field, a wrong type or a value `FilterTable::validate` refuses (named).
-pub fn filter_table_with(overrides: &toml::Table) -> anyhow::Result<FilterTable> {
-    let boot = FilterTable::default_boot();
-    let mut value = toml::Table::try_from(boot).context("filter_table")?;
-    for (k, v) in overrides {
-        if !value.contains_key(k) {
-            anyhow::bail!(
-                "filter_table.{k}: unknown field (fields of FilterTable: {})",
-                value.keys().cloned().collect::<Vec<_>>().join(", ")
-            );
-        }
-        value.insert(k.clone(), v.clone());
-    }
-    let table: FilterTable = toml::Value::Table(value)
-        .try_into()
-        .map_err(|e| anyhow::anyhow!("filter_table: {e}"))?;
-    table
-        .validate()
-        .map_err(|e| anyhow::anyhow!("filter_table: refused by FilterTable::validate: {e:?}"))?;
-    Ok(table)
-}
-
-/// Encode a table as an uplink image (fsw-core's format).
-///
-/// # Errors
-/// The table does not fit (cannot happen for the four table types).
-pub fn image<T: serde::Serialize>(
-    id: TableId,
-    created: TimeTag,
-    table: &T,
-) -> anyhow::Result<Vec<u8>> {
-    let mut buf = vec![0_u8; IMAGE_CAPACITY];
-    let n = encode_image(id, created, table, &mut buf)
-        .map_err(|e| anyhow::anyhow!("encoding the {} table image: {e:?}", id.name()))?;
-    buf.truncate(n);
-    Ok(buf)
-}
-
-/// The table id of an image (octet 4), if valid.
-#[must_use]
-pub fn image_table_id(image: &[u8]) -> Option<TableId> {
-    image.get(4).copied().and_then(TableId::from_u8)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use fsw_core::tables::TableSet;
+    use fsw_core::raw::TimeTag;
+    use fsw_core::tables::{TableId, TableSet};
 
     /// The catalog holds the Hp 2.0–5.7 stars (3231, below the 4096 capacity), is accepted by
     /// the OBC's table services, and a known star sits where the catalogue puts it.

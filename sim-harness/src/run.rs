@@ -250,7 +250,7 @@ impl Scorer {
             .iter()
             .enumerate()
             .map(|(i, up)| TableReport {
-                table: crate::onboard::image_table_id(&up.image)
+                table: crate::uplink::image_table_id(&up.image)
                     .map_or("unknown", TableId::name)
                     .to_owned(),
                 file: format!("uploads/{i:02}_{}", up.name),

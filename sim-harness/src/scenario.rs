@@ -340,7 +340,7 @@ impl TimedCommand {
         for (k, v) in own {
             fields.insert(k.clone(), v.clone());
         }
-        crate::onboard::filter_table_with(&fields).map(Some)
+        crate::uplink::filter_table_with(&fields).map(Some)
     }
 }
 

@@ -6,7 +6,7 @@
 //!
 //! Matrices are stored row-major as `[[f64; 3]; 3]` (`m[row][col]`), as in the paper.
 
-use super::image::TableError;
+use super::error::TableError;
 use crate::attitude::{is_proper_rotation, rot, rotvec_from_rot};
 use crate::units::{ARCSEC_PER_RAD, RAD_PER_DEG};
 use nalgebra::{Matrix3, Vector3};

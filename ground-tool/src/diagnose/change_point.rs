@@ -31,7 +31,7 @@
 use super::effects::{Effect, EffectKind};
 use super::fit::{accumulate, accumulate_fhst_only, indices, solve_fixed, Layout, Normal};
 use super::measurements::{MeasurementSet, SENSOR_NAMES};
-use super::search::SearchResult;
+use super::search_result::SearchResult;
 use nalgebra::{Matrix3, Matrix6, Vector3, Vector6};
 
 /// Fewest measurements on each side of a scanned step.

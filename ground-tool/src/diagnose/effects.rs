@@ -288,6 +288,23 @@ impl Effect {
         self.sensor.is_none_or(|s| s == m.sensor)
     }
 
+    /// Legendre polynomials P1–P3 of the time across the sensor's data span: the secular
+    /// extension's terms.
+    fn secular_extension_terms(&self, m: &Measurement) -> [f64; 3] {
+        let x = self.time_span_s.map_or(0.0, |[t0, t1]| {
+            if t1 > t0 {
+                (2.0 * (m.t_s - t0) / (t1 - t0) - 1.0).clamp(-1.0, 1.0)
+            } else {
+                0.0
+            }
+        });
+        [
+            x,
+            0.5 * (3.0 * x * x - 1.0),
+            0.5 * (5.0 * x * x * x - 3.0 * x),
+        ]
+    }
+
     /// Columns (param index, [∂r_axis0, ∂r_axis1] in arcsec per parameter unit).
     pub fn columns(
         &self,
@@ -402,53 +419,10 @@ impl Effect {
             }
             EffectKind::FssCyclicError => {}
             EffectKind::GenericAlignmentExtension => {
-                // Orbit harmonics 2–3, the square of the own temperature, and for an FHST the
-                // other tracker's temperature and its square (only relative FHST alignment is
-                // observable: the other tracker's thermal motion looks like this one's).
-                let dt = m.dtemp[m.sensor];
-                let dto = if m.sensor < 2 {
-                    m.dtemp[1 - m.sensor]
-                } else {
-                    0.0
-                };
-                let u = m.orbit_phase;
-                let (c2, s2, c3, s3) = if u.is_finite() {
-                    (
-                        (2.0 * u).cos(),
-                        (2.0 * u).sin(),
-                        (3.0 * u).cos(),
-                        (3.0 * u).sin(),
-                    )
-                } else {
-                    (0.0, 0.0, 0.0, 0.0)
-                };
-                let terms = [c2, s2, c3, s3, dt * dt, dto, dto * dto];
-                for ax in 0..3 {
-                    let col = alignment_col(ax);
-                    for (k, t) in terms.iter().enumerate() {
-                        out.push((GENERIC_TERMS * ax + k, v2(col * *t)));
-                    }
-                }
+                push_alignment_terms(out, m, GENERIC_TERMS, &generic_extension_terms(m));
             }
             EffectKind::SecularAlignmentExtension => {
-                let x = self.time_span_s.map_or(0.0, |[t0, t1]| {
-                    if t1 > t0 {
-                        (2.0 * (m.t_s - t0) / (t1 - t0) - 1.0).clamp(-1.0, 1.0)
-                    } else {
-                        0.0
-                    }
-                });
-                let terms = [
-                    x,
-                    0.5 * (3.0 * x * x - 1.0),
-                    0.5 * (5.0 * x * x * x - 3.0 * x),
-                ];
-                for ax in 0..3 {
-                    let col = alignment_col(ax);
-                    for (k, t) in terms.iter().enumerate() {
-                        out.push((3 * ax + k, v2(col * *t)));
-                    }
-                }
+                push_alignment_terms(out, m, 3, &self.secular_extension_terms(m));
             }
             EffectKind::CatalogProperMotionError => {
                 if m.sensor < 2 {
@@ -478,8 +452,8 @@ impl Effect {
 
     /// Regressors whose structure this effect should remove (adequacy check).
     #[must_use]
-    pub fn signature(&self) -> &'static [super::structure::Regressor] {
-        use super::structure::Regressor as R;
+    pub fn signature(&self) -> &'static [super::regressor::Regressor] {
+        use super::regressor::Regressor as R;
         match self.kind {
             EffectKind::AberrationAnnual => &[],
             // The combined candidate's orbital part is once per orbit: orbit-phase structure it
@@ -767,129 +741,192 @@ pub fn library(
         out.push(e);
     }
     for s in 0..4 {
-        if !active[s] {
-            continue;
-        }
-        out.push(Effect::new(
-            EffectKind::TimeTagOffset,
-            Some(s),
-            &[("tau", "ms", 1000.0)],
-        ));
-        out.push(Effect::new(
-            EffectKind::ThermalAlignmentDrift,
-            Some(s),
-            &[
-                ("x", "arcsec/degC", 30.0),
-                ("y", "arcsec/degC", 30.0),
-                ("z", "arcsec/degC", 30.0),
-            ],
-        ));
-        let once = [
-            ("cos_x", "arcsec", 100.0),
-            ("cos_y", "arcsec", 100.0),
-            ("cos_z", "arcsec", 100.0),
-            ("sin_x", "arcsec", 100.0),
-            ("sin_y", "arcsec", 100.0),
-            ("sin_z", "arcsec", 100.0),
-        ];
-        // The same with the second harmonic: a thermal orbit cycle is not a sinusoid
-        // (eclipse entry and exit, algorithms.md §9 row 2: "periodic at orbit period and
-        // harmonics"). A separate candidate, so a once-per-orbit variation is not charged six
-        // more parameters; the evidence decides between them.
-        let mut both = once.to_vec();
-        both.extend([
-            ("cos2u_x", "arcsec", 100.0),
-            ("cos2u_y", "arcsec", 100.0),
-            ("cos2u_z", "arcsec", 100.0),
-            ("sin2u_x", "arcsec", 100.0),
-            ("sin2u_y", "arcsec", 100.0),
-            ("sin2u_z", "arcsec", 100.0),
-        ]);
-        if periodic[s] {
-            out.push(Effect::new(
-                EffectKind::OrbitPeriodicAlignment,
-                Some(s),
-                &once,
-            ));
-            let mut e = Effect::new(EffectKind::OrbitPeriodicAlignment, Some(s), &both);
-            e.harmonics = 2;
-            out.push(e);
-        }
-        {
-            let mut names = Vec::new();
-            for ax in ["x", "y", "z"] {
-                for t in [
-                    "cos2u",
-                    "sin2u",
-                    "cos3u",
-                    "sin3u",
-                    "dT2",
-                    "dT_other",
-                    "dT_other2",
-                ] {
-                    names.push((format!("{ax}_{t}"), "arcsec", 100.0));
-                }
-            }
-            let refs: Vec<(&str, &'static str, f64)> =
-                names.iter().map(|(n, u, s)| (n.as_str(), *u, *s)).collect();
-            let mut e = Effect::new(EffectKind::GenericAlignmentExtension, Some(s), &refs);
-            e.hidden = true;
-            out.push(e);
-            let names: Vec<String> = ["x", "y", "z"]
-                .iter()
-                .flat_map(|ax| (1..=3).map(move |k| format!("{ax}_time_p{k}")))
-                .collect();
-            let refs: Vec<(&str, &'static str, f64)> = names
-                .iter()
-                .map(|n| (n.as_str(), "arcsec", 100.0))
-                .collect();
-            let mut e = Effect::new(EffectKind::SecularAlignmentExtension, Some(s), &refs);
-            e.hidden = true;
-            e.time_span_s = spans[s];
-            out.push(e);
-        }
-        if s < 2 {
-            out.push(Effect::new(
-                EffectKind::FhstDistortion,
-                Some(s),
-                &[
-                    ("radial_at_4deg", "arcsec", 100.0),
-                    ("hv_h_at_corner", "arcsec", 100.0),
-                    ("hv_v_at_corner", "arcsec", 100.0),
-                ],
-            ));
-            out.push(Effect::new(
-                EffectKind::MagnitudeBias,
-                Some(s),
-                &[
-                    ("h_per_mag", "arcsec/mag", 20.0),
-                    ("v_per_mag", "arcsec/mag", 20.0),
-                ],
-            ));
-        } else {
-            let mut params = vec![
-                ("alpha_scale", "ppm", 2000.0),
-                ("alpha_cross_at_corner", "arcsec", 200.0),
-                ("alpha_cubic_at_edge", "arcsec", 200.0),
-                ("beta_scale", "ppm", 2000.0),
-                ("beta_cross_at_corner", "arcsec", 200.0),
-                ("beta_cubic_at_edge", "arcsec", 200.0),
-            ];
-            let pitch = fss_pitch_rad[s - 2];
-            if pitch.is_some() {
-                params.extend([
-                    ("alpha_cyclic_sin", "arcsec", 60.0),
-                    ("alpha_cyclic_cos", "arcsec", 60.0),
-                    ("beta_cyclic_sin", "arcsec", 60.0),
-                    ("beta_cyclic_cos", "arcsec", 60.0),
-                ]);
-            }
-            let mut e = Effect::new(EffectKind::FssTransferFunction, Some(s), &params);
-            e.pitch_rad = pitch;
-            e.extra_params = usize::from(pitch.is_some());
-            out.push(e);
+        if active[s] {
+            sensor_effects(&mut out, s, periodic[s], spans[s], fss_pitch_rad);
         }
     }
+    out.extend(catalog_effect(set));
+    out
+}
+
+/// Orbit harmonics 2–3, the square of the own temperature, and for an FHST the other
+/// tracker's temperature and its square (only relative FHST alignment is observable: the
+/// other tracker's thermal motion looks like this one's): the generic extension's terms.
+fn generic_extension_terms(m: &Measurement) -> [f64; GENERIC_TERMS] {
+    let dt = m.dtemp[m.sensor];
+    let dto = if m.sensor < 2 {
+        m.dtemp[1 - m.sensor]
+    } else {
+        0.0
+    };
+    let u = m.orbit_phase;
+    let (c2, s2, c3, s3) = if u.is_finite() {
+        (
+            (2.0 * u).cos(),
+            (2.0 * u).sin(),
+            (3.0 * u).cos(),
+            (3.0 * u).sin(),
+        )
+    } else {
+        (0.0, 0.0, 0.0, 0.0)
+    };
+    [c2, s2, c3, s3, dt * dt, dto, dto * dto]
+}
+
+/// Columns of an alignment term per ACS axis times each of `terms` (`stride` columns per
+/// axis), as the alignment-extension candidates have them.
+fn push_alignment_terms(
+    out: &mut Vec<(usize, [f64; 2])>,
+    m: &Measurement,
+    stride: usize,
+    terms: &[f64],
+) {
+    for ax in 0..3 {
+        let mut e = nalgebra::Vector3::zeros();
+        e[ax] = 1.0;
+        let col = -(m.jm * m.b_acs.cross(&e));
+        for (k, t) in terms.iter().enumerate() {
+            let v = col * *t;
+            out.push((stride * ax + k, [v.x, v.y]));
+        }
+    }
+}
+
+/// The candidates of sensor `s`: time tag, thermal drift, orbit-periodic alignment (when the
+/// data span orbits), the hidden lack-of-fit extensions, and its field terms (FHST
+/// distortion and magnitude bias; FSS transfer function with the cyclic term at the pitch
+/// found).
+fn sensor_effects(
+    out: &mut Vec<Effect>,
+    s: usize,
+    periodic: bool,
+    span: Option<[f64; 2]>,
+    fss_pitch_rad: [Option<f64>; 2],
+) {
+    out.push(Effect::new(
+        EffectKind::TimeTagOffset,
+        Some(s),
+        &[("tau", "ms", 1000.0)],
+    ));
+    out.push(Effect::new(
+        EffectKind::ThermalAlignmentDrift,
+        Some(s),
+        &[
+            ("x", "arcsec/degC", 30.0),
+            ("y", "arcsec/degC", 30.0),
+            ("z", "arcsec/degC", 30.0),
+        ],
+    ));
+    let once = [
+        ("cos_x", "arcsec", 100.0),
+        ("cos_y", "arcsec", 100.0),
+        ("cos_z", "arcsec", 100.0),
+        ("sin_x", "arcsec", 100.0),
+        ("sin_y", "arcsec", 100.0),
+        ("sin_z", "arcsec", 100.0),
+    ];
+    // The same with the second harmonic: a thermal orbit cycle is not a sinusoid
+    // (eclipse entry and exit, algorithms.md §9 row 2: "periodic at orbit period and
+    // harmonics"). A separate candidate, so a once-per-orbit variation is not charged six
+    // more parameters; the evidence decides between them.
+    let mut both = once.to_vec();
+    both.extend([
+        ("cos2u_x", "arcsec", 100.0),
+        ("cos2u_y", "arcsec", 100.0),
+        ("cos2u_z", "arcsec", 100.0),
+        ("sin2u_x", "arcsec", 100.0),
+        ("sin2u_y", "arcsec", 100.0),
+        ("sin2u_z", "arcsec", 100.0),
+    ]);
+    if periodic {
+        out.push(Effect::new(
+            EffectKind::OrbitPeriodicAlignment,
+            Some(s),
+            &once,
+        ));
+        let mut e = Effect::new(EffectKind::OrbitPeriodicAlignment, Some(s), &both);
+        e.harmonics = 2;
+        out.push(e);
+    }
+    {
+        let mut names = Vec::new();
+        for ax in ["x", "y", "z"] {
+            for t in [
+                "cos2u",
+                "sin2u",
+                "cos3u",
+                "sin3u",
+                "dT2",
+                "dT_other",
+                "dT_other2",
+            ] {
+                names.push((format!("{ax}_{t}"), "arcsec", 100.0));
+            }
+        }
+        let refs: Vec<(&str, &'static str, f64)> =
+            names.iter().map(|(n, u, s)| (n.as_str(), *u, *s)).collect();
+        let mut e = Effect::new(EffectKind::GenericAlignmentExtension, Some(s), &refs);
+        e.hidden = true;
+        out.push(e);
+        let names: Vec<String> = ["x", "y", "z"]
+            .iter()
+            .flat_map(|ax| (1..=3).map(move |k| format!("{ax}_time_p{k}")))
+            .collect();
+        let refs: Vec<(&str, &'static str, f64)> = names
+            .iter()
+            .map(|n| (n.as_str(), "arcsec", 100.0))
+            .collect();
+        let mut e = Effect::new(EffectKind::SecularAlignmentExtension, Some(s), &refs);
+        e.hidden = true;
+        e.time_span_s = span;
+        out.push(e);
+    }
+    if s < 2 {
+        out.push(Effect::new(
+            EffectKind::FhstDistortion,
+            Some(s),
+            &[
+                ("radial_at_4deg", "arcsec", 100.0),
+                ("hv_h_at_corner", "arcsec", 100.0),
+                ("hv_v_at_corner", "arcsec", 100.0),
+            ],
+        ));
+        out.push(Effect::new(
+            EffectKind::MagnitudeBias,
+            Some(s),
+            &[
+                ("h_per_mag", "arcsec/mag", 20.0),
+                ("v_per_mag", "arcsec/mag", 20.0),
+            ],
+        ));
+    } else {
+        let mut params = vec![
+            ("alpha_scale", "ppm", 2000.0),
+            ("alpha_cross_at_corner", "arcsec", 200.0),
+            ("alpha_cubic_at_edge", "arcsec", 200.0),
+            ("beta_scale", "ppm", 2000.0),
+            ("beta_cross_at_corner", "arcsec", 200.0),
+            ("beta_cubic_at_edge", "arcsec", 200.0),
+        ];
+        let pitch = fss_pitch_rad[s - 2];
+        if pitch.is_some() {
+            params.extend([
+                ("alpha_cyclic_sin", "arcsec", 60.0),
+                ("alpha_cyclic_cos", "arcsec", 60.0),
+                ("beta_cyclic_sin", "arcsec", 60.0),
+                ("beta_cyclic_cos", "arcsec", 60.0),
+            ]);
+        }
+        let mut e = Effect::new(EffectKind::FssTransferFunction, Some(s), &params);
+        e.pitch_rad = pitch;
+        e.extra_params = usize::from(pitch.is_some());
+        out.push(e);
+    }
+}
+
+/// The catalog candidate: per-star offsets of the stars seen often enough (at least three),
+/// constrained to no net rotation per tracker.
+fn catalog_effect(set: &MeasurementSet) -> Option<Effect> {
     // Catalog: stars seen often enough, in at least two batches.
     let mut seen: std::collections::BTreeMap<u32, (usize, usize, usize)> =
         std::collections::BTreeMap::new();
@@ -916,56 +953,56 @@ pub fn library(
         .filter(|(_, (n, _, _))| *n >= CATALOG_MIN_SAMPLES)
         .map(|(h, _)| *h)
         .collect();
-    if stars.len() >= 3 {
-        let mut names = Vec::with_capacity(2 * stars.len());
-        for h in &stars {
-            names.push((format!("HIP{h}_east"), "arcsec", 60.0));
-            names.push((format!("HIP{h}_north"), "arcsec", 60.0));
-        }
-        let refs: Vec<(&str, &'static str, f64)> =
-            names.iter().map(|(n, u, s)| (n.as_str(), *u, *s)).collect();
-        let mut e = Effect::new(EffectKind::CatalogProperMotionError, None, &refs);
-        e.star_dirs = stars
-            .iter()
-            .map(|h| dirs.get(h).copied().unwrap_or_else(nalgebra::Vector3::z))
+    if stars.len() < 3 {
+        return None;
+    }
+    let mut names = Vec::with_capacity(2 * stars.len());
+    for h in &stars {
+        names.push((format!("HIP{h}_east"), "arcsec", 60.0));
+        names.push((format!("HIP{h}_north"), "arcsec", 60.0));
+    }
+    let refs: Vec<(&str, &'static str, f64)> =
+        names.iter().map(|(n, u, s)| (n.as_str(), *u, *s)).collect();
+    let mut e = Effect::new(EffectKind::CatalogProperMotionError, None, &refs);
+    e.star_dirs = stars
+        .iter()
+        .map(|h| dirs.get(h).copied().unwrap_or_else(nalgebra::Vector3::z))
+        .collect();
+    // Gauge: a common rotation of the stars one tracker sees is the same as a rotation of
+    // that tracker (or of the attitude), so per-star offsets can move the alignments
+    // (the roll about a boresight above all). The offsets are therefore constrained to
+    // have no least-squares net rotation per tracker (0 ± 0.5″ in every axis): the
+    // catalog effect cannot move a tracker's alignment, which stays what the data give
+    // without it.
+    for tr in 0..2 {
+        let members: Vec<usize> = (0..stars.len())
+            .filter(|&k| trackers.get(&stars[k]).is_some_and(|t| t[tr]))
             .collect();
-        // Gauge: a common rotation of the stars one tracker sees is the same as a rotation of
-        // that tracker (or of the attitude), so per-star offsets can move the alignments
-        // (the roll about a boresight above all). The offsets are therefore constrained to
-        // have no least-squares net rotation per tracker (0 ± 0.5″ in every axis): the
-        // catalog effect cannot move a tracker's alignment, which stays what the data give
-        // without it.
-        for tr in 0..2 {
-            let members: Vec<usize> = (0..stars.len())
-                .filter(|&k| trackers.get(&stars[k]).is_some_and(|t| t[tr]))
-                .collect();
-            if members.len() < 3 {
-                continue;
-            }
-            let n = members.len() as f64;
-            let mut pm = nalgebra::Matrix3::<f64>::zeros();
+        if members.len() < 3 {
+            continue;
+        }
+        let n = members.len() as f64;
+        let mut pm = nalgebra::Matrix3::<f64>::zeros();
+        for &k in &members {
+            let [east, north] = tangent_basis_eci(&e.star_dirs[k]);
+            pm += (north * north.transpose() + east * east.transpose()) / n;
+        }
+        let Some(pinv) = pm.try_inverse() else {
+            continue;
+        };
+        for axis in 0..3 {
+            let coef = pinv.row(axis).transpose();
+            let mut row = Vec::with_capacity(2 * members.len());
             for &k in &members {
                 let [east, north] = tangent_basis_eci(&e.star_dirs[k]);
-                pm += (north * north.transpose() + east * east.transpose()) / n;
+                row.push((2 * k, coef.dot(&north) / n));
+                row.push((2 * k + 1, -coef.dot(&east) / n));
             }
-            let Some(pinv) = pm.try_inverse() else {
-                continue;
-            };
-            for axis in 0..3 {
-                let coef = pinv.row(axis).transpose();
-                let mut row = Vec::with_capacity(2 * members.len());
-                for &k in &members {
-                    let [east, north] = tangent_basis_eci(&e.star_dirs[k]);
-                    row.push((2 * k, coef.dot(&north) / n));
-                    row.push((2 * k + 1, -coef.dot(&east) / n));
-                }
-                e.constraints.push((row, 0.5));
-            }
+            e.constraints.push((row, 0.5));
         }
-        e.stars = stars;
-        out.push(e);
     }
-    out
+    e.stars = stars;
+    Some(e)
 }
 
 /// `C(n, k)` (statrs), saturating at `usize::MAX` (a look-elsewhere factor: only its size

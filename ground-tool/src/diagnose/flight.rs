@@ -80,6 +80,277 @@ pub struct Restriction<'a> {
     pub reference_arcsec: [f64; N_ALIGN],
 }
 
+/// Whether flight parameter `p` may move under `restrict` (every one without).
+fn is_free(restrict: Option<Restriction<'_>>, p: usize) -> bool {
+    restrict.is_none_or(|r| r.free.contains(&p))
+}
+
+/// The flight fit and the terms it holds, which every table term is read from.
+struct FlightFit<'a> {
+    res: &'a SearchResult,
+    fit: super::fit::SubFit,
+    /// Terms that go up only when determined at 3σ.
+    gated: Vec<usize>,
+}
+
+impl FlightFit<'_> {
+    /// Parameter `i` when it is a gated term determined at 3σ, else 0.
+    fn p3(&self, i: usize) -> f64 {
+        if !self.gated.contains(&i) {
+            return 0.0;
+        }
+        match self.fit.param(i) {
+            Some((x, s)) if x.abs() > 3.0 * s => x,
+            _ => 0.0,
+        }
+    }
+
+    /// Rotations folded into each sensor's alignment (arcsec, ACS): a thermal drift's
+    /// constant `k (T_ref − T̄)` that moves the fit's reference temperature (the run mean T̄)
+    /// to the table's, and an alignment step (the table flies the alignment after it, the
+    /// flight going on from the end of the span). Also the thermal reference temperatures.
+    fn folded_rotations(
+        &self,
+        effects: &[usize],
+        base: &AlignmentTable,
+        temperature_mean_c: [f64; 5],
+    ) -> ([f64; 4], [Vector3<f64>; 4]) {
+        let res = self.res;
+        let mut thermal_reference = base.corrections.thermal_reference_c;
+        let mut fixed_rotation_arcsec = [Vector3::zeros(); 4];
+        for &i in effects {
+            let e = &res.layout.effects[i];
+            if let (EffectKind::ThermalAlignmentDrift, Some(s)) = (e.kind, e.sensor) {
+                let start = res.layout.range(i).start;
+                let k = Vector3::new(self.p3(start), self.p3(start + 1), self.p3(start + 2));
+                if k == Vector3::zeros() {
+                    continue;
+                }
+                let flown = base.corrections.thermal_alignment_rad_per_c[s];
+                if flown.iter().all(|x| *x == 0.0) {
+                    thermal_reference[s] = temperature_mean_c[s];
+                }
+                fixed_rotation_arcsec[s] += k * (thermal_reference[s] - temperature_mean_c[s]);
+            }
+            if let (EffectKind::AlignmentStep, Some(s)) = (e.kind, e.sensor) {
+                let start = res.layout.range(i).start;
+                let x = |k: usize| self.fit.param(start + k).map_or(0.0, |(x, _)| x);
+                fixed_rotation_arcsec[s] += Vector3::new(x(0), x(1), x(2));
+            }
+        }
+        (thermal_reference, fixed_rotation_arcsec)
+    }
+}
+
+/// The tables as the effects change them, and what is said of each change.
+struct TableChanges<'a> {
+    table: AlignmentTable,
+    filter: Option<FilterTable>,
+    catalog: Option<StarCatalogTable>,
+    applied: Vec<String>,
+    ground_only: Vec<String>,
+    flown_filter: &'a FilterTable,
+    flown_catalog: Option<&'a StarCatalogTable>,
+    thermal_reference: [f64; 4],
+}
+
+/// Which alignments the flight fit re-estimated: the line of `applied` that says so.
+fn refit_note(restrict: Option<Restriction<'_>>) -> Option<String> {
+    let names = super::measurements::SENSOR_NAMES;
+    let refit: Vec<&str> = (1..4)
+        .filter(|s| (0..3).any(|ax| is_free(restrict, 3 * (s - 1) + ax)))
+        .map(|s| names[s])
+        .collect();
+    if refit.len() == 3 {
+        Some(
+            "alignments re-estimated jointly with the effects (FHST frame of the OBC kept)"
+                .to_owned(),
+        )
+    } else if !refit.is_empty() {
+        Some(format!(
+            "alignments of {} re-estimated jointly with the effects, the others as the reference table (FHST frame of the OBC kept)",
+            refit.join(", ")
+        ))
+    } else {
+        None
+    }
+}
+
+impl TableChanges<'_> {
+    /// Puts effect `i`'s terms into the table that has a hook for it, or says it has none.
+    fn apply_effect(&mut self, ff: &FlightFit<'_>, i: usize) {
+        let names = super::measurements::SENSOR_NAMES;
+        let e = &ff.res.layout.effects[i];
+        let r = ff.res.layout.range(i);
+        let p = |k: usize| ff.p3(r.start + k);
+        let label = e.label();
+        let table = &mut self.table;
+        match (e.kind, e.sensor) {
+            (EffectKind::TimeTagOffset, Some(s)) => {
+                table.corrections.time_offset_s[s] += p(0) * 1e-3;
+                self.applied.push(format!(
+                    "{label}: alignment.corrections.time_offset_s[{}] = {:.4} s",
+                    names[s], table.corrections.time_offset_s[s]
+                ));
+            }
+            (EffectKind::FhstDistortion, Some(s)) if s < 2 => {
+                let d = &mut table.corrections.fhst_distortion[s];
+                d[0] += p(0) * RAD_PER_ARCSEC / FHST_REF_RAD.powi(3);
+                d[1] += p(1) * RAD_PER_ARCSEC / FHST_REF_RAD.powi(2);
+                d[2] += p(2) * RAD_PER_ARCSEC / FHST_REF_RAD.powi(2);
+                self.applied.push(format!(
+                    "{label}: alignment.corrections.fhst_distortion[{}] = [{:.5}, {:.5}, {:.5}]",
+                    names[s], d[0], d[1], d[2]
+                ));
+            }
+            (EffectKind::MagnitudeBias, Some(s)) if s < 2 => {
+                let b = &mut table.corrections.fhst_magnitude_bias_rad_per_mag[s];
+                b[0] += p(0) * RAD_PER_ARCSEC;
+                b[1] += p(1) * RAD_PER_ARCSEC;
+                self.applied.push(format!(
+                    "{label}: alignment.corrections.fhst_magnitude_bias_rad_per_mag[{}] = [{:.3}, {:.3}] arcsec/mag",
+                    names[s],
+                    b[0] / RAD_PER_ARCSEC,
+                    b[1] / RAD_PER_ARCSEC
+                ));
+            }
+            (EffectKind::ThermalAlignmentDrift, Some(s)) => {
+                let k = &mut table.corrections.thermal_alignment_rad_per_c[s];
+                for (ax, kx) in k.iter_mut().enumerate() {
+                    *kx += p(ax) * RAD_PER_ARCSEC;
+                }
+                table.corrections.thermal_reference_c[s] = self.thermal_reference[s];
+                self.applied.push(format!(
+                    "{label}: alignment.corrections.thermal_alignment_rad_per_c[{}] = [{:.3}, {:.3}, {:.3}] arcsec/degC about ACS x, y, z, thermal_reference_c = {:.2} degC",
+                    names[s],
+                    k[0] / RAD_PER_ARCSEC,
+                    k[1] / RAD_PER_ARCSEC,
+                    k[2] / RAD_PER_ARCSEC,
+                    self.thermal_reference[s]
+                ));
+            }
+            (EffectKind::AlignmentStep, Some(s)) => {
+                let x = |k: usize| ff.fit.param(r.start + k).unwrap_or((f64::NAN, f64::NAN));
+                self.applied.push(format!(
+                    "{label}: the alignment of {} after the step at t = {:.0} s flies (step [{:.2} ± {:.2}, {:.2} ± {:.2}, {:.2} ± {:.2}] arcsec about ACS x, y, z)",
+                    names[s],
+                    e.step_time_s.unwrap_or(f64::NAN),
+                    x(0).0,
+                    x(0).1,
+                    x(1).0,
+                    x(1).1,
+                    x(2).0,
+                    x(2).1
+                ));
+            }
+            (EffectKind::FssTransferFunction, Some(s)) if s >= 2 => {
+                self.apply_fss_transfer(e, s, &p);
+            }
+            (EffectKind::CatalogProperMotionError, _) => match self.flown_catalog {
+                Some(flown) => {
+                    let (c, n) = corrected_catalog(flown, e, r.start, &ff.fit);
+                    self.applied.push(format!(
+                        "{label}: star_catalog: {n} of {} stars moved by their offsets (net rotation removed, shrunk to the minimum-variance estimate)",
+                        e.stars.len()
+                    ));
+                    self.catalog = Some(c);
+                }
+                None => self.ground_only.push(format!(
+                    "{label}: no flown star catalog in the run folder to correct"
+                )),
+            },
+            (EffectKind::AberrationAnnual | EffectKind::Aberration, _) => {
+                let mut f = *self.flown_filter;
+                f.aberration_correction = true;
+                self.filter = Some(f);
+                self.applied
+                    .push(format!("{label}: filter.aberration_correction = true"));
+            }
+            _ => self
+                .ground_only
+                .push(format!("{label}: no flight-table hook")),
+        }
+    }
+
+    /// An FSS transfer function (sensor `s`, parameters `p`): its polynomial into
+    /// `fss_transfer`/`fss_cubic`, its cyclic term into `fss_cyclic` when determined and of
+    /// the flown pitch (one pitch per sensor).
+    fn apply_fss_transfer(
+        &mut self,
+        e: &super::effects::Effect,
+        s: usize,
+        p: &dyn Fn(usize) -> f64,
+    ) {
+        let names = super::measurements::SENSOR_NAMES;
+        let label = e.label();
+        let corr = &mut self.table.corrections;
+        let e3 = FSS_EDGE_RAD.powi(3);
+        let c = &mut corr.fss_transfer[s - 2];
+        c[0] += p(0) * 1e-6;
+        c[1] += p(1) * RAD_PER_ARCSEC / e3;
+        c[3] += p(3) * 1e-6;
+        c[4] += p(4) * RAD_PER_ARCSEC / e3;
+        let c = *c;
+        let k = &mut corr.fss_cubic[s - 2];
+        k[0] += p(2) * RAD_PER_ARCSEC / e3;
+        k[1] += p(5) * RAD_PER_ARCSEC / e3;
+        let k = *k;
+        self.applied.push(format!(
+            "{label}: alignment.corrections.fss_transfer[{}] = [{:.3e}, {:.3e}, {:.3e}, {:.3e}, {:.3e}, {:.3e}], fss_cubic = [{:.3e}, {:.3e}]",
+            names[s], c[0], c[1], c[2], c[3], c[4], c[5], k[0], k[1]
+        ));
+        let Some(pitch) = e.pitch_rad else {
+            return;
+        };
+        let amp = [p(6), p(7), p(8), p(9)].map(|a| a * RAD_PER_ARCSEC);
+        let cyc = &mut corr.fss_cyclic[s - 2];
+        if amp.iter().all(|a| *a == 0.0) {
+            self.ground_only.push(format!(
+                "{label}: cyclic term at pitch {:.3} deg not determined at 3 sigma",
+                pitch.to_degrees()
+            ));
+        } else if cyc[0] == 0.0 || (cyc[0] - pitch).abs() < 1e-9 {
+            cyc[0] = pitch;
+            for (c, a) in cyc[1..].iter_mut().zip(amp) {
+                *c += a;
+            }
+            self.applied.push(format!(
+                "{label}: alignment.corrections.fss_cyclic[{}] = [{:.4} deg, {:.2}, {:.2}, {:.2}, {:.2} arcsec]",
+                names[s],
+                cyc[0].to_degrees(),
+                cyc[1] / RAD_PER_ARCSEC,
+                cyc[2] / RAD_PER_ARCSEC,
+                cyc[3] / RAD_PER_ARCSEC,
+                cyc[4] / RAD_PER_ARCSEC
+            ));
+        } else {
+            self.ground_only.push(format!(
+                "{label}: cyclic term at pitch {:.3} deg (the flown table has one at {:.3} deg; one pitch per sensor)",
+                pitch.to_degrees(),
+                cyc[0].to_degrees()
+            ));
+        }
+    }
+
+    /// Every changed table validates.
+    fn validate(&self) -> anyhow::Result<()> {
+        self.table.validate().map_err(|e| {
+            anyhow::anyhow!("diagnose: the corrected alignment table does not validate ({e:?})")
+        })?;
+        if let Some(f) = &self.filter {
+            f.validate().map_err(|e| {
+                anyhow::anyhow!("diagnose: the filter table does not validate ({e:?})")
+            })?;
+        }
+        if let Some(c) = &self.catalog {
+            c.validate().map_err(|e| {
+                anyhow::anyhow!("diagnose: the corrected star catalog does not validate ({e:?})")
+            })?;
+        }
+        Ok(())
+    }
+}
+
 /// Build the tables from the final fit. `temperature_mean_c` is the run mean of each
 /// temperature slot, the reference of the thermal parameters
 /// ([`super::measurements::MeasurementSet::temperature_mean_c`]). `base` is the table the
@@ -96,15 +367,15 @@ pub fn flight_update(
     temperature_mean_c: [f64; 5],
     restrict: Option<Restriction<'_>>,
 ) -> anyhow::Result<FlightUpdate> {
-    // The flight fit: the final model restricted to what the OBC can apply (alignments, time
-    // offsets, distortion, magnitude bias, thermal drift, the FSS transfer function, annual
-    // aberration). The alignments then absorb the rest as well as they can for the OBC's own
-    // model; taking the full model's alignments would leave the OBC with alignments that were
-    // estimated together with terms it does not have (an orbit-periodic term trades with its
-    // alignment).
+    // 1. The flight model: the final model restricted to what the OBC can apply (alignments,
+    //    time offsets, distortion, magnitude bias, thermal drift, the FSS transfer function,
+    //    annual aberration). The alignments then absorb the rest as well as they can for the
+    //    OBC's own model; taking the full model's alignments would leave the OBC with
+    //    alignments that were estimated together with terms it does not have (an
+    //    orbit-periodic term trades with its alignment).
     let mut effects: Vec<usize> = res.baseline.clone();
     effects.extend(&res.added);
-    let free = |p: usize| restrict.is_none_or(|r| r.free.contains(&p));
+    let free = |p: usize| is_free(restrict, p);
     effects.retain(|&i| res.layout.range(i).any(free));
     // Alignments not let through stay at the reference's.
     let held_alignment: Vec<super::fit::Fixed> = restrict.map_or_else(Vec::new, |r| {
@@ -117,226 +388,42 @@ pub fn flight_update(
             })
             .collect()
     });
+    // 2. Its fit, the gated terms kept at 3σ.
     let (always, gated) = flight_terms(res, &effects, &free);
-    let (flight_fit, gated) = gated_fit(res, &always, gated, &held_alignment);
-    let g_table = relative_to_base(flight_fit.expand(res.layout.total), restrict);
-    let p3 = |i: usize| {
-        if !gated.contains(&i) {
-            return 0.0;
-        }
-        match flight_fit.param(i) {
-            Some((x, s)) if x.abs() > 3.0 * s => x,
-            _ => 0.0,
-        }
-    };
-    // Rotations folded into each sensor's alignment (arcsec, ACS): a thermal drift's constant
-    // `k (T_ref − T̄)` that moves the fit's reference temperature (the run mean T̄) to the
-    // table's, and an alignment step (the table flies the alignment after it).
-    let mut thermal_reference = base.corrections.thermal_reference_c;
-    let mut fixed_rotation_arcsec = [Vector3::zeros(); 4];
-    for &i in &effects {
-        let e = &res.layout.effects[i];
-        if let (EffectKind::ThermalAlignmentDrift, Some(s)) = (e.kind, e.sensor) {
-            let start = res.layout.range(i).start;
-            let k = Vector3::new(p3(start), p3(start + 1), p3(start + 2));
-            if k == Vector3::zeros() {
-                continue;
-            }
-            let flown = base.corrections.thermal_alignment_rad_per_c[s];
-            if flown.iter().all(|x| *x == 0.0) {
-                thermal_reference[s] = temperature_mean_c[s];
-            }
-            fixed_rotation_arcsec[s] += k * (thermal_reference[s] - temperature_mean_c[s]);
-        }
-        // An alignment step: the table flies the alignment after it (the flight goes on from
-        // the end of the span).
-        if let (EffectKind::AlignmentStep, Some(s)) = (e.kind, e.sensor) {
-            let start = res.layout.range(i).start;
-            let x = |k: usize| flight_fit.param(start + k).map_or(0.0, |(x, _)| x);
-            fixed_rotation_arcsec[s] += Vector3::new(x(0), x(1), x(2));
-        }
-    }
-    let mut applied = Vec::new();
-    let mut ground_only = Vec::new();
-    let mut table = adjusted_alignment(base, &g_table, &fixed_rotation_arcsec, counts)?;
+    let (fit, gated) = gated_fit(res, &always, gated, &held_alignment);
+    let ff = FlightFit { res, fit, gated };
+    let g_table = relative_to_base(ff.fit.expand(res.layout.total), restrict);
+    // 3. The alignments, with the rotations folded in; the ground's for comparison.
+    let (thermal_reference, fixed_rotation_arcsec) =
+        ff.folded_rotations(&effects, base, temperature_mean_c);
+    let table = adjusted_alignment(base, &g_table, &fixed_rotation_arcsec, counts)?;
     let g_ground = relative_to_base(res.final_fit.expand(res.layout.total), restrict);
     let ground_alignment = adjusted_alignment(base, &g_ground, &[Vector3::zeros(); 4], counts)?;
-    let names = super::measurements::SENSOR_NAMES;
-    let refit: Vec<&str> = (1..4)
-        .filter(|s| (0..3).any(|ax| free(3 * (s - 1) + ax)))
-        .map(|s| names[s])
-        .collect();
-    if refit.len() == 3 {
-        applied.push(
-            "alignments re-estimated jointly with the effects (FHST frame of the OBC kept)"
-                .to_owned(),
-        );
-    } else if !refit.is_empty() {
-        applied.push(format!(
-            "alignments of {} re-estimated jointly with the effects, the others as the reference table (FHST frame of the OBC kept)",
-            refit.join(", ")
-        ));
-    }
-    let mut filter = None;
-    let mut catalog = None;
+    // 4. Every effect into the table that has a hook for it.
+    let mut changes = TableChanges {
+        table,
+        filter: None,
+        catalog: None,
+        applied: refit_note(restrict).into_iter().collect(),
+        ground_only: Vec::new(),
+        flown_filter,
+        flown_catalog,
+        thermal_reference,
+    };
     for i in effects {
-        let e = &res.layout.effects[i];
-        let r = res.layout.range(i);
-        let p = |k: usize| p3(r.start + k);
-        let label = e.label();
-        match (e.kind, e.sensor) {
-            (EffectKind::TimeTagOffset, Some(s)) => {
-                table.corrections.time_offset_s[s] += p(0) * 1e-3;
-                applied.push(format!(
-                    "{label}: alignment.corrections.time_offset_s[{}] = {:.4} s",
-                    names[s], table.corrections.time_offset_s[s]
-                ));
-            }
-            (EffectKind::FhstDistortion, Some(s)) if s < 2 => {
-                let d = &mut table.corrections.fhst_distortion[s];
-                d[0] += p(0) * RAD_PER_ARCSEC / FHST_REF_RAD.powi(3);
-                d[1] += p(1) * RAD_PER_ARCSEC / FHST_REF_RAD.powi(2);
-                d[2] += p(2) * RAD_PER_ARCSEC / FHST_REF_RAD.powi(2);
-                applied.push(format!(
-                    "{label}: alignment.corrections.fhst_distortion[{}] = [{:.5}, {:.5}, {:.5}]",
-                    names[s], d[0], d[1], d[2]
-                ));
-            }
-            (EffectKind::MagnitudeBias, Some(s)) if s < 2 => {
-                let b = &mut table.corrections.fhst_magnitude_bias_rad_per_mag[s];
-                b[0] += p(0) * RAD_PER_ARCSEC;
-                b[1] += p(1) * RAD_PER_ARCSEC;
-                applied.push(format!(
-                    "{label}: alignment.corrections.fhst_magnitude_bias_rad_per_mag[{}] = [{:.3}, {:.3}] arcsec/mag",
-                    names[s],
-                    b[0] / RAD_PER_ARCSEC,
-                    b[1] / RAD_PER_ARCSEC
-                ));
-            }
-            (EffectKind::ThermalAlignmentDrift, Some(s)) => {
-                let k = &mut table.corrections.thermal_alignment_rad_per_c[s];
-                for (ax, kx) in k.iter_mut().enumerate() {
-                    *kx += p(ax) * RAD_PER_ARCSEC;
-                }
-                table.corrections.thermal_reference_c[s] = thermal_reference[s];
-                applied.push(format!(
-                    "{label}: alignment.corrections.thermal_alignment_rad_per_c[{}] = [{:.3}, {:.3}, {:.3}] arcsec/degC about ACS x, y, z, thermal_reference_c = {:.2} degC",
-                    names[s],
-                    k[0] / RAD_PER_ARCSEC,
-                    k[1] / RAD_PER_ARCSEC,
-                    k[2] / RAD_PER_ARCSEC,
-                    thermal_reference[s]
-                ));
-            }
-            (EffectKind::AlignmentStep, Some(s)) => {
-                let x = |k: usize| {
-                    flight_fit
-                        .param(r.start + k)
-                        .unwrap_or((f64::NAN, f64::NAN))
-                };
-                applied.push(format!(
-                    "{label}: the alignment of {} after the step at t = {:.0} s flies (step [{:.2} ± {:.2}, {:.2} ± {:.2}, {:.2} ± {:.2}] arcsec about ACS x, y, z)",
-                    names[s],
-                    e.step_time_s.unwrap_or(f64::NAN),
-                    x(0).0,
-                    x(0).1,
-                    x(1).0,
-                    x(1).1,
-                    x(2).0,
-                    x(2).1
-                ));
-            }
-            (EffectKind::FssTransferFunction, Some(s)) if s >= 2 => {
-                let corr = &mut table.corrections;
-                let e3 = FSS_EDGE_RAD.powi(3);
-                let c = &mut corr.fss_transfer[s - 2];
-                c[0] += p(0) * 1e-6;
-                c[1] += p(1) * RAD_PER_ARCSEC / e3;
-                c[3] += p(3) * 1e-6;
-                c[4] += p(4) * RAD_PER_ARCSEC / e3;
-                let c = *c;
-                let k = &mut corr.fss_cubic[s - 2];
-                k[0] += p(2) * RAD_PER_ARCSEC / e3;
-                k[1] += p(5) * RAD_PER_ARCSEC / e3;
-                let k = *k;
-                applied.push(format!(
-                    "{label}: alignment.corrections.fss_transfer[{}] = [{:.3e}, {:.3e}, {:.3e}, {:.3e}, {:.3e}, {:.3e}], fss_cubic = [{:.3e}, {:.3e}]",
-                    names[s], c[0], c[1], c[2], c[3], c[4], c[5], k[0], k[1]
-                ));
-                if let Some(pitch) = e.pitch_rad {
-                    let amp = [p(6), p(7), p(8), p(9)].map(|a| a * RAD_PER_ARCSEC);
-                    let cyc = &mut corr.fss_cyclic[s - 2];
-                    if amp.iter().all(|a| *a == 0.0) {
-                        ground_only.push(format!(
-                            "{label}: cyclic term at pitch {:.3} deg not determined at 3 sigma",
-                            pitch.to_degrees()
-                        ));
-                    } else if cyc[0] == 0.0 || (cyc[0] - pitch).abs() < 1e-9 {
-                        cyc[0] = pitch;
-                        for (c, a) in cyc[1..].iter_mut().zip(amp) {
-                            *c += a;
-                        }
-                        applied.push(format!(
-                            "{label}: alignment.corrections.fss_cyclic[{}] = [{:.4} deg, {:.2}, {:.2}, {:.2}, {:.2} arcsec]",
-                            names[s],
-                            cyc[0].to_degrees(),
-                            cyc[1] / RAD_PER_ARCSEC,
-                            cyc[2] / RAD_PER_ARCSEC,
-                            cyc[3] / RAD_PER_ARCSEC,
-                            cyc[4] / RAD_PER_ARCSEC
-                        ));
-                    } else {
-                        ground_only.push(format!(
-                            "{label}: cyclic term at pitch {:.3} deg (the flown table has one at {:.3} deg; one pitch per sensor)",
-                            pitch.to_degrees(),
-                            cyc[0].to_degrees()
-                        ));
-                    }
-                }
-            }
-            (EffectKind::CatalogProperMotionError, _) => match flown_catalog {
-                Some(flown) => {
-                    let (c, n) = corrected_catalog(flown, e, r.start, &flight_fit);
-                    applied.push(format!(
-                        "{label}: star_catalog: {n} of {} stars moved by their offsets (net rotation removed, shrunk to the minimum-variance estimate)",
-                        e.stars.len()
-                    ));
-                    catalog = Some(c);
-                }
-                None => ground_only.push(format!(
-                    "{label}: no flown star catalog in the run folder to correct"
-                )),
-            },
-            (EffectKind::AberrationAnnual | EffectKind::Aberration, _) => {
-                let mut f = *flown_filter;
-                f.aberration_correction = true;
-                filter = Some(f);
-                applied.push(format!("{label}: filter.aberration_correction = true"));
-            }
-            _ => ground_only.push(format!("{label}: no flight-table hook")),
-        }
+        changes.apply_effect(&ff, i);
     }
-    table.validate().map_err(|e| {
-        anyhow::anyhow!("diagnose: the corrected alignment table does not validate ({e:?})")
-    })?;
-    if let Some(f) = &filter {
-        f.validate()
-            .map_err(|e| anyhow::anyhow!("diagnose: the filter table does not validate ({e:?})"))?;
-    }
-    if let Some(c) = &catalog {
-        c.validate().map_err(|e| {
-            anyhow::anyhow!("diagnose: the corrected star catalog does not validate ({e:?})")
-        })?;
-    }
+    // 5. Every changed table validates.
+    changes.validate()?;
     Ok(FlightUpdate {
-        alignment: table,
+        alignment: changes.table,
         ground_alignment,
-        filter,
-        catalog,
-        flight_idx: always.iter().chain(&gated).copied().collect(),
-        flight_fit,
-        applied,
-        ground_only,
+        filter: changes.filter,
+        catalog: changes.catalog,
+        flight_idx: always.iter().chain(&ff.gated).copied().collect(),
+        flight_fit: ff.fit,
+        applied: changes.applied,
+        ground_only: changes.ground_only,
     })
 }
 

@@ -261,12 +261,353 @@ fn make_batches(frames: &[FrameObservations]) -> Vec<(usize, usize, bool)> {
     out
 }
 
+/// Calibrated gyro increments and their intervals per frame (step k ends at frame k): the
+/// IRUCAL `δM` applied and the OBC bias at the frame removed.
+fn calibrated_increments(input: &DiagnoseInput<'_>) -> (Vec<Vector3<f64>>, Vec<f64>) {
+    let n = input.frames.len();
+    let mut phi = vec![Vector3::zeros(); n];
+    let mut dts = vec![0.0; n];
+    for (k, f) in input.frames.iter().enumerate() {
+        if let Some(g) = f.gyro {
+            phi[k] = (Matrix3::identity() + input.gyro.delta_m) * g.dtheta_acs_rad
+                - bias_at(input, k) * g.dt_s;
+            dts[k] = g.dt_s;
+        }
+    }
+    (phi, dts)
+}
+
+/// The OBC's bias at frame `k` (the calibration's when the telemetry has none).
+fn bias_at(input: &DiagnoseInput<'_>, k: usize) -> Vector3<f64> {
+    input
+        .bias_per_frame
+        .as_ref()
+        .and_then(|b| b.get(k).copied())
+        .unwrap_or(input.gyro.bias_acs_rad_per_s)
+}
+
+/// The body rate at each frame: the mean of the increments ending at it and at the next.
+fn frame_rates(phi: &[Vector3<f64>], dts: &[f64]) -> Vec<Vector3<f64>> {
+    let n = phi.len();
+    let mut frame_rate = vec![Vector3::zeros(); n];
+    for k in 0..n {
+        let (mut s, mut t) = (Vector3::zeros(), 0.0);
+        for j in [k, k + 1] {
+            if j < n && dts[j] > 0.0 {
+                s += phi[j];
+                t += dts[j];
+            }
+        }
+        if t > 0.0 {
+            frame_rate[k] = s / t;
+        }
+    }
+    frame_rate
+}
+
+/// The run mean of each temperature slot (temperatures enter as deviations from it).
+fn mean_temperatures(frames: &[FrameObservations]) -> [f64; 5] {
+    let mut tmean = [0.0; 5];
+    if !frames.is_empty() {
+        for f in frames {
+            for (m, t) in tmean.iter_mut().zip(f.temperatures_c) {
+                *m += t;
+            }
+        }
+        for m in &mut tmean {
+            *m /= frames.len() as f64;
+        }
+    }
+    tmean
+}
+
+/// Time since the end of the last slew at each frame (NaN before the first slew).
+fn time_since_slew(frames: &[FrameObservations]) -> Vec<f64> {
+    let mut since_slew = vec![f64::NAN; frames.len()];
+    let mut last_end: Option<f64> = None;
+    for (k, f) in frames.iter().enumerate() {
+        if f.high_rate {
+            last_end = Some(f.time.seconds());
+        }
+        since_slew[k] = last_end.map_or(f64::NAN, |e| f.time.seconds() - e);
+    }
+    since_slew
+}
+
+/// Orbit period from the first orbit state (two-body).
+fn orbit_period(frames: &[FrameObservations]) -> Option<f64> {
+    frames.iter().find_map(|f| f.orbit).map(|(p, v)| {
+        let mu = 398_600.441_8;
+        let r = p.norm();
+        let energy = 0.5 * v.norm_squared() - mu / r;
+        let a = -mu / (2.0 * energy);
+        std::f64::consts::TAU * (a.powi(3) / mu).sqrt()
+    })
+}
+
+/// The identified star and Sun sightings of the frames: at most one measurement each, so
+/// the measurements are reserved at once and trimmed after, not doubled as they grow (six
+/// months of 30-s frames: ~0.5 M of 424 B, issue 22).
+fn count_sightings(frames: &[FrameObservations]) -> usize {
+    frames
+        .iter()
+        .map(|f| {
+            f.stars
+                .iter()
+                .filter(|s| s.as_ref().is_some_and(|s| s.identified.is_some()))
+                .count()
+                + f.suns.iter().filter(|s| s.is_some()).count()
+        })
+        .sum()
+}
+
+/// What the stages of [`MeasurementSet::build`] share: the input, the flown alignments and
+/// time offsets, the aberration to add to the frames' references, and the per-frame series.
+struct SetBuild<'a> {
+    input: &'a DiagnoseInput<'a>,
+    m_sensor: [Matrix3<f64>; 4],
+    tau0: [f64; 4],
+    /// The model's annual and orbital aberration factors less the frames'.
+    dk: [f64; 2],
+    t_first: f64,
+    phi: Vec<Vector3<f64>>,
+    dts: Vec<f64>,
+    frame_rate: Vec<Vector3<f64>>,
+    tmean: [f64; 5],
+    since_slew: Vec<f64>,
+}
+
+/// One frame's context for its measurements: its attitude, batch and the velocities.
+struct FrameContext {
+    k: usize,
+    a_k: Matrix3<f64>,
+    batch: usize,
+    t_s: f64,
+    t_center: f64,
+    phase: f64,
+    v_e: Vector3<f64>,
+    v_sc: Vector3<f64>,
+    sun: Vector3<f64>,
+    dtemp: [f64; 5],
+}
+
+/// One sighting before its residual: sensor, reference direction (ECI), measured angles
+/// (rad), σ (rad), Hipparcos number (0 for the Sun) and catalog magnitude.
+struct Sighting {
+    sensor: usize,
+    u: Vector3<f64>,
+    ang: [f64; 2],
+    sigma_rad: f64,
+    star: u32,
+    mag: f64,
+}
+
+impl SetBuild<'_> {
+    /// The batch's attitude at every frame: the fine attitude at the center (FHST-only; with
+    /// one tracker, the FSSs help; else the OBC's), carried by the gyro increments
+    /// (A(k) = Rot(φ_k) A(k−1)); `None` when there is none. (attitudes, center's, fine).
+    fn batch_attitudes(
+        &self,
+        lo: usize,
+        hi: usize,
+        center: usize,
+    ) -> Option<(Vec<Matrix3<f64>>, Matrix3<f64>, bool)> {
+        let frames = self.input.frames;
+        let bias = bias_at(self.input, center);
+        let well_determined = |s: &crate::attitude::quest::AttitudeSolution| {
+            (0..3).all(|i| s.cov_acs_rad2[(i, i)].max(0.0).sqrt() * ARCSEC_PER_RAD < 60.0)
+        };
+        let fine = [AttitudeSensors::FhstOnly, AttitudeSensors::FhstAndFss]
+            .into_iter()
+            .filter_map(|which| {
+                fine_attitude(
+                    frames,
+                    lo..hi,
+                    center,
+                    &bias,
+                    &self.input.gyro.delta_m,
+                    which,
+                )
+                .ok()
+            })
+            .find(well_determined);
+        let (a_center, is_fine) = match (fine, frames[center].obc_q_acs_from_eci) {
+            (Some(s), _) => (s.m_acs_from_eci, true),
+            (None, Some(q)) => (q.to_dcm(), false),
+            (None, None) => return None,
+        };
+        let phi = &self.phi;
+        let mut att = vec![Matrix3::identity(); hi - lo];
+        att[center - lo] = a_center;
+        for k in center + 1..hi {
+            att[k - lo] = rot(&phi[k]) * att[k - 1 - lo];
+        }
+        for k in (lo..center).rev() {
+            att[k - lo] = rot(&phi[k + 1]).transpose() * att[k + 1 - lo];
+        }
+        Some((att, a_center, is_fine))
+    }
+
+    /// Frame `k`'s context at attitude `a_k` in batch `batch` (center time `t_center`).
+    fn frame_context(
+        &self,
+        k: usize,
+        a_k: Matrix3<f64>,
+        batch: usize,
+        t_center: f64,
+    ) -> FrameContext {
+        let f = &self.input.frames[k];
+        let (phase, v_sc) = match f.orbit {
+            Some((p, v)) => (orbit_phase(&p, &v), v),
+            None => (f64::NAN, Vector3::zeros()),
+        };
+        let v_e = self
+            .input
+            .earth_vel_eci_km_per_s
+            .get(k)
+            .copied()
+            .unwrap_or_else(Vector3::zeros);
+        let sun = self
+            .input
+            .sun_eci
+            .get(k)
+            .copied()
+            .unwrap_or_else(Vector3::zeros);
+        let mut dtemp = [0.0; 5];
+        for (d, (t, m)) in dtemp
+            .iter_mut()
+            .zip(f.temperatures_c.iter().zip(self.tmean))
+        {
+            *d = t - m;
+        }
+        FrameContext {
+            k,
+            a_k,
+            batch,
+            t_s: f.time.seconds() - self.t_first,
+            t_center,
+            phase,
+            v_e,
+            v_sc,
+            sun,
+            dtemp,
+        }
+    }
+
+    /// The star and Sun sightings of frame `k`, in the order FHST1, FHST2, FSS1, FSS2.
+    fn sightings(&self, k: usize) -> Vec<Sighting> {
+        let f = &self.input.frames[k];
+        let mut out = Vec::new();
+        for (i, s) in f.stars.iter().enumerate() {
+            let Some(s) = s else { continue };
+            let Some((hip, dir)) = s.identified else {
+                continue;
+            };
+            out.push(Sighting {
+                sensor: i,
+                u: dir,
+                ang: [s.meas.h_rad, s.meas.v_rad],
+                sigma_rad: s.sigma_rad,
+                star: hip,
+                mag: s.catalog_magnitude,
+            });
+        }
+        for (i, s) in f.suns.iter().enumerate() {
+            let Some(s) = s else { continue };
+            out.push(Sighting {
+                sensor: i + 2,
+                u: s.sun_eci,
+                ang: [s.meas.alpha_rad, s.meas.beta_rad],
+                sigma_rad: s.sigma_rad,
+                star: 0,
+                mag: f64::NAN,
+            });
+        }
+        out
+    }
+
+    /// One sighting's residual, partials and regressors; `None` when the reference falls
+    /// outside the sensor's field.
+    fn measurement(&self, fc: &FrameContext, sg: &Sighting) -> Option<Measurement> {
+        let (k, sensor) = (fc.k, sg.sensor);
+        let f = &self.input.frames[k];
+        let rate = self.frame_rate[k];
+        let m = &self.m_sensor[sensor];
+        let [dk_annual, dk_orbital] = self.dk;
+        let (v_e, v_sc) = (fc.v_e, fc.v_sc);
+        let v_tot = v_e + v_sc;
+        // References to the model's aberration (first order).
+        let u = if dk_annual == 0.0 && dk_orbital == 0.0 {
+            sg.u
+        } else {
+            (sg.u
+                + aberration_term(&sg.u, &v_e) * dk_annual
+                + aberration_term(&sg.u, &v_sc) * dk_orbital)
+                .normalize()
+        };
+        // Attitude at the sample time t − τ₀.
+        let a_s = if self.tau0[sensor] == 0.0 {
+            fc.a_k
+        } else {
+            rot(&(-rate * self.tau0[sensor])) * fc.a_k
+        };
+        let b = a_s * u;
+        let s = m.transpose() * b;
+        let (p0, p1) = hv_from_dir(&s)?;
+        let jm = hv_jacobian(&s) * m.transpose();
+        let boresight = m.column(2).into_owned();
+        let tb = tangent_basis(&u);
+        let vdir = if v_tot.norm() > 0.0 {
+            v_tot.normalize()
+        } else {
+            v_tot
+        };
+        let sun = fc.sun;
+        Some(Measurement {
+            sensor,
+            frame: k,
+            batch: fc.batch,
+            t_s: fc.t_s,
+            dt_center_s: fc.t_s - fc.t_center,
+            r: [
+                (sg.ang[0] - p0) * ARCSEC_PER_RAD,
+                (sg.ang[1] - p1) * ARCSEC_PER_RAD,
+            ],
+            sigma: sg.sigma_rad * ARCSEC_PER_RAD,
+            jm,
+            b_acs: b,
+            ang: [p0, p1],
+            rate_acs: rate,
+            rate_sensor: m.transpose() * rate,
+            ab_annual_acs: a_s * aberration_term(&u, &v_e),
+            ab_orbital_acs: a_s * aberration_term(&u, &v_sc),
+            tangent_acs: [a_s * tb[0], a_s * tb[1]],
+            u_eci: u,
+            star: sg.star,
+            magnitude: sg.mag,
+            dtemp: fc.dtemp,
+            orbit_phase: fc.phase,
+            high_rate: f.high_rate,
+            sun_angle_deg: if sun.norm() > 0.0 {
+                (a_s * sun).dot(&boresight).clamp(-1.0, 1.0).acos() * DEG_PER_RAD
+            } else {
+                f64::NAN
+            },
+            vel_sensor: m.transpose() * (a_s * vdir),
+            since_slew_s: self.since_slew[k],
+            outlier: false,
+        })
+    }
+}
+
 impl MeasurementSet {
     /// Build residuals, partials and regressors.
     #[must_use]
     pub fn build(input: &DiagnoseInput<'_>) -> Self {
         let frames = input.frames;
         let n = frames.len();
+        // 1. The flown alignments and time offsets, the aberration to add, the per-frame
+        //    series (calibrated increments, rates, temperatures, time since the last slew).
         let m_sensor: [Matrix3<f64>; 4] = {
             let t = input.alignment.matrices();
             [
@@ -276,116 +617,32 @@ impl MeasurementSet {
                 matrix_from_rows(t[3]),
             ]
         };
-        let tau0 = input.alignment.corrections.time_offset_s;
         let k_frames = if input.frames_aberration { 1.0 } else { 0.0 };
         let k0 = input.aberration_model.map(|b| if b { 1.0 } else { 0.0 });
-        let (dk_annual, dk_orbital) = (k0[0] - k_frames, k0[1] - k_frames);
-        let t_first = frames.first().map_or(0.0, |f| f.time.seconds());
-        let bias_at = |k: usize| -> Vector3<f64> {
-            input
-                .bias_per_frame
-                .as_ref()
-                .and_then(|b| b.get(k).copied())
-                .unwrap_or(input.gyro.bias_acs_rad_per_s)
+        let (phi, dts) = calibrated_increments(input);
+        let b = SetBuild {
+            input,
+            m_sensor,
+            tau0: input.alignment.corrections.time_offset_s,
+            dk: [k0[0] - k_frames, k0[1] - k_frames],
+            t_first: frames.first().map_or(0.0, |f| f.time.seconds()),
+            frame_rate: frame_rates(&phi, &dts),
+            phi,
+            dts,
+            tmean: mean_temperatures(frames),
+            since_slew: time_since_slew(frames),
         };
-        // Calibrated increments and rates per frame (step k ends at frame k).
-        let mut phi = vec![Vector3::zeros(); n];
-        let mut dts = vec![0.0; n];
-        for (k, f) in frames.iter().enumerate() {
-            if let Some(g) = f.gyro {
-                phi[k] = (Matrix3::identity() + input.gyro.delta_m) * g.dtheta_acs_rad
-                    - bias_at(k) * g.dt_s;
-                dts[k] = g.dt_s;
-            }
-        }
-        let mut frame_rate = vec![Vector3::zeros(); n];
-        for k in 0..n {
-            let (mut s, mut t) = (Vector3::zeros(), 0.0);
-            for j in [k, k + 1] {
-                if j < n && dts[j] > 0.0 {
-                    s += phi[j];
-                    t += dts[j];
-                }
-            }
-            if t > 0.0 {
-                frame_rate[k] = s / t;
-            }
-        }
-        // Temperatures: deviation from the run mean per slot.
-        let mut tmean = [0.0; 5];
-        if n > 0 {
-            for f in frames {
-                for (m, t) in tmean.iter_mut().zip(f.temperatures_c) {
-                    *m += t;
-                }
-            }
-            for m in &mut tmean {
-                *m /= n as f64;
-            }
-        }
-        // Time since the end of the last slew.
-        let mut since_slew = vec![f64::NAN; n];
-        let mut last_end: Option<f64> = None;
-        for (k, f) in frames.iter().enumerate() {
-            if f.high_rate {
-                last_end = Some(f.time.seconds());
-            }
-            since_slew[k] = last_end.map_or(f64::NAN, |e| f.time.seconds() - e);
-        }
-        // Orbit period from the first orbit state (two-body).
-        let orbit_period_s = frames.iter().find_map(|f| f.orbit).map(|(p, v)| {
-            let mu = 398_600.441_8;
-            let r = p.norm();
-            let energy = 0.5 * v.norm_squared() - mu / r;
-            let a = -mu / (2.0 * energy);
-            std::f64::consts::TAU * (a.powi(3) / mu).sqrt()
-        });
-
+        // 2. Per batch: the attitude at every frame, then every sighting's measurement.
         let mut batches = Vec::new();
         let mut frame_attitude = vec![None; n];
-        // At most one measurement per identified star and Sun sighting: reserved at once and
-        // trimmed after, not doubled as it grows (six months of 30-s frames: ~0.5 M of
-        // 424 B, issue 22).
-        let sightings = frames
-            .iter()
-            .map(|f| {
-                f.stars
-                    .iter()
-                    .filter(|s| s.as_ref().is_some_and(|s| s.identified.is_some()))
-                    .count()
-                    + f.suns.iter().filter(|s| s.is_some()).count()
-            })
-            .sum();
-        let mut meas = Vec::with_capacity(sightings);
+        let mut meas = Vec::with_capacity(count_sightings(frames));
         for (lo, hi, hr) in make_batches(frames) {
             let center = (lo + hi) / 2;
-            let bias = bias_at(center);
-            // FHST-only fine attitude; with one tracker, the FSSs help; else the OBC's.
-            let well_determined = |s: &crate::attitude::quest::AttitudeSolution| {
-                (0..3).all(|i| s.cov_acs_rad2[(i, i)].max(0.0).sqrt() * ARCSEC_PER_RAD < 60.0)
+            let Some((att, a_center, is_fine)) = b.batch_attitudes(lo, hi, center) else {
+                continue;
             };
-            let fine = [AttitudeSensors::FhstOnly, AttitudeSensors::FhstAndFss]
-                .into_iter()
-                .filter_map(|which| {
-                    fine_attitude(frames, lo..hi, center, &bias, &input.gyro.delta_m, which).ok()
-                })
-                .find(well_determined);
-            let (a_center, is_fine) = match (fine, frames[center].obc_q_acs_from_eci) {
-                (Some(s), _) => (s.m_acs_from_eci, true),
-                (None, Some(q)) => (q.to_dcm(), false),
-                (None, None) => continue,
-            };
-            // Carry the attitude to every frame: A(k) = Rot(φ_k) A(k−1).
-            let mut att = vec![Matrix3::identity(); hi - lo];
-            att[center - lo] = a_center;
-            for k in center + 1..hi {
-                att[k - lo] = rot(&phi[k]) * att[k - 1 - lo];
-            }
-            for k in (lo..center).rev() {
-                att[k - lo] = rot(&phi[k + 1]).transpose() * att[k + 1 - lo];
-            }
             let batch_index = batches.len();
-            let t_center = frames[center].time.seconds() - t_first;
+            let t_center = frames[center].time.seconds() - b.t_first;
             batches.push(Batch {
                 lo,
                 hi,
@@ -398,139 +655,37 @@ impl MeasurementSet {
                 fhst_only: true,
             });
             for k in lo..hi {
-                let f = &frames[k];
                 let a_k = att[k - lo];
                 frame_attitude[k] = Some(a_k);
-                let t_s = f.time.seconds() - t_first;
-                let (phase, v_sc) = match f.orbit {
-                    Some((p, v)) => (orbit_phase(&p, &v), v),
-                    None => (f64::NAN, Vector3::zeros()),
-                };
-                let v_e = input
-                    .earth_vel_eci_km_per_s
-                    .get(k)
-                    .copied()
-                    .unwrap_or_else(Vector3::zeros);
-                let v_tot = v_e + v_sc;
-                let sun = input.sun_eci.get(k).copied().unwrap_or_else(Vector3::zeros);
-                let mut dtemp = [0.0; 5];
-                for (d, (t, m)) in dtemp.iter_mut().zip(f.temperatures_c.iter().zip(tmean)) {
-                    *d = t - m;
-                }
-                let rate = frame_rate[k];
-                let mut push = |sensor: usize,
-                                u: Vector3<f64>,
-                                ang: [f64; 2],
-                                sigma_rad: f64,
-                                star: u32,
-                                mag: f64| {
-                    let m = &m_sensor[sensor];
-                    // References to the model's aberration (first order).
-                    let u = if dk_annual == 0.0 && dk_orbital == 0.0 {
-                        u
-                    } else {
-                        (u + aberration_term(&u, &v_e) * dk_annual
-                            + aberration_term(&u, &v_sc) * dk_orbital)
-                            .normalize()
-                    };
-                    // Attitude at the sample time t − τ₀.
-                    let a_s = if tau0[sensor] == 0.0 {
-                        a_k
-                    } else {
-                        rot(&(-rate * tau0[sensor])) * a_k
-                    };
-                    let b = a_s * u;
-                    let s = m.transpose() * b;
-                    let Some((p0, p1)) = hv_from_dir(&s) else {
-                        return;
-                    };
-                    let jm = hv_jacobian(&s) * m.transpose();
-                    let boresight = m.column(2).into_owned();
-                    let tb = tangent_basis(&u);
-                    let vdir = if v_tot.norm() > 0.0 {
-                        v_tot.normalize()
-                    } else {
-                        v_tot
-                    };
-                    meas.push(Measurement {
-                        sensor,
-                        frame: k,
-                        batch: batch_index,
-                        t_s,
-                        dt_center_s: t_s - t_center,
-                        r: [
-                            (ang[0] - p0) * ARCSEC_PER_RAD,
-                            (ang[1] - p1) * ARCSEC_PER_RAD,
-                        ],
-                        sigma: sigma_rad * ARCSEC_PER_RAD,
-                        jm,
-                        b_acs: b,
-                        ang: [p0, p1],
-                        rate_acs: rate,
-                        rate_sensor: m.transpose() * rate,
-                        ab_annual_acs: a_s * aberration_term(&u, &v_e),
-                        ab_orbital_acs: a_s * aberration_term(&u, &v_sc),
-                        tangent_acs: [a_s * tb[0], a_s * tb[1]],
-                        u_eci: u,
-                        star,
-                        magnitude: mag,
-                        dtemp,
-                        orbit_phase: phase,
-                        high_rate: f.high_rate,
-                        sun_angle_deg: if sun.norm() > 0.0 {
-                            (a_s * sun).dot(&boresight).clamp(-1.0, 1.0).acos() * DEG_PER_RAD
-                        } else {
-                            f64::NAN
-                        },
-                        vel_sensor: m.transpose() * (a_s * vdir),
-                        since_slew_s: since_slew[k],
-                        outlier: false,
-                    });
-                };
-                for (i, s) in f.stars.iter().enumerate() {
-                    let Some(s) = s else { continue };
-                    let Some((hip, dir)) = s.identified else {
-                        continue;
-                    };
-                    push(
-                        i,
-                        dir,
-                        [s.meas.h_rad, s.meas.v_rad],
-                        s.sigma_rad,
-                        hip,
-                        s.catalog_magnitude,
-                    );
-                }
-                for (i, s) in f.suns.iter().enumerate() {
-                    let Some(s) = s else { continue };
-                    push(
-                        i + 2,
-                        s.sun_eci,
-                        [s.meas.alpha_rad, s.meas.beta_rad],
-                        s.sigma_rad,
-                        0,
-                        f64::NAN,
-                    );
-                }
+                let fc = b.frame_context(k, a_k, batch_index, t_center);
+                meas.extend(
+                    b.sightings(k)
+                        .iter()
+                        .filter_map(|sg| b.measurement(&fc, sg)),
+                );
             }
         }
         meas.shrink_to_fit();
+        // 3. The set, its noise floor and its batches checked.
         let mut set = Self {
             meas,
             batches,
             frame_attitude,
-            frame_rate,
-            frame_time_s: frames.iter().map(|f| f.time.seconds() - t_first).collect(),
+            frame_time_s: frames
+                .iter()
+                .map(|f| f.time.seconds() - b.t_first)
+                .collect(),
             frame_gyro: (0..n)
-                .map(|k| (dts[k] > 0.0).then_some((phi[k], dts[k])))
+                .map(|k| (b.dts[k] > 0.0).then_some((b.phi[k], b.dts[k])))
                 .collect(),
             noise_floor_arcsec: [f64::NAN; 4],
             sigma_scale: [1.0; 4],
             m_acs_from_sensor: m_sensor,
             aberration_k0: k0,
-            time_offset0_s: tau0,
-            orbit_period_s,
-            temperature_mean_c: tmean,
+            time_offset0_s: b.tau0,
+            orbit_period_s: orbit_period(frames),
+            temperature_mean_c: b.tmean,
+            frame_rate: b.frame_rate,
         };
         set.estimate_noise();
         set.check_batches();

@@ -11,7 +11,7 @@
 
 use super::gyro::GyroAnalysis;
 use super::measurements::{axis_names, SENSOR_NAMES};
-use super::scoring::ParameterCheck;
+pub use super::scoring::{BeforeAfter, Scoring};
 use super::search::Iteration;
 use super::structure::{binned_means, Regressor};
 use super::{Analysis, Detected, Unexplained};
@@ -21,31 +21,6 @@ use serde::Serialize;
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::Path;
-
-/// Before/after per sensor.
-#[derive(Clone, Debug, Default, Serialize)]
-pub struct BeforeAfter {
-    /// Before.
-    pub before: BTreeMap<String, f64>,
-    /// After.
-    pub after: BTreeMap<String, f64>,
-}
-
-/// Scoring block (truth.json present).
-#[derive(Clone, Debug, Serialize)]
-pub struct Scoring {
-    /// Always "scoring only: from truth.json, never used by the analysis".
-    pub label: String,
-    /// Undeclared effects of the truth.
-    pub truth_undeclared_effects: Vec<String>,
-    /// Each detection and whether the truth has that effect on that unit.
-    pub detections_in_truth: Vec<(String, String, bool)>,
-    /// Parameter estimates against the scenario's values.
-    pub parameters: Vec<ParameterCheck>,
-    /// Where the true field functions (FSS transfer function, FHST distortion) of the table
-    /// errors came from, or why they are unknown (then counted as zero).
-    pub field_truth: String,
-}
 
 /// The whole report.
 #[derive(Clone, Debug, Serialize)]
@@ -412,10 +387,8 @@ fn ledger_markdown(s: &mut String, ledger: &[super::ledger::LedgerEntry]) {
     s.push('\n');
 }
 
-/// Markdown report.
-#[must_use]
-pub fn markdown(r: &DiagnoseReport) -> String {
-    let mut s = String::new();
+/// The title, the run and its declared effects, the notes.
+fn md_header(s: &mut String, r: &DiagnoseReport) {
     let _ = writeln!(s, "# ground-tool diagnose: {}\n", r.scenario);
     let _ = writeln!(
         s,
@@ -435,6 +408,10 @@ pub fn markdown(r: &DiagnoseReport) -> String {
     for n in &r.notes {
         let _ = writeln!(s, "> Note: {n}\n");
     }
+}
+
+/// The effects detected.
+fn md_detected(s: &mut String, r: &DiagnoseReport) {
     let _ = writeln!(s, "## Detected effects\n");
     if r.detected.is_empty() {
         let _ = writeln!(
@@ -457,6 +434,10 @@ pub fn markdown(r: &DiagnoseReport) -> String {
         }
         s.push('\n');
     }
+}
+
+/// The structure left unexplained, then the ledger.
+fn md_unexplained(s: &mut String, r: &DiagnoseReport) {
     let _ = writeln!(s, "## Unexplained structure\n");
     if r.unexplained.is_empty() {
         let _ = writeln!(s, "None at family-wise α = 0.001 (Holm).\n");
@@ -482,7 +463,11 @@ pub fn markdown(r: &DiagnoseReport) -> String {
         }
         s.push('\n');
     }
-    ledger_markdown(&mut s, &r.ledger);
+    ledger_markdown(s, &r.ledger);
+}
+
+/// Residual RMS per sensor, before and after, with the noise floor.
+fn md_residuals(s: &mut String, r: &DiagnoseReport) {
     let _ = writeln!(s, "## Residual RMS (arcsec, per axis)\n\n| sensor | measurements | before | after | noise floor |\n|---|---|---|---|---|");
     for n in SENSOR_NAMES {
         let g =
@@ -496,6 +481,10 @@ pub fn markdown(r: &DiagnoseReport) -> String {
             g(&r.noise_floor_arcsec)
         );
     }
+}
+
+/// The scoring against the truth, when a scorer was plugged in.
+fn md_scoring(s: &mut String, r: &DiagnoseReport) {
     if let Some(c) = &r.calibration_error_arcsec {
         let _ = writeln!(s, "\n## Calibration error (SCORING ONLY: from truth.json)\n\nAlignment error per sensor (arcsec): RMS direction error over this run's measurements of the sensor, common FHST-pair rotation removed (the full rotation angles are in report.json).\n\n| sensor | before (chain) | after (diagnose) |\n|---|---|---|");
         for n in SENSOR_NAMES {
@@ -536,6 +525,10 @@ pub fn markdown(r: &DiagnoseReport) -> String {
             }
         }
     }
+}
+
+/// The flight tables: written, applied, kept on the ground, validation; the gyro side.
+fn md_flight_tables(s: &mut String, r: &DiagnoseReport) {
     let _ = writeln!(s, "\n## Flight tables\n");
     for w in &r.flight_tables.written {
         let _ = writeln!(s, "* written: `{w}`");
@@ -582,6 +575,10 @@ pub fn markdown(r: &DiagnoseReport) -> String {
             }
         );
     }
+}
+
+/// The loop: every iteration with its candidates, then the plots.
+fn md_loop(s: &mut String, r: &DiagnoseReport) {
     let _ = writeln!(s, "\n## The loop ({} iterations)\n", r.iterations);
     for it in &r.iteration_log {
         let _ = writeln!(
@@ -621,5 +618,18 @@ pub fn markdown(r: &DiagnoseReport) -> String {
             let _ = writeln!(s, "![{p}]({p})\n");
         }
     }
+}
+
+/// Markdown report.
+#[must_use]
+pub fn markdown(r: &DiagnoseReport) -> String {
+    let mut s = String::new();
+    md_header(&mut s, r);
+    md_detected(&mut s, r);
+    md_unexplained(&mut s, r);
+    md_residuals(&mut s, r);
+    md_scoring(&mut s, r);
+    md_flight_tables(&mut s, r);
+    md_loop(&mut s, r);
     s
 }

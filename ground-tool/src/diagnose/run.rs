@@ -225,55 +225,78 @@ fn validate_tables(
     )
 }
 
-/// Run the diagnosis of a run folder and write the report and tables into `out_dir`.
-///
-/// # Errors
-/// Missing or malformed inputs (the message says what), too little data, I/O.
-#[allow(clippy::too_many_lines)]
-pub fn diagnose_run(
-    run_dir: &Path,
-    out_dir: &Path,
-    opts: &DiagnoseOptions,
-) -> anyhow::Result<DiagnoseOutput> {
-    crate::progress::step("reading the telemetry");
-    let (tm, metadata) = read_run(run_dir)?;
-    let declared = metadata.declared();
-    let flown_catalog = flown_catalog(run_dir, &metadata, opts.tables.as_deref())?;
-    let annual = declared.iter().any(|d| d == "aberration");
-    let orbital = declared.iter().any(|d| d == "orbital_aberration");
-    let (flown_alignment, flown_iru, flown_filter) =
-        flown_tables(run_dir, &metadata, opts.tables.as_deref())?;
-    let mut copt = CalibrateOptions {
-        flown_alignment,
-        flown_iru,
-        ..CalibrateOptions::default()
-    };
-    copt.identify.aberration = annual;
-    let mut notes = Vec::new();
-    let cal = match calibrate_telemetry(&tm, &metadata, &copt) {
-        Ok(c) => Chain {
-            frames: Vec::new(),
-            alignment: c.alignment,
-            irucal: c.irucal.clone(),
-            output: Some(c),
-        },
-        Err(e) => {
-            // The chain needs every sensor observed with another (FFCAL) and maneuvers
-            // (IRUCAL); without it the joint fit still estimates the alignments from the
-            // flown tables.
-            let why = format!("{e:#}");
-            if why.contains("only ") && why.contains("raw sensor frames") {
-                return Err(e);
-            }
-            notes.push(format!(
-                "calibration chain failed ({why}); analysis from the flown tables"
-            ));
-            chain_fallback(&tm, &metadata, &copt)?
-        }
-    };
+/// What the stages of one diagnosis share: the run's metadata and declared effects, the
+/// tables flown, the calibration options, and the report's notes gathered on the way.
+struct RunContext<'a> {
+    run_dir: &'a Path,
+    opts: &'a DiagnoseOptions,
+    metadata: crate::pipeline::calibrate::Metadata,
+    declared: Vec<String>,
+    flown_catalog: Option<fsw_core::tables::StarCatalogTable>,
+    flown_filter: Option<FilterTable>,
+    copt: CalibrateOptions,
+    /// The declared annual and orbital aberration.
+    aberration: [bool; 2],
+    notes: Vec<String>,
+}
 
-    // Ephemerides per frame.
-    let frames = cal.frames();
+/// The three figures of the telemetry the analysis needs after letting it go: six months of
+/// it decoded are ~0.2 GB, held otherwise through the analysis (issue 22).
+struct TelemetryFigures {
+    /// Time of the last raw frame (s): the tables' creation time.
+    created: f64,
+    /// Housekeeping cycles on the backup IRU configuration.
+    backup_cycles: usize,
+    /// Housekeeping cycles.
+    hk_cycles: usize,
+}
+
+impl TelemetryFigures {
+    fn of(tm: &tp::Telemetry) -> Self {
+        Self {
+            created: tm.raw.last().map_or(0.0, |r| r.time.seconds()),
+            backup_cycles: tm.housekeeping.iter().filter(|h| h.iru_config == 1).count(),
+            hk_cycles: tm.housekeeping.len(),
+        }
+    }
+}
+
+/// What the measurement set's build leaves for the gyro side.
+struct GyroSide {
+    frames: Vec<GyroFrame>,
+    calibration: GyroCalibration,
+    bias_per_frame: Option<Vec<Vector3<f64>>>,
+    /// Time of the first frame (s since J2000, TT).
+    frames_t0_j2000: f64,
+}
+
+/// The flight tables before writing, with what the report and the scorer need of their
+/// making.
+struct FlightTables {
+    flight: super::flight::FlightUpdate,
+    validation: super::heldout::FlightTableValidation,
+    calibrate_alignment: AlignmentTable,
+    ground_alignment: AlignmentTable,
+    /// Diagnose's tables before the held-out validation: (alignment, parameters, held).
+    unvalidated: (AlignmentTable, nalgebra::DVector<f64>, Vec<usize>),
+}
+
+/// The tables written and what the report says of the IRU table.
+struct WrittenTables {
+    paths: Vec<String>,
+    alignment: AlignmentTable,
+    iru_note: String,
+    iru_applied: Vec<String>,
+    iru_ground_only: Vec<String>,
+    /// The filter terms calibrate tuned that diagnose wrote (`tuned_filter`).
+    filter_applied: Vec<String>,
+}
+
+/// Per-frame Earth velocity (barycentric, km/s) and apparent Sun direction from the
+/// spacecraft (ECI), for the aberration and the FSS models.
+fn frame_ephemerides(
+    frames: &[crate::pipeline::observations::FrameObservations],
+) -> (Vec<Vector3<f64>>, Vec<Vector3<f64>>) {
     let mut earth = Vec::with_capacity(frames.len());
     let mut sun = Vec::with_capacity(frames.len());
     let mut eph: Option<gro_reference::sun::SunEphemeris> = None;
@@ -285,10 +308,16 @@ pub fn diagnose_run(
         let (p, v) = f.orbit.unwrap_or((Vector3::zeros(), Vector3::zeros()));
         sun.push(st.apparent_dir_from_sc_eci(&p, &v));
     }
-    // OBC bias per frame.
+    (earth, sun)
+}
+
+/// The OBC's gyro bias estimate at each frame: the last housekeeping packet at or before it.
+fn obc_bias_per_frame(
+    frames: &[crate::pipeline::observations::FrameObservations],
+    hk: &[fsw_core::telemetry::ObcHousekeeping],
+) -> Vec<Vector3<f64>> {
     let mut bias = Vec::with_capacity(frames.len());
     let mut j = 0usize;
-    let hk = &tm.housekeeping;
     for f in frames {
         while j + 1 < hk.len() && hk[j + 1].time <= f.time {
             j += 1;
@@ -298,231 +327,48 @@ pub fn diagnose_run(
                 .map_or(Vector3::zeros(), |h| Vector3::from(h.bias_acs_rad_per_s)),
         );
     }
-    // The rest needs three figures of the telemetry, not the telemetry: six months of it
-    // decoded are ~0.2 GB, held otherwise through the analysis (issue 22).
-    let created = tm.raw.last().map_or(0.0, |r| r.time.seconds());
-    let backup_cycles = tm.housekeeping.iter().filter(|h| h.iru_config == 1).count();
-    let hk_cycles = tm.housekeeping.len();
-    drop(tm);
-    let gyro_cal = cal.irucal.as_ref().map_or(
-        GyroCalibration {
-            delta_m: Matrix3::zeros(),
-            bias_acs_rad_per_s: bias.first().copied().unwrap_or_else(Vector3::zeros),
-        },
-        |s| s.calibration,
-    );
-    let input = DiagnoseInput {
-        frames,
-        earth_vel_eci_km_per_s: earth,
-        sun_eci: sun,
-        gyro: gyro_cal,
-        bias_per_frame: Some(bias),
-        alignment: cal.alignment,
-        frames_aberration: annual,
-        aberration_model: [annual, orbital],
-        declared_effects: declared.clone(),
-    };
-    crate::progress::step("residuals of every FHST and FSS measurement");
-    let set = MeasurementSet::build(&input);
-    let gyro_frames: Vec<GyroFrame> = frames.iter().map(GyroFrame::from).collect();
-    let frames_t0_j2000 = frames
-        .first()
-        .map_or(0.0, |f| f.time.seconds_since_j2000_tt());
-    let gyro_cal = input.gyro;
-    let bias_per_frame = input.bias_per_frame;
-    // The per-frame ephemerides served the build only (25 MB over six months).
-    drop(input.earth_vel_eci_km_per_s);
-    drop(input.sun_eci);
-    let mut cal = cal;
-    cal.release_frames();
-    crate::progress::step("residual structure and the effect library (joint fit)");
-    let analysis = analyse_set(set, &declared, &opts.search)?;
-    if let Some(i) = analysis
+    bias
+}
+
+/// The note on the unknown orbit modelled from the residuals, when the telemetry has none.
+fn unknown_orbit_note(analysis: &Analysis) -> Option<String> {
+    let i = analysis
         .search
         .layout
         .effects
         .iter()
-        .position(|e| e.kind == super::effects::EffectKind::UnknownOrbit)
-    {
-        let e = &analysis.search.layout.effects[i];
-        let period_min = e
-            .rate_rad_per_s
-            .map_or(f64::NAN, |n| std::f64::consts::TAU / n / 60.0);
-        let x = analysis
-            .search
-            .final_fit
-            .expand(analysis.search.layout.total);
-        let r: Vec<f64> = analysis.search.layout.range(i).map(|j| x[j]).collect();
-        let amplitude = (r.iter().map(|v| v * v).sum::<f64>() / 2.0).sqrt();
-        notes.push(format!(
-            "no orbit in the telemetry (no ephemeris records, docs/icd.md §3.4): the declared orbital aberration and Sun parallax are modelled as an unknown circular orbit, period {period_min:.2} min found from the residuals, aberration amplitude {amplitude:.1}″ (≈ 5.3″ for a 7.7 km/s orbit)"
-        ));
-    }
-    notes.extend(coverage_notes(&analysis.set, gyro_frames.len(), |k| {
-        gyro_frames.get(k).is_some_and(|f| f.high_rate)
-    }));
-    notes.extend(super::change_point::attribution_notes(
-        &analysis.set,
-        &analysis.search,
-    ));
-    let gcfg = GyroConfig {
-        alpha: opts.search.alpha,
-        min_delta_bic: opts.search.min_delta_bic,
-        rrw_rad_per_s15: metadata.sensors.iru_rrw_rad_per_s_sqrt_s,
-        arw_rad_per_sqrt_s: metadata.sensors.iru_arw_rad_per_sqrt_s,
-        transient_declared: declared.iter().any(|d| d == "iru_bias_transient"),
-    };
-    let gyro_input = GyroInput {
-        frames: &gyro_frames,
-        gyro: gyro_cal,
-        bias_per_frame: bias_per_frame.as_deref(),
-    };
-    crate::progress::step("gyro residuals in the slews");
-    let gyro_res = gyro::analyse(&gyro_input, &analysis.set, &analysis.search.after, &gcfg);
-    let gyro_ledger = super::ledger::gyro_ledger(&gyro_res, opts.search.alpha);
+        .position(|e| e.kind == super::effects::EffectKind::UnknownOrbit)?;
+    let e = &analysis.search.layout.effects[i];
+    let period_min = e
+        .rate_rad_per_s
+        .map_or(f64::NAN, |n| std::f64::consts::TAU / n / 60.0);
+    let x = analysis
+        .search
+        .final_fit
+        .expand(analysis.search.layout.total);
+    let r: Vec<f64> = analysis.search.layout.range(i).map(|j| x[j]).collect();
+    let amplitude = (r.iter().map(|v| v * v).sum::<f64>() / 2.0).sqrt();
+    Some(format!(
+        "no orbit in the telemetry (no ephemeris records, docs/icd.md §3.4): the declared orbital aberration and Sun parallax are modelled as an unknown circular orbit, period {period_min:.2} min found from the residuals, aberration amplitude {amplitude:.1}″ (≈ 5.3″ for a 7.7 km/s orbit)"
+    ))
+}
 
-    // Flight tables.
-    let filter_flown = flown_filter.unwrap_or_else(FilterTable::default_boot);
-    let flight_all = super::flight::flight_update(
-        &analysis.search,
-        &cal.alignment,
-        &filter_flown,
-        flown_catalog.as_ref(),
-        analysis.set.count_per_sensor(),
-        analysis.set.temperature_mean_c,
-        None,
-    )?;
-    // Diagnose's tables against the table calibrate writes, on held-out blocks of time
-    // (`super::heldout`): the tables are rebuilt from the reference with only the components
-    // the validation took; nothing taken, calibrate's alignment table is written. Every term
-    // left out is listed as not written.
-    crate::progress::step("held-out validation of the tables");
-    let calibrate_alignment = calibrate_written_alignment(&cal, &copt);
-    let (validation, reference_arcsec) =
-        validate_tables(&analysis, &flight_all, &cal, &calibrate_alignment);
-    let validated = validation.passed;
-    let ground_alignment = flight_all.ground_alignment;
-    let unvalidated = (
-        flight_all.alignment,
-        flight_all.flight_fit.expand(analysis.search.layout.total),
-        flight_all.flight_idx.clone(),
+/// The IRU table with the gyro-side effects of the configuration that flew most of the run,
+/// when it still validates: (table, terms applied, terms kept on the ground).
+fn iru_with_gyro_effects(
+    iru_out: IruTable,
+    gyro_res: &gyro::GyroAnalysis,
+    figures: &TelemetryFigures,
+) -> (IruTable, Vec<String>, Vec<String>) {
+    let (iru_corrected, iru_applied, mut iru_ground_only) = super::flight::iru_update(
+        &iru_out,
+        &gyro_res.detected,
+        2 * figures.backup_cycles > figures.hk_cycles,
     );
-    let mut flight = if validated {
-        super::flight::flight_update(
-            &analysis.search,
-            &calibrate_alignment,
-            &filter_flown,
-            flown_catalog.as_ref(),
-            analysis.set.count_per_sensor(),
-            analysis.set.temperature_mean_c,
-            Some(super::flight::Restriction {
-                free: &validation.taken_params,
-                reference_arcsec,
-            }),
-        )?
-    } else {
-        let mut f = flight_all;
-        let terms: Vec<String> = f.applied.drain(..).collect();
-        f.ground_only.extend(
-            terms
-                .into_iter()
-                .map(|a| format!("not written (held-out validation): {a}")),
-        );
-        f.alignment = calibrate_alignment;
-        f.catalog = None;
-        f.filter = None;
-        f.flight_idx.clear();
-        notes.push(format!(
-            "diagnose's tables not written; the alignment table calibrate writes is written instead: {}",
-            validation.reason
-        ));
-        f
-    };
-    if validated {
-        flight
-            .ground_only
-            .extend(validation.not_taken.iter().map(|c| {
-                let trackers = c
-                    .trackers
-                    .map_or_else(String::new, |t| format!(", trackers' rows z {:.1}", t.z));
-                format!(
-                    "not written (held-out validation, z {:.1}{trackers}): {}",
-                    c.improvement.z, c.component
-                )
-            }));
-    }
-    // What `calibrate` uplinks as well (`calibrate::filter_update`): the onboard annual-
-    // aberration correction when the model declares aberration and the flown table has it off.
-    // Only when the chain's held-out check of that change passed
-    // (`pipeline::alignment_heldout::validate_aberration_switch`).
-    let chain_filter_validated = cal.output.as_ref().is_some_and(|o| o.filter.is_some());
-    let (chain_filter, chain_changes) = if chain_filter_validated {
-        crate::pipeline::calibrate::filter_update(
-            flight.filter.as_ref().unwrap_or(&filter_flown),
-            &metadata,
-        )?
-    } else {
-        (None, Vec::new())
-    };
-    if let Some(f) = chain_filter {
-        flight.filter = Some(f);
-        flight.applied.extend(
-            chain_changes
-                .iter()
-                .map(|c| format!("calibration chain: filter.{c}")),
-        );
-    }
-    std::fs::create_dir_all(out_dir.join("tables"))
-        .with_context(|| format!("creating {}", out_dir.display()))?;
-    let mut written = Vec::new();
-    let p = out_dir.join("tables").join("alignment.tbl");
-    // The chain's held-out validation judges the chain's model; diagnose's tables carry the
-    // effects it found on top (a time tag, say), which that model lacks: a refusal there makes
-    // the flown table the reference of diagnose's own validation above.
-    if let Some(v) = cal
-        .output
-        .as_ref()
-        .map(|o| &o.report.alignment_validation)
-        .filter(|v| !v.passed)
-    {
-        notes.push(format!(
-            "calibrate's held-out validation refused its own alignments ({}); diagnose's tables were validated against the flown ones",
-            v.reason
-        ));
-    }
-    let alignment_out = flight.alignment;
-    write_table(&p, TableId::Alignment, &alignment_out, created)?;
-    written.push(p.display().to_string());
-    // An IRUCAL whose gyro residuals hold structure nothing explains (a bias step or ramp, a
-    // scale error against rate outside the library) is not trusted: its δM absorbed that
-    // structure (issue 22), so G stays as flown and the report says why.
-    let flown_iru_table = copt.flown_iru.unwrap_or_else(IruTable::prelaunch);
-    let gyro_unexplained = super::ledger::unexplained_items(&gyro_ledger);
-    let (iru_out, iru_note) = if gyro_unexplained.is_empty() {
-        iru_table_out(&flown_iru_table, cal.output.as_ref())
-    } else {
-        (
-            flown_iru_table,
-            format!(
-                "IRU table as flown: the gyro residuals hold unexplained structure ({}), so the IRUCAL δM is not written",
-                gyro_unexplained
-                    .iter()
-                    .map(|u| format!(
-                        "{} against {}, {:.3} {}, Holm p {:.1e}",
-                        u.sensor, u.regressor, u.size, u.unit, u.p_value
-                    ))
-                    .collect::<Vec<_>>()
-                    .join("; ")
-            ),
-        )
-    };
-    // The gyro-side effects into the configuration that flew most of the run.
-    let (iru_corrected, iru_applied, mut iru_ground_only) =
-        super::flight::iru_update(&iru_out, &gyro_res.detected, 2 * backup_cycles > hk_cycles);
     // A gyro effect too large for the table's range is reported and kept on the ground: the
     // other tables (and the report) are still worth having.
-    let (iru_out, iru_applied) = match iru_corrected.validate() {
-        Ok(()) => (iru_corrected, iru_applied),
+    match iru_corrected.validate() {
+        Ok(()) => (iru_corrected, iru_applied, iru_ground_only),
         Err(e) => {
             let why = format!(
                 "IRU table not corrected: with the gyro effects ({}) it does not validate ({e:?}); the chain's IRU table is written instead",
@@ -530,161 +376,569 @@ pub fn diagnose_run(
             );
             crate::note!("warning: {why}");
             iru_ground_only.push(why);
-            (iru_out, Vec::new())
-        }
-    };
-    iru_out
-        .validate()
-        .map_err(|e| anyhow::anyhow!("diagnose: the IRU table does not validate ({e:?})"))?;
-    // The filter-table terms calibrate tuned from the flight (`pipeline::filter_tuning`), as
-    // calibrate wrote them; the slew uncertainty only when G is calibrate's (it was derived
-    // from that G's residual error).
-    for t in cal
-        .output
-        .iter()
-        .flat_map(|o| o.report.filter_tuning.iter())
-        .filter(|t| t.written)
-    {
-        use crate::pipeline::filter_tuning::FilterTerm;
-        if t.field == FilterTerm::SlewUncertainty && !gyro_unexplained.is_empty() {
-            notes.push(format!(
-                "filter.{} not written: G stays as flown, and calibrate's value was derived for its own G",
-                t.field.field()
-            ));
-            continue;
-        }
-        let mut f = flight.filter.unwrap_or(filter_flown);
-        if t.apply(&mut f) && f.validate().is_ok() {
-            flight.filter = Some(f);
-            flight.applied.push(format!(
-                "calibration chain: filter.{}: {}",
-                t.field.field(),
-                t.reason
-            ));
+            (iru_out, Vec::new(), iru_ground_only)
         }
     }
-    let p = out_dir.join("tables").join("iru.tbl");
-    write_table(&p, TableId::Iru, &iru_out, created)?;
-    written.push(p.display().to_string());
-    if let Some(c) = &flight.catalog {
-        let p = out_dir.join("tables").join("star_catalog.tbl");
-        write_table(&p, TableId::StarCatalog, c, created)?;
-        written.push(p.display().to_string());
-    }
-    if let Some(f) = &flight.filter {
-        let p = out_dir.join("tables").join("filter.tbl");
-        write_table(&p, TableId::Filter, f, created)?;
-        written.push(p.display().to_string());
+}
+
+impl<'a> RunContext<'a> {
+    /// The declared effects and the tables flown (`--tables`, else the run's activated
+    /// uploads, else the boot tables).
+    fn new(
+        run_dir: &'a Path,
+        metadata: crate::pipeline::calibrate::Metadata,
+        opts: &'a DiagnoseOptions,
+    ) -> anyhow::Result<Self> {
+        let declared = metadata.declared();
+        let flown_catalog = flown_catalog(run_dir, &metadata, opts.tables.as_deref())?;
+        let annual = declared.iter().any(|d| d == "aberration");
+        let orbital = declared.iter().any(|d| d == "orbital_aberration");
+        let (flown_alignment, flown_iru, flown_filter) =
+            flown_tables(run_dir, &metadata, opts.tables.as_deref())?;
+        let mut copt = CalibrateOptions {
+            flown_alignment,
+            flown_iru,
+            ..CalibrateOptions::default()
+        };
+        copt.identify.aberration = annual;
+        Ok(Self {
+            run_dir,
+            opts,
+            metadata,
+            declared,
+            flown_catalog,
+            flown_filter,
+            copt,
+            aberration: [annual, orbital],
+            notes: Vec::new(),
+        })
     }
 
-    // Report.
-    let mut detected = analysis.detected.clone();
-    detected.extend(gyro_res.detected.iter().cloned());
-    let names = SENSOR_NAMES;
-    let to_map = |v: [f64; 4]| -> BTreeMap<String, f64> {
-        (0..4)
-            .filter(|&i| v[i].is_finite())
-            .map(|i| (names[i].to_owned(), v[i]))
-            .collect()
-    };
-    let counts = analysis.set.count_per_sensor();
-    let (g_flight, g_unvalidated) = (
-        flight.flight_fit.expand(analysis.search.layout.total),
-        &unvalidated.1,
-    );
-    let outcome = match &opts.scorer {
-        Some(scorer) => scorer.score(&ScoringInputs {
-            run_dir,
-            analysis: &analysis,
-            detected: &detected,
-            chain_alignment: &cal.alignment,
-            ground_alignment: &ground_alignment,
-            calibrate_alignment: &calibrate_alignment,
-            written: TableFit {
-                alignment: &alignment_out,
-                parameters: &g_flight,
-                held: &flight.flight_idx,
+    /// The calibration chain with the current model; when it fails (it needs every sensor
+    /// observed with another for FFCAL and maneuvers for IRUCAL), the frames with the flown
+    /// tables: the joint fit still estimates the alignments from them.
+    fn calibration_chain(&mut self, tm: &tp::Telemetry) -> anyhow::Result<Chain> {
+        match calibrate_telemetry(tm, &self.metadata, &self.copt) {
+            Ok(c) => Ok(Chain {
+                frames: Vec::new(),
+                alignment: c.alignment,
+                irucal: c.irucal.clone(),
+                output: Some(c),
+            }),
+            Err(e) => {
+                let why = format!("{e:#}");
+                if why.contains("only ") && why.contains("raw sensor frames") {
+                    return Err(e);
+                }
+                self.notes.push(format!(
+                    "calibration chain failed ({why}); analysis from the flown tables"
+                ));
+                chain_fallback(tm, &self.metadata, &self.copt)
+            }
+        }
+    }
+
+    /// The residuals of every FHST and FSS measurement, from the chain's frames with the
+    /// per-frame ephemerides and OBC bias; and what the gyro side needs of the frames.
+    fn measurement_set(
+        &self,
+        cal: &Chain,
+        (earth, sun): (Vec<Vector3<f64>>, Vec<Vector3<f64>>),
+        bias: Vec<Vector3<f64>>,
+    ) -> (MeasurementSet, GyroSide) {
+        let frames = cal.frames();
+        let [annual, orbital] = self.aberration;
+        let gyro_cal = cal.irucal.as_ref().map_or(
+            GyroCalibration {
+                delta_m: Matrix3::zeros(),
+                bias_acs_rad_per_s: bias.first().copied().unwrap_or_else(Vector3::zeros),
             },
-            unvalidated: TableFit {
-                alignment: &unvalidated.0,
-                parameters: g_unvalidated,
-                held: &unvalidated.2,
-            },
-            first_frame_j2000_tt_s: frames_t0_j2000,
-        })?,
-        None => ScoringOutcome::default(),
-    };
-    let mut report = DiagnoseReport {
-        run_dir: run_dir.display().to_string(),
-        scenario: metadata.scenario.clone(),
-        declared_effects: declared,
-        baseline_model: analysis
-            .search
-            .baseline
+            |s| s.calibration,
+        );
+        let input = DiagnoseInput {
+            frames,
+            earth_vel_eci_km_per_s: earth,
+            sun_eci: sun,
+            gyro: gyro_cal,
+            bias_per_frame: Some(bias),
+            alignment: cal.alignment,
+            frames_aberration: annual,
+            aberration_model: [annual, orbital],
+            declared_effects: self.declared.clone(),
+        };
+        crate::progress::step("residuals of every FHST and FSS measurement");
+        let set = MeasurementSet::build(&input);
+        let side = GyroSide {
+            frames: frames.iter().map(GyroFrame::from).collect(),
+            frames_t0_j2000: frames
+                .first()
+                .map_or(0.0, |f| f.time.seconds_since_j2000_tt()),
+            calibration: input.gyro,
+            bias_per_frame: input.bias_per_frame,
+        };
+        (set, side)
+    }
+
+    /// The gyro residuals in the slews and their ledger.
+    fn gyro_analysis(
+        &self,
+        side: &GyroSide,
+        analysis: &Analysis,
+    ) -> (gyro::GyroAnalysis, Vec<super::ledger::LedgerEntry>) {
+        let opts = self.opts;
+        let gcfg = GyroConfig {
+            alpha: opts.search.alpha,
+            min_delta_bic: opts.search.min_delta_bic,
+            rrw_rad_per_s15: self.metadata.sensors.iru_rrw_rad_per_s_sqrt_s,
+            arw_rad_per_sqrt_s: self.metadata.sensors.iru_arw_rad_per_sqrt_s,
+            transient_declared: self.declared.iter().any(|d| d == "iru_bias_transient"),
+        };
+        let gyro_input = GyroInput {
+            frames: &side.frames,
+            gyro: side.calibration,
+            bias_per_frame: side.bias_per_frame.as_deref(),
+        };
+        crate::progress::step("gyro residuals in the slews");
+        let gyro_res = gyro::analyse(&gyro_input, &analysis.set, &analysis.search.after, &gcfg);
+        let gyro_ledger = super::ledger::gyro_ledger(&gyro_res, opts.search.alpha);
+        (gyro_res, gyro_ledger)
+    }
+
+    /// Diagnose's flight tables, validated against the table calibrate writes on held-out
+    /// blocks of time (`super::heldout`): the tables are rebuilt from the reference with only
+    /// the components the validation took; nothing taken, calibrate's alignment table is
+    /// written. Every term left out is listed as not written.
+    fn flight_tables(&mut self, analysis: &Analysis, cal: &Chain) -> anyhow::Result<FlightTables> {
+        let filter_flown = self.flown_filter.unwrap_or_else(FilterTable::default_boot);
+        let flight_all = super::flight::flight_update(
+            &analysis.search,
+            &cal.alignment,
+            &filter_flown,
+            self.flown_catalog.as_ref(),
+            analysis.set.count_per_sensor(),
+            analysis.set.temperature_mean_c,
+            None,
+        )?;
+        crate::progress::step("held-out validation of the tables");
+        let calibrate_alignment = calibrate_written_alignment(cal, &self.copt);
+        let (validation, reference_arcsec) =
+            validate_tables(analysis, &flight_all, cal, &calibrate_alignment);
+        let validated = validation.passed;
+        let ground_alignment = flight_all.ground_alignment;
+        let unvalidated = (
+            flight_all.alignment,
+            flight_all.flight_fit.expand(analysis.search.layout.total),
+            flight_all.flight_idx.clone(),
+        );
+        let mut flight = if validated {
+            super::flight::flight_update(
+                &analysis.search,
+                &calibrate_alignment,
+                &filter_flown,
+                self.flown_catalog.as_ref(),
+                analysis.set.count_per_sensor(),
+                analysis.set.temperature_mean_c,
+                Some(super::flight::Restriction {
+                    free: &validation.taken_params,
+                    reference_arcsec,
+                }),
+            )?
+        } else {
+            let mut f = flight_all;
+            let terms: Vec<String> = f.applied.drain(..).collect();
+            f.ground_only.extend(
+                terms
+                    .into_iter()
+                    .map(|a| format!("not written (held-out validation): {a}")),
+            );
+            f.alignment = calibrate_alignment;
+            f.catalog = None;
+            f.filter = None;
+            f.flight_idx.clear();
+            self.notes.push(format!(
+                "diagnose's tables not written; the alignment table calibrate writes is written instead: {}",
+                validation.reason
+            ));
+            f
+        };
+        if validated {
+            flight
+                .ground_only
+                .extend(validation.not_taken.iter().map(|c| {
+                    let trackers = c
+                        .trackers
+                        .map_or_else(String::new, |t| format!(", trackers' rows z {:.1}", t.z));
+                    format!(
+                        "not written (held-out validation, z {:.1}{trackers}): {}",
+                        c.improvement.z, c.component
+                    )
+                }));
+        }
+        self.chain_filter(cal, &mut flight, &filter_flown)?;
+        Ok(FlightTables {
+            flight,
+            validation,
+            calibrate_alignment,
+            ground_alignment,
+            unvalidated,
+        })
+    }
+
+    /// What `calibrate` uplinks as well (`calibrate::filter_update`): the onboard annual-
+    /// aberration correction when the model declares aberration and the flown table has it
+    /// off. Only when the chain's held-out check of that change passed
+    /// (`pipeline::alignment_heldout::validate_aberration_switch`).
+    fn chain_filter(
+        &self,
+        cal: &Chain,
+        flight: &mut super::flight::FlightUpdate,
+        filter_flown: &FilterTable,
+    ) -> anyhow::Result<()> {
+        let chain_filter_validated = cal.output.as_ref().is_some_and(|o| o.filter.is_some());
+        let (chain_filter, chain_changes) = if chain_filter_validated {
+            crate::pipeline::calibrate::filter_update(
+                flight.filter.as_ref().unwrap_or(filter_flown),
+                &self.metadata,
+            )?
+        } else {
+            (None, Vec::new())
+        };
+        if let Some(f) = chain_filter {
+            flight.filter = Some(f);
+            flight.applied.extend(
+                chain_changes
+                    .iter()
+                    .map(|c| format!("calibration chain: filter.{c}")),
+            );
+        }
+        Ok(())
+    }
+
+    /// Writes `OUT/tables/`: the alignment table, the IRU table (IRUCAL's δM unless the gyro
+    /// residuals hold unexplained structure, then the gyro-side effects), the star catalog
+    /// and the filter table when diagnose changed them.
+    fn write_tables(
+        &mut self,
+        out_dir: &Path,
+        cal: &Chain,
+        flight: &super::flight::FlightUpdate,
+        (gyro_res, gyro_ledger): (&gyro::GyroAnalysis, &[super::ledger::LedgerEntry]),
+        figures: &TelemetryFigures,
+    ) -> anyhow::Result<WrittenTables> {
+        let created = figures.created;
+        std::fs::create_dir_all(out_dir.join("tables"))
+            .with_context(|| format!("creating {}", out_dir.display()))?;
+        let mut written = Vec::new();
+        let p = out_dir.join("tables").join("alignment.tbl");
+        // The chain's held-out validation judges the chain's model; diagnose's tables carry
+        // the effects it found on top (a time tag, say), which that model lacks: a refusal
+        // there makes the flown table the reference of diagnose's own validation above.
+        if let Some(v) = cal
+            .output
+            .as_ref()
+            .map(|o| &o.report.alignment_validation)
+            .filter(|v| !v.passed)
+        {
+            self.notes.push(format!(
+                "calibrate's held-out validation refused its own alignments ({}); diagnose's tables were validated against the flown ones",
+                v.reason
+            ));
+        }
+        let alignment_out = flight.alignment;
+        write_table(&p, TableId::Alignment, &alignment_out, created)?;
+        written.push(p.display().to_string());
+        // An IRUCAL whose gyro residuals hold structure nothing explains (a bias step or ramp,
+        // a scale error against rate outside the library) is not trusted: its δM absorbed
+        // that structure (issue 22), so G stays as flown and the report says why.
+        let flown_iru_table = self.copt.flown_iru.unwrap_or_else(IruTable::prelaunch);
+        let gyro_unexplained = super::ledger::unexplained_items(gyro_ledger);
+        let (iru_out, iru_note) = if gyro_unexplained.is_empty() {
+            iru_table_out(&flown_iru_table, cal.output.as_ref())
+        } else {
+            (
+                flown_iru_table,
+                format!(
+                    "IRU table as flown: the gyro residuals hold unexplained structure ({}), so the IRUCAL δM is not written",
+                    gyro_unexplained
+                        .iter()
+                        .map(|u| format!(
+                            "{} against {}, {:.3} {}, Holm p {:.1e}",
+                            u.sensor, u.regressor, u.size, u.unit, u.p_value
+                        ))
+                        .collect::<Vec<_>>()
+                        .join("; ")
+                ),
+            )
+        };
+        let (iru_out, iru_applied, iru_ground_only) =
+            iru_with_gyro_effects(iru_out, gyro_res, figures);
+        iru_out
+            .validate()
+            .map_err(|e| anyhow::anyhow!("diagnose: the IRU table does not validate ({e:?})"))?;
+        let p = out_dir.join("tables").join("iru.tbl");
+        write_table(&p, TableId::Iru, &iru_out, created)?;
+        written.push(p.display().to_string());
+        if let Some(c) = &flight.catalog {
+            let p = out_dir.join("tables").join("star_catalog.tbl");
+            write_table(&p, TableId::StarCatalog, c, created)?;
+            written.push(p.display().to_string());
+        }
+        let filter_flown = self.flown_filter.unwrap_or_else(FilterTable::default_boot);
+        let (filter_out, filter_applied) = self.tuned_filter(
+            cal,
+            flight.filter.unwrap_or(filter_flown),
+            gyro_unexplained.is_empty(),
+        );
+        if flight.filter.is_some() || !filter_applied.is_empty() {
+            let p = out_dir.join("tables").join("filter.tbl");
+            write_table(&p, TableId::Filter, &filter_out, created)?;
+            written.push(p.display().to_string());
+        }
+        Ok(WrittenTables {
+            paths: written,
+            alignment: alignment_out,
+            iru_note,
+            iru_applied,
+            iru_ground_only,
+            filter_applied,
+        })
+    }
+
+    /// The filter-table terms calibrate tuned from the flight (`pipeline::filter_tuning`) on
+    /// top of `filter`, as calibrate wrote them; the slew uncertainty only when G is
+    /// calibrate's (`g_is_calibrates`: it was derived from that G's residual error). Returns
+    /// the table and the terms applied.
+    fn tuned_filter(
+        &mut self,
+        cal: &Chain,
+        mut filter: FilterTable,
+        g_is_calibrates: bool,
+    ) -> (FilterTable, Vec<String>) {
+        use crate::pipeline::filter_tuning::FilterTerm;
+        let mut applied = Vec::new();
+        for t in cal
+            .output
             .iter()
-            .map(|&i| analysis.search.layout.effects[i].label())
-            .collect(),
-        detected: detected.clone(),
-        unexplained: analysis
-            .unexplained
-            .iter()
-            .cloned()
-            .chain(super::ledger::unexplained_items(&gyro_ledger))
-            .collect(),
-        ledger: analysis.ledger.iter().cloned().chain(gyro_ledger).collect(),
-        residual_rms_arcsec: BeforeAfter {
-            before: to_map(analysis.rms_before),
-            after: to_map(analysis.rms_after),
-        },
-        noise_floor_arcsec: to_map(analysis.set.noise_floor_arcsec),
-        measurements: (0..4).map(|i| (names[i].to_owned(), counts[i])).collect(),
-        iterations: analysis.search.iterations.len(),
-        iteration_log: analysis.search.iterations.clone(),
-        gyro: GyroSummary {
-            bias_samples: gyro_res.bias_samples,
-            slews: gyro_res.slews,
-            candidates: gyro_res.candidates.clone(),
-            notes: gyro_res.notes.clone(),
-        },
-        flight_tables: FlightSummary {
-            written,
-            applied: {
-                let mut a = flight.applied.clone();
-                a.push(iru_note.clone());
-                a.extend(iru_applied);
-                a
+            .flat_map(|o| o.report.filter_tuning.iter())
+            .filter(|t| t.written)
+        {
+            if t.field == FilterTerm::SlewUncertainty && !g_is_calibrates {
+                self.notes.push(format!(
+                    "filter.{} not written: G stays as flown, and calibrate's value was derived for its own G",
+                    t.field.field()
+                ));
+                continue;
+            }
+            let mut f = filter;
+            if t.apply(&mut f) && f.validate().is_ok() {
+                filter = f;
+                applied.push(format!(
+                    "calibration chain: filter.{}: {}",
+                    t.field.field(),
+                    t.reason
+                ));
+            }
+        }
+        (filter, applied)
+    }
+
+    /// The report: detections, ledger, residuals, iterations, the gyro side, the tables, and
+    /// the scorer's figures when one is plugged in.
+    #[allow(clippy::too_many_arguments)]
+    fn report(
+        self,
+        analysis: &Analysis,
+        cal: &Chain,
+        tables: FlightTables,
+        written: WrittenTables,
+        (gyro_res, gyro_ledger): (&gyro::GyroAnalysis, Vec<super::ledger::LedgerEntry>),
+        frames_t0_j2000: f64,
+    ) -> anyhow::Result<DiagnoseReport> {
+        let FlightTables {
+            flight,
+            validation,
+            calibrate_alignment,
+            ground_alignment,
+            unvalidated,
+        } = tables;
+        let mut detected = analysis.detected.clone();
+        detected.extend(gyro_res.detected.iter().cloned());
+        let names = SENSOR_NAMES;
+        let to_map = |v: [f64; 4]| -> BTreeMap<String, f64> {
+            (0..4)
+                .filter(|&i| v[i].is_finite())
+                .map(|i| (names[i].to_owned(), v[i]))
+                .collect()
+        };
+        let counts = analysis.set.count_per_sensor();
+        let (g_flight, g_unvalidated) = (
+            flight.flight_fit.expand(analysis.search.layout.total),
+            &unvalidated.1,
+        );
+        let outcome = match &self.opts.scorer {
+            Some(scorer) => scorer.score(&ScoringInputs {
+                run_dir: self.run_dir,
+                analysis,
+                detected: &detected,
+                chain_alignment: &cal.alignment,
+                ground_alignment: &ground_alignment,
+                calibrate_alignment: &calibrate_alignment,
+                written: TableFit {
+                    alignment: &written.alignment,
+                    parameters: &g_flight,
+                    held: &flight.flight_idx,
+                },
+                unvalidated: TableFit {
+                    alignment: &unvalidated.0,
+                    parameters: g_unvalidated,
+                    held: &unvalidated.2,
+                },
+                first_frame_j2000_tt_s: frames_t0_j2000,
+            })?,
+            None => ScoringOutcome::default(),
+        };
+        Ok(DiagnoseReport {
+            run_dir: self.run_dir.display().to_string(),
+            scenario: self.metadata.scenario.clone(),
+            declared_effects: self.declared,
+            baseline_model: analysis
+                .search
+                .baseline
+                .iter()
+                .map(|&i| analysis.search.layout.effects[i].label())
+                .collect(),
+            detected: detected.clone(),
+            unexplained: analysis
+                .unexplained
+                .iter()
+                .cloned()
+                .chain(super::ledger::unexplained_items(&gyro_ledger))
+                .collect(),
+            ledger: analysis.ledger.iter().cloned().chain(gyro_ledger).collect(),
+            residual_rms_arcsec: BeforeAfter {
+                before: to_map(analysis.rms_before),
+                after: to_map(analysis.rms_after),
             },
-            ground_only: {
-                let mut g = flight.ground_only.clone();
-                g.extend(iru_ground_only);
-                g
+            noise_floor_arcsec: to_map(analysis.set.noise_floor_arcsec),
+            measurements: (0..4).map(|i| (names[i].to_owned(), counts[i])).collect(),
+            iterations: analysis.search.iterations.len(),
+            iteration_log: analysis.search.iterations.clone(),
+            gyro: GyroSummary {
+                bias_samples: gyro_res.bias_samples,
+                slews: gyro_res.slews,
+                candidates: gyro_res.candidates.clone(),
+                notes: gyro_res.notes.clone(),
             },
-            validation: Some(validation),
-        },
-        calibration_error_arcsec: outcome.calibration_error_arcsec,
-        calibration_rotation_error_arcsec: outcome.calibration_rotation_error_arcsec,
-        written_table_error_arcsec: outcome.written_table_error_arcsec,
-        unvalidated_table_error_arcsec: outcome.unvalidated_table_error_arcsec,
-        scoring: outcome.scoring,
-        plots: Vec::new(),
-        notes,
-    };
+            flight_tables: FlightSummary {
+                written: written.paths,
+                applied: {
+                    let mut a = flight.applied.clone();
+                    a.push(written.iru_note.clone());
+                    a.extend(written.iru_applied);
+                    a.extend(written.filter_applied);
+                    a
+                },
+                ground_only: {
+                    let mut g = flight.ground_only.clone();
+                    g.extend(written.iru_ground_only);
+                    g
+                },
+                validation: Some(validation),
+            },
+            calibration_error_arcsec: outcome.calibration_error_arcsec,
+            calibration_rotation_error_arcsec: outcome.calibration_rotation_error_arcsec,
+            written_table_error_arcsec: outcome.written_table_error_arcsec,
+            unvalidated_table_error_arcsec: outcome.unvalidated_table_error_arcsec,
+            scoring: outcome.scoring,
+            plots: Vec::new(),
+            notes: self.notes,
+        })
+    }
+}
+
+/// Writes the plots, `report.json` and `report.md` of `report` into `out_dir`.
+fn write_report(
+    out_dir: &Path,
+    report: &mut DiagnoseReport,
+    analysis: &Analysis,
+    gyro_res: &gyro::GyroAnalysis,
+) -> anyhow::Result<()> {
     crate::progress::step("report and plots");
-    report.plots = write_plots(out_dir, &analysis, &detected, &gyro_res)?;
+    report.plots = write_plots(out_dir, analysis, &report.detected, gyro_res)?;
     std::fs::write(
         out_dir.join("report.json"),
         serde_json::to_string_pretty(&report)?,
     )
     .with_context(|| format!("writing {}", out_dir.join("report.json").display()))?;
-    std::fs::write(out_dir.join("report.md"), markdown(&report))
+    std::fs::write(out_dir.join("report.md"), markdown(report))
         .with_context(|| format!("writing {}", out_dir.join("report.md").display()))?;
+    Ok(())
+}
+
+/// Run the diagnosis of a run folder and write the report and tables into `out_dir`.
+///
+/// # Errors
+/// Missing or malformed inputs (the message says what), too little data, I/O.
+pub fn diagnose_run(
+    run_dir: &Path,
+    out_dir: &Path,
+    opts: &DiagnoseOptions,
+) -> anyhow::Result<DiagnoseOutput> {
+    // 1. The telemetry, the metadata, the tables flown, the calibration chain.
+    crate::progress::step("reading the telemetry");
+    let (tm, metadata) = read_run(run_dir)?;
+    let mut ctx = RunContext::new(run_dir, metadata, opts)?;
+    let mut cal = ctx.calibration_chain(&tm)?;
+    // 2. Per-frame ephemerides and OBC bias; the telemetry is let go but for three figures.
+    let ephemerides = frame_ephemerides(cal.frames());
+    let bias = obc_bias_per_frame(cal.frames(), &tm.housekeeping);
+    let figures = TelemetryFigures::of(&tm);
+    drop(tm);
+    // 3. The measurement set; then the frames are let go.
+    let (set, gyro_side) = ctx.measurement_set(&cal, ephemerides, bias);
+    cal.release_frames();
+    // 4. Residual structure and the effect library (joint fit), and its notes.
+    crate::progress::step("residual structure and the effect library (joint fit)");
+    let analysis = analyse_set(set, &ctx.declared, &opts.search)?;
+    ctx.notes.extend(unknown_orbit_note(&analysis));
+    ctx.notes
+        .extend(coverage_notes(&analysis.set, gyro_side.frames.len(), |k| {
+            gyro_side.frames.get(k).is_some_and(|f| f.high_rate)
+        }));
+    ctx.notes.extend(super::change_point::attribution_notes(
+        &analysis.set,
+        &analysis.search,
+    ));
+    // 5. The gyro side.
+    let (gyro_res, gyro_ledger) = ctx.gyro_analysis(&gyro_side, &analysis);
+    // 6. The flight tables, validated on held-out data, and written.
+    let tables = ctx.flight_tables(&analysis, &cal)?;
+    let written = ctx.write_tables(
+        out_dir,
+        &cal,
+        &tables.flight,
+        (&gyro_res, &gyro_ledger),
+        &figures,
+    )?;
+    // 7. The report.
+    let alignment = written.alignment;
+    let filter = tables.flight.filter;
+    let mut report = ctx.report(
+        &analysis,
+        &cal,
+        tables,
+        written,
+        (&gyro_res, gyro_ledger),
+        gyro_side.frames_t0_j2000,
+    )?;
+    write_report(out_dir, &mut report, &analysis, &gyro_res)?;
     Ok(DiagnoseOutput {
         report,
         analysis,
-        alignment: alignment_out,
-        filter: flight.filter,
+        alignment,
+        filter,
         calibration: cal.output,
-        first_frame_j2000_tt_s: frames_t0_j2000,
+        first_frame_j2000_tt_s: gyro_side.frames_t0_j2000,
         gyro: gyro_res,
     })
 }
@@ -706,22 +960,14 @@ pub fn diagnose_command(
     quiet: bool,
     scorer: Option<std::sync::Arc<dyn Scorer>>,
 ) -> anyhow::Result<()> {
-    use gro_reference::outdir::OutputDir;
     let progress = crate::progress::Session::start("ground-tool diagnose", !quiet);
     let options = DiagnoseOptions {
         tables: tables.map(std::path::Path::to_path_buf),
         scorer,
         ..DiagnoseOptions::default()
     };
-    let dir = OutputDir::begin(
-        out_target,
-        "ground-tool diagnose",
-        force,
-        &[Some(run_dir), tables]
-            .into_iter()
-            .flatten()
-            .collect::<Vec<_>>(),
-    )?;
+    let dir =
+        crate::run_check::begin_output(out_target, "ground-tool diagnose", force, run_dir, tables)?;
     let out = dir.path();
     crate::run_check::check_run_dir(run_dir, out)?;
     // Diagnose's refusals (too few frames, a singular fit) are about the data: exit code 2;

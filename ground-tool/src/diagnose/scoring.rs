@@ -9,7 +9,6 @@
 //! reads `truth.json`. What a scorer sees is [`ScoringInputs`]; what it returns is
 //! [`ScoringOutcome`], written into `report.json` and `report.md` labelled as scoring.
 
-use super::report::{BeforeAfter, Scoring};
 use super::search::SearchResult;
 use super::{Analysis, Detected};
 use fsw_core::tables::AlignmentTable;
@@ -34,6 +33,31 @@ pub struct ParameterCheck {
     pub truth: f64,
     /// (estimate − truth)/σ.
     pub z: f64,
+}
+
+/// Before/after per sensor.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct BeforeAfter {
+    /// Before.
+    pub before: BTreeMap<String, f64>,
+    /// After.
+    pub after: BTreeMap<String, f64>,
+}
+
+/// Scoring block (truth.json present).
+#[derive(Clone, Debug, Serialize)]
+pub struct Scoring {
+    /// Always "scoring only: from truth.json, never used by the analysis".
+    pub label: String,
+    /// Undeclared effects of the truth.
+    pub truth_undeclared_effects: Vec<String>,
+    /// Each detection and whether the truth has that effect on that unit.
+    pub detections_in_truth: Vec<(String, String, bool)>,
+    /// Parameter estimates against the scenario's values.
+    pub parameters: Vec<ParameterCheck>,
+    /// Where the true field functions (FSS transfer function, FHST distortion) of the table
+    /// errors came from, or why they are unknown (then counted as zero).
+    pub field_truth: String,
 }
 
 /// A table written (or that would have been written) with the parameters of the fit it holds.

@@ -599,89 +599,148 @@ pub fn resolve(
     last
 }
 
-/// The selection of time-tag columns over the arcs' systems (module doc, **Evidence**).
-fn select(systems: &[ArcSystem], config: &SearchConfig, debug: bool) -> Option<TimeReference> {
-    let mut turning = [0usize; 4];
-    for s in systems {
-        for (t, n) in turning.iter_mut().zip(s.turning) {
-            *t += n;
-        }
-    }
-    if debug {
+/// What the stages of [`select`] share: the arcs' systems reduced to the sensors with enough
+/// turning samples, their sum, each column's halves, the columns offered and the settings.
+struct Selection<'a> {
+    reduced: Vec<ArcSystem>,
+    sensors: Vec<usize>,
+    full: ArcSystem,
+    halves: Vec<Option<[ArcSystem; 2]>>,
+    offered: Vec<usize>,
+    config: &'a SearchConfig,
+    halves_p_min: f64,
+}
+
+/// The columns as the selection changes them, and the record of its iterations.
+#[derive(Default)]
+struct ColumnState {
+    model: Vec<usize>,
+    excluded: Vec<usize>,
+    kept: Vec<Evidence>,
+    iterations: Vec<Iteration>,
+}
+
+/// Prints each arc's own estimate of the time tags (`DIAGNOSE_DEBUG`).
+fn debug_arcs(reduced: &[ArcSystem], sensors: &[usize]) {
+    for (k, s) in reduced.iter().enumerate() {
+        let cols: Vec<usize> = sensors.iter().map(|c| c + 1).collect();
+        let per: Vec<String> = match solve(s, &cols) {
+            Some(f) => sensors
+                .iter()
+                .enumerate()
+                .map(|(i, &c)| {
+                    format!(
+                        "{} {:.1} ± {:.1}",
+                        SENSOR_NAMES[c],
+                        f.x[i],
+                        (f.cov[(i, i)] * f.s2().max(1.0)).sqrt()
+                    )
+                })
+                .collect(),
+            None => vec!["singular".to_owned()],
+        };
         crate::note!(
-            "arcs with data {}; turning samples {turning:?}",
-            systems.len()
+            "arc {k}: rows {}, turning {:?}: {}",
+            s.rows,
+            s.turning,
+            per.join(", ")
         );
     }
-    if systems.len() < 2 {
-        return None;
-    }
-    let sensors: Vec<usize> = (0..4)
-        .filter(|&s| turning[s] >= MIN_TURNING_SAMPLES)
-        .collect();
-    let reduced: Vec<ArcSystem> = systems.iter().map(|s| s.common_to(&sensors)).collect();
-    let mut full = ArcSystem::zeros();
-    for s in &reduced {
-        full.add(s);
-    }
-    if debug {
-        for (k, s) in reduced.iter().enumerate() {
-            let cols: Vec<usize> = sensors.iter().map(|c| c + 1).collect();
-            let per: Vec<String> = match solve(s, &cols) {
-                Some(f) => sensors
-                    .iter()
-                    .enumerate()
-                    .map(|(i, &c)| {
-                        format!(
-                            "{} {:.1} ± {:.1}",
-                            SENSOR_NAMES[c],
-                            f.x[i],
-                            (f.cov[(i, i)] * f.s2().max(1.0)).sqrt()
-                        )
-                    })
-                    .collect(),
-                None => vec!["singular".to_owned()],
-            };
+}
+
+impl<'a> Selection<'a> {
+    /// The sensors with enough turning samples, the arcs reduced to them and summed, the
+    /// halves per column and the columns offered; `None` with fewer than two arcs or no
+    /// column to offer.
+    fn new(systems: &[ArcSystem], config: &'a SearchConfig, debug: bool) -> Option<Self> {
+        let mut turning = [0usize; 4];
+        for s in systems {
+            for (t, n) in turning.iter_mut().zip(s.turning) {
+                *t += n;
+            }
+        }
+        if debug {
             crate::note!(
-                "arc {k}: rows {}, turning {:?}: {}",
-                s.rows,
-                s.turning,
-                per.join(", ")
+                "arcs with data {}; turning samples {turning:?}",
+                systems.len()
             );
         }
-    }
-    // Halves per column: alternate arcs among those that test it. Alternate arcs of the
-    // whole run would leave a sensor seen only in every other slew (an FHST that sees stars
-    // in the x and z slews but not in the y slew between them) with one empty half, whose
-    // estimate is the prior's 0 ± 1 s: a test that always passes. A column tested in one arc
-    // only has no halves and is not kept: one slew cannot show that a delay repeats.
-    let halves: Vec<Option<[ArcSystem; 2]>> = (0..N_TAU)
-        .map(|c| {
-            let with: Vec<&ArcSystem> = reduced.iter().filter(|s| s.tests(c, &sensors)).collect();
-            (with.len() >= 2).then(|| {
-                let mut h = [ArcSystem::zeros(), ArcSystem::zeros()];
-                for (k, s) in with.iter().enumerate() {
-                    h[k % 2].add(s);
-                }
-                h
+        if systems.len() < 2 {
+            return None;
+        }
+        let sensors: Vec<usize> = (0..4)
+            .filter(|&s| turning[s] >= MIN_TURNING_SAMPLES)
+            .collect();
+        let reduced: Vec<ArcSystem> = systems.iter().map(|s| s.common_to(&sensors)).collect();
+        let mut full = ArcSystem::zeros();
+        for s in &reduced {
+            full.add(s);
+        }
+        if debug {
+            debug_arcs(&reduced, &sensors);
+        }
+        // Halves per column: alternate arcs among those that test it. Alternate arcs of the
+        // whole run would leave a sensor seen only in every other slew (an FHST that sees
+        // stars in the x and z slews but not in the y slew between them) with one empty
+        // half, whose estimate is the prior's 0 ± 1 s: a test that always passes. A column
+        // tested in one arc only has no halves and is not kept: one slew cannot show that a
+        // delay repeats.
+        let halves: Vec<Option<[ArcSystem; 2]>> = (0..N_TAU)
+            .map(|c| {
+                let with: Vec<&ArcSystem> =
+                    reduced.iter().filter(|s| s.tests(c, &sensors)).collect();
+                (with.len() >= 2).then(|| {
+                    let mut h = [ArcSystem::zeros(), ArcSystem::zeros()];
+                    for (k, s) in with.iter().enumerate() {
+                        h[k % 2].add(s);
+                    }
+                    h
+                })
             })
+            .collect();
+        let mut offered: Vec<usize> = sensors.iter().map(|s| s + 1).collect();
+        if sensors.len() >= 2 {
+            offered.insert(0, 0);
+        }
+        if offered.is_empty() {
+            return None;
+        }
+        Some(Self {
+            reduced,
+            sensors,
+            full,
+            halves,
+            offered,
+            config,
+            halves_p_min: chi2_sf(config.halves_sigma * config.halves_sigma, 1.0),
         })
-        .collect();
-    let mut offered: Vec<usize> = sensors.iter().map(|s| s + 1).collect();
-    if sensors.len() >= 2 {
-        offered.insert(0, 0);
     }
-    if offered.is_empty() {
-        return None;
+
+    /// The scatter ratio of column `k` of the model `with` at estimate `x` between the arcs.
+    fn scatter(&self, with: &[usize], k: usize, x: f64) -> (f64, usize) {
+        scatter_ratio(&self.reduced, &self.sensors, with, k, x)
     }
-    let halves_p_min = chi2_sf(config.halves_sigma * config.halves_sigma, 1.0);
-    let scatter = |with: &[usize], k: usize, x: f64| scatter_ratio(&reduced, &sensors, with, k, x);
-    // Evidence of column `c` against `model`.
-    let evaluate = |model: &[usize], c: usize| {
-        let h = halves.get(c).and_then(Option::as_ref).map(|[a, b]| [a, b]);
-        evaluate(&full, h, &scatter, config.alpha, model, c)
-    };
-    let why_not = |e: &Evidence, p_adjusted: f64| -> Option<String> {
+
+    /// Evidence of column `c` against `model`.
+    fn evaluate(&self, model: &[usize], c: usize) -> Option<Evidence> {
+        let h = self
+            .halves
+            .get(c)
+            .and_then(Option::as_ref)
+            .map(|[a, b]| [a, b]);
+        evaluate(
+            &self.full,
+            h,
+            &|with: &[usize], k: usize, x: f64| self.scatter(with, k, x),
+            self.config.alpha,
+            model,
+            c,
+        )
+    }
+
+    /// Why column evidence `e` (LR p adjusted `p_adjusted`) is not kept, if it is not.
+    fn why_not(&self, e: &Evidence, p_adjusted: f64) -> Option<String> {
+        let config = self.config;
         let mut why = Vec::new();
         if !(p_adjusted < config.alpha) {
             why.push(format!(
@@ -700,30 +759,28 @@ fn select(systems: &[ArcSystem], config: &SearchConfig, debug: bool) -> Option<T
         }
         if e.halves_estimates.0.is_empty() {
             why.push("no halves: fewer than two arcs test it".to_owned());
-        } else if !(e.halves_p > halves_p_min) {
+        } else if !(e.halves_p > self.halves_p_min) {
             why.push(format!(
                 "halves differ (χ² {:.1}, p {:.2e})",
                 e.halves_chi2, e.halves_p
             ));
         }
         (!why.is_empty()).then(|| why.join("; "))
-    };
-    let mut model: Vec<usize> = Vec::new();
-    let mut excluded: Vec<usize> = Vec::new();
-    let mut kept: Vec<Evidence> = Vec::new();
-    let mut iterations = Vec::new();
-    let n_offered = offered.len() as f64;
-    for _ in 0..2 * N_TAU {
-        // Forward.
+    }
+
+    /// Forward: adds, by ΔBIC, the passing column (p Holm-adjusted over the candidates)
+    /// until none passes.
+    fn forward(&self, st: &mut ColumnState) {
         loop {
-            let cands: Vec<usize> = offered
+            let cands: Vec<usize> = self
+                .offered
                 .iter()
                 .copied()
-                .filter(|c| !model.contains(c) && !excluded.contains(c))
+                .filter(|c| !st.model.contains(c) && !st.excluded.contains(c))
                 .collect();
             let mut evs: Vec<(usize, Evidence)> = cands
                 .iter()
-                .filter_map(|&c| evaluate(&model, c).map(|e| (c, e)))
+                .filter_map(|&c| self.evaluate(&st.model, c).map(|e| (c, e)))
                 .collect();
             if evs.is_empty() {
                 break;
@@ -732,13 +789,13 @@ fn select(systems: &[ArcSystem], config: &SearchConfig, debug: bool) -> Option<T
             let mut best: Option<(usize, f64)> = None;
             for (i, ((_, e), a)) in evs.iter_mut().zip(adj).enumerate() {
                 e.p_holm = a;
-                e.rejected_because = why_not(e, a);
+                e.rejected_because = self.why_not(e, a);
                 if e.rejected_because.is_none() && best.is_none_or(|(_, b)| e.delta_bic > b) {
                     best = Some((i, e.delta_bic));
                 }
             }
             let Some((bi, _)) = best else {
-                iterations.push(Iteration {
+                st.iterations.push(Iteration {
                     number: 0,
                     added: None,
                     candidates: evs.into_iter().map(|e| e.1).collect(),
@@ -747,24 +804,30 @@ fn select(systems: &[ArcSystem], config: &SearchConfig, debug: bool) -> Option<T
             };
             evs[bi].1.accepted = true;
             let c = evs[bi].0;
-            model.push(c);
-            kept.push(evs[bi].1.clone());
-            iterations.push(Iteration {
+            st.model.push(c);
+            st.kept.push(evs[bi].1.clone());
+            st.iterations.push(Iteration {
                 number: 0,
                 added: Some(column_label(c)),
                 candidates: evs.into_iter().map(|e| e.1).collect(),
             });
         }
-        // Backward: the weakest column that fails against the model without it leaves.
+    }
+
+    /// Backward: the weakest column that fails against the model without it (p Bonferroni
+    /// over the columns offered) leaves and is excluded; the evidence of those that pass is
+    /// renewed. False when none fails.
+    fn backward(&self, st: &mut ColumnState) -> bool {
+        let n_offered = self.offered.len() as f64;
         let mut worst: Option<(usize, Evidence)> = None;
-        for (k, &c) in model.iter().enumerate() {
-            let without: Vec<usize> = model.iter().copied().filter(|&x| x != c).collect();
-            let Some(mut e) = evaluate(&without, c) else {
+        for (k, &c) in st.model.iter().enumerate() {
+            let without: Vec<usize> = st.model.iter().copied().filter(|&x| x != c).collect();
+            let Some(mut e) = self.evaluate(&without, c) else {
                 continue;
             };
             let p_adj = (e.p_value * n_offered).min(1.0);
             e.p_holm = p_adj;
-            e.rejected_because = why_not(&e, p_adj);
+            e.rejected_because = self.why_not(&e, p_adj);
             if e.rejected_because.is_some()
                 && worst
                     .as_ref()
@@ -773,14 +836,14 @@ fn select(systems: &[ArcSystem], config: &SearchConfig, debug: bool) -> Option<T
                 worst = Some((k, e));
             } else if e.rejected_because.is_none() {
                 e.accepted = true;
-                kept[k] = e;
+                st.kept[k] = e;
             }
         }
-        let Some((k, e)) = worst else { break };
-        let c = model.remove(k);
-        kept.remove(k);
-        excluded.push(c);
-        iterations.push(Iteration {
+        let Some((k, e)) = worst else { return false };
+        let c = st.model.remove(k);
+        st.kept.remove(k);
+        st.excluded.push(c);
+        st.iterations.push(Iteration {
             number: 0,
             added: Some(format!(
                 "removed {} (backward: {})",
@@ -789,63 +852,96 @@ fn select(systems: &[ArcSystem], config: &SearchConfig, debug: bool) -> Option<T
             )),
             candidates: vec![e],
         });
+        true
     }
-    let fit = solve(&full, &model)?;
+
+    /// The offered columns left out of `model`, each tested against it ([`leftover_columns`]).
+    fn leftover(&self, model: &[usize]) -> Vec<ArcLeftover> {
+        leftover_columns(
+            &self.offered,
+            model,
+            &self.reduced,
+            &self.sensors,
+            &|c| {
+                self.evaluate(model, c).map(|mut e| {
+                    e.rejected_because = self.why_not(&e, 0.0);
+                    e
+                })
+            },
+            &|c| {
+                let mut with = model.to_vec();
+                with.push(c);
+                let k = model.len();
+                let f = solve(&self.full, &with)?;
+                let ratio = self.scatter(&with, k, f.x[k]).0;
+                Some((f.x[k], (f.cov[(k, k)] * f.s2().max(1.0) * ratio).sqrt()))
+            },
+        )
+    }
+
+    /// Each tested sensor's time tag (ms, σ scaled by the scatter between the arcs) from the
+    /// common and its own column of `fit`, and its evidence (its own column's when it has
+    /// one).
+    fn per_sensor(&self, fit: &Sub, model: &[usize], kept: &[Evidence]) -> TimeTags {
+        let scale = fit.s2().max(1.0);
+        let ratio: Vec<f64> = (0..model.len())
+            .map(|k| self.scatter(model, k, fit.x[k]).0)
+            .collect();
+        let mut tau_ms = [None; 4];
+        let mut evidence: [Option<Evidence>; 4] = Default::default();
+        let common = model.iter().position(|&c| c == 0);
+        for &s in &self.sensors {
+            let own = model.iter().position(|&c| c == s + 1);
+            if common.is_none() && own.is_none() {
+                continue;
+            }
+            let (mut x, mut v) = (0.0, 0.0);
+            for a in [common, own].into_iter().flatten() {
+                x += fit.x[a];
+                for b in [common, own].into_iter().flatten() {
+                    v += fit.cov[(a, b)] * (ratio[a] * ratio[b]).sqrt();
+                }
+            }
+            tau_ms[s] = Some((x, (v * scale).sqrt()));
+            // A sensor's own deviation is the more specific evidence when it has one.
+            evidence[s] = own.or(common).map(|a| kept[a].clone());
+        }
+        (tau_ms, evidence)
+    }
+}
+
+/// Per sensor: the time tag (ms, σ) and the evidence for it.
+type TimeTags = ([Option<(f64, f64)>; 4], [Option<Evidence>; 4]);
+
+/// The selection of time-tag columns over the arcs' systems (module doc, **Evidence**).
+fn select(systems: &[ArcSystem], config: &SearchConfig, debug: bool) -> Option<TimeReference> {
+    // 1. The columns offered and what their tests share.
+    let sel = Selection::new(systems, config, debug)?;
+    // 2. Forward, then backward, until no column fails (at most 2 N_TAU rounds).
+    let mut st = ColumnState::default();
+    for _ in 0..2 * N_TAU {
+        sel.forward(&mut st);
+        if !sel.backward(&mut st) {
+            break;
+        }
+    }
+    // 3. The fit of the model kept, finite, and the columns left out.
+    let fit = solve(&sel.full, &st.model)?;
     if !(fit.x.iter().chain(fit.cov.iter()).all(|v| v.is_finite()) && fit.chi2.is_finite()) {
         return None;
     }
-    let leftover = leftover_columns(
-        &offered,
-        &model,
-        &reduced,
-        &sensors,
-        &|c| {
-            evaluate(&model, c).map(|mut e| {
-                e.rejected_because = why_not(&e, 0.0);
-                e
-            })
-        },
-        &|c| {
-            let mut with = model.clone();
-            with.push(c);
-            let k = model.len();
-            let f = solve(&full, &with)?;
-            let ratio = scatter(&with, k, f.x[k]).0;
-            Some((f.x[k], (f.cov[(k, k)] * f.s2().max(1.0) * ratio).sqrt()))
-        },
-    );
-    let scale = fit.s2().max(1.0);
-    let ratio: Vec<f64> = (0..model.len())
-        .map(|k| scatter(&model, k, fit.x[k]).0)
-        .collect();
-    let mut tau_ms = [None; 4];
-    let mut evidence: [Option<Evidence>; 4] = Default::default();
-    let common = model.iter().position(|&c| c == 0);
-    for &s in &sensors {
-        let own = model.iter().position(|&c| c == s + 1);
-        if common.is_none() && own.is_none() {
-            continue;
-        }
-        let (mut x, mut v) = (0.0, 0.0);
-        for a in [common, own].into_iter().flatten() {
-            x += fit.x[a];
-            for b in [common, own].into_iter().flatten() {
-                v += fit.cov[(a, b)] * (ratio[a] * ratio[b]).sqrt();
-            }
-        }
-        tau_ms[s] = Some((x, (v * scale).sqrt()));
-        // A sensor's own deviation is the more specific evidence when it has one.
-        evidence[s] = own.or(common).map(|a| kept[a].clone());
-    }
+    let leftover = sel.leftover(&st.model);
+    // 4. Each sensor's time tag and evidence.
+    let (tau_ms, evidence) = sel.per_sensor(&fit, &st.model, &st.kept);
     Some(TimeReference {
         arcs: systems.len(),
         passes: 1,
-        rows: full.rows,
-        model,
-        tested: std::array::from_fn(|s| sensors.contains(&s)),
+        rows: sel.full.rows,
+        tested: std::array::from_fn(|s| sel.sensors.contains(&s)),
+        model: st.model,
         tau_ms,
         evidence,
-        iterations,
+        iterations: st.iterations,
         leftover,
     })
 }
