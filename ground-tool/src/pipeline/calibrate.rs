@@ -1316,7 +1316,7 @@ pub fn calibrate_telemetry(
         metadata,
         &frames_cal,
         &setup,
-        iru_report.as_ref(),
+        (iru_report.as_ref(), iru_skipped.as_deref()),
         (tm, &flown_iru),
     )?;
     let report = CalibrationReport {
@@ -1614,6 +1614,37 @@ impl FixFloors {
     }
 }
 
+impl IruReport {
+    /// What the slew uncertainty needs of this report (`super::filter_tuning`).
+    #[must_use]
+    pub fn tuning_evidence(&self) -> super::filter_tuning::IruEvidence {
+        use super::filter_tuning::{HeldOut, IruEvidence, RateScale, TriadCalibration};
+        let held_out = |v: &crate::calibration::iru_chain::HeldOutValidation| HeldOut {
+            passed: v.passed,
+            mean_square_normalised: v.mean_square_normalised,
+            reason: v.reason.clone(),
+        };
+        IruEvidence {
+            delta_m: self.delta_m,
+            delta_m_sigma: self.delta_m_sigma,
+            delta_m_uplinked: self.delta_m_uplinked,
+            validation: self.validation.as_ref().map(held_out),
+            g_updated: self.g_updated,
+            decision: self.decision.clone(),
+            rate_scale: RateScale {
+                significant: self.rate_scale.significant,
+                p_value: self.rate_scale.p_value,
+            },
+            backup: self.backup.as_ref().map(|b| TriadCalibration {
+                delta_m: b.delta_m,
+                delta_m_sigma: b.delta_m_sigma,
+                delta_m_uplinked: b.delta_m_uplinked,
+                validation: b.validation.as_ref().map(held_out),
+            }),
+        }
+    }
+}
+
 /// The filter table to write, the changes with why, their validation, and the decisions on
 /// the gyro terms: the aberration switch [`filter_update`] makes is written only if the
 /// telemetry shows it is needed (`alignment_heldout::validate_aberration_switch`); the slew
@@ -1626,7 +1657,7 @@ fn filter_stage(
     metadata: &Metadata,
     frames: &[FrameObservations],
     setup: &AlignmentSetup<'_>,
-    iru: Option<&IruReport>,
+    (iru, iru_skipped): (Option<&IruReport>, Option<&str>),
     gyro_data: (&Telemetry, &IruTable),
 ) -> anyhow::Result<FilterStage> {
     let flown = options
@@ -1643,7 +1674,11 @@ fn filter_stage(
         }
         _ => new_filter,
     };
-    let slew = super::filter_tuning::slew_uncertainty(flown.gyro_scale_uncertainty, iru);
+    let slew = super::filter_tuning::slew_uncertainty(
+        flown.gyro_scale_uncertainty,
+        iru.map(IruReport::tuning_evidence).as_ref(),
+        iru_skipped,
+    );
     let [arw, rrw] = super::filter_tuning::noise_terms(&flown, gyro_data.0, gyro_data.1);
     let [bright, faint] = super::filter_tuning::fhst_noise_terms(&flown, frames);
     let mut terms = vec![slew, arw, rrw, bright, faint];

@@ -31,9 +31,10 @@
 //!    `super::filter_tuning` writes an end point only when the interval excludes the flown
 //!    value and both folds differ from it by more than 20 % on the same side.
 
-use super::filter_tuning::NoiseEvidence;
 use super::observations::FrameObservations;
+use super::tuning_evidence::NoiseEvidence;
 use fsw_core::fhst::{FHST_MAGNITUDE_MAX, FHST_MAGNITUDE_MIN, FHST_RAD_PER_COUNT};
+use fsw_core::tables::types::FilterTable;
 use fsw_core::units::ARCSEC_PER_RAD;
 
 /// Largest difference of the two intervals' gyro increments (any axis) in a triple, rad:
@@ -227,60 +228,118 @@ fn law_misfit(chi2: f64, dof: usize) -> Option<String> {
     })
 }
 
-/// The evidence for the two end points (σ(2.0), σ(5.7)) of every tracker with enough
-/// samples: whole data with 95 % intervals and the two folds' values (method steps 2–4);
-/// or why there is none.
+/// Fewest second-difference samples for a tracker to count: with fewer it neither gives
+/// evidence nor blocks a lowering (it has hardly seen a star).
+pub const MIN_TRACKER_SAMPLES: usize = 20;
+
+/// How far the bins lie above the flown law, where the law's own end points cannot be used
+/// (the law misfits or an end is out of reach): the largest ratio of a bin's σ to the flown
+/// σ(m) and that bin's lower 95 % ratio.
+fn ratio_to_flown(bins: &[Bin], flown: &FilterTable) -> Option<(f64, f64)> {
+    const Z95: f64 = 1.959_964;
+    bins.iter()
+        .map(|b| {
+            let f = flown.fhst_sigma_rad(b.magnitude) * ARCSEC_PER_RAD;
+            let r = b.sigma_arcsec / f;
+            (r, r * (1.0 - Z95 / (2.0 * b.n as f64).sqrt()))
+        })
+        .max_by(|x, y| x.0.total_cmp(&y.0))
+}
+
+/// The evidence for the two end points (σ(2.0), σ(5.7)) of every tracker with at least
+/// [`MIN_TRACKER_SAMPLES`] samples: whole data with 95 % intervals and the two folds' values
+/// (method steps 2–4). Where the law's end points cannot be used (too few bins, a misfit, an
+/// end out of reach) the tracker still gives evidence to raise when its bins lie above the
+/// flown law (the flown ends scaled by the largest bin ratio, in the whole data and in each
+/// fold), and otherwise none, with the reason: a tracker with data but no evidence blocks a
+/// lowering (`super::filter_tuning::fhst_noise_terms`).
 ///
 /// # Errors
-/// No tracker has enough qualifying samples over at least one magnitude, in the whole data
-/// and in each fold (the message counts them).
+/// No tracker has [`MIN_TRACKER_SAMPLES`] qualifying samples (the message counts them).
 pub fn fhst_noise_evidence(
     frames: &[FrameObservations],
+    flown: &FilterTable,
 ) -> Result<[Vec<NoiseEvidence>; 2], String> {
     const Z95: f64 = 1.959_964;
     let names = ["FHST1", "FHST2"];
+    let flown_ends = [
+        flown.fhst_sigma_bright_arcsec,
+        flown.fhst_sigma_faint_arcsec,
+    ];
     let mut bright = Vec::new();
     let mut faint = Vec::new();
     let mut why_not = Vec::new();
     for (tracker, name) in names.into_iter().enumerate() {
         let all = samples(frames, tracker);
+        if all.len() < MIN_TRACKER_SAMPLES {
+            why_not.push(format!("{name}: {} second-difference samples", all.len()));
+            continue;
+        }
         let whole_refs: Vec<&Sample> = all.iter().collect();
-        let fold = |k: usize| -> Vec<&Sample> {
+        let fold_refs = [0, 1].map(|k| -> Vec<&Sample> {
             all.iter()
                 .filter(|s| ((s.t_s / FOLD_BLOCK_S).floor() as i64).rem_euclid(2) as usize == k)
                 .collect()
-        };
-        let whole = end_points(&bins(&whole_refs));
-        let folds = [0, 1].map(|k| end_points(&bins(&fold(k))).map(|e| e.0));
-        let Some((whole, chi2, dof)) = whole else {
-            why_not.push(format!(
-                "{name}: {} second-difference samples do not give {MIN_BIN_SAMPLES} per magnitude bin over at least one magnitude",
-                all.len()
-            ));
-            continue;
-        };
-        let misfit = law_misfit(chi2, dof);
+        });
         let whole_bins = bins(&whole_refs);
+        let fold_bins = [bins(&fold_refs[0]), bins(&fold_refs[1])];
+        let law = end_points(&whole_bins);
+        let fold_law = [end_points(&fold_bins[0]), end_points(&fold_bins[1])];
         for (j, out) in [&mut bright, &mut faint].into_iter().enumerate() {
-            let (v, s) = whole[j];
             let end = [FHST_MAGNITUDE_MIN, FHST_MAGNITUDE_MAX][j];
-            let near = whole_bins
-                .iter()
-                .any(|b| (b.magnitude - end).abs() <= END_POINT_REACH_MAG);
-            let note = misfit.clone().or_else(|| {
-                (!near).then(|| {
-                    format!(
-                        "no magnitude bin within {END_POINT_REACH_MAG} mag of {end}: the end point would be an extrapolation of the law"
-                    )
-                })
-            });
-            out.push(NoiseEvidence {
-                axis: name,
-                samples: all.len(),
-                whole: note.is_none().then_some([v, v - Z95 * s, v + Z95 * s]),
-                folds: [folds[0].map(|f| f[j].0), folds[1].map(|f| f[j].0)],
-                note,
-            });
+            let unusable = match &law {
+                None => Some(format!(
+                    "{} second-difference samples do not give {MIN_BIN_SAMPLES} per magnitude bin over at least one magnitude",
+                    all.len()
+                )),
+                Some((_, chi2, dof)) => law_misfit(*chi2, *dof).or_else(|| {
+                    (!whole_bins
+                        .iter()
+                        .any(|b| (b.magnitude - end).abs() <= END_POINT_REACH_MAG))
+                    .then(|| {
+                        format!(
+                            "no magnitude bin within {END_POINT_REACH_MAG} mag of {end}: the end point would be an extrapolation of the law"
+                        )
+                    })
+                }),
+            };
+            let evidence = match (unusable, &law) {
+                (None, Some((ends, _, _))) => {
+                    let (v, s) = ends[j];
+                    NoiseEvidence {
+                        axis: name,
+                        samples: all.len(),
+                        whole: Some([v, v - Z95 * s, v + Z95 * s]),
+                        folds: [0, 1].map(|k| fold_law[k].as_ref().map(|f| f.0[j].0)),
+                        note: None,
+                    }
+                }
+                (why, _) => {
+                    let why = why.unwrap_or_default();
+                    let above = ratio_to_flown(&whole_bins, flown).filter(|(_, lo)| *lo > 1.0);
+                    match above {
+                        Some((r, lo)) => NoiseEvidence {
+                            axis: name,
+                            samples: all.len(),
+                            whole: Some([r, lo, r].map(|x| x * flown_ends[j])),
+                            folds: [0, 1].map(|k| {
+                                ratio_to_flown(&fold_bins[k], flown).map(|f| f.0 * flown_ends[j])
+                            }),
+                            note: Some(format!(
+                                "{why}; its bins lie above the flown law by up to ×{r:.2}"
+                            )),
+                        },
+                        None => NoiseEvidence {
+                            axis: name,
+                            samples: all.len(),
+                            whole: None,
+                            folds: [None, None],
+                            note: Some(why),
+                        },
+                    }
+                }
+            };
+            out.push(evidence);
         }
     }
     if bright.is_empty() {
@@ -333,5 +392,29 @@ mod tests {
             .collect();
         let (_, chi2, dof) = end_points(&linear).unwrap();
         assert!(law_misfit(chi2, dof).is_some(), "χ² {chi2} over {dof}");
+    }
+
+    /// Bins twice the flown law (whatever their shape) give the raise evidence ×2 with a
+    /// lower bound above 1; bins at the law give none above 1.
+    #[test]
+    fn bins_above_the_flown_law_give_a_raise_ratio() {
+        let flown = FilterTable::default_boot();
+        let at = |m: f64| flown.fhst_sigma_rad(m) * ARCSEC_PER_RAD;
+        let bins = |k: f64| -> Vec<Bin> {
+            (0..6)
+                .map(|i| {
+                    let m = 4.0 + 0.25 * i as f64;
+                    Bin {
+                        magnitude: m,
+                        sigma_arcsec: k * at(m),
+                        n: 2000,
+                    }
+                })
+                .collect()
+        };
+        let (r, lo) = ratio_to_flown(&bins(2.0), &flown).unwrap();
+        assert!((r - 2.0).abs() < 1e-9 && lo > 1.8, "{r} {lo}");
+        let (r, lo) = ratio_to_flown(&bins(1.0), &flown).unwrap();
+        assert!((r - 1.0).abs() < 1e-9 && lo < 1.0, "{r} {lo}");
     }
 }

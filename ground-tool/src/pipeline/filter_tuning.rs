@@ -34,7 +34,7 @@
 //! the new `k` differs from the flown one by more than [`MIN_RELATIVE_CHANGE`]. Otherwise the
 //! flown `k` stays and the report says why, with the derived value.
 
-use super::calibrate::IruReport;
+pub use super::tuning_evidence::NoiseEvidence;
 use fsw_core::tables::types::FilterTable;
 use serde::Serialize;
 
@@ -146,7 +146,11 @@ fn residual_element_sigma(
 /// `gyro_scale_uncertainty` from IRUCAL's report (module doc); the backup triad counts when
 /// it flew slews (then `IruReport::backup` holds its calibration).
 #[must_use]
-pub fn slew_uncertainty(flown_k: f64, iru: Option<&IruReport>) -> TermDecision {
+pub fn slew_uncertainty(
+    flown_k: f64,
+    iru: Option<&IruEvidence>,
+    skipped: Option<&str>,
+) -> TermDecision {
     let mut d = TermDecision {
         field: FilterTerm::SlewUncertainty,
         flown: flown_k,
@@ -155,7 +159,10 @@ pub fn slew_uncertainty(flown_k: f64, iru: Option<&IruReport>) -> TermDecision {
         reason: String::new(),
     };
     let Some(r) = iru else {
-        d.reason = "kept: no IRU calibration (too few maneuvers), nothing new is known of the gyros' scale factors and misalignments".to_owned();
+        d.reason = format!(
+            "kept: no IRU calibration ({}), nothing new is known of the gyros' scale factors and misalignments",
+            skipped.unwrap_or("none ran")
+        );
         return d;
     };
     let Some(v) = r.validation.as_ref() else {
@@ -256,23 +263,6 @@ const NOISE_REPLICAS: usize = crate::calibration::allan::BOOTSTRAP_REPLICAS;
 /// per axis), the χ² intervals a few.
 const BOOTSTRAP_MAX_SAMPLES: usize = 1 << 17;
 
-/// One axis's (or tracker's) evidence on a noise term, in the table field's unit (per gyro
-/// channel for σ_v and σ_u): the whole data's value and interval, and each held-out fold's
-/// value (`None` when the term is not detected).
-#[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct NoiseEvidence {
-    /// Gyro axis (X, Y, Z) or tracker (FHST1, FHST2).
-    pub axis: &'static str,
-    /// Rate samples (all folds).
-    pub samples: usize,
-    /// Whole data: [value, low, high] when detected.
-    pub whole: Option<[f64; 3]>,
-    /// Fold A (even hold segments) and fold B (odd ones): value when detected.
-    pub folds: [Option<f64>; 2],
-    /// Why the whole data give no evidence although they were analysed, when so.
-    pub note: Option<String>,
-}
-
 /// The two held-out folds of a set of hold segments: alternate segments when there are at
 /// least four (each fold then spans the run, so a slow trend falls in both), else each
 /// segment's first and second halves.
@@ -295,6 +285,60 @@ fn folds(segments: &[Vec<f64>]) -> [Vec<Vec<f64>>; 2] {
     out
 }
 
+/// A held-out validation's verdict, as far as the slew uncertainty needs it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct HeldOut {
+    /// Passed.
+    pub passed: bool,
+    /// Mean square of the held-out normalised residuals (1 = σ true).
+    pub mean_square_normalised: f64,
+    /// The validation's reason, with its numbers.
+    pub reason: String,
+}
+
+/// One triad's δM after the calibration (unitless, row-major) and its validation.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TriadCalibration {
+    /// δM.
+    pub delta_m: [[f64; 3]; 3],
+    /// 1σ of δM.
+    pub delta_m_sigma: [[f64; 3]; 3],
+    /// The δM applied to G (0 where not uplinked).
+    pub delta_m_uplinked: [[f64; 3]; 3],
+    /// Held-out validation, when attempted.
+    pub validation: Option<HeldOut>,
+}
+
+/// The lack-of-fit test of a scale error that changes with rate.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RateScale {
+    /// Significant.
+    pub significant: bool,
+    /// Its p-value.
+    pub p_value: f64,
+}
+
+/// What IRUCAL says of G (calibrate's `IruReport`, in the terms the slew uncertainty needs).
+#[derive(Clone, Debug, PartialEq)]
+pub struct IruEvidence {
+    /// δM of the primary triad.
+    pub delta_m: [[f64; 3]; 3],
+    /// Its 1σ.
+    pub delta_m_sigma: [[f64; 3]; 3],
+    /// The δM applied to G.
+    pub delta_m_uplinked: [[f64; 3]; 3],
+    /// The primary triad's held-out validation.
+    pub validation: Option<HeldOut>,
+    /// Whether G was updated.
+    pub g_updated: bool,
+    /// Why G was or was not updated.
+    pub decision: String,
+    /// The rate-dependent scale test.
+    pub rate_scale: RateScale,
+    /// The backup triad, when it flew slews.
+    pub backup: Option<TriadCalibration>,
+}
+
 /// One term's [value, low, high] of the fit, when detected.
 fn detected(t: &crate::calibration::allan::NoiseTerm) -> Option<[f64; 3]> {
     t.detected.then_some([t.value, t.low, t.high])
@@ -304,50 +348,21 @@ fn detected(t: &crate::calibration::allan::NoiseTerm) -> Option<[f64; 3]> {
 /// high]): the rate random walk plus a rate ramp (the early bias transient) taken as a walk
 /// over one orbit, as the boot table's σ_u is derived (docs/obc_filter.md §2). An undetected
 /// ramp enters with its upper bound at all three places, so a σ_u is never lowered below a
-/// ramp the data cannot exclude. `None` when K is not detected.
-/// `common_ramp`: a ramp the channel difference cancels (seen in the OBC's own bias, in the
-/// fit's units), taken when larger than the fit's.
-fn filter_rrw(fit: &crate::calibration::allan::NoiseFit, common_ramp: f64) -> Option<[f64; 3]> {
-    let k = detected(&fit.rrw_rad_per_s_sqrt_s)?;
+/// ramp the data cannot exclude. `None` when neither K nor a ramp is seen.
+/// Without K but with a detected ramp, K enters at its upper bound (0 in the low end): a
+/// ramp alone can show the flown σ_u too small.
+fn filter_rrw(fit: &crate::calibration::allan::NoiseFit) -> Option<[f64; 3]> {
     let r = &fit.rate_ramp_rad_per_s2;
-    let ramp = detected(r)
-        .unwrap_or([r.high; 3])
-        .map(|x| x.max(common_ramp));
+    let ramp = detected(r).unwrap_or([r.high; 3]);
+    let k = match detected(&fit.rrw_rad_per_s_sqrt_s) {
+        Some(k) => k,
+        None if r.detected => {
+            let high = fit.rrw_rad_per_s_sqrt_s.high;
+            [high, 0.0, high]
+        }
+        None => return None,
+    };
     Some([0, 1, 2].map(|i| (k[i] * k[i] + ramp[i] * ramp[i] * RAMP_HORIZON_S).sqrt()))
-}
-
-/// Housekeeping after the first housekeeping packet that the OBC-bias ramp ignores, s: the
-/// filter's bias converges over the first tens of minutes.
-pub const OBC_BIAS_SETTLE_S: f64 = 3600.0;
-
-/// The largest rate ramp of the OBC's own bias estimate over the run (housekeeping, ACS
-/// axes, least-squares slope after [`OBC_BIAS_SETTLE_S`]), rad/s². Why: a drift common to
-/// both channels of an axis cancels in their difference, which the Allan analysis uses, but
-/// moves the bias the filter must follow; the OBC's estimate sees it. `None` with fewer than
-/// 100 packets spanning at least [`RAMP_HORIZON_S`] after the settling time.
-#[must_use]
-pub fn obc_bias_ramp(tm: &crate::tp::Telemetry) -> Option<f64> {
-    let t0 = tm.housekeeping.first()?.time.seconds() + OBC_BIAS_SETTLE_S;
-    let pts: Vec<(f64, [f64; 3])> = tm
-        .housekeeping
-        .iter()
-        .map(|h| (h.time.seconds(), h.bias_acs_rad_per_s))
-        .filter(|(t, b)| *t >= t0 && b.iter().all(|x| x.is_finite()))
-        .collect();
-    let span = pts.last()?.0 - pts.first()?.0;
-    if pts.len() < 100 || span < RAMP_HORIZON_S {
-        return None;
-    }
-    let n = pts.len() as f64;
-    let t_mean = pts.iter().map(|p| p.0).sum::<f64>() / n;
-    let stt: f64 = pts.iter().map(|p| (p.0 - t_mean).powi(2)).sum();
-    (0..3)
-        .map(|i| {
-            let b_mean = pts.iter().map(|p| p.1[i]).sum::<f64>() / n;
-            let stb: f64 = pts.iter().map(|p| (p.0 - t_mean) * (p.1[i] - b_mean)).sum();
-            (stb / stt).abs()
-        })
-        .reduce(f64::max)
 }
 
 /// The time over which a rate ramp is carried as a random walk, s: one GRO orbit, the
@@ -361,7 +376,6 @@ fn axis_evidence(
     axis: &'static str,
     segments: &[Vec<f64>],
     tau0_s: f64,
-    common_ramp: f64,
 ) -> Result<[NoiseEvidence; 2], String> {
     use crate::calibration::allan::{analyse_segments_with, MIN_TOTAL_SAMPLES};
     let per_channel = std::f64::consts::SQRT_2;
@@ -370,8 +384,9 @@ fn axis_evidence(
     let fold_samples = |f: &[Vec<f64>]| f.iter().map(Vec::len).sum::<usize>();
     if fold_samples(&fa).min(fold_samples(&fb)) < MIN_TOTAL_SAMPLES {
         return Err(format!(
-            "axis {axis}: {samples} hold samples in {} segment(s), fewer than {MIN_TOTAL_SAMPLES} per held-out fold",
-            segments.len()
+            "axis {axis}: {samples} hold samples in {} segment(s) of at least {} samples, fewer than {MIN_TOTAL_SAMPLES} per held-out fold",
+            segments.len(),
+            crate::calibration::allan::MIN_SEGMENT_SAMPLES
         ));
     }
     let replicas = if samples <= BOOTSTRAP_MAX_SAMPLES {
@@ -383,11 +398,9 @@ fn axis_evidence(
         .map_err(|e| format!("axis {axis}: the Allan fit failed ({e})"))?;
     let fold_fits =
         [&fa, &fb].map(|f| analyse_segments_with(axis, f, tau0_s, NOISE_CONFIDENCE, 0).ok());
-    // The common ramp is per body axis; the fit's figures are of the pair difference.
-    let ramp = common_ramp * per_channel;
     let term = |f: &crate::calibration::allan::NoiseFit, rrw: bool| {
         if rrw {
-            filter_rrw(f, ramp)
+            filter_rrw(f)
         } else {
             detected(&f.arw_rad_per_sqrt_s)
         }
@@ -412,7 +425,6 @@ fn axis_evidence(
 fn noise_evidence(
     tm: &crate::tp::Telemetry,
     iru: &fsw_core::tables::IruTable,
-    common_ramp: f64,
 ) -> Result<[Vec<NoiseEvidence>; 2], String> {
     use crate::calibration::allan::{hold_segments, median_spacing_s, AXES};
     let tau0_s = median_spacing_s(tm).ok_or("no raw frames")?;
@@ -421,11 +433,15 @@ fn noise_evidence(
     let mut why_not = Vec::new();
     for (axis, a, b) in AXES {
         let seg = hold_segments(tm, iru, (a, Some(b)), tau0_s);
-        match axis_evidence(axis, &seg.used, tau0_s, common_ramp) {
+        match axis_evidence(axis, &seg.used, tau0_s) {
             Ok([a, r]) => {
                 arw.push(a);
                 rrw.push(r);
             }
+            Err(e) if seg.dropped > 0 => why_not.push(format!(
+                "{e} ({} shorter hold segment(s) dropped, the longest {} samples of τ₀ = {tau0_s} s)",
+                seg.dropped, seg.longest
+            )),
             Err(e) => why_not.push(e),
         }
     }
@@ -476,10 +492,11 @@ pub fn noise_decision(
         let fold = |f: Option<f64>| f.map_or("not detected".to_owned(), |v| format!("{v:.3e}"));
         match e.whole {
             Some([v, lo, hi]) => format!(
-                "{}: {v:.3e} [{lo:.3e}, {hi:.3e}], folds {} / {}",
+                "{}: {v:.3e} [{lo:.3e}, {hi:.3e}], folds {} / {}{}",
                 e.axis,
                 fold(e.folds[0]),
-                fold(e.folds[1])
+                fold(e.folds[1]),
+                e.note.as_ref().map_or(String::new(), |n| format!(" ({n})"))
             ),
             None => format!(
                 "{}: {}",
@@ -529,7 +546,7 @@ pub fn fhst_noise_terms(
     flown: &FilterTable,
     frames: &[super::observations::FrameObservations],
 ) -> [TermDecision; 2] {
-    match super::fhst_noise::fhst_noise_evidence(frames) {
+    match super::fhst_noise::fhst_noise_evidence(frames, flown) {
         Ok([bright, faint]) => [
             noise_decision(
                 FilterTerm::FhstBright,
@@ -562,34 +579,36 @@ pub fn fhst_noise_terms(
 
 /// σ_v (`arw_rad_per_sqrt_s`) and σ_u (`rrw_rad_per_s_sqrt_s`, `filter_rrw`: the rate
 /// random walk with any rate ramp the holds show or cannot exclude) from the Allan deviation
-/// of the low-rate holds, each through the two-fold held-out test of [`noise_decision`],
-/// lowered only when all three axes agree. Without enough hold data both are kept, with the
-/// reason.
+/// of the low-rate holds, each through the two-fold held-out test of [`noise_decision`], and
+/// only raised (noise or drift common to both channels of an axis cancels in their
+/// difference). Without enough hold data both are kept, with the reason.
 #[must_use]
 pub fn noise_terms(
     flown: &FilterTable,
     tm: &crate::tp::Telemetry,
     iru: &fsw_core::tables::IruTable,
 ) -> [TermDecision; 2] {
-    let obc_ramp = obc_bias_ramp(tm);
-    match noise_evidence(tm, iru, obc_ramp.unwrap_or(0.0)) {
+    match noise_evidence(tm, iru) {
         Ok([arw, rrw]) => {
-            let mut rrw_decision = noise_decision(
-                FilterTerm::Rrw,
-                flown.rrw_rad_per_s_sqrt_s,
-                &rrw,
-                obc_ramp.is_some(),
-                3,
+            // σ_u is never lowered: a drift common to both channels of an axis cancels in
+            // their difference, and neither the OBC's bias estimate (its own noise raised σ_u
+            // by a third on `normal-ops`) nor a single slope over the run (blind to an
+            // orbit-periodic drift) bounds it safely (docs/obc_filter.md §11).
+            let mut rrw_decision =
+                noise_decision(FilterTerm::Rrw, flown.rrw_rad_per_s_sqrt_s, &rrw, false, 3);
+            rrw_decision.reason.push_str(
+                "; σ_u is never lowered, and a drift common to both channels of an axis (which cancels in their difference) is not in it",
             );
-            if obc_ramp.is_none() && !rrw_decision.written {
-                rrw_decision.reason.push_str(
-                    "; never lowered without the OBC's bias history (housekeeping over an orbit): a drift common to both channels of an axis cancels in their difference",
+            // σ_v is never lowered: noise common to both channels of an axis cancels in
+            // their difference (an outside probe's 90 % common noise read 2.4× low).
+            let mut arw_decision =
+                noise_decision(FilterTerm::Arw, flown.arw_rad_per_sqrt_s, &arw, false, 3);
+            if !arw_decision.written {
+                arw_decision.reason.push_str(
+                    "; σ_v is never lowered from the channel difference: noise common to both channels of an axis cancels in it",
                 );
             }
-            [
-                noise_decision(FilterTerm::Arw, flown.arw_rad_per_sqrt_s, &arw, true, 3),
-                rrw_decision,
-            ]
+            [arw_decision, rrw_decision]
         }
         Err(why) => [
             (FilterTerm::Arw, flown.arw_rad_per_sqrt_s),
@@ -703,21 +722,21 @@ mod tests {
         let flown = 1.454e-8;
         let truth = 4.0 * flown;
         let segs = white_segments(truth, &[3000, 2500, 2800, 3100, 2600, 2900], 7);
-        let [arw, _] = axis_evidence("X", &segs, 1.0, 0.0).unwrap();
+        let [arw, _] = axis_evidence("X", &segs, 1.0).unwrap();
         let d = noise_decision(FilterTerm::Arw, flown, &[arw], true, 3);
         let v = d.derived.expect("derived");
         assert!(d.written, "{}", d.reason);
         assert!((v / truth - 1.0).abs() < 0.2, "{v:e} against {truth:e}");
         // The same noise as the table: kept.
         let segs = white_segments(flown, &[3000, 2500, 2800, 3100, 2600, 2900], 8);
-        let [arw, _] = axis_evidence("X", &segs, 1.0, 0.0).unwrap();
+        let [arw, _] = axis_evidence("X", &segs, 1.0).unwrap();
         assert!(!noise_decision(FilterTerm::Arw, flown, &[arw], true, 3).written);
     }
 
     #[test]
     fn too_little_hold_data_is_refused_with_the_count() {
         let segs = white_segments(1e-8, &[900, 800], 3);
-        let e = axis_evidence("Y", &segs, 1.0, 0.0).unwrap_err();
+        let e = axis_evidence("Y", &segs, 1.0).unwrap_err();
         assert!(e.contains("1700 hold samples"), "{e}");
     }
 

@@ -14,3 +14,4 @@ pub mod fss_systematic;
 pub mod gyro_chain;
 pub mod observations;
 pub mod star_batches;
+pub mod tuning_evidence;
