@@ -606,6 +606,11 @@ def main(argv=None):
                    help="(a mis-declared model) star and Sun directions without annual aberration, though "
                         "metadata.json still declares it: the ground must not switch the OBC's correction on")
     p.add_argument("--quiet-iru", action="store_true", help="no gyro bias and no noise")
+    p.add_argument("--gyro-arw", type=float, default=2.0e-8, metavar="RAD_PER_SQRT_S",
+                   help="angle random walk per body axis and triad (default 2.0e-8)")
+    p.add_argument("--gyro-common-noise", type=float, default=0.0, metavar="F",
+                   help="fraction (0-1) of the gyro noise variance common to both triads (the "
+                        "channel difference of an axis cannot see it)")
     p.add_argument("--backup-channels-dead", action="store_true",
                    help="backup IRU channels X1, Y2, Z2 never move (only the primary is written)")
     p.add_argument("--hk-offset-s", type=float, default=0.0,
@@ -643,7 +648,9 @@ def main(argv=None):
     fhst_sigma = [6.0, 18.0]  # mag 2.0 and 5.7, linear between
     fss_noise_counts = 0.5
     bias = [0.30 * RAD_PER_ARCSEC, -0.20 * RAD_PER_ARCSEC, 0.25 * RAD_PER_ARCSEC]
-    arw = 2.0e-8
+    arw = args.gyro_arw
+    if not 0.0 <= args.gyro_common_noise <= 1.0:
+        sys.exit("--gyro-common-noise must lie in [0, 1]")
     if args.quiet_iru:
         bias, arw = [0.0, 0.0, 0.0], 0.0
 
@@ -987,11 +994,18 @@ def main(argv=None):
                    + rate3[i] * 1e-6 * dth[i] * abs(dth[i] / args.cycle_s / RAD_PER_DEG) ** 3
                    + (scale_step[1][i] * 1e-6 * dth[i] if t_mid >= scale_step[0] and args.gyro_scale_step else 0.0)
                    for i in range(3)]
+            # Noise common to both triads, drawn only when asked (the default stream unchanged).
+            f_common = args.gyro_common_noise
+            common = ([rng_iru.gauss(0.0, arw * math.sqrt(args.cycle_s)) for _ in range(3)]
+                      if f_common > 0.0 else [0.0, 0.0, 0.0])
             for cfg, chans in ((0, (1, 2, 4)), (1, (0, 3, 5))):
                 b_now = bias_at(cfg, t_mid)
                 if high:
                     b_now = [b_now[i] + mode_bias[i] * RAD_PER_ARCSEC for i in range(3)]
-                meas = [dth[i] + b_now[i] * args.cycle_s + rng_iru.gauss(0.0, arw * math.sqrt(args.cycle_s))
+                own = [rng_iru.gauss(0.0, arw * math.sqrt(args.cycle_s)) for _ in range(3)]
+                meas = [dth[i] + b_now[i] * args.cycle_s
+                        + (own[i] if f_common == 0.0
+                           else math.sqrt(1.0 - f_common) * own[i] + math.sqrt(f_common) * common[i])
                         for i in range(3)]
                 dn = scale(mv(g_inv_cfg[cfg], meas), 1.0 / (w_arcsec * RAD_PER_ARCSEC))
                 if cfg == 1 and args.backup_channels_dead:
@@ -1255,6 +1269,8 @@ def main(argv=None):
                      **alias_check},
         "cycles": n_cycles,
         "fhst_sigma_arcsec_injected": fhst_sigma,
+        "gyro_arw_rad_per_sqrt_s": arw,
+        "gyro_common_noise_fraction": args.gyro_common_noise,
         "duration_s": total,
         "frames": stats["frames"],
         "fhst_samples": stats["fhst_samples"],
