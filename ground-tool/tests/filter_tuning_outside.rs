@@ -28,7 +28,10 @@ fn calibrate(run: &Path) -> (Value, Option<FilterTable>) {
     );
     let report: Value = serde_json::from_slice(&o.stdout).unwrap();
     let filter = out.join("tables/filter.tbl");
-    (report, filter.exists().then(|| read_table_image(&filter).unwrap()))
+    (
+        report,
+        filter.exists().then(|| read_table_image(&filter).unwrap()),
+    )
 }
 
 fn term<'a>(report: &'a Value, field: &str) -> &'a Value {
@@ -55,7 +58,10 @@ fn a_noisier_gyro_is_found_and_common_noise_never_lowers_the_table() {
     let t = term(&r, "arw_rad_per_sqrt_s");
     assert_eq!(t["written"], true, "{t}");
     let v = t["derived"].as_f64().unwrap();
-    assert!((v / truth - 1.0).abs() < 0.2, "σ_v {v:e} against {truth:e}: {t}");
+    assert!(
+        (v / truth - 1.0).abs() < 0.2,
+        "σ_v {v:e} against {truth:e}: {t}"
+    );
     assert_eq!(filter.unwrap().arw_rad_per_sqrt_s, v);
 
     // 90 % of the variance common to both triads, at the writer's default 2e-8: the channel
@@ -63,7 +69,14 @@ fn a_noisier_gyro_is_found_and_common_noise_never_lowers_the_table() {
     let run = support::write_run(
         "tuning",
         "common90",
-        &["--plan", "long", "--hold-s", "1200", "--gyro-common-noise", "0.9"],
+        &[
+            "--plan",
+            "long",
+            "--hold-s",
+            "1200",
+            "--gyro-common-noise",
+            "0.9",
+        ],
     );
     let (r, filter) = calibrate(&run);
     let t = term(&r, "arw_rad_per_sqrt_s");
@@ -71,11 +84,20 @@ fn a_noisier_gyro_is_found_and_common_noise_never_lowers_the_table() {
         t["written"] == false || t["derived"].as_f64().unwrap() >= boot,
         "σ_v lowered under common noise: {t}"
     );
-    assert!(t["reason"].as_str().unwrap().contains("never lowered"), "{t}");
+    assert!(
+        t["reason"].as_str().unwrap().contains("never lowered"),
+        "{t}"
+    );
     if let Some(f) = filter {
         assert!(f.arw_rad_per_sqrt_s >= boot, "{}", f.arw_rad_per_sqrt_s);
     }
     // σ_u is never lowered either, and says a common drift is not in its evidence.
     let t = term(&r, "rrw_rad_per_s_sqrt_s");
-    assert!(t["reason"].as_str().unwrap().contains("common to both channels"), "{t}");
+    assert!(
+        t["reason"]
+            .as_str()
+            .unwrap()
+            .contains("common to both channels"),
+        "{t}"
+    );
 }
