@@ -324,8 +324,8 @@ pub struct CalibrationReport {
     /// Validation of the filter-table change, when there is one (the flown filter table is
     /// kept when it fails).
     pub filter_validation: Option<AberrationSwitchValidation>,
-    /// The filter table's gyro terms derived from the calibration and the decision on each,
-    /// written or not, with why (`super::filter_tuning`).
+    /// The filter table's noise terms derived from the flight (gyro and FHST) and the
+    /// decision on each, written or not, with why (`super::filter_tuning`).
     pub filter_tuning: Vec<super::filter_tuning::TermDecision>,
     /// The FHST systematic floor derived for the alignments that fly
     /// ([`super::filter_floor`]); `None` before `calibrate_run` decides which alignments fly.
@@ -1646,7 +1646,7 @@ impl IruReport {
 }
 
 /// The filter table to write, the changes with why, their validation, and the decisions on
-/// the gyro terms: the aberration switch [`filter_update`] makes is written only if the
+/// the noise terms: the aberration switch [`filter_update`] makes is written only if the
 /// telemetry shows it is needed (`alignment_heldout::validate_aberration_switch`); the slew
 /// uncertainty only through the IRU table's held-out validation (`super::filter_tuning`).
 ///
@@ -1714,7 +1714,7 @@ struct FilterStage {
     changes: Vec<String>,
     /// The aberration switch's validation, when proposed.
     aberration_validation: Option<AberrationSwitchValidation>,
-    /// The decisions on the gyro terms, written or not.
+    /// The decisions on the noise terms (`super::filter_tuning`), written or not.
     terms: Vec<super::filter_tuning::TermDecision>,
 }
 
