@@ -4,29 +4,18 @@
 //! triads (which the channel difference cannot see) never lowers σ_v below the boot value
 //! (an outside probe's case: it read 2.4× low and was written, `docs/investigations.md`).
 
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+
 mod support;
 
 use fsw_core::tables::types::FilterTable;
 use ground_tool::pipeline::calibrate::read_table_image;
 use serde_json::Value;
 use std::path::Path;
-use std::process::Command;
 
 fn calibrate(run: &Path) -> (Value, Option<FilterTable>) {
     let out = run.join("cal");
-    let o = Command::new(env!("CARGO_BIN_EXE_ground-tool"))
-        .args(["calibrate", "--force", "--json", "--out"])
-        .arg(&out)
-        .arg(run)
-        .output()
-        .unwrap();
-    assert!(
-        o.status.success(),
-        "calibrate {}: {}",
-        run.display(),
-        String::from_utf8_lossy(&o.stderr)
-    );
-    let report: Value = serde_json::from_slice(&o.stdout).unwrap();
+    let report = support::calibrate_json(env!("CARGO_BIN_EXE_ground-tool"), run, &out, &[]);
     let filter = out.join("tables/filter.tbl");
     (
         report,

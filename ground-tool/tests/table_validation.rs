@@ -16,26 +16,9 @@ use fsw_core::tables::AlignmentTable;
 use ground_tool::pipeline::calibrate::read_table_image;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 fn calibrate(run: &Path, out: &Path, extra: &[&str]) -> Value {
-    let o = Command::new(env!("CARGO_BIN_EXE_ground-tool"))
-        .arg("calibrate")
-        .arg(run)
-        .arg("--out")
-        .arg(out)
-        .arg("--force")
-        .arg("--json")
-        .args(extra)
-        .output()
-        .unwrap();
-    assert!(
-        o.status.success(),
-        "calibrate {}: {}",
-        run.display(),
-        String::from_utf8_lossy(&o.stderr)
-    );
-    serde_json::from_slice(&o.stdout).unwrap()
+    support::calibrate_json(env!("CARGO_BIN_EXE_ground-tool"), run, out, extra)
 }
 
 fn validation(r: &Value) -> (bool, f64, f64, f64, String) {

@@ -31,3 +31,25 @@ pub fn write_run(prefix: &str, case: &str, flags: &[&str]) -> PathBuf {
     );
     dir
 }
+
+/// `ground-tool calibrate RUN --out OUT --force --json EXTRA...` (the binary of the test's
+/// own crate, `bin`): the report, after asserting success.
+pub fn calibrate_json(bin: &str, run: &Path, out: &Path, extra: &[&str]) -> serde_json::Value {
+    let o = Command::new(bin)
+        .arg("calibrate")
+        .arg(run)
+        .arg("--out")
+        .arg(out)
+        .arg("--force")
+        .arg("--json")
+        .args(extra)
+        .output()
+        .unwrap();
+    assert!(
+        o.status.success(),
+        "calibrate {}: {}",
+        run.display(),
+        String::from_utf8_lossy(&o.stderr)
+    );
+    serde_json::from_slice(&o.stdout).unwrap()
+}
