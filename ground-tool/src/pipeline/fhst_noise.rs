@@ -234,7 +234,8 @@ pub const MIN_TRACKER_SAMPLES: usize = 20;
 
 /// How far the bins lie above the flown law, where the law's own end points cannot be used
 /// (the law misfits or an end is out of reach): the largest ratio of a bin's σ to the flown
-/// σ(m) and that bin's lower 95 % ratio.
+/// σ(m) and that bin's lower 95 % ratio. The caller passes the bins within
+/// [`END_POINT_REACH_MAG`] of the end it decides.
 fn ratio_to_flown(bins: &[Bin], flown: &FilterTable) -> Option<(f64, f64)> {
     const Z95: f64 = 1.959_964;
     bins.iter()
@@ -249,9 +250,9 @@ fn ratio_to_flown(bins: &[Bin], flown: &FilterTable) -> Option<(f64, f64)> {
 /// The evidence for the two end points (σ(2.0), σ(5.7)) of every tracker with at least
 /// [`MIN_TRACKER_SAMPLES`] samples: whole data with 95 % intervals and the two folds' values
 /// (method steps 2–4). Where the law's end points cannot be used (too few bins, a misfit, an
-/// end out of reach) the tracker still gives evidence to raise when its bins lie above the
-/// flown law (the flown ends scaled by the largest bin ratio, in the whole data and in each
-/// fold), and otherwise none, with the reason: a tracker with data but no evidence blocks a
+/// end out of reach) the tracker still gives evidence to raise an end when its bins near that
+/// end lie above the flown law (the flown end scaled by their largest ratio, in the whole
+/// data and in each fold), and otherwise none, with the reason: a tracker with data but no evidence blocks a
 /// lowering (`super::filter_tuning::fhst_noise_terms`).
 ///
 /// # Errors
@@ -316,14 +317,25 @@ pub fn fhst_noise_evidence(
                 }
                 (why, _) => {
                     let why = why.unwrap_or_default();
-                    let above = ratio_to_flown(&whole_bins, flown).filter(|(_, lo)| *lo > 1.0);
+                    // Only the bins near this end speak for it: a law raised as a whole by
+                    // its worst bin overstated the other end (seed 2 of the main job: bright
+                    // bins 1.3× over, the faint end raised to 31″ against ≤ 24″).
+                    let near = |bins: &[Bin]| -> Vec<Bin> {
+                        bins.iter()
+                            .filter(|b| (b.magnitude - end).abs() <= END_POINT_REACH_MAG)
+                            .copied()
+                            .collect()
+                    };
+                    let above =
+                        ratio_to_flown(&near(&whole_bins), flown).filter(|(_, lo)| *lo > 1.0);
                     match above {
                         Some((r, lo)) => NoiseEvidence {
                             axis: name,
                             samples: all.len(),
                             whole: Some([r, lo, r].map(|x| x * flown_ends[j])),
                             folds: [0, 1].map(|k| {
-                                ratio_to_flown(&fold_bins[k], flown).map(|f| f.0 * flown_ends[j])
+                                ratio_to_flown(&near(&fold_bins[k]), flown)
+                                    .map(|f| f.0 * flown_ends[j])
                             }),
                             note: Some(format!(
                                 "{why}; its bins lie above the flown law by up to ×{r:.2}"
