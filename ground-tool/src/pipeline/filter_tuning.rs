@@ -16,8 +16,11 @@
 //! the flown value and both folds differ from it by more than [`MIN_RELATIVE_CHANGE`] on the
 //! same side. A term is raised when any axis votes up (to the largest: the filter must not
 //! be optimistic on any axis) and lowered only when every axis with evidence votes down.
-//! σ_v and σ_u come from the Allan deviation of the holds ([`noise_terms`]), the FHST law
-//! from the stars' second differences (`super::fhst_noise`, [`fhst_noise_terms`]).
+//! σ_v and σ_u come from the Allan deviation of the holds ([`noise_terms`]) and are never
+//! lowered (noise or drift common to both channels of an axis cancels in their difference,
+//! which the analysis uses); the FHST law comes from the stars' second differences
+//! (`super::fhst_noise`, [`fhst_noise_terms`]) and is lowered only when every tracker with
+//! data agrees.
 //!
 //! # Slew uncertainty from IRUCAL (rule)
 //! A residual error `E` of the flown G turns a rotation `θ u` into an attitude error `E u θ`,
