@@ -512,6 +512,8 @@ fn record() -> Recording {
                 truth.fss_sample(1, time, &al),
             ],
             temperatures_centi_c: temperatures(cycle),
+            tam: Default::default(),
+            css: Default::default(),
         };
         let recorded = commands_for(cycle, &sc, &truth.q);
         let cycle_rec = RecordedCycle {

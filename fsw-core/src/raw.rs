@@ -143,6 +143,47 @@ pub struct FssSample {
     pub flags: u8,
 }
 
+/// Number of three-axis magnetometers: TAM1 (primary), TAM2.
+/// Paper: two TAMs (issue 20); docs/icd.md §3.5.
+pub const TAMS: usize = 2;
+/// Number of coarse Sun sensor eyes the OBC reads: ±X, ±Y, ±Z of ACS.
+/// Project choice (the paper gives no CSS layout); docs/magnetics.md §2, docs/icd.md §3.5.
+pub const CSS_EYES: usize = 6;
+
+/// TAM status flag: the three field words hold a measurement.
+/// docs/icd.md §3.5.
+pub const TAM_FLAG_VALID: u8 = 0x01;
+/// CSS status flag: the six eye words hold a measurement.
+/// docs/icd.md §3.5.
+pub const CSS_FLAG_VALID: u8 = 0x01;
+
+/// One three-axis magnetometer sample, in counts along the TAM's own axes.
+/// The count size (mG per count) is a TAM table field, not a constant.
+/// docs/icd.md §3.5; docs/magnetics.md §2.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct TamSample {
+    /// Field along the TAM's X, Y, Z axes, signed counts.
+    /// docs/icd.md §3.5.
+    pub field_counts: [i16; 3],
+    /// Status bits `TAM_FLAG_*`; 0 (the default) means no data.
+    /// docs/icd.md §3.5.
+    pub flags: u8,
+}
+
+/// One sample of the coarse Sun sensor eyes (cosine-law photocells), in counts.
+/// docs/icd.md §3.5; docs/magnetics.md §2.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct CssSample {
+    /// Eye outputs, order +X, −X, +Y, −Y, +Z, −Z of ACS.
+    /// docs/icd.md §3.5.
+    pub counts: [u16; CSS_EYES],
+    /// Status bits `CSS_FLAG_*`; 0 (the default) means no data.
+    /// docs/icd.md §3.5.
+    pub flags: u8,
+}
+
 /// Everything the OBC reads from its sensors in one cycle.
 /// APID 0x010, docs/icd.md §3.1.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -163,4 +204,10 @@ pub struct RawSensorFrame {
     /// Temperatures in 0.01 °C: FHST1, FHST2, FSS1, FSS2, IRU baseplate.
     /// docs/icd.md §3.1 (offset 38).
     pub temperatures_centi_c: [i16; TEMPERATURE_SENSORS],
+    /// TAM1, TAM2 (all flags 0 when the spacecraft carries no magnetics data this cycle).
+    /// Not in APID 0x010: docs/icd.md §3.5 (APID 0x013).
+    pub tam: [TamSample; TAMS],
+    /// The coarse Sun sensor eyes.
+    /// Not in APID 0x010: docs/icd.md §3.5 (APID 0x013).
+    pub css: CssSample,
 }

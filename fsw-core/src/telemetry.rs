@@ -427,6 +427,8 @@ pub fn decode_raw_frame(time: TimeTag, data: &[u8]) -> Result<RawSensorFrame, Re
         fhst,
         fss,
         temperatures_centi_c,
+        tam: Default::default(),
+        css: Default::default(),
     })
 }
 

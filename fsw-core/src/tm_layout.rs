@@ -716,6 +716,8 @@ mod tests {
                 flags: 1 + 2 * i as u8,
             }),
             temperatures_centi_c: [2001, -2002, 2003, 2004, -2005],
+            tam: Default::default(),
+            css: Default::default(),
         };
         let mut buf = [0u8; 256];
         let n = encode_raw_frame(&raw, &mut buf).unwrap();

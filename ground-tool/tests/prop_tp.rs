@@ -168,6 +168,8 @@ fn raw_frame(rng: &mut Rng, time: TimeTag) -> RawSensorFrame {
         fhst,
         fss,
         temperatures_centi_c: [(); 5].map(|()| rng.range(1000, 3000) as i16),
+        tam: Default::default(),
+        css: Default::default(),
     }
 }
 

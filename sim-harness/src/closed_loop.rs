@@ -648,12 +648,19 @@ impl Simulation {
             }
             time_offset_s = FaultState::time_offset_s(&self.faults, t);
         }
+        let magnetics = self
+            .magnetics
+            .as_mut()
+            .map(|m| m.sample(&self.clock, &truth))
+            .unwrap_or_default();
         let frame = RawSensorFrame {
             time: self.clock.time_tag(t + time_offset_s).unwrap_or_default(),
             iru: self.pending_iru,
             fhst,
             fss,
             temperatures_centi_c: temps,
+            tam: magnetics.tam.map(crate::magnetics::flight_tam_sample),
+            css: crate::magnetics::flight_css_sample(&magnetics.css),
         };
 
         // Commands due now (borrowing the images; at most MAX_COMMANDS_PER_CYCLE).
@@ -703,11 +710,6 @@ impl Simulation {
             }
         }
         let output = self.fsw.step(&frame, &commands[..n]);
-        let magnetics = self
-            .magnetics
-            .as_mut()
-            .map(|m| m.sample(&self.clock, &truth))
-            .unwrap_or_default();
 
         let (attitude_error_acs_rad, nees) = if output.housekeeping.filter_mode == 0 {
             (Vector3::zeros(), None)

@@ -98,3 +98,37 @@ impl Magnetics {
         }
     }
 }
+
+/// The hardware words the OBC reads from a TAM reading (`docs/icd.md` §3.5).
+#[must_use]
+pub fn flight_tam_sample(r: TamReading) -> fsw_core::raw::TamSample {
+    fsw_core::raw::TamSample {
+        field_counts: r.field_counts,
+        flags: if r.valid {
+            fsw_core::raw::TAM_FLAG_VALID
+        } else {
+            0
+        },
+    }
+}
+
+/// The hardware words the OBC reads from the CSS set: the first
+/// [`fsw_core::raw::CSS_EYES`] eyes (`docs/icd.md` §3.5); no data when the set has none.
+#[must_use]
+pub fn flight_css_sample(r: &CssReading) -> fsw_core::raw::CssSample {
+    let mut counts = [0u16; fsw_core::raw::CSS_EYES];
+    for (dst, src) in counts
+        .iter_mut()
+        .zip(r.counts.iter().take(usize::from(r.eyes)))
+    {
+        *dst = *src;
+    }
+    fsw_core::raw::CssSample {
+        counts,
+        flags: if r.eyes > 0 {
+            fsw_core::raw::CSS_FLAG_VALID
+        } else {
+            0
+        },
+    }
+}
