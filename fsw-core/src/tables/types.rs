@@ -42,11 +42,11 @@ pub fn rows_from_matrix(m: &Matrix3<f64>) -> Mat3Rows {
     ]
 }
 
-fn all_finite(m: &Mat3Rows) -> bool {
+pub(crate) fn all_finite(m: &Mat3Rows) -> bool {
     m.iter().flatten().all(|x| x.is_finite())
 }
 
-fn check_finite(values: &[f64], field: u8) -> Result<(), TableError> {
+pub(crate) fn check_finite(values: &[f64], field: u8) -> Result<(), TableError> {
     if values.iter().all(|x| x.is_finite()) {
         Ok(())
     } else {
@@ -54,7 +54,7 @@ fn check_finite(values: &[f64], field: u8) -> Result<(), TableError> {
     }
 }
 
-fn check_range(value: f64, lo: f64, hi: f64, field: u8) -> Result<(), TableError> {
+pub(crate) fn check_range(value: f64, lo: f64, hi: f64, field: u8) -> Result<(), TableError> {
     if !value.is_finite() {
         return Err(TableError::NotFinite { field });
     }
