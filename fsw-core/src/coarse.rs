@@ -75,10 +75,10 @@ pub enum CoarseUnavailable {
     /// algorithms.md §10a ("near-parallel vectors").
     NearlyParallel,
     /// The field model refused the time or position.
-    /// [`FieldModelError`].
+    /// docs/magnetics.md §4 ([`FieldModelError`]).
     FieldModel(FieldModelError),
     /// The Sun ephemeris refused the time.
-    /// [`crate::sun_ephemeris`].
+    /// docs/magnetics.md §4 (the onboard Sun ephemeris, Meeus ch. 25).
     Ephemeris,
     /// A non-finite value in the solution.
     /// Project choice (defensive check).

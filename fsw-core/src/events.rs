@@ -90,11 +90,20 @@ pub enum EventId {
     /// run). p1 = age of the orbit state, s since the table epoch (saturated, 0 if before).
     /// docs/icd.md §3.3.
     OrbitalCorrectionApplied = 0x0802,
+    /// The coarse attitude could not be fixed (raised when the reason changes). p1 = reason
+    /// ([`crate::coarse::CoarseUnavailable::code`]), p2 = fixes made since boot.
+    /// docs/icd.md §3.3; docs/magnetics.md §4.
+    CoarseFixUnavailable = 0x0901,
+    /// The coarse attitude was fixed again after an interval without fixes (or for the first
+    /// time). p1 = source ([`crate::coarse::CoarseSource`]: 1 FSS + TAM, 2 CSS + TAM), p2 = the
+    /// reason code of the interval without fixes (0 none).
+    /// docs/icd.md §3.3; docs/magnetics.md §4.
+    CoarseFixResumed = 0x0902,
 }
 
 impl EventId {
     /// Every event id (for the uniqueness test and the ICD table).
-    pub const ALL: [EventId; 22] = [
+    pub const ALL: [EventId; 24] = [
         Self::TableLoaded,
         Self::TableRejected,
         Self::TableActivated,
@@ -117,6 +126,8 @@ impl EventId {
         Self::CommandRejected,
         Self::OrbitalCorrectionUnavailable,
         Self::OrbitalCorrectionApplied,
+        Self::CoarseFixUnavailable,
+        Self::CoarseFixResumed,
     ];
 
     /// On-wire code.

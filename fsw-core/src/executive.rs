@@ -38,6 +38,7 @@
 //! nine RK4 steps of the orbit.
 
 use crate::attitude::{rot, Quat};
+use crate::coarse::CoarseAttitude;
 use crate::control::Controller;
 use crate::events::{raise, Counters, Event, EventId, MAX_EVENTS_PER_CYCLE};
 use crate::fhst;
@@ -256,6 +257,10 @@ pub struct FlightCore {
     /// The last orbital-correction event raised (0x0801 with its status and reason, or
     /// 0x0802), so that each is raised once per run; `None` with the flag off.
     orbital_reported: Option<(EventId, u32, u32)>,
+    /// The coarse attitude (phase 7b).
+    coarse: CoarseAttitude,
+    /// The last coarse-fix reason reported (0 = fixed), for events on change only.
+    coarse_reported: Option<u32>,
     /// Time since the last gyro data (a coast), s.
     coast_s: f64,
 }
@@ -314,6 +319,8 @@ impl FlightCore {
             orbit: OnboardOrbit::new(),
             orbital_fix: None,
             orbital_reported: None,
+            coarse: CoarseAttitude::new(),
+            coarse_reported: None,
             coast_s: 0.0,
         }
     }
@@ -432,6 +439,9 @@ impl FlightCore {
         }
         self.update_filter_mode(&residuals, &mut events);
 
+        // 7b. Coarse attitude (Sun, field, gyros), alongside the fine solution.
+        self.coarse_attitude(frame, &delta_theta, dt_s, &mut events);
+
         // 8. Control.
         self.control(&mut events);
 
@@ -441,6 +451,72 @@ impl FlightCore {
             housekeeping,
             events,
         }
+    }
+
+    /// Phase 7b: carry the coarse attitude on the gyros and, when due, fix it from the Sun and
+    /// the field (`crate::coarse`, docs/magnetics.md §4). Events on a change of reason only.
+    fn coarse_attitude(
+        &mut self,
+        frame: &RawSensorFrame,
+        delta_theta_acs_rad: &Vector3<f64>,
+        dt_s: f64,
+        events: &mut heapless::Vec<Event, MAX_EVENTS_PER_CYCLE>,
+    ) {
+        let p_bb: Matrix3<f64> = self.filter.covariance.fixed_view::<3, 3>(3, 3).into_owned();
+        self.coarse.propagate(
+            delta_theta_acs_rad,
+            &self.filter.bias_rad_per_s,
+            &p_bb,
+            self.tables.filter().arw_rad_per_sqrt_s,
+            dt_s,
+        );
+        let table = self.tables.magnetics();
+        if !self.coarse.fix_due(table) {
+            return;
+        }
+        let orbit = match (self.tables.has_orbit(), self.orbit.state()) {
+            (true, Ok(state)) if self.orbit.status() == OrbitStatus::Valid => {
+                Some(state.pos_eci_km)
+            }
+            _ => None,
+        };
+        let t_s = frame.time.seconds_since_j2000_tt();
+        let result =
+            self.coarse
+                .try_fix(frame, self.tables.alignment(), table, orbit.as_ref(), t_s);
+        let reason = match result {
+            Ok(()) => 0,
+            Err(why) => why.code(),
+        };
+        if self.coarse_reported != Some(reason) {
+            let previous = self.coarse_reported.unwrap_or(0);
+            self.coarse_reported = Some(reason);
+            if reason == 0 {
+                let source = u32::from(self.coarse.source as u8);
+                raise(
+                    events,
+                    &mut self.counters,
+                    EventId::CoarseFixResumed,
+                    source,
+                    previous,
+                );
+            } else {
+                let fixes = self.coarse.fixes;
+                raise(
+                    events,
+                    &mut self.counters,
+                    EventId::CoarseFixUnavailable,
+                    reason,
+                    fixes,
+                );
+            }
+        }
+    }
+
+    /// The coarse attitude (Sun, field and gyros; docs/magnetics.md §4).
+    #[must_use]
+    pub fn coarse(&self) -> &CoarseAttitude {
+        &self.coarse
     }
 
     fn check_time(

@@ -25,13 +25,13 @@ use nalgebra::{Matrix3, Vector3};
 use crate::tables::magnetics::{matrix, MagneticsTable, FIELD_MAX_DEGREE, FIELD_N1};
 
 /// IGRF reference radius, km.
-/// IAGA IGRF (a = 6371.2 km).
+/// Wertz (1978) app. H; IAGA IGRF (a = 6371.2 km).
 pub const REFERENCE_RADIUS_KM: f64 = 6_371.2;
 /// Julian year, s.
 /// IAU (365.25 d of 86,400 s).
 pub const JULIAN_YEAR_S: f64 = 365.25 * 86_400.0;
 /// Largest time from the table's epoch at which the model is evaluated, Julian years.
-/// IAGA IGRF (secular variation predicts 5 years).
+/// Project choice after IAGA IGRF (secular variation predicts 5 years).
 pub const MAX_EXTRAPOLATION_YEARS: f64 = 5.0;
 /// TT − TAI, s.
 /// IAU (TT = TAI + 32.184 s).
@@ -52,7 +52,7 @@ pub enum FieldModelError {
     /// docs/tables.md (Table 6, field 0).
     NoModel,
     /// The time is more than [`MAX_EXTRAPOLATION_YEARS`] from the coefficients' epoch.
-    /// IAGA IGRF secular-variation span.
+    /// Project choice after the IAGA IGRF secular-variation span.
     OutsideSpan,
     /// The position's radius is outside [`MIN_RADIUS_KM`]..=[`MAX_RADIUS_KM`] or not finite.
     /// Project choice (the onboard orbit's range).
@@ -145,7 +145,10 @@ pub fn field_itrs_nt(
     let mut sin_m = [0.0; FIELD_N1];
     set(&mut cos_m, 0, 1.0);
     for m in 1..FIELD_N1 {
-        let (c, s) = (get(&cos_m, m.saturating_sub(1)), get(&sin_m, m.saturating_sub(1)));
+        let (c, s) = (
+            get(&cos_m, m.saturating_sub(1)),
+            get(&sin_m, m.saturating_sub(1)),
+        );
         set(&mut cos_m, m, c * cl - s * sl);
         set(&mut sin_m, m, s * cl + c * sl);
     }
@@ -180,7 +183,11 @@ pub fn field_itrs_nt(
             );
         }
         set(&mut p, n, st * get(&p1, n.saturating_sub(1)));
-        set(&mut dp, n, st * get(&dp1, n.saturating_sub(1)) + ct * get(&p1, n.saturating_sub(1)));
+        set(
+            &mut dp,
+            n,
+            st * get(&dp1, n.saturating_sub(1)) + ct * get(&p1, n.saturating_sub(1)),
+        );
         ratio_pow *= ratio;
         schmidt_n0 *= (2.0 * nf - 1.0) / nf;
         let mut schmidt = schmidt_n0;
@@ -225,7 +232,7 @@ pub fn field_itrs_nt(
 
 /// The field on J2000/GCRS axes (nT) at the J2000 position `pos_eci_km` and time `t_s`
 /// (s since J2000.0 TT).
-/// [`field_itrs_nt`] through [`m_itrs_from_eci`].
+/// Wertz (1978) app. H ([`field_itrs_nt`]) through Meeus ch. 12 ([`m_itrs_from_eci`]).
 ///
 /// # Errors
 /// As [`field_itrs_nt`].

@@ -137,10 +137,13 @@ impl MagneticsTable {
             m_acs_from_tam: [IDENTITY_ROWS; TAMS],
             tam_milligauss_per_count: [[0.3; 3]; TAMS],
             tam_bias_milligauss: [[0.0; 3]; TAMS],
-            // An unknown bias of a few mG (the paper's was 4 mG) dominates before calibration.
-            field_sigma_milligauss: 4.0,
-            // FSS: 0.004° counts, transfer and alignment errors of arcminutes.
-            fss_sun_sigma_rad: 0.05 * core::f64::consts::PI / 180.0,
+            // Before calibration: a bias of the paper's size (4 mG) in an unknown direction,
+            // 4/√3 = 2.3 mG per axis, with an uncalibrated TAM alignment (≤ 0.2°: 1.4 mG of
+            // 400 mG) and scale (0.1 %: 0.4 mG): 2.5 mG per axis (docs/magnetics.md §4).
+            field_sigma_milligauss: 2.5,
+            // FSS: the prelaunch alignments were off by up to 0.20° (paper: FSS1 0.20°, FSS2
+            // 0.05°, found by the in-flight calibration); 0.004° counts are negligible.
+            fss_sun_sigma_rad: 0.1 * core::f64::consts::PI / 180.0,
             css_normals_acs: CSS_NORMALS_DEFAULT,
             css_counts_at_normal_incidence: 1000.0,
             // Earth albedo through a cosine eye moves the Sun direction by degrees.
