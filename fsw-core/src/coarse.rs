@@ -31,10 +31,27 @@ use crate::raw::{CssSample, RawSensorFrame, TamSample, CSS_FLAG_VALID, TAMS, TAM
 use crate::tables::magnetics::{matrix, MagneticsTable};
 use crate::tables::AlignmentTable;
 
+/// nT per mG.
+/// Project choice: the unit definition (1 G = 10⁵ nT).
+pub const NT_PER_MILLIGAUSS: f64 = 100.0;
+
 /// Smallest `|Σ cᵢ/k · nᵢ|` read as "the Sun is in view of the CSS eyes" (1 with the full Sun,
 /// ≤ 0.3 from Earth albedo alone).
 /// Project choice: docs/magnetics.md §4.
 pub const CSS_MIN_SUN_NORM: f64 = 0.6;
+
+/// Gate on a fix vector against the carried solution: `angle² / (σ_vec² + tr P) >` this
+/// rejects it (χ² with 2 degrees of freedom at a false-alarm probability of 1e-6).
+/// Project choice: docs/magnetics.md §4 (fault screening).
+pub const GATE_CHI2: f64 = 27.6;
+/// After this many consecutive gated attempts the gate is released for one fix (the carried
+/// solution is then the suspect, not the vectors).
+/// Project choice: docs/magnetics.md §4 (fault screening).
+pub const GATE_RELEASE_ATTEMPTS: u16 = 30;
+/// A TAM whose field magnitude differs from the model's by more than
+/// `5 σ_field + this × |B_model|` is rejected (a stuck, dead or saturated magnetometer).
+/// Project choice: docs/magnetics.md §4 (scale and model errors ≤ 1 %).
+pub const TAM_MAGNITUDE_RELATIVE_TOLERANCE: f64 = 0.02;
 
 /// Which vectors made the last fix.
 /// Project choice (not in the paper): docs/magnetics.md §4.
@@ -83,6 +100,12 @@ pub enum CoarseUnavailable {
     /// A non-finite value in the solution.
     /// Project choice (defensive check).
     NotFinite,
+    /// Every TAM with data failed the magnitude check against the model.
+    /// docs/magnetics.md §4 (fault screening).
+    TamMagnitude,
+    /// A vector disagreed with the carried solution beyond [`GATE_CHI2`].
+    /// docs/magnetics.md §4 (fault screening).
+    Gated,
 }
 
 impl CoarseUnavailable {
@@ -102,6 +125,8 @@ impl CoarseUnavailable {
             Self::FieldModel(FieldModelError::NotFinite) => 9,
             Self::Ephemeris => 10,
             Self::NotFinite => 11,
+            Self::TamMagnitude => 12,
+            Self::Gated => 13,
         }
     }
 }
@@ -140,7 +165,7 @@ pub fn tam_field_acs_milligauss(
     let b_tam = Vector3::new(f64::from(cx) * sx, f64::from(cy) * sy, f64::from(cz) * sz)
         - Vector3::from(*bias);
     let b = m * b_tam;
-    (b.iter().all(|x| x.is_finite()) && b.norm() > 0.0).then_some(b)
+    b.iter().all(|x| x.is_finite()).then_some(b)
 }
 
 /// The Sun direction in ACS from the CSS eyes, or `None` when they do not see the Sun.
@@ -209,36 +234,28 @@ pub fn triad(
     }
 }
 
-/// The Sun in ACS this cycle: FSS1, FSS2 (through the alignment table), else the CSS eyes;
-/// with its 1σ and the source.
+/// The Sun directions in ACS this cycle, in order of preference: FSS1, FSS2 (through the
+/// alignment table), the CSS eyes; each with its 1σ and source (`None` where a sensor has no
+/// Sun).
 /// Paper: FSS; docs/magnetics.md §4 (CSS fallback).
 #[must_use]
-pub fn sun_acs(
+pub fn sun_candidates_acs(
     frame: &RawSensorFrame,
     alignment: &AlignmentTable,
     table: &MagneticsTable,
-) -> Option<(Vector3<f64>, f64, CoarseSource)> {
-    for (id, sample) in FssId::ALL.iter().zip(frame.fss.iter()) {
-        if let Ok(m) = fss::measure_sensor(sample, *id, alignment) {
-            return Some((m.dir_acs, table.fss_sun_sigma_rad, CoarseSource::FssTam));
-        }
-    }
-    css_sun_acs(&frame.css, table).map(|v| (v, table.css_sun_sigma_rad, CoarseSource::CssTam))
-}
-
-/// The field in ACS this cycle (TAM1, else TAM2), mG.
-/// docs/magnetics.md §4.
-#[must_use]
-pub fn field_acs_milligauss(
-    frame: &RawSensorFrame,
-    table: &MagneticsTable,
-) -> Option<Vector3<f64>> {
-    (0..TAMS).find_map(|unit| {
+) -> [Option<(Vector3<f64>, f64, CoarseSource)>; 3] {
+    let fss = |id: FssId| {
         frame
-            .tam
-            .get(unit)
-            .and_then(|s| tam_field_acs_milligauss(s, unit, table))
-    })
+            .fss
+            .get(id.index())
+            .and_then(|sample| fss::measure_sensor(sample, id, alignment).ok())
+            .map(|m| (m.dir_acs, table.fss_sun_sigma_rad, CoarseSource::FssTam))
+    };
+    [
+        fss(FssId::Fss1),
+        fss(FssId::Fss2),
+        css_sun_acs(&frame.css, table).map(|v| (v, table.css_sun_sigma_rad, CoarseSource::CssTam)),
+    ]
 }
 
 /// The coarse solution: attitude, covariance, where the last fix came from and how old it is.
@@ -266,8 +283,17 @@ pub struct CoarseAttitude {
     /// Fixes made since boot.
     /// docs/magnetics.md §4.
     pub fixes: u32,
+    /// Vectors rejected by the fault screening since boot (TAM magnitude, gate).
+    /// docs/magnetics.md §4.
+    pub rejections: u32,
+    /// The last rejection: 1 TAM1 magnitude, 2 TAM2 magnitude, 3 field gated, 4 Sun gated
+    /// (0 none since boot).
+    /// docs/icd.md §3.3 (event 0x0903).
+    pub last_rejection: u8,
     /// Cycles since the last attempt.
     cycles_since_attempt: u16,
+    /// Consecutive attempts stopped by the gate.
+    consecutive_gated: u16,
 }
 
 impl Default for CoarseAttitude {
@@ -289,7 +315,10 @@ impl CoarseAttitude {
             age_s: 0.0,
             last_unavailable: None,
             fixes: 0,
+            rejections: 0,
+            last_rejection: 0,
             cycles_since_attempt: u16::MAX,
+            consecutive_gated: 0,
         }
     }
 
@@ -352,7 +381,7 @@ impl CoarseAttitude {
         pos_eci_km: Option<&Vector3<f64>>,
         t_s: f64,
     ) -> Result<(), CoarseUnavailable> {
-        let result = Self::solve(frame, alignment, table, pos_eci_km, t_s);
+        let result = self.solve(frame, alignment, table, pos_eci_km, t_s);
         match result {
             Ok((q, p, source)) => {
                 self.q_acs_from_eci = q;
@@ -362,16 +391,22 @@ impl CoarseAttitude {
                 self.age_s = 0.0;
                 self.last_unavailable = None;
                 self.fixes = self.fixes.saturating_add(1);
+                self.consecutive_gated = 0;
                 Ok(())
             }
             Err(why) => {
+                if why == CoarseUnavailable::Gated {
+                    self.consecutive_gated = self.consecutive_gated.saturating_add(1);
+                }
                 self.last_unavailable = Some(why);
                 Err(why)
             }
         }
     }
 
+    /// References, screened vectors, TRIAD.
     fn solve(
+        &mut self,
         frame: &RawSensorFrame,
         alignment: &AlignmentTable,
         table: &MagneticsTable,
@@ -382,31 +417,92 @@ impl CoarseAttitude {
             return Err(CoarseUnavailable::NoFieldModel);
         }
         let pos = pos_eci_km.ok_or(CoarseUnavailable::NoOrbit)?;
-        let b_acs = field_acs_milligauss(frame, table).ok_or(CoarseUnavailable::NoField)?;
-        let (sun_acs, sun_sigma, source) =
-            sun_acs(frame, alignment, table).ok_or(CoarseUnavailable::NoSun)?;
-        let b_eci =
+        let suns = sun_candidates_acs(frame, alignment, table);
+        if suns.iter().all(Option::is_none) {
+            return Err(CoarseUnavailable::NoSun);
+        }
+        let b_eci_nt =
             field_model::field_eci_nt(table, pos, t_s).map_err(CoarseUnavailable::FieldModel)?;
         let sun_eci =
             crate::sun_ephemeris::sun_dir_eci(t_s).map_err(|_| CoarseUnavailable::Ephemeris)?;
-        let field_sigma = table.field_sigma_milligauss / b_acs.norm();
-        let sun = VectorPair {
-            body: sun_acs,
-            reference: sun_eci,
-            sigma_rad: sun_sigma,
-        };
-        let field = VectorPair {
-            body: b_acs,
-            reference: b_eci,
-            sigma_rad: field_sigma,
-        };
-        let (anchor, other) = if sun_sigma <= field_sigma {
+        let field = self.screened_field(frame, table, &b_eci_nt)?;
+        let mut sun = None;
+        for (v, sigma, source) in suns.into_iter().flatten() {
+            let pair = VectorPair {
+                body: v,
+                reference: sun_eci,
+                sigma_rad: sigma,
+            };
+            if self.passes_gate(&pair) {
+                sun = Some((pair, source));
+                break;
+            }
+            self.reject(4);
+        }
+        let (sun, source) = sun.ok_or(CoarseUnavailable::Gated)?;
+        let (anchor, other) = if sun.sigma_rad <= field.sigma_rad {
             (&sun, &field)
         } else {
             (&field, &sun)
         };
         let (q, p) = triad(anchor, other, table.min_sun_field_angle_rad)?;
         Ok((q, p, source))
+    }
+
+    /// The first TAM (TAM1, TAM2) whose field passes the magnitude check against the model
+    /// (`5 σ_field + 2 % |B|`) and the gate against the carried solution.
+    fn screened_field(
+        &mut self,
+        frame: &RawSensorFrame,
+        table: &MagneticsTable,
+        b_eci_nt: &Vector3<f64>,
+    ) -> Result<VectorPair, CoarseUnavailable> {
+        let b_model_mg = b_eci_nt.norm() / NT_PER_MILLIGAUSS;
+        let tolerance_mg =
+            5.0 * table.field_sigma_milligauss + TAM_MAGNITUDE_RELATIVE_TOLERANCE * b_model_mg;
+        let mut outcome = CoarseUnavailable::NoField;
+        for (unit, sample) in frame.tam.iter().enumerate().take(TAMS) {
+            let Some(b) = tam_field_acs_milligauss(sample, unit, table) else {
+                continue;
+            };
+            let code = if unit == 0 { 1 } else { 2 };
+            if !((b.norm() - b_model_mg).abs() <= tolerance_mg) {
+                self.reject(code);
+                if outcome == CoarseUnavailable::NoField {
+                    outcome = CoarseUnavailable::TamMagnitude;
+                }
+                continue;
+            }
+            let pair = VectorPair {
+                body: b,
+                reference: *b_eci_nt,
+                sigma_rad: table.field_sigma_milligauss / b.norm(),
+            };
+            if self.passes_gate(&pair) {
+                return Ok(pair);
+            }
+            self.reject(3);
+            outcome = CoarseUnavailable::Gated;
+        }
+        Err(outcome)
+    }
+
+    /// The gate against the carried solution (passes when there is none, or after
+    /// [`GATE_RELEASE_ATTEMPTS`] consecutive gated attempts): the angle between the vector and
+    /// its prediction `Â r` against `σ_vec² + tr P`.
+    fn passes_gate(&self, v: &VectorPair) -> bool {
+        if !self.valid || self.consecutive_gated >= GATE_RELEASE_ATTEMPTS {
+            return true;
+        }
+        let predicted = self.q_acs_from_eci.to_dcm() * v.reference.normalize();
+        let angle = predicted.cross(&v.body.normalize()).norm();
+        let variance = v.sigma_rad * v.sigma_rad + self.covariance_rad2.trace().max(0.0);
+        angle * angle <= GATE_CHI2 * variance
+    }
+
+    fn reject(&mut self, code: u8) {
+        self.rejections = self.rejections.saturating_add(1);
+        self.last_rejection = code;
     }
 }
 
@@ -522,5 +618,123 @@ mod tests {
         let b = tam_field_acs_milligauss(&s, 0, &t).unwrap();
         assert!((b - Vector3::new(-60.0, -30.0, 94.0)).norm() < 1e-9, "{b}");
         assert_eq!(tam_field_acs_milligauss(&TamSample::default(), 0, &t), None);
+    }
+
+    /// A frame whose TAMs and CSS eyes see attitude `q` at `pos`, `t_s` (dipole field model).
+    fn scene() -> (MagneticsTable, Quat, Vector3<f64>, f64, RawSensorFrame) {
+        let mut t = MagneticsTable::boot();
+        t.field_degree = 1;
+        t.g_nt[1][0] = -29_775.0;
+        t.g_nt[1][1] = -1_848.0;
+        t.h_nt[1][1] = 5_406.0;
+        let q = Quat::from_rotation_vector(&Vector3::new(0.4, -0.9, 0.3));
+        let a = q.to_dcm();
+        let pos = Vector3::new(4_000.0, 5_000.0, 2_000.0);
+        let t_s = -2.74e8;
+        t.field_epoch_s_since_j2000_tt = t_s;
+        let b_eci = crate::field_model::field_eci_nt(&t, &pos, t_s).unwrap();
+        let sun_eci = crate::sun_ephemeris::sun_dir_eci(t_s).unwrap();
+        let b_counts = (a * b_eci) / NT_PER_MILLIGAUSS / 0.3;
+        let tam = TamSample {
+            field_counts: [b_counts.x, b_counts.y, b_counts.z].map(|c| c.round() as i16),
+            flags: TAM_FLAG_VALID,
+        };
+        let sun_acs = a * sun_eci;
+        let mut css = CssSample {
+            counts: [0; 6],
+            flags: CSS_FLAG_VALID,
+        };
+        for (c, n) in css.counts.iter_mut().zip(t.css_normals_acs.iter()) {
+            *c = (1000.0 * Vector3::from(*n).dot(&sun_acs).max(0.0)).round() as u16;
+        }
+        let frame = RawSensorFrame {
+            tam: [tam, tam],
+            css,
+            ..RawSensorFrame::default()
+        };
+        (t, q, pos, t_s, frame)
+    }
+
+    /// The fault screening: a dead TAM1 is refused on its magnitude and TAM2 used; a TAM1
+    /// bias jump of 40 mG is refused by the gate and TAM2 used; a glint on a CSS eye is
+    /// refused by the gate (no other Sun: no fix) until the gate is released after
+    /// `GATE_RELEASE_ATTEMPTS` attempts.
+    #[test]
+    fn screening_refuses_failed_sensors_and_falls_back() {
+        let (mut t, q, pos, t_s, frame) = scene();
+        // A Sun good to 0.1° (the scene's CSS is exact), so that the carried solution is
+        // sharp enough for the gate to see a 9° field error.
+        t.css_sun_sigma_rad = 0.1_f64.to_radians();
+        let align = AlignmentTable::prelaunch();
+        let mut c = CoarseAttitude::new();
+        c.try_fix(&frame, &align, &t, Some(&pos), t_s).unwrap();
+        assert!(attitude_error_rad(&q, &c.q_acs_from_eci).norm() < 0.01);
+        assert_eq!(c.source, CoarseSource::CssTam);
+
+        let mut dead = frame;
+        dead.tam[0].field_counts = [0; 3];
+        c.try_fix(&dead, &align, &t, Some(&pos), t_s).unwrap();
+        assert_eq!(c.last_rejection, 1);
+        assert!(attitude_error_rad(&q, &c.q_acs_from_eci).norm() < 0.01);
+
+        let mut jump = frame;
+        let b = Vector3::from(jump.tam[0].field_counts.map(f64::from));
+        let perp = b.cross(&Vector3::new(0.0, 0.0, 1.0)).normalize() * (40.0 / 0.3);
+        for (c, d) in jump.tam[0].field_counts.iter_mut().zip(perp.iter()) {
+            *c = (f64::from(*c) + d).round() as i16;
+        }
+        c.try_fix(&jump, &align, &t, Some(&pos), t_s).unwrap();
+        assert_eq!(c.last_rejection, 3);
+        assert!(attitude_error_rad(&q, &c.q_acs_from_eci).norm() < 0.01);
+
+        let mut glint = frame;
+        let darkest = glint.css.counts.iter().position(|x| *x == 0).unwrap();
+        glint.css.counts[darkest] = 800;
+        for _ in 0..GATE_RELEASE_ATTEMPTS {
+            assert_eq!(
+                c.try_fix(&glint, &align, &t, Some(&pos), t_s),
+                Err(CoarseUnavailable::Gated)
+            );
+            assert_eq!(c.last_rejection, 4);
+        }
+        // Released: the glinted Sun is taken (the carried solution is then the suspect).
+        c.try_fix(&glint, &align, &t, Some(&pos), t_s).unwrap();
+        assert!(attitude_error_rad(&q, &c.q_acs_from_eci).norm() > 0.05);
+    }
+
+    #[test]
+    fn missing_inputs_are_named() {
+        let (t, _, pos, t_s, frame) = scene();
+        let align = AlignmentTable::prelaunch();
+        let mut c = CoarseAttitude::new();
+        let boot = MagneticsTable::boot();
+        assert_eq!(
+            c.try_fix(&frame, &align, &boot, Some(&pos), t_s),
+            Err(CoarseUnavailable::NoFieldModel)
+        );
+        assert_eq!(
+            c.try_fix(&frame, &align, &t, None, t_s),
+            Err(CoarseUnavailable::NoOrbit)
+        );
+        let mut dark = frame;
+        dark.css = CssSample::default();
+        assert_eq!(
+            c.try_fix(&dark, &align, &t, Some(&pos), t_s),
+            Err(CoarseUnavailable::NoSun)
+        );
+        let mut no_tam = frame;
+        no_tam.tam = [TamSample::default(); 2];
+        assert_eq!(
+            c.try_fix(&no_tam, &align, &t, Some(&pos), t_s),
+            Err(CoarseUnavailable::NoField)
+        );
+        let mut both_dead = frame;
+        both_dead.tam[0].field_counts = [0; 3];
+        both_dead.tam[1].field_counts = [0; 3];
+        assert_eq!(
+            c.try_fix(&both_dead, &align, &t, Some(&pos), t_s),
+            Err(CoarseUnavailable::TamMagnitude)
+        );
+        assert!(!c.valid);
     }
 }

@@ -99,11 +99,16 @@ pub enum EventId {
     /// reason code of the interval without fixes (0 none).
     /// docs/icd.md §3.3; docs/magnetics.md §4.
     CoarseFixResumed = 0x0902,
+    /// The coarse attitude's fault screening rejected a vector (raised when the kind of
+    /// rejection changes). p1 = 1 TAM1 magnitude, 2 TAM2 magnitude, 3 field against the
+    /// carried solution, 4 Sun against the carried solution; p2 = rejections since boot.
+    /// docs/icd.md §3.3; docs/magnetics.md §4.
+    CoarseVectorRejected = 0x0903,
 }
 
 impl EventId {
     /// Every event id (for the uniqueness test and the ICD table).
-    pub const ALL: [EventId; 24] = [
+    pub const ALL: [EventId; 25] = [
         Self::TableLoaded,
         Self::TableRejected,
         Self::TableActivated,
@@ -128,6 +133,7 @@ impl EventId {
         Self::OrbitalCorrectionApplied,
         Self::CoarseFixUnavailable,
         Self::CoarseFixResumed,
+        Self::CoarseVectorRejected,
     ];
 
     /// On-wire code.

@@ -261,6 +261,8 @@ pub struct FlightCore {
     coarse: CoarseAttitude,
     /// The last coarse-fix reason reported (0 = fixed), for events on change only.
     coarse_reported: Option<u32>,
+    /// The last coarse vector rejection reported (0 none).
+    coarse_rejection_reported: u8,
     /// Time since the last gyro data (a coast), s.
     coast_s: f64,
 }
@@ -321,6 +323,7 @@ impl FlightCore {
             orbital_reported: None,
             coarse: CoarseAttitude::new(),
             coarse_reported: None,
+            coarse_rejection_reported: 0,
             coast_s: 0.0,
         }
     }
@@ -484,6 +487,13 @@ impl FlightCore {
         let result =
             self.coarse
                 .try_fix(frame, self.tables.alignment(), table, orbit.as_ref(), t_s);
+        let rejection = self.coarse.last_rejection;
+        if rejection != 0 && self.coarse_rejection_reported != rejection {
+            self.coarse_rejection_reported = rejection;
+            let total = self.coarse.rejections;
+            let id = EventId::CoarseVectorRejected;
+            raise(events, &mut self.counters, id, u32::from(rejection), total);
+        }
         let reason = match result {
             Ok(()) => 0,
             Err(why) => why.code(),

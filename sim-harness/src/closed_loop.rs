@@ -480,12 +480,32 @@ impl Simulation {
         })
     }
 
-    /// This cycle's field, TAM and CSS samples (all invalid without magnetics).
-    fn sample_magnetics(&mut self, truth: &TruthSnapshot) -> crate::magnetics::MagneticsRecord {
-        self.magnetics
-            .as_mut()
-            .map(|m| m.sample(&self.clock, truth))
-            .unwrap_or_default()
+    /// This cycle's field, TAM and CSS samples (all invalid without magnetics) and the words
+    /// the OBC reads from them, with the `tam_failure` and `css_glint` faults applied.
+    fn sample_magnetics(
+        &mut self,
+        truth: &TruthSnapshot,
+    ) -> (
+        crate::magnetics::MagneticsRecord,
+        [fsw_core::raw::TamSample; 2],
+        fsw_core::raw::CssSample,
+    ) {
+        let Some(m) = self.magnetics.as_mut() else {
+            return Default::default();
+        };
+        let record = m.sample(&self.clock, truth);
+        let t = truth.t_s;
+        let mut tam = record.tam.map(crate::magnetics::flight_tam_sample);
+        for (unit, sample) in tam.iter_mut().enumerate() {
+            let resolution = m.tam()[unit].params().resolution_milligauss_per_count;
+            *sample = FaultState::apply_tam(&self.faults, unit, t, *sample, resolution);
+        }
+        let css = FaultState::apply_css(
+            &self.faults,
+            t,
+            crate::magnetics::flight_css_sample(&record.css),
+        );
+        (record, tam, css)
     }
 
     /// The magnetometers and coarse Sun sensors, `None` with `[magnetics] enabled = false`.
@@ -681,15 +701,15 @@ impl Simulation {
             }
             time_offset_s = FaultState::time_offset_s(&self.faults, t);
         }
-        let magnetics = self.sample_magnetics(&truth);
+        let (magnetics, tam, css) = self.sample_magnetics(&truth);
         let frame = RawSensorFrame {
             time: self.clock.time_tag(t + time_offset_s).unwrap_or_default(),
             iru: self.pending_iru,
             fhst,
             fss,
             temperatures_centi_c: temps,
-            tam: magnetics.tam.map(crate::magnetics::flight_tam_sample),
-            css: crate::magnetics::flight_css_sample(&magnetics.css),
+            tam,
+            css,
         };
 
         // Commands due now (borrowing the images; at most MAX_COMMANDS_PER_CYCLE).
