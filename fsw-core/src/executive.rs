@@ -38,7 +38,7 @@
 //! nine RK4 steps of the orbit.
 
 use crate::attitude::{rot, Quat};
-use crate::coarse::CoarseAttitude;
+use crate::coarse::{CoarseAttitude, CoarseUnavailable};
 use crate::control::Controller;
 use crate::events::{raise, Counters, Event, EventId, MAX_EVENTS_PER_CYCLE};
 use crate::fhst;
@@ -322,7 +322,9 @@ impl FlightCore {
             orbital_fix: None,
             orbital_reported: None,
             coarse: CoarseAttitude::new(),
-            coarse_reported: None,
+            // The boot magnetics table holds no field model: the coarse attitude is off by
+            // design, not unavailable, and says nothing until a table makes it possible.
+            coarse_reported: Some(CoarseUnavailable::NoFieldModel.code()),
             coarse_rejection_reported: 0,
             coast_s: 0.0,
         }

@@ -74,11 +74,17 @@ pub fn gast_rad(table: &MagneticsTable, t_s: f64) -> f64 {
     let whole_turns_deg = 360.0 * (d - libm::floor(d));
     let deg = 280.460_618_37 + whole_turns_deg + 0.985_647_366_29 * d + 0.000_387_933 * t * t
         - t * t * t / 38_710_000.0;
-    let rad = libm::fmod(deg, 360.0).to_radians() + table.equation_of_equinoxes_rad;
-    let two_pi = 2.0 * core::f64::consts::PI;
-    let r = libm::fmod(rad, two_pi);
-    if r < 0.0 {
-        r + two_pi
+    // `x − y⌊x/y⌋`, not `libm::fmod`: its integer reduction keeps panic paths
+    // (scripts/no-panic-check.sh).
+    let rad = wrap(deg, 360.0).to_radians() + table.equation_of_equinoxes_rad;
+    wrap(rad, 2.0 * core::f64::consts::PI)
+}
+
+/// `x` reduced to `[0, period)`.
+fn wrap(x: f64, period: f64) -> f64 {
+    let r = x - period * libm::floor(x / period);
+    if r >= period || r < 0.0 {
+        0.0
     } else {
         r
     }
