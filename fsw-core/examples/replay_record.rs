@@ -763,12 +763,18 @@ fn main() {
     }
     let last = &rec.outputs[rec.outputs.len() - 1].housekeeping;
     let err_arcsec = rec.truth_final.angle_to_rad(&rec.estimate_final) / RAD_PER_ARCSEC;
-    let coarse_deg = rec.truth_final.angle_to_rad(&rec.coarse_final.q_acs_from_eci) / RAD_PER_DEG;
+    let coarse_deg = rec
+        .truth_final
+        .angle_to_rad(&rec.coarse_final.q_acs_from_eci)
+        / RAD_PER_DEG;
     println!(
         "coarse attitude: {} fixes, final error {coarse_deg:.3}° (source {:?})",
         rec.coarse_final.fixes, rec.coarse_final.source
     );
-    assert!(rec.coarse_final.fixes >= 50, "the coarse path must run in the replay");
+    assert!(
+        rec.coarse_final.fixes >= 50,
+        "the coarse path must run in the replay"
+    );
     assert!(coarse_deg < 1.0);
     println!("events: {counts:?}");
     println!(

@@ -250,6 +250,8 @@ pub struct FlightCore {
     wheel_torque_cmd_nm: Vector3<f64>,
     sun_cache: Option<(f64, sun_ephemeris::SunState)>,
     slew_angle_rad: f64,
+    /// Angle turned about each ACS axis since the slew began (`|Δθ_j|` summed), rad.
+    slew_angle_acs_rad: Vector3<f64>,
     /// The onboard orbit (phase 3).
     orbit: OnboardOrbit,
     /// This cycle's orbit state when the orbital correction applies (flag on, orbit valid).
@@ -318,6 +320,7 @@ impl FlightCore {
             wheel_torque_cmd_nm: Vector3::zeros(),
             sun_cache: None,
             slew_angle_rad: 0.0,
+            slew_angle_acs_rad: Vector3::zeros(),
             orbit: OnboardOrbit::new(),
             orbital_fix: None,
             orbital_reported: None,
@@ -406,6 +409,7 @@ impl FlightCore {
             self.inflate_for_gyro_calibration(&delta_theta);
         } else {
             self.slew_angle_rad = 0.0;
+            self.slew_angle_acs_rad = Vector3::zeros();
         }
         if initialized
             && self
@@ -1259,17 +1263,30 @@ impl FlightCore {
     /// is coherent (∝ angle turned), so the standard deviation grows linearly with the angle:
     /// `var += k² ((θ + |Δθ|)² − θ²)` per axis, `k` = `gyro_scale_uncertainty`.
     fn inflate_for_gyro_calibration(&mut self, delta_theta: &Vector3<f64>) {
-        let k = self.tables.filter().gyro_scale_uncertainty;
+        let filter = self.tables.filter();
+        let k = filter.gyro_scale_uncertainty;
+        let per_element = filter.gyro_calibration_sigma;
         let step = delta_theta.norm();
-        if !(step.is_finite() && k.is_finite()) {
+        if !(step.is_finite() && k.is_finite() && delta_theta.iter().all(|x| x.is_finite())) {
             return;
         }
         let before = self.slew_angle_rad;
         let after = before + step;
         self.slew_angle_rad = after;
-        let var = k * k * (after * after - before * before);
+        let before_axes = self.slew_angle_acs_rad;
+        let after_axes = before_axes + delta_theta.abs();
+        self.slew_angle_acs_rad = after_axes;
+        let grow = if per_element.iter().flatten().any(|e| *e != 0.0) {
+            // `var_i += Σ_j E_ij² (a_j'² − a_j²)`.
+            let turned =
+                after_axes.component_mul(&after_axes) - before_axes.component_mul(&before_axes);
+            let e2 = matrix_from_rows(&per_element).map(|e| e * e);
+            Matrix3::from_diagonal(&(e2 * turned))
+        } else {
+            Matrix3::identity() * (k * k * (after * after - before * before))
+        };
         let mut block = self.filter.covariance.fixed_view_mut::<3, 3>(0, 0);
-        block += Matrix3::identity() * var;
+        block += grow;
     }
 
     /// Onboard Sun direction, the ephemeris re-evaluated at most every [`SUN_REFRESH_S`]
