@@ -28,8 +28,8 @@ use fsw_core::raw::{FhstSample, FssSample, IruSample, RawSensorFrame, TimeTag};
 use fsw_core::telemetry::{
     encode_ephemeris, encode_event, encode_housekeeping, encode_raw_frame, encode_time_code,
     EphemerisRecord, MeasurementStatus, ObcHousekeeping, SensorResidual, APID_EPHEMERIS,
-    APID_EVENT, APID_HOUSEKEEPING, APID_RAW_SENSORS, EPHEMERIS_LEN, EVENT_LEN, HOUSEKEEPING_LEN,
-    RAW_FRAME_LEN, TIME_CODE_LEN,
+    APID_EVENT, APID_HOUSEKEEPING, APID_MAGNETICS, APID_RAW_SENSORS, EPHEMERIS_LEN, EVENT_LEN, HOUSEKEEPING_LEN,
+    MAGNETICS_LEN, RAW_FRAME_LEN, TIME_CODE_LEN,
 };
 use ground_tool::tp::{decode, Telemetry};
 
@@ -312,6 +312,7 @@ fn packet_len(apid: u16) -> Option<usize> {
         APID_HOUSEKEEPING => HOUSEKEEPING_LEN,
         APID_EVENT => EVENT_LEN,
         APID_EPHEMERIS => EPHEMERIS_LEN,
+        APID_MAGNETICS => MAGNETICS_LEN,
         _ => return None,
     };
     Some(OVERHEAD + user)
@@ -349,13 +350,15 @@ fn check_report(tm: &Telemetry, bytes: &[u8]) -> Result<(), String> {
         || r.packets_housekeeping != tm.housekeeping.len()
         || r.packets_event != tm.events.len()
         || r.packets_ephemeris != tm.ephemeris.len()
+        || r.packets_magnetics != tm.magnetics.len()
     {
         return Err("report counts differ from the records".into());
     }
     let decoded = r.packets_raw * (OVERHEAD + RAW_FRAME_LEN)
         + r.packets_housekeeping * (OVERHEAD + HOUSEKEEPING_LEN)
         + r.packets_event * (OVERHEAD + EVENT_LEN)
-        + r.packets_ephemeris * (OVERHEAD + EPHEMERIS_LEN);
+        + r.packets_ephemeris * (OVERHEAD + EPHEMERIS_LEN)
+        + r.packets_magnetics * (OVERHEAD + MAGNETICS_LEN);
     // Packets dropped for a damaged time code are accounted for with their length.
     let outliers: usize = r.time_outliers.iter().map(|o| o.len).sum();
     if decoded + dup + outliers + r.skipped_octets() != bytes.len() {
@@ -368,7 +371,8 @@ fn check_report(tm: &Telemetry, bytes: &[u8]) -> Result<(), String> {
     let sorted = tm.raw.windows(2).all(|w| w[0].time <= w[1].time)
         && tm.housekeeping.windows(2).all(|w| w[0].time <= w[1].time)
         && tm.events.windows(2).all(|w| w[0].0 <= w[1].0)
-        && tm.ephemeris.windows(2).all(|w| w[0].time <= w[1].time);
+        && tm.ephemeris.windows(2).all(|w| w[0].time <= w[1].time)
+        && tm.magnetics.windows(2).all(|w| w[0].time <= w[1].time);
     if !sorted {
         return Err("records not sorted by time".into());
     }
