@@ -28,8 +28,8 @@ use fsw_core::raw::{FhstSample, FssSample, IruSample, RawSensorFrame, TimeTag};
 use fsw_core::telemetry::{
     encode_ephemeris, encode_event, encode_housekeeping, encode_raw_frame, encode_time_code,
     EphemerisRecord, MeasurementStatus, ObcHousekeeping, SensorResidual, APID_EPHEMERIS,
-    APID_EVENT, APID_HOUSEKEEPING, APID_MAGNETICS, APID_RAW_SENSORS, EPHEMERIS_LEN, EVENT_LEN, HOUSEKEEPING_LEN,
-    MAGNETICS_LEN, RAW_FRAME_LEN, TIME_CODE_LEN,
+    APID_EVENT, APID_HOUSEKEEPING, APID_MAGNETICS, APID_RAW_SENSORS, EPHEMERIS_LEN, EVENT_LEN,
+    HOUSEKEEPING_LEN, MAGNETICS_LEN, RAW_FRAME_LEN, TIME_CODE_LEN,
 };
 use ground_tool::tp::{decode, Telemetry};
 

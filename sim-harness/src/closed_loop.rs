@@ -461,6 +461,14 @@ impl Simulation {
         self.magnetics.as_ref()
     }
 
+    /// This cycle's field, TAM and CSS samples (all empty with magnetics disabled).
+    fn sample_magnetics(&mut self, truth: &TruthSnapshot) -> crate::magnetics::MagneticsRecord {
+        self.magnetics
+            .as_mut()
+            .map(|m| m.sample(&self.clock, truth))
+            .unwrap_or_default()
+    }
+
     /// The scenario.
     #[must_use]
     pub fn scenario(&self) -> &Scenario {
@@ -648,11 +656,7 @@ impl Simulation {
             }
             time_offset_s = FaultState::time_offset_s(&self.faults, t);
         }
-        let magnetics = self
-            .magnetics
-            .as_mut()
-            .map(|m| m.sample(&self.clock, &truth))
-            .unwrap_or_default();
+        let magnetics = self.sample_magnetics(&truth);
         let frame = RawSensorFrame {
             time: self.clock.time_tag(t + time_offset_s).unwrap_or_default(),
             iru: self.pending_iru,
