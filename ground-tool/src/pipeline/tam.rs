@@ -69,8 +69,12 @@ pub const MILLIGAUSS_PER_NANOTESLA: f64 = 0.01;
 /// (`0.3/√12`), `docs/magnetics.md` §2. Reported beside the estimate; not used for σ.
 pub const TAM_PRIOR_NOISE_MILLIGAUSS: f64 = 0.218;
 
-/// Spacing of the TAM samples used, s: one sample with its own fine attitude per spacing.
+/// Spacing of the TAM samples used, s: one sample with its own fine attitude per spacing
+/// (widened on long runs so that at most [`MAX_SAMPLES`] are offered).
 pub const SAMPLE_SPACING_S: f64 = 30.0;
+
+/// Most sample times offered (a fine attitude each): six months at 30 s would be 524,000.
+pub const MAX_SAMPLES: f64 = 20_000.0;
 
 /// Half width of the FHST batch giving each sample's fine attitude, s. Wider than half the
 /// spacing: a tracker holds one star for minutes, and a ±15-s batch had two non-parallel
@@ -104,6 +108,33 @@ pub const ATTITUDE_SYSTEMATIC_ARCSEC: f64 = 60.0;
 /// Field-model error assumed, mG: 0 because the simulator's truth is the same model (a real
 /// mission: ≈ 1 mG, see the module doc).
 pub const FIELD_MODEL_SIGMA_MILLIGAUSS: f64 = 0.0;
+
+/// Why the TAM calibration could not be made (its text goes into `report.json` `tam.reason`).
+#[derive(Debug, thiserror::Error)]
+pub enum TamError {
+    /// No APID 0x013 packets.
+    #[error("no magnetics frames (APID 0x013) in the telemetry: the spacecraft carried no TAM data, or the file predates format version 2 (docs/icd.md §3.5)")]
+    NoMagneticsFrames,
+    /// The embedded field model did not load (a build defect).
+    #[error("the field model did not load: {0}")]
+    FieldModel(String),
+    /// No offered sample had a fine attitude and a field.
+    #[error("none of the {offered} sample times has a FHST fine attitude and a field (no fine attitude: {fine:?}; no orbit or outside the field model: {no_field})")]
+    NoSamples {
+        /// Sample times offered.
+        offered: usize,
+        /// Refused for the fine attitude.
+        fine: FineRefusals,
+        /// Refused for the field.
+        no_field: usize,
+    },
+    /// Too few valid TAM1 readings among the samples.
+    #[error("{samples} samples with a fine attitude and a field, but fewer than {MIN_SAMPLES} with a valid TAM1 reading")]
+    TooFewPrimary {
+        /// Samples with a fine attitude and a field.
+        samples: usize,
+    },
+}
 
 /// The TAM calibration of one run (`report.json` `tam`).
 #[derive(Clone, Debug, Default, Serialize)]
@@ -297,23 +328,23 @@ pub fn tam_stage(
         ..TamReport::default()
     };
     if tm.magnetics.is_empty() {
-        report.reason = Some("no magnetics frames (APID 0x013) in the telemetry: the spacecraft carried no TAM data, or the file predates format version 2 (docs/icd.md §3.5)".into());
+        report.reason = Some(TamError::NoMagneticsFrames.to_string());
         return report;
     }
     let samples = match collect_samples(tm, frames, obc_bias_at, &mut report) {
         Ok(s) => s,
         Err(why) => {
-            report.reason = Some(why);
+            report.reason = Some(why.to_string());
             return report;
         }
     };
     report.tam1 = fit_unit(&samples, 0);
     report.tam2 = fit_unit(&samples, 1);
     let Some(primary) = report.tam1.as_ref() else {
-        report.reason = Some(format!(
-            "{} samples with a fine attitude and a field, but fewer than {MIN_SAMPLES} with a valid TAM1 reading",
-            samples.len()
-        ));
+        let why = TamError::TooFewPrimary {
+            samples: samples.len(),
+        };
+        report.reason = Some(why.to_string());
         return report;
     };
     report.status = "determined";
@@ -330,9 +361,14 @@ fn collect_samples(
     frames: &[FrameObservations],
     obc_bias_at: &dyn Fn(f64) -> Vector3<f64>,
     report: &mut TamReport,
-) -> Result<Vec<Sample>, String> {
-    let model = FieldModel::dgrf_1990_1995().map_err(|e| format!("field model: {e}"))?;
+) -> Result<Vec<Sample>, TamError> {
+    let model = FieldModel::dgrf_1990_1995().map_err(|e| TamError::FieldModel(e.to_string()))?;
     let mut field = FieldEvaluator::new(model, FieldEvaluator::DEFAULT_REFRESH_S);
+    let span_s = match (tm.magnetics.first(), tm.magnetics.last()) {
+        (Some(a), Some(b)) => b.time.seconds() - a.time.seconds(),
+        _ => 0.0,
+    };
+    let spacing_s = SAMPLE_SPACING_S.max(span_s / MAX_SAMPLES);
     let mut out = Vec::new();
     let mut next_s = f64::NEG_INFINITY;
     for m in &tm.magnetics {
@@ -343,7 +379,7 @@ fn collect_samples(
         let Ok(k) = frames.binary_search_by(|f| f.time.cmp(&m.time)) else {
             continue;
         };
-        next_s = t + SAMPLE_SPACING_S;
+        next_s = t + spacing_s;
         report.samples_offered += 1;
         let field_eci_nt = frames[k].orbit.and_then(|(pos_eci_km, _)| {
             field
@@ -381,10 +417,11 @@ fn collect_samples(
         });
     }
     if out.is_empty() {
-        return Err(format!(
-            "none of the {} sample times has a FHST fine attitude and a field (no fine attitude: {:?}, no orbit or outside the field model: {})",
-            report.samples_offered, report.refused_fine_attitude, report.refused_no_field
-        ));
+        return Err(TamError::NoSamples {
+            offered: report.samples_offered,
+            fine: report.refused_fine_attitude,
+            no_field: report.refused_no_field,
+        });
     }
     let mut sigmas: Vec<f64> = out.iter().map(|s| s.fine_sigma_arcsec).collect();
     sigmas.sort_by(f64::total_cmp);
