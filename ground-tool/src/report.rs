@@ -448,7 +448,7 @@ fn md_tam(md: &mut String, r: &CalibrationReport) {
         if let Some(u) = u {
             let _ = writeln!(
                 md,
-                "- {name}: {} (normal-matrix condition {:.2e}); bias {} ± {} mG; {} samples, residual RMS {} mG (noise estimated {} mG, a priori {:.3}); held-out χ²/dof {}.",
+                "- {name}: {} (normal-matrix condition {:.2e}); bias {} ± {} mG; {} samples, residual RMS {} mG (noise estimated {} mG, a priori {:.3}); bias over 8 blocks in time: χ² ratio {} (σ scaled by {}); held-out χ²/dof {}.",
                 u.model,
                 u.normal_matrix_condition,
                 f3(u.bias_milligauss, 3),
@@ -457,6 +457,10 @@ fn md_tam(md: &mut String, r: &CalibrationReport) {
                 f3(u.residual_rms_milligauss, 3),
                 f3(u.noise_estimated_milligauss, 3),
                 u.noise_prior_milligauss,
+                u.block_consistency
+                    .map_or("n/a".to_owned(), |c| format!("{:.2}", c.chi2_ratio)),
+                u.block_consistency
+                    .map_or("1".to_owned(), |c| format!("{:.2}", c.sigma_scale)),
                 u.heldout
                     .iter()
                     .map(|h| format!("{:.2} (fit on the {})", h.chi2_per_dof, h.fitted))

@@ -35,6 +35,11 @@
 //! real mission adds the IGRF's omission (crustal and external fields, of order 100 nT = 1 mG
 //! at 450 km, correlated along the orbit), which would dominate σ and is not modelled.
 //!
+//! **Consistency in time:** the bias each of [`CONSISTENCY_BLOCKS`] blocks in time would give
+//! is compared with the noise (a Birge ratio, [`BlockConsistency`]); when it moves more, the
+//! random σ is scaled up: a slow systematic (an orbit-periodic attitude error, a field-model
+//! error) is then carried, not hidden.
+//!
 //! **Held-out check:** the samples are split in time at the median; each half's fit predicts
 //! the other half, whose residual RMS and χ²/dof against the estimated noise are reported.
 //!
@@ -104,6 +109,9 @@ pub const T_PRIOR_SIGMA: f64 = 2e-3;
 /// frame the FHST alignments realise against the ACS the TAM was aligned to (the paper's
 /// prelaunch FHST misalignments are 60–80″).
 pub const ATTITUDE_SYSTEMATIC_ARCSEC: f64 = 60.0;
+
+/// Blocks in time of the bias consistency check ([`BlockConsistency`]).
+pub const CONSISTENCY_BLOCKS: usize = 8;
 
 /// Field-model error assumed, mG: 0 because the simulator's truth is the same model (a real
 /// mission: ≈ 1 mG, see the module doc).
@@ -230,6 +238,27 @@ pub struct TamUnitFit {
     pub samples: usize,
     /// Fit on one half in time, prediction of the other (both ways).
     pub heldout: Vec<TamHeldOut>,
+    /// Whether the bias moves between blocks in time more than the noise explains; its
+    /// `sigma_scale` (≥ 1) is applied to the random part of the bias σ.
+    pub block_consistency: Option<BlockConsistency>,
+}
+
+/// The residuals' means over [`CONSISTENCY_BLOCKS`] blocks in time (the bias each block would
+/// give with `T` at the full fit's) against the estimated noise: χ² over its exact
+/// expectation `3 (K − Σ_k n_k h̄_kᵀ N⁻¹ h̄_k)` (`h̄_k` the block mean of `[x; 1]`: what the
+/// fit itself removes). A ratio above 1 is a slow systematic the white-noise σ does not carry
+/// (an orbit-periodic attitude error such as a thermal alignment drift, a field-model error);
+/// σ's random part is then scaled by its square root (Birge ratio).
+#[derive(Clone, Copy, Debug, Default, Serialize)]
+pub struct BlockConsistency {
+    /// Blocks.
+    pub blocks: usize,
+    /// χ² / its expectation.
+    pub chi2_ratio: f64,
+    /// Degrees of freedom (the expectation of χ²).
+    pub dof: f64,
+    /// `√max(1, chi2_ratio)`.
+    pub sigma_scale: f64,
 }
 
 /// A fit on one half of the samples predicting the other half.
@@ -571,7 +600,9 @@ fn fit_unit(samples: &[Sample], unit: usize) -> Option<TamUnitFit> {
     let rms = residual_rms(&data, |x| f.predict(x));
     #[allow(clippy::cast_precision_loss)]
     let noise = rms.map(|r| r * (data.len() as f64 / dof).sqrt());
-    let sigma_random = noise.map(|s| s * f.n_inv[(3, 3)].max(0.0).sqrt());
+    let consistency = block_consistency(&data, &f, &noise);
+    let scale_random = consistency.map_or(1.0, |c| c.sigma_scale);
+    let sigma_random = noise.map(|s| s * f.n_inv[(3, 3)].max(0.0).sqrt() * scale_random);
     let sigma_attitude = attitude_consider(&data, &f);
     let mean_x = data.iter().map(|(x, _)| *x).sum::<Vector3<f64>>() / count_f64(data.len());
     let sigma_t = if full {
@@ -613,6 +644,49 @@ fn fit_unit(samples: &[Sample], unit: usize) -> Option<TamUnitFit> {
         residual_rms_uncalibrated_milligauss: residual_rms(&data, |x| *x).into(),
         samples: data.len(),
         heldout: heldout(&data, full, &noise),
+        block_consistency: consistency,
+    })
+}
+
+/// The bias consistency over blocks in time ([`BlockConsistency`]); `None` with fewer than 10
+/// samples per block.
+fn block_consistency(
+    data: &[(Vector3<f64>, Vector3<f64>)],
+    f: &LinearFit,
+    noise: &Vector3<f64>,
+) -> Option<BlockConsistency> {
+    let k = CONSISTENCY_BLOCKS;
+    if data.len() < 10 * k {
+        return None;
+    }
+    let (mut chi2, mut removed) = (0.0, 0.0);
+    for b in 0..k {
+        let block = data.get(b * data.len() / k..(b + 1) * data.len() / k)?;
+        let n = count_f64(block.len());
+        let mean_r = block
+            .iter()
+            .map(|(x, y)| y - f.predict(x))
+            .sum::<Vector3<f64>>()
+            / n;
+        let mean_h = block
+            .iter()
+            .map(|(x, _)| Vector4::new(x.x, x.y, x.z, 1.0))
+            .sum::<Vector4<f64>>()
+            / n;
+        chi2 += (0..3)
+            .map(|i| n * (mean_r[i] / noise[i].max(1e-12)).powi(2))
+            .sum::<f64>();
+        removed += n * (mean_h.transpose() * f.n_inv * mean_h)[(0, 0)];
+    }
+    let dof = 3.0 * (count_f64(k) - removed);
+    (dof > 0.5).then(|| {
+        let chi2_ratio = chi2 / dof;
+        BlockConsistency {
+            blocks: k,
+            chi2_ratio,
+            dof,
+            sigma_scale: chi2_ratio.max(1.0).sqrt(),
+        }
     })
 }
 
