@@ -13,7 +13,7 @@
 //!   onboard field model ([`crate::field_model`]) at the onboard orbit's position.
 //! * **Fix.** TRIAD with the more accurate vector as anchor (algorithms.md §10a). Its
 //!   covariance (Shuster & Oh, *J. Guidance* 4(1), 1981, in the form derived in
-//!   docs/magnetics.md §4): with anchor `b₁` (σ₁), second vector `b₂` (σ₂), `c = b₁·b₂`,
+//!   docs/magnetics.md §5): with anchor `b₁` (σ₁), second vector `b₂` (σ₂), `c = b₁·b₂`,
 //!   `s = |b₁ × b₂|`, `G = I + (c/s²) b₁ b₂ᵀ`:
 //!   `P = σ₁² G (I − b₁b₁ᵀ) Gᵀ + (σ₂²/s²) b₁b₁ᵀ` — the rotation about the anchor is known only
 //!   through the second vector, worse as the two close up; below the table's smallest angle
@@ -37,37 +37,37 @@ pub const NT_PER_MILLIGAUSS: f64 = 100.0;
 
 /// Smallest `|Σ cᵢ/k · nᵢ|` read as "the Sun is in view of the CSS eyes" (1 with the full Sun,
 /// ≤ 0.3 from Earth albedo alone).
-/// Project choice: docs/magnetics.md §4.
+/// Project choice: docs/magnetics.md §5.
 pub const CSS_MIN_SUN_NORM: f64 = 0.6;
 
 /// Gate on a fix vector against the carried solution: `angle² / (σ_vec² + tr P) >` this
 /// rejects it (χ² with 2 degrees of freedom at a false-alarm probability of 1e-6).
-/// Project choice: docs/magnetics.md §4 (fault screening).
+/// Project choice: docs/magnetics.md §5 (fault screening).
 pub const GATE_CHI2: f64 = 27.6;
 /// After this many consecutive gated attempts the gate is released for one fix (the carried
 /// solution is then the suspect, not the vectors).
-/// Project choice: docs/magnetics.md §4 (fault screening).
+/// Project choice: docs/magnetics.md §5 (fault screening).
 pub const GATE_RELEASE_ATTEMPTS: u16 = 30;
 /// A TAM whose field magnitude differs from the model's by more than
 /// `5 σ_field + this × |B_model|` is rejected (a stuck, dead or saturated magnetometer).
-/// Project choice: docs/magnetics.md §4 (scale and model errors ≤ 1 %).
+/// Project choice: docs/magnetics.md §5 (scale and model errors ≤ 1 %).
 pub const TAM_MAGNITUDE_RELATIVE_TOLERANCE: f64 = 0.02;
 
 /// Which vectors made the last fix.
-/// Project choice (not in the paper): docs/magnetics.md §4.
+/// Project choice (not in the paper): docs/magnetics.md §5.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[repr(u8)]
 pub enum CoarseSource {
     /// No fix yet.
-    /// docs/magnetics.md §4.
+    /// docs/magnetics.md §5.
     #[default]
     None = 0,
     /// FSS Sun and TAM field.
     /// Paper: coarse attitude from FSS and TAM data.
     FssTam = 1,
     /// CSS Sun and TAM field.
-    /// docs/magnetics.md §4.
+    /// docs/magnetics.md §5.
     CssTam = 2,
 }
 
@@ -86,25 +86,25 @@ pub enum CoarseUnavailable {
     /// docs/icd.md §3.5.
     NoField,
     /// Neither FSS nor the CSS eyes see the Sun (eclipse, or the Sun outside every FOV).
-    /// docs/magnetics.md §4.
+    /// docs/magnetics.md §5.
     NoSun,
     /// The Sun and the field are closer than the table's smallest angle.
     /// algorithms.md §10a ("near-parallel vectors").
     NearlyParallel,
     /// The field model refused the time or position.
-    /// docs/magnetics.md §4 ([`FieldModelError`]).
+    /// docs/magnetics.md §5 ([`FieldModelError`]).
     FieldModel(FieldModelError),
     /// The Sun ephemeris refused the time.
-    /// docs/magnetics.md §4 (the onboard Sun ephemeris, Meeus ch. 25).
+    /// docs/magnetics.md §5 (the onboard Sun ephemeris, Meeus ch. 25).
     Ephemeris,
     /// A non-finite value in the solution.
     /// Project choice (defensive check).
     NotFinite,
     /// Every TAM with data failed the magnitude check against the model.
-    /// docs/magnetics.md §4 (fault screening).
+    /// docs/magnetics.md §5 (fault screening).
     TamMagnitude,
     /// A vector disagreed with the carried solution beyond [`GATE_CHI2`].
-    /// docs/magnetics.md §4 (fault screening).
+    /// docs/magnetics.md §5 (fault screening).
     Gated,
 }
 
@@ -169,7 +169,7 @@ pub fn tam_field_acs_milligauss(
 }
 
 /// The Sun direction in ACS from the CSS eyes, or `None` when they do not see the Sun.
-/// `v = Σ cᵢ/k · nᵢ` (docs/magnetics.md §4); [`CSS_MIN_SUN_NORM`].
+/// `v = Σ cᵢ/k · nᵢ` (docs/magnetics.md §5); [`CSS_MIN_SUN_NORM`].
 #[must_use]
 pub fn css_sun_acs(sample: &CssSample, table: &MagneticsTable) -> Option<Vector3<f64>> {
     if sample.flags & CSS_FLAG_VALID == 0 {
@@ -188,7 +188,7 @@ pub fn css_sun_acs(sample: &CssSample, table: &MagneticsTable) -> Option<Vector3
 }
 
 /// TRIAD with `anchor` first, and its attitude covariance (rad², ACS axes).
-/// algorithms.md §10a; Shuster & Oh (1981); the covariance form of docs/magnetics.md §4.
+/// algorithms.md §10a; Shuster & Oh (1981); the covariance form of docs/magnetics.md §5.
 ///
 /// # Errors
 /// [`CoarseUnavailable::NearlyParallel`] when the vectors are closer than `min_angle_rad`;
@@ -237,7 +237,7 @@ pub fn triad(
 /// The Sun directions in ACS this cycle, in order of preference: FSS1, FSS2 (through the
 /// alignment table), the CSS eyes; each with its 1σ and source (`None` where a sensor has no
 /// Sun).
-/// Paper: FSS; docs/magnetics.md §4 (CSS fallback).
+/// Paper: FSS; docs/magnetics.md §5 (CSS fallback).
 #[must_use]
 pub fn sun_candidates_acs(
     frame: &RawSensorFrame,
@@ -259,7 +259,7 @@ pub fn sun_candidates_acs(
 }
 
 /// The coarse solution: attitude, covariance, where the last fix came from and how old it is.
-/// Project choice (not in the paper): docs/magnetics.md §4.
+/// Project choice (not in the paper): docs/magnetics.md §5.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct CoarseAttitude {
     /// Attitude, ACS from J2000.
@@ -269,22 +269,22 @@ pub struct CoarseAttitude {
     /// algorithms.md §1 (error convention).
     pub covariance_rad2: Matrix3<f64>,
     /// A fix has been made (the solution means something).
-    /// docs/magnetics.md §4.
+    /// docs/magnetics.md §5.
     pub valid: bool,
     /// Vectors of the last fix.
-    /// docs/magnetics.md §4.
+    /// docs/magnetics.md §5.
     pub source: CoarseSource,
     /// Time since the last fix, s.
-    /// docs/magnetics.md §4.
+    /// docs/magnetics.md §5.
     pub age_s: f64,
     /// Why the last attempt made no fix (`None` after a fix).
     /// docs/icd.md §3.3 (event 0x0901).
     pub last_unavailable: Option<CoarseUnavailable>,
     /// Fixes made since boot.
-    /// docs/magnetics.md §4.
+    /// docs/magnetics.md §5.
     pub fixes: u32,
     /// Vectors rejected by the fault screening since boot (TAM magnitude, gate).
-    /// docs/magnetics.md §4.
+    /// docs/magnetics.md §5.
     pub rejections: u32,
     /// The last rejection: 1 TAM1 magnitude, 2 TAM2 magnitude, 3 field gated, 4 Sun gated
     /// (0 none since boot).
@@ -304,7 +304,7 @@ impl Default for CoarseAttitude {
 
 impl CoarseAttitude {
     /// No solution yet.
-    /// docs/magnetics.md §4.
+    /// docs/magnetics.md §5.
     #[must_use]
     pub const fn new() -> Self {
         Self {
@@ -325,7 +325,7 @@ impl CoarseAttitude {
     /// Carry the solution over one cycle on the gyro increment `delta_theta_acs_rad` less the
     /// bias estimate; the covariance grows by `arw² dt` and by the bias covariance
     /// `P_bb (2 age + dt) dt` (an error `δb·age` since the fix).
-    /// algorithms.md §2 (propagation); docs/magnetics.md §4.
+    /// algorithms.md §2 (propagation); docs/magnetics.md §5.
     pub fn propagate(
         &mut self,
         delta_theta_acs_rad: &Vector3<f64>,
@@ -369,7 +369,7 @@ impl CoarseAttitude {
     /// Try a fix from this frame at `t_s` (s since J2000.0 TT) with the onboard orbit's
     /// position `pos_eci_km` (`None`: no valid orbit). On success the solution is replaced;
     /// otherwise it is kept (carried on the gyros) and the reason recorded.
-    /// docs/magnetics.md §4.
+    /// docs/magnetics.md §5.
     ///
     /// # Errors
     /// Why no fix was made ([`CoarseUnavailable`]).

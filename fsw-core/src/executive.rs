@@ -463,7 +463,7 @@ impl FlightCore {
     }
 
     /// Phase 7b: carry the coarse attitude on the gyros and, when due, fix it from the Sun and
-    /// the field (`crate::coarse`, docs/magnetics.md §4). Events on a change of reason only.
+    /// the field (`crate::coarse`, docs/magnetics.md §5). Events on a change of reason only.
     fn coarse_attitude(
         &mut self,
         frame: &RawSensorFrame,
@@ -529,7 +529,7 @@ impl FlightCore {
         }
     }
 
-    /// The coarse attitude (Sun, field and gyros; docs/magnetics.md §4).
+    /// The coarse attitude (Sun, field and gyros; docs/magnetics.md §5).
     #[must_use]
     pub fn coarse(&self) -> &CoarseAttitude {
         &self.coarse

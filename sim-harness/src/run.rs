@@ -43,7 +43,7 @@ use crate::truth::time::utc_string;
 use fsw_core::events::EventId;
 use fsw_core::raw::IRU_CHANNELS;
 use fsw_core::tables::TableId;
-use fsw_core::telemetry::EphemerisRecord;
+use fsw_core::telemetry::{EphemerisRecord, MagneticsFrame};
 use fsw_core::units::{ARCSEC_PER_RAD, RAD_PER_ARCSEC, RAD_PER_DEG};
 use gro_reference::run_folder::{
     DeclaredNoise, HeadSpread, Metadata, TransferSpreads, UnitSpread, Upload, METADATA_FILE,
@@ -906,6 +906,8 @@ fn drive<W: Write>(
     let mut aliasing = 0_u64;
     let mut since_downlink = [0_i64; IRU_CHANNELS];
     let mut prev_counts: Option<[u16; IRU_CHANNELS]> = None;
+    // APID 0x013 after each downlinked raw frame while the spacecraft carries magnetics.
+    let magnetics = sim.magnetics().is_some();
     while let Some(rec) = sim.step() {
         let t = rec.truth.t_s;
         let counts = rec.frame.iru.counts;
@@ -924,6 +926,9 @@ fn drive<W: Write>(
             }
             since_downlink = [0; IRU_CHANNELS];
             tm.raw(&rec.frame)?;
+            if magnetics {
+                tm.magnetics(&MagneticsFrame::of_raw_frame(&rec.frame))?;
+            }
             if t + 1e-9 >= next_eph {
                 tm.ephemeris(&EphemerisRecord {
                     time,

@@ -64,7 +64,8 @@
 //! `[tam1]` (primary; default bias = the paper's [0, 0, −4] mG), `[tam2]`
 //! ([`crate::sensors::tam::TamParams`], units in the key names: `bias_milligauss`,
 //! `scale_ppm`, `misalignment_arcsec`, ...), `[css]` ([`crate::sensors::css::CssParams`]) and
-//! `[magnetics] enabled` (sample them into the record, default off: [`crate::magnetics`],
+//! `[magnetics] enabled` (sample them into the record and the raw frame, and downlink them as
+//! APID 0x013; default off, on in `gro-early-mission` and `normal-ops`: [`crate::magnetics`],
 //! `docs/magnetics.md`).
 
 use std::path::{Path, PathBuf};
@@ -513,7 +514,7 @@ pub struct Scenario {
     /// Coarse Sun sensors ([`crate::sensors::css`]).
     #[serde(default)]
     pub css: CssParams,
-    /// Sample the field, TAMs and CSSs into the record ([`crate::magnetics`]).
+    /// Sample the field, TAMs and CSSs into the record and downlink them ([`crate::magnetics`]).
     #[serde(default)]
     pub magnetics: crate::magnetics::MagneticsParams,
     /// Thermal nodes.

@@ -139,7 +139,7 @@ impl MagneticsTable {
             tam_bias_milligauss: [[0.0; 3]; TAMS],
             // Before calibration: a bias of the paper's size (4 mG) in an unknown direction,
             // 4/√3 = 2.3 mG per axis, with an uncalibrated TAM alignment (≤ 0.2°: 1.4 mG of
-            // 400 mG) and scale (0.1 %: 0.4 mG): 2.5 mG per axis (docs/magnetics.md §4).
+            // 400 mG) and scale (0.1 %: 0.4 mG): 2.5 mG per axis (docs/magnetics.md §5).
             field_sigma_milligauss: 2.5,
             // FSS: the prelaunch alignments were off by up to 0.20° (paper: FSS1 0.20°, FSS2
             // 0.05°, found by the in-flight calibration); 0.004° counts are negligible.
