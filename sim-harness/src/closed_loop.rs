@@ -299,7 +299,7 @@ impl Simulation {
                 },
             );
         }
-        for up in ephemeris_uploads(&scenario, &clock)? {
+        for up in ephemeris_uploads(&scenario, &clock, tables_dir)? {
             push_upload(&mut uploads, &mut timeline, up);
         }
         if let Some(dir) = tables_dir {
@@ -790,8 +790,13 @@ impl Simulation {
 /// The start-up uplinks of the tables the ground computes from ephemerides: the orbit table
 /// (`[onboard_orbit]`, at its uplink times) and the magnetics table (`[magnetics]` with
 /// `onboard_table`: the field model at the scenario epoch and the TAM knowledge the scenario
-/// gives the OBC, `onboard::magnetics_table`).
-fn ephemeris_uploads(scenario: &Scenario, clock: &SimClock) -> anyhow::Result<Vec<Upload>> {
+/// gives the OBC, `onboard::magnetics_table`) — unless the `--tables` folder holds a magnetics
+/// table (the ground's, from its TAM calibration), which then flies instead.
+fn ephemeris_uploads(
+    scenario: &Scenario,
+    clock: &SimClock,
+    tables_dir: Option<&std::path::Path>,
+) -> anyhow::Result<Vec<Upload>> {
     let mut uploads = Vec::new();
     if let Some(uplink) = &scenario.onboard_orbit {
         for (k, at_s) in uplink
@@ -816,6 +821,16 @@ fn ephemeris_uploads(scenario: &Scenario, clock: &SimClock) -> anyhow::Result<Ve
                 at_s,
             });
         }
+    }
+    let folder_has_magnetics = match tables_dir {
+        Some(dir) => crate::manifest::read(dir)?
+            .0
+            .iter()
+            .any(|(_, _, image)| onboard::image_table_id(image) == Some(TableId::Magnetics)),
+        None => false,
+    };
+    if folder_has_magnetics {
+        return Ok(uploads);
     }
     if let Some((table, at_s)) = onboard::magnetics_table(scenario, clock)? {
         uploads.push(Upload {
