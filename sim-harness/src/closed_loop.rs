@@ -299,9 +299,6 @@ impl Simulation {
                 },
             );
         }
-        for up in ephemeris_uploads(&scenario, &clock, tables_dir)? {
-            push_upload(&mut uploads, &mut timeline, up);
-        }
         if let Some(dir) = tables_dir {
             // The images the folder's manifest lists, checked (crate::manifest).
             let (tables, unlisted) = crate::manifest::read(dir)?;
@@ -326,6 +323,9 @@ impl Simulation {
                     },
                 );
             }
+        }
+        for up in ephemeris_uploads(&scenario, &clock, tables_dir)? {
+            push_upload(&mut uploads, &mut timeline, up);
         }
         if scenario.initial_estimate.enabled {
             timeline.push((0.0, Action::FilterInit(None)));
@@ -791,7 +791,9 @@ impl Simulation {
 /// (`[onboard_orbit]`, at its uplink times) and the magnetics table (`[magnetics]` with
 /// `onboard_table`: the field model at the scenario epoch and the TAM knowledge the scenario
 /// gives the OBC, `onboard::magnetics_table`) — unless the `--tables` folder holds a magnetics
-/// table (the ground's, from its TAM calibration), which then flies instead.
+/// table (the ground's, from its TAM calibration), which then flies instead. Pushed after the
+/// `--tables` folder's uploads (at 0 s), so that the uploads are listed in load order (the
+/// scorer and the ground match load events to them in order).
 fn ephemeris_uploads(
     scenario: &Scenario,
     clock: &SimClock,

@@ -172,3 +172,87 @@ pub fn magnetics_table(
     );
     (Some(table), d)
 }
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+    use crate::pipeline::tam::TamHeldOut;
+
+    fn fit(chi2: [f64; 2], predicted: f64, uncalibrated: f64) -> TamUnitFit {
+        TamUnitFit {
+            model: "bias, scale and misalignment (full 3x3 T)",
+            bias_milligauss: [0.1, -0.2, -4.0],
+            scale_ppm: Some([1000.0, -800.0, 600.0]),
+            misalignment_acs_arcsec: Some([500.0, -300.0, 700.0]),
+            residual_rms_uncalibrated_milligauss: [uncalibrated; 3],
+            samples: 400,
+            heldout: ["first half", "second half"]
+                .iter()
+                .zip(chi2)
+                .map(|(f, c)| TamHeldOut {
+                    fitted: f,
+                    samples: [200, 200],
+                    bias_milligauss: [0.0; 3],
+                    predicted_rms_milligauss: [predicted; 3],
+                    chi2_per_dof: c,
+                })
+                .collect(),
+            ..TamUnitFit::default()
+        }
+    }
+
+    fn report(tam1: TamUnitFit) -> TamReport {
+        TamReport {
+            status: "determined",
+            tam1: Some(tam1),
+            ..TamReport::default()
+        }
+    }
+
+    fn start() -> fsw_core::raw::TimeTag {
+        let epoch = gro_reference::time::epoch_from_iso("1991-04-09T00:00:00Z").unwrap();
+        gro_reference::time::time_tag(epoch).unwrap()
+    }
+
+    /// A fit that carries over and beats the uncalibrated TAM is written: the OBC accepts the
+    /// table, its bias and count size undo `(I + D)`, its field σ is the held-out RMS.
+    #[test]
+    fn a_fit_that_carries_over_is_written() {
+        let (t, d) = magnetics_table(&report(fit([1.1, 1.3], 0.25, 3.8)), start(), Some(20.0));
+        let t = t.unwrap();
+        assert!(d.written, "{}", d.reason);
+        assert_eq!(t.validate(), Ok(()));
+        assert!((t.tam_bias_milligauss[0][2] - (-4.0 / 1.0006)).abs() < 1e-9);
+        assert!((t.tam_milligauss_per_count[0][0] - 0.3 / 1.001).abs() < 1e-12);
+        assert!((t.field_sigma_milligauss - 0.25).abs() < 1e-12);
+        assert!((t.fss_sun_sigma_rad / RAD_PER_ARCSEC - 20.0).abs() < 1e-9);
+        assert!(d.reason.contains("TAM2 kept nominal"));
+    }
+
+    /// A half-fit that does not predict the other half, or no gain over the uncalibrated TAM,
+    /// or no TAM1 fit: nothing written, and the reason names it.
+    #[test]
+    fn refusals_name_their_reason() {
+        let (t, d) = magnetics_table(&report(fit([1.2, 3.6], 0.25, 3.8)), start(), None);
+        assert!(t.is_none() && !d.written);
+        assert!(d.reason.contains("χ²/dof 3.60"), "{}", d.reason);
+        let (t, d) = magnetics_table(&report(fit([1.0, 1.0], 0.25, 0.28)), start(), None);
+        assert!(
+            t.is_none() && d.reason.contains("not 20 % below"),
+            "{}",
+            d.reason
+        );
+        let none = TamReport {
+            status: "not_determined",
+            reason: Some("no magnetics frames".into()),
+            ..TamReport::default()
+        };
+        let (t, d) = magnetics_table(&none, start(), None);
+        assert!(
+            t.is_none() && d.reason.contains("no magnetics frames"),
+            "{}",
+            d.reason
+        );
+    }
+}
