@@ -675,13 +675,10 @@ impl Scenario {
         gro_reference::run_folder::declared_or_default(self.declared_effects.as_deref())
     }
 
-    /// Check values serde cannot.
-    ///
-    /// # Errors
-    /// The first offending field, by its TOML path.
     /// The filter-table fields uplinked at t = 0 over the boot values: the
     /// `[onboard_orbit]` ones (the orbital correction on), then the scenario's
-    /// `filter_table`; `None` = no filter-table upload.
+    /// `filter_table`; `None` = no filter-table upload (also when both are empty: an orbit
+    /// uplinked with `filter_table = {}` leaves the boot filter table flying).
     #[must_use]
     pub fn startup_filter_table(&self) -> Option<toml::Table> {
         let mut fields = match (&self.onboard_orbit, &self.filter_table) {
@@ -692,9 +689,16 @@ impl Scenario {
         for (k, v) in self.filter_table.iter().flatten() {
             fields.insert(k.clone(), v.clone());
         }
+        if fields.is_empty() && self.filter_table.is_none() {
+            return None;
+        }
         Some(fields)
     }
 
+    /// Check values serde cannot.
+    ///
+    /// # Errors
+    /// The first offending field, by its TOML path.
     pub fn validate(&self) -> anyhow::Result<()> {
         let pos = |name: &str, v: f64| -> anyhow::Result<()> {
             if !(v.is_finite() && v > 0.0) {
