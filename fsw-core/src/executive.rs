@@ -28,10 +28,12 @@
 //! 7. **FSS1, FSS2**: counts → Sun vector in ACS; onboard Sun ephemeris (seen from the
 //!    spacecraft when the orbital correction applies); update in coarse mode only (fine mode
 //!    is FHST-only, as on GRO); the α/β innovation is always reported.
-//! 7b. **Coarse attitude** (every mode, alongside the fine filter; [`crate::coarse`]): carried
-//!    on the gyro increments every cycle, fixed every `coarse_fix_every_n_cycles` from the Sun
-//!    (FSS, else CSS) and the TAM field against the onboard field model at the onboard orbit
-//!    (magnetics table, Table 6), after a magnitude check and a χ² gate; events 0x0901–0x0903.
+//!
+//!    Then phase 7b, the **coarse attitude** (every mode, alongside the fine filter;
+//!    [`crate::coarse`]): carried on the gyro increments every cycle, fixed every
+//!    `coarse_fix_every_n_cycles` from the Sun (FSS, else CSS) and the TAM field against the
+//!    onboard field model at the onboard orbit (magnetics table, Table 6), after a magnitude
+//!    check and a χ² gate; events 0x0901–0x0903.
 //! 8. **Control**: inertial hold or rate-limited eigen-axis slew → wheel torque; IRU rate
 //!    mode request (high for slews).
 //! 9. **Housekeeping** (the onboard orbit is not in it: the 230-octet record of
