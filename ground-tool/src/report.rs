@@ -385,7 +385,7 @@ fn md_iru(md: &mut String, r: &CalibrationReport) {
                     md,
                     "Hold batch at t = {:.2} h refused as a fix: its attitude fit has χ² {chi2:.0} on {dof} dof (p below {:.0e}), so its vectors do not agree under their stated σ (seen when the bias the batch is propagated with, the OBC's, is wrong, as right after a bias reset or a triad switch; misidentified stars would do the same).\n",
                     t / 3600.0,
-                    crate::pipeline::calibrate::FIX_MISFIT_P
+                    crate::pipeline::iru_fixes::FIX_MISFIT_P
                 );
             }
             for b in &iru.bias_steps {

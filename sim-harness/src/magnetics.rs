@@ -16,22 +16,14 @@
 //! `docs/magnetics.md` has the measured numbers.
 
 use nalgebra::Vector3;
-use serde::{Deserialize, Serialize};
 
+pub use crate::scenario::MagneticsParams;
 use crate::scenario::Scenario;
 use crate::sensors::css::{Css, CssReading};
 use crate::sensors::tam::{Tam, TamReading};
 use crate::sensors::TruthSnapshot;
 use crate::truth::field::TruthField;
 use crate::truth::time::SimClock;
-
-/// Scenario `[magnetics]`.
-#[derive(Clone, Debug, PartialEq, Default, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct MagneticsParams {
-    /// Sample the field, the TAMs and the CSSs every cycle into the record (default off).
-    pub enabled: bool,
-}
 
 /// One cycle's magnetics: the truth field and the readings.
 #[derive(Clone, Copy, Debug, PartialEq, Default)]

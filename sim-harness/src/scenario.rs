@@ -413,6 +413,14 @@ impl OnboardOrbitUplink {
     }
 }
 
+/// Scenario `[magnetics]` ([`crate::magnetics`]: the field, TAM and CSS models of the loop).
+#[derive(Clone, Debug, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MagneticsParams {
+    /// Sample the field, the TAMs and the CSSs every cycle into the record (default off).
+    pub enabled: bool,
+}
+
 /// A whole scenario.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -515,7 +523,7 @@ pub struct Scenario {
     pub css: CssParams,
     /// Sample the field, TAMs and CSSs into the record ([`crate::magnetics`]).
     #[serde(default)]
-    pub magnetics: crate::magnetics::MagneticsParams,
+    pub magnetics: MagneticsParams,
     /// Thermal nodes.
     #[serde(default)]
     pub thermal: ThermalSet,

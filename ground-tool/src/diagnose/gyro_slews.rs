@@ -35,7 +35,7 @@
 //! not named goes to the evidence ledger as unexplained ([`super::ledger`]), and the IRU table
 //! is then written as flown ([`super::run`]).
 
-use super::gyro::{batch_attitude, delta_bic, GyroAnalysis, GyroLeftover, SlewInput};
+use super::gyro_data::{batch_attitude, delta_bic, GyroAnalysis, GyroLeftover, SlewInput};
 use super::search::Evidence;
 use super::stats::{chi2_sf, f_sf};
 use super::Detected;

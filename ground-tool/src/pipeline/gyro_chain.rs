@@ -24,15 +24,15 @@ use serde::Serialize;
 use fsw_core::tables::types::{matrix_from_rows, rows_from_matrix};
 use fsw_core::tables::IruTable;
 
-use super::calibrate::{
-    batch_fix, gyro_complete, steps_between, FixFloors, FixRefusal, IruReport, ManeuverReport,
-    BATCH_HALF_S,
+use super::iru_fixes::{
+    batch_fix, gyro_complete, steps_between, FixFloors, FixRefusal, BATCH_HALF_S,
 };
+use super::maneuvers::ManeuverReport;
 use super::observations::{FrameObservations, RateSwitch};
 use crate::calibration::iru::{GyroCalibration, IrucalSolution};
 use crate::calibration::iru_chain::{
-    significant_elements, solve_chain, validate_heldout, Chain, ChainConfig, ChainFix, ChainLink,
-    ChainSolution, HeldOutValidation, Triad,
+    significant_elements, solve_chain, validate_heldout, BiasStepTest, Chain, ChainConfig,
+    ChainFix, ChainLink, ChainSolution, HeldOutValidation, RateScaleTest, Triad,
 };
 use crate::ARCSEC_PER_RAD;
 
@@ -285,6 +285,112 @@ pub struct IruStage {
     pub skipped: Option<String>,
     /// The chain solution (bias history).
     pub chain_solution: Option<ChainSolution>,
+}
+
+/// IRU results for the report.
+#[derive(Clone, Debug, Serialize)]
+pub struct IruReport {
+    /// δM (row-major, unitless).
+    pub delta_m: [[f64; 3]; 3],
+    /// 1σ of δM.
+    pub delta_m_sigma: [[f64; 3]; 3],
+    /// Bias from the full calibration, ACS, rad/s.
+    pub bias_rad_per_s: [f64; 3],
+    /// 1σ, rad/s.
+    pub bias_sigma_rad_per_s: [f64; 3],
+    /// Number of intervals (maneuvers + holds).
+    pub intervals: usize,
+    /// Interval residuals before and after, arcsec.
+    pub residual_before_arcsec: Vec<f64>,
+    /// After.
+    pub residual_after_arcsec: Vec<f64>,
+    /// Whether the new G was written (δM significant at 3σ somewhere).
+    pub g_updated: bool,
+    /// The δM applied to G: the elements determined at 3σ, others 0 (all 0 without an update).
+    pub delta_m_uplinked: [[f64; 3]; 3],
+    /// Intervals dropped as outliers (index in the order they were built, after earlier drops).
+    pub rejected_intervals: Vec<usize>,
+    /// The estimator that produced δM.
+    pub estimator: &'static str,
+    /// Attitude fixes in the gyro chain.
+    pub fixes: usize,
+    /// Gyro links joining consecutive fixes.
+    pub links: usize,
+    /// Links that carry a maneuver.
+    pub maneuver_links: usize,
+    /// Rate random walk declared in the metadata (rad/s^1.5).
+    pub rrw_declared_rad_per_s_1p5: f64,
+    /// Rate random walk used (larger when the data's likelihood needed it).
+    pub rrw_used_rad_per_s_1p5: f64,
+    /// Scale of the attitude fixes' random covariance chosen by the likelihood (1 = as stated).
+    pub fix_cov_scale: f64,
+    /// Scale of the FHST-only fixes' systematic (per-attitude) covariance chosen by the
+    /// likelihood.
+    pub fix_systematic_scale: f64,
+    /// Scale of the systematic covariance of the fixes that needed the Sun (FSS transfer
+    /// function and alignment) chosen by the likelihood.
+    pub fix_sun_systematic_scale: f64,
+    /// Mean normalised innovation of the fixes per dof (1 = σ right).
+    pub nis_mean_per_dof: f64,
+    /// Fixes outside the innovation gate (not used).
+    pub gated_fixes: usize,
+    /// Hold batches refused as fixes because their own attitude fit does not fit (χ² p below
+    /// `FIX_MISFIT_P`): time (s from the first frame), χ², dof.
+    pub misfit_fixes: Vec<(f64, f64, usize)>,
+    /// Why the gyro model does not fit, when it does not.
+    pub model_fit: Option<String>,
+    /// The lack-of-fit test of a scale error that changes with rate.
+    pub rate_scale: RateScaleTest,
+    /// Bias steps at unknown times found by the change-point scan and modelled: each with its
+    /// time, size, σ and multiplicity-corrected p.
+    pub bias_steps: Vec<BiasStepTest>,
+    /// The scan's best candidate that was not accepted (when a scan ran and stopped).
+    pub bias_step_rejected: Option<BiasStepTest>,
+    /// The scan stopped at its cap of steps (`iru_chain::MAX_BIAS_STEPS`): more changes faster
+    /// than the walk may remain.
+    pub bias_steps_capped: bool,
+    /// Where in their envelope the rate-mode switches inside decimated frames fell, as
+    /// estimated (slew start, slew end; 0 = middle, ±0.5 = edges), with 1σ (0.5: no data).
+    pub split_fraction: [f64; 2],
+    /// See `split_fraction`.
+    pub split_fraction_sigma: [f64; 2],
+    /// Held-out validation of the primary triad's δM, when attempted.
+    pub validation: Option<HeldOutValidation>,
+    /// Why G was or was not updated (the real reason, with numbers).
+    pub decision: String,
+    /// The backup triad, when it flew slews.
+    pub backup: Option<BackupIruReport>,
+}
+
+impl IruReport {
+    /// What the slew uncertainty needs of this report (`super::filter_tuning`).
+    #[must_use]
+    pub fn tuning_evidence(&self) -> super::filter_tuning::IruEvidence {
+        use super::filter_tuning::{HeldOut, IruEvidence, RateScale, TriadCalibration};
+        let held_out = |v: &crate::calibration::iru_chain::HeldOutValidation| HeldOut {
+            passed: v.passed,
+            mean_square_normalised: v.mean_square_normalised,
+            reason: v.reason.clone(),
+        };
+        IruEvidence {
+            delta_m: self.delta_m,
+            delta_m_sigma: self.delta_m_sigma,
+            delta_m_uplinked: self.delta_m_uplinked,
+            validation: self.validation.as_ref().map(held_out),
+            g_updated: self.g_updated,
+            decision: self.decision.clone(),
+            rate_scale: RateScale {
+                significant: self.rate_scale.significant,
+                p_value: self.rate_scale.p_value,
+            },
+            backup: self.backup.as_ref().map(|b| TriadCalibration {
+                delta_m: b.delta_m,
+                delta_m_sigma: b.delta_m_sigma,
+                delta_m_uplinked: b.delta_m_uplinked,
+                validation: b.validation.as_ref().map(held_out),
+            }),
+        }
+    }
 }
 
 /// The backup triad's δM in the report.
