@@ -303,8 +303,7 @@ struct Geometry {
 impl Geometry {
     fn new() -> Self {
         let pre = AlignmentTable::prelaunch();
-        let m_pre: Vec<Matrix3<f64>> =
-            pre.matrices().iter().map(|m| matrix_from_rows(m)).collect();
+        let m_pre: Vec<Matrix3<f64>> = pre.matrices().iter().map(|m| matrix_from_rows(m)).collect();
         let mis = [
             Vector3::new(20.0, -30.0, 15.0),
             Vector3::new(-40.0, 25.0, 60.0),
