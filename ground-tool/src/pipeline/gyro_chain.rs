@@ -457,66 +457,12 @@ pub fn irucal_stage(
         write_chain_csv(&path, chain, &sol);
     }
     let fit = model_fit(&sol, cfg);
-    let decide = |triad: Triad, table_g: &mut [[f64; 3]; 3]| {
-        let k = match triad {
-            Triad::Primary => 0,
-            Triad::Backup => 1,
-        };
-        let dm_up = significant_elements(&sol.delta_m[k], &sol.sigma_delta_m[k]);
-        if dm_up.iter().all(|x| *x == 0.0) {
-            return (
-                false,
-                Matrix3::zeros(),
-                None,
-                "G left at its flown value: no δM element is determined at 3σ".to_owned(),
-            );
-        }
-        if let Err(why) = &fit {
-            return (
-                false,
-                Matrix3::zeros(),
-                None,
-                format!("G left at its flown value: {why}"),
-            );
-        }
-        let mask = dm_up.map(|x| x != 0.0);
-        let cfg_solved = ChainConfig {
-            fix_cov_scale: sol.fix_cov_scale,
-            fix_systematic_scale: sol.fix_systematic_scale,
-            fix_sun_systematic_scale: sol.fix_sun_systematic_scale,
-            bias_restarts: sol.bias_restarts,
-            ..*cfg
-        };
-        crate::progress::step(&format!(
-            "IRUCAL: held-out validation of the {triad:?} triad's G"
-        ));
-        let validation = validate_heldout(chain, &cfg_solved, triad, sol.rrw_used, &mask);
-        match validation {
-            Ok(v) if v.passed => {
-                let g = (Matrix3::identity() + dm_up) * matrix_from_rows(table_g);
-                *table_g = rows_from_matrix(&g);
-                let why = format!(
-                    "G updated with the δM elements determined at 3σ; held-out validation: {}",
-                    v.reason
-                );
-                (true, dm_up, Some(v), why)
-            }
-            Ok(v) => {
-                let why = format!("G left at its flown value: {}", v.reason);
-                (false, Matrix3::zeros(), Some(v), why)
-            }
-            Err(e) => (
-                false,
-                Matrix3::zeros(),
-                None,
-                format!("G left at its flown value: the held-out fit failed ({e})"),
-            ),
-        }
-    };
     let mut table = *flown;
-    let (g_updated, dm_up, validation, decision) = decide(Triad::Primary, &mut table.g_primary);
+    let (g_updated, dm_up, validation, decision) =
+        decide_triad(chain, cfg, &sol, &fit, Triad::Primary, &mut table.g_primary);
     let backup = (sol.rotation_deg[1] > 1.0).then(|| {
-        let (upd, dmb, v, why) = decide(Triad::Backup, &mut table.g_backup);
+        let (upd, dmb, v, why) =
+            decide_triad(chain, cfg, &sol, &fit, Triad::Backup, &mut table.g_backup);
         BackupIruReport {
             delta_m: rows_from_matrix(&sol.delta_m[1]),
             delta_m_sigma: rows_from_matrix(&sol.sigma_delta_m[1]),
@@ -578,6 +524,92 @@ pub fn irucal_stage(
         decision,
         backup,
     });
+    stage.solution = Some(irucal_solution(
+        &sol,
+        (bias, bias_sigma),
+        residual_before,
+        residual_after,
+    ));
+    stage.table = table;
+    stage.chain_solution = Some(sol);
+    stage
+}
+
+/// Whether a triad's G is updated: only with δM elements determined at 3σ, a gyro model
+/// that fits, and the held-out validation passed; then `table_g` takes them. Returns
+/// (updated, the δM uplinked, the validation, why).
+fn decide_triad(
+    chain: &Chain,
+    cfg: &ChainConfig,
+    sol: &ChainSolution,
+    fit: &Result<(), String>,
+    triad: Triad,
+    table_g: &mut [[f64; 3]; 3],
+) -> (bool, Matrix3<f64>, Option<HeldOutValidation>, String) {
+    let k = match triad {
+        Triad::Primary => 0,
+        Triad::Backup => 1,
+    };
+    let dm_up = significant_elements(&sol.delta_m[k], &sol.sigma_delta_m[k]);
+    if dm_up.iter().all(|x| *x == 0.0) {
+        return (
+            false,
+            Matrix3::zeros(),
+            None,
+            "G left at its flown value: no δM element is determined at 3σ".to_owned(),
+        );
+    }
+    if let Err(why) = fit {
+        return (
+            false,
+            Matrix3::zeros(),
+            None,
+            format!("G left at its flown value: {why}"),
+        );
+    }
+    let mask = dm_up.map(|x| x != 0.0);
+    let cfg_solved = ChainConfig {
+        fix_cov_scale: sol.fix_cov_scale,
+        fix_systematic_scale: sol.fix_systematic_scale,
+        fix_sun_systematic_scale: sol.fix_sun_systematic_scale,
+        bias_restarts: sol.bias_restarts,
+        ..*cfg
+    };
+    crate::progress::step(&format!(
+        "IRUCAL: held-out validation of the {triad:?} triad's G"
+    ));
+    let validation = validate_heldout(chain, &cfg_solved, triad, sol.rrw_used, &mask);
+    match validation {
+        Ok(v) if v.passed => {
+            let g = (Matrix3::identity() + dm_up) * matrix_from_rows(table_g);
+            *table_g = rows_from_matrix(&g);
+            let why = format!(
+                "G updated with the δM elements determined at 3σ; held-out validation: {}",
+                v.reason
+            );
+            (true, dm_up, Some(v), why)
+        }
+        Ok(v) => {
+            let why = format!("G left at its flown value: {}", v.reason);
+            (false, Matrix3::zeros(), Some(v), why)
+        }
+        Err(e) => (
+            false,
+            Matrix3::zeros(),
+            None,
+            format!("G left at its flown value: the held-out fit failed ({e})"),
+        ),
+    }
+}
+
+/// The chain's solution as IRUCAL's (primary triad, the last bias), for the reports and the
+/// diagnose chain.
+fn irucal_solution(
+    sol: &ChainSolution,
+    (bias, bias_sigma): ([f64; 3], [f64; 3]),
+    residual_before: Vec<f64>,
+    residual_after: Vec<f64>,
+) -> IrucalSolution {
     let cov = &sol.covariance_ppm2[0];
     let mut covariance_scaled = nalgebra::DMatrix::zeros(12, 12);
     for r in 0..9 {
@@ -588,7 +620,7 @@ pub fn irucal_stage(
     for i in 0..3 {
         covariance_scaled[(9 + i, 9 + i)] = (bias_sigma[i] * ARCSEC_PER_RAD).powi(2);
     }
-    stage.solution = Some(IrucalSolution {
+    IrucalSolution {
         calibration: GyroCalibration {
             delta_m: sol.delta_m[0],
             bias_acs_rad_per_s: Vector3::from(bias),
@@ -603,10 +635,7 @@ pub fn irucal_stage(
         residual_after_arcsec: residual_after,
         chi2: sol.nis.iter().flatten().sum(),
         iterations: sol.iterations,
-    });
-    stage.table = table;
-    stage.chain_solution = Some(sol);
-    stage
+    }
 }
 
 /// Whether the gyro model fits the fixes: few gated fixes and a consistent mean NIS.
