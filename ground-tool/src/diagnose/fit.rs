@@ -209,7 +209,8 @@ fn nuisance_row(m: &Measurement) -> [Vector6<f64>; 2] {
     out
 }
 
-fn batch_ranges(set: &MeasurementSet) -> Vec<std::ops::Range<usize>> {
+/// The measurements of each batch (`set.meas` is in batch order).
+pub(super) fn batch_ranges(set: &MeasurementSet) -> Vec<std::ops::Range<usize>> {
     let mut out = vec![0..0; set.batches.len()];
     let mut i = 0;
     while i < set.meas.len() {

@@ -709,20 +709,16 @@ impl History<'_> {
             why.push(format!("halves differ (χ² {hchi2:.1}, p {hp:.2e})"));
         }
         let evidence = Evidence {
-            effect: format!("{}[IRU]", cand.name),
-            k,
-            delta_chi2: c0 - c1,
-            f,
-            p_value: p,
             p_holm: (p * n_candidates as f64).min(1.0),
-            delta_bic: dbic,
-            halves_chi2: hchi2,
-            halves_p: hp,
-            halves_estimates: hest,
-            signature_excess: (f64::NAN, f64::NAN),
             adequate: true,
-            accepted: false,
             rejected_because: (!why.is_empty()).then(|| why.join("; ")),
+            ..Evidence::likelihood_test(
+                format!("{}[IRU]", cand.name),
+                k,
+                (c0 - c1, f, p),
+                dbic,
+                (hchi2, hp, hest),
+            )
         };
         let leftover = GyroLeftover {
             evidence: evidence.clone(),

@@ -505,20 +505,17 @@ fn column_test(
         why.push(format!("halves differ (χ² {hchi2:.1}, p {hp:.2e})"));
     }
     let ev = Evidence {
-        effect: name.to_owned(),
-        k,
-        delta_chi2: c0 - fit1.chi2,
-        f,
-        p_value: p,
         p_holm,
-        delta_bic: dbic,
-        halves_chi2: hchi2,
-        halves_p: hp,
-        halves_estimates: hest,
-        signature_excess: (f64::NAN, f64::NAN),
         adequate: true,
         accepted: why.is_empty(),
         rejected_because: (!why.is_empty()).then(|| why.join("; ")),
+        ..Evidence::likelihood_test(
+            name.to_owned(),
+            k,
+            (c0 - fit1.chi2, f, p),
+            dbic,
+            (hchi2, hp, hest),
+        )
     };
     Some((ev, fit1, s2))
 }
@@ -737,20 +734,10 @@ fn rate_mode_bias_test(
     let p = chi2_sf(chi2, 3.0);
     let p_holm = (p * SLEW_TESTS).min(1.0);
     let alpha = inp.cfg.alpha;
+    let no_halves = (f64::NAN, f64::NAN, (Vec::new(), Vec::new()));
     let ev = Evidence {
-        effect: "gyro_rate_mode_bias[IRU]".into(),
-        k: 3,
-        delta_chi2: chi2,
-        f: chi2 / 3.0,
-        p_value: p,
         p_holm,
-        delta_bic: f64::NAN,
-        halves_chi2: f64::NAN,
-        halves_p: f64::NAN,
-        halves_estimates: (Vec::new(), Vec::new()),
-        signature_excess: (f64::NAN, f64::NAN),
         adequate: true,
-        accepted: false,
         rejected_because: Some(if p_holm < alpha {
             format!(
                 "no library effect has this signature: the slews' bias differs from the holds' by [{:.4}, {:.4}, {:.4}] ± [{:.4}, {:.4}, {:.4}]″/s (Wald χ² {chi2:.1}, 3 dof)",
@@ -764,6 +751,13 @@ fn rate_mode_bias_test(
         } else {
             format!("Wald p {p:.2e} (×{SLEW_TESTS} slew tests) ≥ {alpha}")
         }),
+        ..Evidence::likelihood_test(
+            "gyro_rate_mode_bias[IRU]".into(),
+            3,
+            (chi2, chi2 / 3.0, p),
+            f64::NAN,
+            no_halves,
+        )
     };
     out.leftover.push(GyroLeftover {
         evidence: ev.clone(),
