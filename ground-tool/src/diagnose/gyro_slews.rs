@@ -617,23 +617,17 @@ fn rate_power_test(
             best = Some((ev, fit, p));
         }
     }
-    let Some((mut ev, fit, _)) = best else {
+    let Some((ev, fit, _)) = best else {
         return;
     };
-    ev.accepted = false;
-    if ev.rejected_because.is_none() || ev.p_holm < inp.cfg.alpha {
-        ev.rejected_because =
-            Some("no library effect has this signature: a scale that changes with the rate".into());
-    }
-    out.leftover.push(GyroLeftover {
-        evidence: ev.clone(),
-        regressor: "slew_rate",
-        size: (0..3)
-            .map(|j| fit.x[model.len() + j].abs())
-            .fold(0.0, f64::max),
-        unit: "ppm at the reference rate",
-    });
-    out.candidates.push(ev);
+    let size = largest_added(&fit, model);
+    unexplained(
+        out,
+        ev,
+        inp.cfg.alpha,
+        "a scale that changes with the rate",
+        ("slew_rate", size, "ppm at the reference rate"),
+    );
 }
 
 /// A scale factor that changed once (outside the library): the δM diagonal from slew `k` on,
@@ -683,20 +677,45 @@ fn scale_step_test(
     };
     fill(rows, k);
     ev.effect = format!("gyro_scale_step[IRU] (from slew {} of {n})", k + 1);
-    ev.accepted = false;
     // A step happens once: the interleaved halves do test it (both hold slews on each side),
     // but a failed halves check is not a reason to call it something else.
-    if ev.rejected_because.is_none() || ev.p_holm < inp.cfg.alpha {
-        ev.rejected_because =
-            Some("no library effect has this signature: a scale factor that changed once".into());
+    let size = largest_added(&fit, model);
+    unexplained(
+        out,
+        ev,
+        inp.cfg.alpha,
+        "a scale factor that changed once",
+        ("time_s", size, "ppm"),
+    );
+}
+
+/// The largest of the three columns a test added to `model` (ppm).
+fn largest_added(fit: &SlewFit, model: &[usize]) -> f64 {
+    (0..3)
+        .map(|j| fit.x[model.len() + j].abs())
+        .fold(0.0, f64::max)
+}
+
+/// A test outside the library reported as unexplained: never accepted; when it passed its
+/// rules or is significant after the family's correction (`alpha`), the reason is that no
+/// library effect has its signature (`what`); into the leftovers with its regressor, size
+/// and unit, and into the candidates.
+fn unexplained(
+    out: &mut GyroAnalysis,
+    mut ev: Evidence,
+    alpha: f64,
+    what: &str,
+    (regressor, size, unit): (&'static str, f64, &'static str),
+) {
+    ev.accepted = false;
+    if ev.rejected_because.is_none() || ev.p_holm < alpha {
+        ev.rejected_because = Some(format!("no library effect has this signature: {what}"));
     }
     out.leftover.push(GyroLeftover {
         evidence: ev.clone(),
-        regressor: "time_s",
-        size: (0..3)
-            .map(|j| fit.x[model.len() + j].abs())
-            .fold(0.0, f64::max),
-        unit: "ppm",
+        regressor,
+        size,
+        unit,
     });
     out.candidates.push(ev);
 }

@@ -25,7 +25,7 @@ use nalgebra::{Matrix3, Vector3};
 use sim_harness::sensors::fss::FssHeadErrors;
 use sim_harness::truth::aberration::aberrate;
 
-use ground_tool::diagnose::measurements::DiagnoseInput;
+use ground_tool::diagnose::measurements::{DiagnoseInput, MeasurementSet};
 
 /// Effects switched on in the synthetic truth (zero = off).
 #[derive(Clone, Debug, Default)]
@@ -110,7 +110,25 @@ pub struct SynthRun {
     pub config: SynthConfig,
 }
 
+impl SynthConfig {
+    /// The default settings with `effects` and `seed`.
+    #[must_use]
+    pub fn seeded(effects: SynthEffects, seed: u64) -> Self {
+        Self {
+            seed,
+            effects,
+            ..Self::default()
+        }
+    }
+}
+
 impl SynthRun {
+    /// The measurement set diagnose builds from this run (no declared effect).
+    #[must_use]
+    pub fn measurement_set(&self) -> MeasurementSet {
+        MeasurementSet::build(&self.input(&[]))
+    }
+
     /// Input of the analysis.
     #[must_use]
     pub fn input(&self, declared: &[&str]) -> DiagnoseInput<'_> {
