@@ -164,7 +164,7 @@ fn predicted_shift(r: &Runs) -> anyhow::Result<()> {
     // without the orbital velocity's aberration (first order, the OBC attitude of the frame),
     // and a consider covariance: each batch's orbital velocity unknown, isotropic, |v| = V.
     let mut frame_of = Vec::with_capacity(sa.len());
-    for (lo, hi) in star_batches(&fa) {
+    for (lo, hi) in star_batches(fa) {
         for (k, f) in fa.iter().enumerate().take(hi).skip(lo) {
             for s in f.stars.iter().flatten() {
                 if s.identified.is_some() {
