@@ -41,7 +41,7 @@ pub const EXPECTED_MAGIC: u32 = 0x4752_4F45;
 /// Version of both files.
 pub const FIXTURE_VERSION: u16 = 1;
 /// Most table images one input file may carry.
-pub const MAX_IMAGES: usize = 4;
+pub const MAX_IMAGES: usize = 8;
 /// Most commands recorded for one cycle (the executive's own limit).
 pub const MAX_RECORDED_COMMANDS: usize = MAX_COMMANDS_PER_CYCLE;
 /// Length of the longest cycle record.

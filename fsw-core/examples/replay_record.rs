@@ -19,7 +19,11 @@
 //! * cycles 360–365: FHST2 loses track, reacquires with the new-star flag;
 //! * cycle 400: switch to the backup IRU channels (other biases) and reset the filter
 //!   covariance;
-//! * cycle 470: FHST1 acquires another star (identification after the slew).
+//! * cycle 470: FHST1 acquires another star (identification after the slew);
+//! * cycle 5: load and activate an orbit table and a magnetics table (a degree-10 field
+//!   model); from then on TAM1/TAM2 words (the truth attitude, the model's field at the
+//!   orbit's position, 0.2 mG noise) let the coarse attitude fix every 10th cycle (issue 20):
+//!   the field synthesis, Earth orientation and TRIAD run on the target too.
 //!
 //! Raw counts come from fsw-core's inverse sensor functions ([`fhst::hv_from_dir`],
 //! [`fss::angles_from_dir`], IRU pulses through the table's `G`) with deterministic noise
@@ -61,14 +65,15 @@ use fsw_core::executive::{CycleOutput, FlightCore};
 use fsw_core::fhst::{self, FHST_HALF_FIELD_RAD, FHST_RAD_PER_COUNT};
 use fsw_core::fss::{self, FSS_HALF_FIELD_RAD, FSS_RAD_PER_COUNT};
 use fsw_core::raw::{
-    FhstSample, FssSample, IruSample, RawSensorFrame, TimeTag, FHST_FLAG_NEW_STAR,
-    FHST_FLAG_TRACKING, FHST_FLAG_VALID, FSS_FLAG_SUN_ALPHA, FSS_FLAG_SUN_BETA,
+    FhstSample, FssSample, IruSample, RawSensorFrame, TamSample, TimeTag, FHST_FLAG_NEW_STAR,
+    FHST_FLAG_TRACKING, FHST_FLAG_VALID, FSS_FLAG_SUN_ALPHA, FSS_FLAG_SUN_BETA, TAM_FLAG_VALID,
 };
 use fsw_core::sun_ephemeris;
 use fsw_core::tables::image::encode_image;
 use fsw_core::tables::types::matrix_from_rows;
 use fsw_core::tables::{
-    AlignmentTable, CatalogStar, FilterTable, IruTable, StarCatalogTable, TableId,
+    AlignmentTable, CatalogStar, FilterTable, IruTable, MagneticsTable, OrbitTable,
+    StarCatalogTable, TableId,
 };
 use fsw_core::telemetry::{decode_event, decode_housekeeping, decode_time_code, TIME_CODE_LEN};
 use fsw_core::units::{RAD_PER_ARCSEC, RAD_PER_DEG};
@@ -90,6 +95,9 @@ const CYCLE_SLEW: u32 = 240;
 const CYCLE_BACKUP: u32 = 400;
 const FHST2_LOST: std::ops::Range<u32> = 360..366;
 const CYCLE_FHST1_SWITCH: u32 = 470;
+const CYCLE_MAGNETICS: u32 = 5;
+/// TAM count size, mG.
+const TAM_MILLIGAUSS_PER_COUNT: f64 = 0.3;
 
 // ------------------------------------------------------------------------------------------
 // Deterministic noise
@@ -430,6 +438,12 @@ fn commands_for(cycle: u32, sc: &Scenario, truth_q: &Quat) -> Vec<RecordedComman
                 .normalized();
             vec![RecordedCommand::FilterInitialize(quat4(&q))]
         }
+        CYCLE_MAGNETICS => vec![
+            RecordedCommand::TableLoad(3),
+            RecordedCommand::TableActivate(TableId::Orbit as u8),
+            RecordedCommand::TableLoad(4),
+            RecordedCommand::TableActivate(TableId::Magnetics as u8),
+        ],
         CYCLE_SLEW => vec![RecordedCommand::SlewTo(quat4(&sc.q_target))],
         CYCLE_BACKUP => vec![
             RecordedCommand::SelectIruConfig(1),
@@ -456,7 +470,71 @@ fn table_images() -> (Vec<Vec<u8>>, StarCatalogTable) {
     let filter_image = buf[..n].to_vec();
     let mut corrupt = filter_image.clone();
     corrupt[30] ^= 0x10;
-    (vec![catalog_image, filter_image, corrupt], sc.catalog)
+    let n = encode_image(TableId::Orbit, created, &replay_orbit(), &mut buf).unwrap();
+    let orbit_image = buf[..n].to_vec();
+    let n = encode_image(TableId::Magnetics, created, &replay_magnetics(), &mut buf).unwrap();
+    let magnetics_image = buf[..n].to_vec();
+    (
+        vec![
+            catalog_image,
+            filter_image,
+            corrupt,
+            orbit_image,
+            magnetics_image,
+        ],
+        sc.catalog,
+    )
+}
+
+/// A circular 6833-km, 28.48° orbit with its epoch at cycle 0.
+fn replay_orbit() -> OrbitTable {
+    let v = (fsw_core::orbit::MU_EARTH_KM3_PER_S2 / 6833.0).sqrt();
+    let i = 28.48_f64.to_radians();
+    OrbitTable {
+        epoch_s_since_j2000_tt: time_tag(0).seconds_since_j2000_tt(),
+        pos_eci_km: [0.0, -6833.0 * libm::cos(i), -6833.0 * libm::sin(i)],
+        vel_eci_km_per_s: [v, 0.0, 0.0],
+    }
+}
+
+/// A magnetics table with every coefficient of degree ≤ 10 non-zero, dominated by a dipole,
+/// its epoch at cycle 0; TAMs on the ACS axes.
+fn replay_magnetics() -> MagneticsTable {
+    let mut t = MagneticsTable::boot();
+    t.field_degree = 10;
+    t.field_epoch_s_since_j2000_tt = time_tag(0).seconds_since_j2000_tt();
+    for n in 1..=10 {
+        for m in 0..=n {
+            t.g_nt[n][m] = 100.0 / n as f64;
+            t.g_nt_per_year[n][m] = 1.0;
+            if m > 0 {
+                t.h_nt[n][m] = -50.0 / n as f64;
+            }
+        }
+    }
+    t.g_nt[1][0] = -29_775.0;
+    t.tam_milligauss_per_count = [[TAM_MILLIGAUSS_PER_COUNT; 3]; 2];
+    t.validate().unwrap();
+    t
+}
+
+/// TAM words of attitude `q` at `t_s`, with 0.2 mG noise from `rng`.
+fn tam_words(
+    orbit: &mut fsw_core::orbit::OnboardOrbit,
+    table: &MagneticsTable,
+    q: &Quat,
+    t_s: f64,
+    rng: &mut Rng,
+) -> [TamSample; 2] {
+    let _ = orbit.advance_to(t_s);
+    let b_eci = fsw_core::field_model::field_eci_nt(table, &orbit.state().unwrap().pos_eci_km, t_s)
+        .unwrap();
+    let b_mg = q.to_dcm() * b_eci / 100.0;
+    [0, 1].map(|_| TamSample {
+        field_counts: [b_mg.x, b_mg.y, b_mg.z]
+            .map(|b| ((b + 0.2 * rng.normal()) / TAM_MILLIGAUSS_PER_COUNT).round() as i16),
+        flags: TAM_FLAG_VALID,
+    })
 }
 
 struct Recording {
@@ -465,6 +543,7 @@ struct Recording {
     outputs: Vec<CycleOutput>,
     truth_final: Quat,
     estimate_final: Quat,
+    coarse_final: fsw_core::coarse::CoarseAttitude,
 }
 
 fn record() -> Recording {
@@ -490,6 +569,10 @@ fn record() -> Recording {
     let mut truth = Truth::new(sc.q0, &filter_boot, &iru_table);
     let mut records = Vec::new();
     let mut outputs = Vec::new();
+    let magnetics = replay_magnetics();
+    let mut orbit = fsw_core::orbit::OnboardOrbit::new();
+    orbit.load(&replay_orbit());
+    let mut tam_rng = Rng(0x5441_4D31_1991_0405);
     // One cycle of pulses before the first frame.
     truth.advance(&Vector3::zeros(), 1.0, false, &iru_table);
     for cycle in 0..CYCLES {
@@ -512,7 +595,13 @@ fn record() -> Recording {
                 truth.fss_sample(1, time, &al),
             ],
             temperatures_centi_c: temperatures(cycle),
-            tam: Default::default(),
+            tam: tam_words(
+                &mut orbit,
+                &magnetics,
+                &truth.q,
+                time.seconds_since_j2000_tt(),
+                &mut tam_rng,
+            ),
             css: Default::default(),
         };
         let recorded = commands_for(cycle, &sc, &truth.q);
@@ -537,6 +626,7 @@ fn record() -> Recording {
         outputs,
         truth_final: truth.q,
         estimate_final: core.attitude(),
+        coarse_final: *core.coarse(),
     }
 }
 
@@ -673,6 +763,19 @@ fn main() {
     }
     let last = &rec.outputs[rec.outputs.len() - 1].housekeeping;
     let err_arcsec = rec.truth_final.angle_to_rad(&rec.estimate_final) / RAD_PER_ARCSEC;
+    let coarse_deg = rec
+        .truth_final
+        .angle_to_rad(&rec.coarse_final.q_acs_from_eci)
+        / RAD_PER_DEG;
+    println!(
+        "coarse attitude: {} fixes, final error {coarse_deg:.3}° (source {:?})",
+        rec.coarse_final.fixes, rec.coarse_final.source
+    );
+    assert!(
+        rec.coarse_final.fixes >= 50,
+        "the coarse path must run in the replay"
+    );
+    assert!(coarse_deg < 1.0);
     println!("events: {counts:?}");
     println!(
         "final: filter mode {}, control mode {}, accepted {}, gated {}, estimate error {:.1} arcsec",

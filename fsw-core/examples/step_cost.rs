@@ -15,6 +15,10 @@
 //! With `STEP_COST_ORBIT=1` an orbit table (GRO's orbit, epoch at the first frame) and the
 //! filter table with `orbital_aberration_correction` on are activated first: every cycle then
 //! propagates the onboard orbit and applies the orbital aberration (issue 19).
+//! With `STEP_COST_COARSE=1` the orbit table (aberration correction on, as above), a magnetics
+//! table with a full degree-10 field model and TAM words consistent with it (the truth
+//! attitude, the field at the orbit's position) are added: the coarse attitude is carried every
+//! cycle and fixed every 10th (issue 20).
 
 // Host measurement tooling, not flight code: the flight-code lints are relaxed here.
 #![allow(
@@ -47,10 +51,31 @@ fn main() {
         .nth(1)
         .and_then(|a| a.parse().ok())
         .unwrap_or(10_000);
-    let scenario = synthetic::build(cycles + 2);
+    let mut scenario = synthetic::build(cycles + 2);
+    let coarse = std::env::var_os("STEP_COST_COARSE").is_some_and(|v| !v.is_empty());
+    if coarse {
+        add_tam_words(&mut scenario);
+    }
     let mut core = synthetic::boot(&scenario);
-    if std::env::var_os("STEP_COST_ORBIT").is_some_and(|v| !v.is_empty()) {
+    if coarse || std::env::var_os("STEP_COST_ORBIT").is_some_and(|v| !v.is_empty()) {
         activate_orbit(&mut core, &scenario.frames[0]);
+    }
+    if coarse {
+        let table = magnetics_table(&scenario.frames[0]);
+        let mut a = vec![0u8; 8192];
+        let n = fsw_core::tables::image::encode_image(
+            fsw_core::tables::TableId::Magnetics,
+            fsw_core::raw::TimeTag::default(),
+            &table,
+            &mut a,
+        )
+        .expect("fits");
+        let cmds = [
+            fsw_core::executive::Command::TableLoad(&a[..n]),
+            fsw_core::executive::Command::TableActivate(fsw_core::tables::TableId::Magnetics),
+        ];
+        let out = core.step(&scenario.frames[0], &cmds);
+        assert_eq!(core.tables().magnetics(), &table, "{:?}", out.events);
     }
     if std::env::var_os("STEP_COST_HOOKS").is_some_and(|v| !v.is_empty()) {
         activate_hooks(&mut core, &scenario.frames[1]);
@@ -59,9 +84,12 @@ fn main() {
     }
     let accepted = run_cycles(&mut core, &scenario.frames[2..]);
     eprintln!(
-        "filter mode {:?}, measurements accepted {accepted}, size_of::<FlightCore>() = {} B",
+        "filter mode {:?}, measurements accepted {accepted}, size_of::<FlightCore>() = {} B, \
+         coarse fixes {} (last refusal {:?})",
         core.filter_mode(),
-        std::mem::size_of::<FlightCore>()
+        std::mem::size_of::<FlightCore>(),
+        core.coarse().fixes,
+        core.coarse().last_unavailable
     );
     println!("{cycles}");
 }
@@ -133,4 +161,51 @@ fn activate_orbit(core: &mut FlightCore, frame: &RawSensorFrame) {
     );
     assert_eq!(core.tables().orbit(), &orbit, "{:?}", out.events);
     assert!(core.tables().filter().orbital_aberration_correction);
+}
+
+/// A magnetics table with every coefficient of degree ≤ 10 non-zero (the full synthesis cost),
+/// dominated by a dipole, its epoch at `frame`.
+fn magnetics_table(frame: &RawSensorFrame) -> fsw_core::tables::MagneticsTable {
+    let mut t = fsw_core::tables::MagneticsTable::boot();
+    t.field_degree = 10;
+    t.field_epoch_s_since_j2000_tt = frame.time.seconds_since_j2000_tt();
+    for n in 1..=10 {
+        for m in 0..=n {
+            t.g_nt[n][m] = 100.0 / n as f64;
+            if m > 0 {
+                t.h_nt[n][m] = -50.0 / n as f64;
+            }
+        }
+    }
+    t.g_nt[1][0] = -29_775.0;
+    t
+}
+
+/// TAM words of the truth attitude at the orbit of `activate_orbit`, in every frame.
+fn add_tam_words(s: &mut synthetic::Scenario) {
+    let first = s.frames[0];
+    let table = magnetics_table(&first);
+    let mut orbit = fsw_core::orbit::OnboardOrbit::new();
+    let v = (fsw_core::orbit::MU_EARTH_KM3_PER_S2 / 6833.0).sqrt();
+    let i = 28.48_f64.to_radians();
+    orbit.load(&fsw_core::tables::OrbitTable {
+        epoch_s_since_j2000_tt: first.time.seconds_since_j2000_tt(),
+        pos_eci_km: [0.0, -6833.0 * i.cos(), -6833.0 * i.sin()],
+        vel_eci_km_per_s: [v, 0.0, 0.0],
+    });
+    let a = s.q_true.to_dcm();
+    for f in &mut s.frames {
+        let t_s = f.time.seconds_since_j2000_tt();
+        let _ = orbit.advance_to(t_s);
+        let Ok(state) = orbit.state() else { continue };
+        let Ok(b) = fsw_core::field_model::field_eci_nt(&table, &state.pos_eci_km, t_s) else {
+            continue;
+        };
+        let counts = a * b / 100.0 / 0.3;
+        let tam = fsw_core::raw::TamSample {
+            field_counts: [counts.x, counts.y, counts.z].map(|c| c.round() as i16),
+            flags: fsw_core::raw::TAM_FLAG_VALID,
+        };
+        f.tam = [tam, tam];
+    }
 }

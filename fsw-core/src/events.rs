@@ -90,11 +90,25 @@ pub enum EventId {
     /// run). p1 = age of the orbit state, s since the table epoch (saturated, 0 if before).
     /// docs/icd.md §3.3.
     OrbitalCorrectionApplied = 0x0802,
+    /// The coarse attitude could not be fixed (raised when the reason changes). p1 = reason
+    /// ([`crate::coarse::CoarseUnavailable::code`]), p2 = fixes made since boot.
+    /// docs/icd.md §3.3; docs/magnetics.md §5.
+    CoarseFixUnavailable = 0x0901,
+    /// The coarse attitude was fixed again after an interval without fixes (or for the first
+    /// time). p1 = source ([`crate::coarse::CoarseSource`]: 1 FSS + TAM, 2 CSS + TAM), p2 = the
+    /// reason code of the interval without fixes (0 none).
+    /// docs/icd.md §3.3; docs/magnetics.md §5.
+    CoarseFixResumed = 0x0902,
+    /// The coarse attitude's fault screening rejected a vector (raised when the kind of
+    /// rejection changes). p1 = 1 TAM1 magnitude, 2 TAM2 magnitude, 3 field against the
+    /// carried solution, 4 Sun against the carried solution; p2 = rejections since boot.
+    /// docs/icd.md §3.3; docs/magnetics.md §5.
+    CoarseVectorRejected = 0x0903,
 }
 
 impl EventId {
     /// Every event id (for the uniqueness test and the ICD table).
-    pub const ALL: [EventId; 22] = [
+    pub const ALL: [EventId; 25] = [
         Self::TableLoaded,
         Self::TableRejected,
         Self::TableActivated,
@@ -117,6 +131,9 @@ impl EventId {
         Self::CommandRejected,
         Self::OrbitalCorrectionUnavailable,
         Self::OrbitalCorrectionApplied,
+        Self::CoarseFixUnavailable,
+        Self::CoarseFixResumed,
+        Self::CoarseVectorRejected,
     ];
 
     /// On-wire code.

@@ -38,6 +38,7 @@
 //! nine RK4 steps of the orbit.
 
 use crate::attitude::{rot, Quat};
+use crate::coarse::{CoarseAttitude, CoarseUnavailable};
 use crate::control::Controller;
 use crate::events::{raise, Counters, Event, EventId, MAX_EVENTS_PER_CYCLE};
 use crate::fhst;
@@ -249,6 +250,8 @@ pub struct FlightCore {
     wheel_torque_cmd_nm: Vector3<f64>,
     sun_cache: Option<(f64, sun_ephemeris::SunState)>,
     slew_angle_rad: f64,
+    /// Angle turned about each ACS axis since the slew began (`|Δθ_j|` summed), rad.
+    slew_angle_acs_rad: Vector3<f64>,
     /// The onboard orbit (phase 3).
     orbit: OnboardOrbit,
     /// This cycle's orbit state when the orbital correction applies (flag on, orbit valid).
@@ -256,6 +259,12 @@ pub struct FlightCore {
     /// The last orbital-correction event raised (0x0801 with its status and reason, or
     /// 0x0802), so that each is raised once per run; `None` with the flag off.
     orbital_reported: Option<(EventId, u32, u32)>,
+    /// The coarse attitude (phase 7b).
+    coarse: CoarseAttitude,
+    /// The last coarse-fix reason reported (0 = fixed), for events on change only.
+    coarse_reported: Option<u32>,
+    /// The last coarse vector rejection reported (0 none).
+    coarse_rejection_reported: u8,
     /// Time since the last gyro data (a coast), s.
     coast_s: f64,
 }
@@ -311,9 +320,15 @@ impl FlightCore {
             wheel_torque_cmd_nm: Vector3::zeros(),
             sun_cache: None,
             slew_angle_rad: 0.0,
+            slew_angle_acs_rad: Vector3::zeros(),
             orbit: OnboardOrbit::new(),
             orbital_fix: None,
             orbital_reported: None,
+            coarse: CoarseAttitude::new(),
+            // The boot magnetics table holds no field model: the coarse attitude is off by
+            // design, not unavailable, and says nothing until a table makes it possible.
+            coarse_reported: Some(CoarseUnavailable::NoFieldModel.code()),
+            coarse_rejection_reported: 0,
             coast_s: 0.0,
         }
     }
@@ -394,6 +409,7 @@ impl FlightCore {
             self.inflate_for_gyro_calibration(&delta_theta);
         } else {
             self.slew_angle_rad = 0.0;
+            self.slew_angle_acs_rad = Vector3::zeros();
         }
         if initialized
             && self
@@ -432,6 +448,9 @@ impl FlightCore {
         }
         self.update_filter_mode(&residuals, &mut events);
 
+        // 7b. Coarse attitude (Sun, field, gyros), alongside the fine solution.
+        self.coarse_attitude(frame, &delta_theta, dt_s, &mut events);
+
         // 8. Control.
         self.control(&mut events);
 
@@ -441,6 +460,79 @@ impl FlightCore {
             housekeeping,
             events,
         }
+    }
+
+    /// Phase 7b: carry the coarse attitude on the gyros and, when due, fix it from the Sun and
+    /// the field (`crate::coarse`, docs/magnetics.md §5). Events on a change of reason only.
+    fn coarse_attitude(
+        &mut self,
+        frame: &RawSensorFrame,
+        delta_theta_acs_rad: &Vector3<f64>,
+        dt_s: f64,
+        events: &mut heapless::Vec<Event, MAX_EVENTS_PER_CYCLE>,
+    ) {
+        let p_bb: Matrix3<f64> = self.filter.covariance.fixed_view::<3, 3>(3, 3).into_owned();
+        self.coarse.propagate(
+            delta_theta_acs_rad,
+            &self.filter.bias_rad_per_s,
+            &p_bb,
+            self.tables.filter().arw_rad_per_sqrt_s,
+            dt_s,
+        );
+        let table = self.tables.magnetics();
+        if !self.coarse.fix_due(table) {
+            return;
+        }
+        let orbit = match (self.tables.has_orbit(), self.orbit.state()) {
+            (true, Ok(state)) if self.orbit.status() == OrbitStatus::Valid => {
+                Some(state.pos_eci_km)
+            }
+            _ => None,
+        };
+        let t_s = frame.time.seconds_since_j2000_tt();
+        let result =
+            self.coarse
+                .try_fix(frame, self.tables.alignment(), table, orbit.as_ref(), t_s);
+        let rejection = self.coarse.last_rejection;
+        if rejection != 0 && self.coarse_rejection_reported != rejection {
+            self.coarse_rejection_reported = rejection;
+            let total = self.coarse.rejections;
+            let id = EventId::CoarseVectorRejected;
+            raise(events, &mut self.counters, id, u32::from(rejection), total);
+        }
+        let reason = match result {
+            Ok(()) => 0,
+            Err(why) => why.code(),
+        };
+        if self.coarse_reported != Some(reason) {
+            let previous = self.coarse_reported.unwrap_or(0);
+            self.coarse_reported = Some(reason);
+            if reason == 0 {
+                let source = u32::from(self.coarse.source as u8);
+                raise(
+                    events,
+                    &mut self.counters,
+                    EventId::CoarseFixResumed,
+                    source,
+                    previous,
+                );
+            } else {
+                let fixes = self.coarse.fixes;
+                raise(
+                    events,
+                    &mut self.counters,
+                    EventId::CoarseFixUnavailable,
+                    reason,
+                    fixes,
+                );
+            }
+        }
+    }
+
+    /// The coarse attitude (Sun, field and gyros; docs/magnetics.md §5).
+    #[must_use]
+    pub fn coarse(&self) -> &CoarseAttitude {
+        &self.coarse
     }
 
     fn check_time(
@@ -1171,17 +1263,30 @@ impl FlightCore {
     /// is coherent (∝ angle turned), so the standard deviation grows linearly with the angle:
     /// `var += k² ((θ + |Δθ|)² − θ²)` per axis, `k` = `gyro_scale_uncertainty`.
     fn inflate_for_gyro_calibration(&mut self, delta_theta: &Vector3<f64>) {
-        let k = self.tables.filter().gyro_scale_uncertainty;
+        let filter = self.tables.filter();
+        let k = filter.gyro_scale_uncertainty;
+        let per_element = filter.gyro_calibration_sigma;
         let step = delta_theta.norm();
-        if !(step.is_finite() && k.is_finite()) {
+        if !(step.is_finite() && k.is_finite() && delta_theta.iter().all(|x| x.is_finite())) {
             return;
         }
         let before = self.slew_angle_rad;
         let after = before + step;
         self.slew_angle_rad = after;
-        let var = k * k * (after * after - before * before);
+        let before_axes = self.slew_angle_acs_rad;
+        let after_axes = before_axes + delta_theta.abs();
+        self.slew_angle_acs_rad = after_axes;
+        let grow = if per_element.iter().flatten().any(|e| *e != 0.0) {
+            // `var_i += Σ_j E_ij² (a_j'² − a_j²)`.
+            let turned =
+                after_axes.component_mul(&after_axes) - before_axes.component_mul(&before_axes);
+            let e2 = matrix_from_rows(&per_element).map(|e| e * e);
+            Matrix3::from_diagonal(&(e2 * turned))
+        } else {
+            Matrix3::identity() * (k * k * (after * after - before * before))
+        };
         let mut block = self.filter.covariance.fixed_view_mut::<3, 3>(0, 0);
-        block += Matrix3::identity() * var;
+        block += grow;
     }
 
     /// Onboard Sun direction, the ephemeris re-evaluated at most every [`SUN_REFRESH_S`]

@@ -30,10 +30,12 @@
 )]
 
 pub mod attitude;
+pub mod coarse;
 pub mod control;
 pub mod events;
 pub mod executive;
 pub mod fhst;
+pub mod field_model;
 pub mod fss;
 pub mod iru;
 pub mod mekf;

@@ -12,11 +12,14 @@
 //! | 0x010 | [`RawSensorFrame`] | [`RAW_FRAME_LEN`] |
 //! | 0x011 | [`ObcHousekeeping`] | [`HOUSEKEEPING_LEN`] |
 //! | 0x012 | [`Event`] | [`EVENT_LEN`] |
+//! | 0x013 | [`MagneticsFrame`] (TAM1, TAM2, CSS words of the [`RawSensorFrame`]) | [`MAGNETICS_LEN`] |
 //! | 0x020 | [`EphemerisRecord`] | [`EPHEMERIS_LEN`] |
 
 use crate::attitude::Quat;
 use crate::events::{Counters, Event, EventId};
-use crate::raw::{FhstSample, FssSample, IruSample, RawSensorFrame, TimeTag};
+use crate::raw::{
+    CssSample, FhstSample, FssSample, IruSample, RawSensorFrame, TamSample, TimeTag, CSS_EYES, TAMS,
+};
 use serde::{Deserialize, Serialize};
 
 /// APID of the raw sensor frame.
@@ -28,6 +31,10 @@ pub const APID_HOUSEKEEPING: u16 = 0x011;
 /// APID of event packets.
 /// docs/icd.md §3.3.
 pub const APID_EVENT: u16 = 0x012;
+/// APID of the magnetics frame (TAM1, TAM2 and the CSS eyes), written after the raw frame
+/// of the same cycle with the same time code when the spacecraft carries them.
+/// docs/icd.md §3.5 (format version 2).
+pub const APID_MAGNETICS: u16 = 0x013;
 /// APID of the definitive-orbit ephemeris record.
 /// docs/icd.md §3.4.
 pub const APID_EPHEMERIS: u16 = 0x020;
@@ -44,6 +51,9 @@ pub const HOUSEKEEPING_LEN: usize = 230;
 /// Event user data length.
 /// docs/icd.md §3.3.
 pub const EVENT_LEN: usize = 10;
+/// Magnetics frame user data length: 2 × (3 × i16 + u8) + 6 × u16 + u8.
+/// docs/icd.md §3.5.
+pub const MAGNETICS_LEN: usize = 27;
 /// Ephemeris user data length.
 /// docs/icd.md §3.4.
 pub const EPHEMERIS_LEN: usize = 48;
@@ -197,6 +207,44 @@ pub struct ObcHousekeeping {
     /// Bit i set = table id i+1 has a validated image pending.
     /// docs/icd.md §3.2 (offset 229).
     pub table_pending_mask: u8,
+}
+
+/// The magnetometer and coarse-Sun-sensor words of one cycle, as downlinked: the `tam` and
+/// `css` of the cycle's [`RawSensorFrame`] (same time code as its APID 0x010 packet).
+/// APID 0x013, docs/icd.md §3.5.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct MagneticsFrame {
+    /// Sample time (the raw frame's).
+    /// docs/icd.md §3.5 (the packet's CUC time code).
+    pub time: TimeTag,
+    /// TAM1 (primary), TAM2.
+    /// docs/icd.md §3.5 (offsets 0, 7).
+    pub tam: [TamSample; TAMS],
+    /// The six CSS eyes.
+    /// docs/icd.md §3.5 (offset 14).
+    pub css: CssSample,
+}
+
+impl MagneticsFrame {
+    /// The magnetics words of a raw frame.
+    /// docs/icd.md §3.5.
+    #[must_use]
+    pub fn of_raw_frame(f: &RawSensorFrame) -> Self {
+        Self {
+            time: f.time,
+            tam: f.tam,
+            css: f.css,
+        }
+    }
+
+    /// True when any unit carries data (a flag octet not 0): a writer may leave the packet out
+    /// otherwise.
+    /// docs/icd.md §3.5.
+    #[must_use]
+    pub fn has_data(&self) -> bool {
+        self.tam.iter().any(|t| t.flags != 0) || self.css.flags != 0
+    }
 }
 
 /// Definitive orbit record (provided by orbit determination on the ground, or by the harness),
@@ -432,6 +480,52 @@ pub fn decode_raw_frame(time: TimeTag, data: &[u8]) -> Result<RawSensorFrame, Re
     })
 }
 
+/// Encode a magnetics frame's user data (without its time, which is the secondary header).
+/// docs/icd.md §3.5.
+///
+/// # Errors
+/// [`RecordError::BufferTooSmall`].
+pub fn encode_magnetics(m: &MagneticsFrame, out: &mut [u8]) -> Result<usize, RecordError> {
+    let mut w = Writer::new(out);
+    for t in &m.tam {
+        for c in t.field_counts {
+            w.i16(c);
+        }
+        w.u8(t.flags);
+    }
+    for c in m.css.counts {
+        w.u16(c);
+    }
+    w.u8(m.css.flags);
+    w.finish()
+}
+
+/// Decode a magnetics frame's user data; `time` comes from the secondary header. Flag bits
+/// other than bit 0 are reserved and kept as read.
+/// docs/icd.md §3.5.
+///
+/// # Errors
+/// [`RecordError::Length`].
+pub fn decode_magnetics(time: TimeTag, data: &[u8]) -> Result<MagneticsFrame, RecordError> {
+    check_len(data, MAGNETICS_LEN)?;
+    let mut r = Reader::new(data);
+    let mut tam = [TamSample::default(); TAMS];
+    for t in &mut tam {
+        t.field_counts = [r.i16(), r.i16(), r.i16()];
+        t.flags = r.u8();
+    }
+    let mut counts = [0u16; CSS_EYES];
+    for c in &mut counts {
+        *c = r.u16();
+    }
+    let flags = r.u8();
+    Ok(MagneticsFrame {
+        time,
+        tam,
+        css: CssSample { counts, flags },
+    })
+}
+
 /// Encode the housekeeping user data (without its time).
 /// docs/icd.md §3.2.
 ///
@@ -631,6 +725,25 @@ mod tests {
             encode_housekeeping(&h, &mut small),
             Err(RecordError::BufferTooSmall)
         );
+    }
+
+    #[test]
+    fn magnetics_round_trip_and_length() {
+        let mut f = RawSensorFrame::default();
+        f.time.coarse_s = 1_049_000_001;
+        f.tam[0].field_counts = [-1234, 0, 2047];
+        f.tam[0].flags = 1;
+        f.tam[1].field_counts = [-2048, 7, -1];
+        f.css.counts = [0, 1000, 65535, 3, 4, 5];
+        f.css.flags = 1;
+        let m = MagneticsFrame::of_raw_frame(&f);
+        assert!(m.has_data());
+        let mut buf = [0u8; 64];
+        let n = encode_magnetics(&m, &mut buf).unwrap();
+        assert_eq!(n, MAGNETICS_LEN);
+        assert_eq!(decode_magnetics(m.time, &buf[..n]), Ok(m));
+        assert!(decode_magnetics(m.time, &buf[..n - 1]).is_err());
+        assert!(!MagneticsFrame::default().has_data());
     }
 
     #[test]

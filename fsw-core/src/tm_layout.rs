@@ -15,8 +15,9 @@
 use crate::events::Event;
 use crate::raw::RawSensorFrame;
 use crate::telemetry::{
-    EphemerisRecord, ObcHousekeeping, APID_EPHEMERIS, APID_EVENT, APID_HOUSEKEEPING,
-    APID_RAW_SENSORS, EPHEMERIS_LEN, EVENT_LEN, HOUSEKEEPING_LEN, RAW_FRAME_LEN,
+    EphemerisRecord, MagneticsFrame, ObcHousekeeping, APID_EPHEMERIS, APID_EVENT,
+    APID_HOUSEKEEPING, APID_MAGNETICS, APID_RAW_SENSORS, EPHEMERIS_LEN, EVENT_LEN,
+    HOUSEKEEPING_LEN, MAGNETICS_LEN, RAW_FRAME_LEN,
 };
 
 /// A field's wire type (big-endian; floats IEEE-754).
@@ -491,6 +492,71 @@ pub const EVENT_FIELDS: [Field; 3] = [
     f("parameter_2", 6, U32, "", "parameter 2"),
 ];
 
+const TAM_FLAGS: &str = "bit0 valid (the three field words hold a measurement); 0 = no data";
+const CSS_FLAGS: &str = "bit0 valid (the six eye words hold a measurement); 0 = no data";
+
+/// APID 0x013, magnetics frame: the fields of docs/icd.md §3.5.
+/// docs/icd.md §3.5.
+pub const MAGNETICS_FIELDS: [Field; 15] = [
+    f(
+        "tam1_x_counts",
+        0,
+        I16,
+        "TAM count",
+        "TAM1 (primary) field along its X axis; mG per count in the TAM table (0.3 as flown)",
+    ),
+    f(
+        "tam1_y_counts",
+        2,
+        I16,
+        "TAM count",
+        "TAM1 field along its Y axis",
+    ),
+    f(
+        "tam1_z_counts",
+        4,
+        I16,
+        "TAM count",
+        "TAM1 field along its Z axis",
+    ),
+    f("tam1_flags", 6, U8, "", TAM_FLAGS),
+    f(
+        "tam2_x_counts",
+        7,
+        I16,
+        "TAM count",
+        "TAM2 field along its X axis",
+    ),
+    f(
+        "tam2_y_counts",
+        9,
+        I16,
+        "TAM count",
+        "TAM2 field along its Y axis",
+    ),
+    f(
+        "tam2_z_counts",
+        11,
+        I16,
+        "TAM count",
+        "TAM2 field along its Z axis",
+    ),
+    f("tam2_flags", 13, U8, "", TAM_FLAGS),
+    f(
+        "css_plus_x_counts",
+        14,
+        U16,
+        "CSS count",
+        "coarse Sun sensor eye on +X of ACS",
+    ),
+    f("css_minus_x_counts", 16, U16, "CSS count", "CSS eye on -X"),
+    f("css_plus_y_counts", 18, U16, "CSS count", "CSS eye on +Y"),
+    f("css_minus_y_counts", 20, U16, "CSS count", "CSS eye on -Y"),
+    f("css_plus_z_counts", 22, U16, "CSS count", "CSS eye on +Z"),
+    f("css_minus_z_counts", 24, U16, "CSS count", "CSS eye on -Z"),
+    f("css_flags", 26, U8, "", CSS_FLAGS),
+];
+
 /// APID 0x020, definitive orbit: the fields of docs/icd.md §3.4.
 /// docs/icd.md §3.4.
 pub const EPHEMERIS_FIELDS: [Field; 6] = [
@@ -510,7 +576,7 @@ pub const EPHEMERIS_FIELDS: [Field; 6] = [
 
 /// Every packet type of the downlink, in APID order.
 /// docs/icd.md §3.
-pub const PACKETS: [PacketLayout; 4] = [
+pub const PACKETS: [PacketLayout; 5] = [
     PacketLayout {
         apid: APID_RAW_SENSORS,
         name: "raw_sensor_frame",
@@ -528,6 +594,12 @@ pub const PACKETS: [PacketLayout; 4] = [
         name: "event",
         user_data_len: EVENT_LEN,
         fields: &EVENT_FIELDS,
+    },
+    PacketLayout {
+        apid: APID_MAGNETICS,
+        name: "magnetics_frame",
+        user_data_len: MAGNETICS_LEN,
+        fields: &MAGNETICS_FIELDS,
     },
     PacketLayout {
         apid: APID_EPHEMERIS,
@@ -612,6 +684,22 @@ pub fn visit_event<F: FnMut(FieldValue) + ?Sized>(e: &Event, out: &mut F) {
     out(FieldValue::Unsigned(u64::from(e.p2)));
 }
 
+/// A magnetics frame's values in [`MAGNETICS_FIELDS`] order.
+/// docs/icd.md §3.5.
+pub fn visit_magnetics<F: FnMut(FieldValue) + ?Sized>(m: &MagneticsFrame, out: &mut F) {
+    use FieldValue::{Signed, Unsigned};
+    for t in &m.tam {
+        for c in t.field_counts {
+            out(Signed(i64::from(c)));
+        }
+        out(Unsigned(u64::from(t.flags)));
+    }
+    for c in m.css.counts {
+        out(Unsigned(u64::from(c)));
+    }
+    out(Unsigned(u64::from(m.css.flags)));
+}
+
 /// An orbit record's values in [`EPHEMERIS_FIELDS`] order.
 /// docs/icd.md §3.4.
 pub fn visit_ephemeris<F: FnMut(FieldValue) + ?Sized>(e: &EphemerisRecord, out: &mut F) {
@@ -629,10 +717,10 @@ mod tests {
     )]
     use super::*;
     use crate::events::{Counters, EventId};
-    use crate::raw::{FhstSample, FssSample, IruSample, TimeTag};
+    use crate::raw::{CssSample, FhstSample, FssSample, IruSample, TamSample, TimeTag};
     use crate::telemetry::{
-        encode_ephemeris, encode_event, encode_housekeeping, encode_raw_frame, MeasurementStatus,
-        SensorResidual,
+        encode_ephemeris, encode_event, encode_housekeeping, encode_magnetics, encode_raw_frame,
+        MeasurementStatus, SensorResidual,
     };
 
     /// The value at a field's offset, read from the encoded user data by its type alone.
@@ -787,6 +875,27 @@ mod tests {
         let n = encode_event(&ev, &mut buf).unwrap();
         check(&PACKETS[2], &buf[..n], &values(|out| visit_event(&ev, out)));
 
+        let mag = MagneticsFrame {
+            time: TimeTag {
+                coarse_s: 1,
+                fine: 2,
+            },
+            tam: [0i16, 1].map(|i| TamSample {
+                field_counts: [-1000 - i, 1100 + i, -1200 - 3 * i],
+                flags: 1 + 2 * i as u8,
+            }),
+            css: CssSample {
+                counts: [10, 20, 30, 40, 50, 65535],
+                flags: 5,
+            },
+        };
+        let n = encode_magnetics(&mag, &mut buf).unwrap();
+        check(
+            &PACKETS[3],
+            &buf[..n],
+            &values(|out| visit_magnetics(&mag, out)),
+        );
+
         let eph = EphemerisRecord {
             time: TimeTag {
                 coarse_s: 1,
@@ -797,7 +906,7 @@ mod tests {
         };
         let n = encode_ephemeris(&eph, &mut buf).unwrap();
         check(
-            &PACKETS[3],
+            &PACKETS[4],
             &buf[..n],
             &values(|out| visit_ephemeris(&eph, out)),
         );

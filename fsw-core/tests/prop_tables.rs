@@ -782,6 +782,24 @@ fn check_usable(set: &TableSet, id: TableId) -> Result<(), TestCaseError> {
                 prop_assert!(state.pos_eci_km.norm() >= fsw_core::orbit::MIN_RADIUS_KM * 0.99);
             }
         }
+        TableId::Magnetics => {
+            // An accepted field model gives a finite field (or a typed refusal) anywhere in
+            // the onboard orbit's range, at any time within the table's span.
+            let t = set.magnetics();
+            prop_assert_eq!(t.validate(), Ok(()));
+            for pos in [
+                [7000.0, 0.0, 0.0],
+                [0.0, 0.0, 6500.0],
+                [-30_000.0, 20_000.0, 1.0],
+            ] {
+                let pos = Vector3::from(pos);
+                if let Ok(b) =
+                    fsw_core::field_model::field_eci_nt(t, &pos, t.field_epoch_s_since_j2000_tt)
+                {
+                    prop_assert!(b.iter().all(|x| x.is_finite()));
+                }
+            }
+        }
     }
     Ok(())
 }

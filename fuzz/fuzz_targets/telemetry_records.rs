@@ -9,9 +9,10 @@
 
 use fsw_core::raw::TimeTag;
 use fsw_core::telemetry::{
-    decode_ephemeris, decode_event, decode_housekeeping, decode_raw_frame, decode_time_code,
-    encode_ephemeris, encode_event, encode_housekeeping, encode_raw_frame, encode_time_code,
-    RecordError, EPHEMERIS_LEN, EVENT_LEN, HOUSEKEEPING_LEN, RAW_FRAME_LEN, TIME_CODE_LEN,
+    decode_ephemeris, decode_event, decode_housekeeping, decode_magnetics, decode_raw_frame,
+    decode_time_code, encode_ephemeris, encode_event, encode_housekeeping, encode_magnetics,
+    encode_raw_frame, encode_time_code, RecordError, EPHEMERIS_LEN, EVENT_LEN, HOUSEKEEPING_LEN,
+    MAGNETICS_LEN, RAW_FRAME_LEN, TIME_CODE_LEN,
 };
 use libfuzzer_sys::fuzz_target;
 
@@ -82,6 +83,13 @@ fuzz_target!(|data: &[u8]| {
         decode_ephemeris(time, user),
         encode_ephemeris,
     );
+    check(
+        user,
+        MAGNETICS_LEN,
+        &[],
+        decode_magnetics(time, user),
+        encode_magnetics,
+    );
     // Records carry the time of the secondary header.
     if let Ok(r) = decode_raw_frame(time, user) {
         assert_eq!(r.time, time);
@@ -90,6 +98,9 @@ fuzz_target!(|data: &[u8]| {
         assert_eq!(r.time, time);
     }
     if let Ok(r) = decode_ephemeris(time, user) {
+        assert_eq!(r.time, time);
+    }
+    if let Ok(r) = decode_magnetics(time, user) {
         assert_eq!(r.time, time);
     }
 });

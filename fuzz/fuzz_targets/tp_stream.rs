@@ -10,8 +10,8 @@
 #![no_main]
 
 use fsw_core::telemetry::{
-    APID_EPHEMERIS, APID_EVENT, APID_HOUSEKEEPING, APID_RAW_SENSORS, EPHEMERIS_LEN, EVENT_LEN,
-    HOUSEKEEPING_LEN, RAW_FRAME_LEN,
+    APID_EPHEMERIS, APID_EVENT, APID_HOUSEKEEPING, APID_MAGNETICS, APID_RAW_SENSORS,
+    EPHEMERIS_LEN, EVENT_LEN, HOUSEKEEPING_LEN, MAGNETICS_LEN, RAW_FRAME_LEN,
 };
 use libfuzzer_sys::fuzz_target;
 
@@ -24,6 +24,7 @@ fn packet_len(apid: u16) -> usize {
             APID_HOUSEKEEPING => HOUSEKEEPING_LEN,
             APID_EVENT => EVENT_LEN,
             APID_EPHEMERIS => EPHEMERIS_LEN,
+            APID_MAGNETICS => MAGNETICS_LEN,
             _ => panic!("duplicate with unknown APID 0x{apid:03x}"),
         }
 }
@@ -61,10 +62,12 @@ fuzz_target!(|data: &[u8]| {
     assert_eq!(r.packets_housekeeping, tm.housekeeping.len());
     assert_eq!(r.packets_event, tm.events.len());
     assert_eq!(r.packets_ephemeris, tm.ephemeris.len());
+    assert_eq!(r.packets_magnetics, tm.magnetics.len());
     let decoded = r.packets_raw * (OVERHEAD + RAW_FRAME_LEN)
         + r.packets_housekeeping * (OVERHEAD + HOUSEKEEPING_LEN)
         + r.packets_event * (OVERHEAD + EVENT_LEN)
-        + r.packets_ephemeris * (OVERHEAD + EPHEMERIS_LEN);
+        + r.packets_ephemeris * (OVERHEAD + EPHEMERIS_LEN)
+        + r.packets_magnetics * (OVERHEAD + MAGNETICS_LEN);
     let mut outlier_octets = 0;
     for o in &r.time_outliers {
         assert!(o.offset + o.len <= data.len());

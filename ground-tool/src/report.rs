@@ -163,6 +163,7 @@ pub fn write_calibration_report(
     md_alignment_validation(&mut md, r);
     md_maneuvers(&mut md, r);
     md_iru(&mut md, r);
+    md_tam(&mut md, r);
     md_tables(&mut md, r);
     write_plots_section(&mut md, &plots);
     std::fs::write(out_dir.join("report.md"), md)?;
@@ -174,8 +175,8 @@ fn md_header(md: &mut String, r: &CalibrationReport) {
     let _ = writeln!(md, "# Calibration report\n");
     let _ = writeln!(
         md,
-        "Telemetry: {} raw frames, {} housekeeping, {} events, {} ephemeris records; {} regions skipped, {} duplicates, {} time reversals.\n",
-        r.telemetry.packets_raw, r.telemetry.packets_housekeeping, r.telemetry.packets_event, r.telemetry.packets_ephemeris,
+        "Telemetry: {} raw frames, {} housekeeping, {} events, {} ephemeris records, {} magnetics frames (APID 0x013); {} regions skipped, {} duplicates, {} time reversals.\n",
+        r.telemetry.packets_raw, r.telemetry.packets_housekeeping, r.telemetry.packets_event, r.telemetry.packets_ephemeris, r.telemetry.packets_magnetics,
         r.telemetry.skipped.len(), r.telemetry.duplicates.len(), r.telemetry.time_reversals.len()
     );
     let _ = writeln!(
@@ -423,6 +424,67 @@ fn md_iru(md: &mut String, r: &CalibrationReport) {
 }
 
 /// The tables written, the filter changes and the derived FHST floor.
+/// The TAM calibration and the FSS/TAM attitude check (`pipeline::tam`).
+fn md_tam(md: &mut String, r: &CalibrationReport) {
+    let t = &r.tam;
+    let _ = writeln!(md, "## Magnetometers (TAM)\n");
+    let (Some(b), Some(s)) = (t.bias_milligauss, t.bias_sigma_milligauss) else {
+        let _ = writeln!(
+            md,
+            "Not determined: {}.\n",
+            t.reason.as_deref().unwrap_or("no reason recorded")
+        );
+        return;
+    };
+    let f3 = |v: [f64; 3], p: usize| format!("[{:.p$}, {:.p$}, {:.p$}]", v[0], v[1], v[2]);
+    let _ = writeln!(
+        md,
+        "Primary TAM bias {} ± {} mG (1σ), {}.\n",
+        f3(b, 3),
+        f3(s, 3),
+        t.method
+    );
+    for (name, u) in [("TAM1", &t.tam1), ("TAM2", &t.tam2)] {
+        if let Some(u) = u {
+            let _ = writeln!(
+                md,
+                "- {name}: {} (normal-matrix condition {:.2e}); bias {} ± {} mG; {} samples, residual RMS {} mG (noise estimated {} mG, a priori {:.3}); bias over 8 blocks in time: χ² ratio {} (σ scaled by {}); held-out χ²/dof {}.",
+                u.model,
+                u.normal_matrix_condition,
+                f3(u.bias_milligauss, 3),
+                f3(u.bias_sigma_milligauss, 3),
+                u.samples,
+                f3(u.residual_rms_milligauss, 3),
+                f3(u.noise_estimated_milligauss, 3),
+                u.noise_prior_milligauss,
+                u.block_consistency
+                    .map_or("n/a".to_owned(), |c| format!("{:.2}", c.chi2_ratio)),
+                u.block_consistency
+                    .map_or("1".to_owned(), |c| format!("{:.2}", c.sigma_scale)),
+                u.heldout
+                    .iter()
+                    .map(|h| format!("{:.2} (fit on the {})", h.chi2_per_dof, h.fitted))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            );
+        }
+    }
+    if let Some(c) = &t.triad_comparison {
+        let _ = writeln!(
+            md,
+            "\nFSS/TAM TRIAD attitude against the FHST fine attitude ({} frames), 3×RMS per axis: {} deg without the TAM correction, {} deg after the bias correction{}.",
+            c.samples,
+            f3(c.uncorrected.three_rms_deg, 3),
+            f3(c.bias_corrected.three_rms_deg, 3),
+            c.fully_corrected
+                .as_ref()
+                .map(|f| format!(", {} deg after the full correction", f3(f.three_rms_deg, 3)))
+                .unwrap_or_default()
+        );
+    }
+    let _ = writeln!(md);
+}
+
 fn md_tables(md: &mut String, r: &CalibrationReport) {
     let _ = writeln!(md, "## Tables\n");
     for (k, v) in &r.tables {

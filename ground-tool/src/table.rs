@@ -17,7 +17,8 @@ use fsw_core::raw::TimeTag;
 use fsw_core::tables::image::{decode_payload, encode_image, parse_image, ImageHeader};
 use fsw_core::tables::types::{matrix_from_rows, rows_from_matrix, SensorCorrections};
 use fsw_core::tables::{
-    AlignmentTable, FilterTable, IruTable, OrbitTable, StarCatalogTable, TableError, TableId,
+    AlignmentTable, FilterTable, IruTable, MagneticsTable, OrbitTable, StarCatalogTable,
+    TableError, TableId,
 };
 
 use crate::ARCSEC_PER_RAD;
@@ -76,6 +77,8 @@ pub enum AnyTable {
     StarCatalog(Box<StarCatalogTable>),
     /// Onboard orbit (state vector at an epoch).
     Orbit(OrbitTable),
+    /// Field model, TAM calibration, coarse-attitude settings.
+    Magnetics(Box<MagneticsTable>),
 }
 
 impl AnyTable {
@@ -90,6 +93,7 @@ impl AnyTable {
             Self::Filter(t) => t.validate(),
             Self::StarCatalog(t) => t.validate(),
             Self::Orbit(t) => t.validate(),
+            Self::Magnetics(t) => t.validate(),
         }
     }
 
@@ -102,6 +106,7 @@ impl AnyTable {
             Self::Filter(t) => serde_json::to_value(t),
             Self::StarCatalog(t) => serde_json::to_value(t),
             Self::Orbit(t) => serde_json::to_value(t),
+            Self::Magnetics(t) => serde_json::to_value(t),
         };
         v.unwrap_or(serde_json::Value::Null)
     }
@@ -125,6 +130,9 @@ pub fn decode_image(bytes: &[u8], what: &str) -> Result<(ImageHeader, AnyTable),
             AnyTable::StarCatalog(Box::new(decode_payload(payload).map_err(image_err)?))
         }
         TableId::Orbit => AnyTable::Orbit(decode_payload(payload).map_err(image_err)?),
+        TableId::Magnetics => {
+            AnyTable::Magnetics(Box::new(decode_payload(payload).map_err(image_err)?))
+        }
     };
     Ok((header, table))
 }
@@ -288,6 +296,7 @@ pub fn write_image(table: &AnyTable, created: TimeTag) -> Result<Vec<u8>, TableT
             encode_image(TableId::StarCatalog, created, t.as_ref(), &mut buf)
         }
         AnyTable::Orbit(t) => encode_image(TableId::Orbit, created, t, &mut buf),
+        AnyTable::Magnetics(t) => encode_image(TableId::Magnetics, created, t.as_ref(), &mut buf),
     };
     let len = encoded.map_err(|e| TableToolError::Image {
         what: "new image".into(),

@@ -9,13 +9,17 @@
 //! Duplicated packets (same APID, sequence count and time as one already read) are dropped;
 //! time going backwards is reported; records are finally sorted by time (stable), so reordered
 //! packets are put back in order and the reordering is reported.
+//!
+//! The magnetics frame (APID 0x013, format version 2 of `docs/icd.md` §3.5) is read like the
+//! others; a file without it (version 1) reads as before, with no magnetics records.
 
 use fsw_core::events::Event;
 use fsw_core::raw::{RawSensorFrame, TimeTag};
 use fsw_core::telemetry::{
-    decode_ephemeris, decode_event, decode_housekeeping, decode_raw_frame, decode_time_code,
-    EphemerisRecord, ObcHousekeeping, APID_EPHEMERIS, APID_EVENT, APID_HOUSEKEEPING,
-    APID_RAW_SENSORS, EPHEMERIS_LEN, EVENT_LEN, HOUSEKEEPING_LEN, RAW_FRAME_LEN, TIME_CODE_LEN,
+    decode_ephemeris, decode_event, decode_housekeeping, decode_magnetics, decode_raw_frame,
+    decode_time_code, EphemerisRecord, MagneticsFrame, ObcHousekeeping, RecordError,
+    APID_EPHEMERIS, APID_EVENT, APID_HOUSEKEEPING, APID_MAGNETICS, APID_RAW_SENSORS, EPHEMERIS_LEN,
+    EVENT_LEN, HOUSEKEEPING_LEN, MAGNETICS_LEN, RAW_FRAME_LEN, TIME_CODE_LEN,
 };
 use serde::Serialize;
 use std::collections::HashMap;
@@ -48,6 +52,8 @@ pub struct TpReport {
     pub packets_event: usize,
     /// Ephemeris packets decoded.
     pub packets_ephemeris: usize,
+    /// Magnetics frames (APID 0x013, TAM and CSS words) decoded; 0 for a file without them.
+    pub packets_magnetics: usize,
     /// Regions skipped (truncated, unknown, corrupt), with offsets.
     pub skipped: Vec<Skipped>,
     /// Duplicated packets dropped (offsets): identical octets to an earlier copy.
@@ -141,6 +147,8 @@ pub struct Telemetry {
     pub events: Vec<(TimeTag, Event)>,
     /// Definitive orbit (APID 0x020).
     pub ephemeris: Vec<EphemerisRecord>,
+    /// Magnetics frames (APID 0x013): TAM1, TAM2, CSS words at the raw frames' time codes.
+    pub magnetics: Vec<MagneticsFrame>,
     /// What the reader found.
     pub report: TpReport,
 }
@@ -164,6 +172,7 @@ fn user_len(apid: u16) -> Option<usize> {
         APID_HOUSEKEEPING => Some(HOUSEKEEPING_LEN),
         APID_EVENT => Some(EVENT_LEN),
         APID_EPHEMERIS => Some(EPHEMERIS_LEN),
+        APID_MAGNETICS => Some(MAGNETICS_LEN),
         _ => None,
     }
 }
@@ -224,6 +233,7 @@ fn decodes_at(bytes: &[u8], at: usize, h: &Header) -> bool {
         APID_HOUSEKEEPING => decode_housekeeping(time, user).is_ok(),
         APID_EVENT => decode_event(user).is_ok(),
         APID_EPHEMERIS => decode_ephemeris(time, user).is_ok(),
+        APID_MAGNETICS => decode_magnetics(time, user).is_ok(),
         _ => false,
     }
 }
@@ -308,9 +318,8 @@ pub fn decode(bytes: &[u8]) -> Telemetry {
     let mut tm = Telemetry::default();
     tm.report.file_len = bytes.len();
     let mut seen: HashMap<(u16, u16, u32, u16), usize> = HashMap::new();
-    // Per APID slot (raw, housekeeping, event, ephemeris), in file order: (offset, length,
-    // sequence count).
-    let mut placed: [Vec<(usize, usize, u16)>; 4] = Default::default();
+    // Per APID slot (`SLOT_APIDS`), in file order: (offset, length, sequence count).
+    let mut placed: [Vec<(usize, usize, u16)>; SLOTS] = Default::default();
     let mut at = 0usize;
     while at < bytes.len() {
         let Some(h) = parse_header(&bytes[at..]) else {
@@ -425,31 +434,8 @@ pub fn decode(bytes: &[u8]) -> Telemetry {
         } else {
             seen.insert(key, at);
         }
-        let slot = match h.apid {
-            APID_RAW_SENSORS => 0,
-            APID_HOUSEKEEPING => 1,
-            APID_EVENT => 2,
-            _ => 3,
-        };
-        let decoded = match h.apid {
-            APID_RAW_SENSORS => decode_raw_frame(time, user).map(|r| {
-                tm.raw.push(r);
-                tm.report.packets_raw += 1;
-            }),
-            APID_HOUSEKEEPING => decode_housekeeping(time, user).map(|r| {
-                tm.housekeeping.push(r);
-                tm.report.packets_housekeeping += 1;
-            }),
-            APID_EVENT => decode_event(user).map(|e| {
-                tm.events.push((time, e));
-                tm.report.packets_event += 1;
-            }),
-            _ => decode_ephemeris(time, user).map(|e| {
-                tm.ephemeris.push(e);
-                tm.report.packets_ephemeris += 1;
-            }),
-        };
-        if decoded.is_ok() {
+        let decoded = store_record(&mut tm, h.apid, time, user);
+        if let Ok(slot) = decoded {
             placed[slot].push((at, h.total_len, h.seq));
         }
         if let Err(e) = decoded {
@@ -466,7 +452,57 @@ pub fn decode(bytes: &[u8]) -> Telemetry {
     tm.housekeeping.sort_by_key(|r| r.time);
     tm.events.sort_by_key(|(t, _)| *t);
     tm.ephemeris.sort_by_key(|r| r.time);
+    tm.magnetics.sort_by_key(|r| r.time);
     tm
+}
+
+/// Number of APID slots of the reader ([`SLOT_APIDS`]).
+const SLOTS: usize = 5;
+
+/// The APIDs in slot order (the index of `placed` in [`decode`]).
+const SLOT_APIDS: [u16; SLOTS] = [
+    APID_RAW_SENSORS,
+    APID_HOUSEKEEPING,
+    APID_EVENT,
+    APID_EPHEMERIS,
+    APID_MAGNETICS,
+];
+
+/// Decode one packet's user data (a known APID of the right length) into its list in `tm`,
+/// returning its slot in [`SLOT_APIDS`].
+fn store_record(
+    tm: &mut Telemetry,
+    apid: u16,
+    time: TimeTag,
+    user: &[u8],
+) -> Result<usize, RecordError> {
+    match apid {
+        APID_RAW_SENSORS => decode_raw_frame(time, user).map(|r| {
+            tm.raw.push(r);
+            tm.report.packets_raw += 1;
+            0
+        }),
+        APID_HOUSEKEEPING => decode_housekeeping(time, user).map(|r| {
+            tm.housekeeping.push(r);
+            tm.report.packets_housekeeping += 1;
+            1
+        }),
+        APID_EVENT => decode_event(user).map(|e| {
+            tm.events.push((time, e));
+            tm.report.packets_event += 1;
+            2
+        }),
+        APID_MAGNETICS => decode_magnetics(time, user).map(|m| {
+            tm.magnetics.push(m);
+            tm.report.packets_magnetics += 1;
+            4
+        }),
+        _ => decode_ephemeris(time, user).map(|e| {
+            tm.ephemeris.push(e);
+            tm.report.packets_ephemeris += 1;
+            3
+        }),
+    }
 }
 
 /// Largest forward step of the CCSDS sequence count between two packets of one APID that
@@ -560,21 +596,17 @@ pub fn screen_times(times: &[f64], seqs: &[u16]) -> (Vec<usize>, Vec<usize>) {
 
 /// Drop isolated time-code outliers, report them, the remaining reversals and the backward
 /// jumps (`placed`: offset and length of each decoded record, per APID slot, file order).
-fn screen_time_codes(tm: &mut Telemetry, placed: &[Vec<(usize, usize, u16)>; 4]) {
-    let apids = [
-        APID_RAW_SENSORS,
-        APID_HOUSEKEEPING,
-        APID_EVENT,
-        APID_EPHEMERIS,
-    ];
-    let times: [Vec<f64>; 4] = [
+fn screen_time_codes(tm: &mut Telemetry, placed: &[Vec<(usize, usize, u16)>; SLOTS]) {
+    let apids = SLOT_APIDS;
+    let times: [Vec<f64>; SLOTS] = [
         tm.raw.iter().map(|r| r.time.seconds()).collect(),
         tm.housekeeping.iter().map(|r| r.time.seconds()).collect(),
         tm.events.iter().map(|(t, _)| t.seconds()).collect(),
         tm.ephemeris.iter().map(|r| r.time.seconds()).collect(),
+        tm.magnetics.iter().map(|r| r.time.seconds()).collect(),
     ];
     let mut reversals = Vec::new();
-    for slot in 0..4 {
+    for slot in 0..SLOTS {
         let (t, pl) = (&times[slot], &placed[slot]);
         if t.len() != pl.len() {
             continue; // cannot happen: one placement per decoded record
@@ -618,7 +650,8 @@ fn screen_time_codes(tm: &mut Telemetry, placed: &[Vec<(usize, usize, u16)>; 4])
             0 => retain_indexed(&mut tm.raw, keep),
             1 => retain_indexed(&mut tm.housekeeping, keep),
             2 => retain_indexed(&mut tm.events, keep),
-            _ => retain_indexed(&mut tm.ephemeris, keep),
+            3 => retain_indexed(&mut tm.ephemeris, keep),
+            _ => retain_indexed(&mut tm.magnetics, keep),
         }
     }
     reversals.sort_by_key(|r| r.0);
@@ -629,6 +662,7 @@ fn screen_time_codes(tm: &mut Telemetry, placed: &[Vec<(usize, usize, u16)>; 4])
     tm.report.packets_housekeeping = tm.housekeeping.len();
     tm.report.packets_event = tm.events.len();
     tm.report.packets_ephemeris = tm.ephemeris.len();
+    tm.report.packets_magnetics = tm.magnetics.len();
 }
 
 fn retain_indexed<T>(v: &mut Vec<T>, keep: impl Fn(usize) -> bool) {

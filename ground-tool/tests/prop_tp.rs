@@ -24,12 +24,15 @@
 
 use fsw_core::attitude::Quat;
 use fsw_core::events::{Counters, Event, EventId};
-use fsw_core::raw::{FhstSample, FssSample, IruSample, RawSensorFrame, TimeTag};
+use fsw_core::raw::{
+    CssSample, FhstSample, FssSample, IruSample, RawSensorFrame, TamSample, TimeTag,
+};
 use fsw_core::telemetry::{
-    encode_ephemeris, encode_event, encode_housekeeping, encode_raw_frame, encode_time_code,
-    EphemerisRecord, MeasurementStatus, ObcHousekeeping, SensorResidual, APID_EPHEMERIS,
-    APID_EVENT, APID_HOUSEKEEPING, APID_RAW_SENSORS, EPHEMERIS_LEN, EVENT_LEN, HOUSEKEEPING_LEN,
-    RAW_FRAME_LEN, TIME_CODE_LEN,
+    encode_ephemeris, encode_event, encode_housekeeping, encode_magnetics, encode_raw_frame,
+    encode_time_code, EphemerisRecord, MagneticsFrame, MeasurementStatus, ObcHousekeeping,
+    SensorResidual, APID_EPHEMERIS, APID_EVENT, APID_HOUSEKEEPING, APID_MAGNETICS,
+    APID_RAW_SENSORS, EPHEMERIS_LEN, EVENT_LEN, HOUSEKEEPING_LEN, MAGNETICS_LEN, RAW_FRAME_LEN,
+    TIME_CODE_LEN,
 };
 use ground_tool::tp::{decode, Telemetry};
 
@@ -106,6 +109,7 @@ enum Rec {
     Hk(ObcHousekeeping),
     Ev(TimeTag, Event),
     Eph(EphemerisRecord),
+    Mag(MagneticsFrame),
 }
 
 #[derive(Clone, Debug)]
@@ -217,7 +221,7 @@ fn housekeeping(rng: &mut Rng, time: TimeTag) -> ObcHousekeeping {
 /// A well-formed stream of `cycles` cycles from `first_s` (ICD §4 order: raw frame, ephemeris
 /// when due, housekeeping, events), sequence counts per APID from random starts (wrapping).
 fn stream(rng: &mut Rng, cycles: usize, first_s: u32) -> Vec<Pkt> {
-    let mut seq = [(); 4].map(|()| rng.below(16_384) as u16);
+    let mut seq = [(); 5].map(|()| rng.below(16_384) as u16);
     let mut next_seq = |slot: usize| {
         let s = seq[slot];
         seq[slot] = (s + 1) & 0x3fff;
@@ -237,6 +241,25 @@ fn stream(rng: &mut Rng, cycles: usize, first_s: u32) -> Vec<Pkt> {
             bytes: packet(APID_RAW_SENSORS, next_seq(0), time, &buf[..n]),
             rec: Rec::Raw(f),
         });
+        // The magnetics frame (format version 2) after most raw frames, with its time code.
+        if rng.chance(0.8) {
+            let m = MagneticsFrame {
+                time,
+                tam: [(); 2].map(|()| TamSample {
+                    field_counts: [(); 3].map(|()| rng.next() as i16),
+                    flags: rng.below(2) as u8,
+                }),
+                css: CssSample {
+                    counts: [(); 6].map(|()| rng.next() as u16),
+                    flags: rng.below(2) as u8,
+                },
+            };
+            let n = encode_magnetics(&m, &mut buf).unwrap();
+            out.push(Pkt {
+                bytes: packet(APID_MAGNETICS, next_seq(4), time, &buf[..n]),
+                rec: Rec::Mag(m),
+            });
+        }
         if c % 5 == 0 || rng.chance(0.1) {
             let e = EphemerisRecord {
                 time,
@@ -287,6 +310,7 @@ fn records(tm: &Telemetry) -> Vec<Rec> {
     out.extend(tm.housekeeping.iter().copied().map(Rec::Hk));
     out.extend(tm.events.iter().map(|(t, e)| Rec::Ev(*t, *e)));
     out.extend(tm.ephemeris.iter().copied().map(Rec::Eph));
+    out.extend(tm.magnetics.iter().copied().map(Rec::Mag));
     out
 }
 
@@ -312,6 +336,7 @@ fn packet_len(apid: u16) -> Option<usize> {
         APID_HOUSEKEEPING => HOUSEKEEPING_LEN,
         APID_EVENT => EVENT_LEN,
         APID_EPHEMERIS => EPHEMERIS_LEN,
+        APID_MAGNETICS => MAGNETICS_LEN,
         _ => return None,
     };
     Some(OVERHEAD + user)
@@ -349,13 +374,15 @@ fn check_report(tm: &Telemetry, bytes: &[u8]) -> Result<(), String> {
         || r.packets_housekeeping != tm.housekeeping.len()
         || r.packets_event != tm.events.len()
         || r.packets_ephemeris != tm.ephemeris.len()
+        || r.packets_magnetics != tm.magnetics.len()
     {
         return Err("report counts differ from the records".into());
     }
     let decoded = r.packets_raw * (OVERHEAD + RAW_FRAME_LEN)
         + r.packets_housekeeping * (OVERHEAD + HOUSEKEEPING_LEN)
         + r.packets_event * (OVERHEAD + EVENT_LEN)
-        + r.packets_ephemeris * (OVERHEAD + EPHEMERIS_LEN);
+        + r.packets_ephemeris * (OVERHEAD + EPHEMERIS_LEN)
+        + r.packets_magnetics * (OVERHEAD + MAGNETICS_LEN);
     // Packets dropped for a damaged time code are accounted for with their length.
     let outliers: usize = r.time_outliers.iter().map(|o| o.len).sum();
     if decoded + dup + outliers + r.skipped_octets() != bytes.len() {
@@ -368,7 +395,8 @@ fn check_report(tm: &Telemetry, bytes: &[u8]) -> Result<(), String> {
     let sorted = tm.raw.windows(2).all(|w| w[0].time <= w[1].time)
         && tm.housekeeping.windows(2).all(|w| w[0].time <= w[1].time)
         && tm.events.windows(2).all(|w| w[0].0 <= w[1].0)
-        && tm.ephemeris.windows(2).all(|w| w[0].time <= w[1].time);
+        && tm.ephemeris.windows(2).all(|w| w[0].time <= w[1].time)
+        && tm.magnetics.windows(2).all(|w| w[0].time <= w[1].time);
     if !sorted {
         return Err("records not sorted by time".into());
     }
@@ -473,7 +501,7 @@ fn reordered_packets_all_recovered_in_time_order() {
         let (missing, extra) = match_records(&tm, &all);
         assert!(missing.is_empty() && extra.is_empty(), "{what}");
         // A time reversal is reported exactly when an APID's times go backwards in the file.
-        let mut last: [Option<TimeTag>; 4] = [None; 4];
+        let mut last: [Option<TimeTag>; 5] = [None; 5];
         let mut reversals = 0;
         for p in &pkts {
             let (slot, t) = match &p.rec {
@@ -481,6 +509,7 @@ fn reordered_packets_all_recovered_in_time_order() {
                 Rec::Hk(h) => (1, h.time),
                 Rec::Ev(t, _) => (2, *t),
                 Rec::Eph(e) => (3, e.time),
+                Rec::Mag(m) => (4, m.time),
             };
             if last[slot].is_some_and(|prev| t < prev) {
                 reversals += 1;
@@ -622,6 +651,7 @@ fn build_damaged(rng: &mut Rng, kind: usize) -> Built {
                     Rec::Hk(h) => h.time,
                     Rec::Ev(t, _) => *t,
                     Rec::Eph(e) => e.time,
+                    Rec::Mag(m) => m.time,
                 };
                 let cycles = rng.range(1, 30);
                 stream(rng, cycles, last.coarse_s + 10)

@@ -75,6 +75,56 @@ pub struct CycleRecord {
     /// The field, TAM and CSS samples of this cycle ([`crate::magnetics`]; the flight
     /// software does not see them yet).
     pub magnetics: crate::magnetics::MagneticsRecord,
+    /// The OBC's coarse attitude against the truth (`None` before its first fix).
+    pub coarse: Option<CoarseCheck>,
+}
+
+/// The fine filter's error `A_true = Rot(δθ) Â` (rad, ACS) and NEES against `q_true`; zero and
+/// `None` before the filter has an attitude (`filter_mode` 0).
+fn fine_check(fsw: &FlightCore, q_true: &Quat, filter_mode: u8) -> (Vector3<f64>, Option<f64>) {
+    if filter_mode == 0 {
+        return (Vector3::zeros(), None);
+    }
+    let filter = fsw.filter();
+    let err = attitude_error_rad(q_true, &filter.q_acs_from_eci);
+    let p: Matrix3<f64> = filter.covariance.fixed_view::<3, 3>(0, 0).into_owned();
+    let nees = p.cholesky().map(|c| err.dot(&c.solve(&err)));
+    (err, nees)
+}
+
+/// The OBC's coarse attitude (`fsw_core::coarse`) against the truth, one cycle.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CoarseCheck {
+    /// `A_true = Rot(δθ) Â_coarse` (rad, ACS).
+    pub error_acs_rad: Vector3<f64>,
+    /// The OBC's 1σ per ACS axis, rad (√ of the covariance diagonal).
+    pub sigma_acs_rad: Vector3<f64>,
+    /// `δθᵀ P⁻¹ δθ`; `None` with a singular covariance.
+    pub nees: Option<f64>,
+    /// Seconds since the solution's last fix.
+    pub age_s: f64,
+    /// The last fix's vectors (`fsw_core::coarse::CoarseSource`: 1 FSS + TAM, 2 CSS + TAM).
+    pub source: u8,
+}
+
+impl CoarseCheck {
+    /// The check of `fsw`'s coarse attitude against `q_true`, `None` before its first fix.
+    #[must_use]
+    pub fn of(fsw: &FlightCore, q_true: &Quat) -> Option<Self> {
+        let c = fsw.coarse();
+        if !c.valid {
+            return None;
+        }
+        let e = attitude_error_rad(q_true, &c.q_acs_from_eci);
+        let p = c.covariance_rad2;
+        Some(Self {
+            error_acs_rad: e,
+            sigma_acs_rad: p.diagonal().map(|v| v.max(0.0).sqrt()),
+            nees: p.cholesky().map(|ch| e.dot(&ch.solve(&e))),
+            age_s: c.age_s,
+            source: c.source as u8,
+        })
+    }
 }
 
 /// One scheduled action.
@@ -249,33 +299,8 @@ impl Simulation {
                 },
             );
         }
-        if let Some(uplink) = &scenario.onboard_orbit {
-            for (k, at_s) in uplink
-                .uplink_times_s(scenario.duration_s)
-                .into_iter()
-                .enumerate()
-            {
-                let epoch_t_s = at_s - uplink.state_age_s;
-                let table = onboard::truth_orbit_table(&scenario, &clock, epoch_t_s, uplink)
-                    .map_err(InputError::from)?;
-                push_upload(
-                    &mut uploads,
-                    &mut timeline,
-                    Upload {
-                        source: format!(
-                            "onboard orbit from the truth at t = {epoch_t_s} s (errors {:?} km, {:?} km/s)",
-                            uplink.pos_error_km, uplink.vel_error_km_per_s
-                        ),
-                        name: format!("orbit_{k}.tbl"),
-                        image: onboard::image(
-                            TableId::Orbit,
-                            clock.time_tag(at_s).unwrap_or_default(),
-                            &table,
-                        )?,
-                        at_s,
-                    },
-                );
-            }
+        for up in ephemeris_uploads(&scenario, &clock)? {
+            push_upload(&mut uploads, &mut timeline, up);
         }
         if let Some(dir) = tables_dir {
             // The images the folder's manifest lists, checked (crate::manifest).
@@ -453,6 +478,34 @@ impl Simulation {
             magnetics: crate::magnetics::Magnetics::of_scenario(&scenario)?,
             scenario,
         })
+    }
+
+    /// This cycle's field, TAM and CSS samples (all invalid without magnetics) and the words
+    /// the OBC reads from them, with the `tam_failure` and `css_glint` faults applied.
+    fn sample_magnetics(
+        &mut self,
+        truth: &TruthSnapshot,
+    ) -> (
+        crate::magnetics::MagneticsRecord,
+        [fsw_core::raw::TamSample; 2],
+        fsw_core::raw::CssSample,
+    ) {
+        let Some(m) = self.magnetics.as_mut() else {
+            return Default::default();
+        };
+        let record = m.sample(&self.clock, truth);
+        let t = truth.t_s;
+        let mut tam = record.tam.map(crate::magnetics::flight_tam_sample);
+        for (unit, sample) in tam.iter_mut().enumerate() {
+            let resolution = m.tam()[unit].params().resolution_milligauss_per_count;
+            *sample = FaultState::apply_tam(&self.faults, unit, t, *sample, resolution);
+        }
+        let css = FaultState::apply_css(
+            &self.faults,
+            t,
+            crate::magnetics::flight_css_sample(&record.css),
+        );
+        (record, tam, css)
     }
 
     /// The magnetometers and coarse Sun sensors, `None` with `[magnetics] enabled = false`.
@@ -648,19 +701,15 @@ impl Simulation {
             }
             time_offset_s = FaultState::time_offset_s(&self.faults, t);
         }
-        let magnetics = self
-            .magnetics
-            .as_mut()
-            .map(|m| m.sample(&self.clock, &truth))
-            .unwrap_or_default();
+        let (magnetics, tam, css) = self.sample_magnetics(&truth);
         let frame = RawSensorFrame {
             time: self.clock.time_tag(t + time_offset_s).unwrap_or_default(),
             iru: self.pending_iru,
             fhst,
             fss,
             temperatures_centi_c: temps,
-            tam: magnetics.tam.map(crate::magnetics::flight_tam_sample),
-            css: crate::magnetics::flight_css_sample(&magnetics.css),
+            tam,
+            css,
         };
 
         // Commands due now (borrowing the images; at most MAX_COMMANDS_PER_CYCLE).
@@ -711,15 +760,11 @@ impl Simulation {
         }
         let output = self.fsw.step(&frame, &commands[..n]);
 
-        let (attitude_error_acs_rad, nees) = if output.housekeeping.filter_mode == 0 {
-            (Vector3::zeros(), None)
-        } else {
-            let filter = self.fsw.filter();
-            let err = attitude_error_rad(&truth.q_acs_from_eci, &filter.q_acs_from_eci);
-            let p: Matrix3<f64> = filter.covariance.fixed_view::<3, 3>(0, 0).into_owned();
-            let nees = p.cholesky().map(|c| err.dot(&c.solve(&err)));
-            (err, nees)
-        };
+        let (attitude_error_acs_rad, nees) = fine_check(
+            &self.fsw,
+            &truth.q_acs_from_eci,
+            output.housekeeping.filter_mode,
+        );
         self.iru.command_high_rate(self.fsw.iru_high_rate_command());
         let torque = self.fsw.wheel_torque_command_nm();
         let report = self.body.step(dt, &torque, &truth.pos_eci_km);
@@ -735,10 +780,59 @@ impl Simulation {
             nees,
             commands_sent: n,
             magnetics,
+            coarse: CoarseCheck::of(&self.fsw, &truth.q_acs_from_eci),
         };
         self.cycle += 1;
         Some(record)
     }
+}
+
+/// The start-up uplinks of the tables the ground computes from ephemerides: the orbit table
+/// (`[onboard_orbit]`, at its uplink times) and the magnetics table (`[magnetics]` with
+/// `onboard_table`: the field model at the scenario epoch and the TAM knowledge the scenario
+/// gives the OBC, `onboard::magnetics_table`).
+fn ephemeris_uploads(scenario: &Scenario, clock: &SimClock) -> anyhow::Result<Vec<Upload>> {
+    let mut uploads = Vec::new();
+    if let Some(uplink) = &scenario.onboard_orbit {
+        for (k, at_s) in uplink
+            .uplink_times_s(scenario.duration_s)
+            .into_iter()
+            .enumerate()
+        {
+            let epoch_t_s = at_s - uplink.state_age_s;
+            let table = onboard::truth_orbit_table(scenario, clock, epoch_t_s, uplink)
+                .map_err(InputError::from)?;
+            uploads.push(Upload {
+                source: format!(
+                    "onboard orbit from the truth at t = {epoch_t_s} s (errors {:?} km, {:?} km/s)",
+                    uplink.pos_error_km, uplink.vel_error_km_per_s
+                ),
+                name: format!("orbit_{k}.tbl"),
+                image: onboard::image(
+                    TableId::Orbit,
+                    clock.time_tag(at_s).unwrap_or_default(),
+                    &table,
+                )?,
+                at_s,
+            });
+        }
+    }
+    if let Some((table, at_s)) = onboard::magnetics_table(scenario, clock)? {
+        uploads.push(Upload {
+            source: format!(
+                "magnetics: DGRF 1990/1995 at the epoch, TAM bias {:?} mG (what the OBC is told)",
+                table.tam_bias_milligauss
+            ),
+            name: "magnetics.tbl".into(),
+            image: onboard::image(
+                TableId::Magnetics,
+                clock.time_tag(at_s).unwrap_or_default(),
+                &table,
+            )?,
+            at_s,
+        });
+    }
+    Ok(uploads)
 }
 
 /// Read a table image file, checking its header names a known table.

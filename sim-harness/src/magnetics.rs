@@ -1,18 +1,18 @@
 //! # The magnetometers and coarse Sun sensors in the closed loop (issue 20, first layers)
 //!
-//! Why: the coarse attitude, Sun acquisition and the ground's TAM calibration (later layers)
-//! need TAM and CSS samples taken with the truth of every cycle. Until the raw frame and the
-//! telemetry carry them (a later step with format versioning, `docs/icd.md` unchanged), the
-//! samples go into the simulation's own record ([`crate::closed_loop::CycleRecord`]
-//! `magnetics`), with the true field they were taken from.
+//! Why: the coarse attitude, Sun acquisition and the ground's TAM calibration need TAM and
+//! CSS samples taken with the truth of every cycle. They go into the simulation's own record
+//! ([`crate::closed_loop::CycleRecord`] `magnetics`, with the true field they were taken
+//! from), into the raw frame the OBC reads (`tam`, `css`), and into the downlink as APID
+//! 0x013 right after each raw frame (`docs/icd.md` §3.5, format version 2; `run.rs`).
 //!
-//! Per cycle (when `[magnetics] enabled = true`; **off by default**, because the field
-//! synthesis adds about a fifth to the simulator's cost per cycle and the README's measured
-//! real-time factor is for the loop without it; `docs/magnetics.md`): the field at the truth position
+//! Per cycle (when `[magnetics] enabled = true`; off by default, so that scenarios written
+//! before it fly and downlink as before; on in `gro-early-mission` and `normal-ops`, at about
+//! a quarter more simulator cost per cycle, `docs/magnetics.md` §3): the field at the truth position
 //! ([`crate::truth::field`]), TAM1 and TAM2 ([`crate::sensors::tam`]; the torquer bars'
 //! dipole is zero: there are none yet) and the CSS set ([`crate::sensors::css`]). Each model
-//! draws from its own random stream, so the FHST, FSS and IRU draws and therefore
-//! `telemetry.bin` do not change; the flight software does not see these samples.
+//! draws from its own random stream, so the FHST, FSS and IRU draws and therefore every
+//! packet of `telemetry.bin` but the 0x013 ones do not change.
 //! `docs/magnetics.md` has the measured numbers.
 
 use nalgebra::Vector3;

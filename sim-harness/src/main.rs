@@ -50,7 +50,7 @@ struct Cli {
 enum Cmd {
     /// Fly one scenario and write a run folder.
     ///
-    /// Writes into DIR (docs/icd.md §5): telemetry.bin (CCSDS packets: raw frame 0x010,
+    /// Writes into DIR (docs/icd.md §5): telemetry.bin (CCSDS packets: raw frame 0x010, magnetics frame 0x013 with `[magnetics] enabled`,
     /// ephemeris 0x020 every 10 s, housekeeping 0x011, events 0x012), metadata.json (what the
     /// operator declares: noise figures, declared effects, boot tables and uploads),
     /// uploads/*.tbl (every table image uplinked), truth.json (true alignments, IRU delta_m

@@ -33,7 +33,8 @@ use crate::truth::time::SimClock;
 use crate::truth::time::S_PER_JULIAN_YEAR;
 use fsw_core::tables::types::rows_from_matrix;
 use fsw_core::tables::{
-    AlignmentTable, CatalogStar, OrbitTable, SensorCorrections, StarCatalogTable, MAX_CATALOG_STARS,
+    AlignmentTable, CatalogStar, MagneticsTable, OrbitTable, SensorCorrections, StarCatalogTable,
+    MAX_CATALOG_STARS,
 };
 
 /// Read the scenario's catalogue file (or the embedded one).
@@ -143,6 +144,40 @@ pub fn truth_orbit_table(
         anyhow::anyhow!("onboard_orbit: the OBC would refuse the state at t = {epoch_t_s} s: {e}")
     })?;
     Ok(table)
+}
+
+/// The magnetics table (Table 6) the ground uplinks at the start: the DGRF field model at the
+/// scenario epoch (`gro_reference::field::onboard_field_table`), the TAMs' nominal axes and
+/// count size, and the TAM biases and field σ the scenario tells the OBC
+/// (`[magnetics] onboard_*`); `None` without magnetics or with `onboard_table = false`.
+///
+/// # Errors
+/// An epoch outside the field model (1990–1995), or a table the OBC would refuse (named).
+pub fn magnetics_table(
+    scenario: &Scenario,
+    clock: &SimClock,
+) -> anyhow::Result<Option<(MagneticsTable, f64)>> {
+    let m = &scenario.magnetics;
+    if !(m.enabled && m.onboard_table) {
+        return Ok(None);
+    }
+    let at_s = m.onboard_table_at_s;
+    let model = gro_reference::field::FieldModel::dgrf_1990_1995()?;
+    let mut base = MagneticsTable::boot();
+    base.tam_milligauss_per_count = [
+        [scenario.tam1.resolution_milligauss_per_count; 3],
+        [scenario.tam2.resolution_milligauss_per_count; 3],
+    ];
+    base.tam_bias_milligauss = m.onboard_tam_bias_milligauss;
+    if let Some(sigma) = m.onboard_field_sigma_milligauss {
+        base.field_sigma_milligauss = sigma;
+    }
+    let table = gro_reference::field::onboard_field_table(&model, clock.epoch(at_s), &base)
+        .map_err(|e| anyhow::anyhow!("[magnetics] onboard_table: {e}"))?;
+    table.validate().map_err(|e| {
+        anyhow::anyhow!("[magnetics]: the OBC would refuse the magnetics table: {e}")
+    })?;
+    Ok(Some((table, at_s)))
 }
 
 #[cfg(test)]

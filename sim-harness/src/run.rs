@@ -43,7 +43,7 @@ use crate::truth::time::utc_string;
 use fsw_core::events::EventId;
 use fsw_core::raw::IRU_CHANNELS;
 use fsw_core::tables::TableId;
-use fsw_core::telemetry::EphemerisRecord;
+use fsw_core::telemetry::{EphemerisRecord, MagneticsFrame};
 use fsw_core::units::{ARCSEC_PER_RAD, RAD_PER_ARCSEC, RAD_PER_DEG};
 use gro_reference::run_folder::{
     DeclaredNoise, HeadSpread, Metadata, TransferSpreads, UnitSpread, Upload, METADATA_FILE,
@@ -222,14 +222,133 @@ pub struct Summary {
     pub iru_counter_aliasing_frames: u64,
     /// Largest true wheel momentum (N·m·s).
     pub max_wheel_momentum_nms: f64,
+    /// 3 × RMS per ACS axis of the OBC's coarse attitude against the truth over every cycle
+    /// after its first fix (deg); absent when it made none (issue 20's key).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub coarse_attitude_error_3sigma_deg: Option<[f64; 3]>,
+    /// The coarse attitude's consistency (absent when it made no fix).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub coarse_attitude: Option<CoarseSummary>,
     /// With `--tables`: why the tables may not belong to the spacecraft flown
     /// ([`crate::provenance`]; absent when they were calibrated on it, or no tables).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub tables_provenance_warning: Option<String>,
 }
 
+/// The OBC's coarse attitude against the truth over a run (`fsw_core::coarse`).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct CoarseSummary {
+    /// Cycles with a coarse solution.
+    pub cycles: u64,
+    /// Mean `δθᵀ P⁻¹ δθ` (3 if the covariance is consistent).
+    pub nees_mean: Option<f64>,
+    /// Fraction of cycles with `|δθᵢ| ≤ 3σᵢ`, per ACS axis.
+    pub within_3sigma_fraction: [f64; 3],
+    /// Mean of the OBC's own 3σ per axis (deg).
+    pub mean_3sigma_deg: [f64; 3],
+    /// Largest `|δθ|` (deg).
+    pub max_error_deg: f64,
+    /// Mean error per axis (deg): a bias shows here.
+    pub mean_error_deg: [f64; 3],
+    /// The paper's requirement, 2° (3σ) per axis, met by `coarse_attitude_error_3sigma_deg`.
+    pub meets_2deg_3sigma: bool,
+    /// 3 × RMS per axis (deg) and cycles, by the last fix's vectors: FSS + TAM, CSS + TAM.
+    pub by_source: Vec<CoarseSourceStats>,
+    /// Cycles more than 60 s after the last fix (carried on the gyros: eclipse, no Sun in
+    /// view, nearly parallel vectors).
+    pub carried_over_60s_cycles: u64,
+}
+
+/// The coarse attitude's error by the vectors of its last fix.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct CoarseSourceStats {
+    /// "fss+tam" or "css+tam".
+    pub source: String,
+    /// Cycles.
+    pub cycles: u64,
+    /// 3 × RMS per ACS axis (deg).
+    pub error_3sigma_deg: [f64; 3],
+    /// Mean `δθᵀ P⁻¹ δθ`.
+    pub nees_mean: Option<f64>,
+}
+
+#[derive(Default)]
+struct CoarseScorer {
+    errors: Accumulator,
+    by_source: [(Accumulator, f64, u64); 2],
+    carried: u64,
+    nees_sum: f64,
+    nees_n: u64,
+    within: [u64; 3],
+    sigma3_sum: [f64; 3],
+}
+
+impl CoarseScorer {
+    fn add(&mut self, c: &crate::closed_loop::CoarseCheck) {
+        let e_deg = c.error_acs_rad / RAD_PER_DEG;
+        self.errors.add(&e_deg);
+        if c.age_s > 60.0 {
+            self.carried += 1;
+        }
+        if let Some((acc, nees_sum, nees_n)) = self
+            .by_source
+            .get_mut(usize::from(c.source).wrapping_sub(1))
+        {
+            acc.add(&e_deg);
+            if let Some(n) = c.nees {
+                *nees_sum += n;
+                *nees_n += 1;
+            }
+        }
+        if let Some(n) = c.nees {
+            self.nees_sum += n;
+            self.nees_n += 1;
+        }
+        for i in 0..3 {
+            let s3 = 3.0 * c.sigma_acs_rad[i];
+            self.sigma3_sum[i] += s3 / RAD_PER_DEG;
+            if c.error_acs_rad[i].abs() <= s3 {
+                self.within[i] += 1;
+            }
+        }
+    }
+
+    fn summary(&self) -> (Option<[f64; 3]>, Option<CoarseSummary>) {
+        let n = self.errors.n;
+        if n == 0 {
+            return (None, None);
+        }
+        let stats = self.errors.stats();
+        let three = stats.rms.map(|r| 3.0 * r);
+        let nf = n as f64;
+        let summary = CoarseSummary {
+            cycles: n,
+            nees_mean: (self.nees_n > 0).then(|| self.nees_sum / self.nees_n as f64),
+            within_3sigma_fraction: self.within.map(|w| w as f64 / nf),
+            mean_3sigma_deg: self.sigma3_sum.map(|s| s / nf),
+            max_error_deg: stats.max,
+            mean_error_deg: stats.mean,
+            meets_2deg_3sigma: three.iter().all(|x| *x <= 2.0),
+            by_source: ["fss+tam", "css+tam"]
+                .iter()
+                .zip(&self.by_source)
+                .filter(|(_, (acc, _, _))| acc.n > 0)
+                .map(|(name, (acc, nees_sum, nees_n))| CoarseSourceStats {
+                    source: (*name).to_owned(),
+                    cycles: acc.n,
+                    error_3sigma_deg: acc.stats().rms.map(|r| 3.0 * r),
+                    nees_mean: (*nees_n > 0).then(|| nees_sum / *nees_n as f64),
+                })
+                .collect(),
+            carried_over_60s_cycles: self.carried,
+        };
+        (Some(three), Some(summary))
+    }
+}
+
 /// The scoring state of a run.
 struct Scorer {
+    coarse: CoarseScorer,
     steady: Accumulator,
     all: Accumulator,
     nees_sum: f64,
@@ -260,6 +379,7 @@ impl Scorer {
             })
             .collect();
         Self {
+            coarse: CoarseScorer::default(),
             steady: Accumulator::default(),
             all: Accumulator::default(),
             nees_sum: 0.0,
@@ -281,6 +401,9 @@ impl Scorer {
         self.counters = hk.counters;
         for h in wheel_momentum {
             self.max_wheel = self.max_wheel.max(h.abs());
+        }
+        if let Some(c) = &rec.coarse {
+            self.coarse.add(c);
         }
         for e in &rec.output.events {
             match e.id {
@@ -783,6 +906,8 @@ fn drive<W: Write>(
     let mut aliasing = 0_u64;
     let mut since_downlink = [0_i64; IRU_CHANNELS];
     let mut prev_counts: Option<[u16; IRU_CHANNELS]> = None;
+    // APID 0x013 after each downlinked raw frame while the spacecraft carries magnetics.
+    let magnetics = sim.magnetics().is_some();
     while let Some(rec) = sim.step() {
         let t = rec.truth.t_s;
         let counts = rec.frame.iru.counts;
@@ -801,6 +926,9 @@ fn drive<W: Write>(
             }
             since_downlink = [0; IRU_CHANNELS];
             tm.raw(&rec.frame)?;
+            if magnetics {
+                tm.magnetics(&MagneticsFrame::of_raw_frame(&rec.frame))?;
+            }
             if t + 1e-9 >= next_eph {
                 tm.ephemeris(&EphemerisRecord {
                     time,
@@ -851,6 +979,7 @@ fn summary(
         events_dropped: k.events_dropped,
     };
     let steady = scorer.steady.stats();
+    let (coarse_3sigma, coarse_summary) = scorer.coarse.summary();
     Summary {
         scenario: s.name.clone(),
         seed: s.seed,
@@ -885,6 +1014,8 @@ fn summary(
         telemetry_bytes: bytes,
         iru_counter_aliasing_frames: aliasing,
         max_wheel_momentum_nms: scorer.max_wheel,
+        coarse_attitude_error_3sigma_deg: coarse_3sigma,
+        coarse_attitude: coarse_summary,
         tables_provenance_warning: None,
     }
 }

@@ -64,7 +64,8 @@
 //! `[tam1]` (primary; default bias = the paper's [0, 0, −4] mG), `[tam2]`
 //! ([`crate::sensors::tam::TamParams`], units in the key names: `bias_milligauss`,
 //! `scale_ppm`, `misalignment_arcsec`, ...), `[css]` ([`crate::sensors::css::CssParams`]) and
-//! `[magnetics] enabled` (sample them into the record, default off: [`crate::magnetics`],
+//! `[magnetics] enabled` (sample them into the record and the raw frame, and downlink them as
+//! APID 0x013; default off, on in `gro-early-mission` and `normal-ops`: [`crate::magnetics`],
 //! `docs/magnetics.md`).
 
 use std::path::{Path, PathBuf};
@@ -414,11 +415,36 @@ impl OnboardOrbitUplink {
 }
 
 /// Scenario `[magnetics]` ([`crate::magnetics`]: the field, TAM and CSS models of the loop).
-#[derive(Clone, Debug, PartialEq, Default, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct MagneticsParams {
-    /// Sample the field, the TAMs and the CSSs every cycle into the record (default off).
+    /// Sample the field, the TAMs and the CSSs every cycle into the record and the raw frame
+    /// (default off).
     pub enabled: bool,
+    /// With `enabled`: uplink the OBC's magnetics table (Table 6: the field model at the
+    /// epoch and the TAM knowledge below) at `onboard_table_at_s` (default on, at 2 s: the
+    /// catalog, filter, alignment and orbit uplinks fill the first two cycles' events).
+    pub onboard_table: bool,
+    /// When the magnetics table is uplinked (s from the epoch).
+    pub onboard_table_at_s: f64,
+    /// The TAM1, TAM2 biases the OBC's table subtracts (mG, sensor axes): zero is prelaunch
+    /// knowledge; the ground's determined bias is the "after" case of issue 20.
+    pub onboard_tam_bias_milligauss: [[f64; 3]; 2],
+    /// The table's `field_sigma_milligauss` (1σ per axis of what is left in a corrected TAM
+    /// field); `None`: the OBC's boot value (4 mG, an undetermined bias).
+    pub onboard_field_sigma_milligauss: Option<f64>,
+}
+
+impl Default for MagneticsParams {
+    fn default() -> Self {
+        Self {
+            enabled: false,
+            onboard_table: true,
+            onboard_table_at_s: 2.0,
+            onboard_tam_bias_milligauss: [[0.0; 3]; 2],
+            onboard_field_sigma_milligauss: None,
+        }
+    }
 }
 
 /// A whole scenario.
@@ -521,7 +547,7 @@ pub struct Scenario {
     /// Coarse Sun sensors ([`crate::sensors::css`]).
     #[serde(default)]
     pub css: CssParams,
-    /// Sample the field, TAMs and CSSs into the record ([`crate::magnetics`]).
+    /// Sample the field, TAMs and CSSs into the record and downlink them ([`crate::magnetics`]).
     #[serde(default)]
     pub magnetics: MagneticsParams,
     /// Thermal nodes.

@@ -5,8 +5,9 @@
 //! per APID (from 0, wrapping at 16384), data length = data-field octets − 1. The data field
 //! is the 6-octet CUC time code (`fsw_core::telemetry::encode_time_code`) followed by the
 //! user data of `fsw_core::telemetry`'s encoders. Within a cycle the order is raw frame
-//! (0x010), ephemeris (0x020) when due, housekeeping (0x011), events (0x012), all with the
-//! cycle's time code.
+//! (0x010), the magnetics frame (0x013) when the scenario has `[magnetics] enabled`,
+//! ephemeris (0x020) when due, housekeeping (0x011), events (0x012), all with the cycle's time
+//! code.
 //!
 //! The writer never allocates per packet (one fixed scratch buffer) and writes into any
 //! `io::Write` (a `BufWriter<File>` for runs, `io::sink()` for the bench).
@@ -19,9 +20,9 @@ use spacepackets::{PacketId, PacketSequenceControl, PacketType, SequenceFlags, S
 use fsw_core::events::Event;
 use fsw_core::raw::{RawSensorFrame, TimeTag};
 use fsw_core::telemetry::{
-    encode_ephemeris, encode_event, encode_housekeeping, encode_raw_frame, encode_time_code,
-    EphemerisRecord, ObcHousekeeping, APID_EPHEMERIS, APID_EVENT, APID_HOUSEKEEPING,
-    APID_RAW_SENSORS, TIME_CODE_LEN,
+    encode_ephemeris, encode_event, encode_housekeeping, encode_magnetics, encode_raw_frame,
+    encode_time_code, EphemerisRecord, MagneticsFrame, ObcHousekeeping, APID_EPHEMERIS, APID_EVENT,
+    APID_HOUSEKEEPING, APID_MAGNETICS, APID_RAW_SENSORS, TIME_CODE_LEN,
 };
 
 /// Primary header length.
@@ -29,18 +30,19 @@ pub const PRIMARY_HEADER_LEN: usize = 6;
 /// Scratch buffer size (largest packet: housekeeping, 6 + 6 + 230).
 const SCRATCH: usize = 256;
 
-/// Per-APID sequence counters, in the order raw, housekeeping, event, ephemeris.
-const APIDS: [u16; 4] = [
+/// Per-APID sequence counters, in the order raw, housekeeping, event, ephemeris, magnetics.
+const APIDS: [u16; 5] = [
     APID_RAW_SENSORS,
     APID_HOUSEKEEPING,
     APID_EVENT,
     APID_EPHEMERIS,
+    APID_MAGNETICS,
 ];
 
 /// Packet writer.
 pub struct PacketWriter<W: Write> {
     out: W,
-    seq: [u16; 4],
+    seq: [u16; 5],
     buf: [u8; SCRATCH],
     packets: u64,
     bytes: u64,
@@ -51,7 +53,7 @@ impl<W: Write> PacketWriter<W> {
     pub fn new(out: W) -> Self {
         Self {
             out,
-            seq: [0; 4],
+            seq: [0; 5],
             buf: [0; SCRATCH],
             packets: 0,
             bytes: 0,
@@ -121,6 +123,16 @@ impl<W: Write> PacketWriter<W> {
         let n = encode_raw_frame(frame, self.user())
             .map_err(|e| std::io::Error::other(format!("raw frame: {e:?}")))?;
         self.emit(APID_RAW_SENSORS, frame.time, n)
+    }
+
+    /// Magnetics frame (APID 0x013): TAM1, TAM2 and the CSS eyes, with the raw frame's time.
+    ///
+    /// # Errors
+    /// I/O or encoding.
+    pub fn magnetics(&mut self, m: &MagneticsFrame) -> std::io::Result<()> {
+        let n = encode_magnetics(m, self.user())
+            .map_err(|e| std::io::Error::other(format!("magnetics frame: {e:?}")))?;
+        self.emit(APID_MAGNETICS, m.time, n)
     }
 
     /// Definitive orbit (APID 0x020).

@@ -140,11 +140,20 @@ fn icd_round_trip_independent_decoder() {
     }
     let file = std::fs::read(tmp.path().join("telemetry.bin")).unwrap();
     let packets = parse(&file);
-    let lengths = [(0x010, 48), (0x011, 230), (0x012, 10), (0x020, 48)];
+    let lengths = [
+        (0x010, 48),
+        (0x011, 230),
+        (0x012, 10),
+        (0x013, 27),
+        (0x020, 48),
+    ];
     let mut seq = std::collections::HashMap::new();
     let mut cycle = 0usize;
     let mut last_time = 0.0;
-    let mut expect = 0x010; // order within a cycle: raw, [ephemeris], housekeeping, events
+    // Order within a cycle: raw, magnetics (format version 2, `[magnetics] enabled`),
+    // [ephemeris], housekeeping, events.
+    let mut expect = 0x010;
+    let mut magnetics = 0usize;
     let mut ephemeris_times = Vec::new();
     for p in &packets {
         assert_eq!(p.version, 0, "at {}", p.offset);
@@ -196,6 +205,29 @@ fn icd_round_trip_independent_decoder() {
                     );
                 }
                 expect = 0x020;
+            }
+            0x013 => {
+                assert_eq!(expect, 0x020, "magnetics out of order at {}", p.offset);
+                let r = &recs[cycle - 1];
+                assert_eq!(
+                    (p.coarse, p.fine),
+                    (r.frame.time.coarse_s, r.frame.time.fine),
+                    "magnetics with its raw frame's time code"
+                );
+                for k in 0..2 {
+                    let o = 7 * k;
+                    let t = &r.frame.tam[k];
+                    for i in 0..3 {
+                        assert_eq!(be16(p.user, o + 2 * i) as i16, t.field_counts[i]);
+                    }
+                    assert_eq!(p.user[o + 6], t.flags);
+                    assert_eq!(t.flags & 1, 1, "TAM{} valid in 1991", k + 1);
+                }
+                for i in 0..6 {
+                    assert_eq!(be16(p.user, 14 + 2 * i), r.frame.css.counts[i]);
+                }
+                assert_eq!(p.user[26], r.frame.css.flags);
+                magnetics += 1;
             }
             0x020 => {
                 assert_eq!(expect, 0x020, "ephemeris out of order at {}", p.offset);
@@ -274,6 +306,7 @@ fn icd_round_trip_independent_decoder() {
         }
     }
     assert_eq!(cycle, recs.len(), "one raw frame per cycle");
+    assert_eq!(magnetics, recs.len(), "one magnetics frame per raw frame");
     assert_eq!(seq[&0x011], recs.len() as u16);
     // Ephemeris every 10 s of sim time; the catalog is activated at t = 0 (CRC in housekeeping).
     assert_eq!(

@@ -156,8 +156,9 @@ fn val_closed_loop_records_tam_and_css_samples() {
     use sim_harness::closed_loop::Simulation;
     let mut s = sim_harness::scenario::resolve("gro-early-mission").unwrap();
     s.duration_s = 3_000.0;
-    assert!(!s.magnetics.enabled, "off by default");
-    s.magnetics.enabled = true;
+    // Off by default (MagneticsParams), on in gro-early-mission since the 0x013 downlink.
+    assert!(!sim_harness::magnetics::MagneticsParams::default().enabled);
+    assert!(s.magnetics.enabled, "gro-early-mission flies the TAMs");
     let clock = SimClock::new(epoch_from_iso(&s.epoch_utc).unwrap());
     let mut sim = Simulation::new(s.clone(), None).unwrap();
     let tam1 = sim.magnetics().unwrap().tam()[0].clone();

@@ -15,18 +15,18 @@ import os
 import struct
 import sys
 
-APID_RAW, APID_HK, APID_EVENT, APID_EPH = 0x010, 0x011, 0x012, 0x020
-USER_LEN = {APID_RAW: 48, APID_HK: 230, APID_EVENT: 10, APID_EPH: 48}
+APID_RAW, APID_HK, APID_EVENT, APID_EPH, APID_MAG = 0x010, 0x011, 0x012, 0x020, 0x013
+USER_LEN = {APID_RAW: 48, APID_HK: 230, APID_EVENT: 10, APID_EPH: 48, APID_MAG: 27}
 
 
 def read(path):
     """Walk telemetry.bin packet by packet (ICD §1–2). Returns {"raw": [...], "hk": [...],
-    "events": [...], "eph": [...], "order": [(apid, t)], "bad": [offsets]} with t the time
+    "events": [...], "eph": [...], "mag": [...], "order": [(apid, t)], "bad": [offsets]} with t the time
     code in TAI seconds since 1958 (coarse + fine / 65536)."""
     if os.path.isdir(path):
         path = os.path.join(path, "telemetry.bin")
     data = open(path, "rb").read()
-    out = {"raw": [], "hk": [], "events": [], "eph": [], "order": [], "bad": []}
+    out = {"raw": [], "hk": [], "events": [], "eph": [], "mag": [], "order": [], "bad": []}
     off = 0
     while off + 6 <= len(data):
         w0, w1, dlen = struct.unpack_from(">HHH", data, off)
@@ -57,6 +57,13 @@ def read(path):
         elif apid == APID_EVENT:
             code, p1, p2 = struct.unpack_from(">HII", u, 0)
             out["events"].append({"t": t, "code": code, "p1": p1, "p2": p2})
+        elif apid == APID_MAG:  # ICD §3.5 (format version 2)
+            t1 = struct.unpack_from(">3hB", u, 0)
+            t2 = struct.unpack_from(">3hB", u, 7)
+            css = struct.unpack_from(">6HB", u, 14)
+            out["mag"].append({"t": t, "tam1_counts": list(t1[:3]), "tam1_flags": t1[3],
+                               "tam2_counts": list(t2[:3]), "tam2_flags": t2[3],
+                               "css_counts": list(css[:6]), "css_flags": css[6]})
         else:
             out["eph"].append({"t": t, "pos": list(struct.unpack_from(">3d", u, 0)),
                                "vel": list(struct.unpack_from(">3d", u, 24))})

@@ -33,6 +33,12 @@ sensor, extreme values, ...).
 
     python3 tests/icd/write_run.py --out /tmp/run            # the nominal run
     python3 tests/icd/write_run.py --out /tmp/r2 --no-hk --eph-period 300
+    python3 tests/icd/write_run.py --out /tmp/r3 --tam    # + APID 0x013 (TAM1/TAM2, CSS)
+
+--tam writes the magnetics frame (docs/icd.md §3.5) after every raw frame from the writer's
+own TAM and CSS model (tests/icd/tam_model.py: IGRF through PyPI ppigrf when installed, else
+its own synthesis of data/igrf_dgrf_1990_1995.csv; TAM1 bias --tam-bias, default the paper's
+[0, 0, -4] mG); truth_icd.json "tam" holds the injected TAM errors.
 
 truth_icd.json holds what was injected (alignment rotations, bias, noise), for the tests;
 the ground tool never reads it.
@@ -65,6 +71,13 @@ IRU_LOW_ARCSEC_PER_PULSE = 0.05
 IRU_HIGH_ARCSEC_PER_PULSE = 0.8
 
 APID_RAW, APID_HK, APID_EVENT, APID_EPH = 0x010, 0x011, 0x012, 0x020
+APID_MAG = 0x013
+
+# The writer's TAMs (its own numbers; TAM1's bias is --tam-bias).
+TAM2_MODEL = {"bias_mG": [0.6, -0.4, 0.3], "scale_ppm": [-400.0, 700.0, 300.0],
+              "misalignment_acs_arcsec": [-250.0, 400.0, 150.0], "noise_mG": 0.2}
+TAM1_SCALE_PPM = [600.0, -500.0, 800.0]
+TAM1_MISALIGNMENT_ACS_ARCSEC = [300.0, -450.0, 200.0]
 
 # Boot tables (docs/tables.md: the paper's Table 1 and prelaunch G; data/gro_paper.toml).
 M_PRELAUNCH = {
@@ -409,7 +422,7 @@ class Packets:
     def __init__(self, seq_start=0, time_offset_s=0.0, stream_to=None):
         self.time_offset_s = time_offset_s
         self.seq = {APID_RAW: seq_start, APID_HK: seq_start, APID_EVENT: seq_start,
-                    APID_EPH: seq_start}
+                    APID_EPH: seq_start, APID_MAG: seq_start}
         self.out = []  # (time, apid, bytes)
         # Streamed straight to the file unless packets are to be reordered or duplicated
         # (a multi-day 1-s run would otherwise hold every packet in memory).
@@ -578,6 +591,10 @@ def main(argv=None):
     p.add_argument("--slew-rates", default=None, metavar="R1,R2,...",
                    help="slew rates in deg/s, cycled over the slews in order (default: --slew-rate-deg-s for all)")
     p.add_argument("--no-hk", action="store_true", help="no housekeeping (APID 0x011)")
+    p.add_argument("--tam", action="store_true",
+                   help="write the magnetics frame (APID 0x013: TAM1, TAM2, CSS) after every raw frame")
+    p.add_argument("--tam-bias", default="0,0,-4", metavar="BX,BY,BZ",
+                   help="TAM1 (primary) bias, mG, TAM axes (default the paper's 0,0,-4)")
     p.add_argument("--hk-every", type=int, default=1, help="housekeeping with every Nth raw frame")
     p.add_argument("--no-eph", action="store_true", help="no ephemeris (APID 0x020)")
     p.add_argument("--eph-period", type=float, default=60.0, help="ephemeris period, s")
@@ -627,6 +644,16 @@ def main(argv=None):
     # The gyro's noise has its own generator: the counters of a run with --downlink-every N
     # are then exactly those of the 1-s run at the same cycles (the sensors draw only at frames).
     rng_iru = random.Random(f"iru-{args.seed}")
+    # The TAMs draw from their own generator too: --tam changes no other byte of the file.
+    rng_tam = random.Random(f"tam-{args.seed}")
+    tam_units = None
+    if args.tam:
+        sys.path.insert(0, HERE)
+        import tam_model
+        tam_units = [{"bias_mG": [float(x) for x in args.tam_bias.split(",")],
+                      "scale_ppm": TAM1_SCALE_PPM, "misalignment_acs_arcsec": TAM1_MISALIGNMENT_ACS_ARCSEC,
+                      "noise_mG": 0.2}, TAM2_MODEL]
+        tai_utc = tai_minus_utc(*(int(x) for x in args.epoch.split("T")[0].split("-")))
     os.makedirs(args.out, exist_ok=True)
     t0 = parse_epoch_utc(args.epoch)
     epoch_year = 2000.0 + (t0 - J2000_TAI1958) / (86400.0 * 365.25)
@@ -1156,6 +1183,12 @@ def main(argv=None):
         if in_span(gaps, tt):
             continue
         pk.add(APID_RAW, tai, raw)
+        if tam_units is not None:
+            b_eci = tam_model.field_eci_mg(tai, tai_utc, pos)
+            mag = b"".join(struct.pack(">3hB", *tam_model.tam_counts(rng_tam, a, b_eci, u), 1) for u in tam_units)
+            mag += struct.pack(">6HB", *tam_model.css_counts(a, sun_dir, in_shadow), 1)
+            assert len(mag) == 27
+            pk.add(APID_MAG, tai, mag)
         if not args.no_eph and (tt + 1e-9 >= next_eph or k == n_cycles - 1):
             pk.add(APID_EPH, tai, struct.pack(">6d", *pos, *vel))
             while next_eph <= tt + 1e-9:
@@ -1236,6 +1269,12 @@ def main(argv=None):
             f.write("{}")
     truth = {
         "writer": "tests/icd/write_run.py",
+        "tam": None if tam_units is None else {
+            "bias_mG": tam_units[0]["bias_mG"], "scale_ppm": tam_units[0]["scale_ppm"],
+            "misalignment_acs_arcsec": tam_units[0]["misalignment_acs_arcsec"],
+            "noise_mG_1sigma": tam_units[0]["noise_mG"], "tam2": tam_units[1],
+            "field": "IGRF via ppigrf" if tam_model.HAVE_PPIGRF else "IGRF, tests/icd/tam_model.py's own synthesis",
+            "model": "B_tam = (I + diag(scale_ppm) 1e-6) Rot(theta)^T (A B_eci) + bias + noise, 0.3 mG/count"},
         "effects": effects,
         "injected_rotation_acs_arcsec": inject,
         "bias_acs_rad_per_s": bias,

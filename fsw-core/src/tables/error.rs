@@ -30,17 +30,22 @@ pub enum TableId {
     /// The onboard orbit (state vector at an epoch), propagated on board.
     /// docs/tables.md (Table 5: orbit); algorithms.md §3.3 (orbital aberration, parallax).
     Orbit = 5,
+    /// The onboard geomagnetic field model, the TAM calibration and the coarse-attitude
+    /// settings.
+    /// docs/tables.md (Table 6: magnetics); issue 20.
+    Magnetics = 6,
 }
 
 impl TableId {
     /// All table ids, in id order.
-    /// docs/tables.md (table ids 1–5).
-    pub const ALL: [TableId; 5] = [
+    /// docs/tables.md (table ids 1–6).
+    pub const ALL: [TableId; 6] = [
         TableId::Alignment,
         TableId::Iru,
         TableId::Filter,
         TableId::StarCatalog,
         TableId::Orbit,
+        TableId::Magnetics,
     ];
 
     /// From the on-wire id.
@@ -53,11 +58,12 @@ impl TableId {
             3 => Some(Self::Filter),
             4 => Some(Self::StarCatalog),
             5 => Some(Self::Orbit),
+            6 => Some(Self::Magnetics),
             _ => None,
         }
     }
 
-    /// Index 0..5 for per-table arrays.
+    /// Index 0..6 for per-table arrays.
     /// Project choice (not in the paper): dense arrays indexed by id − 1.
     #[must_use]
     pub fn index(self) -> usize {
@@ -67,6 +73,7 @@ impl TableId {
             Self::Filter => 2,
             Self::StarCatalog => 3,
             Self::Orbit => 4,
+            Self::Magnetics => 5,
         }
     }
 
@@ -80,6 +87,7 @@ impl TableId {
             Self::Filter => "filter",
             Self::StarCatalog => "star_catalog",
             Self::Orbit => "orbit",
+            Self::Magnetics => "magnetics",
         }
     }
 }
@@ -243,7 +251,7 @@ impl core::fmt::Display for TableError {
             ),
             Self::UnknownTableId { found } => write!(
                 f,
-                "octet 4 (table id) holds {found}, not 1 alignment, 2 IRU, 3 filter, 4 star catalog or 5 orbit [reason 4]"
+                "octet 4 (table id) holds {found}, not 1 alignment, 2 IRU, 3 filter, 4 star catalog, 5 orbit or 6 magnetics [reason 4]"
             ),
             Self::WrongTableId { expected, found } => write!(
                 f,

@@ -15,6 +15,7 @@
 use super::image::{
     decode_catalog_into, decode_payload, encode_image, parse_image, TableError, TableId,
 };
+use super::magnetics::MagneticsTable;
 use super::types::{
     check_alignment_change, check_iru_change, AlignmentTable, FilterTable, IruTable, OrbitTable,
     StarCatalogTable,
@@ -113,6 +114,7 @@ pub struct TableSet {
     filter: Slot<FilterTable>,
     catalog: Slot<StarCatalogTable>,
     orbit: Slot<OrbitTable>,
+    magnetics: Slot<MagneticsTable>,
 }
 
 impl Default for TableSet {
@@ -145,6 +147,7 @@ impl TableSet {
             filter: Slot::new(FilterTable::default_boot()),
             catalog: Slot::new(StarCatalogTable::default()),
             orbit: Slot::new(OrbitTable::none()),
+            magnetics: Slot::new(MagneticsTable::boot()),
         }
     }
 
@@ -184,17 +187,25 @@ impl TableSet {
     pub fn has_orbit(&self) -> bool {
         self.orbit.activations > 0
     }
+    /// Active magnetics table ([`MagneticsTable::boot`]: no field model, until one is
+    /// activated).
+    /// docs/tables.md (Table 6: magnetics).
+    #[must_use]
+    pub fn magnetics(&self) -> &MagneticsTable {
+        &self.magnetics.active
+    }
 
     /// Status of every table, in [`TableId::ALL`] order.
     /// docs/icd.md §3.2 (table CRCs, pending mask).
     #[must_use]
-    pub fn status(&self) -> [TableStatus; 5] {
+    pub fn status(&self) -> [TableStatus; 6] {
         [
             self.alignment.status(),
             self.iru.status(),
             self.filter.status(),
             self.catalog.status(),
             self.orbit.status(),
+            self.magnetics.status(),
         ]
     }
 
@@ -251,6 +262,10 @@ impl TableSet {
                 self.orbit.inactive = None;
                 self.orbit.rejections = self.orbit.rejections.saturating_add(1);
             }
+            TableId::Magnetics => {
+                self.magnetics.inactive = None;
+                self.magnetics.rejections = self.magnetics.rejections.saturating_add(1);
+            }
         }
     }
 
@@ -299,6 +314,11 @@ impl TableSet {
                 t.validate()?;
                 self.orbit.inactive = Some((t, created, crc));
             }
+            TableId::Magnetics => {
+                let t: MagneticsTable = decode_payload(payload)?;
+                t.validate()?;
+                self.magnetics.inactive = Some((t, created, crc));
+            }
         }
         Ok(())
     }
@@ -325,7 +345,7 @@ impl TableSet {
                 Some((t, _, _)) => check_iru_change(t, &self.iru.active, &self.filter.active),
                 None => return Err(None),
             },
-            TableId::Filter | TableId::StarCatalog | TableId::Orbit => Ok(()),
+            TableId::Filter | TableId::StarCatalog | TableId::Orbit | TableId::Magnetics => Ok(()),
         };
         if let Err(e) = recheck {
             self.reject(id);
@@ -337,6 +357,7 @@ impl TableSet {
             TableId::Filter => self.filter.activate(),
             TableId::StarCatalog => self.catalog.activate(),
             TableId::Orbit => self.orbit.activate(),
+            TableId::Magnetics => self.magnetics.activate(),
         };
         if done {
             Ok(())
@@ -354,6 +375,7 @@ impl TableSet {
             TableId::Filter => self.filter.inactive.take().is_some(),
             TableId::StarCatalog => self.catalog.inactive.take().is_some(),
             TableId::Orbit => self.orbit.inactive.take().is_some(),
+            TableId::Magnetics => self.magnetics.inactive.take().is_some(),
         }
     }
 
@@ -382,6 +404,12 @@ impl TableSet {
                 encode_image(id, self.catalog.active_created, &self.catalog.active, out)
             }
             TableId::Orbit => encode_image(id, self.orbit.active_created, &self.orbit.active, out),
+            TableId::Magnetics => encode_image(
+                id,
+                self.magnetics.active_created,
+                &self.magnetics.active,
+                out,
+            ),
         }
     }
 }

@@ -6,10 +6,12 @@
 
 pub mod error;
 pub mod image;
+pub mod magnetics;
 pub mod manager;
 pub mod types;
 
 pub use error::{TableError, TableId};
+pub use magnetics::MagneticsTable;
 pub use manager::{TableSet, TableStatus};
 pub use types::{
     AlignmentTable, CatalogStar, FilterTable, IruTable, OrbitTable, SensorCorrections,

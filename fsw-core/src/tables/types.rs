@@ -42,11 +42,11 @@ pub fn rows_from_matrix(m: &Matrix3<f64>) -> Mat3Rows {
     ]
 }
 
-fn all_finite(m: &Mat3Rows) -> bool {
+pub(crate) fn all_finite(m: &Mat3Rows) -> bool {
     m.iter().flatten().all(|x| x.is_finite())
 }
 
-fn check_finite(values: &[f64], field: u8) -> Result<(), TableError> {
+pub(crate) fn check_finite(values: &[f64], field: u8) -> Result<(), TableError> {
     if values.iter().all(|x| x.is_finite()) {
         Ok(())
     } else {
@@ -54,7 +54,7 @@ fn check_finite(values: &[f64], field: u8) -> Result<(), TableError> {
     }
 }
 
-fn check_range(value: f64, lo: f64, hi: f64, field: u8) -> Result<(), TableError> {
+pub(crate) fn check_range(value: f64, lo: f64, hi: f64, field: u8) -> Result<(), TableError> {
     if !value.is_finite() {
         return Err(TableError::NotFinite { field });
     }
@@ -602,6 +602,14 @@ pub struct FilterTable {
     /// requested but the orbit is not valid the OBC adds the 3.65″ back in quadrature.
     /// docs/tables.md field 22; docs/obc_filter.md §3 (derivation).
     pub fhst_uncorrected_systematic_arcsec: f64,
+    /// 1σ of each element of the gyros' residual error `E` after calibration (unitless, each
+    /// 0..=0.05; row = attitude-error axis, column = axis turned). When any element is
+    /// non-zero a slew grows the attitude variance of axis `i` by `Σ_j E_ij² (a_j'² − a_j²)`,
+    /// `a_j` the angle turned about ACS axis `j` since the slew began, instead of the
+    /// isotropic [`Self::gyro_scale_uncertainty`] (which bounds every element and stays the
+    /// prelaunch form). Boot: all zero.
+    /// docs/tables.md field 23; docs/obc_filter.md §11 (the per-element slew term).
+    pub gyro_calibration_sigma: [[f64; 3]; 3],
 }
 
 impl FilterTable {
@@ -636,10 +644,11 @@ impl FilterTable {
             gyro_scale_uncertainty: 1.0e-3,
             orbital_aberration_correction: false,
             fhst_uncorrected_systematic_arcsec: ORBITAL_ABERRATION_RMS_PER_AXIS_ARCSEC,
+            gyro_calibration_sigma: [[0.0; 3]; 3],
         }
     }
 
-    /// Content checks; field numbers are the declaration order 0..=22.
+    /// Content checks; field numbers are the declaration order 0..=23.
     /// docs/tables.md (Table 3: filter, ranges).
     ///
     /// # Errors
@@ -668,6 +677,9 @@ impl FilterTable {
         check_range(self.slew_complete_rad, 1e-6, 0.5, 19)?;
         check_range(self.gyro_scale_uncertainty, 0.0, 0.05, 20)?;
         check_range(self.fhst_uncorrected_systematic_arcsec, 0.0, 60.0, 22)?;
+        for e in self.gyro_calibration_sigma.iter().flatten() {
+            check_range(*e, 0.0, 0.05, 23)?;
+        }
         Ok(())
     }
 

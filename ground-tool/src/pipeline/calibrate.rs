@@ -177,6 +177,9 @@ pub struct CalibrationReport {
     /// The FHST systematic floor derived for the alignments that fly
     /// ([`super::filter_floor`]); `None` before `calibrate_run` decides which alignments fly.
     pub fhst_floor: Option<super::filter_floor::FhstFloor>,
+    /// The TAM calibration against the FHST fine attitude and the FSS/TAM attitude check
+    /// (`pipeline::tam`, issue 20); says why when the telemetry has no TAM data.
+    pub tam: super::tam::TamReport,
 }
 
 /// Data counts.
@@ -620,14 +623,7 @@ pub fn calibrate_telemetry(
         None => find_maneuvers(&frames_cal),
     };
     let fhst_floor = FixFloors::from_ffcal(&ffcal_summary, &solution, metadata);
-    summary.rate_switch_frames_split = frames_cal
-        .iter()
-        .filter(|f| f.rate_switch == RateSwitch::Split)
-        .count();
-    summary.rate_switch_frames_dropped = frames_cal
-        .iter()
-        .filter(|f| f.rate_switch == RateSwitch::Dropped)
-        .count();
+    summary.count_rate_switches(&frames_cal);
     crate::progress::step("IRUCAL: attitude fixes and the gyro chain");
     let gyro_chain = build_gyro_chain(&frames_cal, &maneuvers, &obc_bias_at, &fhst_floor, t0);
     let mut maneuver_reports =
@@ -688,6 +684,7 @@ pub fn calibrate_telemetry(
         filter_validation,
         filter_tuning,
         fhst_floor: None,
+        tam: super::tam::tam_stage(tm, &frames_cal, &obc_bias_at),
     };
     Ok(CalibrationOutput {
         report,
@@ -702,6 +699,13 @@ pub fn calibrate_telemetry(
 }
 
 impl DataSummary {
+    /// The frames split at, and dropped for, a rate-mode switch.
+    fn count_rate_switches(&mut self, frames: &[FrameObservations]) {
+        let count = |kind: RateSwitch| frames.iter().filter(|f| f.rate_switch == kind).count();
+        self.rate_switch_frames_split = count(RateSwitch::Split);
+        self.rate_switch_frames_dropped = count(RateSwitch::Dropped);
+    }
+
     /// Frame, star and Sun counts of the frames (the rest is filled in by the stages).
     fn of_frames(frames: &[FrameObservations]) -> Self {
         let mut summary = DataSummary {

@@ -104,6 +104,10 @@ pub struct TermDecision {
     pub derived: Option<f64>,
     /// Whether `derived` is written into the new table.
     pub written: bool,
+    /// `gyro_scale_uncertainty` only: the residual error's 1σ per element of G
+    /// (`gyro_calibration_sigma`, row = error axis, column = axis turned), written with it.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub derived_per_element: Option<[[f64; 3]; 3]>,
     /// Why, with the numbers.
     pub reason: String,
 }
@@ -114,11 +118,35 @@ impl TermDecision {
         match (self.written, self.derived) {
             (true, Some(v)) => {
                 *self.field.field_mut(table) = v;
+                if let Some(e) = self.derived_per_element {
+                    table.gyro_calibration_sigma = e;
+                }
                 true
             }
             _ => false,
         }
     }
+}
+
+/// Each residual element σ of a triad's G after the calibration (rule in the module doc).
+fn residual_element_sigmas(
+    delta_m: &[[f64; 3]; 3],
+    sigma: &[[f64; 3]; 3],
+    uplinked: &[[f64; 3]; 3],
+    scale: f64,
+) -> [[f64; 3]; 3] {
+    let mut out = [[0.0; 3]; 3];
+    for i in 0..3 {
+        for j in 0..3 {
+            let s = scale * sigma[i][j];
+            out[i][j] = if uplinked[i][j] == 0.0 {
+                delta_m[i][j].hypot(s)
+            } else {
+                s
+            };
+        }
+    }
+    out
 }
 
 /// The largest residual element σ of a triad's G after the calibration (rule in the module
@@ -129,17 +157,12 @@ fn residual_element_sigma(
     uplinked: &[[f64; 3]; 3],
     scale: f64,
 ) -> (f64, usize, usize) {
+    let all = residual_element_sigmas(delta_m, sigma, uplinked, scale);
     let mut best = (0.0, 0, 0);
-    for i in 0..3 {
-        for j in 0..3 {
-            let s = scale * sigma[i][j];
-            let left = if uplinked[i][j] == 0.0 {
-                delta_m[i][j].hypot(s)
-            } else {
-                s
-            };
-            if left > best.0 {
-                best = (left, i, j);
+    for (i, row) in all.iter().enumerate() {
+        for (j, left) in row.iter().enumerate() {
+            if *left > best.0 {
+                best = (*left, i, j);
             }
         }
     }
@@ -159,6 +182,7 @@ pub fn slew_uncertainty(
         flown: flown_k,
         derived: None,
         written: false,
+        derived_per_element: None,
         reason: String::new(),
     };
     let Some(r) = iru else {
@@ -208,6 +232,26 @@ pub fn slew_uncertainty(
     }
     let k = k.min(MAX_GYRO_SCALE_UNCERTAINTY);
     d.derived = Some(k);
+    let mut per_element =
+        residual_element_sigmas(&r.delta_m, &r.delta_m_sigma, &r.delta_m_uplinked, scale);
+    if let Some(b) = r.backup.as_ref() {
+        let bs = b
+            .validation
+            .as_ref()
+            .map_or(1.0, |bv| bv.mean_square_normalised.max(1.0).sqrt());
+        let backup = residual_element_sigmas(&b.delta_m, &b.delta_m_sigma, &b.delta_m_uplinked, bs);
+        for (p, q) in per_element
+            .iter_mut()
+            .flatten()
+            .zip(backup.iter().flatten())
+        {
+            *p = p.max(*q);
+        }
+    }
+    for e in per_element.iter_mut().flatten() {
+        *e = e.min(MAX_GYRO_SCALE_UNCERTAINTY);
+    }
+    d.derived_per_element = Some(per_element);
     let why_not = if !v.passed {
         Some(format!(
             "the IRU table failed its held-out validation ({})",
@@ -514,6 +558,7 @@ pub fn noise_decision(
         flown,
         derived,
         written: false,
+        derived_per_element: None,
         reason: String::new(),
     };
     d.reason = match (up, all_down && may_lower) {
@@ -575,6 +620,7 @@ pub fn fhst_noise_terms(
             flown: f,
             derived: None,
             written: false,
+            derived_per_element: None,
             reason: format!("kept {f:.3e}: too few star samples for a held-out test ({why})"),
         }),
     }
@@ -622,6 +668,7 @@ pub fn noise_terms(
             flown: f,
             derived: None,
             written: false,
+            derived_per_element: None,
             reason: format!("kept {f:.3e}: too little hold data for a held-out test ({why})"),
         }),
     }

@@ -1,7 +1,8 @@
 //! # The calibration chain on real telemetry
 //!
 //! [`observations`]: DA and FADS (counts → referenced vectors, fine attitudes);
-//! [`calibrate`]: TP → FADS → FFCAL → adjustment → IRUCAL → tables.
+//! [`calibrate`]: TP → FADS → FFCAL → adjustment → IRUCAL → tables; [`tam`]: the TAM
+//! calibration against the FHST fine attitude (issue 20).
 
 pub mod alignment_heldout;
 pub mod calibrate;
@@ -17,4 +18,5 @@ pub mod iru_fixes;
 pub mod maneuvers;
 pub mod observations;
 pub mod star_batches;
+pub mod tam;
 pub mod tuning_evidence;

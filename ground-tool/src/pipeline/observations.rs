@@ -810,7 +810,7 @@ impl OwnAttitude {
 }
 
 /// TRIAD `A` (ACS from ECI) from two body/reference pairs; `None` when nearly parallel.
-fn triad(
+pub(crate) fn triad(
     b1: &Vector3<f64>,
     r1: &Vector3<f64>,
     b2: &Vector3<f64>,

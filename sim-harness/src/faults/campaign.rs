@@ -66,9 +66,9 @@ pub struct FaultReport {
     /// OBC counters at the end of the run without faults.
     pub baseline_counters: Counters,
     /// Active table CRCs just before the first fault (alignment, IRU, filter, catalog, orbit).
-    pub table_crc_before: [u32; 5],
+    pub table_crc_before: [u32; TableId::ALL.len()],
     /// Active table CRCs at the end.
-    pub table_crc_after: [u32; 5],
+    pub table_crc_after: [u32; TableId::ALL.len()],
     /// Dumps of the active tables at the end equal to those just before the first fault.
     pub tables_unchanged: bool,
     /// `TableActivated` events at or after the fault start.
@@ -84,8 +84,8 @@ struct Flight {
     trace: Vec<(f64, [f64; 3], u8)>,
     events: Vec<(f64, EventId)>,
     counters: Counters,
-    crc_before: [u32; 5],
-    crc_after: [u32; 5],
+    crc_before: [u32; TableId::ALL.len()],
+    crc_after: [u32; TableId::ALL.len()],
     dump_before: Vec<Vec<u8>>,
     dump_after: Vec<Vec<u8>>,
     slew_end_errors: Vec<(f64, f64)>,
@@ -104,7 +104,7 @@ fn dumps(sim: &Simulation) -> Vec<Vec<u8>> {
         .collect()
 }
 
-fn crcs(sim: &Simulation) -> [u32; 5] {
+fn crcs(sim: &Simulation) -> [u32; TableId::ALL.len()] {
     sim.fsw().tables().status().map(|s| s.active_crc)
 }
 
@@ -114,8 +114,8 @@ fn fly(scenario: Scenario, snapshot_at_s: f64) -> anyhow::Result<Flight> {
         trace: Vec::new(),
         events: Vec::new(),
         counters: Counters::default(),
-        crc_before: [0; 5],
-        crc_after: [0; 5],
+        crc_before: [0; TableId::ALL.len()],
+        crc_after: [0; TableId::ALL.len()],
         dump_before: Vec::new(),
         dump_after: Vec::new(),
         slew_end_errors: Vec::new(),

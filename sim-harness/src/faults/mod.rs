@@ -113,6 +113,9 @@ mod tests {
             bits: Some(3),
             octets: None,
             margin_pulses: None,
+            offset_milligauss: None,
+            eye: None,
+            counts: None,
         };
         for (c, code) in [
             (Corruption::BitFlip, 9),

@@ -13,8 +13,8 @@ use serde::{Deserialize, Serialize};
 
 use fsw_core::attitude::rot;
 use fsw_core::raw::{
-    FhstSample, FssSample, TimeTag, FHST_FLAG_NEW_STAR, FHST_FLAG_VALID, FSS_FLAG_SUN_ALPHA,
-    IRU_CHANNEL_NAMES,
+    CssSample, FhstSample, FssSample, TamSample, TimeTag, FHST_FLAG_NEW_STAR, FHST_FLAG_VALID,
+    FSS_FLAG_SUN_ALPHA, IRU_CHANNEL_NAMES,
 };
 use fsw_core::tables::types::{matrix_from_rows, rows_from_matrix};
 use fsw_core::tables::{AlignmentTable, TableId};
@@ -40,6 +40,11 @@ pub enum FaultKind {
     FilterReset,
     /// The gyro counters are preset to wrap at a given time.
     IruCounterWrap,
+    /// A magnetometer fails: it reads zero (dead electronics) with its valid flag still set,
+    /// or, with `offset_milligauss`, its reading jumps by that much (a bias shift).
+    TamFailure,
+    /// A coarse Sun sensor eye reads `counts` more than it should (a reflection).
+    CssGlint,
 }
 
 /// Damage of a `table_upload`.
@@ -108,6 +113,15 @@ pub struct Fault {
     /// `iru_counter_wrap`: pulses left before the wrap at `at_s` (default 40).
     #[serde(default)]
     pub margin_pulses: Option<u16>,
+    /// `tam_failure`: the jump of the reading (mG, sensor axes); absent = reads zero.
+    #[serde(default)]
+    pub offset_milligauss: Option<[f64; 3]>,
+    /// `css_glint`: the eye (0..5: +X, −X, +Y, −Y, +Z, −Z).
+    #[serde(default)]
+    pub eye: Option<usize>,
+    /// `css_glint`: the counts added (default 800).
+    #[serde(default)]
+    pub counts: Option<f64>,
 }
 
 fn sensor_index(name: &str) -> Option<usize> {
@@ -134,8 +148,8 @@ impl Fault {
     /// Which FHSTs (bit 0 = FHST1, bit 1 = FHST2) or FSSs (same bits) the fault addresses.
     pub(super) fn unit_mask(&self) -> u8 {
         match self.sensor.as_deref() {
-            Some("fhst1" | "fss1") => 1,
-            Some("fhst2" | "fss2") => 2,
+            Some("fhst1" | "fss1" | "tam1") => 1,
+            Some("fhst2" | "fss2" | "tam2") => 2,
             Some("both") => 3,
             _ => 0,
         }
@@ -225,6 +239,27 @@ impl Fault {
             FaultKind::IruCounterWrap => {
                 if self.margin_pulses.is_some_and(|m| m > 30_000) {
                     bail!("{here}.margin_pulses must be ≤ 30000");
+                }
+            }
+            FaultKind::TamFailure => {
+                if !matches!(sensor, Some("tam1" | "tam2")) {
+                    bail!("{here}.sensor must be \"tam1\" or \"tam2\"");
+                }
+                if let Some(o) = self.offset_milligauss {
+                    if !o.iter().all(|x| x.is_finite() && x.abs() <= 1_000.0) {
+                        bail!("{here}.offset_milligauss must be within ±1000 mG");
+                    }
+                }
+            }
+            FaultKind::CssGlint => {
+                need_duration()?;
+                if self.eye.is_none_or(|e| e >= fsw_core::raw::CSS_EYES) {
+                    bail!("{here}.eye must be 0..5 (+X, -X, +Y, -Y, +Z, -Z)");
+                }
+                if let Some(c) = self.counts {
+                    if !(c.is_finite() && (0.0..=65_535.0).contains(&c)) {
+                        bail!("{here}.counts must be within 0..65535");
+                    }
                 }
             }
         }
@@ -384,6 +419,52 @@ impl FaultState {
             let [da, db] = f.offset_deg.unwrap_or([0.0; 2]);
             out.alpha_counts = shift_counts(out.alpha_counts, da / resolution_deg_per_count);
             out.beta_counts = shift_counts(out.beta_counts, db / resolution_deg_per_count);
+        }
+        out
+    }
+
+    /// Apply the `tam_failure` faults active at `t_s` to TAM `unit`'s words
+    /// (`resolution_milligauss_per_count`: the TAM's count size).
+    #[must_use]
+    pub fn apply_tam(
+        faults: &[Fault],
+        unit: usize,
+        t_s: f64,
+        sample: TamSample,
+        resolution_milligauss_per_count: f64,
+    ) -> TamSample {
+        let mut out = sample;
+        let bit = 1u8 << unit.min(1);
+        for f in faults {
+            if f.kind != FaultKind::TamFailure || f.unit_mask() & bit == 0 || !f.active(t_s) {
+                continue;
+            }
+            match f.offset_milligauss {
+                Some(offset) => {
+                    for (c, o) in out.field_counts.iter_mut().zip(offset) {
+                        *c = shift_counts(*c, o / resolution_milligauss_per_count);
+                    }
+                }
+                None => out.field_counts = [0; 3],
+            }
+        }
+        out
+    }
+
+    /// Apply the `css_glint` faults active at `t_s` to the CSS words.
+    #[must_use]
+    pub fn apply_css(faults: &[Fault], t_s: f64, sample: CssSample) -> CssSample {
+        let mut out = sample;
+        for f in faults {
+            if f.kind != FaultKind::CssGlint || !f.active(t_s) || out.flags == 0 {
+                continue;
+            }
+            if let Some(c) = f.eye.and_then(|e| out.counts.get_mut(e)) {
+                let added = f.counts.unwrap_or(800.0);
+                #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
+                let v = (f64::from(*c) + added).round().clamp(0.0, 65_535.0) as u16;
+                *c = v;
+            }
         }
         out
     }

@@ -1,0 +1,276 @@
+//! # Table 6: magnetics — the onboard field model, the TAM calibration and the coarse-attitude settings
+//!
+//! Why one table: the coarse attitude (`crate::coarse`) needs all of it at once — the field the
+//! magnetometers should see (an IGRF/DGRF spherical-harmonic model with its epoch and secular
+//! variation, and the Earth orientation that carries it to inertial axes), what the TAMs
+//! actually measure (alignment, count size, bias) and how far each vector can be trusted. The
+//! ground recomputes the field model and the TAM bias together (issue 20: the paper's FDF
+//! determined the primary TAM's bias [0, 0, −4] mG and compared FSS/TAM attitudes with FHST
+//! ones), so they travel together and are validated together.
+//!
+//! The boot table holds no field model (`field_degree = 0`): the OBC computes no coarse
+//! attitude until the ground uplinks one, as it propagates no orbit before an orbit table.
+//! The coefficients are **Schmidt semi-normalised** as published by IAGA (nT, nT/yr); the OBC
+//! applies the normalisation itself. Byte layout and ranges: `docs/tables.md` (Table 6).
+
+use nalgebra::Matrix3;
+use serde::{Deserialize, Serialize};
+
+use super::error::TableError;
+use super::types::{all_finite, check_finite, check_range, matrix_from_rows, Mat3Rows};
+use crate::attitude::is_proper_rotation;
+use crate::raw::{CSS_EYES, TAMS};
+
+/// Highest spherical-harmonic degree the onboard field model holds (IGRF's main field before
+/// 2000 is published to degree 10).
+/// IAGA IGRF (DGRF 1990/1995 to degree 10); docs/tables.md (Table 6, field 0).
+pub const FIELD_MAX_DEGREE: usize = 10;
+/// Rows of the coefficient arrays (`n = 0..=FIELD_MAX_DEGREE`).
+/// docs/tables.md (Table 6, fields 2–5).
+pub const FIELD_N1: usize = FIELD_MAX_DEGREE + 1;
+
+/// Spherical-harmonic coefficients `[n][m]` (row `n`, column `m ≤ n`; the rest zero).
+/// docs/tables.md (Table 6, fields 2–5).
+pub type HarmonicRows = [[f64; FIELD_N1]; FIELD_N1];
+
+/// Table 6: the onboard geomagnetic field model, the TAM calibration and the coarse-attitude
+/// settings.
+/// docs/tables.md (Table 6: magnetics); algorithms.md §10a (coarse attitude, TAM calibration).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct MagneticsTable {
+    /// Degree of the field model, 0 (none: no coarse attitude) to [`FIELD_MAX_DEGREE`].
+    /// docs/tables.md (Table 6, field 0).
+    pub field_degree: u8,
+    /// Epoch of the coefficients, seconds since J2000.0 TT.
+    /// docs/tables.md (Table 6, field 1).
+    pub field_epoch_s_since_j2000_tt: f64,
+    /// Schmidt semi-normalised `g[n][m]` at the epoch, nT.
+    /// IAGA IGRF convention; docs/tables.md (Table 6, field 2).
+    pub g_nt: HarmonicRows,
+    /// Schmidt semi-normalised `h[n][m]` at the epoch, nT (`h[n][0]` unused, zero).
+    /// IAGA IGRF convention; docs/tables.md (Table 6, field 3).
+    pub h_nt: HarmonicRows,
+    /// Secular variation of `g`, nT per Julian year (365.25 d).
+    /// IAGA IGRF convention; docs/tables.md (Table 6, field 4).
+    pub g_nt_per_year: HarmonicRows,
+    /// Secular variation of `h`, nT per Julian year.
+    /// IAGA IGRF convention; docs/tables.md (Table 6, field 5).
+    pub h_nt_per_year: HarmonicRows,
+    /// Precession and nutation at the field epoch: the rotation from J2000/GCRS axes to the
+    /// true equator and equinox of date (rows). The OBC turns it about the pole by the
+    /// apparent sidereal time to reach Earth-fixed axes; the ground re-uplinks it with the
+    /// coefficients (precession moves it 50″ a year, far below the coarse requirement).
+    /// IAU 1976/1980 (Meeus ch. 21–22); docs/tables.md (Table 6, field 6).
+    pub m_tod_from_eci: Mat3Rows,
+    /// UT1 − TAI, s (UT1 = TAI + this: −(TAI − UTC) + (UT1 − UTC), IERS), for sidereal time.
+    /// IERS Bulletin A; docs/tables.md (Table 6, field 7).
+    pub ut1_minus_tai_s: f64,
+    /// Equation of the equinoxes at the epoch, rad (apparent minus mean sidereal time).
+    /// IAU 1982 (Meeus ch. 12); docs/tables.md (Table 6, field 8).
+    pub equation_of_equinoxes_rad: f64,
+    /// TAM1, TAM2 alignment `M_AS` (sensor → ACS), rows; proper rotations.
+    /// algorithms.md §10a (TAM calibration); docs/tables.md (Table 6, field 9).
+    pub m_acs_from_tam: [Mat3Rows; TAMS],
+    /// TAM1, TAM2 count size, mG per count (per sensor axis: scale-factor calibration).
+    /// docs/magnetics.md §2; docs/tables.md (Table 6, field 10).
+    pub tam_milligauss_per_count: [[f64; 3]; TAMS],
+    /// TAM1, TAM2 bias subtracted from the reading, mG on the sensor's axes (the paper's
+    /// primary-TAM bias [0, 0, −4] mG once the ground has determined it).
+    /// Paper (`data/gro_paper.toml` `[sensors.tam]`); docs/tables.md (Table 6, field 11).
+    pub tam_bias_milligauss: [[f64; 3]; TAMS],
+    /// 1σ per axis of what is left in a corrected TAM field against the onboard model, mG:
+    /// bias uncertainty, residual spacecraft field, field-model error, noise.
+    /// algorithms.md §10a; docs/tables.md (Table 6, field 12).
+    pub field_sigma_milligauss: f64,
+    /// 1σ per axis of an FSS Sun direction used by the coarse attitude, rad.
+    /// docs/tables.md (Table 6, field 13).
+    pub fss_sun_sigma_rad: f64,
+    /// CSS eye normals (ACS, unit), order +X, −X, +Y, −Y, +Z, −Z by default.
+    /// docs/magnetics.md §2; docs/tables.md (Table 6, field 14).
+    pub css_normals_acs: [[f64; 3]; CSS_EYES],
+    /// CSS output at normal incidence, counts.
+    /// docs/magnetics.md §2; docs/tables.md (Table 6, field 15).
+    pub css_counts_at_normal_incidence: f64,
+    /// 1σ per axis of a CSS Sun direction (Earth albedo dominates), rad.
+    /// docs/tables.md (Table 6, field 16).
+    pub css_sun_sigma_rad: f64,
+    /// A new coarse fix every this many cycles (the field synthesis is the costly part);
+    /// between fixes the solution is carried on the gyros.
+    /// Project choice; docs/tables.md (Table 6, field 17).
+    pub coarse_fix_every_n_cycles: u16,
+    /// Smallest Sun–field angle for a fix, rad: below it the rotation about the two nearly
+    /// parallel vectors is unobservable and no fix is made.
+    /// algorithms.md §10a ("near-parallel vectors"); docs/tables.md (Table 6, field 18).
+    pub min_sun_field_angle_rad: f64,
+}
+
+/// The default CSS layout: six eyes on ±X, ±Y, ±Z of ACS.
+/// docs/magnetics.md §2 (project choice; the paper gives no layout).
+pub const CSS_NORMALS_DEFAULT: [[f64; 3]; CSS_EYES] = [
+    [1.0, 0.0, 0.0],
+    [-1.0, 0.0, 0.0],
+    [0.0, 1.0, 0.0],
+    [0.0, -1.0, 0.0],
+    [0.0, 0.0, 1.0],
+    [0.0, 0.0, -1.0],
+];
+
+const IDENTITY_ROWS: Mat3Rows = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+
+impl MagneticsTable {
+    /// The boot table: no field model (no coarse attitude until one is uplinked), TAMs on
+    /// their nominal axes (ACS), 0.3 mG/count, no bias correction, conservative σ's.
+    /// docs/tables.md (Table 6: "boot").
+    #[must_use]
+    pub fn boot() -> Self {
+        Self {
+            field_degree: 0,
+            field_epoch_s_since_j2000_tt: 0.0,
+            g_nt: [[0.0; FIELD_N1]; FIELD_N1],
+            h_nt: [[0.0; FIELD_N1]; FIELD_N1],
+            g_nt_per_year: [[0.0; FIELD_N1]; FIELD_N1],
+            h_nt_per_year: [[0.0; FIELD_N1]; FIELD_N1],
+            m_tod_from_eci: IDENTITY_ROWS,
+            ut1_minus_tai_s: 0.0,
+            equation_of_equinoxes_rad: 0.0,
+            m_acs_from_tam: [IDENTITY_ROWS; TAMS],
+            tam_milligauss_per_count: [[0.3; 3]; TAMS],
+            tam_bias_milligauss: [[0.0; 3]; TAMS],
+            // Before calibration: a bias of the paper's size (4 mG) in an unknown direction,
+            // 4/√3 = 2.3 mG per axis, with an uncalibrated TAM alignment (≤ 0.2°: 1.4 mG of
+            // 400 mG) and scale (0.1 %: 0.4 mG): 2.5 mG per axis (docs/magnetics.md §5).
+            field_sigma_milligauss: 2.5,
+            // FSS: the prelaunch alignments were off by up to 0.20° (paper: FSS1 0.20°, FSS2
+            // 0.05°, found by the in-flight calibration); 0.004° counts are negligible.
+            fss_sun_sigma_rad: 0.1 * core::f64::consts::PI / 180.0,
+            css_normals_acs: CSS_NORMALS_DEFAULT,
+            css_counts_at_normal_incidence: 1000.0,
+            // Earth albedo through a cosine eye moves the Sun direction by degrees.
+            css_sun_sigma_rad: 5.0 * core::f64::consts::PI / 180.0,
+            coarse_fix_every_n_cycles: 10,
+            min_sun_field_angle_rad: 10.0 * core::f64::consts::PI / 180.0,
+        }
+    }
+
+    /// Whether the table holds a field model (coarse attitude possible).
+    /// docs/tables.md (Table 6, field 0).
+    #[must_use]
+    pub fn has_field_model(&self) -> bool {
+        self.field_degree > 0
+    }
+
+    /// Content checks. Fields numbered as in docs/tables.md (Table 6).
+    /// docs/tables.md (Table 6: ranges).
+    ///
+    /// # Errors
+    /// The first failed check: [`TableError::NotFinite`] or [`TableError::OutOfRange`] with
+    /// the field number.
+    pub fn validate(&self) -> Result<(), TableError> {
+        /// ±50 Julian years of J2000, s.
+        const MAX_EPOCH_S: f64 = 50.0 * 365.25 * 86_400.0;
+        /// Largest Gauss coefficient magnitude, nT (g10 is about −30,000 nT).
+        const MAX_COEFFICIENT_NT: f64 = 100_000.0;
+        /// Largest secular variation, nT/yr.
+        const MAX_SV_NT_PER_YEAR: f64 = 1_000.0;
+        if usize::from(self.field_degree) > FIELD_MAX_DEGREE {
+            return Err(TableError::OutOfRange { field: 0 });
+        }
+        check_range(
+            self.field_epoch_s_since_j2000_tt,
+            -MAX_EPOCH_S,
+            MAX_EPOCH_S,
+            1,
+        )?;
+        let rows = [
+            (&self.g_nt, MAX_COEFFICIENT_NT, 2u8),
+            (&self.h_nt, MAX_COEFFICIENT_NT, 3),
+            (&self.g_nt_per_year, MAX_SV_NT_PER_YEAR, 4),
+            (&self.h_nt_per_year, MAX_SV_NT_PER_YEAR, 5),
+        ];
+        for (c, limit, field) in rows {
+            for row in c {
+                check_finite(row, field)?;
+                if row.iter().any(|x| x.abs() > limit) {
+                    return Err(TableError::OutOfRange { field });
+                }
+            }
+        }
+        check_rotation(&self.m_tod_from_eci, 6)?;
+        check_range(self.ut1_minus_tai_s, -100.0, 100.0, 7)?;
+        check_range(self.equation_of_equinoxes_rad, -1e-4, 1e-4, 8)?;
+        for m in &self.m_acs_from_tam {
+            check_rotation(m, 9)?;
+        }
+        for s in self.tam_milligauss_per_count.iter().flatten() {
+            check_range(*s, 1e-3, 10.0, 10)?;
+        }
+        for b in self.tam_bias_milligauss.iter().flatten() {
+            check_range(*b, -100.0, 100.0, 11)?;
+        }
+        check_range(self.field_sigma_milligauss, 1e-3, 100.0, 12)?;
+        check_range(self.fss_sun_sigma_rad, 1e-6, 0.2, 13)?;
+        for n in &self.css_normals_acs {
+            check_finite(n, 14)?;
+            let norm2 = n.iter().map(|x| x * x).sum::<f64>();
+            if !((0.999..=1.001).contains(&norm2)) {
+                return Err(TableError::OutOfRange { field: 14 });
+            }
+        }
+        check_range(self.css_counts_at_normal_incidence, 1.0, 65_535.0, 15)?;
+        check_range(self.css_sun_sigma_rad, 1e-4, 0.5, 16)?;
+        if self.coarse_fix_every_n_cycles == 0 {
+            return Err(TableError::OutOfRange { field: 17 });
+        }
+        check_range(self.min_sun_field_angle_rad, 0.01, 1.5, 18)
+    }
+}
+
+fn check_rotation(m: &Mat3Rows, field: u8) -> Result<(), TableError> {
+    if !all_finite(m) {
+        return Err(TableError::NotFinite { field });
+    }
+    if is_proper_rotation(&matrix_from_rows(m), super::types::ROTATION_TOLERANCE) {
+        Ok(())
+    } else {
+        Err(TableError::OutOfRange { field })
+    }
+}
+
+/// `M` of a table's rows (for callers outside the tables module).
+/// docs/tables.md (Table 6, fields 6 and 9).
+#[must_use]
+pub fn matrix(m: &Mat3Rows) -> Matrix3<f64> {
+    matrix_from_rows(m)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn boot_validates_and_holds_no_field() {
+        let t = MagneticsTable::boot();
+        assert_eq!(t.validate(), Ok(()));
+        assert!(!t.has_field_model());
+    }
+
+    #[test]
+    fn each_bad_field_is_named() {
+        let mut t = MagneticsTable::boot();
+        t.field_degree = 11;
+        assert_eq!(t.validate(), Err(TableError::OutOfRange { field: 0 }));
+        let mut t = MagneticsTable::boot();
+        t.g_nt[1][0] = f64::NAN;
+        assert_eq!(t.validate(), Err(TableError::NotFinite { field: 2 }));
+        let mut t = MagneticsTable::boot();
+        t.m_acs_from_tam[1][0][0] = -1.0;
+        assert_eq!(t.validate(), Err(TableError::OutOfRange { field: 9 }));
+        let mut t = MagneticsTable::boot();
+        t.css_normals_acs[2] = [0.0, 2.0, 0.0];
+        assert_eq!(t.validate(), Err(TableError::OutOfRange { field: 14 }));
+        let mut t = MagneticsTable::boot();
+        t.coarse_fix_every_n_cycles = 0;
+        assert_eq!(t.validate(), Err(TableError::OutOfRange { field: 17 }));
+    }
+}

@@ -1,0 +1,107 @@
+//! e2e: the ground's TAM calibration (issue 20) on one short flight of `gro-early-mission`.
+//!
+//! Fly the first hour (seed 1; `[magnetics] enabled`, so the telemetry carries APID 0x013),
+//! calibrate from the telemetry alone, and check the primary TAM's bias against `truth.json`
+//! `tam.effective_bias_mG` ([0, 0, −4] mG: the paper's bias, no residual field): within 3σ
+//! of its stated σ on every axis, σ small enough to say something (< 0.5 mG), the estimated
+//! noise near the a-priori 0.22 mG, the held-out halves reported, and the FSS/TAM TRIAD
+//! attitude within the 2° coarse requirement of the FHST fine attitude. Then the
+//! same telemetry without its 0x013 packets: `tam` says why it is not determined, and the
+//! calibration still succeeds. The statistics over seeds are in docs/magnetics.md §4.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+
+use ground_tool::pipeline::calibrate::{calibrate_run, CalibrateOptions};
+use sim_harness::run::{run, RunOptions};
+use sim_harness::scenario::resolve;
+
+/// One simulated hour: 77 TAM samples with a fine attitude, the field turning enough in the
+/// body for the full model (condition ≈ 5e2), about 0.5 s of calibration in a dev build.
+const DURATION_S: f64 = 3600.0;
+
+#[test]
+fn e2e_tam_bias_recovered_within_its_sigma() {
+    let out = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("gro-e2e-tam");
+    let _ = std::fs::remove_dir_all(&out);
+    let fly = out.join("run");
+    let mut scenario = resolve("gro-early-mission").unwrap();
+    assert!(
+        scenario.magnetics.enabled,
+        "gro-early-mission flies the TAMs"
+    );
+    scenario.duration_s = DURATION_S;
+    run(
+        scenario,
+        &RunOptions {
+            out_dir: Some(fly.clone()),
+            tables_dir: None,
+            progress: false,
+        },
+    )
+    .unwrap();
+    let c = calibrate_run(&fly, &out.join("cal"), &CalibrateOptions::default()).unwrap();
+    let tam = &c.report.tam;
+    assert_eq!(tam.status, "determined", "{:?}", tam.reason);
+    let truth: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(fly.join("truth.json")).unwrap()).unwrap();
+    let true_bias: Vec<f64> = truth["tam"]["effective_bias_mG"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    let (bias, sigma) = (
+        tam.bias_milligauss.unwrap(),
+        tam.bias_sigma_milligauss.unwrap(),
+    );
+    for i in 0..3 {
+        let z = (bias[i] - true_bias[i]) / sigma[i];
+        assert!(
+            z.abs() < 3.0 && sigma[i] < 0.5,
+            "axis {i}: {:.3} ± {:.3} mG against {:.3} (z {z:.2})",
+            bias[i],
+            sigma[i],
+            true_bias[i]
+        );
+    }
+    let tam1 = tam.tam1.as_ref().unwrap();
+    assert!(tam1.samples >= 50, "{} samples", tam1.samples);
+    for s in tam1.noise_estimated_milligauss {
+        assert!(
+            (0.15..0.35).contains(&s),
+            "noise {s} mG against 0.22 a priori"
+        );
+    }
+    assert_eq!(tam1.heldout.len(), 2);
+    // The TRIAD check is reported; within the 2° (3σ) coarse requirement after the bias
+    // correction. Whether the correction improves it depends on the field's direction in the
+    // body (a bias along the field changes only its length): on the full 5.2 h flight it
+    // does (docs/magnetics.md §4), on this hour it does not, so that is not asserted.
+    let triad = tam.triad_comparison.as_ref().unwrap();
+    assert!(triad.samples >= 10, "{} TRIAD frames", triad.samples);
+    for x in triad.bias_corrected.three_rms_deg {
+        assert!(x < 2.0, "TRIAD 3×RMS {x}° after the bias correction");
+    }
+
+    // The same telemetry without APID 0x013 (a format-version-1 file): not determined, and why.
+    let bytes = std::fs::read(fly.join("telemetry.bin")).unwrap();
+    let mut v1 = Vec::new();
+    let mut at = 0;
+    while at + 6 <= bytes.len() {
+        let apid = u16::from_be_bytes([bytes[at], bytes[at + 1]]) & 0x07ff;
+        let len = usize::from(u16::from_be_bytes([bytes[at + 4], bytes[at + 5]])) + 7;
+        if apid != 0x013 {
+            v1.extend_from_slice(&bytes[at..at + len]);
+        }
+        at += len;
+    }
+    let old = out.join("v1");
+    std::fs::create_dir_all(&old).unwrap();
+    std::fs::write(old.join("telemetry.bin"), &v1).unwrap();
+    std::fs::copy(fly.join("metadata.json"), old.join("metadata.json")).unwrap();
+    let c = calibrate_run(&old, &out.join("cal-v1"), &CalibrateOptions::default()).unwrap();
+    assert_eq!(c.report.tam.status, "not_determined");
+    assert!(c.report.tam.bias_milligauss.is_none());
+    let reason = c.report.tam.reason.clone().unwrap();
+    assert!(reason.contains("APID 0x013"), "{reason}");
+    let _ = std::fs::remove_dir_all(&out);
+}
