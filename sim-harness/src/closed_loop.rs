@@ -299,9 +299,6 @@ impl Simulation {
                 },
             );
         }
-        for up in ephemeris_uploads(&scenario, &clock)? {
-            push_upload(&mut uploads, &mut timeline, up);
-        }
         if let Some(dir) = tables_dir {
             // The images the folder's manifest lists, checked (crate::manifest).
             let (tables, unlisted) = crate::manifest::read(dir)?;
@@ -326,6 +323,9 @@ impl Simulation {
                     },
                 );
             }
+        }
+        for up in ephemeris_uploads(&scenario, &clock, tables_dir)? {
+            push_upload(&mut uploads, &mut timeline, up);
         }
         if scenario.initial_estimate.enabled {
             timeline.push((0.0, Action::FilterInit(None)));
@@ -790,8 +790,15 @@ impl Simulation {
 /// The start-up uplinks of the tables the ground computes from ephemerides: the orbit table
 /// (`[onboard_orbit]`, at its uplink times) and the magnetics table (`[magnetics]` with
 /// `onboard_table`: the field model at the scenario epoch and the TAM knowledge the scenario
-/// gives the OBC, `onboard::magnetics_table`).
-fn ephemeris_uploads(scenario: &Scenario, clock: &SimClock) -> anyhow::Result<Vec<Upload>> {
+/// gives the OBC, `onboard::magnetics_table`) — unless the `--tables` folder holds a magnetics
+/// table (the ground's, from its TAM calibration), which then flies instead. Pushed after the
+/// `--tables` folder's uploads (at 0 s), so that the uploads are listed in load order (the
+/// scorer and the ground match load events to them in order).
+fn ephemeris_uploads(
+    scenario: &Scenario,
+    clock: &SimClock,
+    tables_dir: Option<&std::path::Path>,
+) -> anyhow::Result<Vec<Upload>> {
     let mut uploads = Vec::new();
     if let Some(uplink) = &scenario.onboard_orbit {
         for (k, at_s) in uplink
@@ -816,6 +823,16 @@ fn ephemeris_uploads(scenario: &Scenario, clock: &SimClock) -> anyhow::Result<Ve
                 at_s,
             });
         }
+    }
+    let folder_has_magnetics = match tables_dir {
+        Some(dir) => crate::manifest::read(dir)?
+            .0
+            .iter()
+            .any(|(_, _, image)| onboard::image_table_id(image) == Some(TableId::Magnetics)),
+        None => false,
+    };
+    if folder_has_magnetics {
+        return Ok(uploads);
     }
     if let Some((table, at_s)) = onboard::magnetics_table(scenario, clock)? {
         uploads.push(Upload {

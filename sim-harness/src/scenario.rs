@@ -708,13 +708,10 @@ impl Scenario {
         gro_reference::run_folder::declared_or_default(self.declared_effects.as_deref())
     }
 
-    /// Check values serde cannot.
-    ///
-    /// # Errors
-    /// The first offending field, by its TOML path.
     /// The filter-table fields uplinked at t = 0 over the boot values: the
     /// `[onboard_orbit]` ones (the orbital correction on), then the scenario's
-    /// `filter_table`; `None` = no filter-table upload.
+    /// `filter_table`; `None` = no filter-table upload (also when both are empty: an orbit
+    /// uplinked with `filter_table = {}` leaves the boot filter table flying).
     #[must_use]
     pub fn startup_filter_table(&self) -> Option<toml::Table> {
         let mut fields = match (&self.onboard_orbit, &self.filter_table) {
@@ -725,14 +722,17 @@ impl Scenario {
         for (k, v) in self.filter_table.iter().flatten() {
             fields.insert(k.clone(), v.clone());
         }
+        if fields.is_empty() && self.filter_table.is_none() {
+            return None;
+        }
         Some(fields)
     }
 
-    /// Check every field: the numbers finite, then timing, initial state, orbit, sensors,
-    /// commands and faults, each with the first error it finds (naming the field).
+    /// Check values serde cannot: the numbers finite, then timing, initial state, orbit,
+    /// sensors, commands and faults, each stage with the first error it finds.
     ///
     /// # Errors
-    /// The first field out of its range.
+    /// The first offending field, by its TOML path.
     pub fn validate(&self) -> anyhow::Result<()> {
         // Every number of the file, however deep, is finite (a NaN or an infinity in any
         // parameter would propagate into the truth and the telemetry as nulls or garbage).

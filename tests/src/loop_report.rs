@@ -62,6 +62,9 @@ pub struct LoopReport {
     pub iru_delta_m_within_3sigma: Option<bool>,
     /// Filter NEES mean (3 = consistent).
     pub filter_nees_mean: Pair<Option<f64>>,
+    /// The OBC's coarse attitude, 3 × RMS per ACS axis against truth, deg (issue 20; `None`
+    /// when a flight made no coarse fix).
+    pub coarse_attitude_error_3sigma_deg: Pair<Option<[f64; 3]>>,
     /// Wall time of each flight, s.
     pub flight_wall_seconds: Pair<f64>,
     /// Whole loop wall time, s.
@@ -219,6 +222,10 @@ pub fn compare(
             before: a.filter_nees_mean,
             after: b.filter_nees_mean,
         },
+        coarse_attitude_error_3sigma_deg: Pair {
+            before: a.coarse_attitude_error_3sigma_deg,
+            after: b.coarse_attitude_error_3sigma_deg,
+        },
         flight_wall_seconds: Pair {
             before: a.wall_seconds,
             after: b.wall_seconds,
@@ -283,6 +290,17 @@ pub fn render_markdown(r: &LoopReport) -> String {
         "| filter NEES mean (3 = consistent) | {} | {} |",
         n(r.filter_nees_mean.before),
         n(r.filter_nees_mean.after)
+    );
+    let c = |x: Option<[f64; 3]>| {
+        x.map_or("n/a".to_string(), |v| {
+            format!("[{:.2}, {:.2}, {:.2}]", v[0], v[1], v[2])
+        })
+    };
+    let _ = writeln!(
+        md,
+        "| coarse attitude error 3×RMS per axis (°; requirement 2°, FSS + TAM + IRU) | {} | {} |",
+        c(r.coarse_attitude_error_3sigma_deg.before),
+        c(r.coarse_attitude_error_3sigma_deg.after)
     );
     let _ = writeln!(
         md,

@@ -160,6 +160,43 @@ fn e2e_calibration_loop_gro_early_mission() {
             );
         }
     }
+    // Per element (field 23): every element of the true residual within 3σ of its own σ.
+    let per = slew.derived_per_element.expect("per-element slew σ");
+    for i in 0..3 {
+        for j in 0..3 {
+            let left = true_dm[(i, j)] - iru.delta_m_uplinked[i][j];
+            assert!(
+                left.abs() <= 3.0 * per[i][j],
+                "G residual [{i}][{j}] {:.0} ppm against its σ {:.0} ppm",
+                left * 1e6,
+                per[i][j] * 1e6
+            );
+        }
+    }
+    // Issue 20: the ground's TAM calibration becomes the magnetics table, and the OBC's coarse
+    // attitude with it is better on every axis and inside the 2° (3σ) requirement.
+    let mag = calibration
+        .report
+        .tam
+        .table
+        .as_ref()
+        .expect("magnetics decision");
+    assert!(mag.written, "{}", mag.reason);
+    assert!(cal.join("tables").join("magnetics.tbl").exists());
+    let (cb, ca) = (
+        r.coarse_attitude_error_3sigma_deg
+            .before
+            .expect("coarse before"),
+        r.coarse_attitude_error_3sigma_deg
+            .after
+            .expect("coarse after"),
+    );
+    for axis in 0..3 {
+        assert!(
+            ca[axis] < cb[axis] && ca[axis] <= 2.0,
+            "coarse {cb:?} → {ca:?}"
+        );
+    }
     // The gyro noise of the holds agrees with the boot table (the simulator's own noise):
     // σ_v and σ_u are kept.
     assert!(calibration.report.filter_tuning[1..]

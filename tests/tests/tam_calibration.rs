@@ -81,6 +81,26 @@ fn e2e_tam_bias_recovered_within_its_sigma() {
     for x in triad.bias_corrected.three_rms_deg {
         assert!(x < 2.0, "TRIAD 3×RMS {x}° after the bias correction");
     }
+    // The magnetics table (Table 6): decided, and when written, on disk, listed, accepted by
+    // the OBC's validation, with the determined bias.
+    let decision = tam.table.as_ref().unwrap();
+    let path = out.join("cal/tables/magnetics.tbl");
+    println!("magnetics table: {}", decision.reason);
+    assert!(!decision.reason.is_empty());
+    assert_eq!(path.exists(), decision.written);
+    if decision.written {
+        let (_, table) =
+            ground_tool::table::decode_image(&std::fs::read(&path).unwrap(), "magnetics").unwrap();
+        let ground_tool::table::AnyTable::Magnetics(t) = table else {
+            panic!("not a magnetics table");
+        };
+        assert_eq!(t.validate(), Ok(()));
+        assert_eq!(t.field_degree, 10);
+        let b = tam.bias_milligauss.unwrap();
+        assert!((t.tam_bias_milligauss[0][2] - b[2]).abs() < 0.01);
+        let manifest = std::fs::read_to_string(out.join("cal/tables/manifest.json")).unwrap();
+        assert!(manifest.contains("magnetics.tbl"));
+    }
 
     // The same telemetry without APID 0x013 (a format-version-1 file): not determined, and why.
     let bytes = std::fs::read(fly.join("telemetry.bin")).unwrap();
@@ -103,5 +123,8 @@ fn e2e_tam_bias_recovered_within_its_sigma() {
     assert!(c.report.tam.bias_milligauss.is_none());
     let reason = c.report.tam.reason.clone().unwrap();
     assert!(reason.contains("APID 0x013"), "{reason}");
+    let decision = c.report.tam.table.as_ref().unwrap();
+    assert!(!decision.written && decision.reason.contains("no TAM1 calibration"));
+    assert!(!out.join("cal-v1/tables/magnetics.tbl").exists());
     let _ = std::fs::remove_dir_all(&out);
 }

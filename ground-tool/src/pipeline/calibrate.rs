@@ -1284,7 +1284,58 @@ pub fn calibrate_run(
             .insert("filter".into(), "tables/filter.tbl".into());
         files.push("filter.tbl".to_owned());
     }
+    magnetics_stage(&mut out, &tm, &tables_dir, created, &mut files)?;
     // The tables to fly, named (gro_reference::manifest): exactly those the report lists.
     gro_reference::manifest::write(&tables_dir, &files, "ground-tool calibrate")?;
     Ok(out)
+}
+
+/// Table 6 from the TAM calibration, through its held-out check (`super::magnetics_table`);
+/// the decision goes into `report.json` `tam.table`.
+fn magnetics_stage(
+    out: &mut CalibrationOutput,
+    tm: &Telemetry,
+    tables_dir: &Path,
+    created: f64,
+    files: &mut Vec<String>,
+) -> anyhow::Result<()> {
+    use super::magnetics_table::magnetics_table;
+    let Some(first) = tm.raw.first() else {
+        return Ok(());
+    };
+    let fss = fss_sigma_after_arcsec(&out.report.alignment_validation);
+    let (table, decision) = magnetics_table(&out.report.tam, first.time, fss);
+    out.report.tam.table = Some(decision);
+    if let Some(t) = table {
+        write_table(
+            &tables_dir.join("magnetics.tbl"),
+            TableId::Magnetics,
+            &t,
+            created,
+        )?;
+        out.report
+            .tables
+            .insert("magnetics".into(), "tables/magnetics.tbl".into());
+        files.push("magnetics.tbl".to_owned());
+    }
+    Ok(())
+}
+
+/// The per-axis σ of an FSS Sun direction through the alignments that fly: the larger
+/// held-out residual RMS of FSS1 and FSS2 with the new alignments, when the alignment table
+/// passed its held-out validation with both FSSs tested; `None` otherwise.
+#[must_use]
+fn fss_sigma_after_arcsec(validation: &AlignmentValidation) -> Option<f64> {
+    if !validation.passed {
+        return None;
+    }
+    let mut worst = None::<f64>;
+    for name in ["FSS1", "FSS2"] {
+        if validation.not_validated.iter().any(|n| n == name) {
+            return None;
+        }
+        let rms = *validation.rms_new_arcsec.get(name)?;
+        worst = Some(worst.map_or(rms, |w| w.max(rms)));
+    }
+    worst
 }

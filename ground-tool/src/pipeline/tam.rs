@@ -177,6 +177,27 @@ pub struct TamReport {
     pub refused_no_field: usize,
     /// The FSS/TAM TRIAD attitude against the FHST fine attitude (the paper's check).
     pub triad_comparison: Option<TriadComparison>,
+    /// Whether the OBC's magnetics table (Table 6) is written from this calibration, and why
+    /// (`super::magnetics_table`; `None` before `calibrate_run` decides).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub table: Option<MagneticsTableDecision>,
+}
+
+/// The decision on the magnetics table (`report.json` `tam.table`; made by `super::magnetics_table`).
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct MagneticsTableDecision {
+    /// Whether `tables/magnetics.tbl` is written.
+    pub written: bool,
+    /// Why, with the numbers.
+    pub reason: String,
+    /// The table's `field_sigma_milligauss` (when written).
+    #[serde(rename = "field_sigma_mG")]
+    pub field_sigma_milligauss: Option<f64>,
+    /// The table's `fss_sun_sigma_rad` in arcsec (when written).
+    pub fss_sun_sigma_arcsec: Option<f64>,
+    /// The bias per TAM the table subtracts, mG on its axes (when written).
+    #[serde(rename = "tam_bias_mG")]
+    pub tam_bias_milligauss: Option<[[f64; 3]; 2]>,
 }
 
 /// Why offered samples had no fine attitude.
