@@ -28,6 +28,10 @@
 //! 7. **FSS1, FSS2**: counts → Sun vector in ACS; onboard Sun ephemeris (seen from the
 //!    spacecraft when the orbital correction applies); update in coarse mode only (fine mode
 //!    is FHST-only, as on GRO); the α/β innovation is always reported.
+//! 7b. **Coarse attitude** (every mode, alongside the fine filter; [`crate::coarse`]): carried
+//!    on the gyro increments every cycle, fixed every `coarse_fix_every_n_cycles` from the Sun
+//!    (FSS, else CSS) and the TAM field against the onboard field model at the onboard orbit
+//!    (magnetics table, Table 6), after a magnitude check and a χ² gate; events 0x0901–0x0903.
 //! 8. **Control**: inertial hold or rate-limited eigen-axis slew → wheel torque; IRU rate
 //!    mode request (high for slews).
 //! 9. **Housekeeping** (the onboard orbit is not in it: the 230-octet record of
@@ -35,7 +39,7 @@
 //!
 //! Worst case per cycle: one star identification per tracker (a linear scan of at most
 //! `MAX_CATALOG_STARS` stars, only on a new acquisition), four 2-component filter updates,
-//! nine RK4 steps of the orbit.
+//! nine RK4 steps of the orbit, one coarse fix (a degree-10 field synthesis and a TRIAD).
 
 use crate::attitude::{rot, Quat};
 use crate::coarse::{CoarseAttitude, CoarseUnavailable};
