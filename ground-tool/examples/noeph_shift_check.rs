@@ -9,7 +9,9 @@
 //! ```
 use fsw_core::tables::types::{AlignmentTable, IruTable};
 use fsw_core::units::ARCSEC_PER_RAD;
-use ground_tool::calibration::fhst_relative::{estimate_relative_alignment, BatchStarSample};
+use ground_tool::calibration::fhst_relative::{
+    estimate_relative_alignment, BatchStarSample, FhstRelativeAlignment,
+};
 use ground_tool::pipeline::calibrate::{load_catalog, read_run, CalibrateOptions};
 use ground_tool::pipeline::observations::{build_observations, FrameObservations};
 use ground_tool::pipeline::star_batches::{star_batch_samples, star_batches};
@@ -33,6 +35,27 @@ fn samples(dir: &Path) -> anyhow::Result<(Vec<FrameObservations>, Vec<BatchStarS
     Ok((frames, s, n))
 }
 
+/// The gyro-batch estimate of `samples` over `n` batches.
+fn estimate(samples: &[BatchStarSample], n: usize) -> anyhow::Result<FhstRelativeAlignment> {
+    estimate_relative_alignment(samples, n, 1).map_err(|e| anyhow::anyhow!("{e}"))
+}
+
+/// The two runs' frames and samples, and their estimates.
+struct Runs {
+    /// The first run's frames.
+    fa: Vec<FrameObservations>,
+    /// Samples of the first and the second run.
+    sa: Vec<BatchStarSample>,
+    sb: Vec<BatchStarSample>,
+    /// Batches (the same in both).
+    na: usize,
+    /// Estimates of the first and the second run.
+    ta: Vector3<f64>,
+    eb: FhstRelativeAlignment,
+    /// The first run's batch spans with identified stars (the samples' batch indices).
+    with_samples: Vec<(usize, usize)>,
+}
+
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().collect();
     let (fa, sa, na) = samples(Path::new(&args[1]))?;
@@ -42,11 +65,11 @@ fn main() -> anyhow::Result<()> {
     assert_eq!(na, nb);
     let same = sa
         .iter()
-        .zip(&sb)
+        .zip(sb.iter())
         .all(|(a, b)| a.tracker == b.tracker && a.batch == b.batch && a.meas_acs == b.meas_acs);
     println!("same samples (tracker, batch, measurement): {same}");
-    let ea = estimate_relative_alignment(&sa, na, 1).map_err(|e| anyhow::anyhow!("{e}"))?;
-    let eb = estimate_relative_alignment(&sb, nb, 1).map_err(|e| anyhow::anyhow!("{e}"))?;
+    let ea = estimate(&sa, na)?;
+    let eb = estimate(&sb, nb)?;
     let ta = ea.theta_acs_arcsec;
     let tb = eb.theta_acs_arcsec;
     println!("with eph    θ = [{:.1}, {:.1}, {:.1}]", ta.x, ta.y, ta.z);
@@ -62,18 +85,47 @@ fn main() -> anyhow::Result<()> {
                 .any(|f| f.stars.iter().flatten().any(|s| s.identified.is_some()))
         })
         .collect();
+    let tb = eb.theta_acs_arcsec;
+    let r = Runs {
+        fa,
+        sa,
+        sb,
+        na,
+        ta,
+        eb,
+        with_samples,
+    };
+    batch_shifts(&r)?;
+    predicted_shift(&r)?;
+    consider_sigma(&r, tb)?;
+    star_segments(&r, args.get(3).map(String::as_str))
+}
+
+/// Per batch: its span, rate, samples per tracker, the largest reference change, and the
+/// shift of the estimate when only this batch comes from the second run.
+fn batch_shifts(r: &Runs) -> anyhow::Result<()> {
+    let Runs {
+        fa,
+        sa,
+        sb,
+        na,
+        ta,
+        with_samples,
+        ..
+    } = r;
+    let na = *na;
     println!("batch  t0(s)  len(s)  rate  n1  n2  |Δref| max FHST1/FHST2 (″)  shift alone (″)");
     for b in 0..na {
         let mixed: Vec<BatchStarSample> = sa
             .iter()
-            .zip(&sb)
+            .zip(sb.iter())
             .map(|(a, bb)| if a.batch == b { *bb } else { *a })
             .collect();
-        let em = estimate_relative_alignment(&mixed, na, 1).map_err(|e| anyhow::anyhow!("{e}"))?;
+        let em = estimate(&mixed, na)?;
         let d = em.theta_acs_arcsec - ta;
         let mut dmax = [0.0f64; 2];
         let mut cnt = [0usize; 2];
-        for (a, bb) in sa.iter().zip(&sb).filter(|(a, _)| a.batch == b) {
+        for (a, bb) in sa.iter().zip(sb.iter()).filter(|(a, _)| a.batch == b) {
             let dd = (a.ref_acs - bb.ref_acs).norm() * ARCSEC_PER_RAD;
             dmax[a.tracker] = dmax[a.tracker].max(dd);
             cnt[a.tracker] += 1;
@@ -94,11 +146,25 @@ fn main() -> anyhow::Result<()> {
             d.z
         );
     }
-    // The shift predicted by the orbital aberration alone: the first run's references
+    Ok(())
+}
+
+/// The first-order change of a direction `a` by the aberration of the velocity `w_acs`
+/// (km/s, same axes).
+fn aberrate(a: &Vector3<f64>, w_acs: &Vector3<f64>) -> Vector3<f64> {
+    const C_KM_PER_S: f64 = 299_792.458;
+    (w_acs - a * w_acs.dot(a)) / C_KM_PER_S
+}
+
+/// The shift predicted by the orbital aberration alone.
+fn predicted_shift(r: &Runs) -> anyhow::Result<()> {
+    let Runs { fa, sa, na, ta, .. } = r;
+    let na = *na;
+    // The first run's references
     // without the orbital velocity's aberration (first order, the OBC attitude of the frame),
     // and a consider covariance: each batch's orbital velocity unknown, isotropic, |v| = V.
     let mut frame_of = Vec::with_capacity(sa.len());
-    for (lo, hi) in star_batches(&fa) {
+    for (lo, hi) in star_batches(fa) {
         for (k, f) in fa.iter().enumerate().take(hi).skip(lo) {
             for s in f.stars.iter().flatten() {
                 if s.identified.is_some() {
@@ -108,8 +174,6 @@ fn main() -> anyhow::Result<()> {
         }
     }
     assert_eq!(frame_of.len(), sa.len());
-    const C_KM_PER_S: f64 = 299_792.458;
-    let aberrate = |a: &Vector3<f64>, w_acs: &Vector3<f64>| (w_acs - a * w_acs.dot(a)) / C_KM_PER_S;
     let mut predicted = sa.clone();
     let mut ok = true;
     for (s, &k) in predicted.iter_mut().zip(&frame_of) {
@@ -123,8 +187,7 @@ fn main() -> anyhow::Result<()> {
         }
     }
     if ok {
-        let ep =
-            estimate_relative_alignment(&predicted, na, 1).map_err(|e| anyhow::anyhow!("{e}"))?;
+        let ep = estimate(&predicted, na)?;
         let d = ep.theta_acs_arcsec - ta;
         println!(
             "orbital aberration removed from the first run's references: shift [{:.1}, {:.1}, {:.1}]″",
@@ -133,6 +196,13 @@ fn main() -> anyhow::Result<()> {
     } else {
         println!("(no orbit or OBC attitude in some frames: predicted shift not computed)");
     }
+    Ok(())
+}
+
+/// The consider σ of the orbital aberration, each batch's velocity unknown.
+fn consider_sigma(r: &Runs, tb: Vector3<f64>) -> anyhow::Result<()> {
+    let Runs { fa, sb, na, eb, .. } = r;
+    let na = *na;
     let v_orbit = fa
         .iter()
         .find_map(|f| f.orbit.map(|(_, v)| v.norm()))
@@ -152,8 +222,7 @@ fn main() -> anyhow::Result<()> {
                     s
                 })
                 .collect();
-            let e =
-                estimate_relative_alignment(&pert, na, 1).map_err(|e| anyhow::anyhow!("{e}"))?;
+            let e = estimate(&pert, na)?;
             k_b.set_column(j, &(e.theta_acs_arcsec - tb));
         }
         // E[w wᵀ] = V²/3 I for a direction uniform on the sphere; columns are per V.
@@ -168,6 +237,18 @@ fn main() -> anyhow::Result<()> {
         eb.covariance_arcsec2[(1, 1)].sqrt(),
         eb.covariance_arcsec2[(2, 2)].sqrt()
     );
+    Ok(())
+}
+
+/// The star segments of the batches listed in `show` (comma-separated indices).
+fn star_segments(r: &Runs, show: Option<&str>) -> anyhow::Result<()> {
+    let Runs {
+        fa,
+        sa,
+        sb,
+        with_samples,
+        ..
+    } = r;
     // Star segments of the batches that move θ most: which stars, where in the field, and
     // the reference change (with − without ephemeris) in sensor axes.
     let m: Vec<nalgebra::Matrix3<f64>> = AlignmentTable::prelaunch()
@@ -175,7 +256,7 @@ fn main() -> anyhow::Result<()> {
         .iter()
         .map(|r| fsw_core::tables::types::matrix_from_rows(r))
         .collect();
-    let show: Vec<usize> = args.get(3).map_or(vec![], |s| {
+    let show: Vec<usize> = show.map_or(vec![], |s| {
         s.split(',').filter_map(|x| x.parse().ok()).collect()
     });
     let mut i = 0usize;

@@ -9,6 +9,7 @@ static GLOBAL: tikv_jemallocator::Jemalloc = tikv_jemallocator::Jemalloc;
 
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
+use ground_tool::run_check::CommandArgs;
 
 #[derive(Parser)]
 #[command(
@@ -497,32 +498,21 @@ fn parse_span(s: &str) -> std::result::Result<(f64, f64), String> {
     Ok((a, b))
 }
 
-#[allow(clippy::too_many_arguments)]
 fn run_calibrate(
-    run_dir: &std::path::Path,
-    out_target: &std::path::Path,
-    force: bool,
-    tables: Option<&std::path::Path>,
+    args: &CommandArgs<'_>,
     shuster1982: bool,
     single_stage: bool,
     fhst_stage: ground_tool::pipeline::calibrate::FhstStage,
     maneuvers: Vec<(f64, f64)>,
-    json: bool,
-    quiet: bool,
 ) -> Result<()> {
     use ground_tool::calibration::alignment::Weighting;
-    let progress = ground_tool::progress::Session::start("ground-tool calibrate", !quiet);
+    let (run_dir, out_target, tables) = (args.run_dir, args.out, args.tables);
+    let progress = ground_tool::progress::Session::start("ground-tool calibrate", !args.quiet);
     use ground_tool::pipeline::calibrate::{calibrate_run, CalibrateOptions};
     let meta = ground_tool::pipeline::flown::metadata_or_default(run_dir);
     let (flown_alignment, flown_iru, flown_filter) =
         ground_tool::pipeline::flown::flown_tables(run_dir, &meta, tables)?;
-    let dir = ground_tool::run_check::begin_output(
-        out_target,
-        "ground-tool calibrate",
-        force,
-        run_dir,
-        tables,
-    )?;
+    let dir = args.begin_output("ground-tool calibrate")?;
     let out = dir.path();
     ground_tool::run_check::check_run_dir(run_dir, out)?;
     let options = CalibrateOptions {
@@ -555,7 +545,7 @@ fn run_calibrate(
     ground_tool::report::write_calibration_report(out, &result, &flown, obc_bias.as_ref())?;
     dir.commit()?;
     drop(progress);
-    if json {
+    if args.json {
         println!("{}", serde_json::to_string_pretty(&result.report)?);
     } else {
         eprintln!(
@@ -566,29 +556,12 @@ fn run_calibrate(
     Ok(())
 }
 
-fn run_diagnose(
-    run_dir: &std::path::Path,
-    out_target: &std::path::Path,
-    force: bool,
-    tables: Option<&std::path::Path>,
-    json: bool,
-    quiet: bool,
-) -> Result<()> {
-    ground_tool::diagnose::run::diagnose_command(
-        run_dir, out_target, force, tables, json, quiet, None,
-    )
-}
-
 /// `ground-tool allan`: read the telemetry, identify the gyro noise, write the outputs.
 fn run_allan(
-    run_dir: &std::path::Path,
-    out_target: &std::path::Path,
-    force: bool,
-    tables: Option<&std::path::Path>,
+    args: &CommandArgs<'_>,
     options: ground_tool::calibration::allan::AllanOptions,
-    json: bool,
-    quiet: bool,
 ) -> Result<()> {
+    let (run_dir, tables, quiet) = (args.run_dir, args.tables, args.quiet);
     use ground_tool::calibration::allan;
     use ground_tool::run_check::{InputError, Severity};
     if !(options.confidence > 0.0 && options.confidence < 1.0) {
@@ -618,18 +591,12 @@ fn run_allan(
             run_dir.display()
         )))
     })?;
-    let dir = ground_tool::run_check::begin_output(
-        out_target,
-        "ground-tool allan",
-        force,
-        run_dir,
-        tables,
-    )?;
+    let dir = args.begin_output("ground-tool allan")?;
     ground_tool::progress::step("allan.json, allan.md and the plot");
     allan::write_outputs(dir.path(), &report, &run_dir.display().to_string())?;
     dir.commit()?;
     drop(progress);
-    if json {
+    if args.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
         for a in &report.axes {
@@ -655,7 +622,7 @@ fn run_allan(
         }
         eprintln!(
             "wrote {}/allan.json, allan.md, allan.png",
-            out_target.display()
+            args.out.display()
         );
     }
     Ok(())
@@ -687,16 +654,18 @@ fn run(cli: Cli) -> Result<()> {
             json,
             quiet,
         } => run_calibrate(
-            &run_dir,
-            &out,
-            force,
-            tables.as_deref(),
+            &CommandArgs {
+                run_dir: &run_dir,
+                out: &out,
+                force,
+                tables: tables.as_deref(),
+                json,
+                quiet,
+            },
             shuster1982,
             single_stage,
             fhst_stage,
             maneuvers,
-            json,
-            quiet,
         )?,
         Command::Diagnose {
             run_dir,
@@ -705,7 +674,17 @@ fn run(cli: Cli) -> Result<()> {
             tables,
             json,
             quiet,
-        } => run_diagnose(&run_dir, &out, force, tables.as_deref(), json, quiet)?,
+        } => ground_tool::diagnose::run::diagnose_command(
+            &CommandArgs {
+                run_dir: &run_dir,
+                out: &out,
+                force,
+                tables: tables.as_deref(),
+                json,
+                quiet,
+            },
+            None,
+        )?,
         Command::Allan {
             run_dir,
             out,
@@ -716,13 +695,15 @@ fn run(cli: Cli) -> Result<()> {
             json,
             quiet,
         } => run_allan(
-            &run_dir,
-            &out,
-            force,
-            tables.as_deref(),
+            &CommandArgs {
+                run_dir: &run_dir,
+                out: &out,
+                force,
+                tables: tables.as_deref(),
+                json,
+                quiet,
+            },
             ground_tool::calibration::allan::AllanOptions { confidence, signal },
-            json,
-            quiet,
         )?,
         Command::Paper { json } => {
             let r = ground_tool::paper::reproduce()?;

@@ -390,63 +390,10 @@ fn median(mut v: Vec<f64>) -> f64 {
 pub fn reproduce() -> Result<PaperReproduction, PaperError> {
     let p = PaperData::embedded()?;
     let missing = |what: &str| PaperError::Missing(what.to_owned());
-    let mut sensors = Vec::new();
-    let mut table3_max = 0.0_f64;
-    for id in SENSORS {
-        let m_pre = p
-            .prelaunch(id)
-            .ok_or_else(|| missing(&format!("table1_prelaunch.{id}")))?;
-        let m_ss = p
-            .misalignment(id)
-            .ok_or_else(|| missing(&format!("table2_misalignment.{id}")))?;
-        let product = m_pre * m_ss;
-        let published = p.adjusted_published(id);
-        let (diff, at) = match &published {
-            Some(m3) => {
-                let d = product - m3;
-                let (mut best, mut at) = (0.0, (0, 0));
-                for r in 0..3 {
-                    for c in 0..3 {
-                        if d[(r, c)].abs() > best {
-                            best = d[(r, c)].abs();
-                            at = (r, c);
-                        }
-                    }
-                }
-                table3_max = table3_max.max(best);
-                (Some(best), Some(at))
-            }
-            None => (None, None),
-        };
-        let theta = rotation_vector_arcsec(&m_pre, &product);
-        let boresight_pre = m_pre.column(2).into_owned().normalize();
-        let boresight_adj = product.column(2).into_owned().normalize();
-        let published_vec = p
-            .rotation_vector_published_arcsec(id)
-            .ok_or_else(|| missing(&format!("rotation_vectors_published_arcsec.{id}")))?;
-        sensors.push(SensorReproduction {
-            id: id.to_owned(),
-            table3_product: rows(&product),
-            table3_max_abs_diff: diff,
-            table3_max_abs_diff_at: at,
-            table2_orthonormality_error: orthonormality_error(&m_ss),
-            rotation_vector_arcsec: theta.into(),
-            rotation_magnitude_arcsec: theta.norm(),
-            rotation_vector_sensor_arcsec: (nearest_rotation(&m_pre).transpose() * theta).into(),
-            rotation_vector_from_published_table3_arcsec: published
-                .map(|m3| rotation_vector_arcsec(&m_pre, &m3).into()),
-            rotation_vector_published_arcsec: published_vec.into(),
-            rotation_magnitude_published_arcsec: p
-                .rotation_magnitude_published_arcsec(id)
-                .ok_or_else(|| {
-                    missing(&format!("rotation_vectors_published_arcsec.magnitude.{id}"))
-                })?,
-            published_vector_norm_arcsec: published_vec.norm(),
-            boresight_shift_arcsec: angle_between_rad(&boresight_pre, &boresight_adj)
-                * ARCSEC_PER_RAD,
-            roll_about_boresight_arcsec: theta.dot(&boresight_pre),
-        });
-    }
+    let sensors = SENSORS
+        .iter()
+        .map(|id| sensor_reproduction(&p, id))
+        .collect::<Result<Vec<_>, _>>()?;
     let t1 = |id: &str| p.prelaunch(id).ok_or_else(|| missing(id));
     let t3 = |id: &str| p.adjusted_published(id).ok_or_else(|| missing(id));
     let (pre1, pre2, adj1, adj2) = (t1("FHST1")?, t1("FHST2")?, t3("FHST1")?, t3("FHST2")?);
@@ -459,12 +406,100 @@ pub fn reproduce() -> Result<PaperReproduction, PaperError> {
         m_an_rotation_arcsec((&pre1, &pre2), (&adj1, &adj2), c)
             .map_err(|e| PaperError::Missing(e.to_string()))
     };
+    let iru = iru_plan_reproduction(&p)?;
+    Ok(PaperReproduction {
+        table3_max_abs_diff_fhst: sensors
+            .iter()
+            .filter_map(|s| s.table3_max_abs_diff)
+            .fold(0.0_f64, f64::max),
+        fhst_boresight_separation_prelaunch_deg: sep_pre * DEG_PER_RAD,
+        fhst_boresight_separation_change_arcsec: (sep_adj - sep_pre) * ARCSEC_PER_RAD,
+        fhst_boresight_separation_change_product_arcsec: (sep_prod - sep_pre) * ARCSEC_PER_RAD,
+        fhst_boresight_separation_reduction_published_arcsec: p
+            .alignment_results_published
+            .fhst_boresight_separation_reduction_arcsec,
+        m_an_rotation_bisector_arcsec: m_an(BoresightFrame::Bisector)?,
+        m_an_rotation_fhst1_arcsec: m_an(BoresightFrame::Fhst1Boresight)?,
+        fss_rotation_deg: [
+            sensors[2].rotation_magnitude_arcsec / 3600.0,
+            sensors[3].rotation_magnitude_arcsec / 3600.0,
+        ],
+        fss_boresight_shift_deg: [
+            sensors[2].boresight_shift_arcsec / 3600.0,
+            sensors[3].boresight_shift_arcsec / 3600.0,
+        ],
+        fss_misalignment_published_deg: [
+            p.alignment_results_published.fss1_misalignment_deg,
+            p.alignment_results_published.fss2_misalignment_deg,
+        ],
+        iru,
+        sensors,
+    })
+}
 
+/// One sensor's rows of Tables 1–3 and its rotation vector against the published one.
+fn sensor_reproduction(p: &PaperData, id: &str) -> Result<SensorReproduction, PaperError> {
+    let missing = |what: &str| PaperError::Missing(what.to_owned());
+    let m_pre = p
+        .prelaunch(id)
+        .ok_or_else(|| missing(&format!("table1_prelaunch.{id}")))?;
+    let m_ss = p
+        .misalignment(id)
+        .ok_or_else(|| missing(&format!("table2_misalignment.{id}")))?;
+    let product = m_pre * m_ss;
+    let published = p.adjusted_published(id);
+    let (diff, at) = match &published {
+        Some(m3) => {
+            let d = product - m3;
+            let (mut best, mut at) = (0.0, (0, 0));
+            for r in 0..3 {
+                for c in 0..3 {
+                    if d[(r, c)].abs() > best {
+                        best = d[(r, c)].abs();
+                        at = (r, c);
+                    }
+                }
+            }
+            (Some(best), Some(at))
+        }
+        None => (None, None),
+    };
+    let theta = rotation_vector_arcsec(&m_pre, &product);
+    let boresight_pre = m_pre.column(2).into_owned().normalize();
+    let boresight_adj = product.column(2).into_owned().normalize();
+    let published_vec = p
+        .rotation_vector_published_arcsec(id)
+        .ok_or_else(|| missing(&format!("rotation_vectors_published_arcsec.{id}")))?;
+    Ok(SensorReproduction {
+        id: id.to_owned(),
+        table3_product: rows(&product),
+        table3_max_abs_diff: diff,
+        table3_max_abs_diff_at: at,
+        table2_orthonormality_error: orthonormality_error(&m_ss),
+        rotation_vector_arcsec: theta.into(),
+        rotation_magnitude_arcsec: theta.norm(),
+        rotation_vector_sensor_arcsec: (nearest_rotation(&m_pre).transpose() * theta).into(),
+        rotation_vector_from_published_table3_arcsec: published
+            .map(|m3| rotation_vector_arcsec(&m_pre, &m3).into()),
+        rotation_vector_published_arcsec: published_vec.into(),
+        rotation_magnitude_published_arcsec: p
+            .rotation_magnitude_published_arcsec(id)
+            .ok_or_else(|| missing(&format!("rotation_vectors_published_arcsec.magnitude.{id}")))?,
+        published_vector_norm_arcsec: published_vec.norm(),
+        boresight_shift_arcsec: angle_between_rad(&boresight_pre, &boresight_adj) * ARCSEC_PER_RAD,
+        roll_about_boresight_arcsec: theta.dot(&boresight_pre),
+    })
+}
+
+/// The IRU calibration plan's σ(δM) and bias σ with FSS-based, as-flown and FHST-only ends,
+/// against the published ones.
+fn iru_plan_reproduction(p: &PaperData) -> Result<IruPlanReproduction, PaperError> {
+    let missing = |what: &str| PaperError::Missing(what.to_owned());
     let fss_sigma_rad = p.fss_inherent_error_deg() * RAD_PER_DEG;
     let fhst_sigma_rad = FHST_ONLY_END_SIGMA_ARCSEC * RAD_PER_ARCSEC;
     let iso = |s: f64| Matrix3::identity() * s * s;
-    let fss_ends = iru_study(&p, |_| iso(fss_sigma_rad))?;
-    let as_flown_isotropic = iru_study(&p, |s| {
+    let fss_ends = iru_study(p, |_| iso(fss_sigma_rad))?;
+    let as_flown_isotropic = iru_study(p, |s| {
         iso(if uses_fss(s) {
             fss_sigma_rad
         } else {
@@ -473,7 +508,7 @@ pub fn reproduce() -> Result<PaperReproduction, PaperError> {
     })?;
     // FSS + FHST: the tracker fixes the two axes across its boresight (10″), the Sun only the
     // roll about that boresight (0.022°).
-    let as_flown = iru_study(&p, |s| {
+    let as_flown = iru_study(p, |s| {
         if !uses_fss(s) {
             return iso(fhst_sigma_rad);
         }
@@ -491,7 +526,7 @@ pub fn reproduce() -> Result<PaperReproduction, PaperError> {
             None => iso(fss_sigma_rad),
         }
     })?;
-    let fhst_only = iru_study(&p, |_| iso(fhst_sigma_rad))?;
+    let fhst_only = iru_study(p, |_| iso(fhst_sigma_rad))?;
     let published = mat(&p.iru_calibration_published.delta_m_1sigma);
     let ratio = |s: &PlanStudy| rows(&s.sigma_delta_m.component_div(&published));
     let improvement = median(
@@ -513,50 +548,23 @@ pub fn reproduce() -> Result<PaperReproduction, PaperError> {
         bias_pub("Z1").ok_or_else(|| missing("iru_high_rate_bias_deg_per_s.primary.Z1"))?,
     ];
     let deg = |v: &Vector3<f64>| -> [f64; 3] { (v * DEG_PER_RAD).into() };
-
-    Ok(PaperReproduction {
-        table3_max_abs_diff_fhst: table3_max,
-        fhst_boresight_separation_prelaunch_deg: sep_pre * DEG_PER_RAD,
-        fhst_boresight_separation_change_arcsec: (sep_adj - sep_pre) * ARCSEC_PER_RAD,
-        fhst_boresight_separation_change_product_arcsec: (sep_prod - sep_pre) * ARCSEC_PER_RAD,
-        fhst_boresight_separation_reduction_published_arcsec: p
-            .alignment_results_published
-            .fhst_boresight_separation_reduction_arcsec,
-        m_an_rotation_bisector_arcsec: m_an(BoresightFrame::Bisector)?,
-        m_an_rotation_fhst1_arcsec: m_an(BoresightFrame::Fhst1Boresight)?,
-        fss_rotation_deg: [
-            sensors[2].rotation_magnitude_arcsec / 3600.0,
-            sensors[3].rotation_magnitude_arcsec / 3600.0,
-        ],
-        fss_boresight_shift_deg: [
-            sensors[2].boresight_shift_arcsec / 3600.0,
-            sensors[3].boresight_shift_arcsec / 3600.0,
-        ],
-        fss_misalignment_published_deg: [
-            p.alignment_results_published.fss1_misalignment_deg,
-            p.alignment_results_published.fss2_misalignment_deg,
-        ],
-        iru: IruPlanReproduction {
-            fss_end_sigma_deg: p.fss_inherent_error_deg(),
-            fhst_end_sigma_arcsec: FHST_ONLY_END_SIGMA_ARCSEC,
-            sigma_delta_m_fss_ends: rows(&fss_ends.sigma_delta_m),
-            sigma_delta_m_as_flown: rows(&as_flown.sigma_delta_m),
-            sigma_delta_m_fhst_only: rows(&fhst_only.sigma_delta_m),
-            sigma_delta_m_published: rows(&published),
-            ratio_fss_ends_to_published: ratio(&fss_ends),
-            ratio_as_flown_to_published: ratio(&as_flown),
-            sigma_delta_m_as_flown_isotropic: rows(&as_flown_isotropic.sigma_delta_m),
-            ratio_as_flown_isotropic_to_published: ratio(&as_flown_isotropic),
-            sigma_bias_as_flown_deg_per_s: deg(&as_flown.sigma_bias_acs_rad_per_s),
-            sigma_bias_as_flown_isotropic_deg_per_s: deg(
-                &as_flown_isotropic.sigma_bias_acs_rad_per_s
-            ),
-            fhst_only_improvement_median: improvement,
-            sigma_bias_fss_ends_deg_per_s: deg(&fss_ends.sigma_bias_acs_rad_per_s),
-            sigma_bias_fhst_only_deg_per_s: deg(&fhst_only.sigma_bias_acs_rad_per_s),
-            sigma_bias_published_deg_per_s,
-        },
-        sensors,
+    Ok(IruPlanReproduction {
+        fss_end_sigma_deg: p.fss_inherent_error_deg(),
+        fhst_end_sigma_arcsec: FHST_ONLY_END_SIGMA_ARCSEC,
+        sigma_delta_m_fss_ends: rows(&fss_ends.sigma_delta_m),
+        sigma_delta_m_as_flown: rows(&as_flown.sigma_delta_m),
+        sigma_delta_m_fhst_only: rows(&fhst_only.sigma_delta_m),
+        sigma_delta_m_published: rows(&published),
+        ratio_fss_ends_to_published: ratio(&fss_ends),
+        ratio_as_flown_to_published: ratio(&as_flown),
+        sigma_delta_m_as_flown_isotropic: rows(&as_flown_isotropic.sigma_delta_m),
+        ratio_as_flown_isotropic_to_published: ratio(&as_flown_isotropic),
+        sigma_bias_as_flown_deg_per_s: deg(&as_flown.sigma_bias_acs_rad_per_s),
+        sigma_bias_as_flown_isotropic_deg_per_s: deg(&as_flown_isotropic.sigma_bias_acs_rad_per_s),
+        fhst_only_improvement_median: improvement,
+        sigma_bias_fss_ends_deg_per_s: deg(&fss_ends.sigma_bias_acs_rad_per_s),
+        sigma_bias_fhst_only_deg_per_s: deg(&fhst_only.sigma_bias_acs_rad_per_s),
+        sigma_bias_published_deg_per_s,
     })
 }
 

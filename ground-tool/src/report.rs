@@ -386,7 +386,7 @@ fn md_iru(md: &mut String, r: &CalibrationReport) {
                     md,
                     "Hold batch at t = {:.2} h refused as a fix: its attitude fit has χ² {chi2:.0} on {dof} dof (p below {:.0e}), so its vectors do not agree under their stated σ (seen when the bias the batch is propagated with, the OBC's, is wrong, as right after a bias reset or a triad switch; misidentified stars would do the same).\n",
                     t / 3600.0,
-                    crate::pipeline::calibrate::FIX_MISFIT_P
+                    crate::pipeline::iru_fixes::FIX_MISFIT_P
                 );
             }
             for b in &iru.bias_steps {
@@ -631,6 +631,32 @@ fn mean(v: &[(f64, f64)]) -> f64 {
     v.iter().map(|p| p.1).sum::<f64>() / v.len().max(1) as f64
 }
 
+/// The zero line of a residual panel (not in the legend).
+fn zero_line() -> Layer {
+    Layer {
+        label: None,
+        color: GREY,
+        kind: Kind::HLine(0.0),
+    }
+}
+
+/// A panel of residuals (arcsec): the zero line and the residuals as dots.
+fn residual_panel(title: &str, label: String, color: RGBColor, dots: Vec<(f64, f64)>) -> Panel {
+    Panel {
+        title: title.into(),
+        y_label: "residual (arcsec)".into(),
+        y_quantile: None,
+        layers: vec![
+            zero_line(),
+            Layer {
+                label: Some(label),
+                color,
+                kind: Kind::Dots(dots),
+            },
+        ],
+    }
+}
+
 const BEFORE: RGBColor = RGBColor(200, 60, 40);
 const AFTER: RGBColor = RGBColor(30, 90, 200);
 const GREY: RGBColor = RGBColor(120, 120, 120);
@@ -698,40 +724,18 @@ fn write_plots(
                 x_range,
                 shared_y: true,
                 panels: vec![
-                    Panel {
-                        title: "before: the flown (prelaunch) alignments".into(),
-                        y_label: "residual (arcsec)".into(),
-                        y_quantile: None,
-                        layers: vec![
-                            Layer {
-                                label: None,
-                                color: GREY,
-                                kind: Kind::HLine(0.0),
-                            },
-                            Layer {
-                                label: Some(format!("before (flown tables): RMS {rb:.1}″, mean {mb:+.1}″")),
-                                color: BEFORE,
-                                kind: Kind::Dots(b),
-                            },
-                        ],
-                    },
-                    Panel {
-                        title: "after: the calibrated alignments (same scale)".into(),
-                        y_label: "residual (arcsec)".into(),
-                        y_quantile: None,
-                        layers: vec![
-                            Layer {
-                                label: None,
-                                color: GREY,
-                                kind: Kind::HLine(0.0),
-                            },
-                            Layer {
-                                label: Some(format!("after (calibrated): RMS {ra:.1}″, mean {ma:+.1}″")),
-                                color: AFTER,
-                                kind: Kind::Dots(a),
-                            },
-                        ],
-                    },
+                    residual_panel(
+                        "before: the flown (prelaunch) alignments",
+                        format!("before (flown tables): RMS {rb:.1}″, mean {mb:+.1}″"),
+                        BEFORE,
+                        b,
+                    ),
+                    residual_panel(
+                        "after: the calibrated alignments (same scale)",
+                        format!("after (calibrated): RMS {ra:.1}″, mean {ma:+.1}″"),
+                        AFTER,
+                        a,
+                    ),
                 ],
                 notes: vec![
                     format!("{n_epochs} epochs with both sensors' referenced vectors."),
@@ -995,11 +999,7 @@ fn bias_axis_panels(
         }
     }
     let diff_rms = rms(&diff);
-    let mut layers = vec![Layer {
-        label: None,
-        color: GREY,
-        kind: Kind::HLine(0.0),
-    }];
+    let mut layers = vec![zero_line()];
     layers.push(Layer {
         label: Some("0 ± the ground's 1σ at its fixes".into()),
         color: GREY,

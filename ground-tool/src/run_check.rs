@@ -575,6 +575,35 @@ fn housekeeping_findings(tm: &Telemetry, out: &mut Vec<Finding>) {
     }
 }
 
+/// What `calibrate`, `diagnose` and `allan` are asked besides their own options: the run
+/// folder, the output folder (replaced whole with `force` when it is not the command's own
+/// previous output), the tables folder flown, and how to report (`json`, `quiet`).
+#[derive(Clone, Copy, Debug)]
+pub struct CommandArgs<'a> {
+    /// Run folder with telemetry.bin.
+    pub run_dir: &'a std::path::Path,
+    /// Output folder.
+    pub out: &'a std::path::Path,
+    /// Replace a non-empty output folder another tool wrote.
+    pub force: bool,
+    /// Tables folder of the images flown.
+    pub tables: Option<&'a std::path::Path>,
+    /// Print report.json to stdout.
+    pub json: bool,
+    /// No progress on stderr.
+    pub quiet: bool,
+}
+
+impl CommandArgs<'_> {
+    /// [`begin_output`] of `command` with these folders.
+    ///
+    /// # Errors
+    /// As [`begin_output`].
+    pub fn begin_output(&self, command: &str) -> anyhow::Result<gro_reference::outdir::OutputDir> {
+        begin_output(self.out, command, self.force, self.run_dir, self.tables)
+    }
+}
+
 /// The output folder of a command over `run_dir` (and a `tables` folder), begun as a
 /// temporary sibling of `out_target` ([`gro_reference::outdir::OutputDir`]), with the run
 /// folder and the tables folder given as its inputs (which the output may not replace).

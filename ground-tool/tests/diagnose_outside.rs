@@ -239,15 +239,22 @@ fn outside_writer_scale_asymmetry_is_found_beside_a_bias_ramp() {
             .iter()
             .find(|d| d["effect"] == effect)
             .unwrap();
-        for ax in ["x", "y", "z"] {
-            let t = injected["parameters"][ax].as_f64().unwrap();
-            let x = d["parameters"][ax].as_f64().unwrap();
-            let s = d["sigma"][ax].as_f64().unwrap();
-            assert!(
-                (x - t).abs() <= 3.0 * s,
-                "{effect} {ax}: {x:.4} ± {s:.4} against the writer's {t}"
-            );
-        }
+        assert_axes_within_3_sigma(d, injected, effect);
+    }
+}
+
+/// Each ACS axis of a detected effect `d` within 3σ of the writer's injected one (`what`
+/// names it in the message).
+#[track_caller]
+fn assert_axes_within_3_sigma(d: &Value, injected: &Value, what: &str) {
+    for ax in ["x", "y", "z"] {
+        let t = injected["parameters"][ax].as_f64().unwrap();
+        let x = d["parameters"][ax].as_f64().unwrap();
+        let s = d["sigma"][ax].as_f64().unwrap();
+        assert!(
+            (x - t).abs() <= 3.0 * s,
+            "{what} {ax}: {x:.4} ± {s:.4} against the writer's {t}"
+        );
     }
 }
 
@@ -278,15 +285,7 @@ fn outside_writer_gyro_bias_step_is_named_as_a_step() {
         .unwrap();
     let t_step = d["parameters"]["t_step_s"].as_f64().unwrap();
     assert!((t_step - 10_000.0).abs() < 600.0, "step at {t_step} s");
-    for ax in ["x", "y", "z"] {
-        let t = injected["parameters"][ax].as_f64().unwrap();
-        let x = d["parameters"][ax].as_f64().unwrap();
-        let s = d["sigma"][ax].as_f64().unwrap();
-        assert!(
-            (x - t).abs() <= 3.0 * s,
-            "step {ax}: {x:.4} ± {s:.4} against the writer's {t}"
-        );
-    }
+    assert_axes_within_3_sigma(d, injected, "step");
     assert!(
         report["unexplained"].as_array().unwrap().is_empty(),
         "{report:#}"

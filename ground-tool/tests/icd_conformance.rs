@@ -30,6 +30,20 @@ struct Outcome {
     checks: Vec<Value>,
 }
 
+impl Outcome {
+    /// The command exited with `rc` (its stderr in the message when not).
+    #[track_caller]
+    fn assert_rc(&self, rc: i32) {
+        assert_eq!(self.rc, rc, "{}", self.stderr);
+    }
+
+    /// The command's stderr says `text`.
+    #[track_caller]
+    fn assert_says(&self, text: &str) {
+        assert!(self.stderr.contains(text), "{}", self.stderr);
+    }
+}
+
 fn ground_tool(cmd: &str, run: &Path) -> Outcome {
     let out_dir = run.join(format!("out-{cmd}"));
     let out = Command::new(env!("CARGO_BIN_EXE_ground-tool"))
@@ -109,7 +123,7 @@ fn icd_nominal_run_calibrates_and_diagnoses_clean() {
     let run = write_run("nominal", &[]);
     let t = truth(&run);
     let cal = ground_tool("calibrate", &run);
-    assert_eq!(cal.rc, 0, "{}", cal.stderr);
+    cal.assert_rc(0);
     assert!(
         cal.checks.is_empty(),
         "input findings on a clean run: {:?}",
@@ -155,7 +169,7 @@ fn icd_nominal_run_calibrates_and_diagnoses_clean() {
     }
     assert_eq!(r["maneuvers"].as_array().unwrap().len(), 3);
     let d = ground_tool("diagnose", &run);
-    assert_eq!(d.rc, 0, "{}", d.stderr);
+    d.assert_rc(0);
     let dr = d.report.clone().unwrap();
     assert_eq!(
         dr["detected"],
@@ -231,7 +245,7 @@ fn icd_housekeeping_absent_or_sparse() {
     // Housekeeping whose time codes match no raw frame is as good as none, and said so.
     let run = write_run("hk-offset", &["--hk-offset-s", "0.5"]);
     let o = ground_tool("calibrate", &run);
-    assert_eq!(o.rc, 0, "{}", o.stderr);
+    o.assert_rc(0);
     assert!(has_check(&o, "housekeeping_unmatched"), "{}", o.stderr);
 }
 
@@ -240,7 +254,7 @@ fn icd_housekeeping_absent_or_sparse() {
 fn icd_ephemeris_absent_or_sparse_is_warned() {
     let run = write_run("eph-300", &["--eph-period", "300"]);
     let o = ground_tool("calibrate", &run);
-    assert_eq!(o.rc, 0, "{}", o.stderr);
+    o.assert_rc(0);
     assert!(
         !has_check(&o, "orbit_missing"),
         "300 s records interpolate: {:?}",
@@ -249,17 +263,13 @@ fn icd_ephemeris_absent_or_sparse_is_warned() {
     assert_fhst_relative_ok(&o.report.clone().unwrap(), &truth(&run), "eph-300");
     let run = write_run("eph-900", &["--eph-period", "900"]);
     let o = ground_tool("calibrate", &run);
-    assert_eq!(o.rc, 0, "{}", o.stderr);
+    o.assert_rc(0);
     assert!(has_check(&o, "orbit_missing"), "{}", o.stderr);
-    assert!(o.stderr.contains("APID 0x020"), "{}", o.stderr);
+    o.assert_says("APID 0x020");
     let run = write_run("no-eph", &["--no-eph"]);
     let o = ground_tool("calibrate", &run);
-    assert_eq!(o.rc, 0, "{}", o.stderr);
-    assert!(
-        o.stderr.contains("no ephemeris packets (APID 0x020)"),
-        "{}",
-        o.stderr
-    );
+    o.assert_rc(0);
+    o.assert_says("no ephemeris packets (APID 0x020)");
 }
 
 /// One sensor absent for the whole run.
@@ -267,33 +277,21 @@ fn icd_ephemeris_absent_or_sparse_is_warned() {
 fn icd_one_sensor_missing() {
     let run = write_run("no-fss2", &["--missing", "FSS2"]);
     let o = ground_tool("calibrate", &run);
-    assert_eq!(o.rc, 0, "{}", o.stderr);
-    assert!(
-        o.stderr.contains("FSS2 has no usable sample"),
-        "{}",
-        o.stderr
-    );
+    o.assert_rc(0);
+    o.assert_says("FSS2 has no usable sample");
     let r = o.report.clone().unwrap();
     assert_eq!(r["data"]["sun_samples"][1], 0);
     assert_fhst_relative_ok(&r, &truth(&run), "no-fss2");
 
     let run = write_run("no-fhst1", &["--missing", "FHST1"]);
     let o = ground_tool("calibrate", &run);
-    assert_eq!(o.rc, 2, "{}", o.stderr);
-    assert!(
-        o.stderr.contains("FHST1 has no usable sample"),
-        "{}",
-        o.stderr
-    );
-    assert!(o.stderr.contains("FFCAL needs both FHSTs"), "{}", o.stderr);
+    o.assert_rc(2);
+    o.assert_says("FHST1 has no usable sample");
+    o.assert_says("FFCAL needs both FHSTs");
     // diagnose still analyses what it can, and says the chain could not run.
     let d = ground_tool("diagnose", &run);
-    assert_eq!(d.rc, 0, "{}", d.stderr);
-    assert!(
-        d.stderr.contains("note: calibration chain failed"),
-        "{}",
-        d.stderr
-    );
+    d.assert_rc(0);
+    d.assert_says("note: calibration chain failed");
 }
 
 /// A sensor reporting invalid flags: for 2000 s (FHST1), for the whole run (FSS1).
@@ -302,7 +300,7 @@ fn icd_invalid_flags_for_long_stretches() {
     let run = write_run("fhst1-invalid", &["--invalid", "FHST1:0:2000"]);
     let t = truth(&run);
     let o = ground_tool("calibrate", &run);
-    assert_eq!(o.rc, 0, "{}", o.stderr);
+    o.assert_rc(0);
     let r = o.report.clone().unwrap();
     let tracked = t["fhst_samples"][0].as_u64().unwrap();
     assert!(
@@ -313,12 +311,8 @@ fn icd_invalid_flags_for_long_stretches() {
     assert_fhst_relative_ok(&r, &t, "fhst1-invalid");
     let run = write_run("fss1-invalid", &["--invalid", "FSS1:0:100000"]);
     let o = ground_tool("calibrate", &run);
-    assert_eq!(o.rc, 0, "{}", o.stderr);
-    assert!(
-        o.stderr.contains("FSS1 has no usable sample"),
-        "{}",
-        o.stderr
-    );
+    o.assert_rc(0);
+    o.assert_says("FSS1 has no usable sample");
 }
 
 /// No slews, and slews flown in low rate: alignments calibrated, IRUCAL skipped with a
@@ -327,15 +321,15 @@ fn icd_invalid_flags_for_long_stretches() {
 fn icd_no_iru_intervals() {
     let run = write_run("no-slews", &["--no-slews", "--duration", "2400"]);
     let o = ground_tool("calibrate", &run);
-    assert_eq!(o.rc, 0, "{}", o.stderr);
+    o.assert_rc(0);
     let r = o.report.clone().unwrap();
     assert!(r["maneuvers"].as_array().unwrap().is_empty());
     assert!(r["iru_skipped"].as_str().unwrap().contains("maneuvers"));
     let run = write_run("low-rate-slews", &["--low-rate-slews"]);
     let o = ground_tool("calibrate", &run);
-    assert_eq!(o.rc, 0, "{}", o.stderr);
+    o.assert_rc(0);
     assert!(has_check(&o, "no_high_rate_frames"), "{}", o.stderr);
-    assert!(o.stderr.contains("--maneuver"), "{}", o.stderr);
+    o.assert_says("--maneuver");
 }
 
 /// Very short runs: exit code 2 naming what is missing.
@@ -345,16 +339,12 @@ fn icd_very_short_runs_are_insufficient_input() {
     for cmd in ["calibrate", "diagnose"] {
         let o = ground_tool(cmd, &run);
         assert_eq!(o.rc, 2, "{cmd}: {}", o.stderr);
-        assert!(
-            o.stderr.contains("only 1 raw sensor frames"),
-            "{}",
-            o.stderr
-        );
+        o.assert_says("only 1 raw sensor frames");
     }
     let run = write_run("two-minutes", &["--no-slews", "--duration", "120"]);
     let o = ground_tool("calibrate", &run);
-    assert_eq!(o.rc, 2, "{}", o.stderr);
-    assert!(o.stderr.contains("FFCAL needs both FHSTs"), "{}", o.stderr);
+    o.assert_rc(2);
+    o.assert_says("FFCAL needs both FHSTs");
 }
 
 /// A 2025 epoch (37 s TAI − UTC, 34 years of proper motion and precession): the data are
@@ -364,7 +354,7 @@ fn icd_very_short_runs_are_insufficient_input() {
 fn icd_epoch_2025() {
     let run = write_run("epoch-2025", &["--epoch", "2025-06-01T00:00:00Z"]);
     let d = ground_tool("diagnose", &run);
-    assert_eq!(d.rc, 0, "{}", d.stderr);
+    d.assert_rc(0);
     assert!(d.checks.is_empty(), "{:?}", d.checks);
     let r = d.report.clone().unwrap();
     assert_eq!(r["detected"], Value::Array(vec![]));
@@ -392,7 +382,7 @@ fn icd_epoch_2025() {
 fn icd_gaps_in_time() {
     let run = write_run("gaps", &["--gap", "1500:300", "--gap", "3000:200"]);
     let o = ground_tool("calibrate", &run);
-    assert_eq!(o.rc, 0, "{}", o.stderr);
+    o.assert_rc(0);
     assert!(has_check(&o, "time_gaps"));
     assert!(
         !has_check(&o, "gyro_increment_ambiguous"),
@@ -402,7 +392,7 @@ fn icd_gaps_in_time() {
     assert_fhst_relative_ok(&o.report.clone().unwrap(), &truth(&run), "gaps");
     let run = write_run("gap-in-slew", &["--gap", "1000:200"]);
     let o = ground_tool("calibrate", &run);
-    assert_eq!(o.rc, 0, "{}", o.stderr);
+    o.assert_rc(0);
     assert!(has_check(&o, "gyro_increment_ambiguous"), "{}", o.stderr);
     // The slew across the gap has no gyro step there, so it is not an IRUCAL interval (before:
     // a silently wrong bias, X −30.7″/s against the true 0.30″/s).
@@ -429,7 +419,7 @@ fn icd_extreme_valid_values() {
     let run = write_run("extreme", &["--extreme"]);
     let t = truth(&run);
     let o = ground_tool("calibrate", &run);
-    assert_eq!(o.rc, 0, "{}", o.stderr);
+    o.assert_rc(0);
     let r = o.report.clone().unwrap();
     assert!(
         r["data"]["sun_samples"][0].as_u64().unwrap() > 0,
@@ -437,7 +427,7 @@ fn icd_extreme_valid_values() {
     );
     assert_fhst_relative_ok(&r, &t, "extreme");
     let d = ground_tool("diagnose", &run);
-    assert_eq!(d.rc, 0, "{}", d.stderr);
+    d.assert_rc(0);
 }
 
 /// A gyro without bias or noise: its counters stand still in the holds, which the flight
@@ -446,7 +436,7 @@ fn icd_extreme_valid_values() {
 fn icd_noiseless_gyro_is_warned() {
     let run = write_run("quiet-iru", &["--quiet-iru"]);
     let o = ground_tool("calibrate", &run);
-    assert_eq!(o.rc, 0, "{}", o.stderr);
+    o.assert_rc(0);
     assert!(has_check(&o, "iru_channel_unchanged"), "{}", o.stderr);
 }
 
@@ -457,18 +447,14 @@ fn icd_wrong_time_codes_are_refused() {
     for cmd in ["calibrate", "diagnose"] {
         let o = ground_tool(cmd, &run);
         assert_eq!(o.rc, 2, "{cmd}: {}", o.stderr);
-        assert!(o.stderr.contains("TAI seconds since 1958"), "{}", o.stderr);
-        assert!(
-            o.stderr.contains("not seconds since the start of the run"),
-            "{}",
-            o.stderr
-        );
+        o.assert_says("TAI seconds since 1958");
+        o.assert_says("not seconds since the start of the run");
     }
     let run = write_run("day-late", &["--time-code-offset-s", "86400"]);
     for cmd in ["calibrate", "diagnose"] {
         let o = ground_tool(cmd, &run);
         assert_eq!(o.rc, 2, "{cmd}: {}", o.stderr);
-        assert!(o.stderr.contains("epoch_utc"), "{}", o.stderr);
+        o.assert_says("epoch_utc");
     }
 }
 
@@ -495,16 +481,12 @@ fn icd_bad_input_exit_code_2_with_the_reason() {
     )
     .unwrap();
     let o = ground_tool("calibrate", &run);
-    assert_eq!(o.rc, 2, "{}", o.stderr);
-    assert!(
-        o.stderr.contains("holds no raw sensor frame (APID 0x010"),
-        "{}",
-        o.stderr
-    );
+    o.assert_rc(2);
+    o.assert_says("holds no raw sensor frame (APID 0x010");
     std::fs::remove_file(run.join("telemetry.bin")).unwrap();
     let o = ground_tool("diagnose", &run);
-    assert_eq!(o.rc, 2, "{}", o.stderr);
-    assert!(o.stderr.contains("telemetry.bin not found"), "{}", o.stderr);
+    o.assert_rc(2);
+    o.assert_says("telemetry.bin not found");
     let run = write_run("bad-meta", &["--duration", "10"]);
     std::fs::write(
         run.join("metadata.json"),
@@ -512,10 +494,6 @@ fn icd_bad_input_exit_code_2_with_the_reason() {
     )
     .unwrap();
     let o = ground_tool("calibrate", &run);
-    assert_eq!(o.rc, 2, "{}", o.stderr);
-    assert!(
-        o.stderr.contains("metadata.json is not valid metadata"),
-        "{}",
-        o.stderr
-    );
+    o.assert_rc(2);
+    o.assert_says("metadata.json is not valid metadata");
 }

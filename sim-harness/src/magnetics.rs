@@ -16,47 +16,14 @@
 //! `docs/magnetics.md` has the measured numbers.
 
 use nalgebra::Vector3;
-use serde::{Deserialize, Serialize};
 
+pub use crate::scenario::MagneticsParams;
 use crate::scenario::Scenario;
 use crate::sensors::css::{Css, CssReading};
 use crate::sensors::tam::{Tam, TamReading};
 use crate::sensors::TruthSnapshot;
 use crate::truth::field::TruthField;
 use crate::truth::time::SimClock;
-
-/// Scenario `[magnetics]`.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct MagneticsParams {
-    /// Sample the field, the TAMs and the CSSs every cycle into the record and the raw frame
-    /// (default off).
-    pub enabled: bool,
-    /// With `enabled`: uplink the OBC's magnetics table (Table 6: the field model at the
-    /// epoch and the TAM knowledge below) at `onboard_table_at_s` (default on, at 2 s: the
-    /// catalog, filter, alignment and orbit uplinks fill the first two cycles' events).
-    pub onboard_table: bool,
-    /// When the magnetics table is uplinked (s from the epoch).
-    pub onboard_table_at_s: f64,
-    /// The TAM1, TAM2 biases the OBC's table subtracts (mG, sensor axes): zero is prelaunch
-    /// knowledge; the ground's determined bias is the "after" case of issue 20.
-    pub onboard_tam_bias_milligauss: [[f64; 3]; 2],
-    /// The table's `field_sigma_milligauss` (1σ per axis of what is left in a corrected TAM
-    /// field); `None`: the OBC's boot value (4 mG, an undetermined bias).
-    pub onboard_field_sigma_milligauss: Option<f64>,
-}
-
-impl Default for MagneticsParams {
-    fn default() -> Self {
-        Self {
-            enabled: false,
-            onboard_table: true,
-            onboard_table_at_s: 2.0,
-            onboard_tam_bias_milligauss: [[0.0; 3]; 2],
-            onboard_field_sigma_milligauss: None,
-        }
-    }
-}
 
 /// One cycle's magnetics: the truth field and the readings.
 #[derive(Clone, Copy, Debug, PartialEq, Default)]

@@ -213,6 +213,91 @@ fn print_json(v: &impl serde::Serialize) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// The few lines `sim-harness run` prints without `--json`.
+fn print_run_summary(name: &str, summary: &run::Summary, out: &std::path::Path) {
+    let e = &summary.attitude_error_arcsec;
+    eprintln!(
+        "{name}: {} cycles, {:.0} s simulated in {:.2} s ({:.0}x real time)\n\
+         attitude error (t >= 600 s, outside slews): rms [{:.2}, {:.2}, {:.2}] arcsec, max {:.2} arcsec; NEES mean {}\n\
+         post-maneuver errors (deg): {}\n\
+         wrote {}",
+        summary.cycles,
+        summary.sim_seconds,
+        summary.wall_seconds,
+        summary.real_time_factor,
+        e.rms[0],
+        e.rms[1],
+        e.rms[2],
+        e.max,
+        summary
+            .filter_nees_mean
+            .map_or_else(|| "n/a".to_owned(), |n| format!("{n:.2}")),
+        post_maneuver_text(&summary.post_maneuver_error_deg),
+        out.display()
+    );
+}
+
+/// A progress bar over `n` runs on a terminal, unless quiet.
+fn progress_bar(quiet: bool, n: u64) -> Option<indicatif::ProgressBar> {
+    use std::io::IsTerminal;
+    (!quiet && std::io::stderr().is_terminal()).then(|| {
+        let pb = indicatif::ProgressBar::new(n);
+        pb.set_style(
+            indicatif::ProgressStyle::with_template(
+                "[{elapsed_precise}] {wide_bar} {pos}/{len} runs (eta {eta})",
+            )
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+        );
+        pb
+    })
+}
+
+/// `sim-harness faults`: assess the fault scenarios given, or the shipped ones.
+fn faults_command(scenarios: Vec<String>, json: bool) -> anyhow::Result<()> {
+    let files = if scenarios.is_empty() {
+        sim_harness::faults::shipped_fault_scenarios()
+            .map_err(InputError::from)?
+            .into_iter()
+            .map(|p| p.display().to_string())
+            .collect()
+    } else {
+        scenarios
+    };
+    let mut reports = Vec::new();
+    for f in &files {
+        let s = scenario::resolve(f).map_err(InputError::from)?;
+        let r = sim_harness::faults::assess(&s).with_context(|| f.clone())?;
+        eprintln!("{f}: done");
+        reports.push(r);
+    }
+    if json {
+        print_json(&reports)?;
+    } else {
+        print!("{}", sim_harness::faults::markdown_table(&reports));
+    }
+    Ok(())
+}
+
+/// `sim-harness bench`: the closed loop's speed.
+fn bench_command(duration: f64, json: bool) -> anyhow::Result<()> {
+    if !(duration.is_finite() && duration > 0.0) {
+        return Err(InputError::msg(format!("--duration must be > 0, got {duration}")).into());
+    }
+    let v = run::bench(duration)?;
+    if json {
+        println!("{}", serde_json::to_string(&v)?);
+    } else {
+        println!(
+            "gro-early-mission, {} s simulated in {:.3} s: {:.0}x real time, {:.0} ns/cycle",
+            v["sim_seconds"],
+            v["wall_seconds"].as_f64().unwrap_or(0.0),
+            v["real_time_factor"].as_f64().unwrap_or(0.0),
+            v["ns_per_cycle"].as_f64().unwrap_or(0.0)
+        );
+    }
+    Ok(())
+}
+
 fn main_inner(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Cmd::Run {
@@ -246,26 +331,7 @@ fn main_inner(cli: Cli) -> anyhow::Result<()> {
             if json {
                 print_json(&summary)?;
             } else {
-                let e = &summary.attitude_error_arcsec;
-                eprintln!(
-                    "{name}: {} cycles, {:.0} s simulated in {:.2} s ({:.0}x real time)\n\
-                     attitude error (t >= 600 s, outside slews): rms [{:.2}, {:.2}, {:.2}] arcsec, max {:.2} arcsec; NEES mean {}\n\
-                     post-maneuver errors (deg): {}\n\
-                     wrote {}",
-                    summary.cycles,
-                    summary.sim_seconds,
-                    summary.wall_seconds,
-                    summary.real_time_factor,
-                    e.rms[0],
-                    e.rms[1],
-                    e.rms[2],
-                    e.max,
-                    summary
-                        .filter_nees_mean
-                        .map_or_else(|| "n/a".to_owned(), |n| format!("{n:.2}")),
-                    post_maneuver_text(&summary.post_maneuver_error_deg),
-                    out.display()
-                );
+                print_run_summary(&name, &summary, &out);
             }
         }
         Cmd::MonteCarlo {
@@ -289,17 +355,7 @@ fn main_inner(cli: Cli) -> anyhow::Result<()> {
                 return Err(InputError::msg("-n must be ≥ 1").into());
             }
             let mine = (0..runs).filter(|i| i % shard.1 == shard.0).count() as u64;
-            use std::io::IsTerminal;
-            let pb = (!quiet && std::io::stderr().is_terminal()).then(|| {
-                let pb = indicatif::ProgressBar::new(mine);
-                pb.set_style(
-                    indicatif::ProgressStyle::with_template(
-                        "[{elapsed_precise}] {wide_bar} {pos}/{len} runs (eta {eta})",
-                    )
-                    .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
-                );
-                pb
-            });
+            let pb = progress_bar(quiet, mine);
             let done = AtomicU64::new(0);
             let on_done = || {
                 let n = done.fetch_add(1, Ordering::Relaxed) + 1;
@@ -333,47 +389,8 @@ fn main_inner(cli: Cli) -> anyhow::Result<()> {
             print_json(&agg)?;
             eprintln!("{} runs aggregated into {}", agg.runs, path.display());
         }
-        Cmd::Faults { scenarios, json } => {
-            let files = if scenarios.is_empty() {
-                sim_harness::faults::shipped_fault_scenarios()
-                    .map_err(InputError::from)?
-                    .into_iter()
-                    .map(|p| p.display().to_string())
-                    .collect()
-            } else {
-                scenarios
-            };
-            let mut reports = Vec::new();
-            for f in &files {
-                let s = scenario::resolve(f).map_err(InputError::from)?;
-                let r = sim_harness::faults::assess(&s).with_context(|| f.clone())?;
-                eprintln!("{f}: done");
-                reports.push(r);
-            }
-            if json {
-                print_json(&reports)?;
-            } else {
-                print!("{}", sim_harness::faults::markdown_table(&reports));
-            }
-        }
-        Cmd::Bench { duration, json } => {
-            if !(duration.is_finite() && duration > 0.0) {
-                return Err(
-                    InputError::msg(format!("--duration must be > 0, got {duration}")).into(),
-                );
-            }
-            let v = run::bench(duration)?;
-            if json {
-                println!("{}", serde_json::to_string(&v)?);
-            } else {
-                println!(
-                    "gro-early-mission, {} s simulated in {:.3} s: {:.0}x real time, {:.0} ns/cycle",
-                    v["sim_seconds"], v["wall_seconds"].as_f64().unwrap_or(0.0),
-                    v["real_time_factor"].as_f64().unwrap_or(0.0),
-                    v["ns_per_cycle"].as_f64().unwrap_or(0.0)
-                );
-            }
-        }
+        Cmd::Faults { scenarios, json } => faults_command(scenarios, json)?,
+        Cmd::Bench { duration, json } => bench_command(duration, json)?,
     }
     Ok(())
 }

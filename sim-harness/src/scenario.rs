@@ -414,6 +414,39 @@ impl OnboardOrbitUplink {
     }
 }
 
+/// Scenario `[magnetics]` ([`crate::magnetics`]: the field, TAM and CSS models of the loop).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MagneticsParams {
+    /// Sample the field, the TAMs and the CSSs every cycle into the record and the raw frame
+    /// (default off).
+    pub enabled: bool,
+    /// With `enabled`: uplink the OBC's magnetics table (Table 6: the field model at the
+    /// epoch and the TAM knowledge below) at `onboard_table_at_s` (default on, at 2 s: the
+    /// catalog, filter, alignment and orbit uplinks fill the first two cycles' events).
+    pub onboard_table: bool,
+    /// When the magnetics table is uplinked (s from the epoch).
+    pub onboard_table_at_s: f64,
+    /// The TAM1, TAM2 biases the OBC's table subtracts (mG, sensor axes): zero is prelaunch
+    /// knowledge; the ground's determined bias is the "after" case of issue 20.
+    pub onboard_tam_bias_milligauss: [[f64; 3]; 2],
+    /// The table's `field_sigma_milligauss` (1σ per axis of what is left in a corrected TAM
+    /// field); `None`: the OBC's boot value (4 mG, an undetermined bias).
+    pub onboard_field_sigma_milligauss: Option<f64>,
+}
+
+impl Default for MagneticsParams {
+    fn default() -> Self {
+        Self {
+            enabled: false,
+            onboard_table: true,
+            onboard_table_at_s: 2.0,
+            onboard_tam_bias_milligauss: [[0.0; 3]; 2],
+            onboard_field_sigma_milligauss: None,
+        }
+    }
+}
+
 /// A whole scenario.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -516,7 +549,7 @@ pub struct Scenario {
     pub css: CssParams,
     /// Sample the field, TAMs and CSSs into the record and downlink them ([`crate::magnetics`]).
     #[serde(default)]
-    pub magnetics: crate::magnetics::MagneticsParams,
+    pub magnetics: MagneticsParams,
     /// Thermal nodes.
     #[serde(default)]
     pub thermal: ThermalSet,
@@ -695,17 +728,12 @@ impl Scenario {
         Some(fields)
     }
 
-    /// Check values serde cannot.
+    /// Check values serde cannot: the numbers finite, then timing, initial state, orbit,
+    /// sensors, commands and faults, each stage with the first error it finds.
     ///
     /// # Errors
     /// The first offending field, by its TOML path.
     pub fn validate(&self) -> anyhow::Result<()> {
-        let pos = |name: &str, v: f64| -> anyhow::Result<()> {
-            if !(v.is_finite() && v > 0.0) {
-                bail!("{name} must be a positive number, got {v}");
-            }
-            Ok(())
-        };
         // Every number of the file, however deep, is finite (a NaN or an infinity in any
         // parameter would propagate into the truth and the telemetry as nulls or garbage).
         if let Ok(tree) = toml::Value::try_from(self) {
@@ -713,7 +741,20 @@ impl Scenario {
                 bail!("{path} must be a finite number, got {v}");
             }
         }
-        pos("step_s", self.step_s)?;
+        self.validate_timing()?;
+        self.validate_initial()?;
+        self.validate_orbit()?;
+        self.validate_sensors()?;
+        for (i, c) in self.commands.iter().enumerate() {
+            c.validate(i, self)?;
+        }
+        crate::faults::validate_all(&self.faults)?;
+        Ok(())
+    }
+
+    /// The step, the duration and the periods of the run and its telemetry.
+    fn validate_timing(&self) -> anyhow::Result<()> {
+        positive("step_s", self.step_s)?;
         if self.step_s > MAX_STEP_S {
             bail!(
                 "step_s must be ≤ {MAX_STEP_S} s (the OBC's filter table accepts cycle periods of 0.125–2 s), got {}",
@@ -733,8 +774,8 @@ impl Scenario {
                 self.step_s
             );
         }
-        pos("sun_refresh_s", self.sun_refresh_s)?;
-        pos("ephemeris_period_s", self.ephemeris_period_s)?;
+        positive("sun_refresh_s", self.sun_refresh_s)?;
+        positive("ephemeris_period_s", self.ephemeris_period_s)?;
         if self.ephemeris_period_s > 60.0 {
             bail!(
                 "ephemeris_period_s must be ≤ 60 (ICD §3.4), got {}",
@@ -750,6 +791,11 @@ impl Scenario {
                 self.truth_bias_period_s
             );
         }
+        Ok(())
+    }
+
+    /// The initial estimate and state, the epoch, the magnetometers and Sun sensors' models.
+    fn validate_initial(&self) -> anyhow::Result<()> {
         let ie = &self.initial_estimate;
         if !(ie.error_deg.is_finite() && (0.0..=10.0).contains(&ie.error_deg)) {
             bail!(
@@ -769,7 +815,12 @@ impl Scenario {
         if !(n.is_finite() && (n - 1.0).abs() < 1e-3) {
             bail!("initial.q_acs_from_eci must be a unit quaternion [x, y, z, w], norm is {n}");
         }
-        pos(
+        Ok(())
+    }
+
+    /// The truth orbit and the onboard orbit uplink.
+    fn validate_orbit(&self) -> anyhow::Result<()> {
+        positive(
             "orbit.semimajor_axis_km",
             self.orbit.semimajor_axis_km - 6378.137,
         )
@@ -789,7 +840,7 @@ impl Scenario {
                 bail!("{name} must be in [-360, 360] deg, got {v}");
             }
         }
-        pos("orbit.max_step_s", self.orbit.max_step_s)?;
+        positive("orbit.max_step_s", self.orbit.max_step_s)?;
         if let Some(o) = &self.onboard_orbit {
             if !(o.at_s >= 0.0 && o.at_s <= self.duration_s.max(0.0)) {
                 bail!(
@@ -816,13 +867,18 @@ impl Scenario {
                 self.orbit.eccentricity
             );
         }
+        Ok(())
+    }
+
+    /// The FHST, FSS and IRU parameters.
+    fn validate_sensors(&self) -> anyhow::Result<()> {
         for (name, f) in [("fhst1", &self.fhst1), ("fhst2", &self.fhst2)] {
-            pos(&format!("{name}.fov_half_width_deg"), f.fov_half_width_deg)?;
-            pos(
+            positive(&format!("{name}.fov_half_width_deg"), f.fov_half_width_deg)?;
+            positive(
                 &format!("{name}.resolution_arcsec_per_count"),
                 f.resolution_arcsec_per_count,
             )?;
-            pos(&format!("{name}.max_track_s"), f.max_track_s)?;
+            positive(&format!("{name}.max_track_s"), f.max_track_s)?;
             if f.magnitude_min > f.magnitude_max {
                 bail!(
                     "{name}.magnitude_min ({}) exceeds magnitude_max ({})",
@@ -832,83 +888,98 @@ impl Scenario {
             }
         }
         for (name, f) in [("fss1", &self.fss1), ("fss2", &self.fss2)] {
-            pos(&format!("{name}.fov_half_width_deg"), f.fov_half_width_deg)?;
-            pos(
+            positive(&format!("{name}.fov_half_width_deg"), f.fov_half_width_deg)?;
+            positive(
                 &format!("{name}.resolution_deg_per_count"),
                 f.resolution_deg_per_count,
             )?;
         }
-        pos(
+        positive(
             "iru.low_rate_arcsec_per_pulse",
             self.iru.low_rate_arcsec_per_pulse,
         )?;
-        pos(
+        positive(
             "iru.high_rate_arcsec_per_pulse",
             self.iru.high_rate_arcsec_per_pulse,
         )?;
-        for (i, c) in self.commands.iter().enumerate() {
-            let here = format!("commands[{i}]");
-            if !(c.at_s.is_finite() && c.at_s >= 0.0) {
-                bail!("{here}.at_s must be ≥ 0, got {}", c.at_s);
-            }
-            match c.kind {
-                CommandKind::SlewTo => {
-                    let relative = c.axis.is_some() || c.angle_deg.is_some();
-                    match (c.q_acs_from_eci.is_some(), relative) {
-                        (false, false) => bail!(
-                            "{here}: kind = \"slew_to\" needs q_acs_from_eci or axis + angle_deg"
-                        ),
-                        (true, true) => bail!(
-                            "{here}: kind = \"slew_to\" takes q_acs_from_eci or axis + angle_deg, not both"
-                        ),
-                        (false, true) => {
-                            let axis = c.axis.as_deref().ok_or_else(|| {
-                                anyhow::anyhow!("{here}.axis missing (angle_deg given)")
-                            })?;
-                            body_axis_from_name(axis).with_context(|| format!("{here}.axis"))?;
-                            match c.angle_deg {
-                                Some(a) if a.is_finite() && a.abs() <= 180.0 => {}
-                                Some(a) => bail!("{here}.angle_deg must be in [-180, 180], got {a}"),
-                                None => bail!("{here}.angle_deg missing (axis given)"),
-                            }
+        Ok(())
+    }
+}
+
+/// `name` must be a positive number.
+fn positive(name: &str, v: f64) -> anyhow::Result<()> {
+    if !(v.is_finite() && v > 0.0) {
+        bail!("{name} must be a positive number, got {v}");
+    }
+    Ok(())
+}
+
+impl TimedCommand {
+    /// Command `i` of `scenario`: its time, the fields its kind needs, its quaternion.
+    fn validate(&self, i: usize, scenario: &Scenario) -> anyhow::Result<()> {
+        let c = self;
+        let here = format!("commands[{i}]");
+        if !(c.at_s.is_finite() && c.at_s >= 0.0) {
+            bail!("{here}.at_s must be ≥ 0, got {}", c.at_s);
+        }
+        match c.kind {
+            CommandKind::SlewTo => {
+                let relative = c.axis.is_some() || c.angle_deg.is_some();
+                match (c.q_acs_from_eci.is_some(), relative) {
+                    (false, false) => bail!(
+                        "{here}: kind = \"slew_to\" needs q_acs_from_eci or axis + angle_deg"
+                    ),
+                    (true, true) => bail!(
+                        "{here}: kind = \"slew_to\" takes q_acs_from_eci or axis + angle_deg, not both"
+                    ),
+                    (false, true) => {
+                        let axis = c.axis.as_deref().ok_or_else(|| {
+                            anyhow::anyhow!("{here}.axis missing (angle_deg given)")
+                        })?;
+                        body_axis_from_name(axis).with_context(|| format!("{here}.axis"))?;
+                        match c.angle_deg {
+                            Some(a) if a.is_finite() && a.abs() <= 180.0 => {}
+                            Some(a) => bail!("{here}.angle_deg must be in [-180, 180], got {a}"),
+                            None => bail!("{here}.angle_deg missing (axis given)"),
                         }
-                        (true, false) => {}
                     }
+                    (true, false) => {}
                 }
-                CommandKind::TableLoad => match (&c.file, &c.filter_table) {
-                    (None, None) => {
-                        bail!("{here}: kind = \"table_load\" needs file or filter_table")
-                    }
-                    (Some(_), Some(_)) => {
-                        bail!("{here}: kind = \"table_load\" takes file or filter_table, not both")
-                    }
-                    (None, Some(_)) => {
-                        c.filter_table_image_fields(self)
-                            .with_context(|| format!("{here}.filter_table"))?;
-                    }
-                    (Some(_), None) => {}
-                },
-                CommandKind::TableActivate | CommandKind::TableAbort => {
-                    let name = c.table.as_deref().ok_or_else(|| {
-                        anyhow::anyhow!("{here}: this kind needs table = \"alignment\" | \"iru\" | \"filter\" | \"star_catalog\"")
-                    })?;
-                    table_id_from_name(name).with_context(|| format!("{here}.table"))?;
-                }
-                CommandKind::SelectIruConfig
-                    if !matches!(c.config.as_deref(), Some("primary" | "backup")) =>
-                {
-                    bail!("{here}: kind = \"select_iru_config\" needs config = \"primary\" or \"backup\"")
-                }
-                _ => {}
             }
-            if let Some(q) = c.q_acs_from_eci {
-                let n = q.iter().map(|x| x * x).sum::<f64>().sqrt();
-                if !(n.is_finite() && (n - 1.0).abs() < 1e-3) {
-                    bail!("{here}.q_acs_from_eci must be a unit quaternion, norm is {n}");
+            CommandKind::TableLoad => match (&c.file, &c.filter_table) {
+                (None, None) => {
+                    bail!("{here}: kind = \"table_load\" needs file or filter_table")
                 }
+                (Some(_), Some(_)) => {
+                    bail!("{here}: kind = \"table_load\" takes file or filter_table, not both")
+                }
+                (None, Some(_)) => {
+                    c.filter_table_image_fields(scenario)
+                        .with_context(|| format!("{here}.filter_table"))?;
+                }
+                (Some(_), None) => {}
+            },
+            CommandKind::TableActivate | CommandKind::TableAbort => {
+                let name = c.table.as_deref().ok_or_else(|| {
+                    anyhow::anyhow!("{here}: this kind needs table = \"alignment\" | \"iru\" | \"filter\" | \"star_catalog\"")
+                })?;
+                table_id_from_name(name).with_context(|| format!("{here}.table"))?;
+            }
+            CommandKind::SelectIruConfig
+                if !matches!(c.config.as_deref(), Some("primary" | "backup")) =>
+            {
+                bail!(
+                    "{here}: kind = \"select_iru_config\" needs config = \"primary\" or \"backup\""
+                )
+            }
+            _ => {}
+        }
+        if let Some(q) = c.q_acs_from_eci {
+            let n = q.iter().map(|x| x * x).sum::<f64>().sqrt();
+            if !(n.is_finite() && (n - 1.0).abs() < 1e-3) {
+                bail!("{here}.q_acs_from_eci must be a unit quaternion, norm is {n}");
             }
         }
-        crate::faults::validate_all(&self.faults)?;
         Ok(())
     }
 }

@@ -8,7 +8,7 @@
 //! ```
 use fsw_core::attitude::rotvec_from_rot;
 use fsw_core::units::ARCSEC_PER_RAD;
-use ground_tool::pipeline::calibrate::{calibrate_run, CalibrateOptions};
+use ground_tool::pipeline::calibrate::{calibrate_run, CalibrateOptions, CalibrationOutput};
 use nalgebra::{Matrix3, Vector3};
 use sim_harness::closed_loop::Simulation;
 use sim_harness::run::{run, RunOptions};
@@ -21,23 +21,7 @@ fn main() -> anyhow::Result<()> {
         scenario.seed = seed.parse()?;
     }
     let dir = std::env::temp_dir().join(format!("irucal-truth-{}", std::process::id()));
-    run(
-        scenario.clone(),
-        &RunOptions {
-            out_dir: Some(dir.join("run")),
-            ..RunOptions::default()
-        },
-    )?;
-    // The same scenario and seed again, keeping the true attitude of every cycle.
-    let mut sim = Simulation::new(scenario, None)?;
-    let mut truth: Vec<(f64, Matrix3<f64>)> = Vec::new();
-    while let Some(rec) = sim.step() {
-        truth.push((rec.truth.t_s, rec.truth.m_acs_from_eci));
-    }
-    let a_true = |t: f64| {
-        let i = truth.partition_point(|(ti, _)| *ti < t - 1e-6);
-        truth[i.min(truth.len() - 1)].1
-    };
+    let truth = Truth::fly(scenario, &dir)?;
     let out = calibrate_run(
         &dir.join("run"),
         &dir.join("cal"),
@@ -45,11 +29,56 @@ fn main() -> anyhow::Result<()> {
     )?;
     let t: serde_json::Value =
         serde_json::from_slice(&std::fs::read(dir.join("run").join("truth.json"))?)?;
+    print_alignments(&out, &t);
+    print_fixes(&out, &truth);
+    let t0 = out.frames.first().map_or(0.0, |f| f.time.seconds());
+    print_star_residuals(&out, &truth, t0);
+    if std::env::var("IRUCAL_CHECK_STARS").is_ok() {
+        print_star_counts(&out, t0);
+    }
+    print_bias_errors(&dir, &t, t0)?;
+    let _ = std::fs::remove_dir_all(&dir);
+    Ok(())
+}
+
+/// The true attitude of every cycle.
+struct Truth {
+    attitudes: Vec<(f64, Matrix3<f64>)>,
+}
+
+impl Truth {
+    /// Fly `scenario` into `dir/run`, then again keeping the true attitude of every cycle.
+    fn fly(
+        scenario: sim_harness::scenario::Scenario,
+        dir: &std::path::Path,
+    ) -> anyhow::Result<Self> {
+        run(
+            scenario.clone(),
+            &RunOptions {
+                out_dir: Some(dir.join("run")),
+                ..RunOptions::default()
+            },
+        )?;
+        // The same scenario and seed again, keeping the true attitude of every cycle.
+        let mut sim = Simulation::new(scenario, None)?;
+        let mut truth: Vec<(f64, Matrix3<f64>)> = Vec::new();
+        while let Some(rec) = sim.step() {
+            truth.push((rec.truth.t_s, rec.truth.m_acs_from_eci));
+        }
+        Ok(Self { attitudes: truth })
+    }
+
+    /// The true attitude at `t` (s).
+    fn a_true(&self, t: f64) -> Matrix3<f64> {
+        let truth = &self.attitudes;
+        let i = truth.partition_point(|(ti, _)| *ti < t - 1e-6);
+        truth[i.min(truth.len() - 1)].1
+    }
+}
+
+/// The relative alignment errors against the truth, FFCAL's σ, and δM true and fitted.
+fn print_alignments(out: &CalibrationOutput, t: &serde_json::Value) {
     let delta_m_true = matrix(&t["iru"]["primary"]["delta_m"]);
-    let samples = t["bias_history"]["samples"]
-        .as_array()
-        .cloned()
-        .unwrap_or_default();
     let names = ["FHST1", "FHST2", "FSS1", "FSS2"];
     let m_true: Vec<Matrix3<f64>> = names.iter().map(|n| matrix(&t["alignments"][n])).collect();
     let est = out
@@ -80,10 +109,14 @@ fn main() -> anyhow::Result<()> {
             Matrix3::from_row_slice(&r.delta_m.concat()) * 1e6
         );
     }
+}
+
+/// Every attitude fix of the gyro chain: its error against the truth, its σ.
+fn print_fixes(out: &CalibrationOutput, truth: &Truth) {
     println!("fix   t_s      err(″ acs)                 σ random (″)          σ systematic (″)");
     for (k, f) in out.gyro_chain.fixes.iter().enumerate() {
-        let e =
-            rotvec_from_rot(&(a_true(f.t_s) * f.fix.m_acs_from_eci.transpose())) * ARCSEC_PER_RAD;
+        let e = rotvec_from_rot(&(truth.a_true(f.t_s) * f.fix.m_acs_from_eci.transpose()))
+            * ARCSEC_PER_RAD;
         let sd = |m: &Matrix3<f64>| [0, 1, 2].map(|i| m[(i, i)].max(0.0).sqrt() * ARCSEC_PER_RAD);
         let (r, sy) = (
             sd(&(f.fix.cov_acs_rad2 - f.systematic_cov_rad2)),
@@ -94,9 +127,12 @@ fn main() -> anyhow::Result<()> {
             f.t_s, e.x, e.y, e.z, r[0], r[1], r[2], sy[0], sy[1], sy[2],
         );
     }
+}
+
+/// Per-star residual against the truth per 100-s block.
+fn print_star_residuals(out: &CalibrationOutput, truth: &Truth, t0: f64) {
     // Per-star residual against the truth (flown = calibrated alignments, so tens of arcsec
     // of alignment error remain): how many identified stars are far off, per 100-s block.
-    let t0 = out.frames.first().map_or(0.0, |f| f.time.seconds());
     let mut block = (0usize, 0usize, 0.0f64, -1i64);
     for f in &out.frames {
         let t = f.time.seconds() - t0;
@@ -115,7 +151,7 @@ fn main() -> anyhow::Result<()> {
         }
         for s in f.stars.iter().flatten() {
             if let Some((_, dir_eci)) = s.identified {
-                let r = (a_true(t) * dir_eci).angle(&s.meas.dir_acs) * ARCSEC_PER_RAD;
+                let r = (truth.a_true(t) * dir_eci).angle(&s.meas.dir_acs) * ARCSEC_PER_RAD;
                 block.0 += 1;
                 if r > 60.0 {
                     block.1 += 1;
@@ -124,40 +160,48 @@ fn main() -> anyhow::Result<()> {
             }
         }
     }
-    // Identified stars per tracker per 100-s block, with the number of distinct stars.
-    if std::env::var("IRUCAL_CHECK_STARS").is_ok() {
-        let mut b = -1i64;
-        let mut counts = [0usize; 2];
-        let mut hips: [std::collections::BTreeSet<u32>; 2] = Default::default();
-        for f in &out.frames {
-            let blk = ((f.time.seconds() - t0) / 100.0) as i64;
-            if blk != b {
-                if b >= 0 {
-                    println!(
-                        "stars {:6}: T1 {:3} ({:?}) T2 {:3} ({:?}) high_rate {}",
-                        b * 100,
-                        counts[0],
-                        hips[0],
-                        counts[1],
-                        hips[1],
-                        f.high_rate
-                    );
-                }
-                b = blk;
-                counts = [0; 2];
-                hips = Default::default();
+}
+
+/// Identified stars per tracker per 100-s block, with the distinct stars.
+fn print_star_counts(out: &CalibrationOutput, t0: f64) {
+    let mut b = -1i64;
+    let mut counts = [0usize; 2];
+    let mut hips: [std::collections::BTreeSet<u32>; 2] = Default::default();
+    for f in &out.frames {
+        let blk = ((f.time.seconds() - t0) / 100.0) as i64;
+        if blk != b {
+            if b >= 0 {
+                println!(
+                    "stars {:6}: T1 {:3} ({:?}) T2 {:3} ({:?}) high_rate {}",
+                    b * 100,
+                    counts[0],
+                    hips[0],
+                    counts[1],
+                    hips[1],
+                    f.high_rate
+                );
             }
-            for k in 0..2 {
-                if let Some(s) = &f.stars[k] {
-                    if let Some((hip, _)) = s.identified {
-                        counts[k] += 1;
-                        hips[k].insert(hip);
-                    }
+            b = blk;
+            counts = [0; 2];
+            hips = Default::default();
+        }
+        for k in 0..2 {
+            if let Some(s) = &f.stars[k] {
+                if let Some((hip, _)) = s.identified {
+                    counts[k] += 1;
+                    hips[k].insert(hip);
                 }
             }
         }
     }
-    // OBC bias error against the truth every 300 s (″/s).
+}
+
+/// The OBC's bias error against the truth every 300 s (″/s).
+fn print_bias_errors(dir: &std::path::Path, t: &serde_json::Value, t0: f64) -> anyhow::Result<()> {
+    let samples = t["bias_history"]["samples"]
+        .as_array()
+        .cloned()
+        .unwrap_or_default();
     let tm = ground_tool::tp::read_file(&dir.join("run").join("telemetry.bin"))?;
     for s in samples.iter().step_by(5) {
         let ts = s["t_s"].as_f64().unwrap_or(0.0);
@@ -175,7 +219,6 @@ fn main() -> anyhow::Result<()> {
             );
         }
     }
-    let _ = std::fs::remove_dir_all(&dir);
     Ok(())
 }
 

@@ -24,6 +24,16 @@ pub struct Pair<T> {
     pub after: T,
 }
 
+impl Pair<BTreeMap<String, f64>> {
+    /// Each key of `before` with its value before and after (NaN where `after` lacks it).
+    fn by_key(&self) -> impl Iterator<Item = (&String, f64, f64)> + '_ {
+        self.before.iter().map(|(k, b)| {
+            let a = self.after.get(k).copied().unwrap_or(f64::NAN);
+            (k, *b, a)
+        })
+    }
+}
+
 /// The loop's result.
 #[derive(Clone, Debug, Serialize, Default)]
 pub struct LoopReport {
@@ -234,25 +244,13 @@ pub fn render_markdown(r: &LoopReport) -> String {
         "| quantity | before (prelaunch tables) | after (calibrated, uplinked) |"
     );
     let _ = writeln!(md, "|---|---|---|");
-    for (k, before) in &r.relative_alignment_error_arcsec.before {
-        let after = r
-            .relative_alignment_error_arcsec
-            .after
-            .get(k)
-            .copied()
-            .unwrap_or(f64::NAN);
+    for (k, before, after) in r.relative_alignment_error_arcsec.by_key() {
         let _ = writeln!(
             md,
             "| relative alignment error {k} (″, vs truth) | {before:.1} | {after:.1} |"
         );
     }
-    for (k, before) in &r.residual_rms_arcsec.before {
-        let after = r
-            .residual_rms_arcsec
-            .after
-            .get(k)
-            .copied()
-            .unwrap_or(f64::NAN);
+    for (k, before, after) in r.residual_rms_arcsec.by_key() {
         let _ = writeln!(md, "| residual RMS {k} (″) | {before:.1} | {after:.1} |");
     }
     let fmt_list = |v: &[f64]| {

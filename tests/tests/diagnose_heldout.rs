@@ -16,14 +16,11 @@ fn run(
     effects: SynthEffects,
     seed: u64,
 ) -> (gro_tests::diagnose::synthetic::SynthRun, MeasurementSet) {
-    let cfg = SynthConfig {
+    let synth = generate(&SynthConfig {
         duration_s: 3.0 * 3600.0,
-        seed,
-        effects,
-        ..SynthConfig::default()
-    };
-    let synth = generate(&cfg);
-    let set = MeasurementSet::build(&synth.input(&[]));
+        ..SynthConfig::seeded(effects, seed)
+    });
+    let set = synth.measurement_set();
     (synth, set)
 }
 

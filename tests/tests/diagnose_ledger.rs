@@ -19,12 +19,7 @@ use ground_tool::diagnose::{analyse, Analysis};
 const ALPHA: f64 = 1.0e-3;
 
 fn analysed(fx: SynthEffects, seed: u64) -> Analysis {
-    let cfg = SynthConfig {
-        seed,
-        effects: fx,
-        ..SynthConfig::default()
-    };
-    let synth = generate(&cfg);
+    let synth = generate(&SynthConfig::seeded(fx, seed));
     analyse(&synth.input(&[]), &SearchConfig::default()).unwrap()
 }
 
@@ -215,12 +210,7 @@ fn most_seen(cfg: &SynthConfig) -> Vec<(u32, usize)> {
 fn a_time_tag_one_slew_arc_shows_is_not_dropped() {
     let mut fx = SynthEffects::default();
     fx.time_tag_s[0] = 0.3;
-    let cfg = SynthConfig {
-        seed: 21,
-        effects: fx,
-        ..SynthConfig::default()
-    };
-    let mut synth = generate(&cfg);
+    let mut synth = generate(&SynthConfig::seeded(fx, 21));
     let mut slew = 0usize;
     let mut turning_before = false;
     for f in &mut synth.frames {

@@ -4,6 +4,8 @@
 //! `scenarios/undeclared/effects_table.sh` and `false_alarm.sh` (docs/diagnose.md).
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
+mod support;
+
 use gro_tests::diagnose::inject::{inject_run, Injected};
 use ground_tool::diagnose::run::{diagnose_run, DiagnoseOutput};
 use std::path::{Path, PathBuf};
@@ -11,8 +13,7 @@ use std::sync::OnceLock;
 
 fn work_dir(name: &str) -> PathBuf {
     // Under target/tmp with a fixed name: a later test run replaces it, nothing accumulates.
-    let d = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("diagnose-real-{name}"));
-    let _ = std::fs::remove_dir_all(&d);
+    let d = support::fresh_dir(&format!("diagnose-real-{name}"));
     let _ = std::fs::remove_dir_all(d.with_extension("diag"));
     std::fs::create_dir_all(&d).unwrap();
     d

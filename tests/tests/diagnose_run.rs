@@ -1,7 +1,7 @@
 //! Diagnose on sim-harness run folders (studies; the CLI is `ground-tool diagnose`).
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
-use ground_tool::diagnose::run::diagnose_run;
+use ground_tool::diagnose::run::{diagnose_run, DiagnoseOutput};
 
 /// `RUN_DIR=... OUT=... cargo test -p tests --test diagnose_run -- --ignored --nocapture`
 #[test]
@@ -208,11 +208,8 @@ fn summary_runs() {
     }
 }
 
-#[test]
-#[ignore = "needs RUN_DIR"]
-fn debug_fss_truth_fit() {
-    use ground_tool::diagnose::effects::EffectKind;
-    use ground_tool::diagnose::fit::*;
+/// `RUN_DIR` diagnosed (scored) into `/tmp/dg/dbg`, for the debugging studies below.
+fn diagnose_env_run_dir() -> (std::path::PathBuf, DiagnoseOutput) {
     let run = std::path::PathBuf::from(std::env::var("RUN_DIR").unwrap());
     let o = diagnose_run(
         &run,
@@ -220,6 +217,15 @@ fn debug_fss_truth_fit() {
         &gro_tests::diagnose::scoring::scored_options(),
     )
     .unwrap();
+    (run, o)
+}
+
+#[test]
+#[ignore = "needs RUN_DIR"]
+fn debug_fss_truth_fit() {
+    use ground_tool::diagnose::effects::EffectKind;
+    use ground_tool::diagnose::fit::*;
+    let (_, o) = diagnose_env_run_dir();
     let res = &o.analysis.search;
     let lay = &res.layout;
     let tf = lay.find(EffectKind::FssTransferFunction, Some(3)).unwrap();
@@ -281,13 +287,7 @@ fn debug_fss_truth_fit() {
 fn debug_catalog() {
     use ground_tool::diagnose::effects::EffectKind;
     use ground_tool::diagnose::fit::*;
-    let run = std::path::PathBuf::from(std::env::var("RUN_DIR").unwrap());
-    let o = diagnose_run(
-        &run,
-        &std::path::PathBuf::from("/tmp/dg/dbg"),
-        &gro_tests::diagnose::scoring::scored_options(),
-    )
-    .unwrap();
+    let (run, o) = diagnose_env_run_dir();
     let res = &o.analysis.search;
     let lay = &res.layout;
     let ci = lay

@@ -7,7 +7,6 @@ use gro_tests::diagnose::synthetic::{generate, SynthConfig, SynthEffects};
 use ground_tool::diagnose::effects::library;
 use ground_tool::diagnose::effects::EffectKind;
 use ground_tool::diagnose::fit::{accumulate_fhst_only, accumulate_halves, Layout};
-use ground_tool::diagnose::measurements::MeasurementSet;
 use ground_tool::diagnose::sparse_catalog::screen;
 use sim_harness::sensors::fss::FssHeadErrors;
 
@@ -43,14 +42,11 @@ fn star_screen_p_values_are_uniform_under_the_null() {
             ],
             ..SynthEffects::default()
         };
-        let cfg = SynthConfig {
+        let synth = generate(&SynthConfig {
             duration_s: 3.0 * 3600.0,
-            seed,
-            effects,
-            ..SynthConfig::default()
-        };
-        let synth = generate(&cfg);
-        let set = MeasurementSet::build(&synth.input(&[]));
+            ..SynthConfig::seeded(effects, seed)
+        });
+        let set = synth.measurement_set();
         let catalog = library(&set, [None, None], None)
             .into_iter()
             .find(|e| e.kind == EffectKind::CatalogProperMotionError && !e.sparse)

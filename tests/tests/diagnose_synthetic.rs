@@ -374,12 +374,7 @@ fn clean_study() {
 fn time_tag_on_a_sensor_the_arcs_cannot_test() {
     let mut fx = SynthEffects::default();
     fx.time_tag_s[2] = 0.4;
-    let cfg = SynthConfig {
-        seed: 6,
-        effects: fx,
-        ..SynthConfig::default()
-    };
-    let mut synth = generate(&cfg);
+    let mut synth = generate(&SynthConfig::seeded(fx, 6));
     let mut n = 0usize;
     for f in &mut synth.frames {
         let turning = f
@@ -417,12 +412,7 @@ fn time_tag_on_a_sensor_the_arcs_cannot_test() {
 fn declared_time_tag_is_not_added_twice() {
     let mut fx = SynthEffects::default();
     fx.time_tag_s[0] = 0.1;
-    let cfg = SynthConfig {
-        seed: 2,
-        effects: fx,
-        ..SynthConfig::default()
-    };
-    let synth = generate(&cfg);
+    let synth = generate(&SynthConfig::seeded(fx, 2));
     let a = analyse(&synth.input(&["time_tag_offset"]), &SearchConfig::default()).unwrap();
     let res = &a.search;
     assert!(
@@ -457,12 +447,7 @@ fn slew_arcs_leave_out_a_non_finite_measurement() {
         time_tag_s: [0.2; 4],
         ..SynthEffects::default()
     };
-    let cfg = SynthConfig {
-        seed: 5,
-        effects: fx,
-        ..SynthConfig::default()
-    };
-    let synth = generate(&cfg);
+    let synth = generate(&SynthConfig::seeded(fx, 5));
     let config = SearchConfig::default();
     let a = analyse(&synth.input(&[]), &config).unwrap();
     let mut set = a.set.clone();

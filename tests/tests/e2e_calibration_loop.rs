@@ -8,6 +8,8 @@
 //! FHST1–FHST2 5″ aim is *not* asserted: its Cramér–Rao bound on this data is ≈ 9″ on two
 //! axes (README "Known gaps"; `calibration-mc` measures it over seeds).
 
+mod support;
+
 use gro_tests::loop_report::{compare, relative_error_and_nees};
 use ground_tool::pipeline::calibrate::{calibrate_run, CalibrateOptions};
 use sim_harness::run::{run, RunOptions};
@@ -15,8 +17,7 @@ use sim_harness::scenario::resolve;
 
 #[test]
 fn e2e_calibration_loop_gro_early_mission() {
-    let out = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("gro-e2e-loop");
-    let _ = std::fs::remove_dir_all(&out);
+    let out = support::fresh_dir("gro-e2e-loop");
     let scenario = resolve("gro-early-mission").unwrap();
     let fly_a = out.join("a");
     let cal = out.join("cal");
@@ -248,8 +249,7 @@ fn e2e_calibration_loop_gro_early_mission() {
 /// byte-identical tables and the same report (up to the output paths it names).
 #[test]
 fn calibration_is_deterministic() {
-    let out = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("gro-e2e-determinism");
-    let _ = std::fs::remove_dir_all(&out);
+    let out = support::fresh_dir("gro-e2e-determinism");
     let fly = out.join("run");
     fly_prelaunch(&fly);
     let mut reports = Vec::new();
@@ -282,8 +282,7 @@ fn calibration_is_deterministic() {
 /// relative alignment is consistent with its stated covariance.
 #[test]
 fn calibration_without_housekeeping() {
-    let out = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("gro-e2e-nohk");
-    let _ = std::fs::remove_dir_all(&out);
+    let out = support::fresh_dir("gro-e2e-nohk");
     let fly = out.join("run");
     fly_prelaunch(&fly);
     // Drop every APID 0x011 packet (CCSDS primary header: APID in the low 11 bits of octets

@@ -1,6 +1,8 @@
 //! Bad inputs against the main-job binaries (issue 17; the whole table:
 //! `tests/reliability/run_all.sh`, docs/reliability.md).
 
+mod support;
+
 use std::path::Path;
 use std::process::{Command, Output};
 
@@ -20,8 +22,7 @@ fn stderr(o: &Output) -> String {
 /// deletes a seed folder it did not create.
 #[test]
 fn calibration_mc_refuses_zero_runs_and_foreign_seed_folders() {
-    let tmp = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("rel-mc");
-    let _ = std::fs::remove_dir_all(&tmp);
+    let tmp = support::fresh_dir("rel-mc");
     std::fs::create_dir_all(tmp.join("w/seed-1")).unwrap();
     std::fs::write(tmp.join("w/seed-1/precious.txt"), "keep").unwrap();
     let mc = env!("CARGO_BIN_EXE_calibration-mc");
@@ -46,8 +47,7 @@ fn calibration_mc_refuses_zero_runs_and_foreign_seed_folders() {
 /// not write.
 #[test]
 fn calibration_loop_runs_twice_into_its_own_folder() {
-    let tmp = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("rel-loop");
-    let _ = std::fs::remove_dir_all(&tmp);
+    let tmp = support::fresh_dir("rel-loop");
     std::fs::create_dir_all(tmp.join("other")).unwrap();
     std::fs::write(tmp.join("other/notes.txt"), "mine").unwrap();
     let lp = env!("CARGO_BIN_EXE_calibration-loop");

@@ -522,8 +522,9 @@ impl Accumulator {
         }
     }
 
+    /// One epoch into the normal equations: the vectors in ACS, the residual statistics, the
+    /// pairs the weighting uses, their weights, then the sums.
     fn add_epoch(&mut self, obs: &[SensorObservation], m_current: &[Matrix3<f64>]) {
-        let nobs = obs.len();
         self.b.clear();
         self.sig2_arcsec2.clear();
         for o in obs {
@@ -531,7 +532,29 @@ impl Accumulator {
             let s = o.sigma_rad * ARCSEC_PER_RAD;
             self.sig2_arcsec2.push(s * s);
         }
-        // Residual statistics over all pairs of distinct sensors (independent of weighting).
+        self.residual_statistics(obs);
+        self.pairs.clear();
+        match self.weighting {
+            Weighting::Shuster1982 => self.all_pairs(obs),
+            Weighting::Optimal1990 => {
+                if !self.independent_pairs(obs) {
+                    return;
+                }
+            }
+        }
+        let m = self.pairs.len();
+        if m == 0 {
+            return;
+        }
+        let (r_cov, w) = self.pair_weights(m);
+        self.accumulate(m, &w);
+        self.r_cov = r_cov;
+        self.w = w;
+    }
+
+    /// Residual statistics over all pairs of distinct sensors (independent of weighting).
+    fn residual_statistics(&mut self, obs: &[SensorObservation]) {
+        let nobs = obs.len();
         for k in 0..nobs {
             for l in (k + 1)..nobs {
                 if obs[k].sensor == obs[l].sensor {
@@ -550,78 +573,84 @@ impl Accumulator {
                 }
             }
         }
-        self.pairs.clear();
-        match self.weighting {
-            Weighting::Shuster1982 => {
-                for k in 0..nobs {
-                    for l in (k + 1)..nobs {
-                        if obs[k].sensor != obs[l].sensor && !same_object(obs, k, l) {
-                            let p = self.make_pair(obs, k, l);
-                            if p.c.norm() > 1e-9 {
-                                self.pairs.push(p);
-                            }
-                        }
+    }
+
+    /// Shuster 1982: every pair of distinct sensors that do not see one object.
+    fn all_pairs(&mut self, obs: &[SensorObservation]) {
+        let nobs = obs.len();
+        for k in 0..nobs {
+            for l in (k + 1)..nobs {
+                if obs[k].sensor != obs[l].sensor && !same_object(obs, k, l) {
+                    let p = self.make_pair(obs, k, l);
+                    if p.c.norm() > 1e-9 {
+                        self.pairs.push(p);
                     }
                 }
             }
-            Weighting::Optimal1990 => {
-                // anchor = most orthogonal pair
-                let (mut a, mut bb, mut best) = (0, 1, -1.0);
-                for k in 0..nobs {
-                    for l in (k + 1)..nobs {
-                        let s = self.b[k].cross(&self.b[l]).norm_squared();
-                        if s > best {
-                            best = s;
-                            a = k;
-                            bb = l;
-                        }
-                    }
+        }
+    }
+
+    /// The 1990 variant: the most orthogonal pair as the anchor, then every other vector tied
+    /// to two placed ones. `false` when every vector of the epoch sees one object (the Sun in
+    /// both FSSs): the epoch is not used.
+    fn independent_pairs(&mut self, obs: &[SensorObservation]) -> bool {
+        let nobs = obs.len();
+        // anchor = most orthogonal pair
+        let (mut a, mut bb, mut best) = (0, 1, -1.0);
+        for k in 0..nobs {
+            for l in (k + 1)..nobs {
+                let s = self.b[k].cross(&self.b[l]).norm_squared();
+                if s > best {
+                    best = s;
+                    a = k;
+                    bb = l;
                 }
-                if same_object(obs, a, bb) {
-                    // Every vector of the epoch sees one object (the Sun in both FSSs).
-                    return;
-                }
-                let p = self.make_pair(obs, a, bb);
-                self.pairs.push(p);
-                // Every other vector k is tied to the two already-placed vectors (i, j) it is
-                // farthest from the plane of: the dot products with i and j fix b_k only up to
-                // a reflection through that plane, and lose first-order sensitivity to the
-                // out-of-plane direction when b_k is near it.
-                let mut placed = std::mem::take(&mut self.placed);
-                placed.clear();
-                placed.push(a);
-                placed.push(bb);
-                for k in 0..nobs {
-                    if k == a || k == bb {
-                        continue;
-                    }
-                    let (mut pi, mut pj, mut best_det) = (a, bb, -1.0);
-                    for (x, &i) in placed.iter().enumerate() {
-                        for &j in placed.iter().skip(x + 1) {
-                            let det = self.b[k].dot(&self.b[i].cross(&self.b[j])).abs();
-                            if det > best_det {
-                                best_det = det;
-                                pi = i;
-                                pj = j;
-                            }
-                        }
-                    }
-                    for i in [pi, pj] {
-                        if !same_object(obs, i, k) {
-                            let p = self.make_pair(obs, i, k);
-                            self.pairs.push(p);
-                        }
-                    }
-                    placed.push(k);
-                }
-                self.placed = placed;
             }
         }
-        let m = self.pairs.len();
-        if m == 0 {
-            return;
+        if same_object(obs, a, bb) {
+            return false;
         }
-        // Full covariance R of the chosen pairs.
+        let p = self.make_pair(obs, a, bb);
+        self.pairs.push(p);
+        // Every other vector k is tied to the two already-placed vectors (i, j) it is
+        // farthest from the plane of: the dot products with i and j fix b_k only up to
+        // a reflection through that plane, and lose first-order sensitivity to the
+        // out-of-plane direction when b_k is near it.
+        let mut placed = std::mem::take(&mut self.placed);
+        placed.clear();
+        placed.push(a);
+        placed.push(bb);
+        for k in 0..nobs {
+            if k == a || k == bb {
+                continue;
+            }
+            let (mut pi, mut pj, mut best_det) = (a, bb, -1.0);
+            for (x, &i) in placed.iter().enumerate() {
+                for &j in placed.iter().skip(x + 1) {
+                    let det = self.b[k].dot(&self.b[i].cross(&self.b[j])).abs();
+                    if det > best_det {
+                        best_det = det;
+                        pi = i;
+                        pj = j;
+                    }
+                }
+            }
+            for i in [pi, pj] {
+                if !same_object(obs, i, k) {
+                    let p = self.make_pair(obs, i, k);
+                    self.pairs.push(p);
+                }
+            }
+            placed.push(k);
+        }
+        self.placed = placed;
+        true
+    }
+
+    /// The full covariance `R` of the `m` chosen pairs and their weight matrix `W`: its
+    /// diagonal inverse (Shuster 1982, whose sandwich `W R W` goes into the meat) or its
+    /// inverse (1990).
+    fn pair_weights(&mut self, m: usize) -> (Vec<f64>, Vec<f64>) {
         let mut r_cov = std::mem::take(&mut self.r_cov);
         r_cov.clear();
         r_cov.resize(m * m, 0.0);
@@ -665,7 +694,12 @@ impl Accumulator {
                 }
             }
         }
-        Self::add_quadratic(&mut self.normal, self.n, &self.pairs, &w, &mut self.kh);
+        (r_cov, w)
+    }
+
+    /// `Hᵀ W H` into the normal matrix, `Hᵀ W y` into the right-hand side, `yᵀ W y` into χ².
+    fn accumulate(&mut self, m: usize, w: &[f64]) {
+        Self::add_quadratic(&mut self.normal, self.n, &self.pairs, w, &mut self.kh);
         for (a, p) in self.pairs.iter().enumerate() {
             let mut wy = 0.0;
             for (bq, q) in self.pairs.iter().enumerate() {
@@ -680,8 +714,6 @@ impl Accumulator {
             }
         }
         self.pairs_used += m;
-        self.r_cov = r_cov;
-        self.w = w;
     }
 }
 

@@ -530,6 +530,10 @@ fn nnls_by_supports(a: &[[f64; TERMS]], b: &[f64]) -> Option<([f64; TERMS], f64)
 /// Fit the five-term model to Allan points (their `edf` and σ; the confidence level for the
 /// term intervals). Returns the fit and the model's dominant α at each point's τ.
 ///
+/// Stages: the iteratively reweighted fit with the model error ([`NoiseModelFit::iterate`]),
+/// each coefficient's equivalent dof ([`NoiseModelFit::coefficient_edf`]), then each term
+/// with its interval ([`NoiseModelFit::term`]).
+///
 /// # Errors
 /// [`AllanError::FitFailed`] with fewer than three points of edf ≥ 1.
 pub fn fit_noise(
@@ -541,79 +545,132 @@ pub fn fit_noise(
         .iter()
         .filter(|p| p.edf >= MIN_FIT_EDF && p.sigma_rad_per_s > 0.0)
         .collect();
+    let failed = || AllanError::FitFailed {
+        axis,
+        points: used.len(),
+    };
     if used.len() < 3 {
-        return Err(AllanError::FitFailed {
-            axis,
-            points: used.len(),
-        });
+        return Err(failed());
     }
-    let var_meas: Vec<f64> = used.iter().map(|p| p.sigma_rad_per_s.powi(2)).collect();
-    // Weights from the model's σ² (the measured ones at first), iterated: a point's σ² has
-    // variance 2 σ⁴ / edf from sampling, plus (ε σ²)² for the model's own error ε (the
-    // pulse quantization is a bounded, correlated angle error, not exactly 3Q²/τ²: on the
-    // DRIRU counts the short-τ points miss the pure τ⁻¹ shape by ~1 %, two hundred times
-    // their sampling σ). ε is estimated from the residuals (method of moments).
-    let mut var_model = var_meas.clone();
-    let mut coef = [0.0; TERMS];
-    let mut model_error2 = 0.0_f64;
-    let mut chi2_sampling = 0.0;
-    for _ in 0..8 {
-        let mut a = Vec::with_capacity(used.len());
-        let mut b = Vec::with_capacity(used.len());
-        for (k, p) in used.iter().enumerate() {
-            // A model far below a point (a support that leaves a region unexplained) must
-            // not give that point an enormous weight: floor at half the measured σ².
-            let var_w = var_model[k].max(0.5 * var_meas[k]);
-            let w = 1.0 / (var_w * (2.0 / p.edf + model_error2).sqrt());
-            a.push(term_shapes(p.tau_s).map(|f| f * w));
-            b.push(var_meas[k] * w);
-        }
-        let Some((c, _)) = nnls_by_supports(&a, &b) else {
-            return Err(AllanError::FitFailed {
-                axis,
-                points: used.len(),
-            });
+    let fit = NoiseModelFit::iterate(&used).ok_or_else(failed)?;
+    let edf_ls = fit.coefficient_edf();
+    // A point's equivalent dof with the model error included.
+    let edf_with_model: Vec<f64> = used
+        .iter()
+        .map(|p| 2.0 / (2.0 / p.edf + fit.model_error2))
+        .collect();
+    let term = |j: usize| fit.term(j, &edf_ls, &edf_with_model, confidence);
+    Ok(NoiseFit {
+        quantization_rad: term(0),
+        arw_rad_per_sqrt_s: term(1),
+        bias_instability_rad_per_s: term(2),
+        rrw_rad_per_s_sqrt_s: term(3),
+        rate_ramp_rad_per_s2: term(4),
+        chi2_per_point: fit.chi2_sampling,
+        model_error_fraction: fit.model_error2.sqrt(),
+        points_fitted: used.len(),
+    })
+}
+
+/// The weighted fit of the five terms to the points used, as the stages of [`fit_noise`]
+/// share it.
+struct NoiseModelFit<'a> {
+    used: &'a [&'a AllanPoint],
+    /// Measured σ² per point.
+    var_meas: Vec<f64>,
+    /// The model's σ² per point.
+    var_model: Vec<f64>,
+    /// Coefficients of the terms.
+    coef: [f64; TERMS],
+    /// ε², the model's own relative error squared.
+    model_error2: f64,
+    /// Mean normalised squared residual from sampling.
+    chi2_sampling: f64,
+}
+
+impl<'a> NoiseModelFit<'a> {
+    /// Weights from the model's σ² (the measured ones at first), iterated: a point's σ² has
+    /// variance 2 σ⁴ / edf from sampling, plus (ε σ²)² for the model's own error ε (the
+    /// pulse quantization is a bounded, correlated angle error, not exactly 3Q²/τ²: on the
+    /// DRIRU counts the short-τ points miss the pure τ⁻¹ shape by ~1 %, two hundred times
+    /// their sampling σ). ε is estimated from the residuals (method of moments). `None` when
+    /// a fit fails.
+    fn iterate(used: &'a [&'a AllanPoint]) -> Option<Self> {
+        let var_meas: Vec<f64> = used.iter().map(|p| p.sigma_rad_per_s.powi(2)).collect();
+        let mut fit = Self {
+            used,
+            var_model: var_meas.clone(),
+            var_meas,
+            coef: [0.0; TERMS],
+            model_error2: 0.0,
+            chi2_sampling: 0.0,
         };
-        coef = c;
-        for (k, p) in used.iter().enumerate() {
-            let v: f64 = term_shapes(p.tau_s)
+        for _ in 0..8 {
+            let (a, b): (Vec<[f64; TERMS]>, Vec<f64>) = used
                 .iter()
-                .zip(&coef)
-                .map(|(f, c)| f * c)
-                .sum();
-            var_model[k] = v.max(1e-6 * var_meas[k]);
+                .enumerate()
+                .map(|(k, p)| {
+                    let w = fit.weight(k);
+                    (term_shapes(p.tau_s).map(|f| f * w), fit.var_meas[k] * w)
+                })
+                .unzip();
+            let (c, _) = nnls_by_supports(&a, &b)?;
+            fit.coef = c;
+            for (k, p) in used.iter().enumerate() {
+                let v: f64 = term_shapes(p.tau_s)
+                    .iter()
+                    .zip(&fit.coef)
+                    .map(|(f, c)| f * c)
+                    .sum();
+                fit.var_model[k] = v.max(1e-6 * fit.var_meas[k]);
+            }
+            fit.estimate_model_error();
         }
-        // ε² by the DerSimonian–Laird moment estimator on the relative residuals
-        // r = (σ²_meas − σ²_model)/σ²_model, whose sampling variance is 2/edf.
-        let active = coef.iter().filter(|c| **c > 0.0).count();
-        let dof = used.len().saturating_sub(active) as f64;
+        Some(fit)
+    }
+
+    /// Point `k`'s weight. A model far below a point (a support that leaves a region
+    /// unexplained) must not give that point an enormous weight: floor at half the measured
+    /// σ².
+    fn weight(&self, k: usize) -> f64 {
+        let var_w = self.var_model[k].max(0.5 * self.var_meas[k]);
+        1.0 / (var_w * (2.0 / self.used[k].edf + self.model_error2).sqrt())
+    }
+
+    /// ε² by the DerSimonian–Laird moment estimator on the relative residuals
+    /// r = (σ²_meas − σ²_model)/σ²_model, whose sampling variance is 2/edf.
+    fn estimate_model_error(&mut self) {
+        let active = self.coef.iter().filter(|c| **c > 0.0).count();
+        let dof = self.used.len().saturating_sub(active) as f64;
         let (mut q, mut sw, mut sw2) = (0.0, 0.0, 0.0);
-        for (k, p) in used.iter().enumerate() {
-            let r2 = ((var_meas[k] - var_model[k]) / var_model[k]).powi(2);
+        for (k, p) in self.used.iter().enumerate() {
+            let r2 = ((self.var_meas[k] - self.var_model[k]) / self.var_model[k]).powi(2);
             let w = p.edf / 2.0;
             q += w * r2;
             sw += w;
             sw2 += w * w;
         }
         let denom = sw - sw2 / sw.max(f64::MIN_POSITIVE);
-        model_error2 = if denom > 0.0 {
+        self.model_error2 = if denom > 0.0 {
             ((q - dof) / denom).max(0.0)
         } else {
             0.0
         };
-        chi2_sampling = q / used.len() as f64;
+        self.chi2_sampling = q / self.used.len() as f64;
     }
-    // Covariance of the coefficients on the active support (independent points, weights
-    // with ε): each term's relative variance as an equivalent dof `2 c² / var(c)`.
-    let edf_ls: [f64; TERMS] = {
+
+    /// Covariance of the coefficients on the active support (independent points, weights
+    /// with ε): each term's relative variance as an equivalent dof `2 c² / var(c)`.
+    fn coefficient_edf(&self) -> [f64; TERMS] {
+        let coef = &self.coef;
         let cols: Vec<usize> = (0..TERMS).filter(|&j| coef[j] > 0.0).collect();
         let mut out = [f64::INFINITY; TERMS];
-        let rows: Vec<[f64; TERMS]> = used
+        let rows: Vec<[f64; TERMS]> = self
+            .used
             .iter()
             .enumerate()
             .map(|(k, p)| {
-                let var_w = var_model[k].max(0.5 * var_meas[k]);
-                let w = 1.0 / (var_w * (2.0 / p.edf + model_error2).sqrt());
+                let w = self.weight(k);
                 term_shapes(p.tau_s).map(|f| f * w)
             })
             .collect();
@@ -632,19 +689,23 @@ pub fn fit_noise(
             }
         }
         out
-    };
-    // A point's equivalent dof with the model error included.
-    let edf_with_model: Vec<f64> = used
-        .iter()
-        .map(|p| 2.0 / (2.0 / p.edf + model_error2))
-        .collect();
-    let term = |j: usize| -> NoiseTerm {
+    }
+
+    /// Term `j` with its χ² interval where it dominates some τ, else an upper bound.
+    fn term(
+        &self,
+        j: usize,
+        edf_ls: &[f64; TERMS],
+        edf_with_model: &[f64],
+        confidence: f64,
+    ) -> NoiseTerm {
+        let coef = &self.coef;
         // Share of the fitted variance at each τ, the dominant range and the best point.
         let mut range: Option<[f64; 2]> = None;
         let mut best: Option<(f64, f64)> = None; // (edf·s², τ)
         let mut upper = f64::INFINITY;
-        for (k, p) in used.iter().enumerate() {
-            let share = coef[j] * term_shapes(p.tau_s)[j] / var_model[k];
+        for (k, p) in self.used.iter().enumerate() {
+            let share = coef[j] * term_shapes(p.tau_s)[j] / self.var_model[k];
             if share >= 0.5 {
                 range = Some(match range {
                     None => [p.tau_s, p.tau_s],
@@ -685,17 +746,7 @@ pub fn fit_noise(
                 interval_method: "upper bound",
             },
         }
-    };
-    Ok(NoiseFit {
-        quantization_rad: term(0),
-        arw_rad_per_sqrt_s: term(1),
-        bias_instability_rad_per_s: term(2),
-        rrw_rad_per_s_sqrt_s: term(3),
-        rate_ramp_rad_per_s2: term(4),
-        chi2_per_point: chi2_sampling,
-        model_error_fraction: model_error2.sqrt(),
-        points_fitted: used.len(),
-    })
+    }
 }
 
 /// The model's σ² at τ from a fit.

@@ -1155,6 +1155,19 @@ const SCAN_EXACT: usize = 1;
 /// this many fixes earlier); all of them would be 64 MB over six months.
 const BASE_EVERY: usize = 4;
 
+/// The forward pass (its last state) with the chain's state extended by `extension`.
+fn forward_extended(
+    chain: &Chain,
+    models: &[Option<LinkModel>],
+    nominal: &Nominal,
+    cfg: &ChainConfig,
+    rrw: f64,
+    extension: Extension,
+) -> Result<Pass, ChainError> {
+    let c = ChainConfig { extension, ..*cfg };
+    forward(chain, models, nominal, &c, rrw, History::Last)
+}
+
 /// The Wald test of a bias step before fix `at`.
 fn bias_step_wald(
     chain: &Chain,
@@ -1164,11 +1177,7 @@ fn bias_step_wald(
     rrw: f64,
     at: usize,
 ) -> Result<(f64, Vector3<f64>, Vector3<f64>), ChainError> {
-    let c = ChainConfig {
-        extension: Extension::BiasStepAt(at),
-        ..*cfg
-    };
-    let pass = forward(chain, models, nominal, &c, rrw, History::Last)?;
+    let pass = forward_extended(chain, models, nominal, cfg, rrw, Extension::BiasStepAt(at))?;
     Ok(step_wald(&pass))
 }
 
@@ -1300,11 +1309,7 @@ fn rate_scale_test(
     cfg: &ChainConfig,
     rrw: f64,
 ) -> Result<RateScaleTest, ChainError> {
-    let c = ChainConfig {
-        extension: Extension::RateScale,
-        ..*cfg
-    };
-    let pass = forward(chain, models, nominal, &c, rrw, History::Last)?;
+    let pass = forward_extended(chain, models, nominal, cfg, rrw, Extension::RateScale)?;
     let (delta_chi2, k, sd) = step_wald(&pass);
     let p_value = chi2_sf(delta_chi2, 3.0);
     Ok(RateScaleTest {

@@ -209,7 +209,8 @@ fn nuisance_row(m: &Measurement) -> [Vector6<f64>; 2] {
     out
 }
 
-fn batch_ranges(set: &MeasurementSet) -> Vec<std::ops::Range<usize>> {
+/// The measurements of each batch (`set.meas` is in batch order).
+pub(super) fn batch_ranges(set: &MeasurementSet) -> Vec<std::ops::Range<usize>> {
     let mut out = vec![0..0; set.batches.len()];
     let mut i = 0;
     while i < set.meas.len() {
@@ -248,14 +249,7 @@ fn accumulate_rows(
     use_batch: &dyn Fn(usize) -> bool,
     fss_rows: bool,
 ) -> Normal {
-    let p = layout.total;
-    let mut out = Normal::zeros(p);
-    let mut local = vec![usize::MAX; p];
-    let mut touched: Vec<usize> = Vec::new();
-    let mut nag: Vec<Vector6<f64>> = Vec::new();
-    let mut cols = Vec::new();
-    let mut scratch = Vec::new();
-    let mut dense: Vec<(usize, f64)> = Vec::new();
+    let mut acc = BatchAccumulator::new(layout.total);
     for (bi, range) in batch_ranges(set).into_iter().enumerate() {
         if !use_batch(bi) || range.is_empty() {
             continue;
@@ -264,19 +258,70 @@ fn accumulate_rows(
         if !ms.iter().any(|m| m.sensor < 2 && !m.outlier) {
             continue;
         }
+        let (naa, na) = acc.fhst_rows(ms, layout);
+        if let Some((a0, s)) = acc.eliminate_attitude(&naa, &na) {
+            if fss_rows {
+                acc.fss_rows(ms, layout, naa, &a0, &s);
+            }
+        }
+        acc.release_columns();
+    }
+    acc.out
+}
+
+/// The normal equations being summed over the batches of [`accumulate_rows`], and the
+/// scratch of one batch: its global columns (`touched`, with their `local` index) and the
+/// attitude's cross terms with them.
+struct BatchAccumulator {
+    out: Normal,
+    /// Global column → its index in `touched` (`usize::MAX` = not in this batch).
+    local: Vec<usize>,
+    touched: Vec<usize>,
+    /// `Aᵀ W G` per touched column (FHST rows).
+    nag: Vec<Vector6<f64>>,
+    cols: Vec<(usize, [f64; 2])>,
+    scratch: Vec<(usize, [f64; 2])>,
+    dense: Vec<(usize, f64)>,
+}
+
+impl BatchAccumulator {
+    fn new(p: usize) -> Self {
+        Self {
+            out: Normal::zeros(p),
+            local: vec![usize::MAX; p],
+            touched: Vec::new(),
+            nag: Vec::new(),
+            cols: Vec::new(),
+            scratch: Vec::new(),
+            dense: Vec::new(),
+        }
+    }
+
+    /// A batch's global columns are given back (the next batch starts empty).
+    fn release_columns(&mut self) {
+        for &c in &self.touched {
+            self.local[c] = usize::MAX;
+        }
+    }
+
+    /// The batch's FHST rows into the global sums, with the attitude's information `naa` and
+    /// its right-hand side `na` (the batch's cross terms in `nag`).
+    fn fhst_rows(&mut self, ms: &[Measurement], layout: &Layout) -> (Matrix6<f64>, Vector6<f64>) {
+        let out = &mut self.out;
         let mut naa = nuisance_prior();
         let mut na = Vector6::<f64>::zeros();
-        touched.clear();
-        nag.clear();
+        self.touched.clear();
+        self.nag.clear();
         for m in ms.iter().filter(|m| m.sensor < 2 && !m.outlier) {
-            layout.row_columns(m, &mut cols, &mut scratch);
+            layout.row_columns(m, &mut self.cols, &mut self.scratch);
+            let cols = &self.cols;
             let arow = nuisance_row(m);
             let w = 1.0 / (m.sigma * m.sigma);
-            for &(c, _) in &cols {
-                if local[c] == usize::MAX {
-                    local[c] = touched.len();
-                    touched.push(c);
-                    nag.push(Vector6::zeros());
+            for &(c, _) in cols {
+                if self.local[c] == usize::MAX {
+                    self.local[c] = self.touched.len();
+                    self.touched.push(c);
+                    self.nag.push(Vector6::zeros());
                 }
             }
             for ax in 0..2 {
@@ -286,70 +331,88 @@ fn accumulate_rows(
                 na += a * (w * r);
                 out.chi2 += w * r * r;
                 out.rows += 1;
-                for &(c1, v1) in &cols {
+                for &(c1, v1) in cols {
                     let wv = w * v1[ax];
                     if wv == 0.0 {
                         continue;
                     }
-                    nag[local[c1]] += a * wv;
+                    self.nag[self.local[c1]] += a * wv;
                     out.b[c1] += wv * r;
-                    for &(c2, v2) in &cols {
+                    for &(c2, v2) in cols {
                         out.n[(c1, c2)] += wv * v2[ax];
                     }
                 }
             }
         }
-        let Some(inv) = naa.try_inverse() else {
-            for &c in &touched {
-                local[c] = usize::MAX;
-            }
-            continue;
-        };
+        (naa, na)
+    }
+
+    /// The batch attitude eliminated from the sums (Schur complement): its estimate `â0` from
+    /// the FHST rows and `S = naa⁻¹ nag` per touched column; `None` when `naa` is singular
+    /// (the batch is not used).
+    fn eliminate_attitude(
+        &mut self,
+        naa: &Matrix6<f64>,
+        na: &Vector6<f64>,
+    ) -> Option<(Vector6<f64>, Vec<Vector6<f64>>)> {
+        let inv = naa.try_inverse()?;
+        let out = &mut self.out;
         out.nuisance += NUISANCE;
         let a0 = inv * na;
         out.chi2 -= na.dot(&a0);
-        let s: Vec<Vector6<f64>> = nag.iter().map(|v| inv * v).collect();
-        for (i, &ci) in touched.iter().enumerate() {
-            out.b[ci] -= nag[i].dot(&a0);
-            for (j, &cj) in touched.iter().enumerate() {
-                out.n[(ci, cj)] -= nag[i].dot(&s[j]);
+        let s: Vec<Vector6<f64>> = self.nag.iter().map(|v| inv * v).collect();
+        for (i, &ci) in self.touched.iter().enumerate() {
+            out.b[ci] -= self.nag[i].dot(&a0);
+            for (j, &cj) in self.touched.iter().enumerate() {
+                out.n[(ci, cj)] -= self.nag[i].dot(&s[j]);
             }
         }
-        // FSS rows against the FHST attitude: r' = r − F â0 = (K − F S) g + F e + noise, where
-        // e = a − â0 is the error of the FHST attitude, with information `naa`. Eliminating e
-        // as well (sequential least squares) gives the exact likelihood: the FSS rows of one
-        // batch share the attitude error.
+        Some((a0, s))
+    }
+
+    /// FSS rows against the FHST attitude: r' = r − F â0 = (K − F S) g + F e + noise, where
+    /// e = a − â0 is the error of the FHST attitude, with information `naa`. Eliminating e
+    /// as well (sequential least squares) gives the exact likelihood: the FSS rows of one
+    /// batch share the attitude error.
+    fn fss_rows(
+        &mut self,
+        ms: &[Measurement],
+        layout: &Layout,
+        naa: Matrix6<f64>,
+        a0: &Vector6<f64>,
+        s: &[Vector6<f64>],
+    ) {
+        let out = &mut self.out;
         let mut nee = naa;
         let mut ne = Vector6::<f64>::zeros();
-        let mut neg: Vec<Vector6<f64>> = vec![Vector6::zeros(); touched.len()];
-        let n_fhst_cols = touched.len();
+        let mut neg: Vec<Vector6<f64>> = vec![Vector6::zeros(); self.touched.len()];
+        let n_fhst_cols = self.touched.len();
         let mut any_fss = false;
-        for m in ms
-            .iter()
-            .filter(|m| fss_rows && m.sensor >= 2 && !m.outlier)
-        {
+        for m in ms.iter().filter(|m| m.sensor >= 2 && !m.outlier) {
             any_fss = true;
-            layout.row_columns(m, &mut cols, &mut scratch);
+            layout.row_columns(m, &mut self.cols, &mut self.scratch);
+            let cols = &self.cols;
             let arow = nuisance_row(m);
             let w = 1.0 / (m.sigma * m.sigma);
-            for &(c, _) in &cols {
-                if local[c] == usize::MAX {
-                    local[c] = touched.len();
-                    touched.push(c);
+            for &(c, _) in cols {
+                if self.local[c] == usize::MAX {
+                    self.local[c] = self.touched.len();
+                    self.touched.push(c);
                     neg.push(Vector6::zeros());
                 }
             }
             for ax in 0..2 {
                 let a = &arow[ax];
-                let r = m.r[ax] - a.dot(&a0);
+                let r = m.r[ax] - a.dot(a0);
+                let dense = &mut self.dense;
                 dense.clear();
                 for i in 0..n_fhst_cols {
                     let v = -a.dot(&s[i]);
                     if v != 0.0 {
-                        dense.push((touched[i], v));
+                        dense.push((self.touched[i], v));
                     }
                 }
-                for &(c, v) in &cols {
+                for &(c, v) in cols {
                     if v[ax] == 0.0 {
                         continue;
                     }
@@ -363,37 +426,34 @@ fn accumulate_rows(
                 out.rows += 1;
                 nee += a * a.transpose() * w;
                 ne += a * (w * r);
-                for &(c1, v1) in &dense {
+                for &(c1, v1) in dense.iter() {
                     let wv = w * v1;
                     out.b[c1] += wv * r;
-                    neg[local[c1]] += a * wv;
-                    for &(c2, v2) in &dense {
+                    neg[self.local[c1]] += a * wv;
+                    for &(c2, v2) in dense.iter() {
                         out.n[(c1, c2)] += wv * v2;
                     }
                 }
             }
         }
-        if any_fss {
-            if let Some(inv_e) = nee.try_inverse() {
-                let e0 = inv_e * ne;
-                out.chi2 -= ne.dot(&e0);
-                let se: Vec<Vector6<f64>> = neg.iter().map(|v| inv_e * v).collect();
-                for (i, &ci) in touched.iter().enumerate() {
-                    if neg[i] == Vector6::zeros() {
-                        continue;
-                    }
-                    out.b[ci] -= neg[i].dot(&e0);
-                    for (j, &cj) in touched.iter().enumerate() {
-                        out.n[(ci, cj)] -= neg[i].dot(&se[j]);
-                    }
+        if !any_fss {
+            return;
+        }
+        if let Some(inv_e) = nee.try_inverse() {
+            let e0 = inv_e * ne;
+            out.chi2 -= ne.dot(&e0);
+            let se: Vec<Vector6<f64>> = neg.iter().map(|v| inv_e * v).collect();
+            for (i, &ci) in self.touched.iter().enumerate() {
+                if neg[i] == Vector6::zeros() {
+                    continue;
+                }
+                out.b[ci] -= neg[i].dot(&e0);
+                for (j, &cj) in self.touched.iter().enumerate() {
+                    out.n[(ci, cj)] -= neg[i].dot(&se[j]);
                 }
             }
         }
-        for &c in &touched {
-            local[c] = usize::MAX;
-        }
     }
-    out
 }
 
 /// χ² of each selected batch for the global vector `g` (full length): the likelihood

@@ -26,83 +26,16 @@
 //! separable from the scale factor when all slews run in high-rate mode (not a candidate).
 
 use super::fit::PostFit;
+use super::gyro_data::{batch_attitude, delta_bic, BatchAttitude, HoldBias, SlewInput};
+pub use super::gyro_data::{GyroAnalysis, GyroConfig, GyroFrame, GyroInput, GyroLeftover};
 use super::measurements::MeasurementSet;
 use super::search::Evidence;
 use super::stats::{chi2_sf, f_sf};
 use super::Detected;
-use crate::calibration::iru::{GyroCalibration, GyroStep};
-use crate::pipeline::observations::FrameObservations;
 use fsw_core::attitude::{rot, rotvec_from_rot};
-use fsw_core::raw::TimeTag;
 use fsw_core::units::{ARCSEC_PER_RAD, RAD_PER_ARCSEC};
 use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
 use std::collections::BTreeMap;
-
-/// BIC improvement of a candidate with `k` parameters over `n` rows, χ² from `c0` to `c1`,
-/// with the same noise scale as the F test: the residual scale `s2 = c1/dof` when it is above
-/// the declared noise (unknown σ: `n ln(c0/c1)`), the declared noise otherwise (known σ:
-/// `c0 − c1`). With few rows and residuals quieter than declared, `n ln(c0/c1)` would
-/// inflate a change the F test calls noise (ΔBIC 31 at LR p = 0.03 on clean data).
-pub(super) fn delta_bic(c0: f64, c1: f64, s2: f64, n: usize, k: usize) -> f64 {
-    let n = n as f64;
-    let gain = if s2 >= 1.0 {
-        n * (c0 / c1.max(1e-9)).ln()
-    } else {
-        c0 - c1
-    };
-    gain - k as f64 * n.ln()
-}
-
-/// Settings of the gyro analysis.
-#[derive(Clone, Copy, Debug)]
-pub struct GyroConfig {
-    /// Family-wise significance.
-    pub alpha: f64,
-    /// Smallest ΔBIC accepted.
-    pub min_delta_bic: f64,
-    /// Declared bias random walk (rad/s^1.5).
-    pub rrw_rad_per_s15: f64,
-    /// Declared angle random walk (rad/√s).
-    pub arw_rad_per_sqrt_s: f64,
-    /// The operator declares the early bias transient (a ramp is in the baseline).
-    pub transient_declared: bool,
-}
-
-/// What the gyro analysis reads of a frame: ≈ 80 bytes of its 704, so that the frames
-/// (0.37 GB over six months of 30-s telemetry) can go once the measurement set is built.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct GyroFrame {
-    /// Frame time.
-    pub time: TimeTag,
-    /// Gyro increment over the interval that ended at this frame.
-    pub gyro: Option<GyroStep>,
-    /// IRU rate mode of that interval.
-    pub high_rate: bool,
-    /// IRU temperature (°C).
-    pub iru_temperature_c: f64,
-}
-
-impl From<&FrameObservations> for GyroFrame {
-    fn from(f: &FrameObservations) -> Self {
-        Self {
-            time: f.time,
-            gyro: f.gyro,
-            high_rate: f.high_rate,
-            iru_temperature_c: f.temperatures_c[4],
-        }
-    }
-}
-
-/// The gyro analysis's input besides the sensor-side fit.
-#[derive(Clone, Debug)]
-pub struct GyroInput<'a> {
-    /// Per frame.
-    pub frames: &'a [GyroFrame],
-    /// Gyro calibration (δM on the increments; the bias is the fallback).
-    pub gyro: GyroCalibration,
-    /// Bias per frame (e.g. the OBC's estimate); `None` = `gyro.bias_acs_rad_per_s`.
-    pub bias_per_frame: Option<&'a [Vector3<f64>]>,
-}
 
 /// A gyro attitude-difference sample.
 #[derive(Clone, Debug)]
@@ -120,48 +53,6 @@ struct BiasSample {
     dtemp_iru: f64,
 }
 
-/// The gyro analysis result.
-#[derive(Clone, Debug, Default)]
-pub struct GyroAnalysis {
-    /// Detected gyro effects.
-    pub detected: Vec<Detected>,
-    /// Evidence of every candidate (for the report).
-    pub candidates: Vec<Evidence>,
-    /// Number of bias samples and slews used.
-    pub bias_samples: usize,
-    /// Slews used for the asymmetry.
-    pub slews: usize,
-    /// Bias history (t s, bias error arcsec/s per axis) for plots.
-    pub bias_series: Vec<(f64, [f64; 3])>,
-    /// Baseline fit of the bias (t, fitted arcsec/s per axis) and the final one.
-    pub bias_fit_before: Vec<(f64, [f64; 3])>,
-    /// Final fit.
-    pub bias_fit_after: Vec<(f64, [f64; 3])>,
-    /// Slew residuals before/after the asymmetry (angle deg signed about the dominant axis,
-    /// residual arcsec along it).
-    pub slew_residuals: Vec<(f64, f64, f64)>,
-    /// Notes (why something was not analysed).
-    pub notes: Vec<String>,
-    /// The candidates not kept, tested against the final model (the last round of the bias
-    /// history, the asymmetry when rejected): the evidence ledger ([`super::ledger`]) reports
-    /// a significant one as unexplained with its size and the reason it was not kept.
-    pub leftover: Vec<GyroLeftover>,
-}
-
-/// A gyro candidate not kept, with its size against the final model.
-#[derive(Clone, Debug)]
-pub struct GyroLeftover {
-    /// Its evidence (`p_holm`: Bonferroni over the candidates of its family).
-    pub evidence: Evidence,
-    /// The regressor its structure follows (`time_s`, `iru_temperature_c`, `slew_angle_abs`).
-    pub regressor: &'static str,
-    /// Size: RMS of the fitted term over the samples (arcsec/s), or the largest asymmetry
-    /// (ppm).
-    pub size: f64,
-    /// Unit of `size`.
-    pub unit: &'static str,
-}
-
 /// RMS over the samples of the term `est[axis] × column(sample)` (column centred), norm over
 /// the three axes: the size of a bias-history candidate.
 fn term_rms(samples: &[BiasSample], column: &dyn Fn(&BiasSample) -> f64, est: &[f64]) -> f64 {
@@ -170,19 +61,6 @@ fn term_rms(samples: &[BiasSample], column: &dyn Fn(&BiasSample) -> f64, est: &[
     let mean = cols.iter().sum::<f64>() / n;
     let spread = (cols.iter().map(|c| (c - mean).powi(2)).sum::<f64>() / n).sqrt();
     spread * est.iter().map(|e| e * e).sum::<f64>().sqrt()
-}
-
-/// A batch's corrected attitude and its per-axis variance (rad²), boxed: few batches are
-/// usable (on six months of 30-s frames a few thousand of 0.5 million), so the list costs 8
-/// bytes per batch instead of 104 (issue 22).
-pub(super) type BatchAttitude = Option<Box<(Matrix3<f64>, Vector3<f64>)>>;
-
-/// The attitude of batch `i`, if usable.
-pub(super) fn batch_attitude(
-    att: &[BatchAttitude],
-    i: usize,
-) -> Option<(Matrix3<f64>, Vector3<f64>)> {
-    att[i].as_deref().copied()
 }
 
 fn batch_attitudes(set: &MeasurementSet, post: &PostFit) -> Vec<BatchAttitude> {
@@ -431,9 +309,11 @@ fn bias_fit(
     Some((chi2, betas, covs, 3 * n))
 }
 
-/// Run the gyro analysis on the final sensor-side fit.
+/// Run the gyro analysis on the final sensor-side fit, in three stages: the hold-to-hold
+/// bias samples ([`bias_samples`]), the bias history's forward search over its candidate
+/// forms ([`bias_history`]), and the slews ([`super::gyro_slews`]) with the bias the holds
+/// measured.
 #[must_use]
-#[allow(clippy::too_many_lines)]
 pub fn analyse(
     input: &GyroInput<'_>,
     set: &MeasurementSet,
@@ -443,31 +323,64 @@ pub fn analyse(
     let mut out = GyroAnalysis::default();
     let att = batch_attitudes(set, post);
     let frames = input.frames;
-    let t_first = frames.first().map_or(0.0, |f| f.time.seconds());
-    let b_ref = input
+    let b_ref = reference_bias(input);
+    let tmean_iru =
+        frames.iter().map(|f| f.iru_temperature_c).sum::<f64>() / frames.len().max(1) as f64;
+    // 1. Bias samples.
+    let samples = bias_samples(input, set, &att, &b_ref, tmean_iru);
+    out.bias_samples = samples.len();
+    out.bias_series = samples
+        .iter()
+        .map(|s| (s.t_s, [s.y.x, s.y.y, s.y.z]))
+        .collect();
+    // 2. The hold bias history (accepted models) per frame.
+    let hold_bias = bias_history(&samples, input, &b_ref, tmean_iru, cfg, &mut out);
+    // 3. The slews.
+    let slews = SlewInput {
+        input,
+        set,
+        att: &att,
+        b_ref: &b_ref,
+        hold_bias: hold_bias.as_ref(),
+        cfg,
+    };
+    super::gyro_slews::analyse(&slews, &mut out);
+    out
+}
+
+/// The constant reference bias `b_ref`: the mean of the per-frame bias when given, else the
+/// calibration's.
+fn reference_bias(input: &GyroInput<'_>) -> Vector3<f64> {
+    input
         .bias_per_frame
         .and_then(|b| {
             let n = b.len().max(1) as f64;
             Some(b.iter().sum::<Vector3<f64>>() / n)
         })
-        .unwrap_or(input.gyro.bias_acs_rad_per_s);
-    let tmean_iru =
-        frames.iter().map(|f| f.iru_temperature_c).sum::<f64>() / frames.len().max(1) as f64;
-    // Bias samples.
+        .unwrap_or(input.gyro.bias_acs_rad_per_s)
+}
+
+/// Stage 1: one bias sample per pair of consecutive, contiguous low-rate batches with usable
+/// attitudes more than 1 s apart (`y = −z/Δt` against `b_ref`).
+fn bias_samples(
+    input: &GyroInput<'_>,
+    set: &MeasurementSet,
+    att: &[BatchAttitude],
+    b_ref: &Vector3<f64>,
+    tmean_iru: f64,
+) -> Vec<BiasSample> {
+    let frames = input.frames;
     let mut samples: Vec<BiasSample> = Vec::new();
-    // The hold bias history (accepted models) per frame.
-    let mut hold_bias: Option<HoldBias> = None;
     for i in 0..set.batches.len().saturating_sub(1) {
         let (a, b) = (&set.batches[i], &set.batches[i + 1]);
         if a.high_rate || b.high_rate || a.hi != b.lo {
             continue;
         }
-        let (Some((ma, va)), Some((mb, vb))) =
-            (batch_attitude(&att, i), batch_attitude(&att, i + 1))
+        let (Some((ma, va)), Some((mb, vb))) = (batch_attitude(att, i), batch_attitude(att, i + 1))
         else {
             continue;
         };
-        let phi = propagate(input, a.center, b.center, &b_ref);
+        let phi = propagate(input, a.center, b.center, b_ref);
         let z = rotvec_from_rot(&(mb * (phi * ma).transpose())) * ARCSEC_PER_RAD;
         let dt = b.t_center_s - a.t_center_s;
         if dt <= 1.0 {
@@ -487,19 +400,85 @@ pub fn analyse(
             dtemp_iru: frames[mid].iru_temperature_c - tmean_iru,
         });
     }
-    out.bias_samples = samples.len();
-    out.bias_series = samples
-        .iter()
-        .map(|s| (s.t_s, [s.y.x, s.y.y, s.y.z]))
-        .collect();
-    let b_ref_arcsec = b_ref * ARCSEC_PER_RAD;
+    samples
+}
+
+/// Stage 2: the bias history. With at least 20 samples and positive-definite whitenings,
+/// the candidate forms ([`BiasForms`]) are added one per round ([`History::forward_round`],
+/// at most three rounds); the fitted history is then evaluated at every frame for the slews
+/// ([`hold_bias_per_frame`]). Otherwise a note says why, and the slews use the OBC's bias.
+fn bias_history(
+    samples: &[BiasSample],
+    input: &GyroInput<'_>,
+    b_ref: &Vector3<f64>,
+    tmean_iru: f64,
+    cfg: &GyroConfig,
+    out: &mut GyroAnalysis,
+) -> Option<HoldBias> {
     let half = samples.len() / 2;
     let whiteners = (
-        Whitener::new(&samples, cfg, MODEL_CHAINED_ERRORS),
+        Whitener::new(samples, cfg, MODEL_CHAINED_ERRORS),
         Whitener::new(&samples[..half], cfg, MODEL_CHAINED_ERRORS),
         Whitener::new(&samples[half..], cfg, MODEL_CHAINED_ERRORS),
     );
-    if let (true, (Some(w_all), Some(w_a), Some(w_b))) = (samples.len() >= 20, &whiteners) {
+    let (true, (Some(w_all), Some(w_a), Some(w_b))) = (samples.len() >= 20, &whiteners) else {
+        out.notes.push(format!(
+            "bias history: {} hold-to-hold samples (need 20 and a positive-definite covariance)",
+            samples.len()
+        ));
+        return None;
+    };
+    let history = History {
+        samples,
+        half,
+        w_all,
+        w_a,
+        w_b,
+        cfg,
+        b_ref_arcsec: b_ref * ARCSEC_PER_RAD,
+    };
+    let forms = BiasForms::new(samples, w_all, cfg);
+    let candidates = forms.candidates(cfg);
+    let mut model = forms.baseline(cfg);
+    out.bias_fit_before = history.fitted(&model);
+    for _round in 0..3 {
+        if !history.forward_round(&forms, &candidates, &mut model, out) {
+            break;
+        }
+    }
+    out.bias_fit_after = history.fitted(&model);
+    // The bias the slews see: the fitted history, not the constant reference (a ramp of
+    // 0.009″/s per hour left the slew model's residual scale at 10–37 and hid a 100-ppm
+    // scale asymmetry; helper-20's review). Kept with its prediction variance also when
+    // no candidate was accepted (the constant hold bias): the slews compare their own
+    // bias with it (`gyro_slews::rate_mode_bias`).
+    let frames = input.frames;
+    hold_bias_per_frame(
+        frames,
+        samples,
+        w_all,
+        &model,
+        frames.first().map_or(0.0, |f| f.time.seconds()),
+        tmean_iru,
+        cfg.rrw_rad_per_s15 * ARCSEC_PER_RAD,
+    )
+}
+
+/// The bias history's candidate forms: ramp, thermal bias, and the transient and the step
+/// with their nonlinear parameter (τ, the step time) chosen on a grid given the baseline.
+struct BiasForms {
+    ramp: BiasModel,
+    thermal: BiasModel,
+    transient: BiasModel,
+    step: BiasModel,
+    /// The transient's τ (s).
+    tau_best: f64,
+    /// The step's time (s since the first frame).
+    t_step_best: f64,
+}
+
+impl BiasForms {
+    fn new(samples: &[BiasSample], w_all: &Whitener, cfg: &GyroConfig) -> Self {
         let t0 = samples[0].t_s;
         let span = samples.last().map_or(1.0, |s| s.t_s - t0).max(1.0);
         let t_mid = t0 + 0.5 * span;
@@ -523,7 +502,7 @@ pub fn analyse(
         } else {
             vec![]
         };
-        let tau_best = best_on_grid(&samples, w_all, &base_models, transient_taus(), &|tau| {
+        let tau_best = best_on_grid(samples, w_all, &base_models, transient_taus(), &|tau| {
             transient_form(t0, tau)
         })
         .unwrap_or(86_400.0);
@@ -535,235 +514,274 @@ pub fn analyse(
             .filter_map(|q| samples.get(q * samples.len() / (STEP_POSITIONS + 1)))
             .map(|s| s.t_s);
         let t_step_best =
-            best_on_grid(&samples, w_all, &base_models, positions, &step_form).unwrap_or(t_mid);
+            best_on_grid(samples, w_all, &base_models, positions, &step_form).unwrap_or(t_mid);
         let step = step_form(t_step_best);
-        let mut candidates: Vec<&BiasModel> = vec![&thermal, &transient, &step];
-        if !cfg.transient_declared {
-            candidates.insert(0, &ramp);
+        Self {
+            ramp,
+            thermal,
+            transient,
+            step,
+            tau_best,
+            t_step_best,
         }
-        let mut model: Vec<&BiasModel> = base_models.clone();
-        let fitted = |ms: &[&BiasModel]| -> Vec<(f64, [f64; 3])> {
-            match bias_fit(&samples, w_all, ms) {
-                Some((_, betas, _, _)) => samples
-                    .iter()
-                    .map(|s| {
-                        let mut v = [0.0; 3];
-                        for (ax, b) in betas.iter().enumerate() {
-                            v[ax] = b[0]
-                                + ms.iter()
-                                    .enumerate()
-                                    .map(|(j, m)| b[j + 1] * (m.column)(s))
-                                    .sum::<f64>();
-                        }
-                        (s.t_s, v)
-                    })
-                    .collect(),
-                None => Vec::new(),
-            }
-        };
-        out.bias_fit_before = fitted(&model);
-        for _round in 0..3 {
-            let Some((c0, ..)) = bias_fit(&samples, w_all, &model) else {
-                break;
-            };
-            let mut best: Option<(usize, Evidence, Vec<f64>, Vec<f64>)> = None;
-            let mut round_evs = Vec::new();
-            let mut round_left = Vec::new();
-            for (ci, cand) in candidates.iter().enumerate() {
-                if model.iter().any(|m| m.name == cand.name) {
-                    continue;
-                }
-                let mut ms = model.clone();
-                ms.push(cand);
-                let Some((c1, betas, covs, n)) = bias_fit(&samples, w_all, &ms) else {
-                    continue;
-                };
-                let k = 3usize;
-                let dof = n as f64 - (3 * (ms.len() + 1)) as f64;
-                let s2 = (c1 / dof).max(1e-9);
-                let f = ((c0 - c1) / k as f64) / s2.max(1.0);
-                let p = (f_sf(f, k as f64, dof) * cand.scan_positions as f64).min(1.0);
-                let dbic = delta_bic(c0, c1, s2, n, k + cand.extra);
-                let j = ms.len();
-                let est: Vec<f64> = betas.iter().map(|b| b[j]).collect();
-                let sig: Vec<f64> = covs
-                    .iter()
-                    .map(|c| (c[(j, j)] * s2.max(1.0)).sqrt())
-                    .collect();
-                // Halves.
-                let (fa, fb) = (
-                    bias_fit(&samples[..half], w_a, &ms),
-                    bias_fit(&samples[half..], w_b, &ms),
-                );
-                let (mut hchi2, mut hp, mut hest) = (f64::NAN, 0.0, (Vec::new(), Vec::new()));
-                if let (Some((_, ba, ca, _)), Some((_, bb, cb, _))) = (fa, fb) {
-                    hchi2 = (0..3)
-                        .map(|ax| {
-                            (ba[ax][j] - bb[ax][j]).powi(2) / (ca[ax][(j, j)] + cb[ax][(j, j)])
-                        })
-                        .sum::<f64>();
-                    hp = chi2_sf(hchi2, 3.0);
-                    hest = (
-                        (0..3).map(|ax| ba[ax][j]).collect(),
-                        (0..3).map(|ax| bb[ax][j]).collect(),
-                    );
-                }
-                let mut why = Vec::new();
-                if !(p * (candidates.len() as f64) < cfg.alpha) {
-                    why.push(format!(
-                        "LR p {p:.2e} (×{} candidates) ≥ {}",
-                        candidates.len(),
-                        cfg.alpha
-                    ));
-                }
-                if !(dbic > cfg.min_delta_bic) {
-                    why.push(format!("ΔBIC {dbic:.1} ≤ {}", cfg.min_delta_bic));
-                }
-                // A step happens once: one half holds it and the other cannot fit it, so the
-                // halves test neither the step nor a candidate fitted with one in the model
-                // (the step's scan has its own Bonferroni p-value).
-                let step_involved = ms.iter().any(|m| m.name == "gyro_bias_step");
-                if !step_involved && !(hp > 0.0027) {
-                    why.push(format!("halves differ (χ² {hchi2:.1}, p {hp:.2e})"));
-                }
-                let ev = Evidence {
-                    effect: format!("{}[IRU]", cand.name),
-                    k,
-                    delta_chi2: c0 - c1,
-                    f,
-                    p_value: p,
-                    p_holm: (p * candidates.len() as f64).min(1.0),
-                    delta_bic: dbic,
-                    halves_chi2: hchi2,
-                    halves_p: hp,
-                    halves_estimates: hest,
-                    signature_excess: (f64::NAN, f64::NAN),
-                    adequate: true,
-                    accepted: false,
-                    rejected_because: (!why.is_empty()).then(|| why.join("; ")),
-                };
-                round_left.push(GyroLeftover {
-                    evidence: ev.clone(),
-                    regressor: if cand.name == "gyro_thermal_bias" {
-                        "iru_temperature_c"
-                    } else {
-                        "time_s"
-                    },
-                    size: term_rms(&samples, &*cand.column, &est),
-                    unit: "arcsec/s",
-                });
-                if why.is_empty() && best.as_ref().is_none_or(|b| dbic > b.1.delta_bic) {
-                    best = Some((ci, ev.clone(), est, sig));
-                }
-                round_evs.push(ev);
-            }
-            let Some((ci, mut ev, est, sig)) = best else {
-                out.candidates.extend(round_evs);
-                // Nothing passed: this round tested every remaining candidate against the
-                // final model.
-                out.leftover.extend(round_left);
-                break;
-            };
-            ev.accepted = true;
-            for e in &mut round_evs {
-                if e.effect == ev.effect {
-                    e.accepted = true;
-                    e.rejected_because = None;
-                }
-            }
-            out.candidates.extend(round_evs);
-            let cand = candidates[ci];
-            model.push(cand);
-            let mut parameters = BTreeMap::new();
-            let mut sigma = BTreeMap::new();
-            let mut units = BTreeMap::new();
-            for (ax, name) in ["x", "y", "z"].iter().enumerate() {
-                parameters.insert((*name).to_owned(), est[ax]);
-                sigma.insert((*name).to_owned(), sig[ax]);
-                units.insert((*name).to_owned(), cand.unit.to_owned());
-            }
-            if cand.name == "gyro_bias_transient" {
-                parameters.insert("tau_s".into(), tau_best);
-                units.insert("tau_s".into(), "s".into());
-            }
-            if cand.name == "gyro_bias_step" {
-                parameters.insert("t_step_s".into(), t_step_best);
-                units.insert("t_step_s".into(), "s since the first frame".into());
-            }
-            for (ax, name) in ["ref_bias_x", "ref_bias_y", "ref_bias_z"]
-                .iter()
-                .enumerate()
-            {
-                parameters.insert((*name).to_owned(), b_ref_arcsec[ax]);
-                units.insert((*name).to_owned(), "arcsec/s".into());
-            }
-            out.detected.push(Detected {
-                effect: cand.name.to_owned(),
-                sensor: "IRU".into(),
-                parameters,
-                sigma,
-                units,
-                evidence: ev,
-                star_dirs: BTreeMap::new(),
-            });
-        }
-        out.bias_fit_after = fitted(&model);
-        // The bias the slews see: the fitted history, not the constant reference (a ramp of
-        // 0.009″/s per hour left the slew model's residual scale at 10–37 and hid a 100-ppm
-        // scale asymmetry; helper-20's review). Kept with its prediction variance also when
-        // no candidate was accepted (the constant hold bias): the slews compare their own
-        // bias with it (`gyro_slews::rate_mode_bias`).
-        hold_bias = hold_bias_per_frame(
-            frames,
-            &samples,
-            w_all,
-            &model,
-            t_first,
-            tmean_iru,
-            cfg.rrw_rad_per_s15 * ARCSEC_PER_RAD,
-        );
-    } else {
-        out.notes.push(format!(
-            "bias history: {} hold-to-hold samples (need 20 and a positive-definite covariance)",
-            samples.len()
-        ));
     }
 
-    drop(whiteners);
-    let slews = SlewInput {
-        input,
-        set,
-        att: &att,
-        b_ref: &b_ref,
-        hold_bias: hold_bias.as_ref(),
-        cfg,
-    };
-    super::gyro_slews::analyse(&slews, &mut out);
-    out
+    /// The model before any candidate: the ramp when the transient is declared.
+    fn baseline(&self, cfg: &GyroConfig) -> Vec<&BiasModel> {
+        if cfg.transient_declared {
+            vec![&self.ramp]
+        } else {
+            vec![]
+        }
+    }
+
+    /// The candidates, in the order they are tested.
+    fn candidates(&self, cfg: &GyroConfig) -> Vec<&BiasModel> {
+        let mut candidates: Vec<&BiasModel> = vec![&self.thermal, &self.transient, &self.step];
+        if !cfg.transient_declared {
+            candidates.insert(0, &self.ramp);
+        }
+        candidates
+    }
 }
 
-/// The bias the holds measure, per frame: the bias history's fit (its constant and the
-/// accepted candidates) relative to the reference `b_ref`, with its prediction variance.
-#[derive(Clone, Debug)]
-pub(super) struct HoldBias {
-    /// Fitted bias relative to `b_ref` (rad/s, ACS), per frame.
-    pub(super) bias_rad_per_s: Vec<Vector3<f64>>,
-    /// Variance of that fit (arcsec²/s², per ACS axis), per frame: the fit's covariance
-    /// scaled by the residual χ²/dof when it is above one.
-    pub(super) var_arcsec2_per_s2: Vec<Vector3<f64>>,
-    /// A candidate beyond the constant was accepted (the slews then take this history as
-    /// their bias; otherwise the OBC's estimate at each slew's start).
-    pub(super) modelled: bool,
+/// What the bias history's rounds share: the samples, their whitenings (all, each half), the
+/// settings and the reference bias.
+struct History<'a> {
+    samples: &'a [BiasSample],
+    /// First sample of the second half.
+    half: usize,
+    w_all: &'a Whitener,
+    w_a: &'a Whitener,
+    w_b: &'a Whitener,
+    cfg: &'a GyroConfig,
+    /// `b_ref` (arcsec/s).
+    b_ref_arcsec: Vector3<f64>,
 }
 
-/// What the slew analysis reads ([`super::gyro_slews`]).
-pub(super) struct SlewInput<'a> {
-    pub(super) input: &'a GyroInput<'a>,
-    pub(super) set: &'a MeasurementSet,
-    pub(super) att: &'a [BatchAttitude],
-    pub(super) b_ref: &'a Vector3<f64>,
-    pub(super) hold_bias: Option<&'a HoldBias>,
-    pub(super) cfg: &'a GyroConfig,
+/// One candidate tested against the current model.
+struct CandidateTest {
+    evidence: Evidence,
+    leftover: GyroLeftover,
+    /// Estimate and σ per ACS axis.
+    est: Vec<f64>,
+    sig: Vec<f64>,
+    /// Every evidence rule passed.
+    passes: bool,
+}
+
+impl History<'_> {
+    /// The fit of `ms` evaluated at every sample (t s, arcsec/s per axis); empty when the fit
+    /// fails.
+    fn fitted(&self, ms: &[&BiasModel]) -> Vec<(f64, [f64; 3])> {
+        match bias_fit(self.samples, self.w_all, ms) {
+            Some((_, betas, _, _)) => self
+                .samples
+                .iter()
+                .map(|s| {
+                    let mut v = [0.0; 3];
+                    for (ax, b) in betas.iter().enumerate() {
+                        v[ax] = b[0]
+                            + ms.iter()
+                                .enumerate()
+                                .map(|(j, m)| b[j + 1] * (m.column)(s))
+                                .sum::<f64>();
+                    }
+                    (s.t_s, v)
+                })
+                .collect(),
+            None => Vec::new(),
+        }
+    }
+
+    /// One round: every candidate not yet in `model` tested ([`Self::test_candidate`]); the
+    /// one with the largest ΔBIC among those that pass joins the model and is reported as
+    /// detected ([`Self::detected`]). `false` when none passed (the round's candidates were
+    /// then tested against the final model: they are the leftovers) or the fit failed.
+    fn forward_round<'m>(
+        &self,
+        forms: &BiasForms,
+        candidates: &[&'m BiasModel],
+        model: &mut Vec<&'m BiasModel>,
+        out: &mut GyroAnalysis,
+    ) -> bool {
+        let Some((c0, ..)) = bias_fit(self.samples, self.w_all, model) else {
+            return false;
+        };
+        let mut best: Option<(usize, Evidence, Vec<f64>, Vec<f64>)> = None;
+        let mut round_evs = Vec::new();
+        let mut round_left = Vec::new();
+        for (ci, cand) in candidates.iter().enumerate() {
+            if model.iter().any(|m| m.name == cand.name) {
+                continue;
+            }
+            let Some(t) = self.test_candidate(c0, model, cand, candidates.len()) else {
+                continue;
+            };
+            round_left.push(t.leftover);
+            if t.passes
+                && best
+                    .as_ref()
+                    .is_none_or(|b| t.evidence.delta_bic > b.1.delta_bic)
+            {
+                best = Some((ci, t.evidence.clone(), t.est, t.sig));
+            }
+            round_evs.push(t.evidence);
+        }
+        let Some((ci, mut ev, est, sig)) = best else {
+            out.candidates.extend(round_evs);
+            // Nothing passed: this round tested every remaining candidate against the
+            // final model.
+            out.leftover.extend(round_left);
+            return false;
+        };
+        ev.accepted = true;
+        for e in &mut round_evs {
+            if e.effect == ev.effect {
+                e.accepted = true;
+                e.rejected_because = None;
+            }
+        }
+        out.candidates.extend(round_evs);
+        let cand = candidates[ci];
+        model.push(cand);
+        out.detected
+            .push(self.detected(forms, cand, &est, &sig, ev));
+        true
+    }
+
+    /// `cand` added to `model` (χ² `c0`): F test with the scan's Bonferroni factor, ΔBIC,
+    /// and the halves (not when a step is involved); `None` when the fit fails.
+    fn test_candidate(
+        &self,
+        c0: f64,
+        model: &[&BiasModel],
+        cand: &BiasModel,
+        n_candidates: usize,
+    ) -> Option<CandidateTest> {
+        let (samples, half, cfg) = (self.samples, self.half, self.cfg);
+        let mut ms = model.to_vec();
+        ms.push(cand);
+        let (c1, betas, covs, n) = bias_fit(samples, self.w_all, &ms)?;
+        let k = 3usize;
+        let dof = n as f64 - (3 * (ms.len() + 1)) as f64;
+        let s2 = (c1 / dof).max(1e-9);
+        let f = ((c0 - c1) / k as f64) / s2.max(1.0);
+        let p = (f_sf(f, k as f64, dof) * cand.scan_positions as f64).min(1.0);
+        let dbic = delta_bic(c0, c1, s2, n, k + cand.extra);
+        let j = ms.len();
+        let est: Vec<f64> = betas.iter().map(|b| b[j]).collect();
+        let sig: Vec<f64> = covs
+            .iter()
+            .map(|c| (c[(j, j)] * s2.max(1.0)).sqrt())
+            .collect();
+        // Halves.
+        let (fa, fb) = (
+            bias_fit(&samples[..half], self.w_a, &ms),
+            bias_fit(&samples[half..], self.w_b, &ms),
+        );
+        let (mut hchi2, mut hp, mut hest) = (f64::NAN, 0.0, (Vec::new(), Vec::new()));
+        if let (Some((_, ba, ca, _)), Some((_, bb, cb, _))) = (fa, fb) {
+            hchi2 = (0..3)
+                .map(|ax| (ba[ax][j] - bb[ax][j]).powi(2) / (ca[ax][(j, j)] + cb[ax][(j, j)]))
+                .sum::<f64>();
+            hp = chi2_sf(hchi2, 3.0);
+            hest = (
+                (0..3).map(|ax| ba[ax][j]).collect(),
+                (0..3).map(|ax| bb[ax][j]).collect(),
+            );
+        }
+        let mut why = Vec::new();
+        if !(p * (n_candidates as f64) < cfg.alpha) {
+            why.push(format!(
+                "LR p {p:.2e} (×{n_candidates} candidates) ≥ {}",
+                cfg.alpha
+            ));
+        }
+        if !(dbic > cfg.min_delta_bic) {
+            why.push(format!("ΔBIC {dbic:.1} ≤ {}", cfg.min_delta_bic));
+        }
+        // A step happens once: one half holds it and the other cannot fit it, so the
+        // halves test neither the step nor a candidate fitted with one in the model
+        // (the step's scan has its own Bonferroni p-value).
+        let step_involved = ms.iter().any(|m| m.name == "gyro_bias_step");
+        if !step_involved && !(hp > 0.0027) {
+            why.push(format!("halves differ (χ² {hchi2:.1}, p {hp:.2e})"));
+        }
+        let evidence = Evidence {
+            p_holm: (p * n_candidates as f64).min(1.0),
+            adequate: true,
+            rejected_because: (!why.is_empty()).then(|| why.join("; ")),
+            ..Evidence::likelihood_test(
+                format!("{}[IRU]", cand.name),
+                k,
+                (c0 - c1, f, p),
+                dbic,
+                (hchi2, hp, hest),
+            )
+        };
+        let leftover = GyroLeftover {
+            evidence: evidence.clone(),
+            regressor: if cand.name == "gyro_thermal_bias" {
+                "iru_temperature_c"
+            } else {
+                "time_s"
+            },
+            size: term_rms(samples, &*cand.column, &est),
+            unit: "arcsec/s",
+        };
+        Some(CandidateTest {
+            evidence,
+            leftover,
+            est,
+            sig,
+            passes: why.is_empty(),
+        })
+    }
+
+    /// The accepted candidate as a detected effect: its estimate per axis, the grid
+    /// parameter of a transient or a step, and the reference bias it is relative to.
+    fn detected(
+        &self,
+        forms: &BiasForms,
+        cand: &BiasModel,
+        est: &[f64],
+        sig: &[f64],
+        evidence: Evidence,
+    ) -> Detected {
+        let mut parameters = BTreeMap::new();
+        let mut sigma = BTreeMap::new();
+        let mut units = BTreeMap::new();
+        for (ax, name) in ["x", "y", "z"].iter().enumerate() {
+            parameters.insert((*name).to_owned(), est[ax]);
+            sigma.insert((*name).to_owned(), sig[ax]);
+            units.insert((*name).to_owned(), cand.unit.to_owned());
+        }
+        if cand.name == "gyro_bias_transient" {
+            parameters.insert("tau_s".into(), forms.tau_best);
+            units.insert("tau_s".into(), "s".into());
+        }
+        if cand.name == "gyro_bias_step" {
+            parameters.insert("t_step_s".into(), forms.t_step_best);
+            units.insert("t_step_s".into(), "s since the first frame".into());
+        }
+        for (ax, name) in ["ref_bias_x", "ref_bias_y", "ref_bias_z"]
+            .iter()
+            .enumerate()
+        {
+            parameters.insert((*name).to_owned(), self.b_ref_arcsec[ax]);
+            units.insert((*name).to_owned(), "arcsec/s".into());
+        }
+        Detected {
+            effect: cand.name.to_owned(),
+            sensor: "IRU".into(),
+            parameters,
+            sigma,
+            units,
+            evidence,
+            star_dirs: BTreeMap::new(),
+        }
+    }
 }
 
 /// The bias history's fit of `model` evaluated at every frame ([`HoldBias`]).

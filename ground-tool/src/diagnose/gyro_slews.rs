@@ -35,7 +35,7 @@
 //! not named goes to the evidence ledger as unexplained ([`super::ledger`]), and the IRU table
 //! is then written as flown ([`super::run`]).
 
-use super::gyro::{batch_attitude, delta_bic, GyroAnalysis, GyroLeftover, SlewInput};
+use super::gyro_data::{batch_attitude, delta_bic, GyroAnalysis, GyroLeftover, SlewInput};
 use super::search::Evidence;
 use super::stats::{chi2_sf, f_sf};
 use super::Detected;
@@ -505,20 +505,17 @@ fn column_test(
         why.push(format!("halves differ (χ² {hchi2:.1}, p {hp:.2e})"));
     }
     let ev = Evidence {
-        effect: name.to_owned(),
-        k,
-        delta_chi2: c0 - fit1.chi2,
-        f,
-        p_value: p,
         p_holm,
-        delta_bic: dbic,
-        halves_chi2: hchi2,
-        halves_p: hp,
-        halves_estimates: hest,
-        signature_excess: (f64::NAN, f64::NAN),
         adequate: true,
         accepted: why.is_empty(),
         rejected_because: (!why.is_empty()).then(|| why.join("; ")),
+        ..Evidence::likelihood_test(
+            name.to_owned(),
+            k,
+            (c0 - fit1.chi2, f, p),
+            dbic,
+            (hchi2, hp, hest),
+        )
     };
     Some((ev, fit1, s2))
 }
@@ -620,23 +617,17 @@ fn rate_power_test(
             best = Some((ev, fit, p));
         }
     }
-    let Some((mut ev, fit, _)) = best else {
+    let Some((ev, fit, _)) = best else {
         return;
     };
-    ev.accepted = false;
-    if ev.rejected_because.is_none() || ev.p_holm < inp.cfg.alpha {
-        ev.rejected_because =
-            Some("no library effect has this signature: a scale that changes with the rate".into());
-    }
-    out.leftover.push(GyroLeftover {
-        evidence: ev.clone(),
-        regressor: "slew_rate",
-        size: (0..3)
-            .map(|j| fit.x[model.len() + j].abs())
-            .fold(0.0, f64::max),
-        unit: "ppm at the reference rate",
-    });
-    out.candidates.push(ev);
+    let size = largest_added(&fit, model);
+    unexplained(
+        out,
+        ev,
+        inp.cfg.alpha,
+        "a scale that changes with the rate",
+        ("slew_rate", size, "ppm at the reference rate"),
+    );
 }
 
 /// A scale factor that changed once (outside the library): the δM diagonal from slew `k` on,
@@ -686,20 +677,45 @@ fn scale_step_test(
     };
     fill(rows, k);
     ev.effect = format!("gyro_scale_step[IRU] (from slew {} of {n})", k + 1);
-    ev.accepted = false;
     // A step happens once: the interleaved halves do test it (both hold slews on each side),
     // but a failed halves check is not a reason to call it something else.
-    if ev.rejected_because.is_none() || ev.p_holm < inp.cfg.alpha {
-        ev.rejected_because =
-            Some("no library effect has this signature: a scale factor that changed once".into());
+    let size = largest_added(&fit, model);
+    unexplained(
+        out,
+        ev,
+        inp.cfg.alpha,
+        "a scale factor that changed once",
+        ("time_s", size, "ppm"),
+    );
+}
+
+/// The largest of the three columns a test added to `model` (ppm).
+fn largest_added(fit: &SlewFit, model: &[usize]) -> f64 {
+    (0..3)
+        .map(|j| fit.x[model.len() + j].abs())
+        .fold(0.0, f64::max)
+}
+
+/// A test outside the library reported as unexplained: never accepted; when it passed its
+/// rules or is significant after the family's correction (`alpha`), the reason is that no
+/// library effect has its signature (`what`); into the leftovers with its regressor, size
+/// and unit, and into the candidates.
+fn unexplained(
+    out: &mut GyroAnalysis,
+    mut ev: Evidence,
+    alpha: f64,
+    what: &str,
+    (regressor, size, unit): (&'static str, f64, &'static str),
+) {
+    ev.accepted = false;
+    if ev.rejected_because.is_none() || ev.p_holm < alpha {
+        ev.rejected_because = Some(format!("no library effect has this signature: {what}"));
     }
     out.leftover.push(GyroLeftover {
         evidence: ev.clone(),
-        regressor: "time_s",
-        size: (0..3)
-            .map(|j| fit.x[model.len() + j].abs())
-            .fold(0.0, f64::max),
-        unit: "ppm",
+        regressor,
+        size,
+        unit,
     });
     out.candidates.push(ev);
 }
@@ -737,20 +753,10 @@ fn rate_mode_bias_test(
     let p = chi2_sf(chi2, 3.0);
     let p_holm = (p * SLEW_TESTS).min(1.0);
     let alpha = inp.cfg.alpha;
+    let no_halves = (f64::NAN, f64::NAN, (Vec::new(), Vec::new()));
     let ev = Evidence {
-        effect: "gyro_rate_mode_bias[IRU]".into(),
-        k: 3,
-        delta_chi2: chi2,
-        f: chi2 / 3.0,
-        p_value: p,
         p_holm,
-        delta_bic: f64::NAN,
-        halves_chi2: f64::NAN,
-        halves_p: f64::NAN,
-        halves_estimates: (Vec::new(), Vec::new()),
-        signature_excess: (f64::NAN, f64::NAN),
         adequate: true,
-        accepted: false,
         rejected_because: Some(if p_holm < alpha {
             format!(
                 "no library effect has this signature: the slews' bias differs from the holds' by [{:.4}, {:.4}, {:.4}] ± [{:.4}, {:.4}, {:.4}]″/s (Wald χ² {chi2:.1}, 3 dof)",
@@ -764,6 +770,13 @@ fn rate_mode_bias_test(
         } else {
             format!("Wald p {p:.2e} (×{SLEW_TESTS} slew tests) ≥ {alpha}")
         }),
+        ..Evidence::likelihood_test(
+            "gyro_rate_mode_bias[IRU]".into(),
+            3,
+            (chi2, chi2 / 3.0, p),
+            f64::NAN,
+            no_halves,
+        )
     };
     out.leftover.push(GyroLeftover {
         evidence: ev.clone(),

@@ -50,7 +50,7 @@ use super::measurements::{MeasurementSet, SENSOR_NAMES};
 use crate::calibration::iru_chain::MAX_FOLDS;
 use crate::pipeline::alignment_heldout::paired_improvement;
 pub use crate::pipeline::alignment_heldout::MIN_IMPROVEMENT_Z;
-use crate::pipeline::calibrate::FSS_CELL_DEG;
+use crate::pipeline::ffcal_stages::FSS_CELL_DEG;
 use fsw_core::attitude::rotvec_from_rot;
 use fsw_core::units::ARCSEC_PER_RAD;
 use nalgebra::{DVector, Matrix3, Vector3};

@@ -36,6 +36,7 @@ pub mod effects;
 pub mod fit;
 pub mod flight;
 pub mod gyro;
+mod gyro_data;
 mod gyro_slews;
 pub mod heldout;
 pub mod ledger;

@@ -952,22 +952,17 @@ pub fn diagnose_run(
 /// As [`diagnose_run`]; a refusal about the data is an [`crate::run_check::InputError`]
 /// (exit code 2), an I/O error a runtime failure.
 pub fn diagnose_command(
-    run_dir: &std::path::Path,
-    out_target: &std::path::Path,
-    force: bool,
-    tables: Option<&std::path::Path>,
-    json: bool,
-    quiet: bool,
+    args: &crate::run_check::CommandArgs<'_>,
     scorer: Option<std::sync::Arc<dyn Scorer>>,
 ) -> anyhow::Result<()> {
-    let progress = crate::progress::Session::start("ground-tool diagnose", !quiet);
+    let (run_dir, out_target) = (args.run_dir, args.out);
+    let progress = crate::progress::Session::start("ground-tool diagnose", !args.quiet);
     let options = DiagnoseOptions {
-        tables: tables.map(std::path::Path::to_path_buf),
+        tables: args.tables.map(std::path::Path::to_path_buf),
         scorer,
         ..DiagnoseOptions::default()
     };
-    let dir =
-        crate::run_check::begin_output(out_target, "ground-tool diagnose", force, run_dir, tables)?;
+    let dir = args.begin_output("ground-tool diagnose")?;
     let out = dir.path();
     crate::run_check::check_run_dir(run_dir, out)?;
     // Diagnose's refusals (too few frames, a singular fit) are about the data: exit code 2;
@@ -1005,7 +1000,7 @@ pub fn diagnose_command(
     for note in &result.report.notes {
         eprintln!("note: {note}");
     }
-    if json {
+    if args.json {
         let text = serde_json::to_string_pretty(&result.report)?;
         println!("{}", text.replace(&tmp, &target));
     } else {

@@ -184,6 +184,38 @@ fn aberration_parts(kind: EffectKind) -> Option<&'static [usize]> {
     }
 }
 
+/// A candidate `c` fitted with `model`: the model's fit `current` and the fit with the
+/// candidate `big`.
+struct CandidateFit<'a> {
+    model: &'a [usize],
+    current: &'a SubFit,
+    c: usize,
+    big: &'a SubFit,
+}
+
+impl CandidateFit<'_> {
+    /// The model with the candidate.
+    fn with_candidate(&self) -> Vec<usize> {
+        with_effect(self.model, self.c)
+    }
+}
+
+/// `model` with effect `c` added.
+pub(super) fn with_effect(model: &[usize], c: usize) -> Vec<usize> {
+    let mut with = model.to_vec();
+    with.push(c);
+    with
+}
+
+/// Why a candidate's form does not fit: an extension of `kind` on its sensor still explains
+/// Δχ² `d` (F `f`, p `p`).
+fn lack_of_fit(kind: EffectKind, d: f64, f: f64, p: f64) -> String {
+    format!(
+        "lack of fit: a {} still explains Δχ² {d:.1} (F {f:.2}, p {p:.1e})",
+        extension_terms(kind)
+    )
+}
+
 /// What a lack-of-fit extension holds, for the rejection messages.
 fn extension_terms(kind: EffectKind) -> &'static str {
     if kind == EffectKind::SecularAlignmentExtension {
@@ -658,8 +690,7 @@ impl SearchContext<'_> {
     /// F test of a hidden extension `ext` (lack-of-fit terms) added to `model`, whose fit has
     /// χ² `chi2`: (the fit with it, Δχ², F, p).
     fn extension_test(&self, model: &[usize], chi2: f64, ext: usize) -> Option<ExtensionTest> {
-        let mut with = model.to_vec();
-        with.push(ext);
+        let with = with_effect(model, ext);
         let fe = self.fit_model(&self.systems.full, &with)?;
         let k = self.layout.effects[ext].len() as f64;
         let d = chi2 - fe.chi2;
@@ -674,8 +705,7 @@ impl SearchContext<'_> {
     /// blind shows on that tracker's stars, and per-star catalog offsets (60 parameters)
     /// explained 98 % of its Δχ² on the writer's FSS1 transfer function.
     fn adds_nothing_beyond(&self, model: &[usize], x: usize, y: usize) -> bool {
-        let mut with_y = model.to_vec();
-        with_y.push(y);
+        let with_y = with_effect(model, y);
         let mut with_both = with_y.clone();
         with_both.push(x);
         match (
@@ -751,7 +781,13 @@ impl SearchContext<'_> {
             }
             if full && why.is_empty() {
                 if let Some(big) = big.as_ref() {
-                    self.adequacy(model, current, current_post, *c, e, big, &mut why);
+                    let fit = CandidateFit {
+                        model,
+                        current,
+                        c: *c,
+                        big,
+                    };
+                    self.adequacy(&fit, current_post, e, &mut why);
                 } else if self.layout.effects[*c].signature().is_empty() {
                     e.adequate = true;
                 }
@@ -773,8 +809,7 @@ impl SearchContext<'_> {
     fn likelihood_evidence(&self, model: &[usize], current: &SubFit, c: usize) -> Option<Scored> {
         let n_rows = self.n_rows;
         let effect = &self.layout.effects[c];
-        let mut with = model.to_vec();
-        with.push(c);
+        let with = with_effect(model, c);
         let big = self.fit_model(&self.systems.full, &with)?;
         let k = effect.len();
         let dchi2 = current.chi2 - big.chi2;
@@ -787,22 +822,7 @@ impl SearchContext<'_> {
         let (hchi2, hp, est) = self.halves(c, &with);
         Some((
             c,
-            Evidence {
-                effect: effect.label(),
-                k,
-                delta_chi2: dchi2,
-                f,
-                p_value: p,
-                p_holm: 1.0,
-                delta_bic: dbic,
-                halves_chi2: hchi2,
-                halves_p: hp,
-                halves_estimates: est,
-                signature_excess: (f64::NAN, f64::NAN),
-                adequate: false,
-                accepted: false,
-                rejected_because: None,
-            },
+            Evidence::likelihood_test(effect.label(), k, (dchi2, f, p), dbic, (hchi2, hp, est)),
             Some(big),
         ))
     }
@@ -900,22 +920,19 @@ impl SearchContext<'_> {
         why
     }
 
-    /// Indication and adequacy of candidate `c` (fit `big`) against `model` (fit `current`,
-    /// residuals `current_post`): its signature structure must be there before and gone (or
-    /// reduced) after, and no extension may still explain what it is meant to; sets
-    /// `e.adequate` and `e.signature_excess` and adds the reasons it fails to `why`.
-    #[allow(clippy::too_many_arguments)]
+    /// Indication and adequacy of a candidate (`fit`; residuals of its model
+    /// `current_post`): its signature structure must be there before and gone (or reduced)
+    /// after, and no extension may still explain what it is meant to; sets `e.adequate` and
+    /// `e.signature_excess` and adds the reasons it fails to `why`.
     fn adequacy(
         &self,
-        model: &[usize],
-        current: &SubFit,
+        fit: &CandidateFit<'_>,
         current_post: &PostFit,
-        c: usize,
         e: &mut Evidence,
-        big: &SubFit,
         why: &mut Vec<String>,
     ) {
         let (set, layout, config) = (self.set, &self.layout, self.config);
+        let (c, big) = (fit.c, fit.big);
         let effect = &layout.effects[c];
         let sig: &[Regressor] = effect.signature();
         if sig.is_empty() {
@@ -944,10 +961,10 @@ impl SearchContext<'_> {
             ));
         }
         if e.adequate && varies_alignment(effect.kind) {
-            self.variation_lack_of_fit(model, c, e, big, why);
+            self.variation_lack_of_fit(fit, e, why);
         }
         if e.adequate && effect.kind == EffectKind::AlignmentStep {
-            self.step_lack_of_fit(model, current, c, e, big, why);
+            self.step_lack_of_fit(fit, e, why);
         }
     }
 
@@ -957,16 +974,13 @@ impl SearchContext<'_> {
     /// candidate's.
     fn variation_lack_of_fit(
         &self,
-        model: &[usize],
-        c: usize,
+        fit: &CandidateFit<'_>,
         e: &mut Evidence,
-        big: &SubFit,
         why: &mut Vec<String>,
     ) {
         let (layout, config) = (&self.layout, self.config);
-        let effect = &layout.effects[c];
-        let mut with_c = model.to_vec();
-        with_c.push(c);
+        let (model, big, with_c) = (fit.model, fit.big, fit.with_candidate());
+        let effect = &layout.effects[fit.c];
         if let Some((ext, (fe, d, f_ext, p_ext))) = layout
             .find(EffectKind::GenericAlignmentExtension, effect.sensor)
             .and_then(|ext| {
@@ -980,9 +994,11 @@ impl SearchContext<'_> {
             // quadratic structure be forced onto the linear candidate).
             if p_ext < config.alpha {
                 e.adequate = false;
-                why.push(format!(
-                    "lack of fit: a {} still explains Δχ² {d:.1} (F {f_ext:.2}, p {p_ext:.1e})",
-                    extension_terms(EffectKind::GenericAlignmentExtension)
+                why.push(lack_of_fit(
+                    EffectKind::GenericAlignmentExtension,
+                    d,
+                    f_ext,
+                    p_ext,
                 ));
             }
             // The form with the second harmonic describes a thermal orbit
@@ -992,8 +1008,7 @@ impl SearchContext<'_> {
             // geomagnetic sensitivity, algorithms.md §9 row 18, or a
             // ΔT² term of a sinusoidal temperature) is left unexplained.
             if e.adequate && effect.harmonics > 1 {
-                let mut only_ext = model.to_vec();
-                only_ext.push(ext);
+                let only_ext = with_effect(model, ext);
                 if let Some(f0) = self.fit_model(&self.systems.full, &only_ext) {
                     let d1 = f0.chi2 - fe.chi2;
                     let f1 = (d1 / 6.0) / fe.s2();
@@ -1013,9 +1028,11 @@ impl SearchContext<'_> {
         {
             if e.adequate && p_ext < config.alpha {
                 e.adequate = false;
-                why.push(format!(
-                    "lack of fit: a {} still explains Δχ² {d:.1} (F {f_ext:.2}, p {p_ext:.1e})",
-                    extension_terms(EffectKind::SecularAlignmentExtension)
+                why.push(lack_of_fit(
+                    EffectKind::SecularAlignmentExtension,
+                    d,
+                    f_ext,
+                    p_ext,
                 ));
             }
         }
@@ -1031,19 +1048,11 @@ impl SearchContext<'_> {
     /// holds) three polynomials mimic a step (Δχ² 2,460 alone against the step's 2,445 on the
     /// writer's FSS1 step), and a real step whose time the data place a hold late leaves a
     /// small secular remainder (Δχ² 67), which is reported, not a reason to drop the step.
-    fn step_lack_of_fit(
-        &self,
-        model: &[usize],
-        current: &SubFit,
-        c: usize,
-        e: &mut Evidence,
-        big: &SubFit,
-        why: &mut Vec<String>,
-    ) {
+    fn step_lack_of_fit(&self, fit: &CandidateFit<'_>, e: &mut Evidence, why: &mut Vec<String>) {
         let (layout, config) = (&self.layout, self.config);
-        let effect = &layout.effects[c];
-        let mut with_c = model.to_vec();
-        with_c.push(c);
+        let (model, current, big) = (fit.model, fit.current, fit.big);
+        let with_c = fit.with_candidate();
+        let effect = &layout.effects[fit.c];
         for kind in [
             EffectKind::GenericAlignmentExtension,
             EffectKind::SecularAlignmentExtension,
@@ -1066,8 +1075,8 @@ impl SearchContext<'_> {
             if e.adequate && (d > share || smooth_better) {
                 e.adequate = false;
                 why.push(format!(
-                    "lack of fit: a {} still explains Δχ² {d:.1} (F {f_ext:.2}, p {p_ext:.1e}) beside the step's {:.1}, and {alone:.1} alone",
-                    extension_terms(kind),
+                    "{} beside the step's {:.1}, and {alone:.1} alone",
+                    lack_of_fit(kind, d, f_ext, p_ext),
                     e.delta_chi2
                 ));
             }

@@ -43,6 +43,34 @@ pub struct Evidence {
 }
 
 impl Evidence {
+    /// A candidate's likelihood-ratio test: Δχ², F and p, ΔBIC, and the halves (χ², p,
+    /// estimates). Holm's p is 1 until the family's correction; no signature test; not yet
+    /// judged adequate, accepted or rejected.
+    pub(crate) fn likelihood_test(
+        effect: String,
+        k: usize,
+        (delta_chi2, f, p_value): (f64, f64, f64),
+        delta_bic: f64,
+        (halves_chi2, halves_p, halves_estimates): (f64, f64, (Vec<f64>, Vec<f64>)),
+    ) -> Self {
+        Self {
+            effect,
+            k,
+            delta_chi2,
+            f,
+            p_value,
+            p_holm: 1.0,
+            delta_bic,
+            halves_chi2,
+            halves_p,
+            halves_estimates,
+            signature_excess: (f64::NAN, f64::NAN),
+            adequate: false,
+            accepted: false,
+            rejected_because: None,
+        }
+    }
+
     /// Evidence of an effect whose own fit failed (singular sub-model).
     pub(super) fn placeholder(effect: String) -> Self {
         Self {

@@ -96,6 +96,20 @@ pub fn chi2_sf(x: f64, k: f64) -> f64 {
     gamma_q(0.5 * k, 0.5 * x)
 }
 
+/// One step of the modified Lentz algorithm for a continued fraction's term `aa`:
+/// `d ← 1/(1 + aa d)`, `c ← 1 + aa/c`, each kept away from zero by `tiny`.
+fn lentz_step(aa: f64, c: &mut f64, d: &mut f64, tiny: f64) {
+    *d = 1.0 + aa * *d;
+    if d.abs() < tiny {
+        *d = tiny;
+    }
+    *c = 1.0 + aa / *c;
+    if c.abs() < tiny {
+        *c = tiny;
+    }
+    *d = 1.0 / *d;
+}
+
 fn beta_cf(a: f64, b: f64, x: f64) -> f64 {
     let tiny = 1e-300;
     let qab = a + b;
@@ -112,26 +126,10 @@ fn beta_cf(a: f64, b: f64, x: f64) -> f64 {
         let m = m as f64;
         let m2 = 2.0 * m;
         let aa = m * (b - m) * x / ((qam + m2) * (a + m2));
-        d = 1.0 + aa * d;
-        if d.abs() < tiny {
-            d = tiny;
-        }
-        c = 1.0 + aa / c;
-        if c.abs() < tiny {
-            c = tiny;
-        }
-        d = 1.0 / d;
+        lentz_step(aa, &mut c, &mut d, tiny);
         h *= d * c;
         let aa = -(a + m) * (qab + m) * x / ((a + m2) * (qap + m2));
-        d = 1.0 + aa * d;
-        if d.abs() < tiny {
-            d = tiny;
-        }
-        c = 1.0 + aa / c;
-        if c.abs() < tiny {
-            c = tiny;
-        }
-        d = 1.0 / d;
+        lentz_step(aa, &mut c, &mut d, tiny);
         let del = d * c;
         h *= del;
         if (del - 1.0).abs() < 1e-15 {

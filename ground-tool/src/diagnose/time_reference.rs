@@ -44,9 +44,9 @@
 //! model conditionally on them).
 
 use super::effects::EffectKind;
-use super::fit::{indices, post_fit, solve_fixed, Fixed, Layout, SubFit};
+use super::fit::{batch_ranges, indices, post_fit, solve_fixed, Fixed, Layout, SubFit};
 use super::measurements::{MeasurementSet, SENSOR_NAMES};
-use super::search::{Evidence, Iteration, SearchConfig, SearchResult};
+use super::search::{with_effect, Evidence, Iteration, SearchConfig, SearchResult};
 use super::stats::{chi2_sf, f_sf, holm_adjust};
 use fsw_core::attitude::{rot, rotvec_from_rot};
 use fsw_core::units::ARCSEC_PER_RAD;
@@ -398,8 +398,7 @@ fn evaluate(
     c: usize,
 ) -> Option<Evidence> {
     let small = solve(full, model)?;
-    let mut with = model.to_vec();
-    with.push(c);
+    let with = with_effect(model, c);
     let big = solve(full, &with)?;
     // No degrees of freedom left (arcs with fewer equations than their nuisance): no
     // test (the F tail of d2 ≤ 0 is 0, a "detection" of anything).
@@ -430,20 +429,8 @@ fn evaluate(
         est = (vec![a.x[k]], vec![b.x[k]]);
     }
     Some(Evidence {
-        effect: column_label(c),
-        k: 1,
-        delta_chi2: dchi2,
-        f,
-        p_value: p,
-        p_holm: 1.0,
-        delta_bic: dbic,
-        halves_chi2: hchi2,
-        halves_p: hp,
-        halves_estimates: est,
-        signature_excess: (f64::NAN, f64::NAN),
         adequate: p_re < alpha,
-        accepted: false,
-        rejected_because: None,
+        ..Evidence::likelihood_test(column_label(c), 1, (dchi2, f, p), dbic, (hchi2, hp, est))
     })
 }
 
@@ -531,17 +518,7 @@ pub fn resolve(
     config: &SearchConfig,
 ) -> Option<TimeReference> {
     let layout = &res.layout;
-    let mut meas_of_batch = vec![0..0; set.batches.len()];
-    let mut i = 0;
-    while i < set.meas.len() {
-        let b = set.meas[i].batch;
-        let mut j = i + 1;
-        while j < set.meas.len() && set.meas[j].batch == b {
-            j += 1;
-        }
-        meas_of_batch[b] = i..j;
-        i = j;
-    }
+    let meas_of_batch = batch_ranges(set);
     let arcs = arcs(set);
     let debug = std::env::var_os("DIAGNOSE_DEBUG").is_some();
     if debug {
@@ -869,8 +846,7 @@ impl<'a> Selection<'a> {
                 })
             },
             &|c| {
-                let mut with = model.to_vec();
-                with.push(c);
+                let with = with_effect(model, c);
                 let k = model.len();
                 let f = solve(&self.full, &with)?;
                 let ratio = self.scatter(&with, k, f.x[k]).0;

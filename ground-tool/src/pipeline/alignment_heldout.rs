@@ -28,7 +28,7 @@ use std::collections::BTreeMap;
 use nalgebra::{Matrix3, Vector3};
 use serde::Serialize;
 
-use super::calibrate::{AlignmentSetup, SENSOR_NAMES};
+use super::ffcal_stages::{AlignmentSetup, SENSOR_NAMES};
 use super::observations::FrameObservations;
 use crate::calibration::alignment::{alignment_residuals, ffcal, FfcalConfig, Weighting};
 use crate::diagnose::stats::chi2_sf;
@@ -207,7 +207,8 @@ pub(crate) fn validate_alignment_heldout(
     let mut used = 0;
     let (mut per_epoch_new, mut per_epoch_flown) = (Vec::new(), Vec::new());
     for (k, &(lo, hi)) in blocks.iter().enumerate() {
-        let held = super::calibrate::alignment_data_segments(&[&frames[lo..hi]], &setup.map, sys);
+        let held =
+            super::ffcal_stages::alignment_data_segments(&[&frames[lo..hi]], &setup.map, sys);
         if held.epoch_count() < MIN_HELDOUT_EPOCHS {
             skipped.push(format!(
                 "block {}: {} FFCAL epochs (fewer than {MIN_HELDOUT_EPOCHS})",
@@ -380,7 +381,7 @@ fn heldout_fhst_pairs_chi2(
     setup: &AlignmentSetup<'_>,
     reference: &mut dyn FnMut(&FrameObservations, &Vector3<f64>) -> Vector3<f64>,
 ) -> (Vec<f64>, usize, usize) {
-    use super::calibrate::alignment_data_references;
+    use super::ffcal_stages::alignment_data_references;
     let sys = [setup.fss_systematic_arcsec; 2];
     let cfg = FfcalConfig {
         require_relative_observability: false,

@@ -25,83 +25,38 @@ use super::alignment_heldout::{
     validate_aberration_switch, validate_alignment_heldout, AberrationSwitchValidation,
     AlignmentValidation,
 };
-use super::fss_consider::{consider_covariance, TransferSpreads};
+use super::ffcal_stages::{alignment_data, fss_cell, AlignmentFit, AlignmentSetup, FfcalStaging};
+pub use super::ffcal_stages::{FhstStage, SENSOR_NAMES};
 use super::fss_systematic::{estimate_fss_systematic, FssSystematicEstimate};
-use super::gyro_chain::{build_gyro_chain, irucal_stage, BackupIruReport, IruStage};
+pub use super::gyro_chain::IruReport;
+use super::gyro_chain::{build_gyro_chain, irucal_stage, IruStage};
+use super::iru_fixes::{frame_index_at, FixFloors, BATCH_HALF_S};
+pub use super::maneuvers::{CoarseAttitude, ManeuverReport};
 use super::observations::{
     build_observations, fine_attitude, AttitudeSensors, FrameObservations, IdentifyOptions,
     RateSwitch,
 };
-use super::star_batches::star_batch_samples;
 use crate::calibration::adjust::{preserve_obc_attitude, BoresightFrame};
 use crate::calibration::alignment::{
-    cramer_rao_covariance, ffcal, AlignmentData, FfcalConfig, FfcalSolution, SensorObservation,
-    SensorSpec, Weighting,
+    cramer_rao_covariance, AlignmentData, FfcalConfig, FfcalSolution, SensorSpec, Weighting,
 };
-use crate::calibration::fhst_relative::{
-    estimate_relative_alignment, fuse_with_prior, FhstRelativeAlignment, RelativeAlignmentError,
-};
-use crate::calibration::iru::{AttitudeFix, GyroNoise, GyroStep, IrucalSolution};
-use crate::calibration::iru_chain::{
-    BiasStepTest, Chain, ChainConfig, HeldOutValidation, RateScaleTest,
-};
-use crate::diagnose::stats::chi2_sf;
+use crate::calibration::fhst_relative::{FhstRelativeAlignment, RelativeAlignmentError};
+use crate::calibration::iru::{GyroNoise, IrucalSolution};
+use crate::calibration::iru_chain::{Chain, ChainConfig};
 use crate::tp::{self, Telemetry, TpReport};
 use anyhow::{bail, Context};
-use fsw_core::attitude::{rot, rotvec_from_rot, Quat};
+use fsw_core::attitude::{rotvec_from_rot, Quat};
 use fsw_core::tables::image::encode_image;
 use fsw_core::tables::types::{matrix_from_rows, rows_from_matrix};
 use fsw_core::tables::{AlignmentTable, FilterTable, IruTable, TableId};
-use fsw_core::units::{ARCSEC_PER_RAD, RAD_PER_ARCSEC};
+use fsw_core::units::ARCSEC_PER_RAD;
 use gro_reference::sky::{Sky, SkyParams};
 use nalgebra::{Matrix3, Vector3};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 
-/// Sensor names in table order.
-pub const SENSOR_NAMES: [&str; 4] = ["FHST1", "FHST2", "FSS1", "FSS2"];
-
-/// Largest per-axis σ of a fine attitude accepted as an IRUCAL interval end, arcsec.
-const MAX_FIX_SIGMA_ARCSEC: f64 = 120.0;
-
-/// σ floor added to every fine attitude per axis (residual alignment error), arcsec.
-const FIX_SIGMA_FLOOR_ARCSEC: f64 = 3.0;
-
-/// What a fine attitude's formal covariance leaves out, added before it is used as an
-/// IRUCAL interval end.
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct FixFloors {
-    /// For a FHST-only fix (rad²): a quarter of the FHST1–FHST2 relative alignment covariance.
-    pub(crate) fhst_cov_rad2: Matrix3<f64>,
-    /// For a fix that needed the Sun, per axis (arcsec): the FSS error that does not average
-    /// down (`DeclaredNoise::fss_systematic_arcsec`, default the paper's inherent 0.022°).
-    pub(crate) fss_arcsec: f64,
-}
-
-/// Fewest gyro batches with both trackers for the gyro-batch FHST stage.
-const MIN_GYRO_BATCHES: usize = 3;
-
-/// Fewest simultaneous FHST1–FHST2 star epochs for the FHST stage of FFCAL.
-const MIN_FHST_STAGE_EPOCHS: usize = 100;
-
-/// Prior variance that holds the FHST alignments at their stage-1 values in stage 2 (arcsec²).
-const HELD_PRIOR_ARCSEC2: f64 = 1e-6;
-
 /// Largest per-axis σ of a coarse attitude reported (deg).
 const COARSE_MAX_SIGMA_DEG: f64 = 2.0;
-
-/// Size of the FSS field cells within which the systematic error counts as one (deg): its
-/// correlation length. Why 8°: the transfer-function error is smooth over several degrees
-/// (+25 to +31″ along a whole 24° sweep in `docs/investigations.md`), so 1° cells let a slew's
-/// sweep of 30–60 cells outweigh the holds with one shared error. Measured (`calibration-mc`,
-/// 20 seeds): 1° → FHST1–FSS2 within 36″ in 20/20 seeds of `gro-early-mission` but 0/20 with
-/// one-orbit holds (mean 41″); 4° → 19/20 and 9/20; 8° → 20/20 and 19/20 (mean 28″ and 30″),
-/// the FSS covariances then more conservative (mean NEES FSS1/FSS2 0.07/0.21 against
-/// 0.12/1.27 at 1°).
-pub(crate) const FSS_CELL_DEG: f64 = 8.0;
-
-/// Half-length of the fine-attitude batches (s): the paper's 10-min batches.
-pub(crate) const BATCH_HALF_S: f64 = 300.0;
 
 /// Prior 1σ of the flown alignments per axis (arcsec): FHSTs, FSSs. The paper's FSS1 moved by
 /// 733 arcsec, so the FSS prior must not constrain a change of that size.
@@ -134,6 +89,16 @@ pub struct CalibrateOptions {
     pub maneuvers_s: Option<Vec<(f64, f64)>>,
 }
 
+impl CalibrateOptions {
+    /// The stages of FFCAL these options ask for.
+    pub(crate) fn ffcal_staging(&self) -> FfcalStaging {
+        FfcalStaging {
+            staged_ffcal: self.staged_ffcal,
+            fhst_stage: self.fhst_stage,
+        }
+    }
+}
+
 impl Default for CalibrateOptions {
     fn default() -> Self {
         Self {
@@ -159,17 +124,6 @@ pub fn obc_bias_at(tm: &Telemetry, t_s: f64) -> Vector3<f64> {
         .map_or(Vector3::zeros(), |h| Vector3::from(h.bias_acs_rad_per_s))
 }
 
-/// Data of the FHST stage of the staged FFCAL.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, clap::ValueEnum)]
-#[serde(rename_all = "snake_case")]
-pub enum FhstStage {
-    /// Every identified star, tied by the gyro within batches of holds and slews
-    /// (`calibration::fhst_relative`; default): the tracker rolls see every star offset.
-    GyroBatches,
-    /// Shuster's dot products of simultaneous star pairs only (the paper's FFCAL data).
-    StarPairs,
-}
-
 /// One sensor's alignment result for the report.
 #[derive(Clone, Debug, Serialize)]
 pub struct AlignmentReport {
@@ -179,113 +133,6 @@ pub struct AlignmentReport {
     pub sigma_arcsec: [f64; 3],
     /// Rotation vector from the flown alignment, ACS, arcsec.
     pub theta_acs_arcsec: [f64; 3],
-}
-
-/// IRU results for the report.
-#[derive(Clone, Debug, Serialize)]
-pub struct IruReport {
-    /// δM (row-major, unitless).
-    pub delta_m: [[f64; 3]; 3],
-    /// 1σ of δM.
-    pub delta_m_sigma: [[f64; 3]; 3],
-    /// Bias from the full calibration, ACS, rad/s.
-    pub bias_rad_per_s: [f64; 3],
-    /// 1σ, rad/s.
-    pub bias_sigma_rad_per_s: [f64; 3],
-    /// Number of intervals (maneuvers + holds).
-    pub intervals: usize,
-    /// Interval residuals before and after, arcsec.
-    pub residual_before_arcsec: Vec<f64>,
-    /// After.
-    pub residual_after_arcsec: Vec<f64>,
-    /// Whether the new G was written (δM significant at 3σ somewhere).
-    pub g_updated: bool,
-    /// The δM applied to G: the elements determined at 3σ, others 0 (all 0 without an update).
-    pub delta_m_uplinked: [[f64; 3]; 3],
-    /// Intervals dropped as outliers (index in the order they were built, after earlier drops).
-    pub rejected_intervals: Vec<usize>,
-    /// The estimator that produced δM.
-    pub estimator: &'static str,
-    /// Attitude fixes in the gyro chain.
-    pub fixes: usize,
-    /// Gyro links joining consecutive fixes.
-    pub links: usize,
-    /// Links that carry a maneuver.
-    pub maneuver_links: usize,
-    /// Rate random walk declared in the metadata (rad/s^1.5).
-    pub rrw_declared_rad_per_s_1p5: f64,
-    /// Rate random walk used (larger when the data's likelihood needed it).
-    pub rrw_used_rad_per_s_1p5: f64,
-    /// Scale of the attitude fixes' random covariance chosen by the likelihood (1 = as stated).
-    pub fix_cov_scale: f64,
-    /// Scale of the FHST-only fixes' systematic (per-attitude) covariance chosen by the
-    /// likelihood.
-    pub fix_systematic_scale: f64,
-    /// Scale of the systematic covariance of the fixes that needed the Sun (FSS transfer
-    /// function and alignment) chosen by the likelihood.
-    pub fix_sun_systematic_scale: f64,
-    /// Mean normalised innovation of the fixes per dof (1 = σ right).
-    pub nis_mean_per_dof: f64,
-    /// Fixes outside the innovation gate (not used).
-    pub gated_fixes: usize,
-    /// Hold batches refused as fixes because their own attitude fit does not fit (χ² p below
-    /// `FIX_MISFIT_P`): time (s from the first frame), χ², dof.
-    pub misfit_fixes: Vec<(f64, f64, usize)>,
-    /// Why the gyro model does not fit, when it does not.
-    pub model_fit: Option<String>,
-    /// The lack-of-fit test of a scale error that changes with rate.
-    pub rate_scale: RateScaleTest,
-    /// Bias steps at unknown times found by the change-point scan and modelled: each with its
-    /// time, size, σ and multiplicity-corrected p.
-    pub bias_steps: Vec<BiasStepTest>,
-    /// The scan's best candidate that was not accepted (when a scan ran and stopped).
-    pub bias_step_rejected: Option<BiasStepTest>,
-    /// The scan stopped at its cap of steps (`iru_chain::MAX_BIAS_STEPS`): more changes faster
-    /// than the walk may remain.
-    pub bias_steps_capped: bool,
-    /// Where in their envelope the rate-mode switches inside decimated frames fell, as
-    /// estimated (slew start, slew end; 0 = middle, ±0.5 = edges), with 1σ (0.5: no data).
-    pub split_fraction: [f64; 2],
-    /// See `split_fraction`.
-    pub split_fraction_sigma: [f64; 2],
-    /// Held-out validation of the primary triad's δM, when attempted.
-    pub validation: Option<HeldOutValidation>,
-    /// Why G was or was not updated (the real reason, with numbers).
-    pub decision: String,
-    /// The backup triad, when it flew slews.
-    pub backup: Option<BackupIruReport>,
-}
-
-/// A maneuver found in the telemetry.
-#[derive(Clone, Debug, Serialize)]
-pub struct ManeuverReport {
-    /// Start, s since the first frame.
-    pub start_s: f64,
-    /// End, s since the first frame.
-    pub end_s: f64,
-    /// Rotation angle from the gyro, deg.
-    pub angle_deg: f64,
-    /// Used for IRUCAL (a gyro link joins attitude fixes before and after it).
-    pub used: bool,
-    /// Why not, when not used.
-    pub why_not_used: Option<String>,
-    /// Coarse attitude at the maneuver end from the FSSs alone (the Sun moving in the body
-    /// during the slew, tied by the gyro), when determined.
-    pub coarse_attitude: Option<CoarseAttitude>,
-}
-
-/// A coarse (FSS + IRU) attitude, checked against the FHST fine attitude at the same time.
-#[derive(Clone, Debug, Serialize)]
-pub struct CoarseAttitude {
-    /// Time, s since the first frame.
-    pub t_s: f64,
-    /// `A` as a scalar-last quaternion.
-    pub q_acs_from_eci: [f64; 4],
-    /// 1σ per ACS axis from the batch covariance, deg (FSS inherent error not included).
-    pub sigma_deg: [f64; 3],
-    /// Angle to the FHST-only fine attitude at the same time, deg (paper's coarse
-    /// requirement: 2° 3σ per axis), when the trackers give one.
-    pub difference_to_fine_deg: Option<f64>,
 }
 
 /// The whole result.
@@ -487,370 +334,6 @@ pub fn read_metadata(run_dir: &Path) -> anyhow::Result<Metadata> {
     Metadata::read(run_dir)
 }
 
-/// The FSS field cell of a sensor-frame Sun direction ([`FSS_CELL_DEG`] on each head angle).
-pub(crate) fn fss_cell(d: &Vector3<f64>) -> (i64, i64) {
-    let a = d.x.atan2(d.z).to_degrees() / FSS_CELL_DEG;
-    let b = d.y.atan2(d.z).to_degrees() / FSS_CELL_DEG;
-    (a.floor() as i64, b.floor() as i64)
-}
-
-/// FFCAL epochs from the frames (`map`: sensor → FFCAL index, `None` = left out).
-///
-/// An FSS sample's σ grows with the number of samples that share its place in the field
-/// (`FSS_CELL_DEG` cells): `σ² = σ_noise² + n σ_sys²`. Why: the FSS error that depends on the
-/// Sun's position in the field (`fss_systematic_arcsec`) is the same for every sample at that
-/// position, so a cell of `n` samples carries no more than one observation with `σ_sys` of
-/// information about it; white-noise weights would claim arcsec accuracy from a sensor whose
-/// error is tens of arcsec, and pull the alignments with it.
-fn alignment_data(
-    frames: &[FrameObservations],
-    map: &[Option<usize>; 4],
-    fss_systematic_arcsec: [f64; 2],
-) -> AlignmentData {
-    alignment_data_segments(&[frames], map, fss_systematic_arcsec)
-}
-
-/// [`alignment_data`] over the frames of several segments taken together (a held-out fold's
-/// training data: the frames before and after the held-out block).
-pub(crate) fn alignment_data_segments(
-    segments: &[&[FrameObservations]],
-    map: &[Option<usize>; 4],
-    fss_systematic_arcsec: [f64; 2],
-) -> AlignmentData {
-    alignment_data_references(segments, map, fss_systematic_arcsec, &mut |_, d| *d)
-}
-
-/// [`alignment_data_segments`] with every reference direction (star or Sun, ECI) passed
-/// through `reference(frame, direction)`: the references another model would use (e.g. the
-/// OBC's without annual aberration, `super::alignment_heldout::validate_aberration_switch`).
-pub(crate) fn alignment_data_references(
-    segments: &[&[FrameObservations]],
-    map: &[Option<usize>; 4],
-    fss_systematic_arcsec: [f64; 2],
-    reference: &mut dyn FnMut(&FrameObservations, &Vector3<f64>) -> Vector3<f64>,
-) -> AlignmentData {
-    let cell = fss_cell;
-    let mut per_cell: std::collections::HashMap<(usize, (i64, i64)), usize> =
-        std::collections::HashMap::new();
-    let frames = || segments.iter().flat_map(|s| s.iter());
-    for f in frames() {
-        for (i, s) in f.suns.iter().enumerate() {
-            if let Some(s) = s {
-                *per_cell.entry((i, cell(&s.meas.dir_sensor))).or_default() += 1;
-            }
-        }
-    }
-    let sys_rad = fss_systematic_arcsec.map(|s| s / ARCSEC_PER_RAD);
-    let mut data = AlignmentData::with_capacity(frames().count(), 4);
-    let mut obs = Vec::with_capacity(4);
-    for f in frames() {
-        obs.clear();
-        for (i, s) in f.stars.iter().enumerate() {
-            if let Some(s) = s {
-                if let (Some((_, dir_eci)), Some(sensor)) = (s.identified, map[i]) {
-                    obs.push(SensorObservation {
-                        sensor,
-                        dir_sensor: s.meas.dir_sensor,
-                        dir_eci: reference(f, &dir_eci),
-                        sigma_rad: s.sigma_rad,
-                    });
-                }
-            }
-        }
-        for (i, s) in f.suns.iter().enumerate() {
-            if let (Some(s), Some(sensor)) = (s, map[i + 2]) {
-                let n = per_cell
-                    .get(&(i, cell(&s.meas.dir_sensor)))
-                    .copied()
-                    .unwrap_or(1) as f64;
-                obs.push(SensorObservation {
-                    sensor,
-                    dir_sensor: s.meas.dir_sensor,
-                    dir_eci: reference(f, &s.sun_eci),
-                    sigma_rad: (s.sigma_rad.powi(2) + n * sys_rad[i] * sys_rad[i]).sqrt(),
-                });
-            }
-        }
-        if obs.len() >= 2 {
-            // A malformed epoch (zero vector) is simply not used.
-            let _ = data.push_epoch(&obs);
-        }
-    }
-    data
-}
-
-/// The FHSTs after stage 1: alignments and their 6×6 covariance (arcsec², ACS).
-pub(crate) struct FhstStageResult {
-    m_acs_from_fhst: [Matrix3<f64>; 2],
-    covariance_arcsec2: nalgebra::Matrix6<f64>,
-    iterations: usize,
-}
-
-impl FhstStageResult {
-    /// Stage 1 by Shuster's FFCAL on the simultaneous star pairs.
-    fn star_pairs(
-        sensors: &[SensorSpec],
-        fhst_data: &AlignmentData,
-        cfg: &FfcalConfig,
-    ) -> anyhow::Result<Self> {
-        let first = sensors
-            .get(..2)
-            .context("FFCAL stage 1 needs FHST1 and FHST2")?;
-        let s1 =
-            ffcal(first, fhst_data, cfg).context("FFCAL stage 1 (FHST1 + FHST2 star pairs)")?;
-        Ok(Self {
-            m_acs_from_fhst: [
-                s1.sensors[0].m_acs_from_sensor_calibrated,
-                s1.sensors[1].m_acs_from_sensor_calibrated,
-            ],
-            covariance_arcsec2: s1.covariance_arcsec2.fixed_view::<6, 6>(0, 0).into_owned(),
-            iterations: s1.iterations,
-        })
-    }
-
-    /// Stage 1 from the gyro-batch relative alignment fused with the flown alignments'
-    /// priors (`fhst_relative::fuse_with_prior`).
-    fn gyro_batches(sensors: &[SensorSpec], rel: &FhstRelativeAlignment) -> anyhow::Result<Self> {
-        let (p1, p2) = match sensors {
-            [a, b, ..] => (a, b),
-            _ => bail!("FFCAL stage 1 needs FHST1 and FHST2"),
-        };
-        let (t1, t2, cov) =
-            fuse_with_prior(rel, &p1.prior_cov_acs_arcsec2, &p2.prior_cov_acs_arcsec2).context(
-                "gyro-batch FHST stage: prior + relative covariance not positive definite",
-            )?;
-        Ok(Self {
-            m_acs_from_fhst: [
-                rot(&(t1 * RAD_PER_ARCSEC)) * p1.m_acs_from_sensor,
-                rot(&(t2 * RAD_PER_ARCSEC)) * p2.m_acs_from_sensor,
-            ],
-            covariance_arcsec2: cov,
-            iterations: 1,
-        })
-    }
-}
-
-/// What an FFCAL fit needs besides the frames: the same for the full fit and for every
-/// held-out fold (`super::alignment_heldout`), so a fold re-runs exactly the estimator whose
-/// table would be written.
-pub(crate) struct AlignmentSetup<'a> {
-    /// The observed sensors (indices of `map`), with the flown alignments and their priors.
-    pub(crate) sensors: &'a [SensorSpec],
-    /// Table index (FHST1, FHST2, FSS1, FSS2) → sensor index in `sensors`, `None` = unobserved.
-    pub(crate) map: [Option<usize>; 4],
-    /// Declared FSS systematic error (arcsec) behind the per-cell weights.
-    pub(crate) fss_systematic_arcsec: f64,
-    /// How the FHST stage is chosen.
-    pub(crate) options: &'a CalibrateOptions,
-    /// FFCAL options.
-    pub(crate) cfg: FfcalConfig,
-    /// The OBC's bias at a time (ACS, rad/s), to carry the gyro batches.
-    pub(crate) obc_bias_at: &'a dyn Fn(f64) -> Vector3<f64>,
-    /// Counts of the data, for the error messages.
-    pub(crate) data_note: String,
-}
-
-/// One FFCAL fit: its inputs and its solution.
-pub(crate) struct AlignmentFit {
-    /// The epochs of ≥ 2 referenced vectors (every sensor).
-    pub(crate) data: AlignmentData,
-    /// The simultaneous FHST1–FHST2 star epochs.
-    pub(crate) fhst_data: AlignmentData,
-    /// The FHST stage used, if staged.
-    pub(crate) fhst_stage: Option<(FhstStage, FhstStageResult)>,
-    /// The gyro-batch relative alignment, or why there is none.
-    pub(crate) batch_rel: Result<FhstRelativeAlignment, RelativeAlignmentError>,
-    /// The alignments and their covariance.
-    pub(crate) solution: FfcalSolution,
-}
-
-impl AlignmentSetup<'_> {
-    /// FFCAL over the frames of `segments` (module doc, step 3): the FHSTs first, from the
-    /// gyro batches or the simultaneous star pairs, then the FSSs relative to that frame
-    /// (`ffcal_staged`); without a FHST stage, one joint fit. `consider`: the declared FSS
-    /// transfer-function spreads for the stage-2 covariance (changes σ, not the estimate).
-    ///
-    /// # Errors
-    /// A stage that cannot be solved, with the data counts in the message.
-    pub(crate) fn fit(
-        &self,
-        segments: &[&[FrameObservations]],
-        consider: Option<&TransferSpreads>,
-    ) -> anyhow::Result<AlignmentFit> {
-        let sys = [self.fss_systematic_arcsec; 2];
-        let data = alignment_data_segments(segments, &self.map, sys);
-        let context = || {
-            format!(
-                "FFCAL: {} epochs with ≥ 2 referenced vectors ({})",
-                data.epoch_count(),
-                self.data_note
-            )
-        };
-        let fhst_data = alignment_data_segments(segments, &[Some(0), Some(1), None, None], sys);
-        let (mut batch_samples, mut batch_count) = (Vec::new(), 0);
-        for seg in segments {
-            let (samples, n) = star_batch_samples(seg, self.obc_bias_at);
-            batch_samples.extend(samples.into_iter().map(|mut s| {
-                s.batch += batch_count;
-                s
-            }));
-            batch_count += n;
-        }
-        let batch_rel = estimate_relative_alignment(&batch_samples, batch_count, MIN_GYRO_BATCHES);
-        let (sensors, cfg) = (self.sensors, &self.cfg);
-        let fhst_stage = match (
-            self.options.staged_ffcal,
-            self.options.fhst_stage,
-            &batch_rel,
-        ) {
-            (false, _, _) => None,
-            (true, FhstStage::GyroBatches, Ok(rel)) => Some((
-                FhstStage::GyroBatches,
-                FhstStageResult::gyro_batches(sensors, rel)?,
-            )),
-            // Without usable batches the star pairs still give the stage.
-            (true, _, _) if fhst_data.epoch_count() >= MIN_FHST_STAGE_EPOCHS => Some((
-                FhstStage::StarPairs,
-                FhstStageResult::star_pairs(sensors, &fhst_data, cfg).with_context(context)?,
-            )),
-            (true, _, _) => None,
-        };
-        let solution = match &fhst_stage {
-            Some((_, stage1)) => {
-                let white = consider.map(|spreads| {
-                    (
-                        spreads,
-                        alignment_data_segments(segments, &self.map, [0.0; 2]),
-                    )
-                });
-                ffcal_staged(
-                    sensors,
-                    stage1,
-                    &data,
-                    cfg,
-                    white.as_ref().map(|(s, w)| (*s, w)),
-                )
-                .with_context(context)?
-            }
-            None => ffcal(sensors, &data, cfg).with_context(context)?,
-        };
-        Ok(AlignmentFit {
-            data,
-            fhst_data,
-            fhst_stage,
-            batch_rel,
-            solution,
-        })
-    }
-}
-
-/// FFCAL in two stages. Why: the FSSs carry systematic errors of tens of arcsec (the paper's
-/// inherent 0.022° after calibration: transfer-function error) that their noise figure does
-/// not describe; in one joint fit these errors leak into the FHST1–FHST2 relative alignment,
-/// which the star pairs alone determine to a few arcsec. So:
-/// 1. the FHSTs (`sensors[0..2]`) from their stars only (`stage1`: the gyro batches, or
-///    Shuster's simultaneous star pairs);
-/// 2. every sensor from all epochs with the FHSTs held at their stage-1 values, which gives
-///    the FSSs relative to the FHST frame.
-///
-/// Covariance: the FHST block is stage 1's. An FSS's error is its stage-2 (conditional) error
-/// plus the error of the FHST frame it was tied to, taken as the mean rotation of the two
-/// trackers: `C(fss_i, fss_j) = C₂(i, j) + C_f`, `C(fss_i, fhst_k) = ½ (C₁(1,k) + C₁(2,k))`,
-/// `C_f = ¼ Σ C₁`. With the transfer function's spreads declared (`fss_consider`: the spreads
-/// and the FSS samples at white-noise σ), `C₂` is the consider covariance plus the noise bound.
-/// Residuals before are those of the flown alignments over all epochs.
-fn ffcal_staged(
-    sensors: &[SensorSpec],
-    stage1: &FhstStageResult,
-    data: &AlignmentData,
-    cfg: &FfcalConfig,
-    fss_consider: Option<(&TransferSpreads, &AlignmentData)>,
-) -> anyhow::Result<FfcalSolution> {
-    let mut held = sensors.to_vec();
-    for (spec, m) in held.iter_mut().zip(&stage1.m_acs_from_fhst) {
-        spec.m_acs_from_sensor = *m;
-        spec.prior_cov_acs_arcsec2 = Matrix3::identity() * HELD_PRIOR_ARCSEC2;
-    }
-    // An FSS that saw the Sun at one place only cannot have its rotation about the Sun line
-    // determined: the prior keeps it there (and its σ says so) rather than failing the run.
-    let stage2_cfg = FfcalConfig {
-        require_relative_observability: false,
-        ..*cfg
-    };
-    let mut sol =
-        ffcal(&held, data, &stage2_cfg).context("FFCAL stage 2 (FSSs relative to the FHSTs)")?;
-    // With declared transfer-function spreads the stage-2 covariance is what the data say
-    // about the two error sources the FSS samples carry: the transfer function as consider
-    // parameters (`fss_consider`), and the noise by the Cramér–Rao bound of the samples at
-    // their white-noise σ (`white`; sub-arcsec over thousands of samples). The per-cell
-    // weights' own formal covariance stands for the same transfer function and would count it
-    // twice (20 seeds, each its own unit: FSS NEES 1.5 / 1.3 with both, 2.9 / 3.1 without).
-    if let Some((spreads, white)) = fss_consider {
-        let converged: Vec<SensorSpec> = held
-            .iter()
-            .zip(&sol.sensors)
-            .map(|(spec, r)| SensorSpec {
-                m_acs_from_sensor: r.m_acs_from_sensor_calibrated,
-                ..spec.clone()
-            })
-            .collect();
-        let m: Vec<Matrix3<f64>> = converged.iter().map(|c| c.m_acs_from_sensor).collect();
-        let noise = cramer_rao_covariance(&converged, white, &m)
-            .context("FFCAL stage 2: the noise bound of the FSS samples")?;
-        sol.covariance_arcsec2 =
-            noise + consider_covariance(&converged, data, &stage2_cfg, spreads)?;
-    }
-    // Before-residuals and corrections relative to the flown alignments.
-    let before = ffcal(
-        sensors,
-        data,
-        &FfcalConfig {
-            max_iterations: 1,
-            ..*cfg
-        },
-    )
-    .ok();
-    let n = sol.covariance_arcsec2.nrows();
-    let c1 = &stage1.covariance_arcsec2;
-    let blk1 =
-        |a: usize, b: usize| -> Matrix3<f64> { c1.fixed_view::<3, 3>(3 * a, 3 * b).into_owned() };
-    let frame_cov = (blk1(0, 0) + blk1(0, 1) + blk1(1, 0) + blk1(1, 1)) * 0.25;
-    let mut cov = sol.covariance_arcsec2.clone();
-    for a in 0..n / 3 {
-        for b in 0..n / 3 {
-            let block = match (a < 2, b < 2) {
-                (true, true) => blk1(a, b),
-                (true, false) => (blk1(a, 0) + blk1(a, 1)) * 0.5,
-                (false, true) => (blk1(0, b) + blk1(1, b)) * 0.5,
-                (false, false) => {
-                    sol.covariance_arcsec2
-                        .fixed_view::<3, 3>(3 * a, 3 * b)
-                        .into_owned()
-                        + frame_cov
-                }
-            };
-            cov.fixed_view_mut::<3, 3>(3 * a, 3 * b).copy_from(&block);
-        }
-    }
-    sol.covariance_arcsec2 = cov;
-    for (k, (r, spec)) in sol.sensors.iter_mut().zip(sensors).enumerate() {
-        r.m_acs_from_sensor_prelaunch = spec.m_acs_from_sensor;
-        r.theta_acs_arcsec =
-            rotvec_from_rot(&(r.m_acs_from_sensor_calibrated * spec.m_acs_from_sensor.transpose()))
-                * ARCSEC_PER_RAD;
-        r.sigma_acs_arcsec = Vector3::from_fn(|i, _| {
-            sol.covariance_arcsec2[(3 * k + i, 3 * k + i)]
-                .max(0.0)
-                .sqrt()
-        });
-        if let Some(b) = before.as_ref().and_then(|b| b.sensors.get(k)) {
-            r.residual_rms_before_arcsec = b.residual_rms_before_arcsec;
-        }
-    }
-    sol.iterations += stage1.iterations;
-    Ok(sol)
-}
-
 /// 1σ per axis (arcsec) of the FHST2-relative-to-FHST1 alignment from the Cramér–Rao bound
 /// of `data` at the solution's alignments; NaN when the bound cannot be formed.
 fn crb_relative_sigma(
@@ -874,138 +357,6 @@ fn crb_relative_sigma(
         }
         _ => [f64::NAN; 3],
     }
-}
-
-fn frame_index_at(frames: &[FrameObservations], t_s: f64) -> usize {
-    frames
-        .partition_point(|f| f.time.seconds() < t_s)
-        .min(frames.len().saturating_sub(1))
-}
-
-/// Fixes whose attitude fit has a χ² p-value below this are refused ([`batch_fix`]): with
-/// ≈ 10⁴ fixes in six months, ≈ 0.01 good fixes refused by chance.
-pub(crate) const FIX_MISFIT_P: f64 = 1e-6;
-
-/// Why [`batch_fix`] gives no fix.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub(crate) enum FixRefusal {
-    /// Too few frames or vectors, or an axis worse than `MAX_FIX_SIGMA_ARCSEC`.
-    NoSolution,
-    /// The fit's residuals are impossible under the stated σ (χ² p < [`FIX_MISFIT_P`]).
-    Misfit {
-        /// χ² of the attitude fit.
-        chi2: f64,
-        /// Its degrees of freedom.
-        dof: usize,
-    },
-}
-
-/// A fine attitude centred at `t_center_s` from frames within ±`BATCH_HALF_S` restricted to
-/// `[lo_s, hi_s]`: FHST-only when the trackers give it, else FHST + FSS (the last value: the fix
-/// needed the Sun); with the part of its covariance that is systematic (the floors: the same for fixes of one kind in one attitude).
-///
-/// The covariance adds what the formal one ignores: `FixFloors::fhst_cov_rad2` for a FHST-only fix
-/// (the FHST1–FHST2 relative alignment uncertainty: a fix may follow either tracker's frame),
-/// and the FSS's inherent error (`FixFloors::fss_arcsec` per axis) for a fix that needed the
-/// Sun, which otherwise would claim arcsec accuracy from hundreds of samples of a sensor
-/// whose error is systematic.
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn batch_fix(
-    frames: &[FrameObservations],
-    t_center_s: f64,
-    lo_s: f64,
-    hi_s: f64,
-    bias: &Vector3<f64>,
-    delta_m: &Matrix3<f64>,
-    floors: &FixFloors,
-    allow_fss: bool,
-) -> Result<(usize, AttitudeFix, Matrix3<f64>, bool), FixRefusal> {
-    let lo = frame_index_at(frames, (t_center_s - BATCH_HALF_S).max(lo_s));
-    let hi = frame_index_at(frames, (t_center_s + BATCH_HALF_S).min(hi_s)) + 1;
-    let center = frame_index_at(frames, t_center_s);
-    if hi <= lo + 10 || center < lo || center >= hi {
-        return Err(FixRefusal::NoSolution);
-    }
-    // FHST-only ends are best (the paper's recommendation); when the trackers do not give two
-    // non-parallel vectors in the batch (Earth occultation, a single star), fall back to
-    // FHST + FSS ends as the paper itself did for some of its intervals.
-    let fhst_only = fine_attitude(
-        frames,
-        lo..hi,
-        center,
-        bias,
-        delta_m,
-        AttitudeSensors::FhstOnly,
-    );
-    let (sol, floor, sun) = match fhst_only {
-        Ok(sol) => (sol, floors.fhst_cov_rad2, false),
-        Err(_) if !allow_fss => return Err(FixRefusal::NoSolution),
-        Err(_) => (
-            fine_attitude(
-                frames,
-                lo..hi,
-                center,
-                bias,
-                delta_m,
-                AttitudeSensors::FhstAndFss,
-            )
-            .map_err(|_| FixRefusal::NoSolution)?,
-            Matrix3::identity() * (floors.fss_arcsec / ARCSEC_PER_RAD).powi(2),
-            true,
-        ),
-    };
-    // A fix whose own residuals are impossible under its stated σ is not a fix: its stars were
-    // carried to the batch centre with a bias the gyro did not have (the OBC's estimate just
-    // after a triad switch or a reset, 1.3″/s off for half an hour: 490″ off while claiming
-    // 8.6″, `docs/investigations.md`). Its χ² p-value below FIX_MISFIT_P refuses it, and the
-    // chain reports it.
-    if chi2_sf(sol.chi2, sol.dof as f64) < FIX_MISFIT_P {
-        return Err(FixRefusal::Misfit {
-            chi2: sol.chi2,
-            dof: sol.dof,
-        });
-    }
-    // Floor for systematic errors the formal covariance ignores (residual alignment error).
-    let systematic =
-        floor + Matrix3::identity() * (FIX_SIGMA_FLOOR_ARCSEC / ARCSEC_PER_RAD).powi(2);
-    let cov = sol.cov_acs_rad2 + systematic;
-    // A fix is an interval end only if every axis is known to FSS quality or better (the
-    // paper's FSS-based ends were 0.022°); a batch with one star and the Sun nearly parallel
-    // gives a formally valid but useless attitude.
-    let sigma_max_rad = (0..3)
-        .map(|i| cov[(i, i)].max(0.0).sqrt())
-        .fold(0.0, f64::max);
-    if !(sigma_max_rad * ARCSEC_PER_RAD <= MAX_FIX_SIGMA_ARCSEC) {
-        return Err(FixRefusal::NoSolution);
-    }
-    Ok((
-        center,
-        AttitudeFix {
-            m_acs_from_eci: sol.m_acs_from_eci,
-            cov_acs_rad2: cov,
-        },
-        systematic,
-        sun,
-    ))
-}
-
-/// Every frame after `a` up to `b` has a gyro step (none lost to a gap or a bad count).
-pub(crate) fn gyro_complete(frames: &[FrameObservations], a: usize, b: usize) -> bool {
-    frames
-        .get(a + 1..=b)
-        .is_some_and(|f| f.iter().all(|f| f.gyro.is_some()))
-}
-
-pub(crate) fn steps_between(frames: &[FrameObservations], a: usize, b: usize) -> Vec<GyroStep> {
-    frames[a + 1..=b]
-        .iter()
-        .map(|f| {
-            f.gyro.unwrap_or(GyroStep {
-                dtheta_acs_rad: Vector3::zeros(),
-                dt_s: 0.0,
-            })
-        })
-        .collect()
 }
 
 /// The coarse attitude at the end `e` of the maneuver `s..=e`: FSS vectors over the maneuver
@@ -1171,7 +522,7 @@ pub fn calibrate_telemetry(
         sensors: &sensors,
         map,
         fss_systematic_arcsec: declared_fss_sys,
-        options,
+        staging: options.ffcal_staging(),
         cfg: FfcalConfig {
             weighting: options.weighting,
             ..FfcalConfig::default()
@@ -1614,37 +965,6 @@ impl FixFloors {
                 .sensors
                 .fss_systematic_or_paper_arcsec()
                 .hypot(fss_alignment_sigma),
-        }
-    }
-}
-
-impl IruReport {
-    /// What the slew uncertainty needs of this report (`super::filter_tuning`).
-    #[must_use]
-    pub fn tuning_evidence(&self) -> super::filter_tuning::IruEvidence {
-        use super::filter_tuning::{HeldOut, IruEvidence, RateScale, TriadCalibration};
-        let held_out = |v: &crate::calibration::iru_chain::HeldOutValidation| HeldOut {
-            passed: v.passed,
-            mean_square_normalised: v.mean_square_normalised,
-            reason: v.reason.clone(),
-        };
-        IruEvidence {
-            delta_m: self.delta_m,
-            delta_m_sigma: self.delta_m_sigma,
-            delta_m_uplinked: self.delta_m_uplinked,
-            validation: self.validation.as_ref().map(held_out),
-            g_updated: self.g_updated,
-            decision: self.decision.clone(),
-            rate_scale: RateScale {
-                significant: self.rate_scale.significant,
-                p_value: self.rate_scale.p_value,
-            },
-            backup: self.backup.as_ref().map(|b| TriadCalibration {
-                delta_m: b.delta_m,
-                delta_m_sigma: b.delta_m_sigma,
-                delta_m_uplinked: b.delta_m_uplinked,
-                validation: b.validation.as_ref().map(held_out),
-            }),
         }
     }
 }

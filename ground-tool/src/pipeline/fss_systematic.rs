@@ -129,7 +129,7 @@ pub fn estimate_fss_systematic(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::pipeline::calibrate::fss_cell as cell;
+    use crate::pipeline::ffcal_stages::fss_cell as cell;
     use crate::pipeline::observations::{RateSwitch, StarObservation, SunObservation};
     use fsw_core::fhst::FhstMeasurement;
     use fsw_core::fss::FssMeasurement;

@@ -24,15 +24,15 @@ use serde::Serialize;
 use fsw_core::tables::types::{matrix_from_rows, rows_from_matrix};
 use fsw_core::tables::IruTable;
 
-use super::calibrate::{
-    batch_fix, gyro_complete, steps_between, FixFloors, FixRefusal, IruReport, ManeuverReport,
-    BATCH_HALF_S,
+use super::iru_fixes::{
+    batch_fix, gyro_complete, steps_between, FixFloors, FixRefusal, BATCH_HALF_S,
 };
+use super::maneuvers::ManeuverReport;
 use super::observations::{FrameObservations, RateSwitch};
 use crate::calibration::iru::{GyroCalibration, IrucalSolution};
 use crate::calibration::iru_chain::{
-    significant_elements, solve_chain, validate_heldout, Chain, ChainConfig, ChainFix, ChainLink,
-    ChainSolution, HeldOutValidation, Triad,
+    significant_elements, solve_chain, validate_heldout, BiasStepTest, Chain, ChainConfig,
+    ChainFix, ChainLink, ChainSolution, HeldOutValidation, RateScaleTest, Triad,
 };
 use crate::ARCSEC_PER_RAD;
 
@@ -287,6 +287,112 @@ pub struct IruStage {
     pub chain_solution: Option<ChainSolution>,
 }
 
+/// IRU results for the report.
+#[derive(Clone, Debug, Serialize)]
+pub struct IruReport {
+    /// δM (row-major, unitless).
+    pub delta_m: [[f64; 3]; 3],
+    /// 1σ of δM.
+    pub delta_m_sigma: [[f64; 3]; 3],
+    /// Bias from the full calibration, ACS, rad/s.
+    pub bias_rad_per_s: [f64; 3],
+    /// 1σ, rad/s.
+    pub bias_sigma_rad_per_s: [f64; 3],
+    /// Number of intervals (maneuvers + holds).
+    pub intervals: usize,
+    /// Interval residuals before and after, arcsec.
+    pub residual_before_arcsec: Vec<f64>,
+    /// After.
+    pub residual_after_arcsec: Vec<f64>,
+    /// Whether the new G was written (δM significant at 3σ somewhere).
+    pub g_updated: bool,
+    /// The δM applied to G: the elements determined at 3σ, others 0 (all 0 without an update).
+    pub delta_m_uplinked: [[f64; 3]; 3],
+    /// Intervals dropped as outliers (index in the order they were built, after earlier drops).
+    pub rejected_intervals: Vec<usize>,
+    /// The estimator that produced δM.
+    pub estimator: &'static str,
+    /// Attitude fixes in the gyro chain.
+    pub fixes: usize,
+    /// Gyro links joining consecutive fixes.
+    pub links: usize,
+    /// Links that carry a maneuver.
+    pub maneuver_links: usize,
+    /// Rate random walk declared in the metadata (rad/s^1.5).
+    pub rrw_declared_rad_per_s_1p5: f64,
+    /// Rate random walk used (larger when the data's likelihood needed it).
+    pub rrw_used_rad_per_s_1p5: f64,
+    /// Scale of the attitude fixes' random covariance chosen by the likelihood (1 = as stated).
+    pub fix_cov_scale: f64,
+    /// Scale of the FHST-only fixes' systematic (per-attitude) covariance chosen by the
+    /// likelihood.
+    pub fix_systematic_scale: f64,
+    /// Scale of the systematic covariance of the fixes that needed the Sun (FSS transfer
+    /// function and alignment) chosen by the likelihood.
+    pub fix_sun_systematic_scale: f64,
+    /// Mean normalised innovation of the fixes per dof (1 = σ right).
+    pub nis_mean_per_dof: f64,
+    /// Fixes outside the innovation gate (not used).
+    pub gated_fixes: usize,
+    /// Hold batches refused as fixes because their own attitude fit does not fit (χ² p below
+    /// `FIX_MISFIT_P`): time (s from the first frame), χ², dof.
+    pub misfit_fixes: Vec<(f64, f64, usize)>,
+    /// Why the gyro model does not fit, when it does not.
+    pub model_fit: Option<String>,
+    /// The lack-of-fit test of a scale error that changes with rate.
+    pub rate_scale: RateScaleTest,
+    /// Bias steps at unknown times found by the change-point scan and modelled: each with its
+    /// time, size, σ and multiplicity-corrected p.
+    pub bias_steps: Vec<BiasStepTest>,
+    /// The scan's best candidate that was not accepted (when a scan ran and stopped).
+    pub bias_step_rejected: Option<BiasStepTest>,
+    /// The scan stopped at its cap of steps (`iru_chain::MAX_BIAS_STEPS`): more changes faster
+    /// than the walk may remain.
+    pub bias_steps_capped: bool,
+    /// Where in their envelope the rate-mode switches inside decimated frames fell, as
+    /// estimated (slew start, slew end; 0 = middle, ±0.5 = edges), with 1σ (0.5: no data).
+    pub split_fraction: [f64; 2],
+    /// See `split_fraction`.
+    pub split_fraction_sigma: [f64; 2],
+    /// Held-out validation of the primary triad's δM, when attempted.
+    pub validation: Option<HeldOutValidation>,
+    /// Why G was or was not updated (the real reason, with numbers).
+    pub decision: String,
+    /// The backup triad, when it flew slews.
+    pub backup: Option<BackupIruReport>,
+}
+
+impl IruReport {
+    /// What the slew uncertainty needs of this report (`super::filter_tuning`).
+    #[must_use]
+    pub fn tuning_evidence(&self) -> super::filter_tuning::IruEvidence {
+        use super::filter_tuning::{HeldOut, IruEvidence, RateScale, TriadCalibration};
+        let held_out = |v: &crate::calibration::iru_chain::HeldOutValidation| HeldOut {
+            passed: v.passed,
+            mean_square_normalised: v.mean_square_normalised,
+            reason: v.reason.clone(),
+        };
+        IruEvidence {
+            delta_m: self.delta_m,
+            delta_m_sigma: self.delta_m_sigma,
+            delta_m_uplinked: self.delta_m_uplinked,
+            validation: self.validation.as_ref().map(held_out),
+            g_updated: self.g_updated,
+            decision: self.decision.clone(),
+            rate_scale: RateScale {
+                significant: self.rate_scale.significant,
+                p_value: self.rate_scale.p_value,
+            },
+            backup: self.backup.as_ref().map(|b| TriadCalibration {
+                delta_m: b.delta_m,
+                delta_m_sigma: b.delta_m_sigma,
+                delta_m_uplinked: b.delta_m_uplinked,
+                validation: b.validation.as_ref().map(held_out),
+            }),
+        }
+    }
+}
+
 /// The backup triad's δM in the report.
 #[derive(Clone, Debug, Serialize)]
 pub struct BackupIruReport {
@@ -351,66 +457,12 @@ pub fn irucal_stage(
         write_chain_csv(&path, chain, &sol);
     }
     let fit = model_fit(&sol, cfg);
-    let decide = |triad: Triad, table_g: &mut [[f64; 3]; 3]| {
-        let k = match triad {
-            Triad::Primary => 0,
-            Triad::Backup => 1,
-        };
-        let dm_up = significant_elements(&sol.delta_m[k], &sol.sigma_delta_m[k]);
-        if dm_up.iter().all(|x| *x == 0.0) {
-            return (
-                false,
-                Matrix3::zeros(),
-                None,
-                "G left at its flown value: no δM element is determined at 3σ".to_owned(),
-            );
-        }
-        if let Err(why) = &fit {
-            return (
-                false,
-                Matrix3::zeros(),
-                None,
-                format!("G left at its flown value: {why}"),
-            );
-        }
-        let mask = dm_up.map(|x| x != 0.0);
-        let cfg_solved = ChainConfig {
-            fix_cov_scale: sol.fix_cov_scale,
-            fix_systematic_scale: sol.fix_systematic_scale,
-            fix_sun_systematic_scale: sol.fix_sun_systematic_scale,
-            bias_restarts: sol.bias_restarts,
-            ..*cfg
-        };
-        crate::progress::step(&format!(
-            "IRUCAL: held-out validation of the {triad:?} triad's G"
-        ));
-        let validation = validate_heldout(chain, &cfg_solved, triad, sol.rrw_used, &mask);
-        match validation {
-            Ok(v) if v.passed => {
-                let g = (Matrix3::identity() + dm_up) * matrix_from_rows(table_g);
-                *table_g = rows_from_matrix(&g);
-                let why = format!(
-                    "G updated with the δM elements determined at 3σ; held-out validation: {}",
-                    v.reason
-                );
-                (true, dm_up, Some(v), why)
-            }
-            Ok(v) => {
-                let why = format!("G left at its flown value: {}", v.reason);
-                (false, Matrix3::zeros(), Some(v), why)
-            }
-            Err(e) => (
-                false,
-                Matrix3::zeros(),
-                None,
-                format!("G left at its flown value: the held-out fit failed ({e})"),
-            ),
-        }
-    };
     let mut table = *flown;
-    let (g_updated, dm_up, validation, decision) = decide(Triad::Primary, &mut table.g_primary);
+    let (g_updated, dm_up, validation, decision) =
+        decide_triad(chain, cfg, &sol, &fit, Triad::Primary, &mut table.g_primary);
     let backup = (sol.rotation_deg[1] > 1.0).then(|| {
-        let (upd, dmb, v, why) = decide(Triad::Backup, &mut table.g_backup);
+        let (upd, dmb, v, why) =
+            decide_triad(chain, cfg, &sol, &fit, Triad::Backup, &mut table.g_backup);
         BackupIruReport {
             delta_m: rows_from_matrix(&sol.delta_m[1]),
             delta_m_sigma: rows_from_matrix(&sol.sigma_delta_m[1]),
@@ -472,6 +524,92 @@ pub fn irucal_stage(
         decision,
         backup,
     });
+    stage.solution = Some(irucal_solution(
+        &sol,
+        (bias, bias_sigma),
+        residual_before,
+        residual_after,
+    ));
+    stage.table = table;
+    stage.chain_solution = Some(sol);
+    stage
+}
+
+/// Whether a triad's G is updated: only with δM elements determined at 3σ, a gyro model
+/// that fits, and the held-out validation passed; then `table_g` takes them. Returns
+/// (updated, the δM uplinked, the validation, why).
+fn decide_triad(
+    chain: &Chain,
+    cfg: &ChainConfig,
+    sol: &ChainSolution,
+    fit: &Result<(), String>,
+    triad: Triad,
+    table_g: &mut [[f64; 3]; 3],
+) -> (bool, Matrix3<f64>, Option<HeldOutValidation>, String) {
+    let k = match triad {
+        Triad::Primary => 0,
+        Triad::Backup => 1,
+    };
+    let dm_up = significant_elements(&sol.delta_m[k], &sol.sigma_delta_m[k]);
+    if dm_up.iter().all(|x| *x == 0.0) {
+        return (
+            false,
+            Matrix3::zeros(),
+            None,
+            "G left at its flown value: no δM element is determined at 3σ".to_owned(),
+        );
+    }
+    if let Err(why) = fit {
+        return (
+            false,
+            Matrix3::zeros(),
+            None,
+            format!("G left at its flown value: {why}"),
+        );
+    }
+    let mask = dm_up.map(|x| x != 0.0);
+    let cfg_solved = ChainConfig {
+        fix_cov_scale: sol.fix_cov_scale,
+        fix_systematic_scale: sol.fix_systematic_scale,
+        fix_sun_systematic_scale: sol.fix_sun_systematic_scale,
+        bias_restarts: sol.bias_restarts,
+        ..*cfg
+    };
+    crate::progress::step(&format!(
+        "IRUCAL: held-out validation of the {triad:?} triad's G"
+    ));
+    let validation = validate_heldout(chain, &cfg_solved, triad, sol.rrw_used, &mask);
+    match validation {
+        Ok(v) if v.passed => {
+            let g = (Matrix3::identity() + dm_up) * matrix_from_rows(table_g);
+            *table_g = rows_from_matrix(&g);
+            let why = format!(
+                "G updated with the δM elements determined at 3σ; held-out validation: {}",
+                v.reason
+            );
+            (true, dm_up, Some(v), why)
+        }
+        Ok(v) => {
+            let why = format!("G left at its flown value: {}", v.reason);
+            (false, Matrix3::zeros(), Some(v), why)
+        }
+        Err(e) => (
+            false,
+            Matrix3::zeros(),
+            None,
+            format!("G left at its flown value: the held-out fit failed ({e})"),
+        ),
+    }
+}
+
+/// The chain's solution as IRUCAL's (primary triad, the last bias), for the reports and the
+/// diagnose chain.
+fn irucal_solution(
+    sol: &ChainSolution,
+    (bias, bias_sigma): ([f64; 3], [f64; 3]),
+    residual_before: Vec<f64>,
+    residual_after: Vec<f64>,
+) -> IrucalSolution {
     let cov = &sol.covariance_ppm2[0];
     let mut covariance_scaled = nalgebra::DMatrix::zeros(12, 12);
     for r in 0..9 {
@@ -482,7 +620,7 @@ pub fn irucal_stage(
     for i in 0..3 {
         covariance_scaled[(9 + i, 9 + i)] = (bias_sigma[i] * ARCSEC_PER_RAD).powi(2);
     }
-    stage.solution = Some(IrucalSolution {
+    IrucalSolution {
         calibration: GyroCalibration {
             delta_m: sol.delta_m[0],
             bias_acs_rad_per_s: Vector3::from(bias),
@@ -497,10 +635,7 @@ pub fn irucal_stage(
         residual_after_arcsec: residual_after,
         chi2: sol.nis.iter().flatten().sum(),
         iterations: sol.iterations,
-    });
-    stage.table = table;
-    stage.chain_solution = Some(sol);
-    stage
+    }
 }
 
 /// Whether the gyro model fits the fixes: few gated fixes and a consistent mean NIS.

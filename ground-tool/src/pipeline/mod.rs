@@ -7,6 +7,7 @@
 
 pub mod alignment_heldout;
 pub mod calibrate;
+pub mod ffcal_stages;
 pub mod fhst_noise;
 pub mod filter_floor;
 pub mod filter_tuning;
@@ -14,7 +15,9 @@ pub mod flown;
 pub mod fss_consider;
 pub mod fss_systematic;
 pub mod gyro_chain;
+pub mod iru_fixes;
 pub mod magnetics_table;
+pub mod maneuvers;
 pub mod observations;
 pub mod star_batches;
 pub mod tam;

@@ -302,28 +302,10 @@ pub fn build_observations(
                 sigma_rad: noise.fhst_sigma_rad(meas.magnitude),
             };
             if let Some(q) = id_q {
-                let r_obs = q.to_dcm().transpose() * meas.dir_acs;
-                let mut found: Option<(u32, Vector3<f64>, f64)> = None;
-                let mut count = 0usize;
-                sky.for_each_in_cone(&r_obs, options.window_rad, |_, star| {
-                    if (star.magnitude - meas.magnitude).abs() > options.magnitude_tolerance {
-                        return;
-                    }
-                    let apparent = if options.aberration {
-                        star.apparent_dir_eci(j2000_tt_s, &observer_bary_km, &observer_vel)
-                    } else {
-                        star.astrometric_dir_eci(j2000_tt_s, &observer_bary_km)
-                    };
-                    if apparent.dot(&r_obs).clamp(-1.0, 1.0).acos() <= options.window_rad {
-                        count += 1;
-                        found = Some((star.hip, apparent, star.magnitude));
-                    }
-                });
-                if count == 1 {
-                    if let Some((hip, dir, mag)) = found {
-                        obs.identified = Some((hip, dir));
-                        obs.catalog_magnitude = mag;
-                    }
+                let observer = (j2000_tt_s, &observer_bary_km, &observer_vel);
+                if let Some((hip, dir, mag)) = identify_star(sky, &meas, &q, observer, options) {
+                    obs.identified = Some((hip, dir));
+                    obs.catalog_magnitude = mag;
                 }
             }
             *slot = Some(obs);
@@ -357,6 +339,41 @@ pub fn build_observations(
     }
     split_rate_switches(tm, &mut frames, &pulses, iru);
     frames
+}
+
+/// FADS for one tracker measurement: the catalog star within the window of the direction
+/// the attitude `q` gives it, within the magnitude tolerance, when there is exactly one:
+/// (HIP, its reference direction at the observer `(TT s since J2000, barycentric position km,
+/// velocity km/s)`, its catalog magnitude).
+fn identify_star(
+    sky: &Sky,
+    meas: &FhstMeasurement,
+    q: &Quat,
+    (j2000_tt_s, observer_bary_km, observer_vel): (f64, &Vector3<f64>, &Vector3<f64>),
+    options: &IdentifyOptions,
+) -> Option<(u32, Vector3<f64>, f64)> {
+    let r_obs = q.to_dcm().transpose() * meas.dir_acs;
+    let mut found: Option<(u32, Vector3<f64>, f64)> = None;
+    let mut count = 0usize;
+    sky.for_each_in_cone(&r_obs, options.window_rad, |_, star| {
+        if (star.magnitude - meas.magnitude).abs() > options.magnitude_tolerance {
+            return;
+        }
+        let apparent = if options.aberration {
+            star.apparent_dir_eci(j2000_tt_s, observer_bary_km, observer_vel)
+        } else {
+            star.astrometric_dir_eci(j2000_tt_s, observer_bary_km)
+        };
+        if apparent.dot(&r_obs).clamp(-1.0, 1.0).acos() <= options.window_rad {
+            count += 1;
+            found = Some((star.hip, apparent, star.magnitude));
+        }
+    });
+    if count == 1 {
+        found
+    } else {
+        None
+    }
 }
 
 /// The IRU rate-mode switches announced by `0x0203` events: (time the new mode starts, high).

@@ -40,12 +40,14 @@ struct Cli {
 fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
     match ground_tool::diagnose::run::diagnose_command(
-        &cli.run_dir,
-        &cli.out,
-        cli.force,
-        cli.tables.as_deref(),
-        cli.json,
-        cli.quiet,
+        &ground_tool::run_check::CommandArgs {
+            run_dir: &cli.run_dir,
+            out: &cli.out,
+            force: cli.force,
+            tables: cli.tables.as_deref(),
+            json: cli.json,
+            quiet: cli.quiet,
+        },
         Some(std::sync::Arc::new(
             gro_tests::diagnose::scoring::TruthScorer,
         )),
