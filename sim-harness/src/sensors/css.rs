@@ -50,14 +50,8 @@ pub struct CssParams {
 impl Default for CssParams {
     fn default() -> Self {
         Self {
-            normals_acs: vec![
-                [1.0, 0.0, 0.0],
-                [-1.0, 0.0, 0.0],
-                [0.0, 1.0, 0.0],
-                [0.0, -1.0, 0.0],
-                [0.0, 0.0, 1.0],
-                [0.0, 0.0, -1.0],
-            ],
+            // The layout the OBC's boot magnetics table assumes (one definition).
+            normals_acs: fsw_core::tables::magnetics::CSS_NORMALS_DEFAULT.to_vec(),
             fov_half_angle_deg: 85.0,
             counts_at_normal_incidence: 1_000.0,
             noise_counts_1sigma: 2.0,
