@@ -354,6 +354,18 @@ impl CoarseAttitude {
         }
     }
 
+    /// Add `grow` (rad², ACS) to the covariance of a carried solution: an error source outside
+    /// the gyro noise model, such as the gyros' scale and misalignment error during a slew
+    /// (the same term the fine filter adds, `FlightCore::step` phase 5).
+    /// docs/magnetics.md §5.
+    pub fn add_covariance(&mut self, grow: &Matrix3<f64>) {
+        if !self.valid || !grow.iter().all(|x| x.is_finite()) {
+            return;
+        }
+        let p = self.covariance_rad2 + grow;
+        self.covariance_rad2 = (p + p.transpose()) * 0.5;
+    }
+
     /// Whether a fix is due this cycle (every `coarse_fix_every_n_cycles`).
     /// docs/tables.md (Table 6, field 17).
     pub fn fix_due(&mut self, table: &MagneticsTable) -> bool {
@@ -458,13 +470,17 @@ impl CoarseAttitude {
         b_eci_nt: &Vector3<f64>,
     ) -> Result<VectorPair, CoarseUnavailable> {
         let b_model_mg = b_eci_nt.norm() / NT_PER_MILLIGAUSS;
-        let tolerance_mg =
-            5.0 * table.field_sigma_milligauss + TAM_MAGNITUDE_RELATIVE_TOLERANCE * b_model_mg;
         let mut outcome = CoarseUnavailable::NoField;
         for (unit, sample) in frame.tam.iter().enumerate().take(TAMS) {
             let Some(b) = tam_field_acs_milligauss(sample, unit, table) else {
                 continue;
             };
+            let sigma_mg = table
+                .field_sigma_milligauss
+                .get(unit)
+                .copied()
+                .unwrap_or(f64::NAN);
+            let tolerance_mg = 5.0 * sigma_mg + TAM_MAGNITUDE_RELATIVE_TOLERANCE * b_model_mg;
             let code = if unit == 0 { 1 } else { 2 };
             if !((b.norm() - b_model_mg).abs() <= tolerance_mg) {
                 self.reject(code);
@@ -476,7 +492,7 @@ impl CoarseAttitude {
             let pair = VectorPair {
                 body: b,
                 reference: *b_eci_nt,
-                sigma_rad: table.field_sigma_milligauss / b.norm(),
+                sigma_rad: sigma_mg / b.norm(),
             };
             if self.passes_gate(&pair) {
                 return Ok(pair);
@@ -495,7 +511,10 @@ impl CoarseAttitude {
             return true;
         }
         let predicted = self.q_acs_from_eci.to_dcm() * v.reference.normalize();
-        let angle = predicted.cross(&v.body.normalize()).norm();
+        let body = v.body.normalize();
+        // The angle itself, not its sine: a reversed vector (a TAM of inverted polarity) is
+        // 180° off, not 0°.
+        let angle = libm::atan2(predicted.cross(&body).norm(), predicted.dot(&body));
         let variance = v.sigma_rad * v.sigma_rad + self.covariance_rad2.trace().max(0.0);
         angle * angle <= GATE_CHI2 * variance
     }

@@ -496,11 +496,16 @@ impl FlightCore {
             _ => None,
         };
         let t_s = frame.time.seconds_since_j2000_tt();
+        let rejections_before = self.coarse.rejections;
         let result =
             self.coarse
                 .try_fix(frame, self.tables.alignment(), table, orbit.as_ref(), t_s);
-        let rejection = self.coarse.last_rejection;
-        if rejection != 0 && self.coarse_rejection_reported != rejection {
+        // 0x0903 when the kind of rejection changes; an attempt without one re-arms it, so
+        // that a sensor failing again later is reported again.
+        if self.coarse.rejections == rejections_before {
+            self.coarse_rejection_reported = 0;
+        } else if self.coarse_rejection_reported != self.coarse.last_rejection {
+            let rejection = self.coarse.last_rejection;
             self.coarse_rejection_reported = rejection;
             let total = self.coarse.rejections;
             let id = EventId::CoarseVectorRejected;
@@ -1293,6 +1298,8 @@ impl FlightCore {
         };
         let mut block = self.filter.covariance.fixed_view_mut::<3, 3>(0, 0);
         block += grow;
+        // The coarse solution is carried on the same gyros through the slew.
+        self.coarse.add_covariance(&grow);
     }
 
     /// Onboard Sun direction, the ephemeris re-evaluated at most every [`SUN_REFRESH_S`]

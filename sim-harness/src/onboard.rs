@@ -170,7 +170,7 @@ pub fn magnetics_table(
     ];
     base.tam_bias_milligauss = m.onboard_tam_bias_milligauss;
     if let Some(sigma) = m.onboard_field_sigma_milligauss {
-        base.field_sigma_milligauss = sigma;
+        base.field_sigma_milligauss = [sigma; 2];
     }
     let table = gro_reference::field::onboard_field_table(&model, clock.epoch(at_s), &base)
         .map_err(|e| anyhow::anyhow!("[magnetics] onboard_table: {e}"))?;

@@ -430,8 +430,8 @@ pub struct MagneticsParams {
     /// The TAM1, TAM2 biases the OBC's table subtracts (mG, sensor axes): zero is prelaunch
     /// knowledge; the ground's determined bias is the "after" case of issue 20.
     pub onboard_tam_bias_milligauss: [[f64; 3]; 2],
-    /// The table's `field_sigma_milligauss` (1σ per axis of what is left in a corrected TAM
-    /// field); `None`: the OBC's boot value (4 mG, an undetermined bias).
+    /// The table's `field_sigma_milligauss` for both TAMs (1σ per axis of what is left in a corrected TAM
+    /// field); `None`: the OBC's boot value (2.5 mG, an undetermined bias).
     pub onboard_field_sigma_milligauss: Option<f64>,
 }
 

@@ -79,10 +79,11 @@ pub struct MagneticsTable {
     /// primary-TAM bias [0, 0, −4] mG once the ground has determined it).
     /// Paper (`data/gro_paper.toml` `[sensors.tam]`); docs/tables.md (Table 6, field 11).
     pub tam_bias_milligauss: [[f64; 3]; TAMS],
-    /// 1σ per axis of what is left in a corrected TAM field against the onboard model, mG:
-    /// bias uncertainty, residual spacecraft field, field-model error, noise.
+    /// TAM1, TAM2: 1σ per axis of what is left in a corrected TAM field against the onboard
+    /// model, mG: bias uncertainty, residual spacecraft field, field-model error, noise. Per
+    /// TAM, because the ground may calibrate one and leave the other nominal.
     /// algorithms.md §10a; docs/tables.md (Table 6, field 12).
-    pub field_sigma_milligauss: f64,
+    pub field_sigma_milligauss: [f64; TAMS],
     /// 1σ per axis of an FSS Sun direction used by the coarse attitude, rad.
     /// docs/tables.md (Table 6, field 13).
     pub fss_sun_sigma_rad: f64,
@@ -140,7 +141,7 @@ impl MagneticsTable {
             // Before calibration: a bias of the paper's size (4 mG) in an unknown direction,
             // 4/√3 = 2.3 mG per axis, with an uncalibrated TAM alignment (≤ 0.2°: 1.4 mG of
             // 400 mG) and scale (0.1 %: 0.4 mG): 2.5 mG per axis (docs/magnetics.md §5).
-            field_sigma_milligauss: 2.5,
+            field_sigma_milligauss: [2.5; TAMS],
             // FSS: the prelaunch alignments were off by up to 0.20° (paper: FSS1 0.20°, FSS2
             // 0.05°, found by the in-flight calibration); 0.004° counts are negligible.
             fss_sun_sigma_rad: 0.1 * core::f64::consts::PI / 180.0,
@@ -208,7 +209,9 @@ impl MagneticsTable {
         for b in self.tam_bias_milligauss.iter().flatten() {
             check_range(*b, -100.0, 100.0, 11)?;
         }
-        check_range(self.field_sigma_milligauss, 1e-3, 100.0, 12)?;
+        for s in self.field_sigma_milligauss {
+            check_range(s, 1e-3, 100.0, 12)?;
+        }
         check_range(self.fss_sun_sigma_rad, 1e-6, 0.2, 13)?;
         for n in &self.css_normals_acs {
             check_finite(n, 14)?;

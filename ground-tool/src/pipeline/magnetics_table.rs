@@ -15,8 +15,10 @@
 //! * per calibrated TAM, from `y = T x + b`, `T = (I + D) M_ASᵀ`: `M_AS = Rot(θ)` (θ the fitted
 //!   misalignment), count size `s₀ / (1 + Dᵢ)`, bias `bᵢ / (1 + Dᵢ)`; a TAM without a fit keeps
 //!   the nominal entries (and the reason says so);
-//! * `field_sigma_milligauss`: the largest held-out residual RMS of the calibrated TAMs (what a
-//!   corrected field differs from the model by, noise and calibration error together). No
+//! * `field_sigma_milligauss`, per TAM: the worst held-out residual RMS of its fit (what a
+//!   corrected field differs from the model by, noise and calibration error together), with the
+//!   part of `T` the table cannot hold (non-orthogonality) added; a TAM left nominal keeps the
+//!   boot σ. No
 //!   field-model error is added: the simulator's field is the model; a real mission adds the
 //!   IGRF's omission, ~1 mG at 450 km (`docs/magnetics.md` §4);
 //! * `fss_sun_sigma_rad`: when the new alignments fly, the larger FSS residual RMS of FFCAL
@@ -70,6 +72,25 @@ fn heldout_check(name: &str, fit: &TamUnitFit) -> Result<f64, String> {
     Ok(worst_rms)
 }
 
+/// The part of the fitted `T` the table cannot hold (its `M_AS` is a rotation and its scale
+/// diagonal: the non-orthogonality is dropped), as a field error per axis at the TAM's full
+/// range, mG: `‖T − diag(1 + D) Rot(θ)ᵀ‖_F / √3 × 600 mG`. Added to the σ in quadrature, so
+/// that what is written is what the validated fit minus the dropped part can promise.
+fn dropped_part_milligauss(fit: &TamUnitFit) -> f64 {
+    /// The TAMs' range, mG (`docs/magnetics.md` §2): the largest field the error multiplies.
+    const RANGE_MILLIGAUSS: f64 = 600.0;
+    let (Some(scale_ppm), Some(theta_arcsec)) = (fit.scale_ppm, fit.misalignment_acs_arcsec) else {
+        return 0.0;
+    };
+    let theta = nalgebra::Vector3::from(theta_arcsec.map(|a| a * RAD_PER_ARCSEC));
+    let d = nalgebra::Matrix3::from_diagonal(&nalgebra::Vector3::from(
+        scale_ppm.map(|p| 1.0 + p * 1e-6),
+    ));
+    let model = d * fsw_core::attitude::rot(&theta).transpose();
+    let fitted = fsw_core::tables::types::matrix_from_rows(&fit.t_tam_from_acs);
+    (fitted - model).norm() / 3.0_f64.sqrt() * RANGE_MILLIGAUSS
+}
+
 /// Write a unit's calibration into the table's entries `unit`.
 fn apply_fit(table: &mut MagneticsTable, unit: usize, fit: &TamUnitFit) {
     let scale = fit.scale_ppm.unwrap_or([0.0; 3]).map(|p| 1.0 + p * 1e-6);
@@ -119,17 +140,25 @@ pub fn magnetics_table(
     let mut base = MagneticsTable::boot();
     base.tam_milligauss_per_count = [[TAM_MILLIGAUSS_PER_COUNT; 3]; 2];
     apply_fit(&mut base, 0, fit1);
-    let mut sigma = sigma1;
+    let sigma1 = sigma1.hypot(dropped_part_milligauss(fit1));
     let mut notes = Vec::new();
-    match tam.tam2.as_ref().map(|f| (f, heldout_check("TAM2", f))) {
+    // A TAM left nominal keeps the boot σ (its bias and alignment are unknown to the OBC).
+    let boot_sigma = MagneticsTable::boot().field_sigma_milligauss[1];
+    let sigma2 = match tam.tam2.as_ref().map(|f| (f, heldout_check("TAM2", f))) {
         Some((fit2, Ok(s2))) => {
             apply_fit(&mut base, 1, fit2);
-            sigma = sigma.max(s2);
+            s2.hypot(dropped_part_milligauss(fit2))
         }
-        Some((_, Err(why))) => notes.push(format!("TAM2 kept nominal ({why})")),
-        None => notes.push("TAM2 kept nominal (no fit)".to_owned()),
-    }
-    base.field_sigma_milligauss = sigma;
+        Some((_, Err(why))) => {
+            notes.push(format!("TAM2 kept nominal with the boot σ ({why})"));
+            boot_sigma
+        }
+        None => {
+            notes.push("TAM2 kept nominal with the boot σ (no fit)".to_owned());
+            boot_sigma
+        }
+    };
+    base.field_sigma_milligauss = [sigma1, sigma2];
     if let Some(fss) = fss_residual_after_arcsec.filter(|x| x.is_finite() && *x > 0.0) {
         base.fss_sun_sigma_rad = fss * RAD_PER_ARCSEC;
     } else {
@@ -159,7 +188,7 @@ pub fn magnetics_table(
     d.fss_sun_sigma_arcsec = Some(table.fss_sun_sigma_rad / RAD_PER_ARCSEC);
     d.tam_bias_milligauss = Some(table.tam_bias_milligauss);
     d.reason = format!(
-        "written: TAM1 ({}) predicts each held-out half with χ²/dof ≤ {MAX_HELDOUT_CHI2_PER_DOF} and residual RMS ≤ {sigma1:.3} mG against {:.3} mG uncalibrated; field σ {sigma:.3} mG{}",
+        "written: TAM1 ({}) predicts each held-out half with χ²/dof ≤ {MAX_HELDOUT_CHI2_PER_DOF} against {:.3} mG uncalibrated; field σ TAM1 {sigma1:.3}, TAM2 {sigma2:.3} mG{}",
         fit1.model,
         fit1.residual_rms_uncalibrated_milligauss
             .iter()
@@ -180,7 +209,11 @@ mod tests {
     use crate::pipeline::tam::TamHeldOut;
 
     fn fit(chi2: [f64; 2], predicted: f64, uncalibrated: f64) -> TamUnitFit {
+        let theta = nalgebra::Vector3::new(500.0, -300.0, 700.0) * RAD_PER_ARCSEC;
+        let d = nalgebra::Matrix3::from_diagonal(&nalgebra::Vector3::new(1.001, 0.9992, 1.0006));
+        let t = d * fsw_core::attitude::rot(&theta).transpose();
         TamUnitFit {
+            t_tam_from_acs: fsw_core::tables::types::rows_from_matrix(&t),
             model: "bias, scale and misalignment (full 3x3 T)",
             bias_milligauss: [0.1, -0.2, -4.0],
             scale_ppm: Some([1000.0, -800.0, 600.0]),
@@ -225,7 +258,9 @@ mod tests {
         assert_eq!(t.validate(), Ok(()));
         assert!((t.tam_bias_milligauss[0][2] - (-4.0 / 1.0006)).abs() < 1e-9);
         assert!((t.tam_milligauss_per_count[0][0] - 0.3 / 1.001).abs() < 1e-12);
-        assert!((t.field_sigma_milligauss - 0.25).abs() < 1e-12);
+        // TAM1: the held-out RMS (the test's T has no dropped part); TAM2 nominal: boot σ.
+        assert!((t.field_sigma_milligauss[0] - 0.25).abs() < 1e-12);
+        assert_eq!(t.field_sigma_milligauss[1], 2.5);
         assert!((t.fss_sun_sigma_rad / RAD_PER_ARCSEC - 20.0).abs() < 1e-9);
         assert!(d.reason.contains("TAM2 kept nominal"));
     }

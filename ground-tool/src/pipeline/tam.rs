@@ -190,9 +190,9 @@ pub struct MagneticsTableDecision {
     pub written: bool,
     /// Why, with the numbers.
     pub reason: String,
-    /// The table's `field_sigma_milligauss` (when written).
+    /// The table's `field_sigma_milligauss`, TAM1 and TAM2 (when written).
     #[serde(rename = "field_sigma_mG")]
-    pub field_sigma_milligauss: Option<f64>,
+    pub field_sigma_milligauss: Option<[f64; 2]>,
     /// The table's `fss_sun_sigma_rad` in arcsec (when written).
     pub fss_sun_sigma_arcsec: Option<f64>,
     /// The bias per TAM the table subtracts, mG on its axes (when written).
