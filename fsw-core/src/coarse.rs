@@ -106,6 +106,10 @@ pub enum CoarseUnavailable {
     /// A vector disagreed with the carried solution beyond [`GATE_CHI2`].
     /// docs/magnetics.md §5 (fault screening).
     Gated,
+    /// A Sun sensor reads a Sun while the onboard orbit puts the spacecraft in the Earth's
+    /// shadow (a reflection or Earth light): no Sun vector is used.
+    /// docs/magnetics.md §5 (fault screening).
+    InShadow,
 }
 
 impl CoarseUnavailable {
@@ -127,6 +131,7 @@ impl CoarseUnavailable {
             Self::NotFinite => 11,
             Self::TamMagnitude => 12,
             Self::Gated => 13,
+            Self::InShadow => 14,
         }
     }
 }
@@ -185,6 +190,16 @@ pub fn css_sun_acs(sample: &CssSample, table: &MagneticsTable) -> Option<Vector3
         });
     let norm = v.norm();
     (norm.is_finite() && norm >= CSS_MIN_SUN_NORM).then(|| v / norm)
+}
+
+/// Whether `pos_eci_km` is in the Earth's shadow for the Sun direction `sun_eci` (unit): a
+/// cylinder of the Earth's equatorial radius behind the Earth (the penumbra, ≈ 8 s of a LEO
+/// orbit, counts as sunlit).
+/// Project choice: docs/magnetics.md §5 (cylindrical shadow, Wertz 1978 §3.5).
+#[must_use]
+pub fn in_earth_shadow(pos_eci_km: &Vector3<f64>, sun_eci: &Vector3<f64>) -> bool {
+    let along = pos_eci_km.dot(sun_eci);
+    along < 0.0 && (pos_eci_km - sun_eci * along).norm() < crate::orbit::EARTH_EQUATORIAL_RADIUS_KM
 }
 
 /// TRIAD with `anchor` first, and its attitude covariance (rad², ACS axes).
@@ -433,10 +448,14 @@ impl CoarseAttitude {
         if suns.iter().all(Option::is_none) {
             return Err(CoarseUnavailable::NoSun);
         }
-        let b_eci_nt =
-            field_model::field_eci_nt(table, pos, t_s).map_err(CoarseUnavailable::FieldModel)?;
         let sun_eci =
             crate::sun_ephemeris::sun_dir_eci(t_s).map_err(|_| CoarseUnavailable::Ephemeris)?;
+        if in_earth_shadow(pos, &sun_eci) {
+            // A "Sun" read in the Earth's shadow is a reflection or Earth light.
+            return Err(CoarseUnavailable::InShadow);
+        }
+        let b_eci_nt =
+            field_model::field_eci_nt(table, pos, t_s).map_err(CoarseUnavailable::FieldModel)?;
         let field = self.screened_field(frame, table, &b_eci_nt)?;
         let mut sun = None;
         for (v, sigma, source) in suns.into_iter().flatten() {
@@ -719,6 +738,21 @@ mod tests {
         // Released: the glinted Sun is taken (the carried solution is then the suspect).
         c.try_fix(&glint, &align, &t, Some(&pos), t_s).unwrap();
         assert!(attitude_error_rad(&q, &c.q_acs_from_eci).norm() > 0.05);
+    }
+
+    /// A Sun read in the Earth's shadow (a glint in eclipse) is refused, whatever the gate.
+    #[test]
+    fn a_sun_in_the_earth_shadow_is_refused() {
+        let (t, _, pos, t_s, frame) = scene();
+        let align = AlignmentTable::prelaunch();
+        let sun = crate::sun_ephemeris::sun_dir_eci(t_s).unwrap();
+        let behind = -sun * pos.norm();
+        assert!(in_earth_shadow(&behind, &sun) && !in_earth_shadow(&(sun * 7_000.0), &sun));
+        let mut c = CoarseAttitude::new();
+        assert_eq!(
+            c.try_fix(&frame, &align, &t, Some(&behind), t_s),
+            Err(CoarseUnavailable::InShadow)
+        );
     }
 
     #[test]
