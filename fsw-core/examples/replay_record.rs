@@ -486,14 +486,20 @@ fn table_images() -> (Vec<Vec<u8>>, StarCatalogTable) {
     )
 }
 
-/// A circular 6833-km, 28.48° orbit with its epoch at cycle 0.
+/// A circular 6833-km orbit through the sub-solar point at cycle 0 (its epoch), so that the
+/// 600 cycles are sunlit: the OBC refuses a Sun read in the Earth's shadow, and the recorded
+/// FSS words see the Sun throughout.
 fn replay_orbit() -> OrbitTable {
+    let t0 = time_tag(0).seconds_since_j2000_tt();
+    let sun = sun_ephemeris::sun_dir_eci(t0).unwrap();
+    let along = sun.cross(&Vector3::z()).normalize();
     let v = (fsw_core::orbit::MU_EARTH_KM3_PER_S2 / 6833.0).sqrt();
-    let i = 28.48_f64.to_radians();
+    let pos = sun * 6833.0;
+    let vel = along * v;
     OrbitTable {
-        epoch_s_since_j2000_tt: time_tag(0).seconds_since_j2000_tt(),
-        pos_eci_km: [0.0, -6833.0 * libm::cos(i), -6833.0 * libm::sin(i)],
-        vel_eci_km_per_s: [v, 0.0, 0.0],
+        epoch_s_since_j2000_tt: t0,
+        pos_eci_km: [pos.x, pos.y, pos.z],
+        vel_eci_km_per_s: [vel.x, vel.y, vel.z],
     }
 }
 
