@@ -1284,7 +1284,17 @@ pub fn calibrate_run(
             .insert("filter".into(), "tables/filter.tbl".into());
         files.push("filter.tbl".to_owned());
     }
-    magnetics_stage(&mut out, &tm, &tables_dir, created, &mut files)?;
+    // The magnetics table is optional: an unknown flown one is said, not fatal.
+    let flown_magnetics =
+        super::flown::flown_magnetics(run_dir, &metadata).map_err(|e| format!("{e:#}"));
+    magnetics_stage(
+        &mut out,
+        &tm,
+        flown_magnetics,
+        &tables_dir,
+        created,
+        &mut files,
+    )?;
     // The tables to fly, named (gro_reference::manifest): exactly those the report lists.
     gro_reference::manifest::write(&tables_dir, &files, "ground-tool calibrate")?;
     Ok(out)
@@ -1295,6 +1305,7 @@ pub fn calibrate_run(
 fn magnetics_stage(
     out: &mut CalibrationOutput,
     tm: &Telemetry,
+    flown: Result<Option<fsw_core::tables::MagneticsTable>, String>,
     tables_dir: &Path,
     created: f64,
     files: &mut Vec<String>,
@@ -1304,7 +1315,17 @@ fn magnetics_stage(
         return Ok(());
     };
     let fss = fss_sigma_after_arcsec(&out.report.alignment_validation);
-    let (table, decision) = magnetics_table(&out.report.tam, first.time, fss);
+    let (flown, unknown) = match flown {
+        Ok(t) => (t, None),
+        Err(why) => (None, Some(why)),
+    };
+    let (table, mut decision) = magnetics_table(&out.report.tam, first.time, fss, flown.as_ref());
+    if let Some(why) = unknown {
+        decision.reason = format!(
+            "{}; the flown magnetics table is unknown ({why}): built from the boot table",
+            decision.reason
+        );
+    }
     out.report.tam.table = Some(decision);
     if let Some(t) = table {
         write_table(

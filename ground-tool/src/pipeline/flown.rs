@@ -117,6 +117,18 @@ pub fn flown_tables(
     ))
 }
 
+/// The magnetics table (Table 6) flown: the run's last activated magnetics upload (`None`
+/// when there is none: the OBC flew its boot table, no field model).
+///
+/// # Errors
+/// As [`flown_tables`].
+pub fn flown_magnetics(
+    run_dir: &Path,
+    meta: &Metadata,
+) -> anyhow::Result<Option<fsw_core::tables::MagneticsTable>> {
+    flown(run_dir, meta, None, "magnetics")
+}
+
 /// The onboard star catalog flown: the catalog `--tables DIR/manifest.json` lists, else the
 /// run's last activated catalog upload (`None` when neither exists).
 ///

@@ -17,8 +17,9 @@
 //!   the nominal entries (and the reason says so);
 //! * `field_sigma_milligauss`, per TAM: the worst held-out residual RMS of its fit (what a
 //!   corrected field differs from the model by, noise and calibration error together), with the
-//!   part of `T` the table cannot hold (non-orthogonality) added; a TAM left nominal keeps the
-//!   boot σ. No
+//!   part of `T` the table cannot hold (non-orthogonality) added; a TAM without a fit keeps the
+//!   σ it flew with (the boot one when nothing was uplinked). The table starts from the one
+//!   flying, so what the ground does not recompute is not reset. No
 //!   field-model error is added: the simulator's field is the model; a real mission adds the
 //!   IGRF's omission, ~1 mG at 450 km (`docs/magnetics.md` §4);
 //! * `fss_sun_sigma_rad`: when the new alignments fly, the larger FSS residual RMS of FFCAL
@@ -121,6 +122,7 @@ pub fn magnetics_table(
     tam: &TamReport,
     start: fsw_core::raw::TimeTag,
     fss_residual_after_arcsec: Option<f64>,
+    flown: Option<&MagneticsTable>,
 ) -> (Option<MagneticsTable>, MagneticsTableDecision) {
     let mut d = MagneticsTableDecision::default();
     let Some(fit1) = tam.tam1.as_ref() else {
@@ -137,25 +139,35 @@ pub fn magnetics_table(
             return (None, d);
         }
     };
-    let mut base = MagneticsTable::boot();
-    base.tam_milligauss_per_count = [[TAM_MILLIGAUSS_PER_COUNT; 3]; 2];
+    // From the table flying (what the ground does not recompute stays as flown), else the
+    // boot table with the TAMs' nominal count size.
+    let mut base = flown.copied().unwrap_or_else(|| {
+        let mut b = MagneticsTable::boot();
+        b.tam_milligauss_per_count = [[TAM_MILLIGAUSS_PER_COUNT; 3]; 2];
+        b
+    });
+    let kept = if flown.is_some() {
+        "as flown"
+    } else {
+        "nominal with the boot σ"
+    };
     apply_fit(&mut base, 0, fit1);
     let sigma1 = sigma1.hypot(dropped_part_milligauss(fit1));
     let mut notes = Vec::new();
-    // A TAM left nominal keeps the boot σ (its bias and alignment are unknown to the OBC).
-    let boot_sigma = MagneticsTable::boot().field_sigma_milligauss[1];
+    // A TAM without a passing fit keeps its flown entries and σ (the boot ones when nothing
+    // was uplinked: its bias and alignment are then unknown to the OBC).
     let sigma2 = match tam.tam2.as_ref().map(|f| (f, heldout_check("TAM2", f))) {
         Some((fit2, Ok(s2))) => {
             apply_fit(&mut base, 1, fit2);
             s2.hypot(dropped_part_milligauss(fit2))
         }
         Some((_, Err(why))) => {
-            notes.push(format!("TAM2 kept nominal with the boot σ ({why})"));
-            boot_sigma
+            notes.push(format!("TAM2 kept {kept} ({why})"));
+            base.field_sigma_milligauss[1]
         }
         None => {
-            notes.push("TAM2 kept nominal with the boot σ (no fit)".to_owned());
-            boot_sigma
+            notes.push(format!("TAM2 kept {kept} (no fit)"));
+            base.field_sigma_milligauss[1]
         }
     };
     base.field_sigma_milligauss = [sigma1, sigma2];
@@ -252,7 +264,12 @@ mod tests {
     /// table, its bias and count size undo `(I + D)`, its field σ is the held-out RMS.
     #[test]
     fn a_fit_that_carries_over_is_written() {
-        let (t, d) = magnetics_table(&report(fit([1.1, 1.3], 0.25, 3.8)), start(), Some(20.0));
+        let (t, d) = magnetics_table(
+            &report(fit([1.1, 1.3], 0.25, 3.8)),
+            start(),
+            Some(20.0),
+            None,
+        );
         let t = t.unwrap();
         assert!(d.written, "{}", d.reason);
         assert_eq!(t.validate(), Ok(()));
@@ -263,16 +280,31 @@ mod tests {
         assert_eq!(t.field_sigma_milligauss[1], 2.5);
         assert!((t.fss_sun_sigma_rad / RAD_PER_ARCSEC - 20.0).abs() < 1e-9);
         assert!(d.reason.contains("TAM2 kept nominal"));
+        // With a flown table whose TAM2 was calibrated before, a TAM2 without a fit keeps
+        // the flown calibration and σ, not the boot ones.
+        let mut flown = MagneticsTable::boot();
+        flown.tam_bias_milligauss[1] = [0.6, -0.4, 0.3];
+        flown.field_sigma_milligauss[1] = 0.31;
+        let (t, d) = magnetics_table(
+            &report(fit([1.1, 1.3], 0.25, 3.8)),
+            start(),
+            Some(20.0),
+            Some(&flown),
+        );
+        let t = t.unwrap();
+        assert_eq!(t.tam_bias_milligauss[1], [0.6, -0.4, 0.3]);
+        assert_eq!(t.field_sigma_milligauss[1], 0.31);
+        assert!(d.reason.contains("TAM2 kept as flown"), "{}", d.reason);
     }
 
     /// A half-fit that does not predict the other half, or no gain over the uncalibrated TAM,
     /// or no TAM1 fit: nothing written, and the reason names it.
     #[test]
     fn refusals_name_their_reason() {
-        let (t, d) = magnetics_table(&report(fit([1.2, 3.6], 0.25, 3.8)), start(), None);
+        let (t, d) = magnetics_table(&report(fit([1.2, 3.6], 0.25, 3.8)), start(), None, None);
         assert!(t.is_none() && !d.written);
         assert!(d.reason.contains("χ²/dof 3.60"), "{}", d.reason);
-        let (t, d) = magnetics_table(&report(fit([1.0, 1.0], 0.25, 0.28)), start(), None);
+        let (t, d) = magnetics_table(&report(fit([1.0, 1.0], 0.25, 0.28)), start(), None, None);
         assert!(
             t.is_none() && d.reason.contains("not 20 % below"),
             "{}",
@@ -283,7 +315,7 @@ mod tests {
             reason: Some("no magnetics frames".into()),
             ..TamReport::default()
         };
-        let (t, d) = magnetics_table(&none, start(), None);
+        let (t, d) = magnetics_table(&none, start(), None, None);
         assert!(
             t.is_none() && d.reason.contains("no magnetics frames"),
             "{}",
