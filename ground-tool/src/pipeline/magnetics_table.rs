@@ -14,7 +14,8 @@
 //!   DGRF 1990/1995, valid five years on board);
 //! * per calibrated TAM, from `y = T x + b`, `T = (I + D) M_ASᵀ`: `M_AS = Rot(θ)` (θ the fitted
 //!   misalignment), count size `s₀ / (1 + Dᵢ)`, bias `bᵢ / (1 + Dᵢ)`; a TAM without a fit keeps
-//!   the nominal entries (and the reason says so);
+//!   its entries of the table flying (nominal ones when none was uplinked), and the reason
+//!   says so;
 //! * `field_sigma_milligauss`, per TAM: the worst held-out residual RMS of its fit (what a
 //!   corrected field differs from the model by, noise and calibration error together), with the
 //!   part of `T` the table cannot hold (non-orthogonality) added; a TAM without a fit keeps the
