@@ -512,6 +512,9 @@ fn run_calibrate(
     let meta = ground_tool::pipeline::flown::metadata_or_default(run_dir);
     let (flown_alignment, flown_iru, flown_filter) =
         ground_tool::pipeline::flown::flown_tables(run_dir, &meta, tables)?;
+    // Optional: an unknown flown magnetics table is said in the report, not fatal.
+    let flown_magnetics =
+        ground_tool::pipeline::flown::flown_magnetics(run_dir, &meta).map_err(|e| format!("{e:#}"));
     let dir = args.begin_output("ground-tool calibrate")?;
     let out = dir.path();
     ground_tool::run_check::check_run_dir(run_dir, out)?;
@@ -519,6 +522,7 @@ fn run_calibrate(
         flown_alignment,
         flown_iru,
         flown_filter,
+        flown_magnetics,
         weighting: if shuster1982 {
             Weighting::Shuster1982
         } else {

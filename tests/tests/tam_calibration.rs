@@ -118,7 +118,15 @@ fn e2e_tam_bias_recovered_within_its_sigma() {
     std::fs::create_dir_all(&old).unwrap();
     std::fs::write(old.join("telemetry.bin"), &v1).unwrap();
     std::fs::copy(fly.join("metadata.json"), old.join("metadata.json")).unwrap();
-    let c = calibrate_run(&old, &out.join("cal-v1"), &CalibrateOptions::default()).unwrap();
+    // As `ground-tool calibrate` does: the flown magnetics table from the run's uploads (here
+    // listed without their files).
+    let meta = ground_tool::pipeline::flown::metadata_or_default(&old);
+    let options = CalibrateOptions {
+        flown_magnetics: ground_tool::pipeline::flown::flown_magnetics(&old, &meta)
+            .map_err(|e| format!("{e:#}")),
+        ..CalibrateOptions::default()
+    };
+    let c = calibrate_run(&old, &out.join("cal-v1"), &options).unwrap();
     assert_eq!(c.report.tam.status, "not_determined");
     assert!(c.report.tam.bias_milligauss.is_none());
     let reason = c.report.tam.reason.clone().unwrap();

@@ -75,6 +75,10 @@ pub struct CalibrateOptions {
     pub flown_iru: Option<IruTable>,
     /// Filter table flown; `None` = boot.
     pub flown_filter: Option<FilterTable>,
+    /// Magnetics table flown (`Ok(None)` = boot, no field model); `Err` = the run lists one
+    /// whose file is missing, said in `report.json` `tam.table` (the table is optional: a new
+    /// one is then built from the boot table).
+    pub flown_magnetics: Result<Option<fsw_core::tables::MagneticsTable>, String>,
     /// FFCAL weighting.
     pub weighting: Weighting,
     /// Identification options (aberration on by default).
@@ -105,6 +109,7 @@ impl Default for CalibrateOptions {
             flown_alignment: None,
             flown_iru: None,
             flown_filter: None,
+            flown_magnetics: Ok(None),
             weighting: Weighting::Optimal1990,
             identify: IdentifyOptions::default(),
             staged_ffcal: true,
@@ -1284,13 +1289,10 @@ pub fn calibrate_run(
             .insert("filter".into(), "tables/filter.tbl".into());
         files.push("filter.tbl".to_owned());
     }
-    // The magnetics table is optional: an unknown flown one is said, not fatal.
-    let flown_magnetics =
-        super::flown::flown_magnetics(run_dir, &metadata).map_err(|e| format!("{e:#}"));
     magnetics_stage(
         &mut out,
         &tm,
-        flown_magnetics,
+        options.flown_magnetics.clone(),
         &tables_dir,
         created,
         &mut files,
