@@ -175,7 +175,12 @@ pub fn magnetics_table(
     if let Some(fss) = fss_residual_after_arcsec.filter(|x| x.is_finite() && *x > 0.0) {
         base.fss_sun_sigma_rad = fss * RAD_PER_ARCSEC;
     } else {
-        notes.push("FSS σ kept at the boot value (the prelaunch alignments fly)".to_owned());
+        notes.push(if flown.is_some() {
+            "FSS σ kept as flown (no new alignments passed their held-out validation)".to_owned()
+        } else {
+            "FSS σ kept at the boot value (no new alignments passed their held-out validation)"
+                .to_owned()
+        });
     }
     let model = match gro_reference::field::FieldModel::dgrf_1990_1995() {
         Ok(m) => m,
