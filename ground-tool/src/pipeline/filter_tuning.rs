@@ -151,15 +151,9 @@ fn residual_element_sigmas(
 
 /// The largest residual element σ of a triad's G after the calibration (rule in the module
 /// doc), and where it is: `(k, row, column)`.
-fn residual_element_sigma(
-    delta_m: &[[f64; 3]; 3],
-    sigma: &[[f64; 3]; 3],
-    uplinked: &[[f64; 3]; 3],
-    scale: f64,
-) -> (f64, usize, usize) {
-    let all = residual_element_sigmas(delta_m, sigma, uplinked, scale);
+fn largest_element(sigmas: &[[f64; 3]; 3]) -> (f64, usize, usize) {
     let mut best = (0.0, 0, 0);
-    for (i, row) in all.iter().enumerate() {
+    for (i, row) in sigmas.iter().enumerate() {
         for (j, left) in row.iter().enumerate() {
             if *left > best.0 {
                 best = (*left, i, j);
@@ -200,8 +194,16 @@ pub fn slew_uncertainty(
         return d;
     };
     let scale = v.mean_square_normalised.max(1.0).sqrt();
-    let (k_primary, i, j) =
-        residual_element_sigma(&r.delta_m, &r.delta_m_sigma, &r.delta_m_uplinked, scale);
+    let primary = residual_element_sigmas(&r.delta_m, &r.delta_m_sigma, &r.delta_m_uplinked, scale);
+    let backup = r.backup.as_ref().map(|b| {
+        let bs = b
+            .validation
+            .as_ref()
+            .map_or(1.0, |bv| bv.mean_square_normalised.max(1.0).sqrt());
+        let sigmas = residual_element_sigmas(&b.delta_m, &b.delta_m_sigma, &b.delta_m_uplinked, bs);
+        (b, bs, sigmas)
+    });
+    let (k_primary, i, j) = largest_element(&primary);
     let mut k = k_primary;
     let mut origin = format!(
         "primary triad's δM[{i}][{j}]: σ {:.0} ppm × {scale:.2} (held-out √m.s.){}",
@@ -215,13 +217,9 @@ pub fn slew_uncertainty(
             String::new()
         }
     );
-    if let Some(b) = r.backup.as_ref() {
-        let bs = b
-            .validation
-            .as_ref()
-            .map_or(1.0, |bv| bv.mean_square_normalised.max(1.0).sqrt());
-        let (kb, bi, bj) =
-            residual_element_sigma(&b.delta_m, &b.delta_m_sigma, &b.delta_m_uplinked, bs);
+    let mut per_element = primary;
+    if let Some((b, bs, sigmas)) = backup.as_ref() {
+        let (kb, bi, bj) = largest_element(sigmas);
         if kb > k {
             k = kb;
             origin = format!(
@@ -229,25 +227,16 @@ pub fn slew_uncertainty(
                 b.delta_m_sigma[bi][bj] * 1e6
             );
         }
-    }
-    let k = k.min(MAX_GYRO_SCALE_UNCERTAINTY);
-    d.derived = Some(k);
-    let mut per_element =
-        residual_element_sigmas(&r.delta_m, &r.delta_m_sigma, &r.delta_m_uplinked, scale);
-    if let Some(b) = r.backup.as_ref() {
-        let bs = b
-            .validation
-            .as_ref()
-            .map_or(1.0, |bv| bv.mean_square_normalised.max(1.0).sqrt());
-        let backup = residual_element_sigmas(&b.delta_m, &b.delta_m_sigma, &b.delta_m_uplinked, bs);
         for (p, q) in per_element
             .iter_mut()
             .flatten()
-            .zip(backup.iter().flatten())
+            .zip(sigmas.iter().flatten())
         {
             *p = p.max(*q);
         }
     }
+    let k = k.min(MAX_GYRO_SCALE_UNCERTAINTY);
+    d.derived = Some(k);
     for e in per_element.iter_mut().flatten() {
         *e = e.min(MAX_GYRO_SCALE_UNCERTAINTY);
     }
@@ -684,12 +673,12 @@ mod tests {
         let dm = [[4e-4, 0.0, 1.7e-4], [0.0; 3], [0.0; 3]];
         let sigma = [[3e-5, 3e-5, 6e-5], [3e-5; 3], [3e-5; 3]];
         let up = [[4e-4, 0.0, 0.0], [0.0; 3], [0.0; 3]];
-        let (k, i, j) = residual_element_sigma(&dm, &sigma, &up, 1.0);
+        let (k, i, j) = largest_element(&residual_element_sigmas(&dm, &sigma, &up, 1.0));
         assert_eq!((i, j), (0, 2));
         assert!((k - 1.7e-4f64.hypot(6e-5)).abs() < 1e-12);
         // Uplinked: only the estimation error is left; the held-out scale multiplies σ.
         let up_all = dm;
-        let (k, _, _) = residual_element_sigma(&dm, &sigma, &up_all, 1.5);
+        let (k, _, _) = largest_element(&residual_element_sigmas(&dm, &sigma, &up_all, 1.5));
         assert!((k - 1.5 * 6e-5).abs() < 1e-12);
     }
 
