@@ -149,54 +149,11 @@ fn e2e_calibration_loop_gro_early_mission() {
     let true_dm =
         gro_tests::loop_report::matrix_from_json(&truth["iru"]["primary"]["delta_m"]).unwrap();
     let iru = calibration.report.iru.as_ref().expect("IRU report");
-    for i in 0..3 {
-        for j in 0..3 {
-            let left = true_dm[(i, j)] - iru.delta_m_uplinked[i][j];
-            assert!(
-                left.abs() <= 3.0 * k,
-                "G residual [{i}][{j}] {:.0} ppm against k {:.0} ppm",
-                left * 1e6,
-                k * 1e6
-            );
-        }
-    }
+    residual_within_3_sigma(&true_dm, &iru.delta_m_uplinked, "k", |_, _| k);
     // Per element (field 23): every element of the true residual within 3σ of its own σ.
     let per = slew.derived_per_element.expect("per-element slew σ");
-    for i in 0..3 {
-        for j in 0..3 {
-            let left = true_dm[(i, j)] - iru.delta_m_uplinked[i][j];
-            assert!(
-                left.abs() <= 3.0 * per[i][j],
-                "G residual [{i}][{j}] {:.0} ppm against its σ {:.0} ppm",
-                left * 1e6,
-                per[i][j] * 1e6
-            );
-        }
-    }
-    // Issue 20: the ground's TAM calibration becomes the magnetics table, and the OBC's coarse
-    // attitude with it is better on every axis and inside the 2° (3σ) requirement.
-    let mag = calibration
-        .report
-        .tam
-        .table
-        .as_ref()
-        .expect("magnetics decision");
-    assert!(mag.written, "{}", mag.reason);
-    assert!(cal.join("tables").join("magnetics.tbl").exists());
-    let (cb, ca) = (
-        r.coarse_attitude_error_3sigma_deg
-            .before
-            .expect("coarse before"),
-        r.coarse_attitude_error_3sigma_deg
-            .after
-            .expect("coarse after"),
-    );
-    for axis in 0..3 {
-        assert!(
-            ca[axis] < cb[axis] && ca[axis] <= 2.0,
-            "coarse {cb:?} → {ca:?}"
-        );
-    }
+    residual_within_3_sigma(&true_dm, &iru.delta_m_uplinked, "its σ", |i, j| per[i][j]);
+    coarse_attitude_improves(&calibration, &cal, &r);
     // The gyro noise of the holds agrees with the boot table (the simulator's own noise):
     // σ_v and σ_u are kept.
     assert!(calibration.report.filter_tuning[1..]
@@ -328,4 +285,56 @@ fn fly_prelaunch(dir: &std::path::Path) {
         },
     )
     .unwrap();
+}
+
+/// Every element of G's true residual error after the uplink (true δM minus the uplinked one)
+/// within 3 × `sigma(i, j)` of zero.
+fn residual_within_3_sigma(
+    true_dm: &nalgebra::Matrix3<f64>,
+    uplinked: &[[f64; 3]; 3],
+    what: &str,
+    sigma: impl Fn(usize, usize) -> f64,
+) {
+    for i in 0..3 {
+        for j in 0..3 {
+            let left = true_dm[(i, j)] - uplinked[i][j];
+            assert!(
+                left.abs() <= 3.0 * sigma(i, j),
+                "G residual [{i}][{j}] {:.0} ppm against {what} {:.0} ppm",
+                left * 1e6,
+                sigma(i, j) * 1e6
+            );
+        }
+    }
+}
+
+/// Issue 20: the ground's TAM calibration becomes the magnetics table, and the OBC's coarse
+/// attitude with it is better on every axis and inside the 2° (3σ) requirement.
+fn coarse_attitude_improves(
+    calibration: &ground_tool::pipeline::calibrate::CalibrationOutput,
+    cal: &std::path::Path,
+    r: &gro_tests::loop_report::LoopReport,
+) {
+    let mag = calibration
+        .report
+        .tam
+        .table
+        .as_ref()
+        .expect("magnetics decision");
+    assert!(mag.written, "{}", mag.reason);
+    assert!(cal.join("tables").join("magnetics.tbl").exists());
+    let (cb, ca) = (
+        r.coarse_attitude_error_3sigma_deg
+            .before
+            .expect("coarse before"),
+        r.coarse_attitude_error_3sigma_deg
+            .after
+            .expect("coarse after"),
+    );
+    for axis in 0..3 {
+        assert!(
+            ca[axis] < cb[axis] && ca[axis] <= 2.0,
+            "coarse {cb:?} → {ca:?}"
+        );
+    }
 }
