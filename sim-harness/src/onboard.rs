@@ -17,6 +17,12 @@
 //!   the catalogue (HIP) order, so the image is deterministic;
 //! * catalog epoch = scenario epoch in Julian years since J2000.0 TT.
 //!
+//! # The filter table's rate random walk for the flight's epoch
+//! [`filter_rrw_for_epoch_rad_per_s_sqrt_s`]: the boot table's derivation (docs/obc_filter.md
+//! §2) evaluated at the time since gyro release at which a flight starts, so that a scenario
+//! flown weeks after release uplinks the σ_u of the gyro model rather than the one sized for
+//! the transient at release (a test checks each shipped scenario's uplinked value against it).
+//!
 //! # True alignment table (`fly_true_alignments = true`)
 //! The alignment table whose four `M_AS` equal the truth's (without thermal drift), no
 //! corrections: what a perfect calibration would uplink.
@@ -36,6 +42,29 @@ use fsw_core::tables::{
     AlignmentTable, CatalogStar, MagneticsTable, OrbitTable, SensorCorrections, StarCatalogTable,
     MAX_CATALOG_STARS,
 };
+
+/// The DRIRU II rate random walk K, 0.0012″/s in 6 h (rad/s^1.5; docs/obc_filter.md §2).
+pub const DRIRU_RRW_RAD_PER_S_SQRT_S: f64 = 3.958e-11;
+/// The early bias transient's largest drift rate, at release: 0.108″/s over τ = 1.5 d
+/// (rad/s²; docs/obc_filter.md §2).
+pub const TRANSIENT_DRIFT_AT_RELEASE_RAD_PER_S2: f64 = 4.04e-12;
+/// The transient's time constant τ (s): 1.5 days.
+pub const TRANSIENT_TIME_CONSTANT_S: f64 = 129_600.0;
+/// The longest interval in which the filter cannot re-estimate the bias on an axis (s): one
+/// orbit, the roll about a single tracker's boresight (docs/obc_filter.md §2).
+pub const BIAS_UNOBSERVED_INTERVAL_S: f64 = 5_760.0;
+
+/// σ_u for a flight that starts `time_since_release_s` after gyro release (rad/s^1.5):
+/// `√(K² + ṙ(t₀)² T)` with `ṙ(t) = ṙ₀ e^{−t/τ}` the transient's drift rate, largest at the
+/// flight's start (docs/obc_filter.md §2). At release it is the boot table's 3.1e-10; 55 days
+/// later (normal-ops) the transient has decayed by e^{−37} and σ_u is the gyro's K.
+#[must_use]
+pub fn filter_rrw_for_epoch_rad_per_s_sqrt_s(time_since_release_s: f64) -> f64 {
+    let drift_rad_per_s2 = TRANSIENT_DRIFT_AT_RELEASE_RAD_PER_S2
+        * (-time_since_release_s.max(0.0) / TRANSIENT_TIME_CONSTANT_S).exp();
+    (DRIRU_RRW_RAD_PER_S_SQRT_S.powi(2) + drift_rad_per_s2.powi(2) * BIAS_UNOBSERVED_INTERVAL_S)
+        .sqrt()
+}
 
 /// Read the scenario's catalogue file (or the embedded one).
 ///
@@ -185,6 +214,45 @@ mod tests {
     use super::*;
     use fsw_core::raw::TimeTag;
     use fsw_core::tables::{TableId, TableSet};
+
+    /// The boot table's σ_u is the derivation at release, and every shipped scenario that
+    /// uplinks a σ_u uplinks the derivation at its own start (a scenario whose epoch moves
+    /// without its table fails here).
+    #[test]
+    fn rrw_uplinks_follow_the_epoch_derivation() {
+        let boot = fsw_core::tables::FilterTable::default_boot().rrw_rad_per_s_sqrt_s;
+        let at_release = filter_rrw_for_epoch_rad_per_s_sqrt_s(0.0);
+        assert!(
+            (boot / at_release - 1.0).abs() < 0.01,
+            "{boot} vs {at_release}"
+        );
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios");
+        let mut checked = 0;
+        for entry in std::fs::read_dir(&dir).unwrap() {
+            let path = entry.unwrap().path();
+            if path.extension().and_then(|e| e.to_str()) != Some("toml") {
+                continue;
+            }
+            let s = Scenario::load(&path).unwrap();
+            let Some(rrw) = s
+                .filter_table
+                .as_ref()
+                .and_then(|t| t.get("rrw_rad_per_s_sqrt_s"))
+                .and_then(toml::Value::as_float)
+            else {
+                continue;
+            };
+            let derived =
+                filter_rrw_for_epoch_rad_per_s_sqrt_s(s.iru.time_since_release_at_start_s);
+            assert!(
+                (rrw / derived - 1.0).abs() < 0.01,
+                "{}: uplinks σ_u {rrw}, the derivation at its epoch gives {derived}",
+                path.display()
+            );
+            checked += 1;
+        }
+        assert!(checked >= 1, "no shipped scenario uplinks a σ_u");
+    }
 
     /// The catalog holds the Hp 2.0–5.7 stars (3231, below the 4096 capacity), is accepted by
     /// the OBC's table services, and a known star sits where the catalogue puts it.
