@@ -834,6 +834,29 @@ fn ephemeris_uploads(
     if folder_has_magnetics {
         return Ok(uploads);
     }
+    if let Some(file) = scenario
+        .magnetics
+        .onboard_table_file
+        .as_deref()
+        .filter(|_| scenario.magnetics.enabled && scenario.magnetics.onboard_table)
+    {
+        let path = scenario.resolve_file(file);
+        let image = read_image(&path).map_err(InputError::from)?;
+        if onboard::image_table_id(&image) != Some(TableId::Magnetics) {
+            return Err(InputError::from(anyhow::anyhow!(
+                "[magnetics] onboard_table_file {}: not a magnetics table image",
+                path.display()
+            ))
+            .into());
+        }
+        uploads.push(Upload {
+            source: format!("magnetics: the ground's table {}", path.display()),
+            name: "magnetics.tbl".into(),
+            image,
+            at_s: scenario.magnetics.onboard_table_at_s,
+        });
+        return Ok(uploads);
+    }
     if let Some((table, at_s)) = onboard::magnetics_table(scenario, clock)? {
         uploads.push(Upload {
             source: format!(

@@ -433,6 +433,11 @@ pub struct MagneticsParams {
     /// The table's `field_sigma_milligauss` for both TAMs (1σ per axis of what is left in a corrected TAM
     /// field); `None`: the OBC's boot value (2.5 mG, an undetermined bias).
     pub onboard_field_sigma_milligauss: Option<f64>,
+    /// A magnetics table image the ground wrote (`ground-tool calibrate` `tables/
+    /// magnetics.tbl`), relative to the scenario's folder, uplinked at `onboard_table_at_s`
+    /// instead of the one built from the `onboard_*` fields above: a flight after the ground
+    /// calibrated its TAMs (`normal-ops`). `None`: the built table (prelaunch knowledge).
+    pub onboard_table_file: Option<String>,
 }
 
 impl Default for MagneticsParams {
@@ -443,6 +448,7 @@ impl Default for MagneticsParams {
             onboard_table_at_s: 2.0,
             onboard_tam_bias_milligauss: [[0.0; 3]; 2],
             onboard_field_sigma_milligauss: None,
+            onboard_table_file: None,
         }
     }
 }
