@@ -254,6 +254,47 @@ mod tests {
         assert!(checked >= 1, "no shipped scenario uplinks a σ_u");
     }
 
+    /// Every table image a shipped scenario flies (`[magnetics] onboard_table_file`) passes the
+    /// OBC's table services, and its TAM biases are the scenario's true ones within 0.5 mG
+    /// per axis: a table calibrated on another spacecraft than the one the scenario flies
+    /// (true TAM errors changed without a new calibration) fails here.
+    #[test]
+    fn shipped_table_images_load() {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios");
+        let mut checked = 0;
+        for entry in std::fs::read_dir(&dir).unwrap() {
+            let path = entry.unwrap().path();
+            if path.extension().and_then(|e| e.to_str()) != Some("toml") {
+                continue;
+            }
+            let s = Scenario::load(&path).unwrap();
+            let Some(file) = s.magnetics.onboard_table_file.as_deref() else {
+                continue;
+            };
+            let image = std::fs::read(s.resolve_file(file)).unwrap();
+            let mut set = TableSet::boot();
+            assert_eq!(set.load(&image), Ok(TableId::Magnetics), "{file}");
+            set.activate(TableId::Magnetics).unwrap();
+            let flown = set.magnetics().tam_bias_milligauss;
+            for (k, truth) in [s.tam1.bias_milligauss, s.tam2.bias_milligauss]
+                .iter()
+                .enumerate()
+            {
+                for axis in 0..3 {
+                    assert!(
+                        (flown[k][axis] - truth[axis]).abs() < 0.5,
+                        "{}: TAM{} bias {:?} mG flown against the true {truth:?}",
+                        path.display(),
+                        k + 1,
+                        flown[k]
+                    );
+                }
+            }
+            checked += 1;
+        }
+        assert!(checked >= 1, "no shipped scenario flies a table image");
+    }
+
     /// The catalog holds the Hp 2.0–5.7 stars (3231, below the 4096 capacity), is accepted by
     /// the OBC's table services, and a known star sits where the catalogue puts it.
     #[test]
