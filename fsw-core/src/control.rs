@@ -226,56 +226,19 @@ impl Controller {
         if !inputs_ok {
             return Err(ControlError::InvalidEstimate);
         }
-        let [jx, jy, jz] = table.inertia_kg_m2;
-        let wn = table.control_bandwidth_rad_per_s;
-        let zeta = table.control_damping;
-        let tau_max = table.torque_limit_nm;
-        let w_max = table.slew_rate_limit_rad_per_s;
-        let j_max = jx.max(jy).max(jz);
-        let params_ok = [
-            jx,
-            jy,
-            jz,
-            wn,
-            zeta,
-            tau_max,
-            w_max,
-            table.slew_complete_rad,
-        ]
-        .iter()
-        .all(|x| x.is_finite() && *x > 0.0);
-        if !params_ok {
-            return Err(ControlError::InvalidTable);
-        }
-        let j = Matrix3::from_diagonal(&Vector3::new(jx, jy, jz));
-        let w = *rate_est_rad_per_s;
-
         let err = self
             .target
             .compose(&q_est.normalized().conjugate())
             .rotation_vector_rad();
         let angle = err.norm();
-        let k_theta = wn / (2.0 * zeta);
-        let k_omega = 2.0 * zeta * wn;
-        let alpha_d = DECELERATION_MARGIN * tau_max / j_max;
-        let rate_mag = w_max
-            .min(libm::sqrt(2.0 * alpha_d * angle))
-            .min(k_theta * angle);
-        let rate_cmd = if angle > 0.0 {
-            err * (rate_mag / angle)
-        } else {
-            Vector3::zeros()
-        };
-
-        let mut torque = j * ((rate_cmd - w) * k_omega) + w.cross(&(j * w));
-        let peak = torque.amax();
-        let torque_limited = peak > tau_max;
-        if torque_limited {
-            torque *= tau_max / peak;
-        }
-        if !torque.iter().all(|x| x.is_finite()) {
-            return Err(ControlError::InvalidEstimate);
-        }
+        let law = eigen_axis_law(&err, rate_est_rad_per_s, table)?;
+        let (torque, rate_cmd, torque_limited) = (
+            law.torque_acs_nm,
+            law.rate_cmd_rad_per_s,
+            law.torque_limited,
+        );
+        let w = *rate_est_rad_per_s;
+        let wn = table.control_bandwidth_rad_per_s;
 
         let mut slew_complete = false;
         if self.mode == ControlMode::Slew
@@ -296,6 +259,91 @@ impl Controller {
             fault: None,
         })
     }
+}
+
+/// The torque of one cycle of the eigen-axis law (module docs): rate command along `err_rad`
+/// (a rotation vector that, turned at a rate along it, reaches the target), torque-limited
+/// with its direction kept.
+/// Project choice (not in the paper): shared by the inertial modes and the Sun acquisition
+/// (`crate::sun_acquisition`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LawOutput {
+    /// Wheel torque, ACS, N·m, each axis within ±`torque_limit_nm`.
+    /// Limit from docs/tables.md (filter table).
+    pub torque_acs_nm: Vector3<f64>,
+    /// Commanded body rate, ACS, rad/s.
+    /// Project choice (not in the paper): see the module docs.
+    pub rate_cmd_rad_per_s: Vector3<f64>,
+    /// The torque was scaled down to the limit.
+    /// Project choice (not in the paper): direction-preserving limit.
+    pub torque_limited: bool,
+}
+
+/// One cycle of the saturated quaternion-feedback law of the module docs for the error
+/// `err_rad` and the bias-corrected rate `rate_est_rad_per_s`.
+/// Project choice (not in the paper): Wie, Weiss & Arapostathis (JGCD 12(3), 1989).
+///
+/// # Errors
+/// [`ControlError::InvalidTable`] for unusable inertia, gains or limits;
+/// [`ControlError::InvalidEstimate`] for a non-finite error, rate or torque.
+pub fn eigen_axis_law(
+    err_rad: &Vector3<f64>,
+    rate_est_rad_per_s: &Vector3<f64>,
+    table: &FilterTable,
+) -> Result<LawOutput, ControlError> {
+    if !(err_rad.iter().all(|x| x.is_finite()) && rate_est_rad_per_s.iter().all(|x| x.is_finite()))
+    {
+        return Err(ControlError::InvalidEstimate);
+    }
+    let [jx, jy, jz] = table.inertia_kg_m2;
+    let wn = table.control_bandwidth_rad_per_s;
+    let zeta = table.control_damping;
+    let tau_max = table.torque_limit_nm;
+    let w_max = table.slew_rate_limit_rad_per_s;
+    let j_max = jx.max(jy).max(jz);
+    let params_ok = [
+        jx,
+        jy,
+        jz,
+        wn,
+        zeta,
+        tau_max,
+        w_max,
+        table.slew_complete_rad,
+    ]
+    .iter()
+    .all(|x| x.is_finite() && *x > 0.0);
+    if !params_ok {
+        return Err(ControlError::InvalidTable);
+    }
+    let j = Matrix3::from_diagonal(&Vector3::new(jx, jy, jz));
+    let w = *rate_est_rad_per_s;
+    let angle = err_rad.norm();
+    let k_theta = wn / (2.0 * zeta);
+    let k_omega = 2.0 * zeta * wn;
+    let alpha_d = DECELERATION_MARGIN * tau_max / j_max;
+    let rate_mag = w_max
+        .min(libm::sqrt(2.0 * alpha_d * angle))
+        .min(k_theta * angle);
+    let rate_cmd = if angle > 0.0 {
+        err_rad * (rate_mag / angle)
+    } else {
+        Vector3::zeros()
+    };
+    let mut torque = j * ((rate_cmd - w) * k_omega) + w.cross(&(j * w));
+    let peak = torque.amax();
+    let torque_limited = peak > tau_max;
+    if torque_limited {
+        torque *= tau_max / peak;
+    }
+    if !torque.iter().all(|x| x.is_finite()) {
+        return Err(ControlError::InvalidEstimate);
+    }
+    Ok(LawOutput {
+        torque_acs_nm: torque,
+        rate_cmd_rad_per_s: rate_cmd,
+        torque_limited,
+    })
 }
 
 #[cfg(test)]

@@ -77,6 +77,16 @@ pub enum EventId {
     /// A slew completed (error below the table threshold). p1 = slew number.
     /// docs/icd.md §3.3.
     SlewCompleted = 0x0602,
+    /// The Sun is on the commanded axis and the rates are down in Sun acquisition.
+    /// p1 = the Sun's angle from the axis, centidegrees.
+    /// docs/icd.md §3.3.
+    SunAcquired = 0x0603,
+    /// In Sun acquisition no Sun sensor sees the Sun (eclipse, or none lit): rates damped only.
+    /// docs/icd.md §3.3.
+    SunNotSeen = 0x0604,
+    /// Sun acquisition commanded.
+    /// docs/icd.md §3.3.
+    SunAcquisitionStarted = 0x0605,
     /// A command was refused. p1 = command code, p2 = reason.
     /// docs/icd.md §3.3.
     CommandRejected = 0x0701,
@@ -108,7 +118,7 @@ pub enum EventId {
 
 impl EventId {
     /// Every event id (for the uniqueness test and the ICD table).
-    pub const ALL: [EventId; 25] = [
+    pub const ALL: [EventId; 28] = [
         Self::TableLoaded,
         Self::TableRejected,
         Self::TableActivated,
@@ -128,6 +138,9 @@ impl EventId {
         Self::TimeTagAnomaly,
         Self::SlewStarted,
         Self::SlewCompleted,
+        Self::SunAcquired,
+        Self::SunNotSeen,
+        Self::SunAcquisitionStarted,
         Self::CommandRejected,
         Self::OrbitalCorrectionUnavailable,
         Self::OrbitalCorrectionApplied,

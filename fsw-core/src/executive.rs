@@ -9,7 +9,7 @@
 //! 2. **Commands** in the order given (at most [`MAX_COMMANDS_PER_CYCLE`]): table
 //!    load/activate/abort (activation therefore always happens at a cycle boundary, before
 //!    any table is used in the cycle; an activated orbit table restarts the onboard orbit),
-//!    IRU configuration, filter init/reset, slew/hold.
+//!    IRU configuration, filter init/reset, slew/hold, Sun acquisition.
 //! 3. **Orbit** (only once an orbit table was activated): the onboard orbit propagated to the
 //!    frame time ([`crate::orbit`], at most 9 RK4 steps). With the filter table's
 //!    `orbital_aberration_correction` on, a valid orbit gives this cycle's star and Sun
@@ -35,7 +35,9 @@
 //!    onboard field model at the onboard orbit (magnetics table, Table 6), after a magnitude
 //!    check and a χ² gate; events 0x0901–0x0903.
 //! 8. **Control**: inertial hold or rate-limited eigen-axis slew → wheel torque; IRU rate
-//!    mode request (high for slews).
+//!    mode request (high for slews). In Sun acquisition ([`crate::sun_acquisition`]) the
+//!    same law turns a commanded body axis to the Sun of the cycle's best Sun sensor (FSS1,
+//!    FSS2, the CSS eyes) with the gyro rate alone, no attitude needed; events 0x0603–0x0605.
 //! 9. **Housekeeping** (the onboard orbit is not in it: the 230-octet record of
 //!    `docs/icd.md` §3.2 has no room without changing its length for outside decoders).
 //!
@@ -44,7 +46,7 @@
 //! nine RK4 steps of the orbit, one coarse fix (a degree-10 field synthesis and a TRIAD).
 
 use crate::attitude::{rot, Quat};
-use crate::coarse::{CoarseAttitude, CoarseUnavailable};
+use crate::coarse::{sun_candidates_acs, CoarseAttitude, CoarseUnavailable};
 use crate::control::Controller;
 use crate::events::{raise, Counters, Event, EventId, MAX_EVENTS_PER_CYCLE};
 use crate::fhst;
@@ -56,6 +58,7 @@ use crate::raw::{
     FhstSample, RawSensorFrame, TimeTag, FHST_FLAG_NEW_STAR, FHST_FLAG_TRACKING, FHST_FLAG_VALID,
 };
 use crate::star_id::{self, StarIdError, StarMatch};
+use crate::sun_acquisition::SunAcquisition;
 use crate::sun_ephemeris;
 use crate::tables::types::{matrix_from_rows, Mat3Rows, ORBITAL_ABERRATION_RMS_PER_AXIS_ARCSEC};
 use crate::tables::{TableId, TableSet};
@@ -129,6 +132,10 @@ pub enum ControlMode {
     /// Slew to a target (2).
     /// Paper: maneuvers (high-rate IRU); docs/icd.md §3.2.
     Slew = 2,
+    /// Sun acquisition: a body axis turned to the Sun from the Sun sensors and the gyros
+    /// alone, then held on it (3).
+    /// Project choice (not in the paper): [`crate::sun_acquisition`]; docs/icd.md §3.2.
+    SunAcquisition = 3,
 }
 
 /// A ground command for this cycle.
@@ -159,6 +166,9 @@ pub enum Command<'a> {
     /// Reset the filter: keep the estimate, reopen the covariance to its initial values.
     /// docs/icd.md §3.3 (event 0x0302).
     FilterReset,
+    /// Turn this body axis (ACS, unit) to the Sun and hold it there, with no attitude needed.
+    /// Project choice (not in the paper): [`crate::sun_acquisition`]; docs/icd.md §3.3.
+    SunAcquire([f64; 3]),
 }
 
 impl Command<'_> {
@@ -175,6 +185,7 @@ impl Command<'_> {
             Self::TableAbort(_) => 6,
             Self::FilterInitialize(_) => 7,
             Self::FilterReset => 8,
+            Self::SunAcquire(_) => 9,
         }
     }
 }
@@ -244,6 +255,8 @@ pub struct FlightCore {
     filter_mode: FilterMode,
     controller: Controller,
     control_mode: ControlMode,
+    /// The Sun acquisition while `control_mode` is `SunAcquisition`.
+    sun_acquisition: Option<SunAcquisition>,
     last_time: Option<TimeTag>,
     trackers: [TrackerState; 2],
     counters: Counters,
@@ -313,6 +326,7 @@ impl FlightCore {
             filter: Mekf::new(),
             filter_mode: FilterMode::Uninitialized,
             controller: Controller::new(),
+            sun_acquisition: None,
             control_mode: ControlMode::Idle,
             last_time: None,
             trackers: [TrackerState::default(); 2],
@@ -458,7 +472,7 @@ impl FlightCore {
         self.coarse_attitude(frame, &delta_theta, dt_s, &mut events);
 
         // 8. Control.
-        self.control(&mut events);
+        self.control(frame, &mut events);
 
         // 9. Housekeeping.
         let housekeeping = self.housekeeping(frame.time, residuals);
@@ -687,6 +701,7 @@ impl FlightCore {
                     && self.controller.slew_to(&target).is_ok()
                 {
                     self.control_mode = ControlMode::Slew;
+                    self.sun_acquisition = None;
                     self.slew_count = self.slew_count.saturating_add(1);
                     raise(events, counters, EventId::SlewStarted, self.slew_count, 0);
                 } else {
@@ -698,10 +713,19 @@ impl FlightCore {
                     && self.controller.hold(&self.filter.q_acs_from_eci).is_ok()
                 {
                     self.control_mode = ControlMode::Hold;
+                    self.sun_acquisition = None;
                 } else {
                     raise(events, counters, EventId::CommandRejected, cmd.code(), 3);
                 }
             }
+            Command::SunAcquire(axis) => match SunAcquisition::new(axis) {
+                Ok(acq) => {
+                    self.sun_acquisition = Some(acq);
+                    self.control_mode = ControlMode::SunAcquisition;
+                    raise(events, counters, EventId::SunAcquisitionStarted, 0, 0);
+                }
+                Err(_) => raise(events, counters, EventId::CommandRejected, cmd.code(), 4),
+            },
         }
     }
 
@@ -1355,9 +1379,17 @@ impl FlightCore {
         }
     }
 
-    fn control(&mut self, events: &mut heapless::Vec<Event, MAX_EVENTS_PER_CYCLE>) {
+    fn control(
+        &mut self,
+        frame: &RawSensorFrame,
+        events: &mut heapless::Vec<Event, MAX_EVENTS_PER_CYCLE>,
+    ) {
         if self.control_mode == ControlMode::Idle {
             self.wheel_torque_cmd_nm = Vector3::zeros();
+            return;
+        }
+        if self.control_mode == ControlMode::SunAcquisition {
+            self.sun_acquisition_cycle(frame, events);
             return;
         }
         let out = self.controller.update(
@@ -1383,6 +1415,54 @@ impl FlightCore {
                 &mut self.counters,
                 EventId::IruRateModeChanged,
                 u32::from(out.high_rate_iru),
+                0,
+            );
+        }
+    }
+
+    /// Phase 8 in Sun acquisition: the best Sun sensor of the cycle (FSS1, FSS2, the CSS eyes)
+    /// and the gyro rate drive the eigen-axis law ([`crate::sun_acquisition`]); events 0x0603
+    /// (acquired) and 0x0604 (no Sun seen); the IRU in high rate.
+    fn sun_acquisition_cycle(
+        &mut self,
+        frame: &RawSensorFrame,
+        events: &mut heapless::Vec<Event, MAX_EVENTS_PER_CYCLE>,
+    ) {
+        let Some(acq) = self.sun_acquisition.as_mut() else {
+            self.wheel_torque_cmd_nm = Vector3::zeros();
+            return;
+        };
+        let candidates =
+            sun_candidates_acs(frame, self.tables.alignment(), self.tables.magnetics());
+        let sun = candidates.iter().flatten().map(|(v, _, _)| *v).next();
+        match acq.update(
+            sun.as_ref(),
+            &self.last_rate_acs_rad_per_s,
+            self.tables.filter(),
+        ) {
+            Ok(out) => {
+                self.wheel_torque_cmd_nm = out.law.torque_acs_nm;
+                if out.acquired_now {
+                    let centideg = out
+                        .sun_angle_rad
+                        .map_or(0.0, |a| a / crate::units::RAD_PER_DEG * 100.0);
+                    #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
+                    let p1 = centideg.clamp(0.0, f64::from(u32::MAX)) as u32;
+                    raise(events, &mut self.counters, EventId::SunAcquired, p1, 0);
+                }
+                if out.lost_now {
+                    raise(events, &mut self.counters, EventId::SunNotSeen, 0, 0);
+                }
+            }
+            Err(_) => self.wheel_torque_cmd_nm = Vector3::zeros(),
+        }
+        if !self.iru_high_rate_cmd {
+            self.iru_high_rate_cmd = true;
+            raise(
+                events,
+                &mut self.counters,
+                EventId::IruRateModeChanged,
+                1,
                 0,
             );
         }

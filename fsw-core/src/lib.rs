@@ -42,6 +42,7 @@ pub mod mekf;
 pub mod orbit;
 pub mod raw;
 pub mod star_id;
+pub mod sun_acquisition;
 pub mod sun_ephemeris;
 pub mod tables;
 pub mod telemetry;

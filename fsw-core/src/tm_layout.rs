@@ -263,7 +263,7 @@ pub const HOUSEKEEPING_FIELDS: [Field; 52] = [
         105,
         U8,
         "",
-        "0 idle, 1 inertial hold, 2 slew",
+        "0 idle, 1 inertial hold, 2 slew, 3 Sun acquisition",
     ),
     f("iru_config", 106, U8, "", "0 primary, 1 backup"),
     f(

@@ -139,6 +139,7 @@ enum Action {
     Abort(TableId),
     FilterInit(Option<Quat>),
     FilterReset,
+    SunAcquire([f64; 3]),
 }
 
 /// A table image uplinked during the run.
@@ -370,6 +371,9 @@ impl Simulation {
                     Action::FilterInit(c.q_acs_from_eci.map(quat_from_array))
                 }
                 CommandKind::FilterReset => Action::FilterReset,
+                CommandKind::SunAcquire => Action::SunAcquire(c.sun_axis_acs.ok_or_else(|| {
+                    InputError::msg(format!("{here}: sun_acquire needs sun_axis_acs"))
+                })?),
                 CommandKind::TableLoad if c.filter_table.is_some() => {
                     let table = c
                         .filter_table_image_fields(&scenario)
@@ -752,6 +756,7 @@ impl Simulation {
                     Command::FilterInitialize(q)
                 }
                 Action::FilterReset => Command::FilterReset,
+                Action::SunAcquire(axis) => Command::SunAcquire(*axis),
             };
             if let Some(slot) = commands.get_mut(n) {
                 *slot = cmd;

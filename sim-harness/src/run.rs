@@ -448,7 +448,8 @@ impl Scorer {
             return;
         }
         self.all.add(&err);
-        if t >= SCORE_START_S && hk.control_mode != 2 {
+        // Scored outside slews (2) and Sun acquisition (3): the inertial attitude modes.
+        if t >= SCORE_START_S && !matches!(hk.control_mode, 2 | 3) {
             self.steady.add(&err);
             if hk.filter_mode == 2 {
                 self.fine += 1;

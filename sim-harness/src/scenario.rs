@@ -53,6 +53,7 @@
 //! | `table_activate`, `table_abort` | `table` = "alignment", "iru", "filter", "star_catalog" | `TableActivate(id)`, `TableAbort(id)` |
 //! | `filter_initialize` | optional `q_acs_from_eci` (default: truth rotated by `[initial_estimate]`) | `FilterInitialize(q)` |
 //! | `filter_reset` | — | `FilterReset` |
+//! | `sun_acquire` | `sun_axis_acs` = [x, y, z] (unit, ACS) | `SunAcquire(axis)`: the axis turned to the Sun from the Sun sensors and gyros alone, then held there |
 //!
 //! # Faults (`[[faults]]`)
 //! Injected by the harness into the sensor words, the clock or the uplink at given times
@@ -257,6 +258,9 @@ pub enum CommandKind {
     TableActivate,
     /// Clear the pending image of `table`.
     TableAbort,
+    /// Turn the body axis `sun_axis_acs` to the Sun from the Sun sensors and gyros alone and
+    /// hold it there (fsw-core `sun_acquisition`; no attitude estimate needed).
+    SunAcquire,
 }
 
 /// A table name of a timeline command (`table = "alignment"`, ...).
@@ -322,6 +326,10 @@ pub struct TimedCommand {
     /// `filter_table = { slew_rate_limit_rad_per_s = 2.7925e-3 }` for 0.16°/s slews).
     #[serde(default)]
     pub filter_table: Option<toml::Table>,
+    /// Body axis (ACS, unit) of `sun_acquire`: where the Sun is brought, e.g. an FSS
+    /// boresight.
+    #[serde(default)]
+    pub sun_axis_acs: Option<[f64; 3]>,
 }
 
 impl TimedCommand {
@@ -970,6 +978,15 @@ impl TimedCommand {
                     anyhow::anyhow!("{here}: this kind needs table = \"alignment\" | \"iru\" | \"filter\" | \"star_catalog\"")
                 })?;
                 table_id_from_name(name).with_context(|| format!("{here}.table"))?;
+            }
+            CommandKind::SunAcquire => {
+                let a = c.sun_axis_acs.ok_or_else(|| {
+                    anyhow::anyhow!("{here}: kind = \"sun_acquire\" needs sun_axis_acs = [x, y, z]")
+                })?;
+                let n = a.iter().map(|x| x * x).sum::<f64>().sqrt();
+                if !(n.is_finite() && (n - 1.0).abs() < 1e-3) {
+                    bail!("{here}.sun_axis_acs must be a unit vector, norm is {n}");
+                }
             }
             CommandKind::SelectIruConfig
                 if !matches!(c.config.as_deref(), Some("primary" | "backup")) =>

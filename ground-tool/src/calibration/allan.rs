@@ -1007,7 +1007,7 @@ fn hold_flags(tm: &Telemetry) -> (Vec<bool>, String) {
             let hk_slew = tm
                 .housekeeping
                 .get(k)
-                .is_some_and(|h| h.time <= r.time && h.control_mode == 2);
+                .is_some_and(|h| h.time <= r.time && matches!(h.control_mode, 2 | 3));
             !in_slew && !hk_slew
         })
         .collect();
