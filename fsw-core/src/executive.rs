@@ -20,7 +20,8 @@
 //!    (automatic or commanded) reopens the filter's bias covariance: the new channels have
 //!    their own biases.
 //! 5. **Propagation** of the MEKF with the exact rotation-vector update.
-//! 6. **FHST1, FHST2** (not during slews: gyro-only propagation, as on GRO, but the trackers'
+//! 6. **FHST1, FHST2** (not during slews or a Sun acquisition's turn: gyro-only propagation, as
+//!    on GRO, but the trackers'
 //!    new-star and lost flags are followed): counts → unit vector in ACS; star identification
 //!    on a new acquisition in a window from the attitude covariance; sequential focal-plane
 //!    update with χ² gating and the systematic floor (filter table
@@ -425,7 +426,8 @@ impl FlightCore {
         if dt_s > 0.0 {
             self.last_rate_acs_rad_per_s = delta_theta / dt_s - self.filter.bias_rad_per_s;
         }
-        if initialized && self.control_mode == ControlMode::Slew {
+        let maneuvering = self.maneuvering();
+        if initialized && maneuvering {
             self.inflate_for_gyro_calibration(&delta_theta);
         } else {
             self.slew_angle_rad = 0.0;
@@ -447,12 +449,12 @@ impl FlightCore {
         // 6–7. Measurements. During a slew the OBC propagates on the gyros alone, as GRO
         // did: the post-maneuver error then measures the gyro calibration, and star
         // identification after the slew is what the 0.5° requirement protects.
-        if initialized && self.control_mode == ControlMode::Slew {
+        if initialized && maneuvering {
             // No updates, but the trackers' track bookkeeping goes on: a star acquired
             // during the slew is a new star, not the one identified before it.
             self.follow_tracks(frame);
         }
-        if initialized && self.control_mode != ControlMode::Slew {
+        if initialized && !maneuvering {
             for tracker in 0..2usize {
                 let r = self.process_fhst(frame, tracker, &mut events);
                 if let Some(slot) = residuals.get_mut(tracker) {
@@ -1417,6 +1419,19 @@ impl FlightCore {
                 u32::from(out.high_rate_iru),
                 0,
             );
+        }
+    }
+
+    /// A maneuver: a slew, or a Sun acquisition still turning (not yet acquired). The filter
+    /// then propagates on the gyros alone and grows its covariance by the gyro calibration's
+    /// uncertainty over the angle turned, as in a slew.
+    fn maneuvering(&self) -> bool {
+        match self.control_mode {
+            ControlMode::Slew => true,
+            ControlMode::SunAcquisition => {
+                self.sun_acquisition.as_ref().is_some_and(|a| !a.acquired())
+            }
+            ControlMode::Idle | ControlMode::Hold => false,
         }
     }
 
