@@ -82,11 +82,21 @@ pub enum EventId {
     /// docs/icd.md §3.3.
     SunAcquired = 0x0603,
     /// In Sun acquisition no Sun sensor sees the Sun (eclipse, or none lit): rates damped only.
+    /// Once per occurrence; p1 = 1 at the mode's first cycle, 0 after the Sun was seen.
     /// docs/icd.md §3.3.
     SunNotSeen = 0x0604,
     /// Sun acquisition commanded.
     /// docs/icd.md §3.3.
     SunAcquisitionStarted = 0x0605,
+    /// The acquired Sun left twice the acquisition threshold: the turn resumes (the filter
+    /// propagates on the gyros alone again).
+    /// docs/icd.md §3.3.
+    SunAcquisitionLost = 0x0606,
+    /// The control step failed and commanded zero torque (raised when the failure starts or
+    /// changes). p1 = 1 invalid target, 2 invalid estimate, 3 unusable table values, 4 Sun
+    /// acquisition without its state; p2 = control mode.
+    /// docs/icd.md §3.3.
+    ControlFault = 0x0607,
     /// A command was refused. p1 = command code, p2 = reason.
     /// docs/icd.md §3.3.
     CommandRejected = 0x0701,
@@ -118,7 +128,7 @@ pub enum EventId {
 
 impl EventId {
     /// Every event id (for the uniqueness test and the ICD table).
-    pub const ALL: [EventId; 28] = [
+    pub const ALL: [EventId; 30] = [
         Self::TableLoaded,
         Self::TableRejected,
         Self::TableActivated,
@@ -141,6 +151,8 @@ impl EventId {
         Self::SunAcquired,
         Self::SunNotSeen,
         Self::SunAcquisitionStarted,
+        Self::SunAcquisitionLost,
+        Self::ControlFault,
         Self::CommandRejected,
         Self::OrbitalCorrectionUnavailable,
         Self::OrbitalCorrectionApplied,

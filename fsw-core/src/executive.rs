@@ -48,7 +48,7 @@
 
 use crate::attitude::{rot, Quat};
 use crate::coarse::{sun_candidates_acs, CoarseAttitude, CoarseUnavailable};
-use crate::control::Controller;
+use crate::control::{ControlError, Controller};
 use crate::events::{raise, Counters, Event, EventId, MAX_EVENTS_PER_CYCLE};
 use crate::fhst;
 use crate::fss;
@@ -137,6 +137,20 @@ pub enum ControlMode {
     /// alone, then held on it (3).
     /// Project choice (not in the paper): [`crate::sun_acquisition`]; docs/icd.md §3.2.
     SunAcquisition = 3,
+}
+
+/// Event 0x0607 p1 when control mode 3 has no Sun-acquisition state (cannot be entered).
+/// docs/icd.md §3.3.
+const CONTROL_FAULT_NO_SUN_ACQUISITION: u32 = 4;
+
+/// Event 0x0607 p1 for a control-law error: 1 invalid target, 2 invalid estimate (a
+/// non-finite attitude, rate or torque), 3 unusable table values. docs/icd.md §3.3.
+fn control_fault_code(e: ControlError) -> u32 {
+    match e {
+        ControlError::InvalidTarget => 1,
+        ControlError::InvalidEstimate => 2,
+        ControlError::InvalidTable => 3,
+    }
 }
 
 /// A ground command for this cycle.
@@ -258,6 +272,8 @@ pub struct FlightCore {
     control_mode: ControlMode,
     /// The Sun acquisition while `control_mode` is `SunAcquisition`.
     sun_acquisition: Option<SunAcquisition>,
+    /// The control step's failure, as event 0x0607's code (`None`: working).
+    control_fault: Option<u32>,
     last_time: Option<TimeTag>,
     trackers: [TrackerState; 2],
     counters: Counters,
@@ -328,6 +344,7 @@ impl FlightCore {
             filter_mode: FilterMode::Uninitialized,
             controller: Controller::new(),
             sun_acquisition: None,
+            control_fault: None,
             control_mode: ControlMode::Idle,
             last_time: None,
             trackers: [TrackerState::default(); 2],
@@ -1400,6 +1417,7 @@ impl FlightCore {
             self.tables.filter(),
         );
         self.wheel_torque_cmd_nm = out.torque_acs_nm;
+        self.note_control_fault(out.fault.map(control_fault_code), events);
         if self.control_mode == ControlMode::Slew && out.slew_complete {
             self.control_mode = ControlMode::Hold;
             raise(
@@ -1410,16 +1428,7 @@ impl FlightCore {
                 0,
             );
         }
-        if out.high_rate_iru != self.iru_high_rate_cmd {
-            self.iru_high_rate_cmd = out.high_rate_iru;
-            raise(
-                events,
-                &mut self.counters,
-                EventId::IruRateModeChanged,
-                u32::from(out.high_rate_iru),
-                0,
-            );
-        }
+        self.command_iru_rate(out.high_rate_iru, events);
     }
 
     /// A maneuver: a slew, or a Sun acquisition still turning (not yet acquired). The filter
@@ -1443,20 +1452,26 @@ impl FlightCore {
         frame: &RawSensorFrame,
         events: &mut heapless::Vec<Event, MAX_EVENTS_PER_CYCLE>,
     ) {
-        let Some(acq) = self.sun_acquisition.as_mut() else {
-            self.wheel_torque_cmd_nm = Vector3::zeros();
-            return;
-        };
         let candidates =
             sun_candidates_acs(frame, self.tables.alignment(), self.tables.magnetics());
         let sun = candidates.iter().flatten().map(|(v, _, _)| *v).next();
-        match acq.update(
+        let Some(acq) = self.sun_acquisition.as_mut() else {
+            // Mode 3 without its state cannot be entered (command 9 sets both); said, not
+            // hidden, if it ever is.
+            self.wheel_torque_cmd_nm = Vector3::zeros();
+            self.note_control_fault(Some(CONTROL_FAULT_NO_SUN_ACQUISITION), events);
+            return;
+        };
+        let result = acq.update(
             sun.as_ref(),
             &self.last_rate_acs_rad_per_s,
             self.tables.filter(),
-        ) {
+        );
+        let turning = !acq.acquired();
+        match result {
             Ok(out) => {
                 self.wheel_torque_cmd_nm = out.law.torque_acs_nm;
+                self.note_control_fault(None, events);
                 if out.acquired_now {
                     let centideg = out
                         .sun_angle_rad
@@ -1465,22 +1480,66 @@ impl FlightCore {
                     let p1 = centideg.clamp(0.0, f64::from(u32::MAX)) as u32;
                     raise(events, &mut self.counters, EventId::SunAcquired, p1, 0);
                 }
-                if out.lost_now {
-                    raise(events, &mut self.counters, EventId::SunNotSeen, 0, 0);
+                if out.acquisition_lost_now {
+                    raise(
+                        events,
+                        &mut self.counters,
+                        EventId::SunAcquisitionLost,
+                        0,
+                        0,
+                    );
+                }
+                if out.sun_lost_now {
+                    let at_entry = u32::from(out.first_cycle);
+                    raise(events, &mut self.counters, EventId::SunNotSeen, at_entry, 0);
                 }
             }
-            Err(_) => self.wheel_torque_cmd_nm = Vector3::zeros(),
+            Err(e) => {
+                self.wheel_torque_cmd_nm = Vector3::zeros();
+                self.note_control_fault(Some(control_fault_code(e)), events);
+            }
         }
-        if !self.iru_high_rate_cmd {
-            self.iru_high_rate_cmd = true;
+        // High rate while turning, low rate in the Sun hold (as slews and inertial holds).
+        self.command_iru_rate(turning, events);
+    }
+
+    /// Command the IRU rate mode; event 0x0203 on a change.
+    fn command_iru_rate(
+        &mut self,
+        high: bool,
+        events: &mut heapless::Vec<Event, MAX_EVENTS_PER_CYCLE>,
+    ) {
+        if high != self.iru_high_rate_cmd {
+            self.iru_high_rate_cmd = high;
             raise(
                 events,
                 &mut self.counters,
                 EventId::IruRateModeChanged,
-                1,
+                u32::from(high),
                 0,
             );
         }
+    }
+
+    /// Event 0x0607 when the control step starts failing (or fails differently); the torque
+    /// is then zero. `None`: the step worked.
+    fn note_control_fault(
+        &mut self,
+        fault: Option<u32>,
+        events: &mut heapless::Vec<Event, MAX_EVENTS_PER_CYCLE>,
+    ) {
+        if let Some(code) = fault {
+            if self.control_fault != Some(code) {
+                raise(
+                    events,
+                    &mut self.counters,
+                    EventId::ControlFault,
+                    code,
+                    u32::from(self.control_mode as u8),
+                );
+            }
+        }
+        self.control_fault = fault;
     }
 
     fn housekeeping(&self, time: TimeTag, residuals: [SensorResidual; 4]) -> ObcHousekeeping {

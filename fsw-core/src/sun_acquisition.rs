@@ -17,8 +17,12 @@
 //! * Torque: the eigen-axis law of [`crate::control`] on `θ_e` (the same rate limit,
 //!   braking and gains as a slew), so the rate about the Sun line is damped to zero.
 //! * No Sun this cycle (eclipse, no sensor lit): `θ_e = 0`, the law damps the rates.
+//! * Within [`NEAR_BEHIND_RAD`] of the opposite point the turn keeps the axis it started
+//!   about (there the Sun sensors' noise would swing `t̂ × ŝ`).
 //! * Acquired: `θ` below [`ACQUIRED_RAD`] and `|ω̂|` below [`ACQUIRED_RATE_RAD_PER_S`]; the
-//!   mode keeps pointing (a Sun hold) until the ground commands a hold or a slew.
+//!   mode keeps pointing (a Sun hold) until the ground commands a hold or a slew. Acquired
+//!   stays true within twice the threshold; beyond it the loss is reported (event 0x0606)
+//!   and the turn resumes.
 //!
 //! Deterministic, allocation-free, constant work (one `atan2`, one `sqrt`).
 //!
@@ -40,6 +44,11 @@ pub const ACQUIRED_RAD: f64 = 2.0 * crate::units::RAD_PER_DEG;
 /// Body rate below which a pointed Sun counts as acquired (rad/s): 0.01°/s.
 /// Project choice (not in the paper).
 pub const ACQUIRED_RATE_RAD_PER_S: f64 = 0.01 * crate::units::RAD_PER_DEG;
+
+/// Within this of π the turn keeps the axis it started about (rad): 10°, twice the CSS eyes'
+/// 5° 1σ of the boot magnetics table, so that their noise cannot swing the turn.
+/// Project choice (not in the paper).
+pub const NEAR_BEHIND_RAD: f64 = 10.0 * crate::units::RAD_PER_DEG;
 
 /// Within this of π the Sun is behind the axis and the turn axis is chosen (rad): 1e-6.
 /// Project choice (not in the paper): below it `t̂ × ŝ` has no usable direction.
@@ -68,9 +77,16 @@ pub struct SunAcquisitionOutput {
     /// The Sun became acquired in this cycle.
     /// docs/icd.md §3.3 (event 0x0603).
     pub acquired_now: bool,
-    /// The Sun was lost (no sensor sees it) in this cycle after being seen.
+    /// No Sun sensor sees the Sun in this cycle, after it was seen or at the mode's first
+    /// cycle (once per occurrence).
     /// docs/icd.md §3.3 (event 0x0604).
-    pub lost_now: bool,
+    pub sun_lost_now: bool,
+    /// This is the mode's first cycle (0x0604 then says "no Sun at entry").
+    /// docs/icd.md §3.3 (event 0x0604, p1).
+    pub first_cycle: bool,
+    /// The acquired Sun left twice the acquisition threshold in this cycle.
+    /// docs/icd.md §3.3 (event 0x0606).
+    pub acquisition_lost_now: bool,
 }
 
 /// The Sun-acquisition mode's state: the axis to bring to the Sun and what was seen.
@@ -81,6 +97,9 @@ pub struct SunAcquisition {
     target_axis_acs: [f64; 3],
     acquired: bool,
     sun_seen: bool,
+    started: bool,
+    /// The last turn axis while the Sun was behind the target (ACS, unit; zero before).
+    behind_axis_acs: [f64; 3],
 }
 
 impl SunAcquisition {
@@ -100,6 +119,8 @@ impl SunAcquisition {
             target_axis_acs: [unit.x, unit.y, unit.z],
             acquired: false,
             sun_seen: true,
+            started: false,
+            behind_axis_acs: [0.0; 3],
         })
     }
 
@@ -136,17 +157,19 @@ impl SunAcquisition {
         });
         let (err, angle) = match sun {
             Some(s) => {
-                let (e, a) = pointing_error_rad(&target, &s);
+                let (e, a) = self.error_keeping_the_turn(&target, &s);
                 (e, Some(a))
             }
             None => (Vector3::zeros(), None),
         };
         let law = eigen_axis_law(&err, rate_est_rad_per_s, table)?;
-        let lost_now = angle.is_none() && self.sun_seen;
+        let first_cycle = !self.started;
+        self.started = true;
+        let sun_lost_now = angle.is_none() && (self.sun_seen || first_cycle);
         self.sun_seen = angle.is_some();
         let on_axis = angle.is_some_and(|a| a < ACQUIRED_RAD)
             && rate_est_rad_per_s.norm() < ACQUIRED_RATE_RAD_PER_S;
-        let acquired_now = on_axis && !self.acquired;
+        let was_acquired = self.acquired;
         if let Some(a) = angle {
             // Hysteresis: once acquired, it stays so within twice the threshold.
             self.acquired = on_axis || (self.acquired && a < 2.0 * ACQUIRED_RAD);
@@ -154,9 +177,36 @@ impl SunAcquisition {
         Ok(SunAcquisitionOutput {
             law,
             sun_angle_rad: angle,
-            acquired_now,
-            lost_now,
+            acquired_now: self.acquired && !was_acquired,
+            sun_lost_now,
+            first_cycle,
+            acquisition_lost_now: was_acquired && !self.acquired,
         })
+    }
+
+    /// [`pointing_error_rad`], except that with the Sun within [`NEAR_BEHIND_RAD`] of the
+    /// point opposite the axis the turn keeps the axis it started about: there `t̂ × ŝ` is
+    /// short and the Sun sensors' noise would swing it from cycle to cycle.
+    fn error_keeping_the_turn(
+        &mut self,
+        target: &Vector3<f64>,
+        sun: &Vector3<f64>,
+    ) -> (Vector3<f64>, f64) {
+        let (err, angle) = pointing_error_rad(target, sun);
+        if core::f64::consts::PI - angle >= NEAR_BEHIND_RAD {
+            self.behind_axis_acs = [0.0; 3];
+            return (err, angle);
+        }
+        let prev = Vector3::from(self.behind_axis_acs);
+        // The previous axis, kept perpendicular to the target (the turn must move the Sun).
+        let kept = prev - target * prev.dot(target);
+        let axis = if kept.norm() > 0.5 {
+            kept.normalize()
+        } else {
+            err.try_normalize(0.0).unwrap_or_else(Vector3::zeros)
+        };
+        self.behind_axis_acs = [axis.x, axis.y, axis.z];
+        (axis * angle, angle)
     }
 }
 
@@ -240,20 +290,50 @@ mod tests {
         let mut acq = SunAcquisition::new([1.0, 0.0, 0.0]).unwrap();
         let w = Vector3::new(1e-3, -2e-3, 5e-4);
         let out = acq.update(None, &w, &table()).unwrap();
-        assert!(out.lost_now && out.sun_angle_rad.is_none());
+        assert!(out.sun_lost_now && out.first_cycle && out.sun_angle_rad.is_none());
         assert!(out.law.torque_acs_nm.dot(&w) < 0.0);
         let again = acq.update(None, &w, &table()).unwrap();
-        assert!(!again.lost_now);
+        assert!(!again.sun_lost_now && !again.first_cycle);
         let sun = Vector3::new(1.0, 0.01, 0.0).normalize();
         let quiet = Vector3::zeros();
         let first = acq.update(Some(&sun), &quiet, &table()).unwrap();
         assert!(first.acquired_now && acq.acquired());
         let second = acq.update(Some(&sun), &quiet, &table()).unwrap();
         assert!(!second.acquired_now && acq.acquired());
-        // Far off the axis it is no longer acquired.
+        // Far off the axis it is no longer acquired, and that is reported once.
         let off = Vector3::new(0.0, 1.0, 0.0);
-        acq.update(Some(&off), &quiet, &table()).unwrap();
-        assert!(!acq.acquired());
+        let lost = acq.update(Some(&off), &quiet, &table()).unwrap();
+        assert!(lost.acquisition_lost_now && !acq.acquired());
+        let still = acq.update(Some(&off), &quiet, &table()).unwrap();
+        assert!(!still.acquisition_lost_now);
+        // The Sun lost after being seen is reported once, not as an entry.
+        let gone = acq.update(None, &quiet, &table()).unwrap();
+        assert!(gone.sun_lost_now && !gone.first_cycle);
+    }
+
+    /// With the Sun near the point opposite the axis, noise that swings `t̂ × ŝ` around does
+    /// not swing the turn: the axis it started about is kept while the Sun stays within
+    /// [`NEAR_BEHIND_RAD`] of the opposite point.
+    #[test]
+    fn the_turn_keeps_its_axis_near_the_opposite_point() {
+        let mut acq = SunAcquisition::new([0.0, 0.0, 1.0]).unwrap();
+        let quiet = Vector3::zeros();
+        let d = 3.0 * crate::units::RAD_PER_DEG;
+        let first = Vector3::new(libm::sin(d), 0.0, -libm::cos(d));
+        let out = acq.update(Some(&first), &quiet, &table()).unwrap();
+        let axis0 = out.law.rate_cmd_rad_per_s.normalize();
+        // The noise puts the Sun on the other side of the opposite point: the bare error
+        // would turn the other way.
+        let other = Vector3::new(-libm::sin(d), 0.01, -libm::cos(d)).normalize();
+        let (bare, _) = pointing_error_rad(&Vector3::z(), &other);
+        assert!(bare.normalize().dot(&axis0) < -0.9);
+        let out = acq.update(Some(&other), &quiet, &table()).unwrap();
+        assert!(out.law.rate_cmd_rad_per_s.normalize().dot(&axis0) > 0.99);
+        // Out of the near-behind cone the bare error rules again.
+        let side = Vector3::new(-1.0, 0.0, 0.0);
+        let out = acq.update(Some(&side), &quiet, &table()).unwrap();
+        let (e, _) = pointing_error_rad(&Vector3::z(), &side);
+        assert!(out.law.rate_cmd_rad_per_s.normalize().dot(&e.normalize()) > 0.999);
     }
 
     /// An axis that is not a unit vector, or not finite, is refused.
