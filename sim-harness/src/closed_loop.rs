@@ -837,6 +837,11 @@ fn ephemeris_uploads(
         None => false,
     };
     if folder_has_magnetics {
+        if let Some(file) = &scenario.magnetics.onboard_table_file {
+            eprintln!(
+                "warning: the --tables folder holds a magnetics table: it flies instead of [magnetics] onboard_table_file = {file:?}"
+            );
+        }
         return Ok(uploads);
     }
     if let Some(file) = scenario

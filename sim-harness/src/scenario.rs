@@ -448,6 +448,33 @@ pub struct MagneticsParams {
     pub onboard_table_file: Option<String>,
 }
 
+impl MagneticsParams {
+    /// A table file with nothing to fly it, or with the fields it replaces, is refused
+    /// rather than ignored.
+    ///
+    /// # Errors
+    /// `onboard_table_file` with `enabled` or `onboard_table` false, or with
+    /// `onboard_tam_bias_milligauss` / `onboard_field_sigma_milligauss` set.
+    pub fn validate(&self) -> anyhow::Result<()> {
+        let Some(file) = &self.onboard_table_file else {
+            return Ok(());
+        };
+        if !(self.enabled && self.onboard_table) {
+            bail!(
+                "[magnetics] onboard_table_file = {file:?} needs enabled = true and onboard_table = true (it would not be flown)"
+            );
+        }
+        if self.onboard_tam_bias_milligauss != [[0.0; 3]; 2]
+            || self.onboard_field_sigma_milligauss.is_some()
+        {
+            bail!(
+                "[magnetics] onboard_table_file = {file:?} replaces the table built from onboard_tam_bias_milligauss and onboard_field_sigma_milligauss: give one or the other"
+            );
+        }
+        Ok(())
+    }
+}
+
 impl Default for MagneticsParams {
     fn default() -> Self {
         Self {
@@ -759,6 +786,7 @@ impl Scenario {
         self.validate_initial()?;
         self.validate_orbit()?;
         self.validate_sensors()?;
+        self.magnetics.validate()?;
         for (i, c) in self.commands.iter().enumerate() {
             c.validate(i, self)?;
         }
