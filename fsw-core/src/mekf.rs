@@ -1366,7 +1366,7 @@ mod tests {
 
     #[test]
     fn near_zero_sigma_does_not_break_positive_definiteness() {
-        // Found by the est_mekf_robust property test: σ = 5.7e-12 rad against a 1° prior.
+        // Found by the est (mekf_robust) property test: σ = 5.7e-12 rad against a 1° prior.
         let mut f = Mekf::new();
         f.initialize(
             &Quat::from_rotation_vector(&Vector3::new(0.1, 0.2, 0.3)),
