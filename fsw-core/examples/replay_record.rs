@@ -37,11 +37,6 @@
 //! code, ICD housekeeping user data, events) and, every 100 cycles and for the last one, the
 //! full record.
 #![allow(
-    clippy::unwrap_used,
-    clippy::expect_used,
-    clippy::panic,
-    clippy::indexing_slicing,
-    clippy::arithmetic_side_effects,
     clippy::cast_possible_truncation,
     clippy::cast_precision_loss,
     clippy::cast_sign_loss,

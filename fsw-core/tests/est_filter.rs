@@ -13,13 +13,6 @@
 //!   (8–24″), 7.78″ quantization, raw counts → [`fhst::measure`] →
 //!   [`Mekf::update_focal_plane`] with σ from [`fhst::measurement_sigma_rad`].
 //! * Filter: 1° initial attitude error, zero initial bias, table noise values, 1 Hz.
-#![allow(
-    clippy::unwrap_used,
-    clippy::expect_used,
-    clippy::panic,
-    clippy::indexing_slicing,
-    clippy::arithmetic_side_effects
-)]
 
 mod est_support;
 

@@ -18,13 +18,6 @@
 //! at the executive's systematic σ (`FHST_UNCORRECTED_SYSTEMATIC_RAD`) or, with misaligned
 //! trackers, a σ that also carries the alignment; and that the same filter without it is
 //! inconsistent on this truth (NEES > 6). ("floor" in the test names: the systematic σ.)
-#![allow(
-    clippy::unwrap_used,
-    clippy::expect_used,
-    clippy::panic,
-    clippy::indexing_slicing,
-    clippy::arithmetic_side_effects
-)]
 
 mod est_support;
 

@@ -12,15 +12,7 @@
 //! It uses a fixed proptest seed so the counts are reproducible; set `PROP_TABLES_SEED` (a
 //! decimal u64) to explore with another seed.
 
-#![allow(
-    clippy::unwrap_used,
-    clippy::expect_used,
-    clippy::panic,
-    clippy::indexing_slicing,
-    clippy::arithmetic_side_effects,
-    clippy::float_cmp,
-    clippy::cast_possible_truncation
-)]
+#![allow(clippy::float_cmp, clippy::cast_possible_truncation)]
 
 use std::cell::RefCell;
 use std::collections::BTreeMap;

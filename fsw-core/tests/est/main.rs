@@ -5,13 +5,6 @@
 //! with `cargo test -p fsw-core --test est sun::`. The filter tests on synthetic data stay
 //! their own binaries (`est_filter`, `est_filter_mismatched`), with the shared helpers of
 //! `est_support`.
-#![allow(
-    clippy::unwrap_used,
-    clippy::expect_used,
-    clippy::panic,
-    clippy::indexing_slicing,
-    clippy::arithmetic_side_effects
-)]
 
 #[path = "../est_support/mod.rs"]
 mod est_support;

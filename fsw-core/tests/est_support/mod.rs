@@ -1,13 +1,6 @@
 //! Shared helpers of the `est_*` integration tests: a deterministic PRNG, Gaussian samples,
 //! random rotations, and a reader for the reference CSV files in `data/`.
-#![allow(
-    dead_code,
-    clippy::unwrap_used,
-    clippy::expect_used,
-    clippy::panic,
-    clippy::indexing_slicing,
-    clippy::arithmetic_side_effects
-)]
+#![allow(dead_code)]
 
 pub mod filter_truth;
 
