@@ -17,14 +17,13 @@
 mod est_support;
 
 use est_support::filter_truth::{
-    attitude_nees, fhst_sample, in_field, new_track, start, wobble, TruthIru,
+    attitude_nees, fhst_sample, in_field, new_track, prelaunch_trackers, propagate, start, wobble,
+    TruthIru,
 };
 use est_support::Rng;
 use fsw_core::attitude::{attitude_error_rad, Quat};
 use fsw_core::fhst;
-use fsw_core::iru::IruConfiguration;
-use fsw_core::tables::types::matrix_from_rows;
-use fsw_core::tables::{AlignmentTable, FilterTable, IruTable};
+use fsw_core::tables::{FilterTable, IruTable};
 use fsw_core::units::ARCSEC_PER_RAD;
 use nalgebra::Vector3;
 
@@ -78,9 +77,7 @@ struct Stats {
 fn run(seed: u64, duration_s: u32, settle_s: u32, slews: &[Slew]) -> Stats {
     let filter_table = FilterTable::default_boot();
     let iru_table = IruTable::prelaunch();
-    let al = AlignmentTable::prelaunch();
-    let rows = [al.m_acs_from_fhst1, al.m_acs_from_fhst2];
-    let ms = rows.map(|r| matrix_from_rows(&r));
+    let (rows, ms) = prelaunch_trackers();
     let mut rng = Rng::new(seed);
 
     let substeps = 10;
@@ -134,13 +131,14 @@ fn run(seed: u64, duration_s: u32, settle_s: u32, slews: &[Slew]) -> Stats {
         // OBC cycle: IRU, propagation, two FHST updates.
         let high = slews.iter().any(|s| s.high_rate(t - 0.5));
         st.high_rate_cycles += u32::from(high);
-        let out = iru.process(
-            &gyro.sample(high, &iru_table),
-            IruConfiguration::Primary,
+        propagate(
+            &mut filter,
+            &mut iru,
+            &mut gyro,
+            high,
+            &filter_table,
             &iru_table,
         );
-        let d = out.delta_theta_acs_rad.expect("healthy IRU");
-        filter.propagate(&d, 1.0, &filter_table).unwrap();
         let a_true = q_true.to_dcm();
         for i in 0..2 {
             let m = &ms[i];

@@ -22,14 +22,13 @@
 mod est_support;
 
 use est_support::filter_truth::{
-    attitude_nees, fhst_sample, in_field, new_track, start, wobble, TruthIru,
+    attitude_nees, fhst_sample, in_field, new_track, prelaunch_trackers, propagate, start, wobble,
+    TruthIru,
 };
 use est_support::Rng;
 use fsw_core::attitude::{attitude_error_rad, Quat};
 use fsw_core::fhst;
-use fsw_core::iru::IruConfiguration;
-use fsw_core::tables::types::matrix_from_rows;
-use fsw_core::tables::{AlignmentTable, FilterTable, IruTable};
+use fsw_core::tables::{FilterTable, IruTable};
 use fsw_core::units::ARCSEC_PER_RAD;
 use nalgebra::Vector3;
 
@@ -66,9 +65,7 @@ fn run(
 ) -> Outcome {
     let filter_table = FilterTable::default_boot();
     let iru_table = IruTable::prelaunch();
-    let al = AlignmentTable::prelaunch();
-    let rows = [al.m_acs_from_fhst1, al.m_acs_from_fhst2];
-    let ms = rows.map(|r| matrix_from_rows(&r));
+    let (rows, ms) = prelaunch_trackers();
     let mut rng = Rng::new(seed);
     // True alignments: the table's rotated by a random residual of σ per ACS axis.
     let ms_true = [
@@ -102,13 +99,14 @@ fn run(
             gyro.angle_rad += gyro.ginv * (w + bias + noise) * dt;
             bias += rng.gauss3() * (sigma_u * dt.sqrt()) + drift * dt;
         }
-        let out = iru.process(
-            &gyro.sample(false, &iru_table),
-            IruConfiguration::Primary,
+        propagate(
+            &mut filter,
+            &mut iru,
+            &mut gyro,
+            false,
+            &filter_table,
             &iru_table,
         );
-        let d = out.delta_theta_acs_rad.expect("healthy IRU");
-        filter.propagate(&d, 1.0, &filter_table).unwrap();
         let a_true = q_true.to_dcm();
         let beta = beta_orbit(t);
         for i in 0..2 {

@@ -9,7 +9,8 @@ use fsw_core::mekf::Mekf;
 use fsw_core::raw::{
     FhstSample, IruSample, FHST_FLAG_NEW_STAR, FHST_FLAG_TRACKING, FHST_FLAG_VALID,
 };
-use fsw_core::tables::{FilterTable, IruTable};
+use fsw_core::tables::types::{matrix_from_rows, Mat3Rows};
+use fsw_core::tables::{AlignmentTable, FilterTable, IruTable};
 use nalgebra::{Matrix3, Vector3};
 
 /// Truth gyro: channel angles and pulse counters of the primary configuration.
@@ -74,6 +75,13 @@ pub fn new_track(rng: &mut Rng, a_true: &Matrix3<f64>, m: &Matrix3<f64>, now: u3
     }
 }
 
+/// The prelaunch alignments of FHST1 and FHST2: the table's rows and their matrices.
+pub fn prelaunch_trackers() -> ([Mat3Rows; 2], [Matrix3<f64>; 2]) {
+    let al = AlignmentTable::prelaunch();
+    let rows = [al.m_acs_from_fhst1, al.m_acs_from_fhst2];
+    (rows, rows.map(|r| matrix_from_rows(&r)))
+}
+
 /// The truth's limit cycle at time `ts` (rad/s), added to its slow body rotation.
 pub fn wobble(ts: f64) -> Vector3<f64> {
     Vector3::new(
@@ -106,6 +114,25 @@ pub fn start(
         iru_table,
     );
     (filter, iru)
+}
+
+/// The OBC's propagation over one cycle: the IRU integrator on the gyro's counters (rate mode
+/// `high_rate`), then the filter.
+pub fn propagate(
+    filter: &mut Mekf,
+    iru: &mut IruIntegrator,
+    gyro: &mut TruthIru,
+    high_rate: bool,
+    filter_table: &FilterTable,
+    iru_table: &IruTable,
+) {
+    let out = iru.process(
+        &gyro.sample(high_rate, iru_table),
+        IruConfiguration::Primary,
+        iru_table,
+    );
+    let d = out.delta_theta_acs_rad.expect("healthy IRU");
+    filter.propagate(&d, 1.0, filter_table).unwrap();
 }
 
 /// Tangent-plane angles of the sensor-frame direction `s` when inside the tracker's ±3.8°
