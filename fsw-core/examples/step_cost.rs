@@ -64,7 +64,7 @@ fn main() {
         let out = load_and_activate(
             &mut core,
             &scenario.frames[0],
-            &[(TableId::Magnetics, image(TableId::Magnetics, &table))],
+            &[image(TableId::Magnetics, &table)],
         );
         assert_eq!(core.tables().magnetics(), &table, "{:?}", out.events);
     }
@@ -85,12 +85,12 @@ fn main() {
     println!("{cycles}");
 }
 
-/// The table image of `t` (a default time tag).
-fn image<T: serde::Serialize>(id: TableId, t: &T) -> Vec<u8> {
+/// The table `id` and the image of `t` (a default time tag).
+fn image<T: serde::Serialize>(id: TableId, t: &T) -> (TableId, Vec<u8>) {
     let mut buf = vec![0u8; 8192];
     let n = encode_image(id, TimeTag::default(), t, &mut buf).expect("fits");
     buf.truncate(n);
-    buf
+    (id, buf)
 }
 
 /// One cycle at `frame` that loads and activates each image of `images` in turn.
@@ -124,10 +124,7 @@ fn activate_hooks(core: &mut FlightCore, frame: &RawSensorFrame) {
     let out = load_and_activate(
         core,
         frame,
-        &[
-            (TableId::Alignment, image(TableId::Alignment, &al)),
-            (TableId::Iru, image(TableId::Iru, &iru)),
-        ],
+        &[image(TableId::Alignment, &al), image(TableId::Iru, &iru)],
     );
     assert_eq!(core.tables().alignment(), &al, "{:?}", out.events);
     assert_eq!(core.tables().iru(), &iru);
@@ -151,8 +148,8 @@ fn activate_orbit(core: &mut FlightCore, frame: &RawSensorFrame) {
         core,
         frame,
         &[
-            (TableId::Orbit, image(TableId::Orbit, &orbit)),
-            (TableId::Filter, image(TableId::Filter, &filter)),
+            image(TableId::Orbit, &orbit),
+            image(TableId::Filter, &filter),
         ],
     );
     assert_eq!(core.tables().orbit(), &orbit, "{:?}", out.events);
