@@ -144,16 +144,50 @@ fn offset_of(all: &[u8], rest: &[u8]) -> u32 {
     u32::try_from(all.len().saturating_sub(rest.len())).unwrap_or(u32::MAX)
 }
 
+/// The counted records after a file's header: `remaining` postcard values, then nothing.
+#[derive(Clone, Debug)]
+struct Records<'a> {
+    all: &'a [u8],
+    rest: &'a [u8],
+    remaining: u32,
+}
+
+impl<'a> Records<'a> {
+    /// The next record, `None` after the last one; [`FixtureError::TrailingBytes`] once when
+    /// bytes follow the last one, [`FixtureError::Decode`] (and nothing more) for a record
+    /// that does not decode.
+    fn next<T: Deserialize<'a>>(&mut self) -> Option<Result<T, FixtureError>> {
+        if self.remaining == 0 {
+            if self.rest.is_empty() {
+                return None;
+            }
+            self.rest = &[];
+            return Some(Err(FixtureError::TrailingBytes));
+        }
+        self.remaining = self.remaining.saturating_sub(1);
+        let offset = offset_of(self.all, self.rest);
+        match postcard::take_from_bytes::<T>(self.rest) {
+            Ok((record, after)) => {
+                self.rest = after;
+                Some(Ok(record))
+            }
+            Err(_) => {
+                self.remaining = 0;
+                self.rest = &[];
+                Some(Err(FixtureError::Decode { offset }))
+            }
+        }
+    }
+}
+
 /// Streaming reader of the input file (no allocation: images and frames borrow or copy
 /// from the file bytes).
 #[derive(Clone, Debug)]
 pub struct InputReader<'a> {
-    all: &'a [u8],
-    rest: &'a [u8],
     /// The file header.
     pub header: InputHeader,
     images: heapless::Vec<&'a [u8], MAX_IMAGES>,
-    remaining: u32,
+    records: Records<'a>,
 }
 
 impl<'a> InputReader<'a> {
@@ -178,11 +212,13 @@ impl<'a> InputReader<'a> {
             rest = after;
         }
         Ok(Self {
-            all: bytes,
-            rest,
             header,
             images,
-            remaining: header.cycles,
+            records: Records {
+                all: bytes,
+                rest,
+                remaining: header.cycles,
+            },
         })
     }
 
@@ -197,26 +233,7 @@ impl<'a> InputReader<'a> {
     /// # Errors
     /// [`FixtureError::Decode`], or [`FixtureError::TrailingBytes`] after the last cycle.
     pub fn next_cycle(&mut self) -> Option<Result<RecordedCycle, FixtureError>> {
-        if self.remaining == 0 {
-            if self.rest.is_empty() {
-                return None;
-            }
-            self.rest = &[];
-            return Some(Err(FixtureError::TrailingBytes));
-        }
-        self.remaining = self.remaining.saturating_sub(1);
-        let offset = offset_of(self.all, self.rest);
-        match postcard::take_from_bytes::<RecordedCycle>(self.rest) {
-            Ok((cycle, after)) => {
-                self.rest = after;
-                Some(Ok(cycle))
-            }
-            Err(_) => {
-                self.remaining = 0;
-                self.rest = &[];
-                Some(Err(FixtureError::Decode { offset }))
-            }
-        }
+        self.records.next()
     }
 
     /// The executive commands of a recorded cycle, table images borrowed from the file.
@@ -275,11 +292,9 @@ pub fn to_command<'a>(
 /// Streaming reader of the expected-output file.
 #[derive(Clone, Debug)]
 pub struct ExpectedReader<'a> {
-    all: &'a [u8],
-    rest: &'a [u8],
     /// The file header.
     pub header: ExpectedHeader,
-    remaining: u32,
+    records: Records<'a>,
 }
 
 impl<'a> ExpectedReader<'a> {
@@ -294,10 +309,12 @@ impl<'a> ExpectedReader<'a> {
             return Err(FixtureError::BadHeader);
         }
         Ok(Self {
-            all: bytes,
-            rest,
             header,
-            remaining: header.cycles,
+            records: Records {
+                all: bytes,
+                rest,
+                remaining: header.cycles,
+            },
         })
     }
 
@@ -306,26 +323,7 @@ impl<'a> ExpectedReader<'a> {
     /// # Errors
     /// [`FixtureError::Decode`] or [`FixtureError::TrailingBytes`].
     pub fn next_cycle(&mut self) -> Option<Result<ExpectedCycle<'a>, FixtureError>> {
-        if self.remaining == 0 {
-            if self.rest.is_empty() {
-                return None;
-            }
-            self.rest = &[];
-            return Some(Err(FixtureError::TrailingBytes));
-        }
-        self.remaining = self.remaining.saturating_sub(1);
-        let offset = offset_of(self.all, self.rest);
-        match postcard::take_from_bytes::<ExpectedCycle<'a>>(self.rest) {
-            Ok((cycle, after)) => {
-                self.rest = after;
-                Some(Ok(cycle))
-            }
-            Err(_) => {
-                self.remaining = 0;
-                self.rest = &[];
-                Some(Err(FixtureError::Decode { offset }))
-            }
-        }
+        self.records.next()
     }
 }
 

@@ -3,8 +3,6 @@
 
 // Host measurement tooling, not flight code: the flight-code lints are relaxed here.
 #![allow(
-    clippy::indexing_slicing,
-    clippy::arithmetic_side_effects,
     clippy::cast_possible_truncation,
     clippy::cast_sign_loss,
     clippy::field_reassign_with_default,

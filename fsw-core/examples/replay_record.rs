@@ -37,11 +37,6 @@
 //! code, ICD housekeeping user data, events) and, every 100 cycles and for the last one, the
 //! full record.
 #![allow(
-    clippy::unwrap_used,
-    clippy::expect_used,
-    clippy::panic,
-    clippy::indexing_slicing,
-    clippy::arithmetic_side_effects,
     clippy::cast_possible_truncation,
     clippy::cast_precision_loss,
     clippy::cast_sign_loss,
@@ -103,19 +98,19 @@ const TAM_MILLIGAUSS_PER_COUNT: f64 = 0.3;
 // Deterministic noise
 // ------------------------------------------------------------------------------------------
 
-struct Rng(u64);
+// SplitMix64, the workspace's one definition (fsw-core cannot depend on gro-reference).
+#[path = "../../gro-reference/src/splitmix.rs"]
+mod splitmix;
+
+struct Rng(splitmix::SplitMix64);
 
 impl Rng {
-    fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
+    fn new(seed: u64) -> Self {
+        Self(splitmix::SplitMix64::new(seed))
     }
     /// Uniform in [0, 1).
     fn uniform(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
+        self.0.unit()
     }
     /// Approximately standard normal (Irwin–Hall, 12 uniforms): no transcendental functions.
     fn normal(&mut self) -> f64 {
@@ -202,7 +197,7 @@ fn scenario(al: &AlignmentTable) -> Scenario {
         stars.push(s).unwrap();
     }
     // Distractors uniform on the sky, none within 2° of a tracked star.
-    let mut rng = Rng(0x6752_4F20_1991_0514);
+    let mut rng = Rng::new(0x6752_4F20_1991_0514);
     let mut id = 100_000;
     while stars.len() < 43 {
         let z = 2.0 * rng.uniform() - 1.0;
@@ -278,7 +273,7 @@ impl Truth {
             ],
             high_rate: false,
             g_inv: matrix_from_rows(&iru.g_primary).try_inverse().unwrap(),
-            rng: Rng(0x4452_4952_5520_4949),
+            rng: Rng::new(0x4452_4952_5520_4949),
             fhst_track: [None, None],
         }
     }
@@ -578,7 +573,7 @@ fn record() -> Recording {
     let magnetics = replay_magnetics();
     let mut orbit = fsw_core::orbit::OnboardOrbit::new();
     orbit.load(&replay_orbit());
-    let mut tam_rng = Rng(0x5441_4D31_1991_0405);
+    let mut tam_rng = Rng::new(0x5441_4D31_1991_0405);
     // One cycle of pulses before the first frame.
     truth.advance(&Vector3::zeros(), 1.0, false, &iru_table);
     for cycle in 0..CYCLES {

@@ -22,19 +22,18 @@
 
 // Host measurement tooling, not flight code: the flight-code lints are relaxed here.
 #![allow(
-    clippy::indexing_slicing,
-    clippy::arithmetic_side_effects,
     clippy::cast_possible_truncation,
     clippy::cast_sign_loss,
     clippy::field_reassign_with_default,
-    clippy::expect_used,
     missing_docs
 )]
 
 include!("synthetic/mod.rs");
 
-use fsw_core::executive::FlightCore;
-use fsw_core::raw::RawSensorFrame;
+use fsw_core::executive::{Command, CycleOutput, FlightCore};
+use fsw_core::raw::{RawSensorFrame, TimeTag};
+use fsw_core::tables::image::encode_image;
+use fsw_core::tables::TableId;
 
 #[inline(never)]
 fn run_cycles(core: &mut FlightCore, frames: &[RawSensorFrame]) -> u32 {
@@ -62,19 +61,11 @@ fn main() {
     }
     if coarse {
         let table = magnetics_table(&scenario.frames[0]);
-        let mut a = vec![0u8; 8192];
-        let n = fsw_core::tables::image::encode_image(
-            fsw_core::tables::TableId::Magnetics,
-            fsw_core::raw::TimeTag::default(),
-            &table,
-            &mut a,
-        )
-        .expect("fits");
-        let cmds = [
-            fsw_core::executive::Command::TableLoad(&a[..n]),
-            fsw_core::executive::Command::TableActivate(fsw_core::tables::TableId::Magnetics),
-        ];
-        let out = core.step(&scenario.frames[0], &cmds);
+        let out = load_and_activate(
+            &mut core,
+            &scenario.frames[0],
+            &[image(TableId::Magnetics, &table)],
+        );
         assert_eq!(core.tables().magnetics(), &table, "{:?}", out.events);
     }
     if std::env::var_os("STEP_COST_HOOKS").is_some_and(|v| !v.is_empty()) {
@@ -94,12 +85,30 @@ fn main() {
     println!("{cycles}");
 }
 
+/// The table `id` and the image of `t` (a default time tag).
+fn image<T: serde::Serialize>(id: TableId, t: &T) -> (TableId, Vec<u8>) {
+    let mut buf = vec![0u8; 8192];
+    let n = encode_image(id, TimeTag::default(), t, &mut buf).expect("fits");
+    buf.truncate(n);
+    (id, buf)
+}
+
+/// One cycle at `frame` that loads and activates each image of `images` in turn.
+fn load_and_activate(
+    core: &mut FlightCore,
+    frame: &RawSensorFrame,
+    images: &[(TableId, Vec<u8>)],
+) -> CycleOutput {
+    let commands: Vec<Command<'_>> = images
+        .iter()
+        .flat_map(|(id, image)| [Command::TableLoad(image), Command::TableActivate(*id)])
+        .collect();
+    core.step(frame, &commands)
+}
+
 /// Load and activate alignment and IRU tables with every correction switched on.
 fn activate_hooks(core: &mut FlightCore, frame: &RawSensorFrame) {
-    use fsw_core::executive::Command;
-    use fsw_core::raw::TimeTag;
-    use fsw_core::tables::image::encode_image;
-    use fsw_core::tables::{AlignmentTable, IruTable, TableId};
+    use fsw_core::tables::{AlignmentTable, IruTable};
     let r = fsw_core::units::RAD_PER_ARCSEC;
     let mut al = AlignmentTable::prelaunch();
     let c = &mut al.corrections;
@@ -112,18 +121,10 @@ fn activate_hooks(core: &mut FlightCore, frame: &RawSensorFrame) {
     c.fss_cyclic = [[0.0349, 6.0 * r, r, 5.0 * r, -r]; 2];
     let mut iru = IruTable::prelaunch();
     iru.scale_asymmetry_primary = [4e-4, -3e-4, 2e-4];
-    let mut a = vec![0u8; 2048];
-    let mut b = vec![0u8; 2048];
-    let na = encode_image(TableId::Alignment, TimeTag::default(), &al, &mut a).expect("fits");
-    let nb = encode_image(TableId::Iru, TimeTag::default(), &iru, &mut b).expect("fits");
-    let out = core.step(
+    let out = load_and_activate(
+        core,
         frame,
-        &[
-            Command::TableLoad(&a[..na]),
-            Command::TableActivate(TableId::Alignment),
-            Command::TableLoad(&b[..nb]),
-            Command::TableActivate(TableId::Iru),
-        ],
+        &[image(TableId::Alignment, &al), image(TableId::Iru, &iru)],
     );
     assert_eq!(core.tables().alignment(), &al, "{:?}", out.events);
     assert_eq!(core.tables().iru(), &iru);
@@ -132,10 +133,7 @@ fn activate_hooks(core: &mut FlightCore, frame: &RawSensorFrame) {
 /// Load and activate an orbit table (circular, a = 6833 km, i = 28.48°, epoch at `frame`) and
 /// the active filter table with the orbital aberration correction on.
 fn activate_orbit(core: &mut FlightCore, frame: &RawSensorFrame) {
-    use fsw_core::executive::Command;
-    use fsw_core::raw::TimeTag;
-    use fsw_core::tables::image::encode_image;
-    use fsw_core::tables::{OrbitTable, TableId};
+    use fsw_core::tables::OrbitTable;
     let v = (fsw_core::orbit::MU_EARTH_KM3_PER_S2 / 6833.0).sqrt();
     let i = 28.48_f64.to_radians();
     let orbit = OrbitTable {
@@ -146,17 +144,12 @@ fn activate_orbit(core: &mut FlightCore, frame: &RawSensorFrame) {
     let mut filter = *core.tables().filter();
     filter.orbital_aberration_correction = true;
     filter.fhst_uncorrected_systematic_arcsec = 0.02;
-    let mut a = vec![0u8; 2048];
-    let mut b = vec![0u8; 2048];
-    let na = encode_image(TableId::Orbit, TimeTag::default(), &orbit, &mut a).expect("fits");
-    let nb = encode_image(TableId::Filter, TimeTag::default(), &filter, &mut b).expect("fits");
-    let out = core.step(
+    let out = load_and_activate(
+        core,
         frame,
         &[
-            Command::TableLoad(&a[..na]),
-            Command::TableActivate(TableId::Orbit),
-            Command::TableLoad(&b[..nb]),
-            Command::TableActivate(TableId::Filter),
+            image(TableId::Orbit, &orbit),
+            image(TableId::Filter, &filter),
         ],
     );
     assert_eq!(core.tables().orbit(), &orbit, "{:?}", out.events);

@@ -226,9 +226,23 @@ pub fn correct_distortion(h_m: f64, v_m: f64, d: &[f64; 3]) -> (f64, f64) {
 /// docs/tables.md (alignment table, `fhst_distortion`).
 #[must_use]
 pub fn apply_distortion(h: f64, v: f64, d: &[f64; 3]) -> (f64, f64) {
+    invert_correction(h, v, DISTORTION_ITERATIONS, |h_m, v_m| {
+        correct_distortion(h_m, v_m, d)
+    })
+}
+
+/// Measured angles whose correction `correct` gives the true angles `(h, v)` (rad): the
+/// fixed-point iteration `m ← m + (true − correct(m))` from `m = true`, `iterations` times.
+/// Shared by [`apply_distortion`] and the FSS's `apply_transfer_full`.
+pub(crate) fn invert_correction(
+    h: f64,
+    v: f64,
+    iterations: usize,
+    correct: impl Fn(f64, f64) -> (f64, f64),
+) -> (f64, f64) {
     let (mut h_m, mut v_m) = (h, v);
-    for _ in 0..DISTORTION_ITERATIONS {
-        let (hc, vc) = correct_distortion(h_m, v_m, d);
+    for _ in 0..iterations {
+        let (hc, vc) = correct(h_m, v_m);
         h_m += h - hc;
         v_m += v - vc;
     }

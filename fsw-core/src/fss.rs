@@ -259,30 +259,25 @@ pub fn correct_transfer_full(alpha_m: f64, beta_m: f64, t: &TransferTerms) -> (f
 /// docs/tables.md (alignment table, fields 6, 10, 11).
 #[must_use]
 pub fn apply_transfer_full(alpha: f64, beta: f64, t: &TransferTerms) -> (f64, f64) {
-    let (mut a_m, mut b_m) = (alpha, beta);
-    for _ in 0..TRANSFER_ITERATIONS {
-        let (ac, bc) = correct_transfer_full(a_m, b_m, t);
-        a_m += alpha - ac;
-        b_m += beta - bc;
-    }
-    (a_m, b_m)
+    crate::fhst::invert_correction(alpha, beta, TRANSFER_ITERATIONS, |a_m, b_m| {
+        correct_transfer_full(a_m, b_m, t)
+    })
 }
 
-/// Unit vector in sensor axes from head angles (rad).
+/// Unit vector in sensor axes from head angles (rad): the head angles are tangent-plane
+/// angles, as the FHST's ([`crate::fhst::dir_from_hv`]).
 /// algorithms.md §4 ("Unit vector").
 #[must_use]
 pub fn dir_from_angles(alpha_rad: f64, beta_rad: f64) -> Vector3<f64> {
-    Vector3::new(libm::tan(alpha_rad), libm::tan(beta_rad), 1.0).normalize()
+    crate::fhst::dir_from_hv(alpha_rad, beta_rad)
 }
 
-/// Head angles (rad) of a sensor-frame direction; `None` unless `s_z > 0` and finite.
+/// Head angles (rad) of a sensor-frame direction; `None` unless `s_z > 0` and finite
+/// ([`crate::fhst::hv_from_dir`]).
 /// algorithms.md §4 ("Measured angles").
 #[must_use]
 pub fn angles_from_dir(s: &Vector3<f64>) -> Option<(f64, f64)> {
-    if !(s.z > 0.0) || !s.iter().all(|x| x.is_finite()) {
-        return None;
-    }
-    Some((libm::atan2(s.x, s.z), libm::atan2(s.y, s.z)))
+    crate::fhst::hv_from_dir(s)
 }
 
 /// [`measure_corrected`] with the sensor's alignment and every transfer-function term from

@@ -19,11 +19,14 @@
 //! * **Project choice (not in the paper)**, with the reason, where neither applies.
 #![no_std]
 #![deny(missing_docs)]
+// Flight code: no unwrap, expect, panic, indexing or unchecked arithmetic (the unit tests of
+// `cfg(test)` are exempt; the crate's other targets are host tooling, see Cargo.toml).
 #![cfg_attr(
-    test,
-    allow(
+    not(test),
+    deny(
         clippy::unwrap_used,
         clippy::expect_used,
+        clippy::panic,
         clippy::indexing_slicing,
         clippy::arithmetic_side_effects
     )

@@ -24,7 +24,7 @@
 //! candidate; a unique candidate is then the right star. A wrong identification needs the
 //! tracked star to be *missing* from the catalog (or its magnitude off by more than Δm) while
 //! another star sits inside the window: the catalog must therefore reach Δm-ish beyond the
-//! tracker's faint limit (integration test `est_star_id`).
+//! tracker's faint limit (integration test `est`, `star_id`).
 
 use crate::attitude::Quat;
 use crate::tables::types::{CatalogStar, FilterTable, StarCatalogTable, MAX_CATALOG_STARS};

@@ -37,7 +37,7 @@
 //!   the same order. Light time for the Sun (< 0.01″) is neglected.
 //!
 //! Against DE421 (Skyfield, `data/sun_reference.csv`, 1991) the apparent direction is good to
-//! about 10″ (integration test `est_sun`), well inside the 0.01° requirement; the remaining
+//! about 10″ (integration test `est`, `sun`), well inside the 0.01° requirement; the remaining
 //! error is mostly the planetary perturbations (Venus, Jupiter) left out of the mean elements.
 //! The Sun seen from the spacecraft additionally differs by the LEO parallax (≤ 9.5″) and the
 //! orbital aberration (≤ 5.2″), which need the orbit: [`apparent_sun_from`] applies them with

@@ -9,12 +9,6 @@
 //! Everything after a `#[cfg(test)]` line at column 0 is test code and is skipped.
 //!
 //! Run: `cargo test -p fsw-core --test doc_citations`.
-#![allow(
-    clippy::unwrap_used,
-    clippy::expect_used,
-    clippy::indexing_slicing,
-    clippy::arithmetic_side_effects
-)]
 
 use std::fs;
 use std::path::{Path, PathBuf};

@@ -13,25 +13,17 @@
 //!   (8–24″), 7.78″ quantization, raw counts → [`fhst::measure`] →
 //!   [`Mekf::update_focal_plane`] with σ from [`fhst::measurement_sigma_rad`].
 //! * Filter: 1° initial attitude error, zero initial bias, table noise values, 1 Hz.
-#![allow(
-    clippy::unwrap_used,
-    clippy::expect_used,
-    clippy::panic,
-    clippy::indexing_slicing,
-    clippy::arithmetic_side_effects
-)]
 
 mod est_support;
 
-use est_support::filter_truth::{new_track, TruthIru};
+use est_support::filter_truth::{
+    attitude_nees, fhst_sample, in_field, new_track, prelaunch_trackers, propagate, start, wobble,
+    TruthIru,
+};
 use est_support::Rng;
 use fsw_core::attitude::{attitude_error_rad, Quat};
-use fsw_core::fhst::{self, FHST_RAD_PER_COUNT};
-use fsw_core::iru::{IruConfiguration, IruIntegrator};
-use fsw_core::mekf::Mekf;
-use fsw_core::raw::{FhstSample, FHST_FLAG_NEW_STAR, FHST_FLAG_TRACKING, FHST_FLAG_VALID};
-use fsw_core::tables::types::matrix_from_rows;
-use fsw_core::tables::{AlignmentTable, FilterTable, IruTable};
+use fsw_core::fhst;
+use fsw_core::tables::{FilterTable, IruTable};
 use fsw_core::units::ARCSEC_PER_RAD;
 use nalgebra::Vector3;
 
@@ -85,9 +77,7 @@ struct Stats {
 fn run(seed: u64, duration_s: u32, settle_s: u32, slews: &[Slew]) -> Stats {
     let filter_table = FilterTable::default_boot();
     let iru_table = IruTable::prelaunch();
-    let al = AlignmentTable::prelaunch();
-    let rows = [al.m_acs_from_fhst1, al.m_acs_from_fhst2];
-    let ms = rows.map(|r| matrix_from_rows(&r));
+    let (rows, ms) = prelaunch_trackers();
     let mut rng = Rng::new(seed);
 
     let substeps = 10;
@@ -99,31 +89,11 @@ fn run(seed: u64, duration_s: u32, settle_s: u32, slews: &[Slew]) -> Stats {
     let mut q_true = rng.quaternion();
     let mut bias = Vector3::new(2.9e-6, 1.7e-6, 2.5e-6);
     let omega0 = Vector3::new(0.3, -0.5, 0.8).normalize() * 5e-5;
-    let mut gyro = TruthIru {
-        ginv: IruConfiguration::Primary
-            .g(&iru_table)
-            .try_inverse()
-            .unwrap(),
-        angle_rad: Vector3::new(1.0e-3, -2.0e-3, 0.5e-3),
-        pulsed_rad: [0.0; 3],
-        counts: [100, 40_000, 65_000, 7, 123, 30_000],
-    };
+    let mut gyro = TruthIru::primary(&iru_table, Vector3::new(1.0e-3, -2.0e-3, 0.5e-3));
 
     // Filter: 1° initial error about a skew axis.
     let err0 = Vector3::new(1.0, -1.0, 0.5).normalize() * 1.0_f64.to_radians();
-    let mut filter = Mekf::new();
-    filter
-        .initialize(
-            &Quat::from_rotation_vector(&(-err0)).compose(&q_true),
-            &filter_table,
-        )
-        .unwrap();
-    let mut iru = IruIntegrator::new();
-    iru.process(
-        &gyro.sample(false, &iru_table),
-        IruConfiguration::Primary,
-        &iru_table,
-    );
+    let (mut filter, mut iru) = start(&q_true, &err0, &mut gyro, &filter_table, &iru_table);
     let mut tracks = [0, 1].map(|i| new_track(&mut rng, &q_true.to_dcm(), &ms[i], 0));
 
     let mut inside = [0u32; 3];
@@ -149,12 +119,7 @@ fn run(seed: u64, duration_s: u32, settle_s: u32, slews: &[Slew]) -> Stats {
         // Truth over one second.
         for j in 0..substeps {
             let ts = t - 1.0 + (f64::from(j) + 0.5) * dt;
-            let wobble = Vector3::new(
-                (ts / 97.0).sin(),
-                (ts / 151.0 + 1.0).sin(),
-                (ts / 263.0 + 2.0).cos(),
-            ) * 1e-5;
-            let w = omega0 + wobble + slews.iter().map(|s| s.rate(ts)).sum::<Vector3<f64>>();
+            let w = omega0 + wobble(ts) + slews.iter().map(|s| s.rate(ts)).sum::<Vector3<f64>>();
             q_true = Quat::from_rotation_vector(&(w * dt))
                 .compose(&q_true)
                 .normalized();
@@ -166,21 +131,19 @@ fn run(seed: u64, duration_s: u32, settle_s: u32, slews: &[Slew]) -> Stats {
         // OBC cycle: IRU, propagation, two FHST updates.
         let high = slews.iter().any(|s| s.high_rate(t - 0.5));
         st.high_rate_cycles += u32::from(high);
-        let out = iru.process(
-            &gyro.sample(high, &iru_table),
-            IruConfiguration::Primary,
+        propagate(
+            &mut filter,
+            &mut iru,
+            &mut gyro,
+            high,
+            &filter_table,
             &iru_table,
         );
-        let d = out.delta_theta_acs_rad.expect("healthy IRU");
-        filter.propagate(&d, 1.0, &filter_table).unwrap();
         let a_true = q_true.to_dcm();
         for i in 0..2 {
             let m = &ms[i];
             let s = m.transpose() * (a_true * tracks[i].r_eci);
-            let lim = 3.8_f64.to_radians();
-            let Some((h, v)) =
-                fhst::hv_from_dir(&s).filter(|(h, v)| h.abs() < lim && v.abs() < lim)
-            else {
+            let Some((h, v)) = in_field(&s) else {
                 tracks[i] = new_track(&mut rng, &a_true, m, k);
                 continue; // lost: the tracker searches for one cycle
             };
@@ -189,19 +152,7 @@ fn run(seed: u64, duration_s: u32, settle_s: u32, slews: &[Slew]) -> Stats {
                 continue;
             }
             let sigma = filter_table.fhst_sigma_rad(tracks[i].magnitude);
-            let nh = ((h + sigma * rng.gauss()) / FHST_RAD_PER_COUNT).round();
-            let nv = ((v + sigma * rng.gauss()) / FHST_RAD_PER_COUNT).round();
-            let mut flags = FHST_FLAG_VALID | FHST_FLAG_TRACKING;
-            if tracks[i].new {
-                flags |= FHST_FLAG_NEW_STAR;
-                tracks[i].new = false;
-            }
-            let sample = FhstSample {
-                h_counts: nh as i16,
-                v_counts: nv as i16,
-                magnitude_centimag: (tracks[i].magnitude * 100.0).round() as i16,
-                flags,
-            };
+            let sample = fhst_sample(&mut rng, &mut tracks[i], h, v, sigma);
             let meas = fhst::measure(&sample, &rows[i], &[0.0; 3]).unwrap();
             let sig = fhst::measurement_sigma_rad(meas.magnitude, &filter_table);
             let o = filter.update_focal_plane(
@@ -232,8 +183,7 @@ fn run(seed: u64, duration_s: u32, settle_s: u32, slews: &[Slew]) -> Stats {
                     inside[ax] += 1;
                 }
             }
-            let p11 = filter.covariance.fixed_view::<3, 3>(0, 0).into_owned();
-            nees_sum += (e.transpose() * p11.try_inverse().unwrap() * e).x;
+            nees_sum += attitude_nees(&filter, &e);
             st.max_err_after_rad = st.max_err_after_rad.max(e.norm());
         }
     }

@@ -1,4 +1,3 @@
-#![allow(clippy::unwrap_used)]
 //! The executive's output is postcard-serializable and round-trips (stable layout), and bad
 //! input (non-monotonic time, NaN-free garbage counts) is flagged without touching the estimate.
 

@@ -27,6 +27,7 @@ pub mod outdir;
 pub mod provenance;
 pub mod run_folder;
 pub mod sky;
+pub mod splitmix;
 pub mod sun;
 pub mod time;
 mod vsop87_earth;

@@ -19,16 +19,10 @@ impl Rng {
     /// Seeded generator; equal seeds give equal streams.
     #[must_use]
     pub fn new(seed: u64) -> Self {
-        let mut x = seed;
-        let mut next = || {
-            x = x.wrapping_add(0x9E37_79B9_7F4A_7C15);
-            let mut z = x;
-            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-            z ^ (z >> 31)
-        };
+        // The state from SplitMix64, as the xoshiro authors recommend.
+        let mut sm = gro_reference::splitmix::SplitMix64::new(seed);
         Self {
-            s: [next(), next(), next(), next()],
+            s: [sm.next_u64(), sm.next_u64(), sm.next_u64(), sm.next_u64()],
             spare_normal: None,
         }
     }

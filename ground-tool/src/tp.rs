@@ -73,6 +73,17 @@ pub struct TpReport {
     pub time_jumps: Vec<TimeJump>,
 }
 
+impl TpReport {
+    /// Record the octets `offset..end` as skipped, and why.
+    fn skip(&mut self, offset: usize, end: usize, reason: impl Into<String>) {
+        self.skipped.push(Skipped {
+            offset,
+            len: end - offset,
+            reason: reason.into(),
+        });
+    }
+}
+
 /// A packet dropped for its time code.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct TimeOutlier {
@@ -329,11 +340,7 @@ pub fn decode(bytes: &[u8]) -> Telemetry {
             } else {
                 "not a valid TM packet header"
             };
-            tm.report.skipped.push(Skipped {
-                offset: at,
-                len: next - at,
-                reason: reason.into(),
-            });
+            tm.report.skip(at, next, reason);
             at = next;
             continue;
         };
@@ -349,25 +356,22 @@ pub fn decode(bytes: &[u8]) -> Telemetry {
             } else {
                 resync(bytes, at + 1)
             };
-            tm.report.skipped.push(Skipped {
-                offset: at,
-                len: next - at,
-                reason: format!("unknown APID 0x{:03x}", h.apid),
-            });
+            tm.report
+                .skip(at, next, format!("unknown APID 0x{:03x}", h.apid));
             at = next;
             continue;
         };
         let expected_total = PRIMARY_HEADER_LEN + TIME_CODE_LEN + expected_user;
         if h.total_len != expected_total {
             let next = resync(bytes, at + 1);
-            tm.report.skipped.push(Skipped {
-                offset: at,
-                len: next - at,
-                reason: format!(
+            tm.report.skip(
+                at,
+                next,
+                format!(
                     "APID 0x{:03x}: packet length {} but the ICD fixes {}",
                     h.apid, h.total_len, expected_total
                 ),
-            });
+            );
             at = next;
             continue;
         }
@@ -375,16 +379,16 @@ pub fn decode(bytes: &[u8]) -> Telemetry {
             // Cut by the end of the file, or by a drop-out before packets that end it: those
             // packets start inside the claimed length.
             let next = resync(bytes, at + 1);
-            tm.report.skipped.push(Skipped {
-                offset: at,
-                len: next - at,
-                reason: format!(
+            tm.report.skip(
+                at,
+                next,
+                format!(
                     "APID 0x{:03x}: truncated packet ({} of {} octets)",
                     h.apid,
                     bytes.len() - at,
                     h.total_len
                 ),
-            });
+            );
             at = next;
             continue;
         }
@@ -395,14 +399,14 @@ pub fn decode(bytes: &[u8]) -> Telemetry {
         let end = at + h.total_len;
         if end <= bytes.len() {
             if let Some(q) = confirmed_start_before(bytes, at + 1, end) {
-                tm.report.skipped.push(Skipped {
-                    offset: at,
-                    len: q - at,
-                    reason: format!(
+                tm.report.skip(
+                    at,
+                    q,
+                    format!(
                         "APID 0x{:03x}: packet cut short (a packet starts inside it)",
                         h.apid
                     ),
-                });
+                );
                 at = q;
                 continue;
             }
@@ -411,11 +415,7 @@ pub fn decode(bytes: &[u8]) -> Telemetry {
         let time = match decode_time_code(data) {
             Ok(t) => t,
             Err(_) => {
-                tm.report.skipped.push(Skipped {
-                    offset: at,
-                    len: h.total_len,
-                    reason: "bad time code".into(),
-                });
+                tm.report.skip(at, at + h.total_len, "bad time code");
                 at += h.total_len;
                 continue;
             }
@@ -439,11 +439,11 @@ pub fn decode(bytes: &[u8]) -> Telemetry {
             placed[slot].push((at, h.total_len, h.seq));
         }
         if let Err(e) = decoded {
-            tm.report.skipped.push(Skipped {
-                offset: at,
-                len: h.total_len,
-                reason: format!("APID 0x{:03x}: field does not decode ({e})", h.apid),
-            });
+            tm.report.skip(
+                at,
+                at + h.total_len,
+                format!("APID 0x{:03x}: field does not decode ({e})", h.apid),
+            );
         }
         at += h.total_len;
     }
@@ -476,33 +476,28 @@ fn store_record(
     time: TimeTag,
     user: &[u8],
 ) -> Result<usize, RecordError> {
+    let r = &mut tm.report;
     match apid {
-        APID_RAW_SENSORS => decode_raw_frame(time, user).map(|r| {
-            tm.raw.push(r);
-            tm.report.packets_raw += 1;
-            0
-        }),
-        APID_HOUSEKEEPING => decode_housekeeping(time, user).map(|r| {
-            tm.housekeeping.push(r);
-            tm.report.packets_housekeeping += 1;
-            1
-        }),
-        APID_EVENT => decode_event(user).map(|e| {
-            tm.events.push((time, e));
-            tm.report.packets_event += 1;
-            2
-        }),
-        APID_MAGNETICS => decode_magnetics(time, user).map(|m| {
-            tm.magnetics.push(m);
-            tm.report.packets_magnetics += 1;
-            4
-        }),
-        _ => decode_ephemeris(time, user).map(|e| {
-            tm.ephemeris.push(e);
-            tm.report.packets_ephemeris += 1;
-            3
-        }),
+        APID_RAW_SENSORS => {
+            decode_raw_frame(time, user).map(|x| keep(&mut tm.raw, x, &mut r.packets_raw, 0))
+        }
+        APID_HOUSEKEEPING => decode_housekeeping(time, user)
+            .map(|x| keep(&mut tm.housekeeping, x, &mut r.packets_housekeeping, 1)),
+        APID_EVENT => {
+            decode_event(user).map(|x| keep(&mut tm.events, (time, x), &mut r.packets_event, 2))
+        }
+        APID_MAGNETICS => decode_magnetics(time, user)
+            .map(|x| keep(&mut tm.magnetics, x, &mut r.packets_magnetics, 4)),
+        _ => decode_ephemeris(time, user)
+            .map(|x| keep(&mut tm.ephemeris, x, &mut r.packets_ephemeris, 3)),
     }
+}
+
+/// `record` appended to `list` and counted in `count`; its slot `slot` returned.
+fn keep<T>(list: &mut Vec<T>, record: T, count: &mut usize, slot: usize) -> usize {
+    list.push(record);
+    *count += 1;
+    slot
 }
 
 /// Largest forward step of the CCSDS sequence count between two packets of one APID that

@@ -267,27 +267,15 @@ fn cli_writes_outputs_and_refuses_short_runs_with_exit_2() {
     let run = support::write_run("allan", "hold", &["--no-slews", "--duration", "3000"]);
     let out = run.with_extension("allan-out");
     let _ = std::fs::remove_dir_all(&out);
-    let o = std::process::Command::new(env!("CARGO_BIN_EXE_ground-tool"))
-        .arg("allan")
-        .arg(&run)
-        .arg("--out")
-        .arg(&out)
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let gt = env!("CARGO_BIN_EXE_ground-tool");
+    support::ground_tool_ok(gt, "allan", &run, &out, &[]);
     let json: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("allan.json")).unwrap()).unwrap();
     assert_eq!(json["axes"].as_array().unwrap().len(), 3);
     assert!(out.join("allan.md").exists() && out.join("allan.png").exists());
     // 600 s of hold: fewer than 1024 samples.
     let short = support::write_run("allan", "short", &["--no-slews", "--duration", "600"]);
-    let o = std::process::Command::new(env!("CARGO_BIN_EXE_ground-tool"))
-        .arg("allan")
-        .arg(&short)
-        .arg("--out")
-        .arg(short.with_extension("allan-out"))
-        .output()
-        .unwrap();
+    let o = support::ground_tool(gt, "allan", &short, &short.with_extension("allan-out"), &[]);
     let err = String::from_utf8_lossy(&o.stderr);
     assert_eq!(o.status.code(), Some(2), "{err}");
     assert!(

@@ -9,7 +9,6 @@
 mod support;
 
 use serde_json::Value;
-use std::process::Command;
 
 /// Write a run with the writer's `flags`, diagnose it, return report.json and the truth.
 fn write_and_diagnose(case: &str, flags: &[&str]) -> (Value, Value) {
@@ -17,18 +16,12 @@ fn write_and_diagnose(case: &str, flags: &[&str]) -> (Value, Value) {
     all.extend_from_slice(flags);
     let dir = support::write_run("diagnose-outside", case, &all);
     let diag = dir.join("diag");
-    let out = Command::new(env!("CARGO_BIN_EXE_ground-tool"))
-        .arg("diagnose")
-        .arg(&dir)
-        .arg("--out")
-        .arg(&diag)
-        .arg("--json")
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "diagnose failed on {case}: {}",
-        String::from_utf8_lossy(&out.stderr)
+    support::ground_tool_ok(
+        env!("CARGO_BIN_EXE_ground-tool"),
+        "diagnose",
+        &dir,
+        &diag,
+        &["--json"],
     );
     let report: Value =
         serde_json::from_str(&std::fs::read_to_string(diag.join("report.json")).unwrap()).unwrap();
@@ -103,14 +96,9 @@ fn outside_writer_gap_inside_a_slew_is_left_out_of_the_gyro_fit() {
         &["--plan", "long", "--duration", "12000", "--gap", "1000:40"],
     );
     assert!(named(&report).is_empty(), "{report:#}");
-    let notes = report["gyro"]["notes"].as_array().unwrap();
-    assert!(
-        notes.iter().any(|n| n
-            .as_str()
-            .unwrap()
-            .contains("frames without a gyro increment")),
-        "{notes:?}"
-    );
+    assert_a_note(&report["gyro"]["notes"], |n| {
+        n.contains("frames without a gyro increment")
+    });
     assert!(report["gyro"]["slews"].as_u64().unwrap() >= 6, "{report:#}");
 }
 
@@ -195,14 +183,16 @@ fn outside_writer_fss1_alignment_step_is_named_as_a_step() {
     let t = d["parameters"]["t_step_s"].as_f64().unwrap();
     assert!((10_000.0..13_000.0).contains(&t), "step at {t:.0} s");
     // FSS2 never sees the Sun on this plan: the report says its effects were not tested.
-    let notes = report["notes"].as_array().unwrap();
-    assert!(
-        notes.iter().any(|n| n
-            .as_str()
-            .unwrap()
-            .starts_with("FSS2: no usable measurement")),
-        "{notes:?}"
-    );
+    assert_a_note(&report["notes"], |n| {
+        n.starts_with("FSS2: no usable measurement")
+    });
+}
+
+/// One of the report's `notes` (an array of strings) satisfies `what`.
+#[track_caller]
+fn assert_a_note(notes: &Value, what: impl Fn(&str) -> bool) {
+    let notes = notes.as_array().unwrap();
+    assert!(notes.iter().any(|n| what(n.as_str().unwrap())), "{notes:?}");
 }
 
 /// A 100-ppm scale asymmetry with a bias ramp (0.009, −0.006, 0.012)″/s per hour on the
@@ -304,18 +294,7 @@ fn outside_writer_clean_day_writes_calibrates_alignment_table() {
         &["--seed", "1", "--plan", "long", "--hold-s", "1200"],
     );
     let run = |cmd: &str, out: &std::path::Path| {
-        let o = Command::new(env!("CARGO_BIN_EXE_ground-tool"))
-            .arg(cmd)
-            .arg(&dir)
-            .arg("--out")
-            .arg(out)
-            .output()
-            .unwrap();
-        assert!(
-            o.status.success(),
-            "{cmd} failed: {}",
-            String::from_utf8_lossy(&o.stderr)
-        );
+        support::ground_tool_ok(env!("CARGO_BIN_EXE_ground-tool"), cmd, &dir, out, &[]);
     };
     let (diag, cal) = (dir.join("diag"), dir.join("cal"));
     run("diagnose", &diag);

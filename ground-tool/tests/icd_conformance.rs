@@ -15,7 +15,6 @@ mod support;
 
 use serde_json::Value;
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 /// Write a run with the writer's `flags` into a fresh folder named after the case.
 fn write_run(case: &str, flags: &[&str]) -> PathBuf {
@@ -46,14 +45,13 @@ impl Outcome {
 
 fn ground_tool(cmd: &str, run: &Path) -> Outcome {
     let out_dir = run.join(format!("out-{cmd}"));
-    let out = Command::new(env!("CARGO_BIN_EXE_ground-tool"))
-        .arg(cmd)
-        .arg(run)
-        .arg("--out")
-        .arg(&out_dir)
-        .arg("--json")
-        .output()
-        .unwrap();
+    let out = support::ground_tool(
+        env!("CARGO_BIN_EXE_ground-tool"),
+        cmd,
+        run,
+        &out_dir,
+        &["--json"],
+    );
     let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
     let rc = out.status.code().unwrap_or(-1);
     assert!(

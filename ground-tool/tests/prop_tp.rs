@@ -34,6 +34,7 @@ use fsw_core::telemetry::{
     APID_RAW_SENSORS, EPHEMERIS_LEN, EVENT_LEN, HOUSEKEEPING_LEN, MAGNETICS_LEN, RAW_FRAME_LEN,
     TIME_CODE_LEN,
 };
+use gro_reference::splitmix::SplitMix64;
 use ground_tool::tp::{decode, Telemetry};
 
 const PRIMARY_HEADER_LEN: usize = 6;
@@ -44,19 +45,14 @@ const OVERHEAD: usize = PRIMARY_HEADER_LEN + TIME_CODE_LEN;
 // ------------------------------------------------------------------------------------------
 
 #[derive(Clone)]
-struct Rng(u64);
+struct Rng(SplitMix64);
 
 impl Rng {
     fn new(seed: u64) -> Self {
-        Self(seed)
+        Self(SplitMix64::new(seed))
     }
-    /// SplitMix64.
     fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
+        self.0.next_u64()
     }
     fn below(&mut self, n: usize) -> usize {
         (self.next() % n as u64) as usize
@@ -65,7 +61,7 @@ impl Rng {
         lo + self.below(hi_incl - lo + 1)
     }
     fn unit(&mut self) -> f64 {
-        (self.next() >> 11) as f64 / (1u64 << 53) as f64
+        self.0.unit()
     }
     fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
         lo + (hi - lo) * self.unit()

@@ -4,22 +4,18 @@
 //! different timeline. python3 is required (the ICD writer makes the runs; CI has it).
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
+#[path = "../../tests/reliability/command.rs"]
+mod command;
 mod support;
+
+use command::stderr;
 
 use serde_json::Value;
 use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Output;
 
 fn gt(args: &[&str], dir: &Path) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_ground-tool"))
-        .args(args)
-        .current_dir(dir)
-        .output()
-        .unwrap()
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
+    command::run(env!("CARGO_BIN_EXE_ground-tool"), args, dir)
 }
 
 /// Table errors are sentences (no Rust debug values), the OS error once, the path named, and

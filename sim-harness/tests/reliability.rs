@@ -2,21 +2,17 @@
 //! docs/reliability.md): each gives the documented exit code, a message that names the field
 //! or file, and leaves nothing half written or foreign deleted.
 
+#[path = "../../tests/reliability/command.rs"]
+mod command;
+
+use command::stderr;
 use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Output;
 
 use fsw_core::tables::{image::encode_image, AlignmentTable, FilterTable, IruTable, TableId};
 
 fn sim(args: &[&str], dir: &Path) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_sim-harness"))
-        .args(args)
-        .current_dir(dir)
-        .output()
-        .unwrap()
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
+    command::run(env!("CARGO_BIN_EXE_sim-harness"), args, dir)
 }
 
 fn image<T: serde::Serialize>(id: TableId, t: &T) -> Vec<u8> {

@@ -169,7 +169,7 @@ fn rms_max(v: &[f64]) -> (f64, f64) {
 /// Earth–Moon barycentre's and the Sun's barycentric velocities the mean-element ephemeris
 /// omits, ≈ 13 + 13 m/s, 0.02″ at most (docs/obc_filter.md §3) — so max ≤ 0.05″. The Sun:
 /// the onboard parallax-plus-orbital correction against the truth's, ≤ 0.05″ (the ephemeris's
-/// own ~10″ error is common to both and is `est_sun`'s subject).
+/// own ~10″ error is common to both and is the subject of `fsw-core`'s `est` test `sun`).
 #[test]
 fn val_onboard_star_and_sun_references_against_truth_apparent() {
     let sc = scenario::resolve("normal-ops").unwrap();

@@ -28,7 +28,6 @@ Columns of the per-run table:
              any regressor, counts as that effect's)
 """
 
-import argparse
 import json
 import os
 import shutil
@@ -39,6 +38,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.normpath(os.path.join(HERE, "..", ".."))
 sys.path.insert(0, os.path.join(ROOT, "scenarios", "undeclared"))
 import ledger_check  # noqa: E402  (the evidence ledger's invariant on report.json)
+from cases_cli import parser, selected_cases, write_json  # noqa: E402
 
 BASE = ["--plan", "long", "--hold-s", "1200"]
 
@@ -206,17 +206,9 @@ def fhst_pair_error(binary, table, truth):
 
 
 def main():
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("cases", nargs="*", help="case names (default: all)")
-    p.add_argument("--seeds", default="1 2 3")
-    p.add_argument("--bin", default=os.path.join(ROOT, "target", "release", "ground-tool"))
-    p.add_argument("--work", default="/tmp/icd-diagnose")
-    p.add_argument("--json", default=None, help="also write the results here")
+    p = parser(__doc__, "1 2 3", "/tmp/icd-diagnose", "also write the results here")
     args = p.parse_args()
-    cases = args.cases or list(CASES)
-    for c in cases:
-        if c not in CASES:
-            p.error(f"unknown case {c}; cases: {', '.join(CASES)}")
+    cases = selected_cases(p, args, CASES)
     seeds = [int(s) for s in args.seeds.split()]
     os.makedirs(args.work, exist_ok=True)
     results = {}
@@ -266,9 +258,7 @@ def main():
     broken = [k for k, r in results.items() if r.get("ledger_violations")]
     print(f"evidence ledger invariant (scenarios/undeclared/ledger_check.py): violated in {len(broken)} of "
           f"{len(done)} runs {broken if broken else ''}")
-    if args.json:
-        with open(args.json, "w") as f:
-            json.dump(results, f, indent=1)
+    write_json(args.json, results)
     return 0
 
 

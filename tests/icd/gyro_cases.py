@@ -44,7 +44,6 @@ that iru.tbl is always written, with the flown G when `g_updated` is false).
 Standard library only; 16 runs per seed, ≈ 2–3 min per seed (the writer dominates) on 2 shared cores.
 """
 
-import argparse
 import json
 import os
 import shutil
@@ -55,6 +54,7 @@ import time
 ARCSEC = 3.141592653589793 / 180 / 3600
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.normpath(os.path.join(HERE, "..", ".."))
+from cases_cli import parser, selected_cases, write_json  # noqa: E402
 
 BASE = ["--plan", "long", "--hold-s", "1200", "--slew-rates", "0.04,0.08,0.16", "--iru-delta-m", "paper"]
 
@@ -205,22 +205,14 @@ def summary(results):
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("cases", nargs="*", help="case names (default: all)")
-    ap.add_argument("--seeds", default="1")
-    ap.add_argument("--downlinks", default="1 30", help="--downlink-every values to run each case at")
-    ap.add_argument("--bin", default=os.path.join(ROOT, "target", "release", "ground-tool"))
-    ap.add_argument("--work", default="/tmp/icd-gyro")
-    ap.add_argument("--json", default=None, help="also write every result here")
+    ap = parser(__doc__, "1", "/tmp/icd-gyro", "also write every result here",
+                after_seeds=[("--downlinks", {"default": "1 30", "help": "--downlink-every values to run each case at"})])
     ap.add_argument("--from-json", default=None, help="print only the summary of an earlier --json file")
     args = ap.parse_args()
     if args.from_json:
         print(summary(json.load(open(args.from_json))))
         return 0
-    cases = args.cases or list(CASES)
-    for c in cases:
-        if c not in CASES:
-            ap.error(f"unknown case {c}; cases: {', '.join(CASES)}")
+    cases = selected_cases(ap, args, CASES)
     if not os.path.exists(args.bin):
         ap.error(f"{args.bin} not found: cargo build --release -p ground-tool")
     os.makedirs(args.work, exist_ok=True)
@@ -237,9 +229,7 @@ def main():
                 print(row(r), flush=True)
     print()
     print(summary(results))
-    if args.json:
-        with open(args.json, "w") as f:
-            json.dump(results, f, indent=1)
+    write_json(args.json, results)
     return 0
 
 

@@ -156,39 +156,22 @@ fn summary_runs() {
                 }
                 eprintln!(
                     "   rms before {:?}",
-                    r.residual_rms_arcsec
-                        .before
-                        .values()
-                        .map(|v| format!("{v:.2}"))
-                        .collect::<Vec<_>>()
+                    rounded(r.residual_rms_arcsec.before.values(), 2)
                 );
                 eprintln!(
                     "   rms after  {:?}",
-                    r.residual_rms_arcsec
-                        .after
-                        .values()
-                        .map(|v| format!("{v:.2}"))
-                        .collect::<Vec<_>>()
+                    rounded(r.residual_rms_arcsec.after.values(), 2)
                 );
                 eprintln!(
                     "   floor      {:?} n {:?}",
-                    r.noise_floor_arcsec
-                        .values()
-                        .map(|v| format!("{v:.2}"))
-                        .collect::<Vec<_>>(),
+                    rounded(r.noise_floor_arcsec.values(), 2),
                     r.measurements.values().collect::<Vec<_>>()
                 );
                 if let Some(c) = &r.calibration_error_arcsec {
                     eprintln!(
                         "   cal err before {:?} after {:?}",
-                        c.before
-                            .values()
-                            .map(|v| format!("{v:.1}"))
-                            .collect::<Vec<_>>(),
-                        c.after
-                            .values()
-                            .map(|v| format!("{v:.1}"))
-                            .collect::<Vec<_>>()
+                        rounded(c.before.values(), 1),
+                        rounded(c.after.values(), 1)
                     );
                 }
                 for c in &r.gyro.candidates {
@@ -335,34 +318,10 @@ fn debug_catalog() {
 #[test]
 #[ignore = "needs a run folder: SRC=... OUT_ROOT=..."]
 fn inject_non_library_effects() {
-    use gro_tests::diagnose::inject::{inject_run, Injected};
+    use gro_tests::diagnose::inject::{inject_run, NON_LIBRARY};
     let src = std::path::PathBuf::from(std::env::var("SRC").unwrap());
     let out_root = std::path::PathBuf::from(std::env::var("OUT_ROOT").unwrap());
-    for (name, effect) in [
-        (
-            "t2",
-            Injected::TemperatureSquared {
-                tracker: 1,
-                k_arcsec_per_c2: 2.0,
-            },
-        ),
-        (
-            "osc",
-            Injected::PostSlewOscillation {
-                tracker: 1,
-                amplitude_arcsec: 20.0,
-                period_s: 60.0,
-                decay_s: 200.0,
-            },
-        ),
-        (
-            "mag",
-            Injected::MagneticTwicePerOrbit {
-                tracker: 1,
-                amplitude_arcsec: 6.0,
-            },
-        ),
-    ] {
+    for (name, effect, _) in NON_LIBRARY {
         let run = out_root.join(format!("inject-{name}"));
         inject_run(&src, &run, effect).unwrap();
         let o = diagnose_run(
@@ -385,4 +344,9 @@ fn inject_non_library_effects() {
             );
         }
     }
+}
+
+/// Each value with `decimals` decimals (for the printed summaries).
+fn rounded<'a>(values: impl Iterator<Item = &'a f64>, decimals: usize) -> Vec<String> {
+    values.map(|v| format!("{v:.decimals$}")).collect()
 }

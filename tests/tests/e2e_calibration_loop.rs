@@ -242,23 +242,9 @@ fn calibration_without_housekeeping() {
     let out = support::fresh_dir("gro-e2e-nohk");
     let fly = out.join("run");
     fly_prelaunch(&fly);
-    // Drop every APID 0x011 packet (CCSDS primary header: APID in the low 11 bits of octets
-    // 0-1, data length - 1 in octets 4-5).
-    let bytes = std::fs::read(fly.join("telemetry.bin")).unwrap();
-    let mut raw_only = Vec::new();
-    let mut at = 0;
-    while at + 6 <= bytes.len() {
-        let apid = u16::from_be_bytes([bytes[at], bytes[at + 1]]) & 0x07ff;
-        let len = usize::from(u16::from_be_bytes([bytes[at + 4], bytes[at + 5]])) + 7;
-        if apid != 0x011 {
-            raw_only.extend_from_slice(&bytes[at..at + len]);
-        }
-        at += len;
-    }
+    // Drop every APID 0x011 packet.
     let nohk = out.join("nohk");
-    std::fs::create_dir_all(&nohk).unwrap();
-    std::fs::write(nohk.join("telemetry.bin"), &raw_only).unwrap();
-    std::fs::copy(fly.join("metadata.json"), nohk.join("metadata.json")).unwrap();
+    support::copy_run_without_apid(&fly, &nohk, 0x011);
     let c = calibrate_run(&nohk, &out.join("cal"), &CalibrateOptions::default()).unwrap();
     assert_eq!(c.report.telemetry.packets_housekeeping, 0);
     assert!(

@@ -75,6 +75,54 @@ fn common(r: &FaultReport, tables_may_change: bool) {
     }
 }
 
+/// The scenario `name` of `scenarios/faults/` assessed (flown with and without its faults) and
+/// the common checks applied.
+fn assessed(name: &str, tables_may_change: bool) -> (Scenario, FaultReport) {
+    let s = load(name);
+    let r = assess(&s).unwrap();
+    common(&r, tables_may_change);
+    (s, r)
+}
+
+/// Every cycle of the same scenario flown without its faults.
+fn fly_without_faults(s: &Scenario) -> Vec<CycleRecord> {
+    let mut clean = s.clone();
+    clean.faults.clear();
+    fly(&clean).0
+}
+
+/// The attitude error bit-identical at every cycle of `a` and `b` before `until_s`.
+fn assert_same_attitude(a: &[CycleRecord], b: &[CycleRecord], until_s: f64) {
+    for (a, b) in a.iter().zip(b).take_while(|(a, _)| a.truth.t_s < until_s) {
+        assert_eq!(
+            a.attitude_error_acs_rad, b.attitude_error_acs_rad,
+            "t = {}",
+            a.truth.t_s
+        );
+    }
+}
+
+/// Channel Y1 excluded at 900 s for `reasons` (`fsw_core::iru::EXCLUDED_*`), the switch to
+/// the backup triad in the same cycle, and no more unusable IRU cycles than without the fault.
+fn assert_y1_excluded_and_backup(recs: &[CycleRecord], r: &FaultReport, reasons: u32) {
+    assert_eq!(
+        events_of(recs, EventId::IruChannelExcluded),
+        vec![(900.0, 2, reasons)]
+    );
+    assert_eq!(
+        events_of(recs, EventId::IruConfigSwitched),
+        vec![(900.0, 1, 1)]
+    );
+    assert_unusable_cycles_unchanged(r);
+}
+
+fn assert_unusable_cycles_unchanged(r: &FaultReport) {
+    assert_eq!(
+        r.counters.iru_unusable_cycles,
+        r.baseline_counters.iru_unusable_cycles
+    );
+}
+
 /// Both FHSTs dark for 2400 s (scenario: 5700 s): coarse mode after 900 cycles, fine again at
 /// the first star after the dropout (trackers back at
 /// 3600 s, when the fault-free run has stars), the error inside the requirement throughout.
@@ -113,9 +161,7 @@ fn e2e_fault_fhst_dropout() {
 /// FHST1 silently reports another catalogue star: gated, attitude held by FHST2.
 #[test]
 fn e2e_fault_fhst_wrong_star() {
-    let s = load("fhst-wrong-star");
-    let r = assess(&s).unwrap();
-    common(&r, false);
+    let (s, r) = assessed("fhst-wrong-star", false);
     let (recs, _) = fly(&s);
     let (t0, t1) = (s.faults[0].at_s, s.faults[0].end_s());
     let gated_events = events_of(&recs, EventId::MeasurementGated);
@@ -155,9 +201,7 @@ fn e2e_fault_fhst_wrong_star() {
 /// samples; no displaced sample is used.
 #[test]
 fn e2e_fault_fhst_offset_star() {
-    let s = load("fhst-offset-star");
-    let r = assess(&s).unwrap();
-    common(&r, false);
+    let (s, r) = assessed("fhst-offset-star", false);
     let (recs, _) = fly(&s);
     let id_at_900 = recs
         .iter()
@@ -222,26 +266,11 @@ fn e2e_fault_fhst_offset_sweep() {
 /// FSS2 glint in fine mode (no effect, visible in the innovation) and in coarse mode (gated).
 #[test]
 fn e2e_fault_fss_glint() {
-    let s = load("fss-glint");
-    let r = assess(&s).unwrap();
-    common(&r, false);
+    let (s, r) = assessed("fss-glint", false);
     let (recs, _) = fly(&s);
     // Glint 1, fine mode: the attitude is bit-identical to a run without any fault until the
     // dropout starts, and the FSS2 innovation shows the 0.5°/−0.3° outlier (2000″ class).
-    let mut clean = s.clone();
-    clean.faults.clear();
-    let (clean_recs, _) = fly(&clean);
-    for (a, b) in recs
-        .iter()
-        .zip(&clean_recs)
-        .take_while(|(a, _)| a.truth.t_s < 1300.0)
-    {
-        assert_eq!(
-            a.attitude_error_acs_rad, b.attitude_error_acs_rad,
-            "t = {}",
-            a.truth.t_s
-        );
-    }
+    assert_same_attitude(&recs, &fly_without_faults(&s), 1300.0);
     let glint1 = recs
         .iter()
         .find(|r| (r.truth.t_s - 1205.0).abs() < 0.5)
@@ -285,16 +314,10 @@ fn e2e_fault_fss_glint() {
 /// the Sun changes nothing; the fine attitude is bit-identical to the fault-free run.
 #[test]
 fn e2e_fault_magnetics() {
-    let s = load("magnetics");
-    let r = assess(&s).unwrap();
-    common(&r, false);
+    let (s, _) = assessed("magnetics", false);
     let (recs, _) = fly(&s);
-    let mut clean = s.clone();
-    clean.faults.clear();
-    let (clean_recs, _) = fly(&clean);
-    for (a, b) in recs.iter().zip(&clean_recs) {
-        assert_eq!(a.attitude_error_acs_rad, b.attitude_error_acs_rad);
-    }
+    let clean_recs = fly_without_faults(&s);
+    assert_same_attitude(&recs, &clean_recs, f64::INFINITY);
     let rejected = events_of(&recs, EventId::CoarseVectorRejected);
     println!("{rejected:?}");
     assert!(rejected
@@ -335,29 +358,16 @@ fn e2e_fault_magnetics() {
 /// the backup biases after the slew instead of gating the stars.
 #[test]
 fn e2e_fault_iru_channel_failure_mid_slew() {
-    let s = load("iru-channel-failure-mid-slew");
-    let r = assess(&s).unwrap();
-    common(&r, false);
+    let (s, r) = assessed("iru-channel-failure-mid-slew", false);
     let (recs, sim) = fly(&s);
-    assert_eq!(
-        events_of(&recs, EventId::IruChannelExcluded),
-        vec![(
-            900.0,
-            2,
-            fsw_core::iru::EXCLUDED_FAILED | fsw_core::iru::EXCLUDED_STUCK
-        )]
-    );
-    assert_eq!(
-        events_of(&recs, EventId::IruConfigSwitched),
-        vec![(900.0, 1, 1)]
+    assert_y1_excluded_and_backup(
+        &recs,
+        &r,
+        fsw_core::iru::EXCLUDED_FAILED | fsw_core::iru::EXCLUDED_STUCK,
     );
     let hk = &recs.last().unwrap().output.housekeeping;
     assert_eq!(hk.iru_config, 1);
     assert_ne!(hk.iru_excluded_mask & 0x04, 0);
-    assert_eq!(
-        r.counters.iru_unusable_cycles,
-        r.baseline_counters.iru_unusable_cycles
-    );
     assert_eq!(
         sim.fsw().filter_mode(),
         fsw_core::executive::FilterMode::Fine
@@ -381,24 +391,11 @@ fn e2e_fault_iru_channel_failure_mid_slew() {
 /// excludes it in the same cycle, and the rest is as for the reported failure.
 #[test]
 fn e2e_fault_iru_stuck_channel_mid_slew() {
-    let s = load("iru-stuck-channel-mid-slew");
-    let r = assess(&s).unwrap();
-    common(&r, false);
+    let (s, r) = assessed("iru-stuck-channel-mid-slew", false);
     let (recs, _) = fly(&s);
     // No BIT bit anywhere in the raw frames: the OBC found it by itself.
     assert!(recs.iter().all(|r| r.frame.iru.channel_failed == 0));
-    assert_eq!(
-        events_of(&recs, EventId::IruChannelExcluded),
-        vec![(900.0, 2, fsw_core::iru::EXCLUDED_STUCK)]
-    );
-    assert_eq!(
-        events_of(&recs, EventId::IruConfigSwitched),
-        vec![(900.0, 1, 1)]
-    );
-    assert_eq!(
-        r.counters.iru_unusable_cycles,
-        r.baseline_counters.iru_unusable_cycles
-    );
+    assert_y1_excluded_and_backup(&recs, &r, fsw_core::iru::EXCLUDED_STUCK);
     // Identical figures to the reported failure (same cycle, same switch).
     let reported = assess(&load("iru-channel-failure-mid-slew")).unwrap();
     assert_eq!(r.worst_axis_error_arcsec, reported.worst_axis_error_arcsec);
@@ -410,9 +407,7 @@ fn e2e_fault_iru_stuck_channel_mid_slew() {
 /// to the run whose counters do not wrap there.
 #[test]
 fn e2e_fault_iru_counter_wrap() {
-    let s = load("iru-counter-wrap");
-    let r = assess(&s).unwrap();
-    common(&r, false);
+    let (s, r) = assessed("iru-counter-wrap", false);
     let (recs, _) = fly(&s);
     // Wraps seen in the raw counters (a step whose u16 difference and i16 reading disagree
     // in sign); in the high-rate frames, the X channels wrap at least 4 times.
@@ -440,22 +435,11 @@ fn e2e_fault_iru_counter_wrap() {
             "{id:?} after t = 0"
         );
     }
-    assert_eq!(
-        r.counters.iru_unusable_cycles,
-        r.baseline_counters.iru_unusable_cycles
-    );
+    assert_unusable_cycles_unchanged(&r);
     // Identical attitude history with and without the wraps (only differences are read).
-    let mut clean = s.clone();
-    clean.faults.clear();
-    let (clean_recs, _) = fly(&clean);
+    let clean_recs = fly_without_faults(&s);
     assert_eq!(recs.len(), clean_recs.len());
-    for (a, b) in recs.iter().zip(&clean_recs) {
-        assert_eq!(
-            a.attitude_error_acs_rad, b.attitude_error_acs_rad,
-            "t = {}",
-            a.truth.t_s
-        );
-    }
+    assert_same_attitude(&recs, &clean_recs, f64::INFINITY);
     // Back inside the requirement within 25 min of the slew start (slew ~13 min).
     assert!(r.recovery_s.unwrap() <= 1500.0);
 }
@@ -464,9 +448,7 @@ fn e2e_fault_iru_counter_wrap() {
 /// period used, attitude undisturbed.
 #[test]
 fn e2e_fault_time_tag_jump() {
-    let s = load("time-tag-jump");
-    let r = assess(&s).unwrap();
-    common(&r, false);
+    let (s, r) = assessed("time-tag-jump", false);
     let (recs, _) = fly(&s);
     let ev: Vec<f64> = events_of(&recs, EventId::TimeTagAnomaly)
         .iter()
@@ -483,9 +465,7 @@ fn e2e_fault_time_tag_jump() {
 /// the active tables do not change until a valid image is activated, which then is the dump.
 #[test]
 fn e2e_fault_table_uploads() {
-    let s = load("table-uploads");
-    let r = assess(&s).unwrap();
-    common(&r, true);
+    let (s, r) = assessed("table-uploads", true);
     let mut sim = Simulation::new(s.clone(), None).unwrap();
     let mut buf = vec![0_u8; 1 << 17];
     let dump = |sim: &Simulation, buf: &mut Vec<u8>| -> Vec<Vec<u8>> {
@@ -574,9 +554,7 @@ fn stored_crc(image: &[u8]) -> u32 {
 /// slew are accepted at once and the error comes back inside the requirement.
 #[test]
 fn e2e_fault_filter_reset_mid_slew() {
-    let s = load("filter-reset-mid-slew");
-    let r = assess(&s).unwrap();
-    common(&r, false);
+    let (s, r) = assessed("filter-reset-mid-slew", false);
     let (recs, _) = fly(&s);
     assert_eq!(
         events_of(&recs, EventId::FilterReset)
@@ -585,9 +563,7 @@ fn e2e_fault_filter_reset_mid_slew() {
             .collect::<Vec<_>>(),
         vec![900.0]
     );
-    let mut clean = s.clone();
-    clean.faults.clear();
-    let (clean_recs, _) = fly(&clean);
+    let clean_recs = fly_without_faults(&s);
     let at = |v: &[CycleRecord], t: f64| {
         v.iter()
             .find(|r| (r.truth.t_s - t).abs() < 0.5)

@@ -1,22 +1,12 @@
 //! Bad inputs against the main-job binaries (issue 17; the whole table:
 //! `tests/reliability/run_all.sh`, docs/reliability.md).
 
+#[path = "../reliability/command.rs"]
+mod command;
 mod support;
 
-use std::path::Path;
-use std::process::{Command, Output};
-
-fn run(bin: &str, args: &[&str], dir: &Path) -> Output {
-    Command::new(bin)
-        .args(args)
-        .current_dir(dir)
-        .output()
-        .unwrap()
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
+use command::{run, stderr};
+use std::process::Output;
 
 /// `calibration-mc -n 0` is bad input (exit 2, as `monte-carlo -n 0`), and `--work W` never
 /// deletes a seed folder it did not create.

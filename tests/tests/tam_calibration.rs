@@ -10,6 +10,8 @@
 //! calibration still succeeds. The statistics over seeds are in docs/magnetics.md §4.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
+mod support;
+
 use ground_tool::pipeline::calibrate::{calibrate_run, CalibrateOptions};
 use sim_harness::run::{run, RunOptions};
 use sim_harness::scenario::resolve;
@@ -20,8 +22,7 @@ const DURATION_S: f64 = 3600.0;
 
 #[test]
 fn e2e_tam_bias_recovered_within_its_sigma() {
-    let out = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("gro-e2e-tam");
-    let _ = std::fs::remove_dir_all(&out);
+    let out = support::fresh_dir("gro-e2e-tam");
     let fly = out.join("run");
     let mut scenario = resolve("gro-early-mission").unwrap();
     assert!(
@@ -103,21 +104,8 @@ fn e2e_tam_bias_recovered_within_its_sigma() {
     }
 
     // The same telemetry without APID 0x013 (a format-version-1 file): not determined, and why.
-    let bytes = std::fs::read(fly.join("telemetry.bin")).unwrap();
-    let mut v1 = Vec::new();
-    let mut at = 0;
-    while at + 6 <= bytes.len() {
-        let apid = u16::from_be_bytes([bytes[at], bytes[at + 1]]) & 0x07ff;
-        let len = usize::from(u16::from_be_bytes([bytes[at + 4], bytes[at + 5]])) + 7;
-        if apid != 0x013 {
-            v1.extend_from_slice(&bytes[at..at + len]);
-        }
-        at += len;
-    }
     let old = out.join("v1");
-    std::fs::create_dir_all(&old).unwrap();
-    std::fs::write(old.join("telemetry.bin"), &v1).unwrap();
-    std::fs::copy(fly.join("metadata.json"), old.join("metadata.json")).unwrap();
+    support::copy_run_without_apid(&fly, &old, 0x013);
     // As `ground-tool calibrate` does: the flown magnetics table from the run's uploads (here
     // listed without their files).
     let meta = ground_tool::pipeline::flown::metadata_or_default(&old);

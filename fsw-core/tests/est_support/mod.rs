@@ -1,38 +1,31 @@
 //! Shared helpers of the `est_*` integration tests: a deterministic PRNG, Gaussian samples,
 //! random rotations, and a reader for the reference CSV files in `data/`.
-#![allow(
-    dead_code,
-    clippy::unwrap_used,
-    clippy::expect_used,
-    clippy::panic,
-    clippy::indexing_slicing,
-    clippy::arithmetic_side_effects
-)]
+#![allow(dead_code)]
 
 pub mod filter_truth;
 
 use fsw_core::attitude::Quat;
 use nalgebra::Vector3;
 
+// SplitMix64, the workspace's one definition (fsw-core cannot depend on gro-reference).
+#[path = "../../../gro-reference/src/splitmix.rs"]
+mod splitmix;
+
 /// SplitMix64: small, deterministic, good enough for test noise.
-pub struct Rng(u64);
+pub struct Rng(splitmix::SplitMix64);
 
 impl Rng {
     pub fn new(seed: u64) -> Self {
-        Self(seed)
+        Self(splitmix::SplitMix64::new(seed))
     }
 
     pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
+        self.0.next_u64()
     }
 
     /// Uniform in [0, 1).
     pub fn uniform(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
+        self.0.unit()
     }
 
     /// Uniform in [lo, hi).

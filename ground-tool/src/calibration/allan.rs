@@ -54,6 +54,7 @@ use crate::tp::Telemetry;
 use fsw_core::events::EventId;
 use fsw_core::iru::pulse_weight_rad;
 use fsw_core::tables::IruTable;
+use gro_reference::splitmix::SplitMix64;
 use serde::Serialize;
 use statrs::distribution::{ChiSquared, ContinuousCDF};
 use std::f64::consts::{LN_2, PI};
@@ -828,24 +829,20 @@ pub fn analyse_segments_with(
 /// SplitMix64 and Box–Muller: the bootstrap's own seeded normal generator (the library has no
 /// random-number crate; the replicas need not match any other generator).
 struct Normal {
-    state: u64,
+    state: SplitMix64,
     spare: Option<f64>,
 }
 
 impl Normal {
     fn new(seed: u64) -> Self {
         Self {
-            state: seed,
+            state: SplitMix64::new(seed),
             spare: None,
         }
     }
 
     fn uniform(&mut self) -> f64 {
-        self.state = self.state.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.state;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^= z >> 31;
+        let z = self.state.next_u64();
         // (0, 1]: never 0, so ln is finite.
         ((z >> 11) as f64 + 1.0) / (1u64 << 53) as f64
     }

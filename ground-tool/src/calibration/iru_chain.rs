@@ -45,7 +45,7 @@ use serde::Serialize;
 use fsw_core::attitude::{rot, rotvec_from_rot};
 
 use super::iru::{propagate_interval, AttitudeFix, GyroCalibration, GyroNoise, GyroStep, PPM};
-use crate::diagnose::stats::chi2_sf;
+use crate::diagnose::stats::{chi2_per_dof, chi2_sf};
 use crate::{ARCSEC_PER_RAD, RAD_PER_ARCSEC};
 
 /// State size: θ, δβ, δm primary, δm backup, split fractions (slew start, slew end), the
@@ -1636,16 +1636,7 @@ pub fn validate_heldout(
     }
     let dof = 3 * links;
     let spread = (2.0 * dof as f64).sqrt();
-    let mean_square = if dof > 0 {
-        chi2_model / dof as f64
-    } else {
-        f64::NAN
-    };
-    let p_value = if dof > 0 {
-        chi2_sf(chi2_model, dof as f64)
-    } else {
-        f64::NAN
-    };
+    let (mean_square, p_value) = chi2_per_dof(chi2_model, dof);
     let (passed, reason) = if links < 2 {
         (
             false,

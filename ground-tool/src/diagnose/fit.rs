@@ -461,22 +461,11 @@ impl BatchAccumulator {
 /// re-estimated from the FHST rows, the FSS rows taken against it with its error eliminated
 /// as well — so that `Σ χ²_b(g) = χ² − 2 gᵀb + gᵀN g` of the same batches' [`Normal`].
 /// Returns (batch, χ², scalar rows) per batch in batch order; the held-out validation of
-/// diagnose's tables ([`super::heldout`]) compares two vectors batch by batch with it.
+/// diagnose's tables ([`super::heldout`]) compares two vectors batch by batch with it. Over
+/// the rows `rows` takes: the trackers' alone say what the trackers, which give the flight
+/// attitude, see of `g` (the held-out judgement of a tracker's table).
 #[must_use]
 pub fn batch_chi2(
-    set: &MeasurementSet,
-    layout: &Layout,
-    g: &DVector<f64>,
-    use_batch: &dyn Fn(usize) -> bool,
-) -> Vec<(usize, f64, usize)> {
-    batch_quadratic(set, layout, g, use_batch, true, Rows::All)
-}
-
-/// [`batch_chi2`] over the rows `rows` takes: the trackers' alone say what the trackers,
-/// which give the flight attitude, see of `g` (the held-out judgement of a tracker's table,
-/// [`super::heldout`]).
-#[must_use]
-pub fn batch_chi2_rows(
     set: &MeasurementSet,
     layout: &Layout,
     g: &DVector<f64>,
@@ -484,18 +473,6 @@ pub fn batch_chi2_rows(
     rows: Rows,
 ) -> Vec<(usize, f64, usize)> {
     batch_quadratic(set, layout, g, use_batch, true, rows)
-}
-
-/// [`batch_information`] over the rows `rows` takes.
-#[must_use]
-pub fn batch_information_rows(
-    set: &MeasurementSet,
-    layout: &Layout,
-    g: &DVector<f64>,
-    use_batch: &dyn Fn(usize) -> bool,
-    rows: Rows,
-) -> Vec<(usize, f64, usize)> {
-    batch_quadratic(set, layout, g, use_batch, false, rows)
 }
 
 /// The rows a batch quadratic takes.
@@ -516,8 +493,9 @@ pub fn batch_information(
     layout: &Layout,
     g: &DVector<f64>,
     use_batch: &dyn Fn(usize) -> bool,
+    rows: Rows,
 ) -> Vec<(usize, f64, usize)> {
-    batch_quadratic(set, layout, g, use_batch, false, Rows::All)
+    batch_quadratic(set, layout, g, use_batch, false, rows)
 }
 
 fn batch_quadratic(

@@ -43,8 +43,8 @@
 //! shrinkage and net-rotation removal [`super::flight`] applies to the uplinked catalog.
 
 use super::fit::{
-    accumulate, batch_chi2, batch_chi2_rows, batch_information_rows, solve_fixed, Fixed, Layout,
-    Normal, Rows, NUISANCE, N_ALIGN,
+    accumulate, batch_chi2, batch_information, solve_fixed, Fixed, Layout, Normal, Rows, NUISANCE,
+    N_ALIGN,
 };
 use super::measurements::{MeasurementSet, SENSOR_NAMES};
 use crate::calibration::iru_chain::MAX_FOLDS;
@@ -360,12 +360,12 @@ impl Folds<'_> {
             };
             let in_fold = |b: usize| self.fold[b] == Some(f);
             out.rows.extend(
-                batch_chi2(self.set, &self.sub, &g, &in_fold)
+                batch_chi2(self.set, &self.sub, &g, &in_fold, Rows::All)
                     .into_iter()
                     .map(|(b, c, n)| (b, c, n.saturating_sub(NUISANCE))),
             );
             out.rows_fhst.extend(
-                batch_chi2_rows(self.set, &self.sub, &g, &in_fold, Rows::Trackers)
+                batch_chi2(self.set, &self.sub, &g, &in_fold, Rows::Trackers)
                     .into_iter()
                     .map(|(b, c, n)| (b, c, n.saturating_sub(NUISANCE))),
             );
@@ -448,7 +448,7 @@ impl Folds<'_> {
                 continue;
             }
             let in_fold = |b: usize| self.fold[b] == Some(f);
-            let info = batch_information_rows(self.set, &self.sub, &dg, &in_fold, which);
+            let info = batch_information(self.set, &self.sub, &dg, &in_fold, which);
             delta.extend(info.into_iter().map(|(b, d, _)| (b, d)));
         }
         delta.sort_by_key(|d| d.0);

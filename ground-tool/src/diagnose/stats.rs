@@ -96,6 +96,17 @@ pub fn chi2_sf(x: f64, k: f64) -> f64 {
     gamma_q(0.5 * k, 0.5 * x)
 }
 
+/// `χ²/dof` and the probability of a χ² at least `chi2` over `dof` degrees of freedom
+/// ([`chi2_sf`]); both NaN without a degree of freedom.
+#[must_use]
+pub fn chi2_per_dof(chi2: f64, dof: usize) -> (f64, f64) {
+    if dof > 0 {
+        (chi2 / dof as f64, chi2_sf(chi2, dof as f64))
+    } else {
+        (f64::NAN, f64::NAN)
+    }
+}
+
 /// One step of the modified Lentz algorithm for a continued fraction's term `aa`:
 /// `d ← 1/(1 + aa d)`, `c ← 1 + aa/c`, each kept away from zero by `tiny`.
 fn lentz_step(aa: f64, c: &mut f64, d: &mut f64, tiny: f64) {

@@ -31,7 +31,7 @@ use serde::Serialize;
 use super::ffcal_stages::{AlignmentSetup, SENSOR_NAMES};
 use super::observations::FrameObservations;
 use crate::calibration::alignment::{alignment_residuals, ffcal, FfcalConfig, Weighting};
-use crate::diagnose::stats::chi2_sf;
+use crate::diagnose::stats::chi2_per_dof;
 
 /// Most folds (blocks of time held out in turn) and the largest held-out χ²/dof that counts
 /// as consistent: the IRU table's (`calibration::iru_chain`), one rule for every table.
@@ -252,16 +252,7 @@ pub(crate) fn validate_alignment_heldout(
     }
     let improvement = paired_improvement(&per_epoch_new, &per_epoch_flown);
     let z = improvement.z;
-    let mean_square = if dof > 0 {
-        chi2_new / dof as f64
-    } else {
-        f64::NAN
-    };
-    let p_value = if dof > 0 {
-        chi2_sf(chi2_new, dof as f64)
-    } else {
-        f64::NAN
-    };
+    let (mean_square, p_value) = chi2_per_dof(chi2_new, dof);
     let folds = blocks.len();
     let rms_new_arcsec = rms_new.by_name(&setup.map);
     let not_validated: Vec<String> = setup

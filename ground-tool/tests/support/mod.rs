@@ -2,7 +2,7 @@
 #![allow(dead_code, clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
+use std::process::{Command, Output};
 
 /// The workspace root.
 pub fn root() -> PathBuf {
@@ -32,24 +32,34 @@ pub fn write_run(prefix: &str, case: &str, flags: &[&str]) -> PathBuf {
     dir
 }
 
-/// `ground-tool calibrate RUN --out OUT --force --json EXTRA...` (the binary of the test's
-/// own crate, `bin`): the report, after asserting success.
-pub fn calibrate_json(bin: &str, run: &Path, out: &Path, extra: &[&str]) -> serde_json::Value {
-    let o = Command::new(bin)
-        .arg("calibrate")
+/// `ground-tool CMD RUN --out OUT EXTRA...` (the binary of the test's own crate, `bin`).
+pub fn ground_tool(bin: &str, cmd: &str, run: &Path, out: &Path, extra: &[&str]) -> Output {
+    Command::new(bin)
+        .arg(cmd)
         .arg(run)
         .arg("--out")
         .arg(out)
-        .arg("--force")
-        .arg("--json")
         .args(extra)
         .output()
-        .unwrap();
+        .unwrap()
+}
+
+/// [`ground_tool`], asserting success (its stderr in the message).
+pub fn ground_tool_ok(bin: &str, cmd: &str, run: &Path, out: &Path, extra: &[&str]) -> Output {
+    let o = ground_tool(bin, cmd, run, out, extra);
     assert!(
         o.status.success(),
-        "calibrate {}: {}",
+        "{cmd} {}: {}",
         run.display(),
         String::from_utf8_lossy(&o.stderr)
     );
+    o
+}
+
+/// `ground-tool calibrate RUN --out OUT --force --json EXTRA...` (the binary of the test's
+/// own crate, `bin`): the report, after asserting success.
+pub fn calibrate_json(bin: &str, run: &Path, out: &Path, extra: &[&str]) -> serde_json::Value {
+    let args: Vec<&str> = ["--force", "--json"].iter().chain(extra).copied().collect();
+    let o = ground_tool_ok(bin, "calibrate", run, out, &args);
     serde_json::from_slice(&o.stdout).unwrap()
 }

@@ -52,6 +52,38 @@ pub enum Injected {
     },
 }
 
+/// The out-of-library effects the tests inject into a clean run, each on FHST2: (short name,
+/// effect, the regressor its residual structure follows) — `ΔH = 2″/°C² (T − T̄)²`, a
+/// post-slew ringing of 20″ (60 s period, 200 s decay) and a twice-per-orbit shift of 6″.
+pub const NON_LIBRARY: [(&str, Injected, &str); 3] = [
+    (
+        "t2",
+        Injected::TemperatureSquared {
+            tracker: 1,
+            k_arcsec_per_c2: 2.0,
+        },
+        "temperature_c",
+    ),
+    (
+        "osc",
+        Injected::PostSlewOscillation {
+            tracker: 1,
+            amplitude_arcsec: 20.0,
+            period_s: 60.0,
+            decay_s: 200.0,
+        },
+        "time_since_slew_s",
+    ),
+    (
+        "mag",
+        Injected::MagneticTwicePerOrbit {
+            tracker: 1,
+            amplitude_arcsec: 6.0,
+        },
+        "orbit_phase_rad",
+    ),
+];
+
 impl Injected {
     /// Name recorded in truth.json.
     #[must_use]

@@ -17,6 +17,7 @@ use fsw_core::raw::TimeTag;
 use fsw_core::tables::types::{matrix_from_rows, rows_from_matrix};
 use fsw_core::tables::AlignmentTable;
 use fsw_core::units::{ARCSEC_PER_RAD, RAD_PER_ARCSEC, RAD_PER_DEG};
+use gro_reference::splitmix::SplitMix64;
 use ground_tool::calibration::iru::{GyroCalibration, GyroStep};
 use ground_tool::pipeline::observations::{
     DeclaredNoise, FrameObservations, RateSwitch, StarObservation, SunObservation,
@@ -156,30 +157,12 @@ struct Star {
     offset: Vector3<f64>,
 }
 
-/// SplitMix64: a small deterministic generator (no extra dependency).
-struct Rng64(u64);
-
-impl Rng64 {
-    fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in [0, 1).
-    fn uniform(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-    }
-}
-
-fn unit(rng: &mut Rng64) -> Vector3<f64> {
+fn unit(rng: &mut SplitMix64) -> Vector3<f64> {
     loop {
         let v = Vector3::new(
-            2.0 * rng.uniform() - 1.0,
-            2.0 * rng.uniform() - 1.0,
-            2.0 * rng.uniform() - 1.0,
+            2.0 * rng.unit() - 1.0,
+            2.0 * rng.unit() - 1.0,
+            2.0 * rng.unit() - 1.0,
         );
         let n = v.norm();
         if n > 0.1 && n <= 1.0 {
@@ -188,10 +171,10 @@ fn unit(rng: &mut Rng64) -> Vector3<f64> {
     }
 }
 
-fn gauss(rng: &mut Rng64) -> f64 {
+fn gauss(rng: &mut SplitMix64) -> f64 {
     // Box–Muller.
-    let u1 = rng.uniform().max(1e-300);
-    let u2 = rng.uniform();
+    let u1 = rng.unit().max(1e-300);
+    let u2 = rng.unit();
     (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
 }
 
@@ -223,7 +206,8 @@ fn plan(cfg: &SynthConfig) -> Vec<(f64, Vector3<f64>, f64)> {
 /// second ([`Scene::frame`]) with the attitude stepped along the slew plan.
 #[must_use]
 pub fn generate(cfg: &SynthConfig) -> SynthRun {
-    let mut rng = Rng64(cfg.seed.wrapping_mul(0x2545_F491_4F6C_DD1D) ^ 0x5851_F42D_4C95_7F2D);
+    let mut rng =
+        SplitMix64::new(cfg.seed.wrapping_mul(0x2545_F491_4F6C_DD1D) ^ 0x5851_F42D_4C95_7F2D);
     // 1. Sky.
     let (stars, catalog_offsets) = sky(cfg, &mut rng);
     // 2. Geometry.
@@ -267,14 +251,14 @@ pub fn generate(cfg: &SynthConfig) -> SynthRun {
 /// star).
 fn sky(
     cfg: &SynthConfig,
-    rng: &mut Rng64,
+    rng: &mut SplitMix64,
 ) -> (Vec<Star>, std::collections::BTreeMap<u32, [f64; 2]>) {
     let fx = &cfg.effects;
     let mut stars = Vec::with_capacity(cfg.stars);
     let mut catalog_offsets = std::collections::BTreeMap::new();
     for k in 0..cfg.stars {
         let dir = unit(rng);
-        let mag = 2.0 + 3.7 * rng.uniform().powf(0.6);
+        let mag = 2.0 + 3.7 * rng.unit().powf(0.6);
         let hip = 1000 + k as u32;
         let mut offset = Vector3::zeros();
         if fx.catalog_sigma_arcsec > 0.0 {
@@ -533,7 +517,7 @@ impl<'a> Scene<'a> {
         k: usize,
         ep: &Epoch,
         trackers: &mut Trackers,
-        rng: &mut Rng64,
+        rng: &mut SplitMix64,
     ) -> (FrameObservations, Vector3<f64>) {
         let star0 = self.tracker(ep, 0, trackers, rng);
         let star1 = self.tracker(ep, 1, trackers, rng);
@@ -569,7 +553,7 @@ impl<'a> Scene<'a> {
         ep: &Epoch,
         tr: usize,
         trackers: &mut Trackers,
-        rng: &mut Rng64,
+        rng: &mut SplitMix64,
     ) -> Option<StarObservation> {
         let (t, half) = (ep.t, HALF_FOV_DEG * RAD_PER_DEG);
         let stars = &self.stars;
@@ -632,7 +616,7 @@ impl<'a> Scene<'a> {
         st: &Star,
         (h, v): (f64, f64),
         new_star: bool,
-        rng: &mut Rng64,
+        rng: &mut SplitMix64,
     ) -> StarObservation {
         let fx = &self.cfg.effects;
         let (ns, half) = (self.cfg.noise_scale, HALF_FOV_DEG * RAD_PER_DEG);
@@ -682,7 +666,7 @@ impl<'a> Scene<'a> {
     fn sun_sensors(
         &self,
         ep: &Epoch,
-        rng: &mut Rng64,
+        rng: &mut SplitMix64,
     ) -> ([Option<Box<SunObservation>>; 2], Vector3<f64>) {
         let fx = &self.cfg.effects;
         let (pos, sun_eci, ns) = (ep.pos, self.geometry.sun_eci, self.cfg.noise_scale);

@@ -1,4 +1,5 @@
-//! What the integration tests of this crate share.
+//! What the integration tests of this crate share (each test binary uses part of it).
+#![allow(dead_code)]
 
 use std::path::{Path, PathBuf};
 
@@ -8,4 +9,24 @@ pub fn fresh_dir(name: &str) -> PathBuf {
     let d = Path::new(env!("CARGO_TARGET_TMPDIR")).join(name);
     let _ = std::fs::remove_dir_all(&d);
     d
+}
+
+/// A copy of the run folder `run` in `dest` (created) without the packets of APID `apid`:
+/// its `telemetry.bin` filtered (CCSDS primary header: APID in the low 11 bits of octets 0-1,
+/// data length − 1 in octets 4-5) and its `metadata.json`.
+pub fn copy_run_without_apid(run: &Path, dest: &Path, apid: u16) {
+    let bytes = std::fs::read(run.join("telemetry.bin")).unwrap();
+    let mut kept = Vec::new();
+    let mut at = 0;
+    while at + 6 <= bytes.len() {
+        let packet_apid = u16::from_be_bytes([bytes[at], bytes[at + 1]]) & 0x07ff;
+        let len = usize::from(u16::from_be_bytes([bytes[at + 4], bytes[at + 5]])) + 7;
+        if packet_apid != apid {
+            kept.extend_from_slice(&bytes[at..at + len]);
+        }
+        at += len;
+    }
+    std::fs::create_dir_all(dest).unwrap();
+    std::fs::write(dest.join("telemetry.bin"), &kept).unwrap();
+    std::fs::copy(run.join("metadata.json"), dest.join("metadata.json")).unwrap();
 }

@@ -1,12 +1,5 @@
 //! MEKF robustness: arbitrary (including non-finite and absurd) inputs never panic, never
 //! corrupt the state, and the covariance stays symmetric positive definite.
-#![allow(
-    clippy::unwrap_used,
-    clippy::expect_used,
-    clippy::panic,
-    clippy::indexing_slicing,
-    clippy::arithmetic_side_effects
-)]
 
 use fsw_core::attitude::Quat;
 use fsw_core::mekf::Mekf;

@@ -8,17 +8,8 @@
 //! 2.0–5.7 catalog; identified against a catalog extended by the 0.2 mag margin
 //! (1.8 ≤ Hp ≤ 5.9, fits the 4096-star table), and — for information — against the plain
 //! 2.0–5.7 catalog, which is where wrong identifications come from.
-#![allow(
-    clippy::unwrap_used,
-    clippy::expect_used,
-    clippy::panic,
-    clippy::indexing_slicing,
-    clippy::arithmetic_side_effects
-)]
 
-mod est_support;
-
-use est_support::{Csv, Rng};
+use crate::est_support::{Csv, Rng};
 use fsw_core::attitude::Quat;
 use fsw_core::fhst::{self, FHST_RAD_PER_COUNT};
 use fsw_core::raw::{FhstSample, FHST_FLAG_NEW_STAR, FHST_FLAG_TRACKING, FHST_FLAG_VALID};

@@ -1,11 +1,4 @@
 //! Property tests of the DRIRU II pulse integration.
-#![allow(
-    clippy::unwrap_used,
-    clippy::expect_used,
-    clippy::panic,
-    clippy::indexing_slicing,
-    clippy::arithmetic_side_effects
-)]
 
 use fsw_core::attitude::{attitude_error_rad, Quat};
 use fsw_core::iru::{

@@ -4,13 +4,6 @@
 //! law does not know; wheels are ideal torquers (their momentum is not modelled); RK4 at
 //! 10 Hz, torque held over the 1-s control cycle. The controller sees the true attitude and
 //! rate (estimation errors are the filter test's subject).
-#![allow(
-    clippy::unwrap_used,
-    clippy::expect_used,
-    clippy::panic,
-    clippy::indexing_slicing,
-    clippy::arithmetic_side_effects
-)]
 
 use fsw_core::attitude::Quat;
 use fsw_core::control::{ControlMode, Controller};

@@ -3,17 +3,10 @@
 //! 1 FSS conversion and vector update (+ the Sun ephemeris, separately).
 //!
 //! ```text
-//! cargo test --release -p fsw-core --test est_perf --no-run
-//! valgrind --tool=callgrind --toggle-collect='est_perf::estimation_cycle' <binary> --exact estimation_cycle_runs
+//! cargo test --release -p fsw-core --test est --no-run
+//! valgrind --tool=callgrind --toggle-collect='est::perf::estimation_cycle' <binary> --exact perf::estimation_cycle_runs
 //! ```
 //! and divide the collected instructions by [`CYCLES`].
-#![allow(
-    clippy::unwrap_used,
-    clippy::expect_used,
-    clippy::panic,
-    clippy::indexing_slicing,
-    clippy::arithmetic_side_effects
-)]
 
 use fsw_core::attitude::Quat;
 use fsw_core::fhst;

@@ -1,15 +1,6 @@
 //! Onboard Sun ephemeris against DE421 (Skyfield) apparent directions, `data/sun_reference.csv`.
-#![allow(
-    clippy::unwrap_used,
-    clippy::expect_used,
-    clippy::panic,
-    clippy::indexing_slicing,
-    clippy::arithmetic_side_effects
-)]
 
-mod est_support;
-
-use est_support::Csv;
+use crate::est_support::Csv;
 use fsw_core::sun_ephemeris::{aberrate, sun_state};
 use fsw_core::units::{ARCSEC_PER_RAD, S_PER_DAY};
 use nalgebra::Vector3;
