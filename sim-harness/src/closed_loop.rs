@@ -342,80 +342,7 @@ impl Simulation {
         });
         for i in order {
             let c = &scenario.commands[i];
-            let here = format!("commands[{i}]");
-            let action = match c.kind {
-                CommandKind::SlewTo => match (c.q_acs_from_eci, &c.axis, c.angle_deg) {
-                    (Some(q), _, _) => Action::Slew(quat_from_array(q)),
-                    (None, Some(axis), Some(angle)) => Action::SlewRelative(
-                        body_axis_from_name(axis)
-                            .with_context(|| format!("{here}.axis"))
-                            .map_err(InputError::from)?
-                            * angle.to_radians(),
-                    ),
-                    _ => {
-                        return Err(InputError::msg(format!(
-                            "{here}: slew_to needs q_acs_from_eci or axis + angle_deg"
-                        ))
-                        .into())
-                    }
-                },
-                CommandKind::Hold => Action::Hold,
-                CommandKind::SelectIruConfig => {
-                    Action::SelectIru(if c.config.as_deref() == Some("backup") {
-                        IruConfiguration::Backup
-                    } else {
-                        IruConfiguration::Primary
-                    })
-                }
-                CommandKind::FilterInitialize => {
-                    Action::FilterInit(c.q_acs_from_eci.map(quat_from_array))
-                }
-                CommandKind::FilterReset => Action::FilterReset,
-                CommandKind::SunAcquire => Action::SunAcquire(c.sun_axis_acs.ok_or_else(|| {
-                    InputError::msg(format!("{here}: sun_acquire needs sun_axis_acs"))
-                })?),
-                CommandKind::TableLoad if c.filter_table.is_some() => {
-                    let table = c
-                        .filter_table_image_fields(&scenario)
-                        .with_context(|| format!("{here}.filter_table"))
-                        .map_err(InputError::from)?
-                        .unwrap_or_else(fsw_core::tables::types::FilterTable::default_boot);
-                    let keys: Vec<&String> = c.filter_table.iter().flat_map(|t| t.keys()).collect();
-                    uploads.push(Upload {
-                        source: format!("scenario {here}.filter_table (fields {keys:?})"),
-                        name: "filter.tbl".into(),
-                        image: onboard::image(TableId::Filter, created, &table)?,
-                        at_s: c.at_s,
-                    });
-                    Action::Load(uploads.len() - 1)
-                }
-                CommandKind::TableLoad => {
-                    let name = c.file.as_deref().unwrap_or_default();
-                    let path = scenario.resolve_file(name);
-                    let image = read_image(&path)
-                        .with_context(|| format!("{here}.file"))
-                        .map_err(InputError::from)?;
-                    uploads.push(Upload {
-                        source: path.display().to_string(),
-                        name: path
-                            .file_name()
-                            .map_or_else(|| "table.tbl".into(), |n| n.to_string_lossy().into()),
-                        image,
-                        at_s: c.at_s,
-                    });
-                    Action::Load(uploads.len() - 1)
-                }
-                CommandKind::TableActivate | CommandKind::TableAbort => {
-                    let id = table_id_from_name(c.table.as_deref().unwrap_or_default())
-                        .with_context(|| format!("{here}.table"))
-                        .map_err(InputError::from)?;
-                    if c.kind == CommandKind::TableActivate {
-                        Action::Activate(id)
-                    } else {
-                        Action::Abort(id)
-                    }
-                }
-            };
+            let action = timeline_action(&scenario, i, &mut uploads, created)?;
             timeline.push((c.at_s, action));
         }
         // Faults that reach the OBC through the uplink (crate::faults).
@@ -883,6 +810,96 @@ fn ephemeris_uploads(
         });
     }
     Ok(uploads)
+}
+
+/// The OBC command of timeline entry `i` (a table load also adds its image to `uploads`).
+///
+/// # Errors
+/// A command the scenario's validation let through but that cannot be built (named).
+fn timeline_action(
+    scenario: &Scenario,
+    i: usize,
+    uploads: &mut Vec<Upload>,
+    created: fsw_core::raw::TimeTag,
+) -> anyhow::Result<Action> {
+    let Some(c) = scenario.commands.get(i) else {
+        anyhow::bail!("commands[{i}] does not exist");
+    };
+    let here = format!("commands[{i}]");
+    let action = match c.kind {
+        CommandKind::SlewTo => match (c.q_acs_from_eci, &c.axis, c.angle_deg) {
+            (Some(q), _, _) => Action::Slew(quat_from_array(q)),
+            (None, Some(axis), Some(angle)) => Action::SlewRelative(
+                body_axis_from_name(axis)
+                    .with_context(|| format!("{here}.axis"))
+                    .map_err(InputError::from)?
+                    * angle.to_radians(),
+            ),
+            _ => {
+                return Err(InputError::msg(format!(
+                    "{here}: slew_to needs q_acs_from_eci or axis + angle_deg"
+                ))
+                .into())
+            }
+        },
+        CommandKind::Hold => Action::Hold,
+        CommandKind::SelectIruConfig => {
+            Action::SelectIru(if c.config.as_deref() == Some("backup") {
+                IruConfiguration::Backup
+            } else {
+                IruConfiguration::Primary
+            })
+        }
+        CommandKind::FilterInitialize => Action::FilterInit(c.q_acs_from_eci.map(quat_from_array)),
+        CommandKind::FilterReset => Action::FilterReset,
+        CommandKind::SunAcquire => {
+            Action::SunAcquire(c.sun_axis_acs.ok_or_else(|| {
+                InputError::msg(format!("{here}: sun_acquire needs sun_axis_acs"))
+            })?)
+        }
+        CommandKind::TableLoad if c.filter_table.is_some() => {
+            let table = c
+                .filter_table_image_fields(scenario)
+                .with_context(|| format!("{here}.filter_table"))
+                .map_err(InputError::from)?
+                .unwrap_or_else(fsw_core::tables::types::FilterTable::default_boot);
+            let keys: Vec<&String> = c.filter_table.iter().flat_map(|t| t.keys()).collect();
+            uploads.push(Upload {
+                source: format!("scenario {here}.filter_table (fields {keys:?})"),
+                name: "filter.tbl".into(),
+                image: onboard::image(TableId::Filter, created, &table)?,
+                at_s: c.at_s,
+            });
+            Action::Load(uploads.len() - 1)
+        }
+        CommandKind::TableLoad => {
+            let name = c.file.as_deref().unwrap_or_default();
+            let path = scenario.resolve_file(name);
+            let image = read_image(&path)
+                .with_context(|| format!("{here}.file"))
+                .map_err(InputError::from)?;
+            uploads.push(Upload {
+                source: path.display().to_string(),
+                name: path
+                    .file_name()
+                    .map_or_else(|| "table.tbl".into(), |n| n.to_string_lossy().into()),
+                image,
+                at_s: c.at_s,
+            });
+            Action::Load(uploads.len() - 1)
+        }
+        CommandKind::TableActivate | CommandKind::TableAbort => {
+            let id = table_id_from_name(c.table.as_deref().unwrap_or_default())
+                .with_context(|| format!("{here}.table"))
+                .map_err(InputError::from)?;
+            if c.kind == CommandKind::TableActivate {
+                Action::Activate(id)
+            } else {
+                Action::Abort(id)
+            }
+        }
+    };
+    Ok(action)
 }
 
 /// Read a table image file, checking its header names a known table.
