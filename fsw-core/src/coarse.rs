@@ -381,6 +381,15 @@ impl CoarseAttitude {
         self.covariance_rad2 = (p + p.transpose()) * 0.5;
     }
 
+    /// Whether the next cycle's [`Self::fix_due`] will be true (the torquer bars are then
+    /// commanded off for the coming interval, so that the fix's TAM sample sees no bar
+    /// field: [`crate::unloading`]).
+    /// docs/magnetics.md §6 (blanking).
+    #[must_use]
+    pub fn fix_due_next_cycle(&self, table: &MagneticsTable) -> bool {
+        self.cycles_since_attempt.saturating_add(1) >= table.coarse_fix_every_n_cycles
+    }
+
     /// Whether a fix is due this cycle (every `coarse_fix_every_n_cycles`).
     /// docs/tables.md (Table 6, field 17).
     pub fn fix_due(&mut self, table: &MagneticsTable) -> bool {

@@ -47,3 +47,4 @@ pub mod tables;
 pub mod telemetry;
 pub mod tm_layout;
 pub mod units;
+pub mod unloading;

@@ -10,14 +10,16 @@
 //! 2. Thermal nodes; FHST1/2 and FSS1/2 sample the truth at t_k; the IRU sample is the one
 //!    that closed the interval [t_{k−1}, t_k] (initial counters at k = 0).
 //!    With `[magnetics] enabled`, TAM1/2 and the CSSs ([`crate::magnetics`]) are sampled
-//!    after the flight software's step into the record only (their own random streams; the
-//!    OBC does not see them yet).
+//!    into the raw frame and the record (their own random streams), the TAMs with the
+//!    torquer bars' field for the dipole the bars delivered over [t_{k−1}, t_k].
 //! 3. The commands due at t_k (at most `MAX_COMMANDS_PER_CYCLE`, the rest wait a cycle) and
 //!    `FlightCore::step(frame, commands)`.
 //! 4. The FSW's IRU rate-mode request goes to the IRU (it applies from the next interval,
-//!    as the hardware does); its wheel torque command is held over [t_k, t_{k+1}].
-//! 5. Dynamics over [t_k, t_{k+1}] (external torques at the t_k position); the IRU closes the
-//!    interval with `∫ω dt`.
+//!    as the hardware does); its wheel torque command is held over [t_k, t_{k+1}], and so is
+//!    its torquer-bar dipole command (`momentum_unloading = "bars"`,
+//!    [`crate::truth::torquer`]; clamped per bar, `torquer_stuck_on` faults applied).
+//! 5. Dynamics over [t_k, t_{k+1}] (external torques at the t_k position and field: gravity
+//!    gradient, the bars' `m × B`); the IRU closes the interval with `∫ω dt`.
 //!
 //! # Start-up uplinks (t = 0, in this order, before the scenario's own t = 0 commands)
 //! Onboard star catalog ([`crate::onboard`]), the filter table of `filter_table` and
@@ -43,11 +45,12 @@ use crate::sensors::fss::Fss;
 use crate::sensors::iru::Iru;
 use crate::sensors::thermal::ThermalNode;
 use crate::sensors::TruthSnapshot;
-use crate::truth::dynamics::{AttitudeState, RigidBody};
+use crate::truth::dynamics::{AttitudeState, MomentumUnloading, RigidBody};
 use crate::truth::orbit::Orbit;
 use crate::truth::sky::Sky;
 use crate::truth::sun::SunEphemeris;
 use crate::truth::time::{epoch_from_iso, SimClock};
+use crate::truth::torquer::{magnetic_torque_nm, TorquerBars, TESLA_PER_NT};
 use crate::InputError;
 use fsw_core::attitude::{attitude_error_rad, Quat};
 use fsw_core::executive::{Command, CycleOutput, FlightCore, MAX_COMMANDS_PER_CYCLE};
@@ -77,6 +80,9 @@ pub struct CycleRecord {
     pub magnetics: crate::magnetics::MagneticsRecord,
     /// The OBC's coarse attitude against the truth (`None` before its first fix).
     pub coarse: Option<CoarseCheck>,
+    /// The dipole each torquer bar delivers over the step after this cycle (A·m²; zero
+    /// without bars): the OBC's command, clamped, or a stuck bar's dipole.
+    pub torquer_dipole_am2: [f64; 3],
 }
 
 /// The fine filter's error `A_true = Rot(δθ) Â` (rad, ACS) and NEES against `q_true`; zero and
@@ -178,6 +184,8 @@ pub struct Simulation {
     faults: Vec<Fault>,
     fault_state: FaultState,
     magnetics: Option<crate::magnetics::Magnetics>,
+    /// The magnetic torquer bars (`[dynamics] momentum_unloading = "bars"`).
+    torquers: Option<TorquerBars>,
 }
 
 fn quat_from_array([x, y, z, w]: [f64; 4]) -> Quat {
@@ -476,6 +484,8 @@ impl Simulation {
             faults: scenario.faults.clone(),
             fault_state: FaultState::new(&scenario.faults),
             magnetics: crate::magnetics::Magnetics::of_scenario(&scenario)?,
+            torquers: (scenario.dynamics.momentum_unloading == MomentumUnloading::Bars)
+                .then(|| TorquerBars::new(&scenario.torquers)),
             scenario,
         })
     }
@@ -493,7 +503,11 @@ impl Simulation {
         let Some(m) = self.magnetics.as_mut() else {
             return Default::default();
         };
-        let record = m.sample(&self.clock, truth);
+        let dipole_acs_am2 = self
+            .torquers
+            .as_ref()
+            .map_or_else(Vector3::zeros, TorquerBars::dipole_acs_am2);
+        let record = m.sample(&self.clock, truth, &dipole_acs_am2);
         let t = truth.t_s;
         let mut tam = record.tam.map(crate::magnetics::flight_tam_sample);
         for (unit, sample) in tam.iter_mut().enumerate() {
@@ -767,7 +781,13 @@ impl Simulation {
         );
         self.iru.command_high_rate(self.fsw.iru_high_rate_command());
         let torque = self.fsw.wheel_torque_command_nm();
-        let report = self.body.step(dt, &torque, &truth.pos_eci_km);
+        let magnetic_torque_acs_nm = self.drive_torquers(t, &truth, &magnetics);
+        let report = self.body.step_with_external_torque(
+            dt,
+            &torque,
+            &truth.pos_eci_km,
+            &magnetic_torque_acs_nm,
+        );
         self.pending_iru = self
             .iru
             .sample(&report.rate_integral_acs_rad, dt, t + dt, dev[4]);
@@ -781,9 +801,41 @@ impl Simulation {
             commands_sent: n,
             magnetics,
             coarse: CoarseCheck::of(&self.fsw, &truth.q_acs_from_eci),
+            torquer_dipole_am2: self
+                .torquers
+                .as_ref()
+                .map_or([0.0; 3], TorquerBars::dipole_am2),
         };
         self.cycle += 1;
         Some(record)
+    }
+
+    /// Drive the torquer bars with the OBC's dipole command (and the `torquer_stuck_on`
+    /// faults) for the coming step and return their torque `m × B` on the body (ACS, N·m)
+    /// in the truth field of this cycle; zero without bars or outside the field model.
+    fn drive_torquers(
+        &mut self,
+        t_s: f64,
+        truth: &TruthSnapshot,
+        magnetics: &crate::magnetics::MagneticsRecord,
+    ) -> Vector3<f64> {
+        let Some(bars) = self.torquers.as_mut() else {
+            return Vector3::zeros();
+        };
+        let stuck = FaultState::stuck_torquers(&self.faults, t_s);
+        bars.command(&self.fsw.torquer_dipole_command_am2(), &stuck);
+        magnetics
+            .field_eci_nt
+            .map_or_else(Vector3::zeros, |b_eci_nt| {
+                let b_acs_tesla = truth.m_acs_from_eci * b_eci_nt * TESLA_PER_NT;
+                magnetic_torque_nm(&bars.dipole_acs_am2(), &b_acs_tesla)
+            })
+    }
+
+    /// The torquer bars (`None` unless `[dynamics] momentum_unloading = "bars"`).
+    #[must_use]
+    pub fn torquers(&self) -> Option<&TorquerBars> {
+        self.torquers.as_ref()
     }
 }
 
