@@ -117,6 +117,7 @@ mod tests {
             offset_milligauss: None,
             eye: None,
             counts: None,
+            dipole_am2: None,
         };
         for (c, code) in [
             (Corruption::BitFlip, 9),
