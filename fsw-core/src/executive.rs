@@ -576,8 +576,11 @@ impl FlightCore {
             self.unloading.switch_off();
             return;
         }
-        // The frame's TAMs saw no bar field if every bar was off over the interval.
-        let sample = self.unloading.bars_off().then(|| self.field_sample(frame));
+        // A blanked frame: its TAMs saw no bar field (every bar off over the interval).
+        let sample = self
+            .unloading
+            .sample_due()
+            .then(|| self.field_sample(frame));
         let [jx, jy, jz] = self.tables.filter().inertia_kg_m2;
         let w = self.last_rate_acs_rad_per_s;
         let h_system =
@@ -618,13 +621,14 @@ impl FlightCore {
         let orbit_valid = self.tables.has_orbit() && self.orbit.status() == OrbitStatus::Valid;
         if table.has_field_model() && orbit_valid && self.filter_mode != FilterMode::Uninitialized {
             if let Ok(state) = self.orbit.state() {
+                // The coarse fix of this cycle (phase 7b) computed the same field unless it
+                // stopped earlier (Earth's shadow, no Sun): synthesise it only then.
                 let t_s = frame.time.seconds_since_j2000_tt();
+                let b_eci_nt = self.coarse.reference_field_eci_nt(t_s).or_else(|| {
+                    crate::field_model::field_eci_nt(table, &state.pos_eci_km, t_s).ok()
+                });
                 out.model_acs_milligauss =
-                    crate::field_model::field_eci_nt(table, &state.pos_eci_km, t_s)
-                        .ok()
-                        .map(|b_eci_nt| {
-                            self.filter.q_acs_from_eci.to_dcm() * b_eci_nt * NT_TO_MILLIGAUSS
-                        });
+                    b_eci_nt.map(|b| self.filter.q_acs_from_eci.to_dcm() * b * NT_TO_MILLIGAUSS);
             }
         }
         out

@@ -179,6 +179,8 @@ pub struct MomentumUnloading {
     hold_acs_am2: [f64; BARS],
     /// The command going out this cycle (ACS, A·m²), in effect until the next cycle.
     command_acs_am2: [f64; BARS],
+    /// The bars were blanked for the coming interval: the next frame is a sample.
+    sample_next: bool,
     /// Consecutive blanked samples over the check threshold.
     check_failures: u8,
     /// The check has failed (event raised; the law uses the model field).
@@ -197,6 +199,7 @@ impl MomentumUnloading {
             active: false,
             hold_acs_am2: [0.0; BARS],
             command_acs_am2: [0.0; BARS],
+            sample_next: true,
             check_failures: 0,
             field_unexpected: false,
             last_momentum_nms: 0.0,
@@ -215,6 +218,15 @@ impl MomentumUnloading {
     #[must_use]
     pub fn bars_off(&self) -> bool {
         self.command_acs_am2.iter().all(|m| *m == 0.0)
+    }
+
+    /// Whether this cycle's frame is a blanked sample: the bars were commanded off for it
+    /// because a coarse fix was due (the first cycle too). Only these frames are read, also
+    /// in the dead band, so that the field work is done once per fix interval.
+    /// docs/magnetics.md §6 (blanking).
+    #[must_use]
+    pub fn sample_due(&self) -> bool {
+        self.sample_next && self.bars_off()
     }
 
     /// Unloading outside the dead band.
@@ -261,6 +273,7 @@ impl MomentumUnloading {
         self.active = false;
         self.hold_acs_am2 = [0.0; BARS];
         self.command_acs_am2 = [0.0; BARS];
+        self.sample_next = true;
     }
 
     /// One cycle. `sample`: the field of this frame when the bars were off during it
@@ -317,6 +330,7 @@ impl MomentumUnloading {
         } else {
             self.hold_acs_am2
         };
+        self.sample_next = blank_next;
         report
     }
 
@@ -442,6 +456,7 @@ mod tests {
 
     /// The dead band with hysteresis, the hold between blanked samples and the blank.
     #[test]
+    #[allow(clippy::float_cmp)] // a held command is the same bits
     fn dead_band_hold_and_blank() {
         let t = MagneticsTable::boot();
         let mut u = MomentumUnloading::new();
@@ -483,6 +498,7 @@ mod tests {
     /// A field at both TAMs that the model does not have, three blanked samples in a row:
     /// event data once, the law then on the model field; a good sample re-arms it.
     #[test]
+    #[allow(clippy::float_cmp)] // the same computation gives the same bits
     fn bars_off_check_fires_once_and_rearms() {
         let t = MagneticsTable::boot();
         let mut u = MomentumUnloading::new();

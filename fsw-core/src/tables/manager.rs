@@ -490,6 +490,7 @@ mod tests {
     /// fields) still loads, with the boot unloading fields; one octet more or less than
     /// either layout is refused.
     #[test]
+    #[allow(clippy::float_cmp)] // copied values: exact equality is the point
     fn magnetics_layouts_round_trip_and_old_payloads_load() {
         let mut t = MagneticsTable::boot();
         t.unloading_gain_per_s = 2.0e-3;

@@ -6,10 +6,11 @@
 //! figure code of the ground tool (`ground_tool::report::figure`); the `tests` crate is the
 //! one that depends on both. The flight is `sim-harness run`'s closed loop, cycle by cycle.
 //!
-//! Writes OUT/wheel_momentum.png and OUT/wheel_momentum.csv (one row per `--every-s`: time,
-//! the four wheel momenta, their vector sum's norm, the mean dipole of each bar over the
-//! interval) and prints the largest wheel momentum (`summary.json`'s
-//! `max_wheel_momentum_nms`, taken over every cycle).
+//! Writes OUT/wheel_momentum.png and OUT/wheel_momentum.csv (one row per `--every-s`, by
+//! default an orbit: the interval's end time, each wheel's largest `|h|`, the largest norm of
+//! the wheels' vector sum, the RMS dipole of each bar — per interval, so that the orbit's own
+//! swings do not hide the trend and the PNG stays small) and prints the largest wheel
+//! momentum (`summary.json`'s `max_wheel_momentum_nms`, taken over every cycle).
 
 use std::fmt::Write as _;
 use std::path::PathBuf;
@@ -37,8 +38,8 @@ struct Cli {
     /// Override the scenario's duration (s).
     #[arg(long)]
     duration: Option<f64>,
-    /// Sampling interval of the plot and the CSV (s).
-    #[arg(long, default_value_t = 60.0)]
+    /// Interval of the plot's and the CSV's maxima and RMS (s; default one orbit).
+    #[arg(long, default_value_t = 5_400.0)]
     every_s: f64,
 }
 
@@ -50,7 +51,7 @@ const COLORS: [RGBColor; 5] = [
     RGBColor(0, 0, 0),
 ];
 
-/// Samples of one run: (time in days, wheel momenta, |Σ|, mean bar dipoles).
+/// Per interval: (end time in days, largest |h| per wheel, largest |Σ h|, RMS bar dipoles).
 struct Samples {
     rows: Vec<(f64, [f64; 4], f64, [f64; 3])>,
     max_wheel_nms: f64,
@@ -74,29 +75,35 @@ fn fly(cli: &Cli) -> anyhow::Result<Samples> {
         max_wheel_nms: 0.0,
         limit_nms,
     };
-    let mut next_t = 0.0;
-    let mut dipole_sum = [0.0; 3];
+    let mut next_t = cli.every_s;
+    let mut dipole_sq = [0.0; 3];
+    let mut wheel_max = [0.0_f64; 4];
+    let mut total_max = 0.0_f64;
     let mut n = 0.0;
     while let Some(rec) = sim.step() {
         let h = sim.true_attitude().wheel_momentum_nms;
-        for x in h {
+        for (m, x) in wheel_max.iter_mut().zip(h) {
+            *m = m.max(x.abs());
             out.max_wheel_nms = out.max_wheel_nms.max(x.abs());
         }
-        for (s, d) in dipole_sum.iter_mut().zip(rec.torquer_dipole_am2) {
-            *s += d;
+        let total = axes
+            .iter()
+            .zip(h)
+            .fold(nalgebra::Vector3::zeros(), |acc, (a, hk)| {
+                acc + nalgebra::Vector3::from(*a).normalize() * hk
+            });
+        total_max = total_max.max(total.norm());
+        for (s, d) in dipole_sq.iter_mut().zip(rec.torquer_dipole_am2) {
+            *s += d * d;
         }
         n += 1.0;
         if rec.truth.t_s + 1e-9 >= next_t {
-            let total = axes
-                .iter()
-                .zip(h)
-                .fold(nalgebra::Vector3::zeros(), |acc, (a, hk)| {
-                    acc + nalgebra::Vector3::from(*a).normalize() * hk
-                });
-            let mean = dipole_sum.map(|s| s / n);
+            let rms = dipole_sq.map(|s| (s / n).sqrt());
             out.rows
-                .push((rec.truth.t_s / 86_400.0, h, total.norm(), mean));
-            dipole_sum = [0.0; 3];
+                .push((rec.truth.t_s / 86_400.0, wheel_max, total_max, rms));
+            dipole_sq = [0.0; 3];
+            wheel_max = [0.0; 4];
+            total_max = 0.0;
             n = 0.0;
             next_t += cli.every_s;
         }
@@ -117,7 +124,7 @@ fn main() -> anyhow::Result<()> {
     std::fs::create_dir_all(&cli.out)?;
     let s = fly(&cli)?;
     let mut csv = String::from(
-        "t_day,h_wheel1_nms,h_wheel2_nms,h_wheel3_nms,h_wheel4_nms,h_wheels_norm_nms,m_bar1_am2,m_bar2_am2,m_bar3_am2\n",
+        "t_day,max_abs_h_wheel1_nms,max_abs_h_wheel2_nms,max_abs_h_wheel3_nms,max_abs_h_wheel4_nms,max_h_wheels_norm_nms,rms_m_bar1_am2,rms_m_bar2_am2,rms_m_bar3_am2\n",
     );
     for (t, h, norm, m) in &s.rows {
         writeln!(
@@ -130,24 +137,27 @@ fn main() -> anyhow::Result<()> {
     let mut wheels: Vec<Layer> = (0..4)
         .map(|k| {
             line(
-                Some(format!("wheel {}", k + 1)),
+                Some(format!("wheel {}: largest |h|", k + 1)),
                 COLORS[k],
                 s.rows.iter().map(|r| (r.0, r.1[k])).collect(),
             )
         })
         .collect();
     wheels.push(line(
-        Some("|Σ h| (vector sum)".into()),
+        Some("largest |Σ h| (vector sum)".into()),
         COLORS[4],
         s.rows.iter().map(|r| (r.0, r.2)).collect(),
     ));
-    for y in [s.limit_nms, -s.limit_nms] {
-        wheels.push(Layer {
-            label: None,
-            color: RGBColor(150, 150, 150),
-            kind: Kind::HLine(y),
-        });
-    }
+    wheels.push(Layer {
+        label: None,
+        color: RGBColor(150, 150, 150),
+        kind: Kind::HLine(s.limit_nms),
+    });
+    wheels.push(Layer {
+        label: None,
+        color: RGBColor(150, 150, 150),
+        kind: Kind::HLine(0.0),
+    });
     let bars: Vec<Layer> = (0..3)
         .map(|k| {
             line(
@@ -170,13 +180,16 @@ fn main() -> anyhow::Result<()> {
         shared_y: false,
         panels: vec![
             Panel {
-                title: format!("true wheel momentum (limit ±{} N·m·s, grey)", s.limit_nms),
+                title: format!(
+                    "true wheel momentum, largest per {} s (wheel limit {} N·m·s, grey)",
+                    cli.every_s, s.limit_nms
+                ),
                 y_label: "N·m·s".into(),
                 layers: wheels,
                 y_quantile: None,
             },
             Panel {
-                title: format!("torquer-bar dipole, mean over {} s", cli.every_s),
+                title: format!("torquer-bar dipole, RMS per {} s", cli.every_s),
                 y_label: "A·m²".into(),
                 layers: bars,
                 y_quantile: None,
