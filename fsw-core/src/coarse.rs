@@ -387,7 +387,7 @@ impl CoarseAttitude {
 
     /// The model field (nT, J2000 axes) this cycle's fix attempt computed at `t_s`, if it
     /// computed one (the unloading's bars-off check then needs no second synthesis).
-    /// docs/magnetics.md §5–6.
+    /// docs/magnetics.md §5, §7.
     #[must_use]
     pub fn reference_field_eci_nt(&self, t_s: f64) -> Option<Vector3<f64>> {
         match self.reference_field {
@@ -399,7 +399,7 @@ impl CoarseAttitude {
     /// Whether the next cycle's [`Self::fix_due`] will be true (the torquer bars are then
     /// commanded off for the coming interval, so that the fix's TAM sample sees no bar
     /// field: [`crate::unloading`]).
-    /// docs/magnetics.md §6 (blanking).
+    /// docs/magnetics.md §7 (blanking).
     #[must_use]
     pub fn fix_due_next_cycle(&self, table: &MagneticsTable) -> bool {
         self.cycles_since_attempt.saturating_add(1) >= table.coarse_fix_every_n_cycles

@@ -108,11 +108,11 @@ pub enum EventId {
     /// blanked samples in a row (a bar stuck on when both TAMs see it, a TAM fault when one
     /// does; raised once until a sample passes). p1 = TAMs that see it (bit 0 TAM1, bit 1
     /// TAM2), p2 = the largest difference from the model field, 0.1 mG.
-    /// docs/icd.md §3.3; docs/magnetics.md §6.
+    /// docs/icd.md §3.3; docs/magnetics.md §7.
     TorquerFieldUnexpected = 0x0A01,
     /// Momentum unloading started (p1 = 1) or stopped (p1 = 0) at the dead band's edges.
     /// p2 = the system momentum `|h|`, N·m·s (rounded).
-    /// docs/icd.md §3.3; docs/magnetics.md §6.
+    /// docs/icd.md §3.3; docs/magnetics.md §7.
     UnloadingStateChanged = 0x0A02,
 }
 

@@ -562,7 +562,7 @@ impl FlightCore {
     }
 
     /// Phase 7c: momentum unloading with the torquer bars (`crate::unloading`,
-    /// docs/magnetics.md §6). Events 0x0A01 (bars-off check) and 0x0A02 (dead band).
+    /// docs/magnetics.md §7). Events 0x0A01 (bars-off check) and 0x0A02 (dead band).
     fn momentum_unloading(
         &mut self,
         frame: &RawSensorFrame,
@@ -635,13 +635,13 @@ impl FlightCore {
     }
 
     /// The torquer-bar dipole command for the coming interval, per bar on the ACS x, y, z
-    /// axes, A·m² (zero while the bars are off). docs/magnetics.md §6.
+    /// axes, A·m² (zero while the bars are off). docs/magnetics.md §7.
     #[must_use]
     pub fn torquer_dipole_command_am2(&self) -> [f64; 3] {
         self.unloading.command_acs_am2()
     }
 
-    /// The momentum unloading's state (docs/magnetics.md §6).
+    /// The momentum unloading's state (docs/magnetics.md §7).
     #[must_use]
     pub fn unloading(&self) -> &MomentumUnloading {
         &self.unloading

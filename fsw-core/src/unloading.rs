@@ -99,10 +99,10 @@ pub enum UnloadingError {
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Dipole {
     /// Commanded dipole per bar (ACS axes), A·m².
-    /// docs/magnetics.md §6.
+    /// docs/magnetics.md §7.
     pub dipole_acs_am2: [f64; BARS],
     /// The vector was scaled down to the bars' limit.
-    /// docs/magnetics.md §6.
+    /// docs/magnetics.md §7.
     pub saturated: bool,
 }
 
@@ -144,14 +144,14 @@ pub fn cross_product_dipole(
 }
 
 /// What one blanked TAM sample gave the unloading (the executive fills it).
-/// docs/magnetics.md §6.
+/// docs/magnetics.md §7.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct FieldSample {
     /// TAM1, TAM2 fields in ACS (Table 6 calibration), mG, when valid and plausible.
-    /// docs/magnetics.md §6.
+    /// docs/magnetics.md §7.
     pub tam_acs_milligauss: [Option<Vector3<f64>>; 2],
     /// The onboard model field in ACS at the fine attitude, mG, when available.
-    /// docs/magnetics.md §5–6.
+    /// docs/magnetics.md §5, §7.
     pub model_acs_milligauss: Option<Vector3<f64>>,
 }
 
@@ -191,7 +191,7 @@ pub struct MomentumUnloading {
 
 impl MomentumUnloading {
     /// Bars off, wheels counted from rest.
-    /// docs/magnetics.md §6.
+    /// docs/magnetics.md §7.
     #[must_use]
     pub const fn new() -> Self {
         Self {
@@ -207,14 +207,14 @@ impl MomentumUnloading {
     }
 
     /// The dipole command for the coming interval, per bar (ACS axes), A·m².
-    /// docs/magnetics.md §6.
+    /// docs/magnetics.md §7.
     #[must_use]
     pub const fn command_acs_am2(&self) -> [f64; BARS] {
         self.command_acs_am2
     }
 
     /// Whether every bar is commanded off (the TAM sample of the next frame is clean).
-    /// docs/magnetics.md §6 (blanking).
+    /// docs/magnetics.md §7 (blanking).
     #[must_use]
     pub fn bars_off(&self) -> bool {
         self.command_acs_am2.iter().all(|m| *m == 0.0)
@@ -223,14 +223,14 @@ impl MomentumUnloading {
     /// Whether this cycle's frame is a blanked sample: the bars were commanded off for it
     /// because a coarse fix was due (the first cycle too). Only these frames are read, also
     /// in the dead band, so that the field work is done once per fix interval.
-    /// docs/magnetics.md §6 (blanking).
+    /// docs/magnetics.md §7 (blanking).
     #[must_use]
     pub fn sample_due(&self) -> bool {
         self.sample_next && self.bars_off()
     }
 
     /// Unloading outside the dead band.
-    /// docs/magnetics.md §6.
+    /// docs/magnetics.md §7.
     #[must_use]
     pub const fn active(&self) -> bool {
         self.active
@@ -244,7 +244,7 @@ impl MomentumUnloading {
     }
 
     /// The OBC's count of the wheel momentum (ACS, N·m·s).
-    /// docs/magnetics.md §6.
+    /// docs/magnetics.md §7.
     #[must_use]
     pub const fn wheel_momentum_acs_nms(&self) -> Vector3<f64> {
         self.wheel_momentum_acs_nms
@@ -252,7 +252,7 @@ impl MomentumUnloading {
 
     /// Count the previous cycle's wheel torque command (held over `dt_s`): the wheels take
     /// `−τ dt`. Non-finite input is ignored; the count is bounded by [`MAX_MOMENTUM_NMS`].
-    /// docs/magnetics.md §6.
+    /// docs/magnetics.md §7.
     pub fn account_wheel_torque(&mut self, torque_cmd_acs_nm: &Vector3<f64>, dt_s: f64) {
         let dh = torque_cmd_acs_nm * dt_s;
         if !(dt_s.is_finite() && dh.iter().all(|x| x.is_finite())) {
@@ -268,7 +268,7 @@ impl MomentumUnloading {
     }
 
     /// Bars off and the state cleared (no table unloading, control idle).
-    /// docs/magnetics.md §6.
+    /// docs/magnetics.md §7.
     pub fn switch_off(&mut self) {
         self.active = false;
         self.hold_acs_am2 = [0.0; BARS];

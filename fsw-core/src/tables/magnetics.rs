@@ -111,20 +111,20 @@ pub struct MagneticsTable {
     /// docs/tables.md (Table 6, field 19).
     pub unloading_gain_per_s: f64,
     /// Largest dipole the OBC commands per torquer bar, A·m² (the bars' rating).
-    /// docs/magnetics.md §6; docs/tables.md (Table 6, field 20).
+    /// docs/magnetics.md §7; docs/tables.md (Table 6, field 20).
     pub torquer_dipole_limit_am2: f64,
     /// Unloading starts when the momentum to unload exceeds this, N·m·s (the dead band).
-    /// docs/magnetics.md §6; docs/tables.md (Table 6, field 21).
+    /// docs/magnetics.md §7; docs/tables.md (Table 6, field 21).
     pub unloading_start_nms: f64,
     /// Unloading stops when the momentum to unload falls below this, N·m·s (≤ field 21: the
     /// hysteresis keeps the bars from chattering at the edge of the dead band).
-    /// docs/magnetics.md §6; docs/tables.md (Table 6, field 22).
+    /// docs/magnetics.md §7; docs/tables.md (Table 6, field 22).
     pub unloading_stop_nms: f64,
     /// The bars-off check: a TAM sample taken with every bar commanded off that differs from
     /// the onboard model field (at the fine attitude) by more than this, mG, on 3 such samples
     /// in a row, is an unexpected field at the TAM (a bar stuck on, or a TAM fault: event
     /// 0x0A01), and the unloading uses the model field instead.
-    /// docs/magnetics.md §6; docs/tables.md (Table 6, field 23).
+    /// docs/magnetics.md §7; docs/tables.md (Table 6, field 23).
     pub torquer_check_milligauss: f64,
 }
 
@@ -219,7 +219,7 @@ impl MagneticsTable {
             css_sun_sigma_rad: 5.0 * core::f64::consts::PI / 180.0,
             coarse_fix_every_n_cycles: 10,
             min_sun_field_angle_rad: 10.0 * core::f64::consts::PI / 180.0,
-            // Momentum unloading (docs/magnetics.md §6): a 333-s time constant (1,000 s let
+            // Momentum unloading (docs/magnetics.md §7): a 333-s time constant (1,000 s let
             // the stored momentum plus a 60° slew's reach 213 of the 250 N·m·s on
             // gro-early-mission, 333 s 181), the bars'
             // assumed 4,000 A·m² rating, a 20/10 N·m·s dead band (a tenth of the 250 N·m·s

@@ -31,7 +31,7 @@
 //! `m |B|`: 4,000 A·m² × 30 μT = 0.12 N·m per bar, about twice the secular torque once the
 //! geometry (only the part of `h` perpendicular to `B` can be dumped) is counted. A few
 //! hundred A·m² (a small LEO satellite's bars) would leave the wheels to saturate with this
-//! inertia: `docs/magnetics.md` §6 has the measurement.
+//! inertia: `docs/magnetics.md` §7 has the measurement.
 
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};

@@ -1,5 +1,5 @@
 //! `momentum-plot`: fly a scenario and draw the true wheel momentum and the torquer bars'
-//! dipole against time (issue 20's momentum-unloading must-show, `docs/magnetics.md` §6).
+//! dipole against time (issue 20's momentum-unloading must-show, `docs/magnetics.md` §7).
 //!
 //! Why a binary of the `tests` crate: the plot needs the simulator's truth wheel momentum
 //! every cycle (the OBC has no tachometers and the telemetry does not carry it), and the
