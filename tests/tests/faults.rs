@@ -305,6 +305,12 @@ fn e2e_fault_magnetics() {
         .any(|(t, p1, _)| *p1 == 3 && (3000.0..3600.0).contains(t)));
     assert!(!rejected.iter().any(|(_, p1, _)| *p1 == 4));
     assert!(events_of(&clean_recs, EventId::CoarseVectorRejected).is_empty());
+    // The unloading's bars-off check sees TAM1's jump against the model on TAM1 alone (a TAM
+    // fault, not a bar: p1 = 1); the dead TAM1 is refused before it (implausible magnitude).
+    let unexpected = events_of(&recs, EventId::TorquerFieldUnexpected);
+    println!("0x0A01: {unexpected:?}");
+    assert!(unexpected.iter().all(|(_, p1, _)| *p1 == 1));
+    assert!(events_of(&clean_recs, EventId::TorquerFieldUnexpected).is_empty());
     // During the faults the coarse attitude keeps the 2° (3σ) requirement per axis and stays
     // within 3σ of its own covariance at every cycle.
     let during: Vec<_> = recs

@@ -499,6 +499,7 @@ mod tests {
         let mut buf = [0u8; 8192];
         let created = TimeTag::default();
         let n = encode_image(TableId::Magnetics, created, &t, &mut buf).unwrap();
+        assert_eq!(n, 4_466, "the layout-2 image of docs/tables.md");
         let mut set = TableSet::boot();
         assert_eq!(set.load(&buf[..n]), Ok(TableId::Magnetics));
         set.activate(TableId::Magnetics).unwrap();
