@@ -60,7 +60,7 @@ use nalgebra::Vector3;
 /// Project choice (not in the paper): three orthogonal bars, as the truth's default.
 pub const BARS: usize = 3;
 /// Tesla per milligauss (1 G = 1e-4 T).
-/// SI definition of the gauss.
+/// SI definition of the gauss; docs/magnetics.md §2 (1 mG = 100 nT).
 pub const TESLA_PER_MILLIGAUSS: f64 = 1.0e-7;
 /// Smallest field the law divides by, tesla (10 mG; the field at GRO's altitude is
 /// 250–450 mG): a weaker one is a failed sensor, not the Earth.
