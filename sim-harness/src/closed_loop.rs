@@ -510,6 +510,12 @@ impl Simulation {
         let record = m.sample(&self.clock, truth, &dipole_acs_am2);
         let t = truth.t_s;
         let mut tam = record.tam.map(crate::magnetics::flight_tam_sample);
+        // The bar drive's current monitor: a bar carried current while the TAMs sampled.
+        if dipole_acs_am2.iter().any(|m| *m != 0.0) {
+            for s in tam.iter_mut().filter(|s| s.flags != 0) {
+                s.flags |= fsw_core::raw::TAM_FLAG_TORQUERS_ON;
+            }
+        }
         for (unit, sample) in tam.iter_mut().enumerate() {
             let resolution = m.tam()[unit].params().resolution_milligauss_per_count;
             *sample = FaultState::apply_tam(&self.faults, unit, t, *sample, resolution);

@@ -184,6 +184,10 @@ fn val_closed_loop_records_tam_and_css_samples() {
         if dipole_acs_am2.norm() > 0.0 {
             bars_on_samples += 1;
         }
+        // The hardware's bars-on bit (ICD version 3) says so, in the words the OBC and the
+        // downlink get.
+        let on = rec.frame.tam[0].flags & fsw_core::raw::TAM_FLAG_TORQUERS_ON != 0;
+        assert_eq!(on, dipole_acs_am2.norm() > 0.0, "t = {}", rec.truth.t_s);
         dipole_acs_am2 = Vector3::from(rec.torquer_dipole_am2);
         let e = tam1.reading_milligauss(&m.tam[0]) - ideal;
         sum += e;
