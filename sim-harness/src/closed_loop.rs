@@ -188,6 +188,18 @@ pub struct Simulation {
     torquers: Option<TorquerBars>,
 }
 
+/// The torquer bars of a scenario flown with `[dynamics] momentum_unloading = "bars"`.
+fn torquers_of(s: &Scenario) -> Option<TorquerBars> {
+    (s.dynamics.momentum_unloading == MomentumUnloading::Bars)
+        .then(|| TorquerBars::new(&s.torquers))
+}
+
+/// Cycles of a run of `duration_s` at `step_s` (both ends included).
+#[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
+fn cycle_count_of(duration_s: f64, step_s: f64) -> u64 {
+    (duration_s / step_s + 1e-9).floor() as u64 + 1
+}
+
 fn quat_from_array([x, y, z, w]: [f64; 4]) -> Quat {
     Quat::new(x, y, z, w).normalized()
 }
@@ -459,8 +471,7 @@ impl Simulation {
         // Start-up entries are at 0 and come first; the scenario's are sorted: keep stable.
         timeline.sort_by(|a, b| a.0.total_cmp(&b.0));
 
-        #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
-        let cycle_count = (scenario.duration_s / scenario.step_s + 1e-9).floor() as u64 + 1;
+        let cycle_count = cycle_count_of(scenario.duration_s, scenario.step_s);
         let error_rotation = Quat::from_rotation_vector(&scenario.initial_estimate.error_rad());
         Ok(Self {
             clock,
@@ -484,8 +495,7 @@ impl Simulation {
             faults: scenario.faults.clone(),
             fault_state: FaultState::new(&scenario.faults),
             magnetics: crate::magnetics::Magnetics::of_scenario(&scenario)?,
-            torquers: (scenario.dynamics.momentum_unloading == MomentumUnloading::Bars)
-                .then(|| TorquerBars::new(&scenario.torquers)),
+            torquers: torquers_of(&scenario),
             scenario,
         })
     }
@@ -785,18 +795,7 @@ impl Simulation {
             &truth.q_acs_from_eci,
             output.housekeeping.filter_mode,
         );
-        self.iru.command_high_rate(self.fsw.iru_high_rate_command());
-        let torque = self.fsw.wheel_torque_command_nm();
-        let magnetic_torque_acs_nm = self.drive_torquers(t, &truth, &magnetics);
-        let report = self.body.step_with_external_torque(
-            dt,
-            &torque,
-            &truth.pos_eci_km,
-            &magnetic_torque_acs_nm,
-        );
-        self.pending_iru = self
-            .iru
-            .sample(&report.rate_integral_acs_rad, dt, t + dt, dev[4]);
+        self.advance_truth(dt, &truth, &magnetics, dev[4]);
         let record = CycleRecord {
             cycle: self.cycle,
             truth,
@@ -814,6 +813,31 @@ impl Simulation {
         };
         self.cycle += 1;
         Some(record)
+    }
+
+    /// Steps 4–5 of the module doc: the OBC's IRU rate mode to the IRU, its wheel torque and
+    /// torquer-bar commands held over [t, t + dt] through the dynamics, and the IRU sample that
+    /// closes the interval (`iru_deviation_c`: the IRU's thermal deviation).
+    fn advance_truth(
+        &mut self,
+        dt: f64,
+        truth: &TruthSnapshot,
+        magnetics: &crate::magnetics::MagneticsRecord,
+        iru_deviation_c: f64,
+    ) {
+        let t = truth.t_s;
+        self.iru.command_high_rate(self.fsw.iru_high_rate_command());
+        let torque = self.fsw.wheel_torque_command_nm();
+        let magnetic_torque_acs_nm = self.drive_torquers(t, truth, magnetics);
+        let report = self.body.step_with_external_torque(
+            dt,
+            &torque,
+            &truth.pos_eci_km,
+            &magnetic_torque_acs_nm,
+        );
+        self.pending_iru =
+            self.iru
+                .sample(&report.rate_integral_acs_rad, dt, t + dt, iru_deviation_c);
     }
 
     /// Drive the torquer bars with the OBC's dipole command (and the `torquer_stuck_on`
