@@ -309,6 +309,9 @@ pub struct CoarseAttitude {
     cycles_since_attempt: u16,
     /// Consecutive attempts stopped by the gate.
     consecutive_gated: u16,
+    /// The model field of the last attempt that computed one: (time, s since J2000 TT;
+    /// field, nT, J2000 axes).
+    reference_field: Option<(f64, Vector3<f64>)>,
 }
 
 impl Default for CoarseAttitude {
@@ -334,6 +337,7 @@ impl CoarseAttitude {
             last_rejection: 0,
             cycles_since_attempt: u16::MAX,
             consecutive_gated: 0,
+            reference_field: None,
         }
     }
 
@@ -379,6 +383,26 @@ impl CoarseAttitude {
         }
         let p = self.covariance_rad2 + grow;
         self.covariance_rad2 = (p + p.transpose()) * 0.5;
+    }
+
+    /// The model field (nT, J2000 axes) this cycle's fix attempt computed at `t_s`, if it
+    /// computed one (the unloading's bars-off check then needs no second synthesis).
+    /// docs/magnetics.md §5, §7.
+    #[must_use]
+    pub fn reference_field_eci_nt(&self, t_s: f64) -> Option<Vector3<f64>> {
+        match self.reference_field {
+            Some((t, b)) if t.to_bits() == t_s.to_bits() => Some(b),
+            _ => None,
+        }
+    }
+
+    /// Whether the next cycle's [`Self::fix_due`] will be true (the torquer bars are then
+    /// commanded off for the coming interval, so that the fix's TAM sample sees no bar
+    /// field: [`crate::unloading`]).
+    /// docs/magnetics.md §7 (blanking).
+    #[must_use]
+    pub fn fix_due_next_cycle(&self, table: &MagneticsTable) -> bool {
+        self.cycles_since_attempt.saturating_add(1) >= table.coarse_fix_every_n_cycles
     }
 
     /// Whether a fix is due this cycle (every `coarse_fix_every_n_cycles`).
@@ -456,6 +480,7 @@ impl CoarseAttitude {
         }
         let b_eci_nt =
             field_model::field_eci_nt(table, pos, t_s).map_err(CoarseUnavailable::FieldModel)?;
+        self.reference_field = Some((t_s, b_eci_nt));
         let field = self.screened_field(frame, table, &b_eci_nt)?;
         let mut sun = None;
         for (v, sigma, source) in suns.into_iter().flatten() {

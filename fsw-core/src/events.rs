@@ -124,11 +124,21 @@ pub enum EventId {
     /// carried solution, 4 Sun against the carried solution; p2 = rejections since boot.
     /// docs/icd.md §3.3; docs/magnetics.md §5.
     CoarseVectorRejected = 0x0903,
+    /// An unexpected field at the TAMs while every torquer bar was commanded off, on 3
+    /// blanked samples in a row (a bar stuck on when both TAMs see it, a TAM fault when one
+    /// does; raised once until a sample passes). p1 = TAMs that see it (bit 0 TAM1, bit 1
+    /// TAM2), p2 = the largest difference from the model field, 0.1 mG.
+    /// docs/icd.md §3.3; docs/magnetics.md §7.
+    TorquerFieldUnexpected = 0x0A01,
+    /// Momentum unloading started (p1 = 1) or stopped (p1 = 0) at the dead band's edges.
+    /// p2 = the system momentum `|h|`, N·m·s (rounded).
+    /// docs/icd.md §3.3; docs/magnetics.md §7.
+    UnloadingStateChanged = 0x0A02,
 }
 
 impl EventId {
     /// Every event id (for the uniqueness test and the ICD table).
-    pub const ALL: [EventId; 30] = [
+    pub const ALL: [EventId; 32] = [
         Self::TableLoaded,
         Self::TableRejected,
         Self::TableActivated,
@@ -159,6 +169,8 @@ impl EventId {
         Self::CoarseFixUnavailable,
         Self::CoarseFixResumed,
         Self::CoarseVectorRejected,
+        Self::TorquerFieldUnexpected,
+        Self::UnloadingStateChanged,
     ];
 
     /// On-wire code.

@@ -35,6 +35,15 @@
 //!    `coarse_fix_every_n_cycles` from the Sun (FSS, else CSS) and the TAM field against the
 //!    onboard field model at the onboard orbit (magnetics table, Table 6), after a magnitude
 //!    check and a χ² gate; events 0x0901–0x0903.
+//!
+//!    Then phase 7c, **momentum unloading** ([`crate::unloading`], Table 6 fields 19–23):
+//!    the previous cycle's wheel torque command is counted into the OBC's wheel momentum;
+//!    on a frame taken with every torquer bar off, the cross-product law's dipole is
+//!    recomputed from the TAM field (else the model's) and the bars-off check runs (event
+//!    0x0A01); the dipole is held for the following cycles and the bars are commanded off
+//!    for the cycle before each coarse fix (blanking: the fix's TAM sample sees no bar
+//!    field); event 0x0A02 at the dead band's edges. The command is
+//!    [`FlightCore::torquer_dipole_command_am2`].
 //! 8. **Control**: inertial hold or rate-limited eigen-axis slew → wheel torque; IRU rate
 //!    mode request (high for slews). In Sun acquisition ([`crate::sun_acquisition`]) the
 //!    same law turns a commanded body axis to the Sun of the cycle's best Sun sensor (FSS1,
@@ -44,7 +53,8 @@
 //!
 //! Worst case per cycle: one star identification per tracker (a linear scan of at most
 //! `MAX_CATALOG_STARS` stars, only on a new acquisition), four 2-component filter updates,
-//! nine RK4 steps of the orbit, one coarse fix (a degree-10 field synthesis and a TRIAD).
+//! nine RK4 steps of the orbit, one coarse fix (a degree-10 field synthesis and a TRIAD) and
+//! on the same cycle the unloading's bars-off check (a second degree-10 synthesis).
 
 use crate::attitude::{rot, Quat};
 use crate::coarse::{sun_candidates_acs, CoarseAttitude, CoarseUnavailable};
@@ -65,6 +75,7 @@ use crate::tables::types::{matrix_from_rows, Mat3Rows, ORBITAL_ABERRATION_RMS_PE
 use crate::tables::{TableId, TableSet};
 use crate::telemetry::{MeasurementStatus, ObcHousekeeping, SensorResidual};
 use crate::units::{ARCSEC_PER_RAD, RAD_PER_ARCSEC};
+use crate::unloading::{FieldSample, MomentumUnloading, TAM_PLAUSIBLE_MILLIGAUSS};
 use nalgebra::{Matrix3, Vector3};
 
 /// Largest number of commands processed in one cycle (further ones are refused).
@@ -100,6 +111,10 @@ pub const FSS_WHITE_SIGMA_RAD: f64 = 0.004 * 0.577_350_269_189_625_8 * crate::un
 /// uses (docs/tables.md field 22). algorithms.md §3.3; docs/obc_filter.md §3.
 pub const FHST_UNCORRECTED_SYSTEMATIC_RAD: f64 =
     ORBITAL_ABERRATION_RMS_PER_AXIS_ARCSEC * crate::units::RAD_PER_ARCSEC;
+
+/// Milligauss per nanotesla (1 mG = 100 nT).
+/// SI definition of the gauss.
+const NT_TO_MILLIGAUSS: f64 = 0.01;
 
 /// Filter mode, telemetry code in brackets.
 /// Paper requirements: coarse attitude (FSS + TAM + IRU, 2° 3σ), fine (FHST + IRU, 0.024° 3σ).
@@ -303,6 +318,8 @@ pub struct FlightCore {
     coarse_rejection_reported: u8,
     /// Time since the last gyro data (a coast), s.
     coast_s: f64,
+    /// Momentum unloading with the torquer bars (phase 7c).
+    unloading: MomentumUnloading,
 }
 
 impl Default for FlightCore {
@@ -368,6 +385,7 @@ impl FlightCore {
             coarse_reported: Some(CoarseUnavailable::NoFieldModel.code()),
             coarse_rejection_reported: 0,
             coast_s: 0.0,
+            unloading: MomentumUnloading::new(),
         }
     }
 
@@ -490,6 +508,9 @@ impl FlightCore {
         // 7b. Coarse attitude (Sun, field, gyros), alongside the fine solution.
         self.coarse_attitude(frame, &delta_theta, dt_s, &mut events);
 
+        // 7c. Momentum unloading (torquer bars), with the previous cycle's wheel command.
+        self.momentum_unloading(frame, dt_s, &mut events);
+
         // 8. Control.
         self.control(frame, &mut events);
 
@@ -571,6 +592,92 @@ impl FlightCore {
                 );
             }
         }
+    }
+
+    /// Phase 7c: momentum unloading with the torquer bars (`crate::unloading`,
+    /// docs/magnetics.md §7). Events 0x0A01 (bars-off check) and 0x0A02 (dead band).
+    fn momentum_unloading(
+        &mut self,
+        frame: &RawSensorFrame,
+        dt_s: f64,
+        events: &mut heapless::Vec<Event, MAX_EVENTS_PER_CYCLE>,
+    ) {
+        self.unloading
+            .account_wheel_torque(&self.wheel_torque_cmd_nm, dt_s);
+        let table = self.tables.magnetics();
+        if !table.unloading_enabled() || self.control_mode == ControlMode::Idle {
+            self.unloading.switch_off();
+            return;
+        }
+        // A blanked frame: its TAMs saw no bar field (every bar off over the interval).
+        let sample = self
+            .unloading
+            .sample_due()
+            .then(|| self.field_sample(frame));
+        let [jx, jy, jz] = self.tables.filter().inertia_kg_m2;
+        let w = self.last_rate_acs_rad_per_s;
+        let h_system =
+            Vector3::new(jx * w.x, jy * w.y, jz * w.z) + self.unloading.wheel_momentum_acs_nms();
+        let table = self.tables.magnetics();
+        let blank_next = self.coarse.fix_due_next_cycle(table);
+        let report = self
+            .unloading
+            .update(sample.as_ref(), &h_system, table, blank_next);
+        if let Some((mask, tenths_mg)) = report.unexpected_field {
+            let id = EventId::TorquerFieldUnexpected;
+            raise(events, &mut self.counters, id, mask, tenths_mg);
+        }
+        if let Some(on) = report.state_changed {
+            #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
+            let h = libm::round(self.unloading.last_momentum_nms()).clamp(0.0, 1.0e9) as u32;
+            let id = EventId::UnloadingStateChanged;
+            raise(events, &mut self.counters, id, u32::from(on), h);
+        }
+    }
+
+    /// The field of this frame for the unloading: the TAMs (Table 6 calibration, plausible
+    /// magnitude) and, with a field model, a valid onboard orbit and an initialised filter,
+    /// the model field turned to ACS with the fine attitude (mG).
+    fn field_sample(&self, frame: &RawSensorFrame) -> FieldSample {
+        let table = self.tables.magnetics();
+        let (lo, hi) = TAM_PLAUSIBLE_MILLIGAUSS;
+        let mut out = FieldSample::default();
+        for (unit, (slot, tam)) in out
+            .tam_acs_milligauss
+            .iter_mut()
+            .zip(frame.tam.iter())
+            .enumerate()
+        {
+            *slot = crate::coarse::tam_field_acs_milligauss(tam, unit, table)
+                .filter(|b| (lo..=hi).contains(&b.norm()));
+        }
+        let orbit_valid = self.tables.has_orbit() && self.orbit.status() == OrbitStatus::Valid;
+        if table.has_field_model() && orbit_valid && self.filter_mode != FilterMode::Uninitialized {
+            if let Ok(state) = self.orbit.state() {
+                // The coarse fix of this cycle (phase 7b) computed the same field unless it
+                // stopped earlier (Earth's shadow, no Sun): synthesise it only then.
+                let t_s = frame.time.seconds_since_j2000_tt();
+                let b_eci_nt = self.coarse.reference_field_eci_nt(t_s).or_else(|| {
+                    crate::field_model::field_eci_nt(table, &state.pos_eci_km, t_s).ok()
+                });
+                out.model_acs_milligauss =
+                    b_eci_nt.map(|b| self.filter.q_acs_from_eci.to_dcm() * b * NT_TO_MILLIGAUSS);
+            }
+        }
+        out
+    }
+
+    /// The torquer-bar dipole command for the coming interval, per bar on the ACS x, y, z
+    /// axes, A·m² (zero while the bars are off). docs/magnetics.md §7.
+    #[must_use]
+    pub fn torquer_dipole_command_am2(&self) -> [f64; 3] {
+        self.unloading.command_acs_am2()
+    }
+
+    /// The momentum unloading's state (docs/magnetics.md §7).
+    #[must_use]
+    pub fn unloading(&self) -> &MomentumUnloading {
+        &self.unloading
     }
 
     /// The coarse attitude (Sun, field and gyros; docs/magnetics.md §5).

@@ -51,3 +51,4 @@ pub mod tables;
 pub mod telemetry;
 pub mod tm_layout;
 pub mod units;
+pub mod unloading;

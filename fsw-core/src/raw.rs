@@ -153,6 +153,12 @@ pub const CSS_EYES: usize = 6;
 /// TAM status flag: the three field words hold a measurement.
 /// docs/icd.md §3.5.
 pub const TAM_FLAG_VALID: u8 = 0x01;
+/// TAM status flag (hardware status, ICD format version 3): a magnetic torquer bar was driven
+/// while the TAM sampled (the bar drive's current monitor), so the words include the bars'
+/// own field. The OBC does not need it (it knows its command and blanks the bars before the
+/// samples it uses); the ground uses it to keep bars-off samples only.
+/// docs/icd.md §3.5; docs/magnetics.md §7.
+pub const TAM_FLAG_TORQUERS_ON: u8 = 0x02;
 /// CSS status flag: the six eye words hold a measurement.
 /// docs/icd.md §3.5.
 pub const CSS_FLAG_VALID: u8 = 0x01;

@@ -492,7 +492,7 @@ pub const EVENT_FIELDS: [Field; 3] = [
     f("parameter_2", 6, U32, "", "parameter 2"),
 ];
 
-const TAM_FLAGS: &str = "bit0 valid (the three field words hold a measurement); 0 = no data";
+const TAM_FLAGS: &str = "bit0 valid (the three field words hold a measurement); 0 = no data; bit1 torquer bars on while sampled (ICD version 3)";
 const CSS_FLAGS: &str = "bit0 valid (the six eye words hold a measurement); 0 = no data";
 
 /// APID 0x013, magnetics frame: the fields of docs/icd.md §3.5.

@@ -10,14 +10,16 @@
 //! 2. Thermal nodes; FHST1/2 and FSS1/2 sample the truth at t_k; the IRU sample is the one
 //!    that closed the interval [t_{k−1}, t_k] (initial counters at k = 0).
 //!    With `[magnetics] enabled`, TAM1/2 and the CSSs ([`crate::magnetics`]) are sampled
-//!    after the flight software's step into the record only (their own random streams; the
-//!    OBC does not see them yet).
+//!    into the raw frame and the record (their own random streams), the TAMs with the
+//!    torquer bars' field for the dipole the bars delivered over [t_{k−1}, t_k].
 //! 3. The commands due at t_k (at most `MAX_COMMANDS_PER_CYCLE`, the rest wait a cycle) and
 //!    `FlightCore::step(frame, commands)`.
 //! 4. The FSW's IRU rate-mode request goes to the IRU (it applies from the next interval,
-//!    as the hardware does); its wheel torque command is held over [t_k, t_{k+1}].
-//! 5. Dynamics over [t_k, t_{k+1}] (external torques at the t_k position); the IRU closes the
-//!    interval with `∫ω dt`.
+//!    as the hardware does); its wheel torque command is held over [t_k, t_{k+1}], and so is
+//!    its torquer-bar dipole command (`momentum_unloading = "bars"`,
+//!    [`crate::truth::torquer`]; clamped per bar, `torquer_stuck_on` faults applied).
+//! 5. Dynamics over [t_k, t_{k+1}] (external torques at the t_k position and field: gravity
+//!    gradient, the bars' `m × B`); the IRU closes the interval with `∫ω dt`.
 //!
 //! # Start-up uplinks (t = 0, in this order, before the scenario's own t = 0 commands)
 //! Onboard star catalog ([`crate::onboard`]), the filter table of `filter_table` and
@@ -43,11 +45,12 @@ use crate::sensors::fss::Fss;
 use crate::sensors::iru::Iru;
 use crate::sensors::thermal::ThermalNode;
 use crate::sensors::TruthSnapshot;
-use crate::truth::dynamics::{AttitudeState, RigidBody};
+use crate::truth::dynamics::{AttitudeState, MomentumUnloading, RigidBody};
 use crate::truth::orbit::Orbit;
 use crate::truth::sky::Sky;
 use crate::truth::sun::SunEphemeris;
 use crate::truth::time::{epoch_from_iso, SimClock};
+use crate::truth::torquer::{magnetic_torque_nm, TorquerBars, TESLA_PER_NT};
 use crate::InputError;
 use fsw_core::attitude::{attitude_error_rad, Quat};
 use fsw_core::executive::{Command, CycleOutput, FlightCore, MAX_COMMANDS_PER_CYCLE};
@@ -77,6 +80,9 @@ pub struct CycleRecord {
     pub magnetics: crate::magnetics::MagneticsRecord,
     /// The OBC's coarse attitude against the truth (`None` before its first fix).
     pub coarse: Option<CoarseCheck>,
+    /// The dipole each torquer bar delivers over the step after this cycle (A·m²; zero
+    /// without bars): the OBC's command, clamped, or a stuck bar's dipole.
+    pub torquer_dipole_am2: [f64; 3],
 }
 
 /// The fine filter's error `A_true = Rot(δθ) Â` (rad, ACS) and NEES against `q_true`; zero and
@@ -179,6 +185,20 @@ pub struct Simulation {
     faults: Vec<Fault>,
     fault_state: FaultState,
     magnetics: Option<crate::magnetics::Magnetics>,
+    /// The magnetic torquer bars (`[dynamics] momentum_unloading = "bars"`).
+    torquers: Option<TorquerBars>,
+}
+
+/// The torquer bars of a scenario flown with `[dynamics] momentum_unloading = "bars"`.
+fn torquers_of(s: &Scenario) -> Option<TorquerBars> {
+    (s.dynamics.momentum_unloading == MomentumUnloading::Bars)
+        .then(|| TorquerBars::new(&s.torquers))
+}
+
+/// Cycles of a run of `duration_s` at `step_s` (both ends included).
+#[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
+fn cycle_count_of(duration_s: f64, step_s: f64) -> u64 {
+    (duration_s / step_s + 1e-9).floor() as u64 + 1
 }
 
 fn quat_from_array([x, y, z, w]: [f64; 4]) -> Quat {
@@ -382,8 +402,7 @@ impl Simulation {
         // Start-up entries are at 0 and come first; the scenario's are sorted: keep stable.
         timeline.sort_by(|a, b| a.0.total_cmp(&b.0));
 
-        #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
-        let cycle_count = (scenario.duration_s / scenario.step_s + 1e-9).floor() as u64 + 1;
+        let cycle_count = cycle_count_of(scenario.duration_s, scenario.step_s);
         let error_rotation = Quat::from_rotation_vector(&scenario.initial_estimate.error_rad());
         Ok(Self {
             clock,
@@ -407,6 +426,7 @@ impl Simulation {
             faults: scenario.faults.clone(),
             fault_state: FaultState::new(&scenario.faults),
             magnetics: crate::magnetics::Magnetics::of_scenario(&scenario)?,
+            torquers: torquers_of(&scenario),
             scenario,
         })
     }
@@ -424,9 +444,19 @@ impl Simulation {
         let Some(m) = self.magnetics.as_mut() else {
             return Default::default();
         };
-        let record = m.sample(&self.clock, truth);
+        let dipole_acs_am2 = self
+            .torquers
+            .as_ref()
+            .map_or_else(Vector3::zeros, TorquerBars::dipole_acs_am2);
+        let record = m.sample(&self.clock, truth, &dipole_acs_am2);
         let t = truth.t_s;
         let mut tam = record.tam.map(crate::magnetics::flight_tam_sample);
+        // The bar drive's current monitor: a bar carried current while the TAMs sampled.
+        if dipole_acs_am2.iter().any(|m| *m != 0.0) {
+            for s in tam.iter_mut().filter(|s| s.flags != 0) {
+                s.flags |= fsw_core::raw::TAM_FLAG_TORQUERS_ON;
+            }
+        }
         for (unit, sample) in tam.iter_mut().enumerate() {
             let resolution = m.tam()[unit].params().resolution_milligauss_per_count;
             *sample = FaultState::apply_tam(&self.faults, unit, t, *sample, resolution);
@@ -697,12 +727,7 @@ impl Simulation {
             &truth.q_acs_from_eci,
             output.housekeeping.filter_mode,
         );
-        self.iru.command_high_rate(self.fsw.iru_high_rate_command());
-        let torque = self.fsw.wheel_torque_command_nm();
-        let report = self.body.step(dt, &torque, &truth.pos_eci_km);
-        self.pending_iru = self
-            .iru
-            .sample(&report.rate_integral_acs_rad, dt, t + dt, dev[4]);
+        self.advance_truth(dt, &truth, &magnetics, dev[4]);
         let record = CycleRecord {
             cycle: self.cycle,
             truth,
@@ -713,9 +738,66 @@ impl Simulation {
             commands_sent: n,
             magnetics,
             coarse: CoarseCheck::of(&self.fsw, &truth.q_acs_from_eci),
+            torquer_dipole_am2: self
+                .torquers
+                .as_ref()
+                .map_or([0.0; 3], TorquerBars::dipole_am2),
         };
         self.cycle += 1;
         Some(record)
+    }
+
+    /// Steps 4–5 of the module doc: the OBC's IRU rate mode to the IRU, its wheel torque and
+    /// torquer-bar commands held over [t, t + dt] through the dynamics, and the IRU sample that
+    /// closes the interval (`iru_deviation_c`: the IRU's thermal deviation).
+    fn advance_truth(
+        &mut self,
+        dt: f64,
+        truth: &TruthSnapshot,
+        magnetics: &crate::magnetics::MagneticsRecord,
+        iru_deviation_c: f64,
+    ) {
+        let t = truth.t_s;
+        self.iru.command_high_rate(self.fsw.iru_high_rate_command());
+        let torque = self.fsw.wheel_torque_command_nm();
+        let magnetic_torque_acs_nm = self.drive_torquers(t, truth, magnetics);
+        let report = self.body.step_with_external_torque(
+            dt,
+            &torque,
+            &truth.pos_eci_km,
+            &magnetic_torque_acs_nm,
+        );
+        self.pending_iru =
+            self.iru
+                .sample(&report.rate_integral_acs_rad, dt, t + dt, iru_deviation_c);
+    }
+
+    /// Drive the torquer bars with the OBC's dipole command (and the `torquer_stuck_on`
+    /// faults) for the coming step and return their torque `m × B` on the body (ACS, N·m)
+    /// in the truth field of this cycle; zero without bars or outside the field model.
+    fn drive_torquers(
+        &mut self,
+        t_s: f64,
+        truth: &TruthSnapshot,
+        magnetics: &crate::magnetics::MagneticsRecord,
+    ) -> Vector3<f64> {
+        let Some(bars) = self.torquers.as_mut() else {
+            return Vector3::zeros();
+        };
+        let stuck = FaultState::stuck_torquers(&self.faults, t_s);
+        bars.command(&self.fsw.torquer_dipole_command_am2(), &stuck);
+        magnetics
+            .field_eci_nt
+            .map_or_else(Vector3::zeros, |b_eci_nt| {
+                let b_acs_tesla = truth.m_acs_from_eci * b_eci_nt * TESLA_PER_NT;
+                magnetic_torque_nm(&bars.dipole_acs_am2(), &b_acs_tesla)
+            })
+    }
+
+    /// The torquer bars (`None` unless `[dynamics] momentum_unloading = "bars"`).
+    #[must_use]
+    pub fn torquers(&self) -> Option<&TorquerBars> {
+        self.torquers.as_ref()
     }
 }
 

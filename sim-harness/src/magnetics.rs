@@ -9,8 +9,9 @@
 //! Per cycle (when `[magnetics] enabled = true`; off by default, so that scenarios written
 //! before it fly and downlink as before; on in `gro-early-mission` and `normal-ops`, at about
 //! a quarter more simulator cost per cycle, `docs/magnetics.md` §3): the field at the truth position
-//! ([`crate::truth::field`]), TAM1 and TAM2 ([`crate::sensors::tam`]; the torquer bars'
-//! dipole is zero: there are none yet) and the CSS set ([`crate::sensors::css`]). Each model
+//! ([`crate::truth::field`]), TAM1 and TAM2 ([`crate::sensors::tam`], with the torquer bars'
+//! field for the dipole they delivered while the TAMs sampled: [`crate::truth::torquer`])
+//! and the CSS set ([`crate::sensors::css`]). Each model
 //! draws from its own random stream, so the FHST, FSS and IRU draws and therefore every
 //! packet of `telemetry.bin` but the 0x013 ones do not change.
 //! `docs/magnetics.md` has the measured numbers.
@@ -76,15 +77,20 @@ impl Magnetics {
         &self.css
     }
 
-    /// Sample everything at the truth of this cycle. Allocates nothing.
-    pub fn sample(&mut self, clock: &SimClock, truth: &TruthSnapshot) -> MagneticsRecord {
+    /// Sample everything at the truth of this cycle, the torquer bars delivering
+    /// `dipole_acs_am2` (ACS, A·m²; zero while they are off). Allocates nothing.
+    pub fn sample(
+        &mut self,
+        clock: &SimClock,
+        truth: &TruthSnapshot,
+        dipole_acs_am2: &Vector3<f64>,
+    ) -> MagneticsRecord {
         let field_eci_nt = self.field.field_eci_nt(clock, truth.t_s, &truth.pos_eci_km);
-        let no_dipole = Vector3::zeros();
         MagneticsRecord {
             field_eci_nt,
             tam: [
-                self.tam[0].sample(truth, field_eci_nt.as_ref(), &no_dipole),
-                self.tam[1].sample(truth, field_eci_nt.as_ref(), &no_dipole),
+                self.tam[0].sample(truth, field_eci_nt.as_ref(), dipole_acs_am2),
+                self.tam[1].sample(truth, field_eci_nt.as_ref(), dipole_acs_am2),
             ],
             css: self.css.sample(truth),
         }

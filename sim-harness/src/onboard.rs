@@ -178,8 +178,8 @@ pub fn truth_orbit_table(
 
 /// The magnetics table (Table 6) the ground uplinks at the start: the DGRF field model at the
 /// scenario epoch (`gro_reference::field::onboard_field_table`), the TAMs' nominal axes and
-/// count size, and the TAM biases and field σ the scenario tells the OBC
-/// (`[magnetics] onboard_*`); `None` without magnetics or with `onboard_table = false`.
+/// count size, the TAM biases and field σ the scenario tells the OBC
+/// (`[magnetics] onboard_*`) and the torquer bars' dipole limit (`[torquers]`); `None` without magnetics or with `onboard_table = false`.
 ///
 /// # Errors
 /// An epoch outside the field model (1990–1995), or a table the OBC would refuse (named).
@@ -199,6 +199,8 @@ pub fn magnetics_table(
         [scenario.tam2.resolution_milligauss_per_count; 3],
     ];
     base.tam_bias_milligauss = m.onboard_tam_bias_milligauss;
+    // The bars' rating is known to the ground (Table 6 field 20).
+    base.torquer_dipole_limit_am2 = scenario.torquers.dipole_limit_am2;
     if let Some(sigma) = m.onboard_field_sigma_milligauss {
         base.field_sigma_milligauss = [sigma; 2];
     }

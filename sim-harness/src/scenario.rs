@@ -591,6 +591,10 @@ pub struct Scenario {
     /// Sample the field, TAMs and CSSs into the record and downlink them ([`crate::magnetics`]).
     #[serde(default)]
     pub magnetics: MagneticsParams,
+    /// The magnetic torquer bars ([`crate::truth::torquer`]), flown with
+    /// `[dynamics] momentum_unloading = "bars"`.
+    #[serde(default)]
+    pub torquers: crate::truth::torquer::TorquerParams,
     /// Thermal nodes.
     #[serde(default)]
     pub thermal: ThermalSet,
@@ -791,6 +795,18 @@ impl Scenario {
             c.validate(i, self)?;
         }
         crate::faults::validate_all(&self.faults)?;
+        let bars =
+            self.dynamics.momentum_unloading == crate::truth::dynamics::MomentumUnloading::Bars;
+        if !bars
+            && self
+                .faults
+                .iter()
+                .any(|f| f.kind == crate::faults::FaultKind::TorquerStuckOn)
+        {
+            bail!(
+                "a torquer_stuck_on fault needs the bars: [dynamics] momentum_unloading = \"bars\""
+            );
+        }
         Ok(())
     }
 
@@ -851,6 +867,12 @@ impl Scenario {
         crate::truth::time::epoch_from_iso(&self.epoch_utc).context("epoch_utc")?;
         self.tam1.validate("tam1")?;
         self.tam2.validate("tam2")?;
+        self.torquers.validate()?;
+        if self.dynamics.momentum_unloading == crate::truth::dynamics::MomentumUnloading::Bars
+            && !self.magnetics.enabled
+        {
+            bail!("dynamics.momentum_unloading = \"bars\" needs the truth field and the TAMs: [magnetics] enabled = true");
+        }
         self.css.validate()?;
         let q = self.initial.q_acs_from_eci;
         let n = q.iter().map(|x| x * x).sum::<f64>().sqrt();

@@ -147,7 +147,7 @@ fn val_bias_and_transfer_matrix_recovered_by_least_squares_over_one_orbit() {
 
 /// Layer 3: the closed loop samples the field, the TAMs and the CSSs into its record. Over
 /// the first 3000 s of gro-early-mission (an inertial hold and a slew): each TAM1 reading
-/// minus the model applied to the record's own truth and field is the noise plus
+/// minus the model applied to the record's own truth, field and torquer-bar dipole is the noise plus
 /// quantisation (mean ≈ 0, σ = √(0.2² + 0.3²/12) = 0.218 mG); the field is the truth
 /// field; the CSS eye nearest the Sun reads ≈ k cos θ outside the umbra. With
 /// `[magnetics] enabled = false` (the default) the record is empty.
@@ -167,6 +167,11 @@ fn val_closed_loop_records_tam_and_css_samples() {
     let mut max_field_diff = 0.0_f64;
     let mut lit_cycles = 0;
     let mut max_css_err = 0.0_f64;
+    // The torquer bars (gro-early-mission flies them, ACS axes): the TAMs of a cycle see the
+    // dipole the bars delivered over the interval that ended at the sample, i.e. the
+    // previous record's.
+    let mut dipole_acs_am2 = Vector3::zeros();
+    let mut bars_on_samples = 0;
     while let Some(rec) = sim.step() {
         let m = rec.magnetics;
         let b = m.field_eci_nt.unwrap();
@@ -175,8 +180,15 @@ fn val_closed_loop_records_tam_and_css_samples() {
             .unwrap();
         max_field_diff = max_field_diff.max((b - mine).norm());
         assert!(m.tam[0].valid && m.tam[1].valid);
-        let ideal =
-            tam1.ideal_reading_milligauss(&(rec.truth.m_acs_from_eci * b), &Vector3::zeros());
+        let ideal = tam1.ideal_reading_milligauss(&(rec.truth.m_acs_from_eci * b), &dipole_acs_am2);
+        if dipole_acs_am2.norm() > 0.0 {
+            bars_on_samples += 1;
+        }
+        // The hardware's bars-on bit (ICD version 3) says so, in the words the OBC and the
+        // downlink get.
+        let on = rec.frame.tam[0].flags & fsw_core::raw::TAM_FLAG_TORQUERS_ON != 0;
+        assert_eq!(on, dipole_acs_am2.norm() > 0.0, "t = {}", rec.truth.t_s);
+        dipole_acs_am2 = Vector3::from(rec.torquer_dipole_am2);
         let e = tam1.reading_milligauss(&m.tam[0]) - ideal;
         sum += e;
         sum2 += e.component_mul(&e);
@@ -216,6 +228,8 @@ fn val_closed_loop_records_tam_and_css_samples() {
     // The loop's evaluator and this one cache on different epochs: ≤ 1e-3 nT apart.
     assert!(max_field_diff < 0.01);
     assert!(lit_cycles > 0);
+    // The residual above is at the noise only if the bars' field was modelled: they ran.
+    assert!(bars_on_samples > 1000, "{bars_on_samples}");
 
     let mut off = s;
     off.magnetics.enabled = false;

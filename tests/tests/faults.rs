@@ -328,6 +328,12 @@ fn e2e_fault_magnetics() {
         .any(|(t, p1, _)| *p1 == 3 && (3000.0..3600.0).contains(t)));
     assert!(!rejected.iter().any(|(_, p1, _)| *p1 == 4));
     assert!(events_of(&clean_recs, EventId::CoarseVectorRejected).is_empty());
+    // The unloading's bars-off check sees TAM1's jump against the model on TAM1 alone (a TAM
+    // fault, not a bar: p1 = 1); the dead TAM1 is refused before it (implausible magnitude).
+    let unexpected = events_of(&recs, EventId::TorquerFieldUnexpected);
+    println!("0x0A01: {unexpected:?}");
+    assert!(unexpected.iter().all(|(_, p1, _)| *p1 == 1));
+    assert!(events_of(&clean_recs, EventId::TorquerFieldUnexpected).is_empty());
     // During the faults the coarse attitude keeps the 2° (3σ) requirement per axis and stays
     // within 3σ of its own covariance at every cycle.
     let during: Vec<_> = recs
@@ -585,4 +591,38 @@ fn e2e_fault_filter_reset_mid_slew() {
     let base = r.baseline_recovery_s.unwrap();
     assert!(rec <= 1500.0, "{rec} (no fault: {base})");
     assert!(r.post_slew_error_arcsec[0] < 0.5 * 3600.0);
+}
+
+/// A torquer bar stuck on (issue 20): the OBC's bars-off check sees the unexpected field at
+/// both TAMs on its blanked samples and raises 0x0A01 once (p1 = 3: both TAMs), within 60 s;
+/// nothing of the kind in the fault-free run; the fine attitude stays inside the requirement
+/// and the wheels below their limit while the bar is stuck.
+#[test]
+fn e2e_fault_torquer_stuck_on() {
+    let s = load("torquer-stuck-on");
+    assert!(s.faults.iter().any(|f| f.kind == FaultKind::TorquerStuckOn));
+    let r = assess(&s).unwrap();
+    common(&r, false);
+    let (recs, _) = fly(&s);
+    let mut clean = s.clone();
+    clean.faults.clear();
+    let (clean_recs, _) = fly(&clean);
+    let unexpected = events_of(&recs, EventId::TorquerFieldUnexpected);
+    println!("0x0A01: {unexpected:?}");
+    assert_eq!(unexpected.len(), 1, "{unexpected:?}");
+    let (t, mask, tenths_mg) = unexpected[0];
+    assert!((1200.0..1260.0).contains(&t), "{t}");
+    assert_eq!(mask, 3);
+    // ≈ 100 mG of bar field (1,000 A·m² × 0.1 mG per A·m²), well above the 20-mG threshold.
+    assert!((500..2000).contains(&tenths_mg), "{tenths_mg}");
+    assert!(events_of(&clean_recs, EventId::TorquerFieldUnexpected).is_empty());
+    // The bar really was stuck, and the OBC kept commanding the others.
+    let stuck: Vec<_> = recs
+        .iter()
+        .filter(|r| (1300.0..3000.0).contains(&r.truth.t_s))
+        .collect();
+    assert!(stuck.iter().all(|r| r.torquer_dipole_am2[1] == 1000.0));
+    let worst = stuck.iter().map(|r| axis_arcsec(r)).fold(0.0, f64::max);
+    println!("worst axis error while stuck: {worst:.1}″");
+    assert!(worst < FINE_REQUIREMENT_ARCSEC, "{worst}");
 }

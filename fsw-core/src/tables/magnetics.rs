@@ -104,6 +104,74 @@ pub struct MagneticsTable {
     /// parallel vectors is unobservable and no fix is made.
     /// algorithms.md §10a ("near-parallel vectors"); docs/tables.md (Table 6, field 18).
     pub min_sun_field_angle_rad: f64,
+    /// Momentum-unloading gain `k` of `m = k (h × B)/|B|²`, 1/s (the time constant of the
+    /// unloading of the momentum perpendicular to the field is `1/k` while no bar saturates);
+    /// 0 = no unloading (bars off).
+    /// Markley & Crassidis (2014) ch. 7 (momentum management, the cross-product law);
+    /// docs/tables.md (Table 6, field 19).
+    pub unloading_gain_per_s: f64,
+    /// Largest dipole the OBC commands per torquer bar, A·m² (the bars' rating).
+    /// docs/magnetics.md §7; docs/tables.md (Table 6, field 20).
+    pub torquer_dipole_limit_am2: f64,
+    /// Unloading starts when the momentum to unload exceeds this, N·m·s (the dead band).
+    /// docs/magnetics.md §7; docs/tables.md (Table 6, field 21).
+    pub unloading_start_nms: f64,
+    /// Unloading stops when the momentum to unload falls below this, N·m·s (≤ field 21: the
+    /// hysteresis keeps the bars from chattering at the edge of the dead band).
+    /// docs/magnetics.md §7; docs/tables.md (Table 6, field 22).
+    pub unloading_stop_nms: f64,
+    /// The bars-off check: a TAM sample taken with every bar commanded off that differs from
+    /// the onboard model field (at the fine attitude) by more than this, mG, on 3 such samples
+    /// in a row, is an unexpected field at the TAM (a bar stuck on, or a TAM fault: event
+    /// 0x0A01), and the unloading uses the model field instead.
+    /// docs/magnetics.md §7; docs/tables.md (Table 6, field 23).
+    pub torquer_check_milligauss: f64,
+}
+
+/// Table 6 as written before the momentum-unloading fields 19–23 (layout 1: 4,402 payload
+/// octets). A payload of this layout is still accepted: the fields it lacks take their boot
+/// values ([`MagneticsTable::from_layout1`]).
+/// docs/tables.md (Table 6, "layouts").
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct MagneticsTableLayout1 {
+    /// Field 0. docs/tables.md (Table 6).
+    pub field_degree: u8,
+    /// Field 1. docs/tables.md (Table 6).
+    pub field_epoch_s_since_j2000_tt: f64,
+    /// Field 2. docs/tables.md (Table 6).
+    pub g_nt: HarmonicRows,
+    /// Field 3. docs/tables.md (Table 6).
+    pub h_nt: HarmonicRows,
+    /// Field 4. docs/tables.md (Table 6).
+    pub g_nt_per_year: HarmonicRows,
+    /// Field 5. docs/tables.md (Table 6).
+    pub h_nt_per_year: HarmonicRows,
+    /// Field 6. docs/tables.md (Table 6).
+    pub m_tod_from_eci: Mat3Rows,
+    /// Field 7. docs/tables.md (Table 6).
+    pub ut1_minus_tai_s: f64,
+    /// Field 8. docs/tables.md (Table 6).
+    pub equation_of_equinoxes_rad: f64,
+    /// Field 9. docs/tables.md (Table 6).
+    pub m_acs_from_tam: [Mat3Rows; TAMS],
+    /// Field 10. docs/tables.md (Table 6).
+    pub tam_milligauss_per_count: [[f64; 3]; TAMS],
+    /// Field 11. docs/tables.md (Table 6).
+    pub tam_bias_milligauss: [[f64; 3]; TAMS],
+    /// Field 12. docs/tables.md (Table 6).
+    pub field_sigma_milligauss: [f64; TAMS],
+    /// Field 13. docs/tables.md (Table 6).
+    pub fss_sun_sigma_rad: f64,
+    /// Field 14. docs/tables.md (Table 6).
+    pub css_normals_acs: [[f64; 3]; CSS_EYES],
+    /// Field 15. docs/tables.md (Table 6).
+    pub css_counts_at_normal_incidence: f64,
+    /// Field 16. docs/tables.md (Table 6).
+    pub css_sun_sigma_rad: f64,
+    /// Field 17. docs/tables.md (Table 6).
+    pub coarse_fix_every_n_cycles: u16,
+    /// Field 18. docs/tables.md (Table 6).
+    pub min_sun_field_angle_rad: f64,
 }
 
 /// The default CSS layout: six eyes on ±X, ±Y, ±Z of ACS.
@@ -151,7 +219,54 @@ impl MagneticsTable {
             css_sun_sigma_rad: 5.0 * core::f64::consts::PI / 180.0,
             coarse_fix_every_n_cycles: 10,
             min_sun_field_angle_rad: 10.0 * core::f64::consts::PI / 180.0,
+            // Momentum unloading (docs/magnetics.md §7): a 333-s time constant (1,000 s let
+            // the stored momentum plus a 60° slew's reach 213 of the 250 N·m·s on
+            // gro-early-mission, 333 s 181), the bars'
+            // assumed 4,000 A·m² rating, a 20/10 N·m·s dead band (a tenth of the 250 N·m·s
+            // wheel limit: the orbit's cyclic gravity-gradient momentum is stored, not dumped)
+            // and a 20-mG bars-off check (8σ of the boot field σ: a prelaunch TAM bias and
+            // misalignment stay below it).
+            unloading_gain_per_s: 3.0e-3,
+            torquer_dipole_limit_am2: 4_000.0,
+            unloading_start_nms: 20.0,
+            unloading_stop_nms: 10.0,
+            torquer_check_milligauss: 20.0,
         }
+    }
+
+    /// A table of layout 1 (fields 0–18): the unloading fields 19–23 take their boot values.
+    /// docs/tables.md (Table 6, "layouts").
+    #[must_use]
+    pub fn from_layout1(old: &MagneticsTableLayout1) -> Self {
+        Self {
+            field_degree: old.field_degree,
+            field_epoch_s_since_j2000_tt: old.field_epoch_s_since_j2000_tt,
+            g_nt: old.g_nt,
+            h_nt: old.h_nt,
+            g_nt_per_year: old.g_nt_per_year,
+            h_nt_per_year: old.h_nt_per_year,
+            m_tod_from_eci: old.m_tod_from_eci,
+            ut1_minus_tai_s: old.ut1_minus_tai_s,
+            equation_of_equinoxes_rad: old.equation_of_equinoxes_rad,
+            m_acs_from_tam: old.m_acs_from_tam,
+            tam_milligauss_per_count: old.tam_milligauss_per_count,
+            tam_bias_milligauss: old.tam_bias_milligauss,
+            field_sigma_milligauss: old.field_sigma_milligauss,
+            fss_sun_sigma_rad: old.fss_sun_sigma_rad,
+            css_normals_acs: old.css_normals_acs,
+            css_counts_at_normal_incidence: old.css_counts_at_normal_incidence,
+            css_sun_sigma_rad: old.css_sun_sigma_rad,
+            coarse_fix_every_n_cycles: old.coarse_fix_every_n_cycles,
+            min_sun_field_angle_rad: old.min_sun_field_angle_rad,
+            ..Self::boot()
+        }
+    }
+
+    /// Whether the table asks for momentum unloading (a positive gain and dipole limit).
+    /// docs/tables.md (Table 6, fields 19–20).
+    #[must_use]
+    pub fn unloading_enabled(&self) -> bool {
+        self.unloading_gain_per_s > 0.0 && self.torquer_dipole_limit_am2 > 0.0
     }
 
     /// Whether the table holds a field model (coarse attitude possible).
@@ -225,7 +340,18 @@ impl MagneticsTable {
         if self.coarse_fix_every_n_cycles == 0 {
             return Err(TableError::OutOfRange { field: 17 });
         }
-        check_range(self.min_sun_field_angle_rad, 0.01, 1.5, 18)
+        check_range(self.min_sun_field_angle_rad, 0.01, 1.5, 18)?;
+        check_range(self.unloading_gain_per_s, 0.0, 0.1, 19)?;
+        check_range(self.torquer_dipole_limit_am2, 0.0, 100_000.0, 20)?;
+        check_range(self.unloading_start_nms, 0.0, 1_000.0, 21)?;
+        check_range(self.unloading_stop_nms, 0.0, self.unloading_start_nms, 22)?;
+        check_range(self.torquer_check_milligauss, 1.0, 500.0, 23)?;
+        // The bars are off in the cycle before each TAM sample the OBC uses (the cycle before
+        // a coarse fix): with a fix every cycle they could never be on.
+        if self.unloading_enabled() && self.coarse_fix_every_n_cycles < 2 {
+            return Err(TableError::OutOfRange { field: 17 });
+        }
+        Ok(())
     }
 }
 
@@ -275,5 +401,26 @@ mod tests {
         let mut t = MagneticsTable::boot();
         t.coarse_fix_every_n_cycles = 0;
         assert_eq!(t.validate(), Err(TableError::OutOfRange { field: 17 }));
+        let mut t = MagneticsTable::boot();
+        t.coarse_fix_every_n_cycles = 1;
+        assert_eq!(t.validate(), Err(TableError::OutOfRange { field: 17 }));
+        t.unloading_gain_per_s = 0.0;
+        assert_eq!(
+            t.validate(),
+            Ok(()),
+            "a fix every cycle is fine without unloading"
+        );
+        let mut t = MagneticsTable::boot();
+        t.unloading_gain_per_s = f64::NAN;
+        assert_eq!(t.validate(), Err(TableError::NotFinite { field: 19 }));
+        let mut t = MagneticsTable::boot();
+        t.torquer_dipole_limit_am2 = -1.0;
+        assert_eq!(t.validate(), Err(TableError::OutOfRange { field: 20 }));
+        let mut t = MagneticsTable::boot();
+        t.unloading_stop_nms = t.unloading_start_nms + 1.0;
+        assert_eq!(t.validate(), Err(TableError::OutOfRange { field: 22 }));
+        let mut t = MagneticsTable::boot();
+        t.torquer_check_milligauss = 0.5;
+        assert_eq!(t.validate(), Err(TableError::OutOfRange { field: 23 }));
     }
 }

@@ -15,7 +15,7 @@
 use super::image::{
     decode_catalog_into, decode_payload, encode_image, parse_image, TableError, TableId,
 };
-use super::magnetics::MagneticsTable;
+use super::magnetics::{MagneticsTable, MagneticsTableLayout1};
 use super::types::{
     check_alignment_change, check_iru_change, AlignmentTable, FilterTable, IruTable, OrbitTable,
     StarCatalogTable,
@@ -315,7 +315,15 @@ impl TableSet {
                 self.orbit.inactive = Some((t, created, crc));
             }
             TableId::Magnetics => {
-                let t: MagneticsTable = decode_payload(payload)?;
+                // Layout 2 (fields 0–23), else layout 1 (fields 0–18, before momentum
+                // unloading): the two differ in length, so at most one decodes exactly.
+                let t: MagneticsTable = match decode_payload(payload) {
+                    Ok(t) => t,
+                    Err(e) => match decode_payload::<MagneticsTableLayout1>(payload) {
+                        Ok(old) => MagneticsTable::from_layout1(&old),
+                        Err(_) => return Err(e),
+                    },
+                };
                 t.validate()?;
                 self.magnetics.inactive = Some((t, created, crc));
             }
@@ -476,6 +484,76 @@ mod tests {
         ));
         assert_eq!(set.alignment(), before.alignment());
         assert_eq!(set.activate(TableId::Alignment), Err(None));
+    }
+
+    /// Table 6 of layout 2 round-trips; a layout-1 payload (written before the unloading
+    /// fields) still loads, with the boot unloading fields; one octet more or less than
+    /// either layout is refused.
+    #[test]
+    #[allow(clippy::float_cmp)] // copied values: exact equality is the point
+    fn magnetics_layouts_round_trip_and_old_payloads_load() {
+        let mut t = MagneticsTable::boot();
+        t.unloading_gain_per_s = 2.0e-3;
+        t.torquer_dipole_limit_am2 = 300.0;
+        t.tam_bias_milligauss[0] = [0.0, 0.0, -4.0];
+        let mut buf = [0u8; 8192];
+        let created = TimeTag::default();
+        let n = encode_image(TableId::Magnetics, created, &t, &mut buf).unwrap();
+        assert_eq!(n, 4_466, "the layout-2 image of docs/tables.md");
+        let mut set = TableSet::boot();
+        assert_eq!(set.load(&buf[..n]), Ok(TableId::Magnetics));
+        set.activate(TableId::Magnetics).unwrap();
+        assert_eq!(set.magnetics(), &t);
+        let mut out = [0u8; 8192];
+        let m = set.dump(TableId::Magnetics, &mut out).unwrap();
+        assert_eq!(&out[..m], &buf[..n]);
+
+        let b = MagneticsTable::boot();
+        let old = MagneticsTableLayout1 {
+            field_degree: b.field_degree,
+            field_epoch_s_since_j2000_tt: b.field_epoch_s_since_j2000_tt,
+            g_nt: b.g_nt,
+            h_nt: b.h_nt,
+            g_nt_per_year: b.g_nt_per_year,
+            h_nt_per_year: b.h_nt_per_year,
+            m_tod_from_eci: b.m_tod_from_eci,
+            ut1_minus_tai_s: b.ut1_minus_tai_s,
+            equation_of_equinoxes_rad: b.equation_of_equinoxes_rad,
+            m_acs_from_tam: b.m_acs_from_tam,
+            tam_milligauss_per_count: b.tam_milligauss_per_count,
+            tam_bias_milligauss: [[0.0, 0.0, -4.0], [0.5, 0.0, 0.0]],
+            field_sigma_milligauss: [0.3, 2.5],
+            fss_sun_sigma_rad: b.fss_sun_sigma_rad,
+            css_normals_acs: b.css_normals_acs,
+            css_counts_at_normal_incidence: b.css_counts_at_normal_incidence,
+            css_sun_sigma_rad: b.css_sun_sigma_rad,
+            coarse_fix_every_n_cycles: 10,
+            min_sun_field_angle_rad: b.min_sun_field_angle_rad,
+        };
+        let n1 = encode_image(TableId::Magnetics, created, &old, &mut buf).unwrap();
+        assert_eq!(n1, 4_426, "the layout-1 image of docs/tables.md");
+        assert!(n1 < n);
+        let mut set = TableSet::boot();
+        assert_eq!(set.load(&buf[..n1]), Ok(TableId::Magnetics));
+        set.activate(TableId::Magnetics).unwrap();
+        let loaded = set.magnetics();
+        assert_eq!(loaded.tam_bias_milligauss, old.tam_bias_milligauss);
+        assert_eq!(loaded.field_sigma_milligauss, [0.3, 2.5]);
+        assert_eq!(loaded.unloading_gain_per_s, b.unloading_gain_per_s);
+        assert_eq!(loaded.torquer_dipole_limit_am2, b.torquer_dipole_limit_am2);
+        // An invalid new field is named; a payload of neither length is refused.
+        let mut bad = t;
+        bad.unloading_stop_nms = 1e6;
+        let n2 = encode_image(TableId::Magnetics, created, &bad, &mut buf).unwrap();
+        assert!(matches!(
+            TableSet::boot().load(&buf[..n2]),
+            Err((_, TableError::OutOfRange { field: 22 }))
+        ));
+        let payload = &t;
+        let mut raw = [0u8; 8192];
+        let len = postcard::to_slice(payload, &mut raw).unwrap().len();
+        assert!(decode_payload::<MagneticsTable>(&raw[..len - 1]).is_err());
+        assert!(decode_payload::<MagneticsTableLayout1>(&raw[..len]).is_err());
     }
 
     #[test]

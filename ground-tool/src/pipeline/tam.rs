@@ -54,7 +54,7 @@ use crate::diagnose::stats::chi2_sf;
 use crate::pipeline::observations::{fine_attitude, triad, AttitudeSensors, FrameObservations};
 use crate::tp::Telemetry;
 use fsw_core::attitude::rotvec_from_rot;
-use fsw_core::raw::{TAMS, TAM_FLAG_VALID};
+use fsw_core::raw::{TAMS, TAM_FLAG_TORQUERS_ON, TAM_FLAG_VALID};
 use fsw_core::telemetry::MagneticsFrame;
 use fsw_core::units::ARCSEC_PER_RAD;
 use gro_reference::field::{FieldEvaluator, FieldModel};
@@ -424,6 +424,11 @@ fn collect_samples(
     for m in &tm.magnetics {
         let t = m.time.seconds();
         if t < next_s || !m.tam.iter().any(|s| s.flags & TAM_FLAG_VALID != 0) {
+            continue;
+        }
+        // A torquer bar was on (ICD format version 3, docs/icd.md §3.5): the words include
+        // the bars' own field; the next bars-off frame is taken instead.
+        if m.tam.iter().any(|s| s.flags & TAM_FLAG_TORQUERS_ON != 0) {
             continue;
         }
         let Ok(k) = frames.binary_search_by(|f| f.time.cmp(&m.time)) else {

@@ -24,6 +24,7 @@
 //! | `time_tag_jump` | `at_s`, `offset_s`, optional `duration_s` | the frame time tag is `t + offset_s` from `at_s` on (for `duration_s` only, if given: a glitch) |
 //! | `table_upload` | `at_s`, `corruption` = "none" / "bit_flip" / "truncate" / "rotate" / "nan", optional `activate` (default true), `rotation_deg` + `rotation_sensor` (rotate), `bits` (bit_flip, default 1), `octets` (truncate, default 16) | an alignment image built from the start-up alignment (the true one with `fly_true_alignments`, else the boot table), damaged as said, is loaded at `at_s` and, if `activate`, activated in the same cycle |
 //! | `filter_reset` | `at_s` | an unexpected `FilterReset` command (covariance reopened, estimate kept) |
+//! | `torquer_stuck_on` | `sensor` = "mtb1" / "mtb2" / "mtb3", `at_s`, `dipole_am2`, optional `duration_s` (absent: for good) | the bar delivers `dipole_am2` whatever the OBC commands ([`crate::truth::torquer`]): its torque on the body and its field at the TAMs (needs `[dynamics] momentum_unloading = "bars"`) |
 //! | `iru_counter_wrap` | `at_s`, optional `margin_pulses` (default 40) | the six 16-bit counters start (t = 0) where, moved by their true bias at low rate until `at_s`, they stand `margin_pulses` short of the wrap in the direction the bias moves them: every counter wraps at about `at_s` (put a high-rate slew there). The OBC sees only count differences, so this is invisible except where the wraps fall |
 //!
 //! Damage of `table_upload`: `bit_flip` flips `bits` payload bits *after* the CRC was
@@ -116,6 +117,7 @@ mod tests {
             offset_milligauss: None,
             eye: None,
             counts: None,
+            dipole_am2: None,
         };
         for (c, code) in [
             (Corruption::BitFlip, 9),

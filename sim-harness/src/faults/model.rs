@@ -45,6 +45,9 @@ pub enum FaultKind {
     TamFailure,
     /// A coarse Sun sensor eye reads `counts` more than it should (a reflection).
     CssGlint,
+    /// A magnetic torquer bar delivers a fixed dipole whatever the OBC commands (a driver
+    /// stuck on).
+    TorquerStuckOn,
 }
 
 /// Damage of a `table_upload`.
@@ -122,6 +125,9 @@ pub struct Fault {
     /// `css_glint`: the counts added (default 800).
     #[serde(default)]
     pub counts: Option<f64>,
+    /// `torquer_stuck_on`: the dipole the bar delivers (A·m², along its axis).
+    #[serde(default)]
+    pub dipole_am2: Option<f64>,
 }
 
 fn sensor_index(name: &str) -> Option<usize> {
@@ -249,6 +255,17 @@ impl Fault {
                     if !o.iter().all(|x| x.is_finite() && x.abs() <= 1_000.0) {
                         bail!("{here}.offset_milligauss must be within ±1000 mG");
                     }
+                }
+            }
+            FaultKind::TorquerStuckOn => {
+                if !matches!(sensor, Some("mtb1" | "mtb2" | "mtb3")) {
+                    bail!("{here}.sensor must be \"mtb1\", \"mtb2\" or \"mtb3\"");
+                }
+                if !self
+                    .dipole_am2
+                    .is_some_and(|d| d.is_finite() && d.abs() <= 100_000.0)
+                {
+                    bail!("{here}.dipole_am2 must be given, within ±100000 A·m²");
                 }
             }
             FaultKind::CssGlint => {
@@ -446,6 +463,28 @@ impl FaultState {
                     }
                 }
                 None => out.field_counts = [0; 3],
+            }
+        }
+        out
+    }
+
+    /// The dipole each torquer bar is stuck at by the `torquer_stuck_on` faults active at
+    /// `t_s` (`None`: the bar follows its command).
+    #[must_use]
+    pub fn stuck_torquers(faults: &[Fault], t_s: f64) -> [Option<f64>; 3] {
+        let mut out = [None; 3];
+        for f in faults {
+            if f.kind != FaultKind::TorquerStuckOn || !f.active(t_s) {
+                continue;
+            }
+            let bar = match f.sensor.as_deref() {
+                Some("mtb1") => 0,
+                Some("mtb2") => 1,
+                Some("mtb3") => 2,
+                _ => continue,
+            };
+            if let Some(slot) = out.get_mut(bar) {
+                *slot = f.dipole_am2;
             }
         }
         out

@@ -14,9 +14,9 @@
 //! - `M_AS,true = Rot(misalignment) · M_AS,nominal` (nominal: the TAM axes are the ACS axes;
 //!   the paper gives no TAM alignment);
 //! - `B_residual,acs`: the spacecraft's residual (hard-iron) field at the TAM, body axes;
-//! - `C·m_acs`: the torquer bars' field at the TAM for the commanded dipole `m_acs` (A·m²):
-//!   the hook for the torquer bars (issue 20); zero dipole while they are off (there are no
-//!   torquer bars in the simulator yet, so the closed loop passes zero);
+//! - `C·m_acs`: the torquer bars' field at the TAM for the dipole `m_acs` (A·m²) the bars
+//!   deliver while the TAM samples ([`crate::truth::torquer`]; zero while they are off):
+//!   column `k` of `C` is the field per A·m² of bar `k` (bars on the ACS axes);
 //! - `bias`: the sensor's own offset, sensor axes; `n`: white Gaussian noise per axis.
 //!
 //! What a ground bias fit recovers with the bars off is the *effective* bias

@@ -18,14 +18,20 @@
 //!   momentum cannot pass its limit within the step (the body then gets less torque).
 //! * External torque: gravity gradient `3 μ/r³ n × (I n)`, `n` the zenith unit vector in ACS,
 //!   held constant over a step (evaluated at the step start).
-//! * Momentum unloading (truth side, not flight software): GRO dumped wheel momentum with
-//!   magnetic torquers, which the emulated OBC attitude software does not include. Without it
-//!   the orbit-averaged gravity gradient (~0.1 N·m for this inertia) saturates the 250 N·m·s
-//!   wheels within an orbit of inertial hold. The model is an ideal external torque
-//!   `τ_u = −h_w / T_u` (h_w the total wheel momentum in ACS, `T_u` =
-//!   `momentum_unloading_time_constant_s`, default 600 s, 0 = off), held over a step; the
-//!   attitude controller sees it as a slow disturbance and moves the momentum out of the
-//!   wheels. The steady wheel momentum is then ≈ T_u × the secular torque (~60 N·m·s).
+//! * Momentum unloading (`momentum_unloading`): without it the orbit-averaged gravity
+//!   gradient (≈ 0.05 N·m for this inertia in `normal-ops`) saturates the 250 N·m·s wheels
+//!   within hours of inertial hold.
+//!   - `"bars"`: GRO's way — the flight core commands the magnetic torquer bars
+//!     ([`super::torquer`]) and the closed loop passes their torque `m × B` to
+//!     [`RigidBody::step_with_external_torque`]; nothing is added here. Needs the truth field
+//!     (`[magnetics] enabled = true`); used by `normal-ops` and `gro-early-mission`.
+//!   - `"ideal"` (the default, for scenarios without the magnetics models: before issue 20
+//!     the only model): an ideal external torque `τ_u = −h_w / T_u` (h_w the total wheel
+//!     momentum in ACS, `T_u` = `momentum_unloading_time_constant_s`, default 600 s), held
+//!     over a step; the attitude controller sees it as a slow disturbance and moves the
+//!     momentum out of the wheels. The steady wheel momentum is then ≈ T_u × the secular
+//!     torque (≈ 30–45 N·m·s in `normal-ops`).
+//!   - `"off"`: no unloading (as `"ideal"` with `T_u = 0`).
 //!
 //! # Integration (per step `h`, torque held)
 //! 1. RK4 on (ω, h_wheels) with `I ω̇ = τ_gg − W τ_w − ω × (I ω + W h_w)`, `ḣ_w = τ_w`.
@@ -65,8 +71,24 @@ pub struct DynamicsParams {
     pub initial_wheel_momentum_nms: Vec<f64>,
     /// Apply the gravity-gradient torque.
     pub gravity_gradient: bool,
-    /// Time constant of the ideal magnetic momentum unloading (s); 0 = off.
+    /// Time constant of the ideal magnetic momentum unloading (s); 0 = off. Used only with
+    /// `momentum_unloading = "ideal"`.
     pub momentum_unloading_time_constant_s: f64,
+    /// How wheel momentum is unloaded (module doc): `"ideal"` (default), `"bars"`, `"off"`.
+    pub momentum_unloading: MomentumUnloading,
+}
+
+/// How wheel momentum is unloaded (scenario `[dynamics] momentum_unloading`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum MomentumUnloading {
+    /// An ideal external torque `−h_w / T_u` (module doc); the model before issue 20.
+    #[default]
+    Ideal,
+    /// The flight core's magnetic torquer bars ([`super::torquer`]).
+    Bars,
+    /// None.
+    Off,
 }
 
 impl Default for DynamicsParams {
@@ -84,6 +106,7 @@ impl Default for DynamicsParams {
             initial_wheel_momentum_nms: Vec::new(),
             gravity_gradient: true,
             momentum_unloading_time_constant_s: 600.0,
+            momentum_unloading: MomentumUnloading::Ideal,
         }
     }
 }
@@ -108,7 +131,8 @@ pub struct StepReport {
     pub rotation_vector_acs_rad: Vector3<f64>,
     /// Body torque the wheels actually applied (N·m), after saturation.
     pub wheel_torque_applied_acs_nm: Vector3<f64>,
-    /// External torque (N·m): gravity gradient plus the ideal momentum unloading.
+    /// External torque (N·m): gravity gradient plus the ideal momentum unloading or the
+    /// torquer bars' torque.
     pub gravity_gradient_acs_nm: Vector3<f64>,
     /// Some wheel hit its torque or momentum limit.
     pub saturated: bool,
@@ -192,7 +216,9 @@ impl RigidBody {
             torque_limit_nm: p.wheel_torque_limit_nm.abs(),
             momentum_limit_nms: p.wheel_momentum_limit_nms.abs(),
             gravity_gradient: p.gravity_gradient,
-            unloading_rate_per_s: if p.momentum_unloading_time_constant_s > 0.0 {
+            unloading_rate_per_s: if p.momentum_unloading == MomentumUnloading::Ideal
+                && p.momentum_unloading_time_constant_s > 0.0
+            {
                 1.0 / p.momentum_unloading_time_constant_s
             } else {
                 0.0
@@ -289,8 +315,21 @@ impl RigidBody {
         torque_cmd_acs_nm: &Vector3<f64>,
         pos_eci_km: &Vector3<f64>,
     ) -> StepReport {
+        self.step_with_external_torque(h_s, torque_cmd_acs_nm, pos_eci_km, &Vector3::zeros())
+    }
+
+    /// [`Self::step`] with a further external torque on the body (ACS, N·m, held over the
+    /// step): the torquer bars' `m × B`.
+    pub fn step_with_external_torque(
+        &mut self,
+        h_s: f64,
+        torque_cmd_acs_nm: &Vector3<f64>,
+        pos_eci_km: &Vector3<f64>,
+        external_acs_nm: &Vector3<f64>,
+    ) -> StepReport {
         let s0 = self.state;
-        let mut gg = if self.gravity_gradient {
+        let mut gg = *external_acs_nm;
+        gg += if self.gravity_gradient {
             self.gravity_gradient_acs_nm(&s0.q_acs_from_eci, pos_eci_km)
         } else {
             Vector3::zeros()
@@ -479,6 +518,38 @@ mod tests {
         assert!(tau.y.abs() < 1e-12 && tau.z.abs() < 1e-12);
         let aligned = body.gravity_gradient_acs_nm(&Quat::IDENTITY, &Vector3::new(0.0, 0.0, r_km));
         assert!(aligned.norm() < 1e-12);
+    }
+
+    /// The torquer bars' torque enters as an external torque: the total angular momentum
+    /// (body + wheels, from rest) changes by `τ h` per step,
+    /// τ = m × B, and `"bars"` adds no ideal unloading of its own.
+    #[test]
+    fn external_magnetic_torque_changes_the_total_momentum() {
+        let p = DynamicsParams {
+            gravity_gradient: false,
+            momentum_unloading: MomentumUnloading::Bars,
+            ..DynamicsParams::default()
+        };
+        let mut body = RigidBody::new(&p, Quat::IDENTITY, Vector3::zeros()).unwrap();
+        let m = Vector3::new(2000.0, -1000.0, 500.0);
+        let b_tesla = Vector3::new(10e-6, 25e-6, -15e-6);
+        let tau = crate::truth::torquer::magnetic_torque_nm(&m, &b_tesla);
+        let h0 = body.momentum_acs_nms();
+        let pos = Vector3::new(7000.0, 0.0, 0.0);
+        for _ in 0..10 {
+            body.step_with_external_torque(1.0, &Vector3::zeros(), &pos, &tau);
+        }
+        // The body turns by ~1e-5 rad in 10 s: ACS and inertial axes agree to that order.
+        let dh = body.momentum_acs_nms() - h0;
+        assert!(
+            (dh - tau * 10.0).norm() < 1e-4 * tau.norm() * 10.0,
+            "{dh} vs {}",
+            tau * 10.0
+        );
+        // The same with `step` and no torque: nothing changes (no ideal unloading).
+        let mut still = RigidBody::new(&p, Quat::IDENTITY, Vector3::zeros()).unwrap();
+        still.step(1.0, &Vector3::zeros(), &pos);
+        assert!((still.momentum_acs_nms() - h0).norm() < 1e-12);
     }
 
     #[test]

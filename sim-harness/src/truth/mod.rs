@@ -1,4 +1,4 @@
-//! # Truth models: time, orbit, Sun, sky, rigid-body dynamics, geomagnetic field
+//! # Truth models: time, orbit, Sun, sky, rigid-body dynamics, geomagnetic field, torquer bars
 //!
 //! Everything the sensors see is computed here, in J2000/ICRS axes (`eci`), km, km/s, rad.
 //! The reference physics the ground uses as well (time scales, Sun ephemeris, sky,
@@ -8,3 +8,4 @@ pub use gro_reference::{aberration, sky, sun, time};
 pub mod dynamics;
 pub mod field;
 pub mod orbit;
+pub mod torquer;
