@@ -1,6 +1,6 @@
 //! e2e: the filter table `normal-ops` flies is the one the ground derives.
 //!
-//! `scenarios/normal-ops.toml` uplinks σ_u = 7.305e-11 (docs/obc_filter.md §12): the gyro
+//! `scenarios/normal-ops.toml` uplinks σ_u = 7.368e-11 (docs/obc_filter.md §12): the gyro
 //! model's σ_u at its epoch (55 days after release: K, sim-harness
 //! `onboard::filter_rrw_for_epoch_rad_per_s_sqrt_s`) raised by `ground-tool calibrate` on one
 //! day flown with it (seed 1). Fly that day again, calibrate from the telemetry alone, and
