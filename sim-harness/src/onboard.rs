@@ -218,6 +218,20 @@ mod tests {
     use fsw_core::raw::TimeTag;
     use fsw_core::tables::{TableId, TableSet};
 
+    /// The scenario files of the workspace `scenarios/` folder (not its subfolders), loaded.
+    fn shipped_scenarios() -> Vec<(std::path::PathBuf, Scenario)> {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios");
+        let mut out = Vec::new();
+        for entry in std::fs::read_dir(&dir).unwrap() {
+            let path = entry.unwrap().path();
+            if path.extension().and_then(|e| e.to_str()) == Some("toml") {
+                let s = Scenario::load(&path).unwrap();
+                out.push((path, s));
+            }
+        }
+        out
+    }
+
     /// The derivation's constants are the simulated DRIRU II's (`IruParams::default()`: K, the
     /// largest transient channel over its τ); the boot table's σ_u is the derivation at
     /// release; every shipped scenario that uplinks a σ_u uplinks at least the derivation at
@@ -249,14 +263,8 @@ mod tests {
             "{boot} vs {at_release}"
         );
         let release = gro_reference::time::epoch_from_iso("1991-04-07T22:37:00Z").unwrap();
-        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios");
         let mut checked = 0;
-        for entry in std::fs::read_dir(&dir).unwrap() {
-            let path = entry.unwrap().path();
-            if path.extension().and_then(|e| e.to_str()) != Some("toml") {
-                continue;
-            }
-            let s = Scenario::load(&path).unwrap();
+        for (path, s) in shipped_scenarios() {
             let Some(rrw) = s
                 .filter_table
                 .as_ref()
@@ -293,14 +301,8 @@ mod tests {
     /// nothing to fly it is refused by the scenario's validation.
     #[test]
     fn shipped_table_images_load() {
-        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios");
         let mut checked = 0;
-        for entry in std::fs::read_dir(&dir).unwrap() {
-            let path = entry.unwrap().path();
-            if path.extension().and_then(|e| e.to_str()) != Some("toml") {
-                continue;
-            }
-            let s = Scenario::load(&path).unwrap();
+        for (path, s) in shipped_scenarios() {
             let Some(file) = s.magnetics.onboard_table_file.as_deref() else {
                 continue;
             };
