@@ -1316,7 +1316,11 @@ fn magnetics_stage(
     let Some(first) = tm.raw.first() else {
         return Ok(());
     };
-    let fss = fss_sigma_after_arcsec(&out.report.alignment_validation);
+    let fss = fss_sigma_after_arcsec(
+        &out.report.alignment_validation,
+        &out.report.ffcal.relative_covariance_to_fhst1_arcsec2,
+        &out.report.residual_rms_arcsec.after,
+    );
     let (flown, unknown) = match flown {
         Ok(t) => (t, None),
         Err(why) => (None, Some(why)),
@@ -1344,11 +1348,19 @@ fn magnetics_stage(
     Ok(())
 }
 
-/// The per-axis σ of an FSS Sun direction through the alignments that fly: the larger
-/// held-out residual RMS of FSS1 and FSS2 with the new alignments, when the alignment table
-/// passed its held-out validation with both FSSs tested; `None` otherwise.
+/// The per-axis σ of an FSS Sun direction through the alignments that fly, when the
+/// alignment table passed its held-out validation with both FSSs tested (`None` otherwise):
+/// per FSS, the largest per-axis σ of its alignment relative to FHST1 (FFCAL's covariance,
+/// in the frame the fine attitude defines) with its FFCAL residual RMS after calibration (the
+/// transfer function and noise at one Sun position) added in quadrature; the larger of the
+/// two FSSs. The held-out RMS used before carries each fold's extrapolation of the alignment
+/// to Sun positions it did not see, and overstated the error 2–4× (docs/magnetics.md §5).
 #[must_use]
-fn fss_sigma_after_arcsec(validation: &AlignmentValidation) -> Option<f64> {
+fn fss_sigma_after_arcsec(
+    validation: &AlignmentValidation,
+    relative_covariance_arcsec2: &std::collections::BTreeMap<String, [[f64; 3]; 3]>,
+    residual_rms_after_arcsec: &std::collections::BTreeMap<String, f64>,
+) -> Option<f64> {
     if !validation.passed {
         return None;
     }
@@ -1357,8 +1369,14 @@ fn fss_sigma_after_arcsec(validation: &AlignmentValidation) -> Option<f64> {
         if validation.not_validated.iter().any(|n| n == name) {
             return None;
         }
-        let rms = *validation.rms_new_arcsec.get(name)?;
-        worst = Some(worst.map_or(rms, |w| w.max(rms)));
+        let cov = relative_covariance_arcsec2.get(name)?;
+        let alignment_var = (0..3).map(|i| cov[i][i]).fold(0.0_f64, f64::max);
+        let residual = *residual_rms_after_arcsec.get(name)?;
+        let sigma = (alignment_var + residual * residual).sqrt();
+        if !sigma.is_finite() {
+            return None;
+        }
+        worst = Some(worst.map_or(sigma, |w| w.max(sigma)));
     }
     worst
 }

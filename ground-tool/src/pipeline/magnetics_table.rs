@@ -23,9 +23,10 @@
 //!   flying, so what the ground does not recompute is not reset. No
 //!   field-model error is added: the simulator's field is the model; a real mission adds the
 //!   IGRF's omission, ~1 mG at 450 km (`docs/magnetics.md` §4);
-//! * `fss_sun_sigma_rad`: when the new alignments fly, the larger FSS residual RMS of FFCAL
-//!   after calibration (a Sun direction through the uplinked alignment is good to that);
-//!   otherwise the boot value (the prelaunch misalignments).
+//! * `fss_sun_sigma_rad`: when the new alignments fly, the larger over FSS1 and FSS2 of the
+//!   alignment's largest per-axis σ relative to FHST1 (FFCAL) and the FSS's FFCAL residual RMS
+//!   after calibration, in quadrature (a Sun direction through the uplinked alignment is good
+//!   to that); otherwise the boot value (the prelaunch misalignments).
 
 use fsw_core::tables::MagneticsTable;
 use fsw_core::units::RAD_PER_ARCSEC;
