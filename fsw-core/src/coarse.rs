@@ -27,7 +27,10 @@ use nalgebra::{Matrix3, Vector3};
 use crate::attitude::Quat;
 use crate::field_model::{self, FieldModelError};
 use crate::fss::{self, FssId};
-use crate::raw::{CssSample, RawSensorFrame, TamSample, CSS_FLAG_VALID, TAMS, TAM_FLAG_VALID};
+use crate::raw::{
+    CssSample, RawSensorFrame, TamSample, CSS_FLAG_VALID, TAMS, TAM_FLAG_TORQUERS_ON,
+    TAM_FLAG_VALID,
+};
 use crate::tables::magnetics::{matrix, MagneticsTable};
 use crate::tables::AlignmentTable;
 
@@ -110,6 +113,10 @@ pub enum CoarseUnavailable {
     /// shadow (a reflection or Earth light): no Sun vector is used.
     /// docs/magnetics.md §5 (fault screening).
     InShadow,
+    /// Every TAM with data was sampled while a torquer bar was driven (its flag
+    /// `TAM_FLAG_TORQUERS_ON`: the bars were to be off, so a bar is stuck on): no field used.
+    /// docs/magnetics.md §7 (fault screening).
+    TorquersOn,
 }
 
 impl CoarseUnavailable {
@@ -132,6 +139,7 @@ impl CoarseUnavailable {
             Self::TamMagnitude => 12,
             Self::Gated => 13,
             Self::InShadow => 14,
+            Self::TorquersOn => 15,
         }
     }
 }
@@ -516,6 +524,16 @@ impl CoarseAttitude {
         let b_model_mg = b_eci_nt.norm() / NT_PER_MILLIGAUSS;
         let mut outcome = CoarseUnavailable::NoField;
         for (unit, sample) in frame.tam.iter().enumerate().take(TAMS) {
+            // The bars are commanded off before every fix (phase 7c): a sample taken with a
+            // bar driven holds the bar's own field (up to hundreds of mG), whatever its
+            // magnitude says.
+            if sample.flags & TAM_FLAG_VALID != 0 && sample.flags & TAM_FLAG_TORQUERS_ON != 0 {
+                self.reject(if unit == 0 { 5 } else { 6 });
+                if matches!(outcome, CoarseUnavailable::NoField) {
+                    outcome = CoarseUnavailable::TorquersOn;
+                }
+                continue;
+            }
             let Some(b) = tam_field_acs_milligauss(sample, unit, table) else {
                 continue;
             };

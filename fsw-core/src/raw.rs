@@ -155,8 +155,9 @@ pub const CSS_EYES: usize = 6;
 pub const TAM_FLAG_VALID: u8 = 0x01;
 /// TAM status flag (hardware status, ICD format version 3): a magnetic torquer bar was driven
 /// while the TAM sampled (the bar drive's current monitor), so the words include the bars'
-/// own field. The OBC does not need it (it knows its command and blanks the bars before the
-/// samples it uses); the ground uses it to keep bars-off samples only.
+/// own field. The OBC blanks the bars before the samples it uses, so on those the flag means a
+/// bar is stuck on: the coarse fix refuses such a sample (event 0x0903, p1 = 5 or 6); the
+/// ground uses the flag to keep bars-off samples only.
 /// docs/icd.md §3.5; docs/magnetics.md §7.
 pub const TAM_FLAG_TORQUERS_ON: u8 = 0x02;
 /// CSS status flag: the six eye words hold a measurement.

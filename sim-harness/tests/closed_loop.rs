@@ -613,3 +613,26 @@ fn e2e_normal_ops_orbit_events_and_fallback() {
     assert_eq!(events.len(), 2, "{events:?}");
     assert_eq!(last.output.housekeeping.filter_mode, 2);
 }
+
+/// The torquer bars unload the wheels in the closed loop (issue 20): three hours of
+/// `normal-ops` with the OBC's cross-product law keep every wheel below 100 N·m·s, where the
+/// same hours without unloading drive one to its 250 N·m·s limit. A sign error anywhere
+/// between the law, the OBC's momentum count and the truth's m × B fails here (the unit
+/// tests check the law only against its own formula).
+#[test]
+fn torquer_bars_keep_the_wheels_bounded() {
+    use sim_harness::truth::dynamics::MomentumUnloading;
+    let bars = scenario("normal-ops", 10_800.0);
+    assert_eq!(bars.dynamics.momentum_unloading, MomentumUnloading::Bars);
+    let mut off = bars.clone();
+    off.dynamics.momentum_unloading = MomentumUnloading::Off;
+    let with = run(bars, &RunOptions::default())
+        .unwrap()
+        .max_wheel_momentum_nms;
+    let without = run(off, &RunOptions::default())
+        .unwrap()
+        .max_wheel_momentum_nms;
+    eprintln!("3 h of normal-ops: largest wheel momentum {with:.1} N·m·s with the bars, {without:.1} without unloading");
+    assert!(with < 100.0, "{with}");
+    assert!(without > 200.0, "{without}");
+}

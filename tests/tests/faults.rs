@@ -336,12 +336,18 @@ fn e2e_fault_magnetics() {
     assert!(events_of(&clean_recs, EventId::TorquerFieldUnexpected).is_empty());
     // During the faults the coarse attitude keeps the 2° (3σ) requirement per axis and stays
     // within 3σ of its own covariance at every cycle.
+    assert_coarse_holds(&recs, 1500.0..3600.0);
+}
+
+/// In the window the coarse attitude keeps the 2° (3σ) requirement per axis (3×RMS) and every
+/// cycle stays within 3σ of its own covariance.
+fn assert_coarse_holds(recs: &[CycleRecord], window: std::ops::Range<f64>) {
     let during: Vec<_> = recs
         .iter()
-        .filter(|r| (1500.0..3600.0).contains(&r.truth.t_s))
+        .filter(|r| window.contains(&r.truth.t_s))
         .filter_map(|r| r.coarse)
         .collect();
-    assert!(during.len() > 2000, "{}", during.len());
+    assert!(during.len() > 1000, "{}", during.len());
     for axis in 0..3 {
         let ms = during
             .iter()
@@ -625,4 +631,13 @@ fn e2e_fault_torquer_stuck_on() {
     let worst = stuck.iter().map(|r| axis_arcsec(r)).fold(0.0, f64::max);
     println!("worst axis error while stuck: {worst:.1}″");
     assert!(worst < FINE_REQUIREMENT_ARCSEC, "{worst}");
+    // The coarse fix refuses the TAM samples taken with the stuck bar driven (their flag says
+    // so although the bars were blanked: 0x0903 p1 = 5 / 6) instead of fixing on a field
+    // 100 mG off (15° of error, NEES 643, before that check), and the coarse attitude holds.
+    let refused = events_of(&recs, EventId::CoarseVectorRejected);
+    assert!(
+        refused.iter().any(|(_, kind, _)| matches!(kind, 5 | 6)),
+        "{refused:?}"
+    );
+    assert_coarse_holds(&recs, 1300.0..3000.0);
 }
