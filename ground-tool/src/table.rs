@@ -130,9 +130,12 @@ pub fn decode_image(bytes: &[u8], what: &str) -> Result<(ImageHeader, AnyTable),
             AnyTable::StarCatalog(Box::new(decode_payload(payload).map_err(image_err)?))
         }
         TableId::Orbit => AnyTable::Orbit(decode_payload(payload).map_err(image_err)?),
-        TableId::Magnetics => {
-            AnyTable::Magnetics(Box::new(decode_payload(payload).map_err(image_err)?))
-        }
+        // Either layout, as the OBC reads it (layout-1 images: the unloading fields at boot).
+        TableId::Magnetics => AnyTable::Magnetics(Box::new(
+            MagneticsTable::decode_any_layout(payload)
+                .map_err(image_err)?
+                .0,
+        )),
     };
     Ok((header, table))
 }
@@ -370,6 +373,22 @@ mod tests {
             coarse_s: PAPER_UPLINK_TAI_S,
             fine: 0,
         }
+    }
+
+    /// A layout-1 magnetics image (fields 0–18, before the unloading fields), which the OBC
+    /// accepts, is read by the ground's tools too, with the unloading fields at boot.
+    #[test]
+    fn layout1_magnetics_images_are_read_as_the_obc_reads_them() {
+        let mut t = fsw_core::tables::MagneticsTable::boot();
+        t.tam_bias_milligauss[0] = [0.0, 0.0, -4.0];
+        let old = fsw_core::tables::magnetics::MagneticsTableLayout1::from_table(&t);
+        let mut buf = vec![0u8; 8192];
+        let n = encode_image(TableId::Magnetics, tag(), &old, &mut buf).unwrap();
+        let (_, read) = decode_image(&buf[..n], "layout-1 test image").unwrap();
+        let AnyTable::Magnetics(read) = read else {
+            panic!("not a magnetics table")
+        };
+        assert_eq!(*read, t);
     }
 
     /// The paper's uplinked alignment table round-trips through the fsw-core image format,

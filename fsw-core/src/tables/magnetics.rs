@@ -17,6 +17,7 @@ use nalgebra::Matrix3;
 use serde::{Deserialize, Serialize};
 
 use super::error::TableError;
+use super::image::decode_payload;
 use super::types::{all_finite, check_finite, check_range, matrix_from_rows, Mat3Rows};
 use crate::attitude::is_proper_rotation;
 use crate::raw::{CSS_EYES, TAMS};
@@ -174,6 +175,35 @@ pub struct MagneticsTableLayout1 {
     pub min_sun_field_angle_rad: f64,
 }
 
+impl MagneticsTableLayout1 {
+    /// Fields 0–18 of `t`: its layout-1 image, for an OBC of the old layout and for tests.
+    /// docs/tables.md (Table 6, "layouts").
+    #[must_use]
+    pub fn from_table(t: &MagneticsTable) -> Self {
+        Self {
+            field_degree: t.field_degree,
+            field_epoch_s_since_j2000_tt: t.field_epoch_s_since_j2000_tt,
+            g_nt: t.g_nt,
+            h_nt: t.h_nt,
+            g_nt_per_year: t.g_nt_per_year,
+            h_nt_per_year: t.h_nt_per_year,
+            m_tod_from_eci: t.m_tod_from_eci,
+            ut1_minus_tai_s: t.ut1_minus_tai_s,
+            equation_of_equinoxes_rad: t.equation_of_equinoxes_rad,
+            m_acs_from_tam: t.m_acs_from_tam,
+            tam_milligauss_per_count: t.tam_milligauss_per_count,
+            tam_bias_milligauss: t.tam_bias_milligauss,
+            field_sigma_milligauss: t.field_sigma_milligauss,
+            fss_sun_sigma_rad: t.fss_sun_sigma_rad,
+            css_normals_acs: t.css_normals_acs,
+            css_counts_at_normal_incidence: t.css_counts_at_normal_incidence,
+            css_sun_sigma_rad: t.css_sun_sigma_rad,
+            coarse_fix_every_n_cycles: t.coarse_fix_every_n_cycles,
+            min_sun_field_angle_rad: t.min_sun_field_angle_rad,
+        }
+    }
+}
+
 /// The default CSS layout: six eyes on ±X, ±Y, ±Z of ACS.
 /// docs/magnetics.md §2 (project choice; the paper gives no layout).
 pub const CSS_NORMALS_DEFAULT: [[f64; 3]; CSS_EYES] = [
@@ -231,6 +261,24 @@ impl MagneticsTable {
             unloading_start_nms: 20.0,
             unloading_stop_nms: 10.0,
             torquer_check_milligauss: 20.0,
+        }
+    }
+
+    /// Decode a Table 6 payload of either layout: layout 2 (fields 0–23), else layout 1
+    /// (fields 0–18: the unloading fields take their boot values, [`Self::from_layout1`]).
+    /// The two differ in length, so at most one decodes exactly. Returns the table and its
+    /// layout (1 or 2). The OBC's table services and the ground's tools both read through it.
+    /// docs/tables.md (Table 6, "layouts").
+    ///
+    /// # Errors
+    /// The layout-2 decode error when neither layout decodes.
+    pub fn decode_any_layout(payload: &[u8]) -> Result<(Self, u8), TableError> {
+        match decode_payload::<Self>(payload) {
+            Ok(t) => Ok((t, 2)),
+            Err(e) => match decode_payload::<MagneticsTableLayout1>(payload) {
+                Ok(old) => Ok((Self::from_layout1(&old), 1)),
+                Err(_) => Err(e),
+            },
         }
     }
 

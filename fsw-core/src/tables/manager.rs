@@ -15,7 +15,7 @@
 use super::image::{
     decode_catalog_into, decode_payload, encode_image, parse_image, TableError, TableId,
 };
-use super::magnetics::{MagneticsTable, MagneticsTableLayout1};
+use super::magnetics::MagneticsTable;
 use super::types::{
     check_alignment_change, check_iru_change, AlignmentTable, FilterTable, IruTable, OrbitTable,
     StarCatalogTable,
@@ -316,14 +316,8 @@ impl TableSet {
             }
             TableId::Magnetics => {
                 // Layout 2 (fields 0–23), else layout 1 (fields 0–18, before momentum
-                // unloading): the two differ in length, so at most one decodes exactly.
-                let t: MagneticsTable = match decode_payload(payload) {
-                    Ok(t) => t,
-                    Err(e) => match decode_payload::<MagneticsTableLayout1>(payload) {
-                        Ok(old) => MagneticsTable::from_layout1(&old),
-                        Err(_) => return Err(e),
-                    },
-                };
+                // unloading).
+                let (t, _layout) = MagneticsTable::decode_any_layout(payload)?;
                 t.validate()?;
                 self.magnetics.inactive = Some((t, created, crc));
             }
@@ -426,6 +420,7 @@ impl TableSet {
 mod tests {
     use super::*;
     use crate::attitude::rot;
+    use crate::tables::magnetics::MagneticsTableLayout1;
     use crate::tables::types::{matrix_from_rows, rows_from_matrix};
     use crate::units::RAD_PER_ARCSEC;
     use nalgebra::Vector3;
