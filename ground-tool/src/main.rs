@@ -510,19 +510,11 @@ fn run_calibrate(
     let progress = ground_tool::progress::Session::start("ground-tool calibrate", !args.quiet);
     use ground_tool::pipeline::calibrate::{calibrate_run, CalibrateOptions};
     let meta = ground_tool::pipeline::flown::metadata_or_default(run_dir);
-    let (flown_alignment, flown_iru, flown_filter) =
-        ground_tool::pipeline::flown::flown_tables(run_dir, &meta, tables)?;
-    // Optional: an unknown flown magnetics table is said in the report, not fatal.
-    let flown_magnetics =
-        ground_tool::pipeline::flown::flown_magnetics(run_dir, &meta).map_err(|e| format!("{e:#}"));
+    let with_flown = ground_tool::pipeline::flown::calibrate_options(run_dir, &meta, tables)?;
     let dir = args.begin_output("ground-tool calibrate")?;
     let out = dir.path();
     ground_tool::run_check::check_run_dir(run_dir, out)?;
     let options = CalibrateOptions {
-        flown_alignment,
-        flown_iru,
-        flown_filter,
-        flown_magnetics,
         weighting: if shuster1982 {
             Weighting::Shuster1982
         } else {
@@ -531,7 +523,7 @@ fn run_calibrate(
         staged_ffcal: !single_stage,
         fhst_stage,
         maneuvers_s: (!maneuvers.is_empty()).then_some(maneuvers),
-        ..CalibrateOptions::default()
+        ..with_flown
     };
     // The OBC's bias at every housekeeping packet, for the bias plots: taken (and its decoded
     // telemetry dropped) before the chain decodes the file, so the peak memory stays the

@@ -8,7 +8,7 @@
 //! model, the flight or the ground's Allan gate that moves it fails here.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
-use ground_tool::pipeline::calibrate::{calibrate_run, CalibrateOptions};
+use ground_tool::pipeline::calibrate::calibrate_run;
 use ground_tool::pipeline::filter_tuning::FilterTerm;
 use sim_harness::onboard::filter_rrw_for_epoch_rad_per_s_sqrt_s;
 use sim_harness::run::{run, RunOptions};
@@ -45,16 +45,7 @@ fn e2e_normal_ops_flies_the_grounds_rate_random_walk() {
     .unwrap();
     // The tables flown, read from the run as `ground-tool calibrate` reads them.
     let meta = ground_tool::pipeline::flown::metadata_or_default(&fly);
-    let (flown_alignment, flown_iru, flown_filter) =
-        ground_tool::pipeline::flown::flown_tables(&fly, &meta, None).unwrap();
-    let options = CalibrateOptions {
-        flown_alignment,
-        flown_iru,
-        flown_filter,
-        flown_magnetics: ground_tool::pipeline::flown::flown_magnetics(&fly, &meta)
-            .map_err(|e| format!("{e:#}")),
-        ..CalibrateOptions::default()
-    };
+    let options = ground_tool::pipeline::flown::calibrate_options(&fly, &meta, None).unwrap();
     let c = calibrate_run(&fly, &out.join("cal"), &options).unwrap();
     let rrw = c
         .report

@@ -10,7 +10,7 @@ use std::path::Path;
 
 use fsw_core::tables::{AlignmentTable, FilterTable, IruTable, StarCatalogTable};
 
-use super::calibrate::{decode_table_image, read_table_image, Metadata};
+use super::calibrate::{decode_table_image, read_table_image, CalibrateOptions, Metadata};
 use crate::run_check::InputError;
 use gro_reference::run_folder::METADATA_FILE;
 
@@ -95,6 +95,28 @@ fn flown<T: serde::de::DeserializeOwned + serde::Serialize>(
             .transpose()
             .map_err(Into::into),
     }
+}
+
+/// [`CalibrateOptions::default`] with the tables the run flew, as `ground-tool calibrate`
+/// reads them: alignment, IRU and filter ([`flown_tables`]: an unreadable image is an error)
+/// and the magnetics table ([`flown_magnetics`]: an unknown one is said in the report, not
+/// fatal).
+///
+/// # Errors
+/// As [`flown_tables`].
+pub fn calibrate_options(
+    run_dir: &Path,
+    meta: &Metadata,
+    tables: Option<&Path>,
+) -> anyhow::Result<CalibrateOptions> {
+    let (flown_alignment, flown_iru, flown_filter) = flown_tables(run_dir, meta, tables)?;
+    Ok(CalibrateOptions {
+        flown_alignment,
+        flown_iru,
+        flown_filter,
+        flown_magnetics: flown_magnetics(run_dir, meta).map_err(|e| format!("{e:#}")),
+        ..CalibrateOptions::default()
+    })
 }
 
 /// Alignment, IRU and filter tables flown (`None` = boot).
