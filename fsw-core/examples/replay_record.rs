@@ -387,6 +387,35 @@ impl Truth {
     }
 }
 
+/// Cycles without wheel 4's tachometer word: the OBC counts its commands, then returns to the
+/// tachometers (event 0x0A03 both ways).
+const WHEEL4_TACH_LOST: std::ops::Range<u32> = 420..430;
+
+/// Tachometer words for wheels on the ACS axes carrying `h` (the skewed fourth at rest), with
+/// Table 6's boot rotor inertia; wheel 4's word is dropped over [`WHEEL4_TACH_LOST`].
+fn wheel_words(h_wheels_acs_nms: &Vector3<f64>, cycle: u32) -> fsw_core::raw::WheelSample {
+    let nms_per_count = fsw_core::tables::MagneticsTable::boot().wheel_spin_inertia_kg_m2
+        * fsw_core::raw::WHEEL_RPM_PER_COUNT
+        * std::f64::consts::TAU
+        / 60.0;
+    let c = |h: f64| (h / nms_per_count).round() as i16;
+    fsw_core::raw::WheelSample {
+        speed_counts: [
+            c(h_wheels_acs_nms.x),
+            c(h_wheels_acs_nms.y),
+            c(h_wheels_acs_nms.z),
+            0,
+        ],
+        speed_valid: if WHEEL4_TACH_LOST.contains(&cycle) {
+            0x07
+        } else {
+            0x0F
+        },
+        dipole_counts: [0; 3],
+        dipole_valid: 0x07,
+    }
+}
+
 fn temperatures(cycle: u32) -> [i16; 5] {
     let c = cycle as i16;
     [
@@ -574,6 +603,8 @@ fn record() -> Recording {
     let mut orbit = fsw_core::orbit::OnboardOrbit::new();
     orbit.load(&replay_orbit());
     let mut tam_rng = Rng::new(0x5441_4D31_1991_0405);
+    // The wheels' momentum (ACS), from rest: they take −τ dt of each command.
+    let mut h_wheels_acs_nms = Vector3::zeros();
     // One cycle of pulses before the first frame.
     truth.advance(&Vector3::zeros(), 1.0, false, &iru_table);
     for cycle in 0..CYCLES {
@@ -604,6 +635,7 @@ fn record() -> Recording {
                 &mut tam_rng,
             ),
             css: Default::default(),
+            wheels: wheel_words(&h_wheels_acs_nms, cycle),
         };
         let recorded = commands_for(cycle, &sc, &truth.q);
         let cycle_rec = RecordedCycle {
@@ -619,6 +651,7 @@ fn record() -> Recording {
         records.push(CycleRecord::encode(&out).unwrap());
         outputs.push(out);
         let torque = core.wheel_torque_command_nm();
+        h_wheels_acs_nms -= torque;
         truth.advance(&torque, 1.0, core.iru_high_rate_command(), &iru_table);
     }
     Recording {

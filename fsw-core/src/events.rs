@@ -134,11 +134,17 @@ pub enum EventId {
     /// p2 = the system momentum `|h|`, N·m·s (rounded).
     /// docs/icd.md §3.3; docs/magnetics.md §7.
     UnloadingStateChanged = 0x0A02,
+    /// The source of the OBC's wheel momentum changed: p1 = 1 the tachometers (every wheel of
+    /// Table 6 read valid), 0 the count of the OBC's own torque commands (a wheel's
+    /// tachometer word missing, invalid or saturated, or no wheel geometry in the table);
+    /// p2 = the frame's tachometer validity bits.
+    /// docs/icd.md §3.3 and §3.6; docs/magnetics.md §7.
+    WheelMomentumSourceChanged = 0x0A03,
 }
 
 impl EventId {
     /// Every event id (for the uniqueness test and the ICD table).
-    pub const ALL: [EventId; 32] = [
+    pub const ALL: [EventId; 33] = [
         Self::TableLoaded,
         Self::TableRejected,
         Self::TableActivated,
@@ -171,6 +177,7 @@ impl EventId {
         Self::CoarseVectorRejected,
         Self::TorquerFieldUnexpected,
         Self::UnloadingStateChanged,
+        Self::WheelMomentumSourceChanged,
     ];
 
     /// On-wire code.

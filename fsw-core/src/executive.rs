@@ -75,7 +75,7 @@ use crate::tables::types::{matrix_from_rows, Mat3Rows, ORBITAL_ABERRATION_RMS_PE
 use crate::tables::{TableId, TableSet};
 use crate::telemetry::{MeasurementStatus, ObcHousekeeping, SensorResidual};
 use crate::units::{ARCSEC_PER_RAD, RAD_PER_ARCSEC};
-use crate::unloading::{FieldSample, MomentumUnloading, TAM_PLAUSIBLE_MILLIGAUSS};
+use crate::unloading::{FieldSample, MomentumSource, MomentumUnloading, TAM_PLAUSIBLE_MILLIGAUSS};
 use nalgebra::{Matrix3, Vector3};
 
 /// Largest number of commands processed in one cycle (further ones are refused).
@@ -595,15 +595,26 @@ impl FlightCore {
     }
 
     /// Phase 7c: momentum unloading with the torquer bars (`crate::unloading`,
-    /// docs/magnetics.md §7). Events 0x0A01 (bars-off check) and 0x0A02 (dead band).
+    /// docs/magnetics.md §7). Events 0x0A01 (bars-off check), 0x0A02 (dead band) and 0x0A03
+    /// (wheel momentum source).
     fn momentum_unloading(
         &mut self,
         frame: &RawSensorFrame,
         dt_s: f64,
         events: &mut heapless::Vec<Event, MAX_EVENTS_PER_CYCLE>,
     ) {
-        self.unloading
-            .account_wheel_torque(&self.wheel_torque_cmd_nm, dt_s);
+        let changed = self.unloading.update_wheel_momentum(
+            &frame.wheels,
+            &self.wheel_torque_cmd_nm,
+            dt_s,
+            self.tables.magnetics(),
+        );
+        if let Some(source) = changed {
+            let id = EventId::WheelMomentumSourceChanged;
+            let p1 = u32::from(source == MomentumSource::Tachometers);
+            let p2 = u32::from(frame.wheels.speed_valid);
+            raise(events, &mut self.counters, id, p1, p2);
+        }
         let table = self.tables.magnetics();
         if !table.unloading_enabled() || self.control_mode == ControlMode::Idle {
             self.unloading.switch_off();

@@ -191,6 +191,44 @@ pub struct CssSample {
     pub flags: u8,
 }
 
+/// Number of reaction wheels whose tachometers the OBC reads.
+/// Project choice (the paper gives no wheel layout): three orthogonal wheels and a skewed
+/// fourth, as the truth's default; docs/icd.md §3.6.
+pub const WHEELS: usize = 4;
+/// Number of torquer-bar current monitors (one per bar, ACS x, y, z).
+/// docs/icd.md §3.6; docs/magnetics.md §7.
+pub const TORQUER_MONITORS: usize = 3;
+/// Wheel tachometer count size, rpm per count (±3,276.7 rpm in an `i16`).
+/// Project choice (not in the paper); docs/icd.md §3.6.
+pub const WHEEL_RPM_PER_COUNT: f64 = 0.1;
+/// Torquer-bar current monitor count size, A·m² of dipole per count.
+/// Project choice (not in the paper); docs/icd.md §3.6.
+pub const TORQUER_AM2_PER_COUNT: f64 = 1.0;
+
+/// One cycle's reaction-wheel tachometers and torquer-bar current monitors (ICD format
+/// version 4). The OBC takes the wheel momentum from the tachometers (Table 6's wheel geometry
+/// and inertia); the monitors are the dipoles the bars actually carried.
+/// docs/icd.md §3.6; docs/magnetics.md §7.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct WheelSample {
+    /// Wheel speeds, signed counts of [`WHEEL_RPM_PER_COUNT`] about each wheel's spin axis,
+    /// wheel 1 to 4.
+    /// docs/icd.md §3.6.
+    pub speed_counts: [i16; WHEELS],
+    /// Bit `i` set: wheel `i + 1`'s tachometer word holds a measurement; 0 (the default)
+    /// means no tachometer data.
+    /// docs/icd.md §3.6.
+    pub speed_valid: u8,
+    /// Dipole each bar carried while the frame was sampled (the drive's current monitor),
+    /// signed counts of [`TORQUER_AM2_PER_COUNT`], bars along ACS x, y, z.
+    /// docs/icd.md §3.6.
+    pub dipole_counts: [i16; TORQUER_MONITORS],
+    /// Bit `k` set: bar `k + 1`'s monitor word holds a measurement.
+    /// docs/icd.md §3.6.
+    pub dipole_valid: u8,
+}
+
 /// Everything the OBC reads from its sensors in one cycle.
 /// APID 0x010, docs/icd.md §3.1.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -217,4 +255,7 @@ pub struct RawSensorFrame {
     /// The coarse Sun sensor eyes.
     /// Not in APID 0x010: docs/icd.md §3.5 (APID 0x013).
     pub css: CssSample,
+    /// Wheel tachometers and torquer-bar current monitors (all flags 0 without them).
+    /// Not in APID 0x010: docs/icd.md §3.6 (APID 0x014).
+    pub wheels: WheelSample,
 }

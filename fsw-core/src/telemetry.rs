@@ -13,12 +13,14 @@
 //! | 0x011 | [`ObcHousekeeping`] | [`HOUSEKEEPING_LEN`] |
 //! | 0x012 | [`Event`] | [`EVENT_LEN`] |
 //! | 0x013 | [`MagneticsFrame`] (TAM1, TAM2, CSS words of the [`RawSensorFrame`]) | [`MAGNETICS_LEN`] |
+//! | 0x014 | [`WheelFrame`] (wheel tachometers and torquer-bar monitors of the [`RawSensorFrame`]) | [`WHEEL_FRAME_LEN`] |
 //! | 0x020 | [`EphemerisRecord`] | [`EPHEMERIS_LEN`] |
 
 use crate::attitude::Quat;
 use crate::events::{Counters, Event, EventId};
 use crate::raw::{
-    CssSample, FhstSample, FssSample, IruSample, RawSensorFrame, TamSample, TimeTag, CSS_EYES, TAMS,
+    CssSample, FhstSample, FssSample, IruSample, RawSensorFrame, TamSample, TimeTag, WheelSample,
+    CSS_EYES, TAMS, TORQUER_MONITORS, WHEELS,
 };
 use serde::{Deserialize, Serialize};
 
@@ -35,6 +37,11 @@ pub const APID_EVENT: u16 = 0x012;
 /// of the same cycle with the same time code when the spacecraft carries them.
 /// docs/icd.md §3.5 (format version 2).
 pub const APID_MAGNETICS: u16 = 0x013;
+/// APID of the wheel frame (reaction-wheel tachometers and torquer-bar current monitors),
+/// written after the raw frame (and magnetics frame) of the same cycle with the same time
+/// code when the spacecraft carries them.
+/// docs/icd.md §3.6 (format version 4).
+pub const APID_WHEELS: u16 = 0x014;
 /// APID of the definitive-orbit ephemeris record.
 /// docs/icd.md §3.4.
 pub const APID_EPHEMERIS: u16 = 0x020;
@@ -54,6 +61,9 @@ pub const EVENT_LEN: usize = 10;
 /// Magnetics frame user data length: 2 × (3 × i16 + u8) + 6 × u16 + u8.
 /// docs/icd.md §3.5.
 pub const MAGNETICS_LEN: usize = 27;
+/// Wheel frame user data length: 4 × i16 + u8 + 3 × i16 + u8.
+/// docs/icd.md §3.6.
+pub const WHEEL_FRAME_LEN: usize = 16;
 /// Ephemeris user data length.
 /// docs/icd.md §3.4.
 pub const EPHEMERIS_LEN: usize = 48;
@@ -244,6 +254,40 @@ impl MagneticsFrame {
     #[must_use]
     pub fn has_data(&self) -> bool {
         self.tam.iter().any(|t| t.flags != 0) || self.css.flags != 0
+    }
+}
+
+/// The wheel tachometer and torquer-bar monitor words of one cycle, as downlinked: the
+/// `wheels` of the cycle's [`RawSensorFrame`] (same time code as its APID 0x010 packet).
+/// APID 0x014, docs/icd.md §3.6.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct WheelFrame {
+    /// Sample time (the raw frame's).
+    /// docs/icd.md §3.6 (the packet's CUC time code).
+    pub time: TimeTag,
+    /// Tachometers and monitors.
+    /// docs/icd.md §3.6.
+    pub wheels: WheelSample,
+}
+
+impl WheelFrame {
+    /// The wheel words of a raw frame.
+    /// docs/icd.md §3.6.
+    #[must_use]
+    pub fn of_raw_frame(f: &RawSensorFrame) -> Self {
+        Self {
+            time: f.time,
+            wheels: f.wheels,
+        }
+    }
+
+    /// True when any word carries data (a validity octet not 0): a writer may leave the packet
+    /// out otherwise.
+    /// docs/icd.md §3.6.
+    #[must_use]
+    pub fn has_data(&self) -> bool {
+        self.wheels.speed_valid != 0 || self.wheels.dipole_valid != 0
     }
 }
 
@@ -477,6 +521,7 @@ pub fn decode_raw_frame(time: TimeTag, data: &[u8]) -> Result<RawSensorFrame, Re
         temperatures_centi_c,
         tam: Default::default(),
         css: Default::default(),
+        wheels: WheelSample::default(),
     })
 }
 
@@ -523,6 +568,54 @@ pub fn decode_magnetics(time: TimeTag, data: &[u8]) -> Result<MagneticsFrame, Re
         time,
         tam,
         css: CssSample { counts, flags },
+    })
+}
+
+/// Encode a wheel frame's user data (without its time, which is the secondary header).
+/// docs/icd.md §3.6.
+///
+/// # Errors
+/// [`RecordError::BufferTooSmall`].
+pub fn encode_wheels(f: &WheelFrame, out: &mut [u8]) -> Result<usize, RecordError> {
+    let mut w = Writer::new(out);
+    for c in f.wheels.speed_counts {
+        w.i16(c);
+    }
+    w.u8(f.wheels.speed_valid);
+    for c in f.wheels.dipole_counts {
+        w.i16(c);
+    }
+    w.u8(f.wheels.dipole_valid);
+    w.finish()
+}
+
+/// Decode a wheel frame's user data; `time` comes from the secondary header. Validity bits
+/// beyond the units (bits 4–7, 3–7) are reserved and kept as read.
+/// docs/icd.md §3.6.
+///
+/// # Errors
+/// [`RecordError::Length`].
+pub fn decode_wheels(time: TimeTag, data: &[u8]) -> Result<WheelFrame, RecordError> {
+    check_len(data, WHEEL_FRAME_LEN)?;
+    let mut r = Reader::new(data);
+    let mut speed_counts = [0i16; WHEELS];
+    for c in &mut speed_counts {
+        *c = r.i16();
+    }
+    let speed_valid = r.u8();
+    let mut dipole_counts = [0i16; TORQUER_MONITORS];
+    for c in &mut dipole_counts {
+        *c = r.i16();
+    }
+    let dipole_valid = r.u8();
+    Ok(WheelFrame {
+        time,
+        wheels: WheelSample {
+            speed_counts,
+            speed_valid,
+            dipole_counts,
+            dipole_valid,
+        },
     })
 }
 
@@ -744,6 +837,29 @@ mod tests {
         assert_eq!(decode_magnetics(m.time, &buf[..n]), Ok(m));
         assert!(decode_magnetics(m.time, &buf[..n - 1]).is_err());
         assert!(!MagneticsFrame::default().has_data());
+    }
+
+    #[test]
+    fn wheel_frame_round_trip_and_length() {
+        let mut f = RawSensorFrame::default();
+        f.time.coarse_s = 1_049_000_001;
+        f.wheels.speed_counts = [-29_842, 0, 32_767, -1];
+        f.wheels.speed_valid = 0x0F;
+        f.wheels.dipole_counts = [-4_000, 1, 3_999];
+        f.wheels.dipole_valid = 0x05;
+        let m = WheelFrame::of_raw_frame(&f);
+        assert!(m.has_data());
+        let mut buf = [0u8; 64];
+        let n = encode_wheels(&m, &mut buf).unwrap();
+        assert_eq!(n, WHEEL_FRAME_LEN);
+        assert_eq!(decode_wheels(m.time, &buf[..n]), Ok(m));
+        assert!(decode_wheels(m.time, &buf[..n - 1]).is_err());
+        assert!(!WheelFrame::default().has_data());
+        let mut small = [0u8; WHEEL_FRAME_LEN - 1];
+        assert_eq!(
+            encode_wheels(&m, &mut small),
+            Err(RecordError::BufferTooSmall)
+        );
     }
 
     #[test]

@@ -15,9 +15,9 @@
 use crate::events::Event;
 use crate::raw::RawSensorFrame;
 use crate::telemetry::{
-    EphemerisRecord, MagneticsFrame, ObcHousekeeping, APID_EPHEMERIS, APID_EVENT,
-    APID_HOUSEKEEPING, APID_MAGNETICS, APID_RAW_SENSORS, EPHEMERIS_LEN, EVENT_LEN,
-    HOUSEKEEPING_LEN, MAGNETICS_LEN, RAW_FRAME_LEN,
+    EphemerisRecord, MagneticsFrame, ObcHousekeeping, WheelFrame, APID_EPHEMERIS, APID_EVENT,
+    APID_HOUSEKEEPING, APID_MAGNETICS, APID_RAW_SENSORS, APID_WHEELS, EPHEMERIS_LEN, EVENT_LEN,
+    HOUSEKEEPING_LEN, MAGNETICS_LEN, RAW_FRAME_LEN, WHEEL_FRAME_LEN,
 };
 
 /// A field's wire type (big-endian; floats IEEE-754).
@@ -557,6 +557,37 @@ pub const MAGNETICS_FIELDS: [Field; 15] = [
     f("css_flags", 26, U8, "", CSS_FLAGS),
 ];
 
+const SPEED_VALID: &str =
+    "bit i set: wheel i+1's tachometer word holds a measurement (bits 0-3); 0 = no tachometers";
+const DIPOLE_VALID: &str =
+    "bit k set: bar k+1's current-monitor word holds a measurement (bits 0-2); 0 = no monitors";
+
+/// APID 0x014, wheel frame: the fields of docs/icd.md §3.6.
+/// docs/icd.md §3.6.
+pub const WHEEL_FIELDS: [Field; 9] = [
+    f(
+        "wheel1_speed_counts",
+        0,
+        I16,
+        "0.1 rpm",
+        "reaction wheel 1 speed about its spin axis (tachometer)",
+    ),
+    f("wheel2_speed_counts", 2, I16, "0.1 rpm", "wheel 2 speed"),
+    f("wheel3_speed_counts", 4, I16, "0.1 rpm", "wheel 3 speed"),
+    f("wheel4_speed_counts", 6, I16, "0.1 rpm", "wheel 4 speed"),
+    f("wheel_speed_valid", 8, U8, "", SPEED_VALID),
+    f(
+        "bar_x_dipole_counts",
+        9,
+        I16,
+        "A m^2",
+        "torquer bar along ACS x: dipole carried while sampled (current monitor)",
+    ),
+    f("bar_y_dipole_counts", 11, I16, "A m^2", "bar along ACS y"),
+    f("bar_z_dipole_counts", 13, I16, "A m^2", "bar along ACS z"),
+    f("bar_dipole_valid", 15, U8, "", DIPOLE_VALID),
+];
+
 /// APID 0x020, definitive orbit: the fields of docs/icd.md §3.4.
 /// docs/icd.md §3.4.
 pub const EPHEMERIS_FIELDS: [Field; 6] = [
@@ -576,7 +607,7 @@ pub const EPHEMERIS_FIELDS: [Field; 6] = [
 
 /// Every packet type of the downlink, in APID order.
 /// docs/icd.md §3.
-pub const PACKETS: [PacketLayout; 5] = [
+pub const PACKETS: [PacketLayout; 6] = [
     PacketLayout {
         apid: APID_RAW_SENSORS,
         name: "raw_sensor_frame",
@@ -600,6 +631,12 @@ pub const PACKETS: [PacketLayout; 5] = [
         name: "magnetics_frame",
         user_data_len: MAGNETICS_LEN,
         fields: &MAGNETICS_FIELDS,
+    },
+    PacketLayout {
+        apid: APID_WHEELS,
+        name: "wheel_frame",
+        user_data_len: WHEEL_FRAME_LEN,
+        fields: &WHEEL_FIELDS,
     },
     PacketLayout {
         apid: APID_EPHEMERIS,
@@ -700,6 +737,20 @@ pub fn visit_magnetics<F: FnMut(FieldValue) + ?Sized>(m: &MagneticsFrame, out: &
     out(Unsigned(u64::from(m.css.flags)));
 }
 
+/// A wheel frame's values in [`WHEEL_FIELDS`] order.
+/// docs/icd.md §3.6.
+pub fn visit_wheels<F: FnMut(FieldValue) + ?Sized>(w: &WheelFrame, out: &mut F) {
+    use FieldValue::{Signed, Unsigned};
+    for c in w.wheels.speed_counts {
+        out(Signed(i64::from(c)));
+    }
+    out(Unsigned(u64::from(w.wheels.speed_valid)));
+    for c in w.wheels.dipole_counts {
+        out(Signed(i64::from(c)));
+    }
+    out(Unsigned(u64::from(w.wheels.dipole_valid)));
+}
+
 /// An orbit record's values in [`EPHEMERIS_FIELDS`] order.
 /// docs/icd.md §3.4.
 pub fn visit_ephemeris<F: FnMut(FieldValue) + ?Sized>(e: &EphemerisRecord, out: &mut F) {
@@ -717,10 +768,12 @@ mod tests {
     )]
     use super::*;
     use crate::events::{Counters, EventId};
-    use crate::raw::{CssSample, FhstSample, FssSample, IruSample, TamSample, TimeTag};
+    use crate::raw::{
+        CssSample, FhstSample, FssSample, IruSample, TamSample, TimeTag, WheelSample,
+    };
     use crate::telemetry::{
         encode_ephemeris, encode_event, encode_housekeeping, encode_magnetics, encode_raw_frame,
-        MeasurementStatus, SensorResidual,
+        encode_wheels, MeasurementStatus, SensorResidual,
     };
 
     /// The value at a field's offset, read from the encoded user data by its type alone.
@@ -806,6 +859,7 @@ mod tests {
             temperatures_centi_c: [2001, -2002, 2003, 2004, -2005],
             tam: Default::default(),
             css: Default::default(),
+            wheels: WheelSample::default(),
         };
         let mut buf = [0u8; 256];
         let n = encode_raw_frame(&raw, &mut buf).unwrap();
@@ -896,6 +950,25 @@ mod tests {
             &values(|out| visit_magnetics(&mag, out)),
         );
 
+        let wheels = WheelFrame {
+            time: TimeTag {
+                coarse_s: 1,
+                fine: 2,
+            },
+            wheels: WheelSample {
+                speed_counts: [-29_000, 1, 2, 32_767],
+                speed_valid: 0x0E,
+                dipole_counts: [-4_000, 3, 4_000],
+                dipole_valid: 0x05,
+            },
+        };
+        let n = encode_wheels(&wheels, &mut buf).unwrap();
+        check(
+            &PACKETS[4],
+            &buf[..n],
+            &values(|out| visit_wheels(&wheels, out)),
+        );
+
         let eph = EphemerisRecord {
             time: TimeTag {
                 coarse_s: 1,
@@ -906,7 +979,7 @@ mod tests {
         };
         let n = encode_ephemeris(&eph, &mut buf).unwrap();
         check(
-            &PACKETS[4],
+            &PACKETS[5],
             &buf[..n],
             &values(|out| visit_ephemeris(&eph, out)),
         );

@@ -21,11 +21,18 @@
 //! * **Dead band with hysteresis**: unloading starts when `|h|` exceeds
 //!   `unloading_start_nms` and stops below `unloading_stop_nms`: the orbit's cyclic
 //!   gravity-gradient momentum (tens of N·m·s) is stored by the wheels, not dumped.
-//! * **What `h` is**: the OBC has no wheel tachometers in its raw frame (`docs/icd.md` §3.1),
-//!   so it counts the momentum its own wheel torque commands put into the wheels
-//!   (`h_w -= τ_cmd dt`, exact while no wheel saturates) and adds the body's `J ω̂` (filter
-//!   table inertia): `h` is the system momentum, so the momentum of a slew, which goes back
-//!   into the wheels at its end, is not dumped.
+//! * **What `h` is**: the system momentum, the wheels' `h_w` plus the body's `J ω̂` (filter
+//!   table inertia), so the momentum of a slew, which goes back into the wheels at its end, is
+//!   not dumped. `h_w` comes from the **wheel tachometers** (`docs/icd.md` §3.6, format
+//!   version 4): `h_w = Σ a_i J_s ω_i` with Table 6's spin axes `a_i` and rotor inertia `J_s`
+//!   ([`wheel_momentum_from_tachometers`]), whenever every wheel of the table reads valid.
+//!   Otherwise (no tachometer words, a wheel's word invalid or saturated, no geometry in the
+//!   table) the OBC falls back to counting its own torque commands from the last tachometer
+//!   value (`h_w -= τ_cmd dt`). That count is exact only while the wheels deliver the command:
+//!   on a torque-limited slew the four wheels clip at their own limit (0.4 N·m each in the
+//!   truth) while the command is limited per ACS axis (0.5 N·m), and the count drifted 54.6
+//!   N·m·s over the main job's nine slews (`docs/magnetics.md` §7). Every change of source is
+//!   an event (0x0A03), so a count that can drift is never silent.
 //!
 //! ## The field, and the TAMs while the bars are on (blanking)
 //! A bar's own field at the TAMs (≈ 0.1 mG per A·m², tens of mG at the rating) is as large as
@@ -76,6 +83,54 @@ pub const CHECK_CONSECUTIVE: u8 = 3;
 /// bound that keeps the count finite whatever the commands were.
 /// Project choice (not in the paper): bounds the estimate.
 pub const MAX_MOMENTUM_NMS: f64 = 1_000.0;
+
+/// Where the OBC's wheel momentum comes from (module doc).
+/// docs/icd.md §3.3 (event 0x0A03); docs/magnetics.md §7.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum MomentumSource {
+    /// Counted from the OBC's own wheel torque commands (no usable tachometers).
+    /// docs/magnetics.md §7.
+    #[default]
+    CommandCount,
+    /// Measured by every wheel's tachometer this cycle.
+    /// docs/icd.md §3.6.
+    Tachometers,
+}
+
+/// Radians per second per tachometer count (0.1 rpm).
+const RAD_PER_S_PER_COUNT: f64 = crate::raw::WHEEL_RPM_PER_COUNT * core::f64::consts::TAU / 60.0;
+
+/// The wheels' momentum in ACS from the tachometers, `Σ a_i J_s ω_i` (N·m·s), when the table
+/// gives a geometry and every wheel in it has a valid, unsaturated word; `None` otherwise.
+/// Module doc; docs/icd.md §3.6; docs/tables.md (Table 6, fields 24–25).
+#[must_use]
+pub fn wheel_momentum_from_tachometers(
+    sample: &crate::raw::WheelSample,
+    table: &crate::tables::MagneticsTable,
+) -> Option<Vector3<f64>> {
+    if !table.has_wheel_geometry() {
+        return None;
+    }
+    let mut h = Vector3::zeros();
+    for (i, (axis, counts)) in table
+        .wheel_spin_axes_acs
+        .iter()
+        .zip(sample.speed_counts)
+        .enumerate()
+    {
+        if axis.iter().all(|x| *x == 0.0) {
+            continue;
+        }
+        let valid = sample.speed_valid & (1u8 << i) != 0;
+        if !valid || counts == i16::MAX || counts == i16::MIN {
+            return None;
+        }
+        let h_wheel = table.wheel_spin_inertia_kg_m2 * f64::from(counts) * RAD_PER_S_PER_COUNT;
+        h += Vector3::new(axis[0], axis[1], axis[2]) * h_wheel;
+    }
+    h.iter().all(|x| x.is_finite()).then_some(h)
+}
 
 /// Why the law gave no dipole.
 /// Project choice (not in the paper): typed errors instead of panics in the flight core.
@@ -171,8 +226,10 @@ pub struct UnloadingReport {
 /// Project choice (not in the paper): the paper does not describe the OBC's unloading.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct MomentumUnloading {
-    /// The momentum the OBC's wheel torque commands have put into the wheels (ACS, N·m·s).
+    /// The wheels' momentum (ACS, N·m·s): the tachometers', else the command count.
     wheel_momentum_acs_nms: Vector3<f64>,
+    /// Where `wheel_momentum_acs_nms` came from this cycle.
+    source: MomentumSource,
     /// Unloading (outside the dead band).
     active: bool,
     /// The dipole computed at the last blanked sample (ACS, A·m²).
@@ -196,6 +253,7 @@ impl MomentumUnloading {
     pub const fn new() -> Self {
         Self {
             wheel_momentum_acs_nms: Vector3::new(0.0, 0.0, 0.0),
+            source: MomentumSource::CommandCount,
             active: false,
             hold_acs_am2: [0.0; BARS],
             command_acs_am2: [0.0; BARS],
@@ -243,11 +301,45 @@ impl MomentumUnloading {
         self.field_unexpected
     }
 
-    /// The OBC's count of the wheel momentum (ACS, N·m·s).
+    /// The OBC's wheel momentum (ACS, N·m·s): measured or counted ([`Self::source`]).
     /// docs/magnetics.md §7.
     #[must_use]
     pub const fn wheel_momentum_acs_nms(&self) -> Vector3<f64> {
         self.wheel_momentum_acs_nms
+    }
+
+    /// Where the wheel momentum came from this cycle.
+    /// docs/magnetics.md §7.
+    #[must_use]
+    pub const fn source(&self) -> MomentumSource {
+        self.source
+    }
+
+    /// This frame's wheel momentum: the tachometers when they all read
+    /// ([`wheel_momentum_from_tachometers`]), else the count of the previous cycle's torque
+    /// command from the last value ([`Self::account_wheel_torque`]). Returns the new source
+    /// when it changed (event 0x0A03).
+    /// Module doc; docs/magnetics.md §7.
+    pub fn update_wheel_momentum(
+        &mut self,
+        sample: &crate::raw::WheelSample,
+        torque_cmd_acs_nm: &Vector3<f64>,
+        dt_s: f64,
+        table: &crate::tables::MagneticsTable,
+    ) -> Option<MomentumSource> {
+        let source = match wheel_momentum_from_tachometers(sample, table) {
+            Some(h) if h.norm() <= MAX_MOMENTUM_NMS => {
+                self.wheel_momentum_acs_nms = h;
+                MomentumSource::Tachometers
+            }
+            _ => {
+                self.account_wheel_torque(torque_cmd_acs_nm, dt_s);
+                MomentumSource::CommandCount
+            }
+        };
+        let changed = source != self.source;
+        self.source = source;
+        changed.then_some(source)
     }
 
     /// Count the previous cycle's wheel torque command (held over `dt_s`): the wheels take
@@ -536,6 +628,71 @@ mod tests {
         };
         u.update(Some(&good), &h, &t, false);
         assert!(!u.field_unexpected());
+    }
+
+    /// Wheel speeds that carry a known momentum per wheel come back as `Σ a_i h_i` (to the
+    /// 0.1-rpm quantisation); a missing or saturated word, or no geometry, gives `None`.
+    #[test]
+    fn tachometers_give_the_wheel_momentum_through_the_table_geometry() {
+        let t = MagneticsTable::boot();
+        let per_count = t.wheel_spin_inertia_kg_m2 * RAD_PER_S_PER_COUNT;
+        let h_wheel = [120.0, -40.0, 7.5, 60.0];
+        let mut s = crate::raw::WheelSample {
+            speed_counts: h_wheel.map(|h| libm::round(h / per_count) as i16),
+            speed_valid: 0x0F,
+            ..Default::default()
+        };
+        let k = 1.0 / libm::sqrt(3.0);
+        let expected = Vector3::new(120.0 + 60.0 * k, -40.0 + 60.0 * k, 7.5 + 60.0 * k);
+        let h = wheel_momentum_from_tachometers(&s, &t).unwrap();
+        assert!((h - expected).norm() < 2.0 * per_count, "{h} vs {expected}");
+        s.speed_valid = 0x07;
+        assert_eq!(wheel_momentum_from_tachometers(&s, &t), None);
+        s.speed_valid = 0x0F;
+        s.speed_counts[2] = i16::MAX;
+        assert_eq!(wheel_momentum_from_tachometers(&s, &t), None, "saturated");
+        let mut no_geometry = t;
+        no_geometry.wheel_spin_axes_acs = [[0.0; 3]; crate::raw::WHEELS];
+        assert_eq!(wheel_momentum_from_tachometers(&s, &no_geometry), None);
+        // A wheel the table does not hold needs no word.
+        let mut three = t;
+        three.wheel_spin_axes_acs[3] = [0.0; 3];
+        s.speed_counts[2] = 100;
+        s.speed_valid = 0x07;
+        assert!(wheel_momentum_from_tachometers(&s, &three).is_some());
+    }
+
+    /// The tachometers replace the count; without them the count carries on from the last
+    /// measured value; each change of source is reported once.
+    #[test]
+    fn momentum_source_follows_the_tachometers_and_reports_each_change() {
+        let t = MagneticsTable::boot();
+        let per_count = t.wheel_spin_inertia_kg_m2 * RAD_PER_S_PER_COUNT;
+        let mut u = MomentumUnloading::new();
+        let tau = Vector3::new(0.5, 0.0, 0.0);
+        let s = crate::raw::WheelSample {
+            speed_counts: [1000, 0, 0, 0],
+            speed_valid: 0x0F,
+            ..Default::default()
+        };
+        assert_eq!(
+            u.update_wheel_momentum(&s, &tau, 1.0, &t),
+            Some(MomentumSource::Tachometers)
+        );
+        assert!((u.wheel_momentum_acs_nms().x - 1000.0 * per_count).abs() < 1e-9);
+        assert_eq!(u.update_wheel_momentum(&s, &tau, 1.0, &t), None);
+        let lost = crate::raw::WheelSample::default();
+        assert_eq!(
+            u.update_wheel_momentum(&lost, &tau, 1.0, &t),
+            Some(MomentumSource::CommandCount)
+        );
+        assert!((u.wheel_momentum_acs_nms().x - (1000.0 * per_count - 0.5)).abs() < 1e-9);
+        assert_eq!(u.update_wheel_momentum(&lost, &tau, 1.0, &t), None);
+        assert_eq!(u.source(), MomentumSource::CommandCount);
+        assert_eq!(
+            u.update_wheel_momentum(&s, &tau, 1.0, &t),
+            Some(MomentumSource::Tachometers)
+        );
     }
 
     #[test]

@@ -17,8 +17,8 @@
 //! (`tests/icd/interop_decoders.py`).
 
 use fsw_core::tm_layout::{
-    visit_ephemeris, visit_event, visit_housekeeping, visit_magnetics, visit_raw_frame, FieldType,
-    FieldValue, PacketLayout, PACKETS,
+    visit_ephemeris, visit_event, visit_housekeeping, visit_magnetics, visit_raw_frame,
+    visit_wheels, FieldType, FieldValue, PacketLayout, PACKETS,
 };
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -322,6 +322,13 @@ pub fn dump_csv(
                     .magnetics
                     .iter()
                     .map(|m| (m.time, collect(|o| visit_magnetics(m, &mut |v| o(v))))),
+            ),
+            fsw_core::telemetry::APID_WHEELS => dump_one(
+                p,
+                &mut tm
+                    .wheels
+                    .iter()
+                    .map(|w| (w.time, collect(|o| visit_wheels(w, &mut |v| o(v))))),
             ),
             other => anyhow::bail!("APID 0x{other:03x} has a layout but no decoded record here"),
         };

@@ -10,16 +10,18 @@
 //! time going backwards is reported; records are finally sorted by time (stable), so reordered
 //! packets are put back in order and the reordering is reported.
 //!
-//! The magnetics frame (APID 0x013, format version 2 of `docs/icd.md` §3.5) is read like the
-//! others; a file without it (version 1) reads as before, with no magnetics records.
+//! The magnetics frame (APID 0x013, format version 2 of `docs/icd.md` §3.5) and the wheel
+//! frame (APID 0x014, version 4, §3.6) are read like the others; a file without them reads as
+//! before, with no such records.
 
 use fsw_core::events::Event;
 use fsw_core::raw::{RawSensorFrame, TimeTag};
 use fsw_core::telemetry::{
     decode_ephemeris, decode_event, decode_housekeeping, decode_magnetics, decode_raw_frame,
-    decode_time_code, EphemerisRecord, MagneticsFrame, ObcHousekeeping, RecordError,
-    APID_EPHEMERIS, APID_EVENT, APID_HOUSEKEEPING, APID_MAGNETICS, APID_RAW_SENSORS, EPHEMERIS_LEN,
-    EVENT_LEN, HOUSEKEEPING_LEN, MAGNETICS_LEN, RAW_FRAME_LEN, TIME_CODE_LEN,
+    decode_time_code, decode_wheels, EphemerisRecord, MagneticsFrame, ObcHousekeeping, RecordError,
+    WheelFrame, APID_EPHEMERIS, APID_EVENT, APID_HOUSEKEEPING, APID_MAGNETICS, APID_RAW_SENSORS,
+    APID_WHEELS, EPHEMERIS_LEN, EVENT_LEN, HOUSEKEEPING_LEN, MAGNETICS_LEN, RAW_FRAME_LEN,
+    TIME_CODE_LEN, WHEEL_FRAME_LEN,
 };
 use serde::Serialize;
 use std::collections::HashMap;
@@ -54,6 +56,9 @@ pub struct TpReport {
     pub packets_ephemeris: usize,
     /// Magnetics frames (APID 0x013, TAM and CSS words) decoded; 0 for a file without them.
     pub packets_magnetics: usize,
+    /// Wheel frames (APID 0x014, tachometer and bar-monitor words) decoded; 0 for a file
+    /// without them.
+    pub packets_wheels: usize,
     /// Regions skipped (truncated, unknown, corrupt), with offsets.
     pub skipped: Vec<Skipped>,
     /// Duplicated packets dropped (offsets): identical octets to an earlier copy.
@@ -160,6 +165,8 @@ pub struct Telemetry {
     pub ephemeris: Vec<EphemerisRecord>,
     /// Magnetics frames (APID 0x013): TAM1, TAM2, CSS words at the raw frames' time codes.
     pub magnetics: Vec<MagneticsFrame>,
+    /// Wheel frames (APID 0x014): tachometers and bar monitors at the raw frames' time codes.
+    pub wheels: Vec<WheelFrame>,
     /// What the reader found.
     pub report: TpReport,
 }
@@ -184,6 +191,7 @@ fn user_len(apid: u16) -> Option<usize> {
         APID_EVENT => Some(EVENT_LEN),
         APID_EPHEMERIS => Some(EPHEMERIS_LEN),
         APID_MAGNETICS => Some(MAGNETICS_LEN),
+        APID_WHEELS => Some(WHEEL_FRAME_LEN),
         _ => None,
     }
 }
@@ -245,6 +253,7 @@ fn decodes_at(bytes: &[u8], at: usize, h: &Header) -> bool {
         APID_EVENT => decode_event(user).is_ok(),
         APID_EPHEMERIS => decode_ephemeris(time, user).is_ok(),
         APID_MAGNETICS => decode_magnetics(time, user).is_ok(),
+        APID_WHEELS => decode_wheels(time, user).is_ok(),
         _ => false,
     }
 }
@@ -453,11 +462,12 @@ pub fn decode(bytes: &[u8]) -> Telemetry {
     tm.events.sort_by_key(|(t, _)| *t);
     tm.ephemeris.sort_by_key(|r| r.time);
     tm.magnetics.sort_by_key(|r| r.time);
+    tm.wheels.sort_by_key(|r| r.time);
     tm
 }
 
 /// Number of APID slots of the reader ([`SLOT_APIDS`]).
-const SLOTS: usize = 5;
+const SLOTS: usize = 6;
 
 /// The APIDs in slot order (the index of `placed` in [`decode`]).
 const SLOT_APIDS: [u16; SLOTS] = [
@@ -466,6 +476,7 @@ const SLOT_APIDS: [u16; SLOTS] = [
     APID_EVENT,
     APID_EPHEMERIS,
     APID_MAGNETICS,
+    APID_WHEELS,
 ];
 
 /// Decode one packet's user data (a known APID of the right length) into its list in `tm`,
@@ -488,6 +499,9 @@ fn store_record(
         }
         APID_MAGNETICS => decode_magnetics(time, user)
             .map(|x| keep(&mut tm.magnetics, x, &mut r.packets_magnetics, 4)),
+        APID_WHEELS => {
+            decode_wheels(time, user).map(|x| keep(&mut tm.wheels, x, &mut r.packets_wheels, 5))
+        }
         _ => decode_ephemeris(time, user)
             .map(|x| keep(&mut tm.ephemeris, x, &mut r.packets_ephemeris, 3)),
     }
@@ -599,6 +613,7 @@ fn screen_time_codes(tm: &mut Telemetry, placed: &[Vec<(usize, usize, u16)>; SLO
         tm.events.iter().map(|(t, _)| t.seconds()).collect(),
         tm.ephemeris.iter().map(|r| r.time.seconds()).collect(),
         tm.magnetics.iter().map(|r| r.time.seconds()).collect(),
+        tm.wheels.iter().map(|r| r.time.seconds()).collect(),
     ];
     let mut reversals = Vec::new();
     for slot in 0..SLOTS {
@@ -646,7 +661,8 @@ fn screen_time_codes(tm: &mut Telemetry, placed: &[Vec<(usize, usize, u16)>; SLO
             1 => retain_indexed(&mut tm.housekeeping, keep),
             2 => retain_indexed(&mut tm.events, keep),
             3 => retain_indexed(&mut tm.ephemeris, keep),
-            _ => retain_indexed(&mut tm.magnetics, keep),
+            4 => retain_indexed(&mut tm.magnetics, keep),
+            _ => retain_indexed(&mut tm.wheels, keep),
         }
     }
     reversals.sort_by_key(|r| r.0);
@@ -658,6 +674,7 @@ fn screen_time_codes(tm: &mut Telemetry, placed: &[Vec<(usize, usize, u16)>; SLO
     tm.report.packets_event = tm.events.len();
     tm.report.packets_ephemeris = tm.ephemeris.len();
     tm.report.packets_magnetics = tm.magnetics.len();
+    tm.report.packets_wheels = tm.wheels.len();
 }
 
 fn retain_indexed<T>(v: &mut Vec<T>, keep: impl Fn(usize) -> bool) {

@@ -25,14 +25,14 @@
 use fsw_core::attitude::Quat;
 use fsw_core::events::{Counters, Event, EventId};
 use fsw_core::raw::{
-    CssSample, FhstSample, FssSample, IruSample, RawSensorFrame, TamSample, TimeTag,
+    CssSample, FhstSample, FssSample, IruSample, RawSensorFrame, TamSample, TimeTag, WheelSample,
 };
 use fsw_core::telemetry::{
     encode_ephemeris, encode_event, encode_housekeeping, encode_magnetics, encode_raw_frame,
-    encode_time_code, EphemerisRecord, MagneticsFrame, MeasurementStatus, ObcHousekeeping,
-    SensorResidual, APID_EPHEMERIS, APID_EVENT, APID_HOUSEKEEPING, APID_MAGNETICS,
-    APID_RAW_SENSORS, EPHEMERIS_LEN, EVENT_LEN, HOUSEKEEPING_LEN, MAGNETICS_LEN, RAW_FRAME_LEN,
-    TIME_CODE_LEN,
+    encode_time_code, encode_wheels, EphemerisRecord, MagneticsFrame, MeasurementStatus,
+    ObcHousekeeping, SensorResidual, WheelFrame, APID_EPHEMERIS, APID_EVENT, APID_HOUSEKEEPING,
+    APID_MAGNETICS, APID_RAW_SENSORS, APID_WHEELS, EPHEMERIS_LEN, EVENT_LEN, HOUSEKEEPING_LEN,
+    MAGNETICS_LEN, RAW_FRAME_LEN, TIME_CODE_LEN, WHEEL_FRAME_LEN,
 };
 use gro_reference::splitmix::SplitMix64;
 use ground_tool::tp::{decode, Telemetry};
@@ -106,6 +106,7 @@ enum Rec {
     Ev(TimeTag, Event),
     Eph(EphemerisRecord),
     Mag(MagneticsFrame),
+    Whl(WheelFrame),
 }
 
 #[derive(Clone, Debug)]
@@ -170,6 +171,7 @@ fn raw_frame(rng: &mut Rng, time: TimeTag) -> RawSensorFrame {
         temperatures_centi_c: [(); 5].map(|()| rng.range(1000, 3000) as i16),
         tam: Default::default(),
         css: Default::default(),
+        wheels: WheelSample::default(),
     }
 }
 
@@ -217,7 +219,7 @@ fn housekeeping(rng: &mut Rng, time: TimeTag) -> ObcHousekeeping {
 /// A well-formed stream of `cycles` cycles from `first_s` (ICD §4 order: raw frame, ephemeris
 /// when due, housekeeping, events), sequence counts per APID from random starts (wrapping).
 fn stream(rng: &mut Rng, cycles: usize, first_s: u32) -> Vec<Pkt> {
-    let mut seq = [(); 5].map(|()| rng.below(16_384) as u16);
+    let mut seq = [(); 6].map(|()| rng.below(16_384) as u16);
     let mut next_seq = |slot: usize| {
         let s = seq[slot];
         seq[slot] = (s + 1) & 0x3fff;
@@ -254,6 +256,23 @@ fn stream(rng: &mut Rng, cycles: usize, first_s: u32) -> Vec<Pkt> {
             out.push(Pkt {
                 bytes: packet(APID_MAGNETICS, next_seq(4), time, &buf[..n]),
                 rec: Rec::Mag(m),
+            });
+        }
+        // The wheel frame (format version 4) after some raw frames, with its time code.
+        if rng.chance(0.5) {
+            let w = WheelFrame {
+                time,
+                wheels: WheelSample {
+                    speed_counts: [(); 4].map(|()| rng.next() as i16),
+                    speed_valid: rng.below(16) as u8,
+                    dipole_counts: [(); 3].map(|()| rng.next() as i16),
+                    dipole_valid: rng.below(8) as u8,
+                },
+            };
+            let n = encode_wheels(&w, &mut buf).unwrap();
+            out.push(Pkt {
+                bytes: packet(APID_WHEELS, next_seq(5), time, &buf[..n]),
+                rec: Rec::Whl(w),
             });
         }
         if c % 5 == 0 || rng.chance(0.1) {
@@ -307,6 +326,7 @@ fn records(tm: &Telemetry) -> Vec<Rec> {
     out.extend(tm.events.iter().map(|(t, e)| Rec::Ev(*t, *e)));
     out.extend(tm.ephemeris.iter().copied().map(Rec::Eph));
     out.extend(tm.magnetics.iter().copied().map(Rec::Mag));
+    out.extend(tm.wheels.iter().copied().map(Rec::Whl));
     out
 }
 
@@ -333,6 +353,7 @@ fn packet_len(apid: u16) -> Option<usize> {
         APID_EVENT => EVENT_LEN,
         APID_EPHEMERIS => EPHEMERIS_LEN,
         APID_MAGNETICS => MAGNETICS_LEN,
+        APID_WHEELS => WHEEL_FRAME_LEN,
         _ => return None,
     };
     Some(OVERHEAD + user)
@@ -371,6 +392,7 @@ fn check_report(tm: &Telemetry, bytes: &[u8]) -> Result<(), String> {
         || r.packets_event != tm.events.len()
         || r.packets_ephemeris != tm.ephemeris.len()
         || r.packets_magnetics != tm.magnetics.len()
+        || r.packets_wheels != tm.wheels.len()
     {
         return Err("report counts differ from the records".into());
     }
@@ -378,7 +400,8 @@ fn check_report(tm: &Telemetry, bytes: &[u8]) -> Result<(), String> {
         + r.packets_housekeeping * (OVERHEAD + HOUSEKEEPING_LEN)
         + r.packets_event * (OVERHEAD + EVENT_LEN)
         + r.packets_ephemeris * (OVERHEAD + EPHEMERIS_LEN)
-        + r.packets_magnetics * (OVERHEAD + MAGNETICS_LEN);
+        + r.packets_magnetics * (OVERHEAD + MAGNETICS_LEN)
+        + r.packets_wheels * (OVERHEAD + WHEEL_FRAME_LEN);
     // Packets dropped for a damaged time code are accounted for with their length.
     let outliers: usize = r.time_outliers.iter().map(|o| o.len).sum();
     if decoded + dup + outliers + r.skipped_octets() != bytes.len() {
@@ -392,7 +415,8 @@ fn check_report(tm: &Telemetry, bytes: &[u8]) -> Result<(), String> {
         && tm.housekeeping.windows(2).all(|w| w[0].time <= w[1].time)
         && tm.events.windows(2).all(|w| w[0].0 <= w[1].0)
         && tm.ephemeris.windows(2).all(|w| w[0].time <= w[1].time)
-        && tm.magnetics.windows(2).all(|w| w[0].time <= w[1].time);
+        && tm.magnetics.windows(2).all(|w| w[0].time <= w[1].time)
+        && tm.wheels.windows(2).all(|w| w[0].time <= w[1].time);
     if !sorted {
         return Err("records not sorted by time".into());
     }
@@ -497,7 +521,7 @@ fn reordered_packets_all_recovered_in_time_order() {
         let (missing, extra) = match_records(&tm, &all);
         assert!(missing.is_empty() && extra.is_empty(), "{what}");
         // A time reversal is reported exactly when an APID's times go backwards in the file.
-        let mut last: [Option<TimeTag>; 5] = [None; 5];
+        let mut last: [Option<TimeTag>; 6] = [None; 6];
         let mut reversals = 0;
         for p in &pkts {
             let (slot, t) = match &p.rec {
@@ -506,6 +530,7 @@ fn reordered_packets_all_recovered_in_time_order() {
                 Rec::Ev(t, _) => (2, *t),
                 Rec::Eph(e) => (3, e.time),
                 Rec::Mag(m) => (4, m.time),
+                Rec::Whl(w) => (5, w.time),
             };
             if last[slot].is_some_and(|prev| t < prev) {
                 reversals += 1;
@@ -648,6 +673,7 @@ fn build_damaged(rng: &mut Rng, kind: usize) -> Built {
                     Rec::Ev(t, _) => *t,
                     Rec::Eph(e) => e.time,
                     Rec::Mag(m) => m.time,
+                    Rec::Whl(w) => w.time,
                 };
                 let cycles = rng.range(1, 30);
                 stream(rng, cycles, last.coarse_s + 10)

@@ -43,6 +43,7 @@ use crate::scenario::{body_axis_from_name, table_id_from_name, CommandKind, Scen
 use crate::sensors::fhst::Fhst;
 use crate::sensors::fss::Fss;
 use crate::sensors::iru::Iru;
+use crate::sensors::tachometer::Tachometers;
 use crate::sensors::thermal::ThermalNode;
 use crate::sensors::TruthSnapshot;
 use crate::truth::dynamics::{AttitudeState, MomentumUnloading, RigidBody};
@@ -187,6 +188,8 @@ pub struct Simulation {
     magnetics: Option<crate::magnetics::Magnetics>,
     /// The magnetic torquer bars (`[dynamics] momentum_unloading = "bars"`).
     torquers: Option<TorquerBars>,
+    /// The wheel tachometers and bar current monitors (`[wheel_tachometers] enabled`).
+    tachometers: Option<Tachometers>,
 }
 
 /// The torquer bars of a scenario flown with `[dynamics] momentum_unloading = "bars"`.
@@ -230,15 +233,7 @@ impl Simulation {
         )
         .map_err(InputError::from)?;
         let seed = scenario.seed;
-        let mut iru = Iru::new(scenario.iru.clone(), &paper, seed).map_err(InputError::from)?;
-        for f in &scenario.faults {
-            if let (FaultKind::IruChannelFailure, Some(ch)) = (f.kind, f.channel_index()) {
-                iru.add_failure(ch, f.at_s, f.bit.unwrap_or(true));
-            }
-            if f.kind == FaultKind::IruCounterWrap {
-                iru.preset_counters_to_wrap(f.at_s, f.margin_pulses.unwrap_or(40));
-            }
-        }
+        let iru = iru_of(&scenario, &paper)?;
         let pending_iru = IruSample {
             counts: iru.counts(),
             channel_failed: 0,
@@ -252,155 +247,13 @@ impl Simulation {
             Fss::new(0, scenario.fss1.clone(), &paper, seed),
             Fss::new(1, scenario.fss2.clone(), &paper, seed),
         ];
-        let created = clock.time_tag(0.0).unwrap_or_default();
-
-        // Start-up uplinks.
-        let mut uploads = Vec::new();
-        let mut timeline: Vec<(f64, Action)> = Vec::new();
-        let push_upload =
-            |uploads: &mut Vec<Upload>, timeline: &mut Vec<(f64, Action)>, up: Upload| {
-                let id = onboard::image_table_id(&up.image);
-                timeline.push((up.at_s, Action::Load(uploads.len())));
-                if let Some(id) = id {
-                    timeline.push((up.at_s, Action::Activate(id)));
-                }
-                uploads.push(up);
-            };
-        if scenario.uplink_catalog {
-            let cat = onboard::build_star_catalog(&catalogue, &scenario, clock.j2000_tt_s(0.0))?;
-            push_upload(
-                &mut uploads,
-                &mut timeline,
-                Upload {
-                    source: format!(
-                        "prelaunch ground system: Hipparcos {}-{} mag ({:?}), proper motion to the epoch, {} stars",
-                        scenario.fhst1.magnitude_min,
-                        scenario.fhst1.magnitude_max,
-                        scenario.sky.magnitude_system,
-                        cat.stars.len()
-                    ),
-                    name: "star_catalog.tbl".into(),
-                    image: onboard::image(TableId::StarCatalog, created, &cat)?,
-                    at_s: 0.0,
-                },
-            );
-        }
-        if let Some(overrides) = &scenario.startup_filter_table() {
-            let table = onboard::filter_table_with(overrides).map_err(InputError::from)?;
-            push_upload(
-                &mut uploads,
-                &mut timeline,
-                Upload {
-                    source: format!(
-                        "scenario filter_table (boot values except {:?})",
-                        overrides.keys().collect::<Vec<_>>()
-                    ),
-                    name: "filter.tbl".into(),
-                    image: onboard::image(TableId::Filter, created, &table)?,
-                    at_s: 0.0,
-                },
-            );
-        }
-        if scenario.fly_true_alignments {
-            let m = [
-                *fhst[0].m_acs_from_fhst_true(),
-                *fhst[1].m_acs_from_fhst_true(),
-                *fss[0].m_acs_from_fss_true(),
-                *fss[1].m_acs_from_fss_true(),
-            ];
-            let table = onboard::true_alignment_table(&m);
-            push_upload(
-                &mut uploads,
-                &mut timeline,
-                Upload {
-                    source: "true alignments (fly_true_alignments = true)".into(),
-                    name: "true_alignment.tbl".into(),
-                    image: onboard::image(TableId::Alignment, created, &table)?,
-                    at_s: 0.0,
-                },
-            );
-        }
-        if let Some(dir) = tables_dir {
-            // The images the folder's manifest lists, checked (crate::manifest).
-            let (tables, unlisted) = crate::manifest::read(dir)?;
-            for f in &unlisted {
-                eprintln!(
-                    "warning: {} is not listed in {}: not loaded",
-                    f.display(),
-                    dir.join(crate::manifest::MANIFEST).display()
-                );
-            }
-            for (f, _, image) in tables {
-                push_upload(
-                    &mut uploads,
-                    &mut timeline,
-                    Upload {
-                        source: f.display().to_string(),
-                        name: f
-                            .file_name()
-                            .map_or_else(|| "table.tbl".into(), |n| n.to_string_lossy().into()),
-                        image,
-                        at_s: 0.0,
-                    },
-                );
-            }
-        }
-        for up in ephemeris_uploads(&scenario, &clock, tables_dir)? {
-            push_upload(&mut uploads, &mut timeline, up);
-        }
-        if scenario.initial_estimate.enabled {
-            timeline.push((0.0, Action::FilterInit(None)));
-        }
-
-        // The scenario's timeline (stable order for equal times).
-        let mut order: Vec<usize> = (0..scenario.commands.len()).collect();
-        order.sort_by(|&a, &b| {
-            scenario.commands[a]
-                .at_s
-                .total_cmp(&scenario.commands[b].at_s)
-                .then(a.cmp(&b))
-        });
-        for i in order {
-            let c = &scenario.commands[i];
-            let action = timeline_action(&scenario, i, &mut uploads, created)?;
-            timeline.push((c.at_s, action));
-        }
-        // Faults that reach the OBC through the uplink (crate::faults).
-        for (i, f) in scenario.faults.iter().enumerate() {
-            match f.kind {
-                FaultKind::TableUpload => {
-                    let base = if scenario.fly_true_alignments {
-                        onboard::true_alignment_table(&[
-                            *fhst[0].m_acs_from_fhst_true(),
-                            *fhst[1].m_acs_from_fhst_true(),
-                            *fss[0].m_acs_from_fss_true(),
-                            *fss[1].m_acs_from_fss_true(),
-                        ])
-                    } else {
-                        fsw_core::tables::AlignmentTable::prelaunch()
-                    };
-                    let created = clock.time_tag(f.at_s).unwrap_or_default();
-                    let image = f.upload_image(&base, created)?;
-                    let damage = f
-                        .corruption
-                        .map_or_else(|| "none".to_owned(), |c| format!("{c:?}").to_lowercase());
-                    uploads.push(Upload {
-                        source: format!("faults[{i}]: alignment image, damage {damage}"),
-                        name: format!("fault{i}_{damage}_alignment.tbl"),
-                        image,
-                        at_s: f.at_s,
-                    });
-                    timeline.push((f.at_s, Action::Load(uploads.len() - 1)));
-                    if f.activate.unwrap_or(true) {
-                        timeline.push((f.at_s, Action::Activate(TableId::Alignment)));
-                    }
-                }
-                FaultKind::FilterReset => timeline.push((f.at_s, Action::FilterReset)),
-                _ => {}
-            }
-        }
+        let true_alignments = true_alignment_table(&fhst, &fss);
+        let mut schedule = Schedule::default();
+        schedule.startup_uplinks(&scenario, &clock, &catalogue, &true_alignments, tables_dir)?;
+        schedule.scenario_commands(&scenario, &clock)?;
+        schedule.uplink_faults(&scenario, &clock, &true_alignments)?;
         // Start-up entries are at 0 and come first; the scenario's are sorted: keep stable.
-        timeline.sort_by(|a, b| a.0.total_cmp(&b.0));
+        schedule.timeline.sort_by(|a, b| a.0.total_cmp(&b.0));
 
         let cycle_count = cycle_count_of(scenario.duration_s, scenario.step_s);
         let error_rotation = Quat::from_rotation_vector(&scenario.initial_estimate.error_rad());
@@ -419,14 +272,20 @@ impl Simulation {
             cycle: 0,
             cycle_count,
             pending_iru,
-            timeline,
+            timeline: schedule.timeline,
             next_action: 0,
-            uploads,
+            uploads: schedule.uploads,
             error_rotation,
             faults: scenario.faults.clone(),
             fault_state: FaultState::new(&scenario.faults),
             magnetics: crate::magnetics::Magnetics::of_scenario(&scenario)?,
             torquers: torquers_of(&scenario),
+            tachometers: scenario.wheel_tachometers.enabled.then(|| {
+                Tachometers::new(
+                    &scenario.wheel_tachometers,
+                    crate::sensors::model_rng(seed, crate::sensors::stream::TACHOMETERS),
+                )
+            }),
             scenario,
         })
     }
@@ -469,6 +328,18 @@ impl Simulation {
         (record, tam, css)
     }
 
+    /// This cycle's tachometer and bar-monitor words (all invalid without
+    /// `[wheel_tachometers] enabled`), with the `tachometer_failed` faults applied. The bars
+    /// still hold the previous cycle's dipole: the one over the interval that ended now.
+    fn sample_wheels(&mut self, t_s: f64) -> fsw_core::raw::WheelSample {
+        let Some(tach) = self.tachometers.as_mut() else {
+            return fsw_core::raw::WheelSample::default();
+        };
+        let failed = FaultState::failed_tachometers(&self.faults, t_s);
+        let dipoles = self.torquers.as_ref().map(TorquerBars::dipole_am2);
+        tach.sample(self.body.wheel_momenta_nms(), &failed, dipoles)
+    }
+
     /// The magnetometers and coarse Sun sensors, `None` with `[magnetics] enabled = false`.
     #[must_use]
     pub fn magnetics(&self) -> Option<&crate::magnetics::Magnetics> {
@@ -497,6 +368,13 @@ impl Simulation {
     #[must_use]
     pub fn true_attitude(&self) -> &AttitudeState {
         self.body.state()
+    }
+
+    /// The truth's wheel momentum in ACS now (N·m·s): what the next frame's tachometers
+    /// measure.
+    #[must_use]
+    pub fn true_wheel_momentum_acs_nms(&self) -> Vector3<f64> {
+        self.body.wheel_momentum_acs_nms()
     }
 
     /// The truth orbit (position/velocity at the last sampled cycle).
@@ -671,6 +549,7 @@ impl Simulation {
             temperatures_centi_c: temps,
             tam,
             css,
+            wheels: self.sample_wheels(t),
         };
 
         // Commands due now (borrowing the images; at most MAX_COMMANDS_PER_CYCLE).
@@ -798,6 +677,186 @@ impl Simulation {
     #[must_use]
     pub fn torquers(&self) -> Option<&TorquerBars> {
         self.torquers.as_ref()
+    }
+}
+
+/// The IRU of a scenario with its `iru_channel_failure` and `iru_counter_wrap` faults.
+fn iru_of(scenario: &Scenario, paper: &PaperFacts) -> anyhow::Result<Iru> {
+    let mut iru = Iru::new(scenario.iru.clone(), paper, scenario.seed).map_err(InputError::from)?;
+    for f in &scenario.faults {
+        if let (FaultKind::IruChannelFailure, Some(ch)) = (f.kind, f.channel_index()) {
+            iru.add_failure(ch, f.at_s, f.bit.unwrap_or(true));
+        }
+        if f.kind == FaultKind::IruCounterWrap {
+            iru.preset_counters_to_wrap(f.at_s, f.margin_pulses.unwrap_or(40));
+        }
+    }
+    Ok(iru)
+}
+
+/// The alignment table of the sensors' true alignments (`fly_true_alignments`, and the base
+/// of a damaged `table_upload` then).
+fn true_alignment_table(fhst: &[Fhst; 2], fss: &[Fss; 2]) -> fsw_core::tables::AlignmentTable {
+    onboard::true_alignment_table(&[
+        *fhst[0].m_acs_from_fhst_true(),
+        *fhst[1].m_acs_from_fhst_true(),
+        *fss[0].m_acs_from_fss_true(),
+        *fss[1].m_acs_from_fss_true(),
+    ])
+}
+
+/// The uplinks and the command timeline of a run, built in [`Simulation::new`]'s stages.
+#[derive(Default)]
+struct Schedule {
+    uploads: Vec<Upload>,
+    timeline: Vec<(f64, Action)>,
+}
+
+impl Schedule {
+    /// Load the image at its time, and activate it when it names a table.
+    fn push_upload(&mut self, up: Upload) {
+        let id = onboard::image_table_id(&up.image);
+        self.timeline
+            .push((up.at_s, Action::Load(self.uploads.len())));
+        if let Some(id) = id {
+            self.timeline.push((up.at_s, Action::Activate(id)));
+        }
+        self.uploads.push(up);
+    }
+
+    /// Start-up uplinks: the star catalog, the scenario's filter table, the true alignments,
+    /// the `--tables` folder, the orbit tables and magnetics table, and the filter
+    /// initialisation.
+    fn startup_uplinks(
+        &mut self,
+        scenario: &Scenario,
+        clock: &SimClock,
+        catalogue: &crate::data::CsvTable,
+        true_alignments: &fsw_core::tables::AlignmentTable,
+        tables_dir: Option<&std::path::Path>,
+    ) -> anyhow::Result<()> {
+        let created = clock.time_tag(0.0).unwrap_or_default();
+        if scenario.uplink_catalog {
+            let cat = onboard::build_star_catalog(catalogue, scenario, clock.j2000_tt_s(0.0))?;
+            self.push_upload(Upload {
+                source: format!(
+                    "prelaunch ground system: Hipparcos {}-{} mag ({:?}), proper motion to the epoch, {} stars",
+                    scenario.fhst1.magnitude_min,
+                    scenario.fhst1.magnitude_max,
+                    scenario.sky.magnitude_system,
+                    cat.stars.len()
+                ),
+                name: "star_catalog.tbl".into(),
+                image: onboard::image(TableId::StarCatalog, created, &cat)?,
+                at_s: 0.0,
+            });
+        }
+        if let Some(overrides) = &scenario.startup_filter_table() {
+            let table = onboard::filter_table_with(overrides).map_err(InputError::from)?;
+            self.push_upload(Upload {
+                source: format!(
+                    "scenario filter_table (boot values except {:?})",
+                    overrides.keys().collect::<Vec<_>>()
+                ),
+                name: "filter.tbl".into(),
+                image: onboard::image(TableId::Filter, created, &table)?,
+                at_s: 0.0,
+            });
+        }
+        if scenario.fly_true_alignments {
+            self.push_upload(Upload {
+                source: "true alignments (fly_true_alignments = true)".into(),
+                name: "true_alignment.tbl".into(),
+                image: onboard::image(TableId::Alignment, created, true_alignments)?,
+                at_s: 0.0,
+            });
+        }
+        if let Some(dir) = tables_dir {
+            // The images the folder's manifest lists, checked (crate::manifest).
+            let (tables, unlisted) = crate::manifest::read(dir)?;
+            for f in &unlisted {
+                eprintln!(
+                    "warning: {} is not listed in {}: not loaded",
+                    f.display(),
+                    dir.join(crate::manifest::MANIFEST).display()
+                );
+            }
+            for (f, _, image) in tables {
+                self.push_upload(Upload {
+                    source: f.display().to_string(),
+                    name: f
+                        .file_name()
+                        .map_or_else(|| "table.tbl".into(), |n| n.to_string_lossy().into()),
+                    image,
+                    at_s: 0.0,
+                });
+            }
+        }
+        for up in ephemeris_uploads(scenario, clock, tables_dir)? {
+            self.push_upload(up);
+        }
+        if scenario.initial_estimate.enabled {
+            self.timeline.push((0.0, Action::FilterInit(None)));
+        }
+        Ok(())
+    }
+
+    /// The scenario's timeline (stable order for equal times).
+    fn scenario_commands(&mut self, scenario: &Scenario, clock: &SimClock) -> anyhow::Result<()> {
+        let created = clock.time_tag(0.0).unwrap_or_default();
+        let mut order: Vec<usize> = (0..scenario.commands.len()).collect();
+        order.sort_by(|&a, &b| {
+            scenario.commands[a]
+                .at_s
+                .total_cmp(&scenario.commands[b].at_s)
+                .then(a.cmp(&b))
+        });
+        for i in order {
+            let c = &scenario.commands[i];
+            let action = timeline_action(scenario, i, &mut self.uploads, created)?;
+            self.timeline.push((c.at_s, action));
+        }
+        Ok(())
+    }
+
+    /// Faults that reach the OBC through the uplink ([`crate::faults`]).
+    fn uplink_faults(
+        &mut self,
+        scenario: &Scenario,
+        clock: &SimClock,
+        true_alignments: &fsw_core::tables::AlignmentTable,
+    ) -> anyhow::Result<()> {
+        for (i, f) in scenario.faults.iter().enumerate() {
+            match f.kind {
+                FaultKind::TableUpload => {
+                    let base = if scenario.fly_true_alignments {
+                        *true_alignments
+                    } else {
+                        fsw_core::tables::AlignmentTable::prelaunch()
+                    };
+                    let created = clock.time_tag(f.at_s).unwrap_or_default();
+                    let image = f.upload_image(&base, created)?;
+                    let damage = f
+                        .corruption
+                        .map_or_else(|| "none".to_owned(), |c| format!("{c:?}").to_lowercase());
+                    self.uploads.push(Upload {
+                        source: format!("faults[{i}]: alignment image, damage {damage}"),
+                        name: format!("fault{i}_{damage}_alignment.tbl"),
+                        image,
+                        at_s: f.at_s,
+                    });
+                    self.timeline
+                        .push((f.at_s, Action::Load(self.uploads.len() - 1)));
+                    if f.activate.unwrap_or(true) {
+                        self.timeline
+                            .push((f.at_s, Action::Activate(TableId::Alignment)));
+                    }
+                }
+                FaultKind::FilterReset => self.timeline.push((f.at_s, Action::FilterReset)),
+                _ => {}
+            }
+        }
+        Ok(())
     }
 }
 

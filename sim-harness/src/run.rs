@@ -43,7 +43,7 @@ use crate::truth::time::utc_string;
 use fsw_core::events::EventId;
 use fsw_core::raw::IRU_CHANNELS;
 use fsw_core::tables::TableId;
-use fsw_core::telemetry::{EphemerisRecord, MagneticsFrame};
+use fsw_core::telemetry::{EphemerisRecord, MagneticsFrame, WheelFrame};
 use fsw_core::units::{ARCSEC_PER_RAD, RAD_PER_ARCSEC, RAD_PER_DEG};
 use gro_reference::run_folder::{
     DeclaredNoise, HeadSpread, Metadata, TransferSpreads, UnitSpread, Upload, METADATA_FILE,
@@ -909,6 +909,8 @@ fn drive<W: Write>(
     let mut prev_counts: Option<[u16; IRU_CHANNELS]> = None;
     // APID 0x013 after each downlinked raw frame while the spacecraft carries magnetics.
     let magnetics = sim.magnetics().is_some();
+    // APID 0x014 after it while the spacecraft carries the wheel tachometers.
+    let wheels = sim.scenario().wheel_tachometers.enabled;
     while let Some(rec) = sim.step() {
         let t = rec.truth.t_s;
         let counts = rec.frame.iru.counts;
@@ -929,6 +931,9 @@ fn drive<W: Write>(
             tm.raw(&rec.frame)?;
             if magnetics {
                 tm.magnetics(&MagneticsFrame::of_raw_frame(&rec.frame))?;
+            }
+            if wheels {
+                tm.wheels(&WheelFrame::of_raw_frame(&rec.frame))?;
             }
             if t + 1e-9 >= next_eph {
                 tm.ephemeris(&EphemerisRecord {

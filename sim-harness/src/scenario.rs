@@ -595,6 +595,10 @@ pub struct Scenario {
     /// `[dynamics] momentum_unloading = "bars"`.
     #[serde(default)]
     pub torquers: crate::truth::torquer::TorquerParams,
+    /// The wheel tachometers and torquer-bar current monitors
+    /// ([`crate::sensors::tachometer`]; APID 0x014).
+    #[serde(default)]
+    pub wheel_tachometers: crate::sensors::tachometer::TachometerParams,
     /// Thermal nodes.
     #[serde(default)]
     pub thermal: ThermalSet,
@@ -807,6 +811,14 @@ impl Scenario {
                 "a torquer_stuck_on fault needs the bars: [dynamics] momentum_unloading = \"bars\""
             );
         }
+        if !self.wheel_tachometers.enabled
+            && self
+                .faults
+                .iter()
+                .any(|f| f.kind == crate::faults::FaultKind::TachometerFailed)
+        {
+            bail!("a tachometer_failed fault needs the tachometers: [wheel_tachometers] enabled = true");
+        }
         Ok(())
     }
 
@@ -868,6 +880,7 @@ impl Scenario {
         self.tam1.validate("tam1")?;
         self.tam2.validate("tam2")?;
         self.torquers.validate()?;
+        self.wheel_tachometers.validate()?;
         if self.dynamics.momentum_unloading == crate::truth::dynamics::MomentumUnloading::Bars
             && !self.magnetics.enabled
         {

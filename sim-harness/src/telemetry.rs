@@ -5,8 +5,8 @@
 //! per APID (from 0, wrapping at 16384), data length = data-field octets − 1. The data field
 //! is the 6-octet CUC time code (`fsw_core::telemetry::encode_time_code`) followed by the
 //! user data of `fsw_core::telemetry`'s encoders. Within a cycle the order is raw frame
-//! (0x010), the magnetics frame (0x013) when the scenario has `[magnetics] enabled`,
-//! ephemeris (0x020) when due, housekeeping (0x011), events (0x012), all with the cycle's time
+//! (0x010), the magnetics frame (0x013) when the scenario has `[magnetics] enabled`, the
+//! wheel frame (0x014) when it has `[wheel_tachometers] enabled`, ephemeris (0x020) when due, housekeeping (0x011), events (0x012), all with the cycle's time
 //! code.
 //!
 //! The writer never allocates per packet (one fixed scratch buffer) and writes into any
@@ -21,8 +21,9 @@ use fsw_core::events::Event;
 use fsw_core::raw::{RawSensorFrame, TimeTag};
 use fsw_core::telemetry::{
     encode_ephemeris, encode_event, encode_housekeeping, encode_magnetics, encode_raw_frame,
-    encode_time_code, EphemerisRecord, MagneticsFrame, ObcHousekeeping, APID_EPHEMERIS, APID_EVENT,
-    APID_HOUSEKEEPING, APID_MAGNETICS, APID_RAW_SENSORS, TIME_CODE_LEN,
+    encode_time_code, encode_wheels, EphemerisRecord, MagneticsFrame, ObcHousekeeping, WheelFrame,
+    APID_EPHEMERIS, APID_EVENT, APID_HOUSEKEEPING, APID_MAGNETICS, APID_RAW_SENSORS, APID_WHEELS,
+    TIME_CODE_LEN,
 };
 
 /// Primary header length.
@@ -30,19 +31,21 @@ pub const PRIMARY_HEADER_LEN: usize = 6;
 /// Scratch buffer size (largest packet: housekeeping, 6 + 6 + 230).
 const SCRATCH: usize = 256;
 
-/// Per-APID sequence counters, in the order raw, housekeeping, event, ephemeris, magnetics.
-const APIDS: [u16; 5] = [
+/// Per-APID sequence counters, in the order raw, housekeeping, event, ephemeris, magnetics,
+/// wheels.
+const APIDS: [u16; 6] = [
     APID_RAW_SENSORS,
     APID_HOUSEKEEPING,
     APID_EVENT,
     APID_EPHEMERIS,
     APID_MAGNETICS,
+    APID_WHEELS,
 ];
 
 /// Packet writer.
 pub struct PacketWriter<W: Write> {
     out: W,
-    seq: [u16; 5],
+    seq: [u16; APIDS.len()],
     buf: [u8; SCRATCH],
     packets: u64,
     bytes: u64,
@@ -53,7 +56,7 @@ impl<W: Write> PacketWriter<W> {
     pub fn new(out: W) -> Self {
         Self {
             out,
-            seq: [0; 5],
+            seq: [0; APIDS.len()],
             buf: [0; SCRATCH],
             packets: 0,
             bytes: 0,
@@ -133,6 +136,16 @@ impl<W: Write> PacketWriter<W> {
         let n = encode_magnetics(m, self.user())
             .map_err(|e| std::io::Error::other(format!("magnetics frame: {e:?}")))?;
         self.emit(APID_MAGNETICS, m.time, n)
+    }
+
+    /// Wheel frame (APID 0x014): the tachometers and bar monitors, with the raw frame's time.
+    ///
+    /// # Errors
+    /// I/O or encoding.
+    pub fn wheels(&mut self, w: &WheelFrame) -> std::io::Result<()> {
+        let n = encode_wheels(w, self.user())
+            .map_err(|e| std::io::Error::other(format!("wheel frame: {e:?}")))?;
+        self.emit(APID_WHEELS, w.time, n)
     }
 
     /// Definitive orbit (APID 0x020).

@@ -619,6 +619,55 @@ fn e2e_normal_ops_orbit_events_and_fallback() {
 /// same hours without unloading drive one to its 250 N·m·s limit. A sign error anywhere
 /// between the law, the OBC's momentum count and the truth's m × B fails here (the unit
 /// tests check the law only against its own formula).
+/// The OBC's wheel momentum against the truth's through the torque-limited slews of
+/// `gro-early-mission` (its first three): with the tachometers it is the measured one (to the
+/// 0.1-rpm words and their noise) after every cycle; with them off the OBC counts its own
+/// commands, which the wheels do not deliver on a torque-limited slew, and the count drifts
+/// (docs/magnetics.md §7). Each change of source is an event 0x0A03.
+#[test]
+fn obc_wheel_momentum_follows_the_tachometers_through_slews() {
+    use fsw_core::events::EventId;
+    use fsw_core::unloading::MomentumSource;
+    let fly = |tachometers: bool, fault: Option<&str>| {
+        let mut s = scenario("gro-early-mission", 6_000.0);
+        s.wheel_tachometers.enabled = tachometers;
+        s.faults.extend(fault.map(|f| toml::from_str(f).unwrap()));
+        let mut sim = Simulation::new(s, None).unwrap();
+        let (mut worst, mut source_events) = (0.0_f64, Vec::new());
+        loop {
+            let truth = sim.true_wheel_momentum_acs_nms();
+            let Some(rec) = sim.step() else { break };
+            let obc = sim.fsw().unloading().wheel_momentum_acs_nms();
+            worst = worst.max((obc - truth).norm());
+            for e in &rec.output.events {
+                if e.id == EventId::WheelMomentumSourceChanged {
+                    source_events.push((rec.cycle, e.p1));
+                }
+            }
+        }
+        (worst, source_events, sim.fsw().unloading().source())
+    };
+    let (with, events_with, source) = fly(true, None);
+    let (without, events_without, _) = fly(false, None);
+    // Wheel 2's tachometer lost over the first slew (1,200 s): the count takes over from the
+    // last measured value, then the tachometers again.
+    let lost =
+        "kind = \"tachometer_failed\"\nsensor = \"rwa2\"\nat_s = 1000.0\nduration_s = 2000.0";
+    let (with_fault, events_fault, _) = fly(true, Some(lost));
+    eprintln!(
+        "gro-early-mission, 6,000 s (3 slews): largest |h_obc − h_true| {with:.4} N·m·s with the tachometers, {without:.2} counting commands, {with_fault:.2} with wheel 2's tachometer lost over the first slew"
+    );
+    assert!(with < 0.05, "{with}");
+    assert!(
+        without > 5.0,
+        "the command count should drift on the slews: {without}"
+    );
+    assert_eq!(source, MomentumSource::Tachometers);
+    assert_eq!(events_with, vec![(0, 1)], "one event at the first frame");
+    assert!(events_without.is_empty(), "{events_without:?}");
+    assert_eq!(events_fault, vec![(0, 1), (1000, 0), (3000, 1)]);
+}
+
 #[test]
 fn torquer_bars_keep_the_wheels_bounded() {
     use sim_harness::truth::dynamics::MomentumUnloading;

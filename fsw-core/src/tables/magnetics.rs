@@ -20,7 +20,7 @@ use super::error::TableError;
 use super::image::decode_payload;
 use super::types::{all_finite, check_finite, check_range, matrix_from_rows, Mat3Rows};
 use crate::attitude::is_proper_rotation;
-use crate::raw::{CSS_EYES, TAMS};
+use crate::raw::{CSS_EYES, TAMS, WHEELS};
 
 /// Highest spherical-harmonic degree the onboard field model holds (IGRF's main field before
 /// 2000 is published to degree 10).
@@ -127,6 +127,46 @@ pub struct MagneticsTable {
     /// 0x0A01), and the unloading uses the model field instead.
     /// docs/magnetics.md §7; docs/tables.md (Table 6, field 23).
     pub torquer_check_milligauss: f64,
+    /// Reaction wheel spin axes in ACS (unit), wheel 1 to 4 in the tachometer words' order;
+    /// a zero row is no wheel. The OBC turns the tachometers into the wheel momentum with
+    /// them: `h = Σ a_i J ω_i`.
+    /// docs/magnetics.md §7; docs/tables.md (Table 6, field 24).
+    pub wheel_spin_axes_acs: [[f64; 3]; WHEELS],
+    /// Wheel rotor inertia about its spin axis, kg·m² (every wheel).
+    /// docs/magnetics.md §7; docs/tables.md (Table 6, field 25).
+    pub wheel_spin_inertia_kg_m2: f64,
+}
+
+/// Fields 19–23 of a layout-2 Table 6 (momentum unloading), the part layout 2 added to
+/// layout 1. A layout-2 payload is a [`MagneticsTableLayout1`] followed by these.
+/// docs/tables.md (Table 6, "layouts").
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct MagneticsUnloadingFields {
+    /// Field 19. docs/tables.md (Table 6).
+    pub unloading_gain_per_s: f64,
+    /// Field 20. docs/tables.md (Table 6).
+    pub torquer_dipole_limit_am2: f64,
+    /// Field 21. docs/tables.md (Table 6).
+    pub unloading_start_nms: f64,
+    /// Field 22. docs/tables.md (Table 6).
+    pub unloading_stop_nms: f64,
+    /// Field 23. docs/tables.md (Table 6).
+    pub torquer_check_milligauss: f64,
+}
+
+impl MagneticsUnloadingFields {
+    /// Fields 19–23 of `t`.
+    /// docs/tables.md (Table 6, "layouts").
+    #[must_use]
+    pub const fn from_table(t: &MagneticsTable) -> Self {
+        Self {
+            unloading_gain_per_s: t.unloading_gain_per_s,
+            torquer_dipole_limit_am2: t.torquer_dipole_limit_am2,
+            unloading_start_nms: t.unloading_start_nms,
+            unloading_stop_nms: t.unloading_stop_nms,
+            torquer_check_milligauss: t.torquer_check_milligauss,
+        }
+    }
 }
 
 /// Table 6 as written before the momentum-unloading fields 19–23 (layout 1: 4,402 payload
@@ -215,6 +255,19 @@ pub const CSS_NORMALS_DEFAULT: [[f64; 3]; CSS_EYES] = [
     [0.0, 0.0, -1.0],
 ];
 
+/// The default wheel layout: three wheels on the ACS axes and a fourth along
+/// `(1, 1, 1)/√3`, the truth's default.
+/// Project choice (the paper gives no wheel layout); docs/magnetics.md §7.
+pub const WHEEL_SPIN_AXES_DEFAULT: [[f64; 3]; WHEELS] = [
+    [1.0, 0.0, 0.0],
+    [0.0, 1.0, 0.0],
+    [0.0, 0.0, 1.0],
+    [FRAC_1_SQRT_3, FRAC_1_SQRT_3, FRAC_1_SQRT_3],
+];
+
+/// `1/√3` (the nearest `f64`), the skewed wheel's direction cosines.
+const FRAC_1_SQRT_3: f64 = 0.577_350_269_189_625_8;
+
 const IDENTITY_ROWS: Mat3Rows = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
 
 impl MagneticsTable {
@@ -261,24 +314,51 @@ impl MagneticsTable {
             unloading_start_nms: 20.0,
             unloading_stop_nms: 10.0,
             torquer_check_milligauss: 20.0,
+            // The truth's default wheels (docs/magnetics.md §7): 0.8 kg·m² holds the
+            // 250-N·m·s limit at 2,984 rpm, inside the tachometer word's ±3,276.7 rpm.
+            wheel_spin_axes_acs: WHEEL_SPIN_AXES_DEFAULT,
+            wheel_spin_inertia_kg_m2: 0.8,
         }
     }
 
-    /// Decode a Table 6 payload of either layout: layout 2 (fields 0–23), else layout 1
-    /// (fields 0–18: the unloading fields take their boot values, [`Self::from_layout1`]).
-    /// The two differ in length, so at most one decodes exactly. Returns the table and its
-    /// layout (1 or 2). The OBC's table services and the ground's tools both read through it.
+    /// Decode a Table 6 payload of any layout: layout 3 (fields 0–25), else layout 2
+    /// (fields 0–23: the wheel fields 24–25 take their boot values), else layout 1 (fields
+    /// 0–18: the unloading fields take their boot values too, [`Self::from_layout1`]). The
+    /// layouts differ in length, so at most one decodes exactly. Returns the table and its
+    /// layout (1, 2 or 3). The OBC's table services and the ground's tools both read through
+    /// it.
     /// docs/tables.md (Table 6, "layouts").
     ///
     /// # Errors
-    /// The layout-2 decode error when neither layout decodes.
+    /// The layout-3 decode error when no layout decodes.
     pub fn decode_any_layout(payload: &[u8]) -> Result<(Self, u8), TableError> {
         match decode_payload::<Self>(payload) {
-            Ok(t) => Ok((t, 2)),
-            Err(e) => match decode_payload::<MagneticsTableLayout1>(payload) {
-                Ok(old) => Ok((Self::from_layout1(&old), 1)),
-                Err(_) => Err(e),
-            },
+            Ok(t) => Ok((t, 3)),
+            Err(e) => {
+                if let Ok((old, u)) =
+                    decode_payload::<(MagneticsTableLayout1, MagneticsUnloadingFields)>(payload)
+                {
+                    return Ok((Self::from_layout2(&old, &u), 2));
+                }
+                match decode_payload::<MagneticsTableLayout1>(payload) {
+                    Ok(old) => Ok((Self::from_layout1(&old), 1)),
+                    Err(_) => Err(e),
+                }
+            }
+        }
+    }
+
+    /// A table of layout 2 (fields 0–23): the wheel fields 24–25 take their boot values.
+    /// docs/tables.md (Table 6, "layouts").
+    #[must_use]
+    pub fn from_layout2(old: &MagneticsTableLayout1, u: &MagneticsUnloadingFields) -> Self {
+        Self {
+            unloading_gain_per_s: u.unloading_gain_per_s,
+            torquer_dipole_limit_am2: u.torquer_dipole_limit_am2,
+            unloading_start_nms: u.unloading_start_nms,
+            unloading_stop_nms: u.unloading_stop_nms,
+            torquer_check_milligauss: u.torquer_check_milligauss,
+            ..Self::from_layout1(old)
         }
     }
 
@@ -315,6 +395,16 @@ impl MagneticsTable {
     #[must_use]
     pub fn unloading_enabled(&self) -> bool {
         self.unloading_gain_per_s > 0.0 && self.torquer_dipole_limit_am2 > 0.0
+    }
+
+    /// Whether the table gives a wheel geometry (any spin axis not zero): the OBC then takes
+    /// the wheel momentum from the tachometers.
+    /// docs/tables.md (Table 6, field 24).
+    #[must_use]
+    pub fn has_wheel_geometry(&self) -> bool {
+        self.wheel_spin_axes_acs
+            .iter()
+            .any(|a| a.iter().any(|x| *x != 0.0))
     }
 
     /// Whether the table holds a field model (coarse attitude possible).
@@ -399,7 +489,31 @@ impl MagneticsTable {
         if self.unloading_enabled() && self.coarse_fix_every_n_cycles < 2 {
             return Err(TableError::OutOfRange { field: 17 });
         }
-        Ok(())
+        self.validate_wheels()
+    }
+
+    /// Fields 24–25: each spin axis unit or zero (no wheel); the wheels present span 3-D
+    /// (else part of the momentum is invisible to the tachometers); a plausible inertia.
+    fn validate_wheels(&self) -> Result<(), TableError> {
+        let mut gram = Matrix3::zeros();
+        for a in &self.wheel_spin_axes_acs {
+            check_finite(a, 24)?;
+            let norm2 = a.iter().map(|x| x * x).sum::<f64>();
+            if norm2 == 0.0 {
+                continue;
+            }
+            if !((0.999..=1.001).contains(&norm2)) {
+                return Err(TableError::OutOfRange { field: 24 });
+            }
+            let v = nalgebra::Vector3::new(a[0], a[1], a[2]);
+            gram += v * v.transpose();
+        }
+        // det(Σ a aᵀ) > 0.01: well clear of wheels in one plane (0 there); three
+        // orthogonal wheels give 1.
+        if self.has_wheel_geometry() && gram.determinant() < 0.01 {
+            return Err(TableError::OutOfRange { field: 24 });
+        }
+        check_range(self.wheel_spin_inertia_kg_m2, 1e-3, 100.0, 25)
     }
 }
 
@@ -470,5 +584,46 @@ mod tests {
         let mut t = MagneticsTable::boot();
         t.torquer_check_milligauss = 0.5;
         assert_eq!(t.validate(), Err(TableError::OutOfRange { field: 23 }));
+        let mut t = MagneticsTable::boot();
+        t.wheel_spin_axes_acs[3] = [0.5, 0.5, 0.5];
+        assert_eq!(t.validate(), Err(TableError::OutOfRange { field: 24 }));
+        let mut t = MagneticsTable::boot();
+        t.wheel_spin_axes_acs = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0; 3], [0.0; 3]];
+        assert_eq!(
+            t.validate(),
+            Err(TableError::OutOfRange { field: 24 }),
+            "two wheels cannot see the momentum along z"
+        );
+        t.wheel_spin_axes_acs = [[0.0; 3]; WHEELS];
+        assert_eq!(t.validate(), Ok(()), "no geometry: the command count");
+        assert!(!t.has_wheel_geometry());
+        let mut t = MagneticsTable::boot();
+        t.wheel_spin_inertia_kg_m2 = 0.0;
+        assert_eq!(t.validate(), Err(TableError::OutOfRange { field: 25 }));
+        assert!(MagneticsTable::boot().has_wheel_geometry());
+    }
+
+    #[test]
+    #[allow(clippy::float_cmp)] // copied values: exact equality is the point
+    fn every_layout_decodes_to_its_fields_and_boot_values() {
+        let mut t = MagneticsTable::boot();
+        t.unloading_gain_per_s = 1.0e-3;
+        t.wheel_spin_inertia_kg_m2 = 0.5;
+        let mut buf = [0u8; 8192];
+        let n = postcard::to_slice(&t, &mut buf).unwrap().len();
+        assert_eq!(MagneticsTable::decode_any_layout(&buf[..n]), Ok((t, 3)));
+        let l2 = (
+            MagneticsTableLayout1::from_table(&t),
+            MagneticsUnloadingFields::from_table(&t),
+        );
+        let n = postcard::to_slice(&l2, &mut buf).unwrap().len();
+        let (back, layout) = MagneticsTable::decode_any_layout(&buf[..n]).unwrap();
+        assert_eq!(layout, 2);
+        assert_eq!(back.unloading_gain_per_s, 1.0e-3);
+        assert_eq!(back.wheel_spin_inertia_kg_m2, 0.8, "boot value");
+        let n = postcard::to_slice(&l2.0, &mut buf).unwrap().len();
+        let (back, layout) = MagneticsTable::decode_any_layout(&buf[..n]).unwrap();
+        assert_eq!(layout, 1);
+        assert_eq!(back.unloading_gain_per_s, 3.0e-3, "boot value");
     }
 }

@@ -315,8 +315,8 @@ impl TableSet {
                 self.orbit.inactive = Some((t, created, crc));
             }
             TableId::Magnetics => {
-                // Layout 2 (fields 0–23), else layout 1 (fields 0–18, before momentum
-                // unloading).
+                // Layout 3 (fields 0–25), else layout 2 (fields 0–23, before the wheel
+                // geometry), else layout 1 (fields 0–18, before momentum unloading).
                 let (t, _layout) = MagneticsTable::decode_any_layout(payload)?;
                 t.validate()?;
                 self.magnetics.inactive = Some((t, created, crc));
@@ -481,9 +481,9 @@ mod tests {
         assert_eq!(set.activate(TableId::Alignment), Err(None));
     }
 
-    /// Table 6 of layout 2 round-trips; a layout-1 payload (written before the unloading
-    /// fields) still loads, with the boot unloading fields; one octet more or less than
-    /// either layout is refused.
+    /// Table 6 of layout 3 round-trips; layout-2 and layout-1 payloads (written before the
+    /// wheel fields, and before the unloading fields) still load, with the boot values of the
+    /// fields they lack; one octet more or less than any layout is refused.
     #[test]
     #[allow(clippy::float_cmp)] // copied values: exact equality is the point
     fn magnetics_layouts_round_trip_and_old_payloads_load() {
@@ -494,7 +494,7 @@ mod tests {
         let mut buf = [0u8; 8192];
         let created = TimeTag::default();
         let n = encode_image(TableId::Magnetics, created, &t, &mut buf).unwrap();
-        assert_eq!(n, 4_466, "the layout-2 image of docs/tables.md");
+        assert_eq!(n, 4_570, "the layout-3 image of docs/tables.md");
         let mut set = TableSet::boot();
         assert_eq!(set.load(&buf[..n]), Ok(TableId::Magnetics));
         set.activate(TableId::Magnetics).unwrap();
@@ -503,6 +503,27 @@ mod tests {
         let m = set.dump(TableId::Magnetics, &mut out).unwrap();
         assert_eq!(&out[..m], &buf[..n]);
 
+        let mut b = MagneticsTable::boot();
+        b.tam_bias_milligauss = [[0.0, 0.0, -4.0], [0.5, 0.0, 0.0]];
+        b.field_sigma_milligauss = [0.3, 2.5];
+        b.coarse_fix_every_n_cycles = 10;
+        b.unloading_gain_per_s = 1.0e-3;
+        b.wheel_spin_inertia_kg_m2 = 0.3;
+        let old2 = (
+            MagneticsTableLayout1::from_table(&b),
+            super::super::magnetics::MagneticsUnloadingFields::from_table(&b),
+        );
+        let n2 = encode_image(TableId::Magnetics, created, &old2, &mut buf).unwrap();
+        assert_eq!(n2, 4_466, "the layout-2 image of docs/tables.md");
+        let mut set = TableSet::boot();
+        assert_eq!(set.load(&buf[..n2]), Ok(TableId::Magnetics));
+        set.activate(TableId::Magnetics).unwrap();
+        let loaded = set.magnetics();
+        assert_eq!(loaded.unloading_gain_per_s, 1.0e-3);
+        assert_eq!(
+            loaded.wheel_spin_inertia_kg_m2,
+            MagneticsTable::boot().wheel_spin_inertia_kg_m2
+        );
         let mut b = MagneticsTable::boot();
         b.tam_bias_milligauss = [[0.0, 0.0, -4.0], [0.5, 0.0, 0.0]];
         b.field_sigma_milligauss = [0.3, 2.5];

@@ -48,6 +48,9 @@ pub enum FaultKind {
     /// A magnetic torquer bar delivers a fixed dipole whatever the OBC commands (a driver
     /// stuck on).
     TorquerStuckOn,
+    /// A reaction wheel's tachometer stops reporting (its valid bit cleared): the OBC falls
+    /// back to counting its torque commands (event 0x0A03).
+    TachometerFailed,
 }
 
 /// Damage of a `table_upload`.
@@ -268,6 +271,12 @@ impl Fault {
                     bail!("{here}.dipole_am2 must be given, within ±100000 A·m²");
                 }
             }
+            FaultKind::TachometerFailed => {
+                need_duration()?;
+                if !matches!(sensor, Some("rwa1" | "rwa2" | "rwa3" | "rwa4")) {
+                    bail!("{here}.sensor must be \"rwa1\", \"rwa2\", \"rwa3\" or \"rwa4\"");
+                }
+            }
             FaultKind::CssGlint => {
                 need_duration()?;
                 if self.eye.is_none_or(|e| e >= fsw_core::raw::CSS_EYES) {
@@ -463,6 +472,28 @@ impl FaultState {
                     }
                 }
                 None => out.field_counts = [0; 3],
+            }
+        }
+        out
+    }
+
+    /// The wheels whose tachometer has failed (`tachometer_failed` faults active at `t_s`).
+    #[must_use]
+    pub fn failed_tachometers(faults: &[Fault], t_s: f64) -> [bool; fsw_core::raw::WHEELS] {
+        let mut out = [false; fsw_core::raw::WHEELS];
+        for f in faults {
+            if f.kind != FaultKind::TachometerFailed || !f.active(t_s) {
+                continue;
+            }
+            let wheel = match f.sensor.as_deref() {
+                Some("rwa1") => 0,
+                Some("rwa2") => 1,
+                Some("rwa3") => 2,
+                Some("rwa4") => 3,
+                _ => continue,
+            };
+            if let Some(slot) = out.get_mut(wheel) {
+                *slot = true;
             }
         }
         out

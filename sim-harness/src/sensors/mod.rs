@@ -1,4 +1,4 @@
-//! # Truth sensor models: FHST, FSS, DRIRU II, temperatures, TAMs and CSSs
+//! # Truth sensor models: FHST, FSS, DRIRU II, temperatures, TAMs, CSSs and wheel tachometers
 //!
 //! Each model turns a [`TruthSnapshot`] into the integer words of
 //! [`fsw_core::raw::RawSensorFrame`] (the TAMs and CSSs into their own readings,
@@ -11,6 +11,7 @@ pub mod css;
 pub mod fhst;
 pub mod fss;
 pub mod iru;
+pub mod tachometer;
 pub mod tam;
 pub mod thermal;
 
@@ -34,6 +35,8 @@ pub mod stream {
     pub const TAM1: u64 = 8;
     /// The coarse Sun sensor set.
     pub const CSS: u64 = 10;
+    /// The wheel tachometers.
+    pub const TACHOMETERS: u64 = 11;
 }
 
 /// A deterministic generator for model `stream` of scenario `seed`.

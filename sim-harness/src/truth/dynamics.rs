@@ -236,6 +236,20 @@ impl RigidBody {
     pub fn state(&self) -> &AttitudeState {
         &self.state
     }
+    /// The wheels' total momentum in ACS (N·m·s).
+    #[must_use]
+    pub fn wheel_momentum_acs_nms(&self) -> Vector3<f64> {
+        self.wheel_momentum_acs(&self.state.wheel_momentum_nms)
+    }
+
+    /// The wheels' momenta along their spin axes (N·m·s), one per wheel.
+    #[must_use]
+    pub fn wheel_momenta_nms(&self) -> &[f64] {
+        self.state
+            .wheel_momentum_nms
+            .get(..self.wheel_count)
+            .unwrap_or(&[])
+    }
 
     /// Inertia tensor (kg·m², ACS).
     #[must_use]
