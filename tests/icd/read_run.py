@@ -16,17 +16,20 @@ import struct
 import sys
 
 APID_RAW, APID_HK, APID_EVENT, APID_EPH, APID_MAG = 0x010, 0x011, 0x012, 0x020, 0x013
-USER_LEN = {APID_RAW: 48, APID_HK: 230, APID_EVENT: 10, APID_EPH: 48, APID_MAG: 27}
+APID_WHEEL = 0x014
+USER_LEN = {APID_RAW: 48, APID_HK: 230, APID_EVENT: 10, APID_EPH: 48, APID_MAG: 27,
+            APID_WHEEL: 16}
 
 
 def read(path):
     """Walk telemetry.bin packet by packet (ICD §1–2). Returns {"raw": [...], "hk": [...],
-    "events": [...], "eph": [...], "mag": [...], "order": [(apid, t)], "bad": [offsets]} with t the time
+    "events": [...], "eph": [...], "mag": [...], "wheel": [...], "order": [(apid, t)], "bad": [offsets]} with t the time
     code in TAI seconds since 1958 (coarse + fine / 65536)."""
     if os.path.isdir(path):
         path = os.path.join(path, "telemetry.bin")
     data = open(path, "rb").read()
-    out = {"raw": [], "hk": [], "events": [], "eph": [], "mag": [], "order": [], "bad": []}
+    out = {"raw": [], "hk": [], "events": [], "eph": [], "mag": [], "wheel": [], "order": [],
+           "bad": []}
     off = 0
     while off + 6 <= len(data):
         w0, w1, dlen = struct.unpack_from(">HHH", data, off)
@@ -64,6 +67,10 @@ def read(path):
             out["mag"].append({"t": t, "tam1_counts": list(t1[:3]), "tam1_flags": t1[3],
                                "tam2_counts": list(t2[:3]), "tam2_flags": t2[3],
                                "css_counts": list(css[:6]), "css_flags": css[6]})
+        elif apid == APID_WHEEL:  # ICD §3.6 (format version 4)
+            w = struct.unpack_from(">4hB3hB", u, 0)
+            out["wheel"].append({"t": t, "speed_counts": list(w[:4]), "speed_valid": w[4],
+                                 "dipole_counts": list(w[5:8]), "dipole_valid": w[8]})
         else:
             out["eph"].append({"t": t, "pos": list(struct.unpack_from(">3d", u, 0)),
                                "vel": list(struct.unpack_from(">3d", u, 24))})
