@@ -810,6 +810,22 @@ fn main() {
         "the coarse path must run in the replay"
     );
     assert!(coarse_deg < 1.0);
+    // The wheel momentum's source: the tachometers from the first frame, the command count
+    // while wheel 4's word is missing, the tachometers again (event 0x0A03).
+    let sources: Vec<(usize, u32)> = rec
+        .outputs
+        .iter()
+        .enumerate()
+        .flat_map(|(i, o)| {
+            o.events
+                .iter()
+                .filter(|e| e.id == fsw_core::events::EventId::WheelMomentumSourceChanged)
+                .map(move |e| (i, e.p1))
+        })
+        .collect();
+    let lost = WHEEL4_TACH_LOST.start as usize;
+    let back = WHEEL4_TACH_LOST.end as usize;
+    assert_eq!(sources, vec![(0, 1), (lost, 0), (back, 1)]);
     println!("events: {counts:?}");
     println!(
         "final: filter mode {}, control mode {}, accepted {}, gated {}, estimate error {:.1} arcsec",

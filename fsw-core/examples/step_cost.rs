@@ -17,8 +17,9 @@
 //! propagates the onboard orbit and applies the orbital aberration (issue 19).
 //! With `STEP_COST_COARSE=1` the orbit table (aberration correction on, as above), a magnetics
 //! table with a full degree-10 field model and TAM words consistent with it (the truth
-//! attitude, the field at the orbit's position) are added: the coarse attitude is carried every
-//! cycle and fixed every 10th (issue 20).
+//! attitude, the field at the orbit's position) and wheel tachometer words are added: the
+//! coarse attitude is carried every cycle and fixed every 10th, and the unloading reads the
+//! wheel momentum from the tachometers (issue 20).
 
 // Host measurement tooling, not flight code: the flight-code lints are relaxed here.
 #![allow(
@@ -200,5 +201,12 @@ fn add_tam_words(s: &mut synthetic::Scenario) {
             flags: fsw_core::raw::TAM_FLAG_VALID,
         };
         f.tam = [tam, tam];
+        // The wheel tachometers (ICD v4): wheels at a few hundred rpm, every word valid, so
+        // the OBC takes the wheel momentum from them every cycle.
+        f.wheels = fsw_core::raw::WheelSample {
+            speed_counts: [1_200, -800, 450, 2_000],
+            speed_valid: 0x0F,
+            ..Default::default()
+        };
     }
 }

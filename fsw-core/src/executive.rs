@@ -673,6 +673,17 @@ impl FlightCore {
                 });
                 out.model_acs_milligauss =
                     b_eci_nt.map(|b| self.filter.q_acs_from_eci.to_dcm() * b * NT_TO_MILLIGAUSS);
+                // The attitude block is the first three diagonal elements (rad²).
+                let var_max = self
+                    .filter
+                    .covariance
+                    .diagonal()
+                    .iter()
+                    .take(3)
+                    .fold(0.0_f64, |m, v| m.max(*v));
+                out.model_sigma_milligauss = out
+                    .model_acs_milligauss
+                    .map_or(0.0, |b| b.norm() * libm::sqrt(var_max));
             }
         }
         out

@@ -208,6 +208,11 @@ pub struct FieldSample {
     /// The onboard model field in ACS at the fine attitude, mG, when available.
     /// docs/magnetics.md §5, §7.
     pub model_acs_milligauss: Option<Vector3<f64>>,
+    /// 1σ of the model field's error from the fine attitude's uncertainty, mG
+    /// (`|B| σ_θ`, σ_θ the largest attitude σ of the filter): the bars-off check's threshold
+    /// grows by 3 of these, so that an uncertain attitude is not taken for a stuck bar.
+    /// docs/magnetics.md §7.
+    pub model_sigma_milligauss: f64,
 }
 
 /// What the unloading reports for events (the executive raises them).
@@ -440,16 +445,29 @@ impl MomentumUnloading {
         table: &crate::tables::MagneticsTable,
     ) -> Option<(u32, u32)> {
         let model = s.model_acs_milligauss?;
+        let sigma = if s.model_sigma_milligauss.is_finite() {
+            s.model_sigma_milligauss.max(0.0)
+        } else {
+            return None;
+        };
+        let limit = table.torquer_check_milligauss + 3.0 * sigma;
         let mut mask = 0u32;
         let mut worst = 0.0_f64;
+        let mut compared = false;
         for (bit, tam) in [1u32, 2].iter().zip(s.tam_acs_milligauss.iter()) {
             if let Some(b) = tam {
+                compared = true;
                 let d = (b - model).norm();
-                if d > table.torquer_check_milligauss {
+                if d > limit {
                     mask |= bit;
                     worst = worst.max(d);
                 }
             }
+        }
+        if !compared {
+            // No TAM to compare: no evidence either way; the run of failures and the state
+            // stay as they were (a failed TAM must not re-arm the check).
+            return None;
         }
         if mask == 0 {
             self.check_failures = 0;
@@ -556,6 +574,7 @@ mod tests {
         let s = FieldSample {
             tam_acs_milligauss: [Some(b), None],
             model_acs_milligauss: None,
+            model_sigma_milligauss: 0.0,
         };
         let small = Vector3::new(t.unloading_start_nms * 0.9, 0.0, 0.0);
         let r = u.update(Some(&s), &small, &t, false);
@@ -599,6 +618,7 @@ mod tests {
         let bad = FieldSample {
             tam_acs_milligauss: [Some(model + stray), Some(model + stray * 0.8)],
             model_acs_milligauss: Some(model),
+            model_sigma_milligauss: 0.0,
         };
         let h = Vector3::new(100.0, 0.0, 0.0);
         let mut fired = 0;
@@ -625,9 +645,58 @@ mod tests {
         let good = FieldSample {
             tam_acs_milligauss: [Some(model), Some(model)],
             model_acs_milligauss: Some(model),
+            model_sigma_milligauss: 0.0,
         };
         u.update(Some(&good), &h, &t, false);
         assert!(!u.field_unexpected());
+    }
+
+    /// A blanked sample with no TAM to compare is no evidence: it neither re-arms the check
+    /// nor resets its run of failures. An uncertain attitude widens the threshold by 3σ of
+    /// the model field's error, so that a 3° attitude error (21 mG at 400 mG) is not a bar.
+    #[test]
+    fn bars_off_check_needs_a_tam_and_allows_for_the_attitude_sigma() {
+        let t = MagneticsTable::boot();
+        let model = Vector3::new(0.0, 380.0, 130.0);
+        let stray = Vector3::new(40.0, 0.0, 0.0);
+        let sample = |tam: Option<Vector3<f64>>, sigma: f64| FieldSample {
+            tam_acs_milligauss: [tam, tam],
+            model_acs_milligauss: Some(model),
+            model_sigma_milligauss: sigma,
+        };
+        let h = Vector3::new(100.0, 0.0, 0.0);
+        let mut u = MomentumUnloading::new();
+        u.update(Some(&sample(Some(model + stray), 0.0)), &h, &t, false);
+        u.update(Some(&sample(Some(model + stray), 0.0)), &h, &t, false);
+        // Dead TAMs in between: the run of two failures stands.
+        u.update(Some(&sample(None, 0.0)), &h, &t, false);
+        let r = u.update(Some(&sample(Some(model + stray), 0.0)), &h, &t, false);
+        assert!(r.unexpected_field.is_some(), "third failure in a row");
+        // Once raised, a sample without TAMs does not clear it.
+        u.update(Some(&sample(None, 0.0)), &h, &t, false);
+        assert!(u.field_unexpected());
+
+        // The field of a 3° attitude error: 400 mG × 0.052 rad ≈ 21 mG, above the 20-mG
+        // threshold, but within it plus 3σ when the filter's σ is 1.5°.
+        let tilt =
+            Vector3::new(0.0, 130.0, -380.0).normalize() * model.norm() * 3.0_f64.to_radians();
+        let sigma_deg = 1.5_f64;
+        let sigma_mg = model.norm() * sigma_deg.to_radians();
+        let mut u = MomentumUnloading::new();
+        for _ in 0..5 {
+            let r = u.update(Some(&sample(Some(model + tilt), sigma_mg)), &h, &t, false);
+            assert_eq!(r.unexpected_field, None);
+        }
+        let mut u = MomentumUnloading::new();
+        let fired = (0..5).any(|_| {
+            u.update(Some(&sample(Some(model + tilt), 0.0)), &h, &t, false)
+                .unexpected_field
+                .is_some()
+        });
+        assert!(
+            fired,
+            "with a certain attitude the same difference is a field"
+        );
     }
 
     /// Wheel speeds that carry a known momentum per wheel come back as `Σ a_i h_i` (to the

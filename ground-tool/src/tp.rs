@@ -555,7 +555,15 @@ pub fn screen_times(times: &[f64], seqs: &[u16]) -> (Vec<usize>, Vec<usize>) {
         // The packets inside: both neighbours known.
         for i in 1..n - 1 {
             let (t, a, b) = (times[i], times[i - 1], times[i + 1]);
-            if in_seq(i - 1, i) && in_seq(i, i + 1) && a <= b + tol && (t < a - tol || t > b + tol)
+            // Beyond the tolerance from *both* neighbours (docs/icd.md §4): with the
+            // neighbours in order that is `t < a − tol` or `t > b + tol`; when they are out
+            // of order by less than the tolerance (one of them may be the damaged one), a
+            // time within the tolerance of either is not accused.
+            let (lo, hi) = (a.min(b), a.max(b));
+            if in_seq(i - 1, i)
+                && in_seq(i, i + 1)
+                && a <= b + tol
+                && (t < lo - tol || t > hi + tol)
             {
                 outliers.push(i);
             }

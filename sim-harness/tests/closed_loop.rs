@@ -145,15 +145,17 @@ fn icd_round_trip_independent_decoder() {
         (0x011, 230),
         (0x012, 10),
         (0x013, 27),
+        (0x014, 16),
         (0x020, 48),
     ];
     let mut seq = std::collections::HashMap::new();
     let mut cycle = 0usize;
     let mut last_time = 0.0;
-    // Order within a cycle: raw, magnetics (format version 2, `[magnetics] enabled`),
-    // [ephemeris], housekeeping, events.
+    // Order within a cycle: raw, magnetics (format version 2, `[magnetics] enabled`), wheels
+    // (version 4, `[wheel_tachometers] enabled`), [ephemeris], housekeeping, events.
     let mut expect = 0x010;
     let mut magnetics = 0usize;
+    let mut wheels = 0usize;
     let mut ephemeris_times = Vec::new();
     for p in &packets {
         assert_eq!(p.version, 0, "at {}", p.offset);
@@ -228,6 +230,27 @@ fn icd_round_trip_independent_decoder() {
                 }
                 assert_eq!(p.user[26], r.frame.css.flags);
                 magnetics += 1;
+            }
+            0x014 => {
+                assert_eq!(expect, 0x020, "wheel frame out of order at {}", p.offset);
+                let r = &recs[cycle - 1];
+                assert_eq!(
+                    (p.coarse, p.fine),
+                    (r.frame.time.coarse_s, r.frame.time.fine),
+                    "wheel frame with its raw frame's time code"
+                );
+                let w = &r.frame.wheels;
+                for i in 0..4 {
+                    assert_eq!(be16(p.user, 2 * i) as i16, w.speed_counts[i]);
+                }
+                assert_eq!(p.user[8], w.speed_valid);
+                assert_eq!(w.speed_valid, 0x0F, "four tachometers");
+                for k in 0..3 {
+                    assert_eq!(be16(p.user, 9 + 2 * k) as i16, w.dipole_counts[k]);
+                }
+                assert_eq!(p.user[15], w.dipole_valid);
+                assert_eq!(w.dipole_valid, 0x07, "three bar monitors");
+                wheels += 1;
             }
             0x020 => {
                 assert_eq!(expect, 0x020, "ephemeris out of order at {}", p.offset);
@@ -307,6 +330,7 @@ fn icd_round_trip_independent_decoder() {
     }
     assert_eq!(cycle, recs.len(), "one raw frame per cycle");
     assert_eq!(magnetics, recs.len(), "one magnetics frame per raw frame");
+    assert_eq!(wheels, recs.len(), "one wheel frame per raw frame");
     assert_eq!(seq[&0x011], recs.len() as u16);
     // Ephemeris every 10 s of sim time; the catalog is activated at t = 0 (CRC in housekeeping).
     assert_eq!(

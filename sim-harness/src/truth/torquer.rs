@@ -21,7 +21,7 @@
 //!   along ACS axis `k`, i.e. per bar with the default axes), with the dipole in effect while
 //!   the TAM sampled (the previous cycle's command).
 //! * Fault `torquer_stuck_on` ([`crate::faults`]): a bar delivers a fixed dipole whatever is
-//!   commanded.
+//!   commanded, clamped like a command to the drive's current limit.
 //!
 //! # The dipole limit (`dipole_limit_am2`, default 4,000 A·m²)
 //! **Assumed**: we found no published dipole for GRO's bars. The value is sized from the
@@ -112,16 +112,17 @@ impl TorquerBars {
         }
     }
 
-    /// Drive the bars with the flight core's command (A·m² per bar), each clamped to the
-    /// limit; a bar with `stuck[k] = Some(d)` delivers `d` whatever is commanded.
+    /// Drive the bars with the flight core's command (A·m² per bar); a bar with
+    /// `stuck[k] = Some(d)` delivers `d` whatever is commanded. Either way the drive's
+    /// current limit clamps the dipole: a stuck driver cannot exceed it either.
     pub fn command(&mut self, cmd_am2: &[f64; BARS], stuck: &[Option<f64>; BARS]) {
         for k in 0..BARS {
-            let c = if cmd_am2[k].is_finite() {
-                cmd_am2[k].clamp(-self.limit_am2, self.limit_am2)
+            let wanted = stuck[k].unwrap_or(cmd_am2[k]);
+            self.dipole_am2[k] = if wanted.is_finite() {
+                wanted.clamp(-self.limit_am2, self.limit_am2)
             } else {
                 0.0
             };
-            self.dipole_am2[k] = stuck[k].unwrap_or(c);
         }
     }
 
@@ -168,8 +169,8 @@ mod tests {
         assert!((t.norm() - m.norm() * b.norm() * sin).abs() < 1e-15);
     }
 
-    /// Commands are clamped per bar, a stuck bar ignores its command, and the total dipole
-    /// follows the bar axes.
+    /// Commands are clamped per bar, a stuck bar ignores its command (within the limit), and
+    /// the total dipole follows the bar axes.
     #[test]
     fn bars_clamp_stick_and_sum_along_their_axes() {
         let p = TorquerParams {
@@ -184,6 +185,9 @@ mod tests {
         assert!((bars.dipole_acs_am2() - expect).norm() < 1e-9);
         bars.command(&[0.0, 0.0, 0.0], &[None, None, Some(350.0)]);
         assert_eq!(bars.dipole_am2(), [0.0, 0.0, 350.0]);
+        // A driver stuck beyond the current limit still delivers at most the limit.
+        bars.command(&[0.0, 0.0, 0.0], &[Some(-9_000.0), None, None]);
+        assert_eq!(bars.dipole_am2(), [-500.0, 0.0, 0.0]);
         assert!(p.validate().is_ok());
         let bad = TorquerParams {
             dipole_limit_am2: 0.0,
