@@ -68,6 +68,7 @@ use crate::orbit::{OnboardOrbit, OrbitState, OrbitStatus, C_KM_PER_S};
 use crate::raw::{
     FhstSample, RawSensorFrame, TimeTag, FHST_FLAG_NEW_STAR, FHST_FLAG_TRACKING, FHST_FLAG_VALID,
 };
+use crate::sensor::SensorId;
 use crate::star_id::{self, StarIdError, StarMatch};
 use crate::sun_acquisition::SunAcquisition;
 use crate::sun_ephemeris;
@@ -328,13 +329,13 @@ impl Default for FlightCore {
     }
 }
 
-/// Temperature (°C) of raw-frame slot `slot` (0 FHST1, 1 FHST2, 2 FSS1, 3 FSS2, 4 IRU);
-/// NaN for a slot the frame does not have (no thermal correction then).
+/// Temperature (°C) of `sensor` in the raw frame (its slot in table order; the IRU's is the
+/// fifth).
 /// docs/icd.md §3.1 (offset 38, 0.01 °C).
-fn frame_temperature_c(frame: &RawSensorFrame, slot: usize) -> f64 {
+fn frame_temperature_c(frame: &RawSensorFrame, sensor: SensorId) -> f64 {
     frame
         .temperatures_centi_c
-        .get(slot)
+        .get(sensor.index())
         .map_or(f64::NAN, |t| f64::from(*t) * 0.01)
 }
 
@@ -1116,12 +1117,14 @@ impl FlightCore {
     /// time offset.
     fn fhst_corrections(&self, frame: &RawSensorFrame, tracker: usize) -> FhstCorrections {
         let alignment = self.tables.alignment();
-        let drifted = alignment.drifted_rows_at(tracker, frame_temperature_c(frame, tracker));
-        let rows = match drifted {
-            Some(rows) => rows,
-            None if tracker == 0 => alignment.m_acs_from_fhst1,
-            None => alignment.m_acs_from_fhst2,
+        let id = if tracker == 0 {
+            SensorId::Fhst1
+        } else {
+            SensorId::Fhst2
         };
+        let rows = alignment
+            .drifted_rows_at(id, frame_temperature_c(frame, id))
+            .unwrap_or_else(|| *alignment.rows(id));
         let c = &alignment.corrections;
         FhstCorrections {
             rows,
@@ -1333,13 +1336,17 @@ impl FlightCore {
             return SensorResidual::default();
         };
         let index = sensor.saturating_add(2);
+        let sensor_id = if sensor == 0 {
+            SensorId::Fss1
+        } else {
+            SensorId::Fss2
+        };
         let alignment = self.tables.alignment();
         // The sensor's alignment at its temperature (thermal drift; none = the stored rows).
-        let drifted = alignment.drifted_rows_at(index, frame_temperature_c(frame, index));
+        let drifted = alignment.drifted_rows_at(sensor_id, frame_temperature_c(frame, sensor_id));
         let m_acs_from_fss_rows = match &drifted {
             Some(rows) => rows,
-            None if sensor == 0 => &alignment.m_acs_from_fss1,
-            None => &alignment.m_acs_from_fss2,
+            None => alignment.rows(sensor_id),
         };
         let m_acs_from_fss = matrix_from_rows(m_acs_from_fss_rows);
         let id = if sensor == 0 {

@@ -90,6 +90,16 @@ impl FhstId {
         }
     }
 
+    /// The tracker as one of the four aligned sensors.
+    /// Paper Table 1.
+    #[must_use]
+    pub const fn sensor(self) -> crate::sensor::SensorId {
+        match self {
+            Self::Fhst1 => crate::sensor::SensorId::Fhst1,
+            Self::Fhst2 => crate::sensor::SensorId::Fhst2,
+        }
+    }
+
     /// Active `M_AS` (sensor → ACS).
     /// Paper: `M_AS`, Table 1 at boot (docs/tables.md Table 1: alignment).
     #[must_use]
@@ -331,7 +341,7 @@ pub fn measure_tracker_at(
     alignment: &AlignmentTable,
     temperature_c: f64,
 ) -> Result<FhstMeasurement, FhstReject> {
-    let m = alignment.m_acs_from_sensor_rows_at(tracker.index(), temperature_c);
+    let m = alignment.m_acs_from_sensor_rows_at(tracker.sensor(), temperature_c);
     let c = &alignment.corrections;
     measure_corrected(
         sample,

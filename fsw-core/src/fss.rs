@@ -72,6 +72,16 @@ impl FssId {
         }
     }
 
+    /// The Sun sensor as one of the four aligned sensors.
+    /// Paper Table 1.
+    #[must_use]
+    pub const fn sensor(self) -> crate::sensor::SensorId {
+        match self {
+            Self::Fss1 => crate::sensor::SensorId::Fss1,
+            Self::Fss2 => crate::sensor::SensorId::Fss2,
+        }
+    }
+
     /// Active `M_AS` (sensor → ACS).
     /// Paper: `M_AS`, Table 1 at boot (docs/tables.md Table 1: alignment).
     #[must_use]
@@ -312,7 +322,7 @@ pub fn measure_sensor_at(
     alignment: &AlignmentTable,
     temperature_c: f64,
 ) -> Result<FssMeasurement, FssReject> {
-    let m = alignment.m_acs_from_sensor_rows_at(sensor.index().saturating_add(2), temperature_c);
+    let m = alignment.m_acs_from_sensor_rows_at(sensor.sensor(), temperature_c);
     measure_corrected(sample, &m, &sensor.transfer_terms(&alignment.corrections))
 }
 

@@ -44,6 +44,7 @@ pub mod iru;
 pub mod mekf;
 pub mod orbit;
 pub mod raw;
+pub mod sensor;
 pub mod star_id;
 pub mod sun_acquisition;
 pub mod sun_ephemeris;

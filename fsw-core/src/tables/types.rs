@@ -8,6 +8,7 @@
 
 use super::error::TableError;
 use crate::attitude::{is_proper_rotation, rot, rotvec_from_rot};
+use crate::sensor::SensorId;
 use crate::units::{ARCSEC_PER_RAD, RAD_PER_DEG};
 use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
@@ -127,15 +128,15 @@ pub const FHST_MAGNITUDE_BIAS_REFERENCE_MAG: f64 = 4.0;
 pub const THERMAL_MAX_DEVIATION_C: f64 = 50.0;
 
 impl SensorCorrections {
-    /// Thermal rotation vector `k (T − T_ref)` (rad, ACS) of sensor `sensor` (0 FHST1,
-    /// 1 FHST2, 2 FSS1, 3 FSS2) at temperature `temperature_c`; zero when the sensor has no
-    /// thermal coefficient, the index is out of range or the temperature is not finite.
+    /// Thermal rotation vector `k (T − T_ref)` (rad, ACS) of `sensor` at temperature
+    /// `temperature_c`; zero when the sensor has no thermal coefficient or the temperature is
+    /// not finite.
     /// docs/tables.md (fields 8–9); effect 2 of algorithms.md §9.
     #[must_use]
-    pub fn thermal_rotation_rad(&self, sensor: usize, temperature_c: f64) -> Vector3<f64> {
+    pub fn thermal_rotation_rad(&self, sensor: SensorId, temperature_c: f64) -> Vector3<f64> {
         let (Some(k), Some(t_ref)) = (
-            self.thermal_alignment_rad_per_c.get(sensor),
-            self.thermal_reference_c.get(sensor),
+            self.thermal_alignment_rad_per_c.get(sensor.index()),
+            self.thermal_reference_c.get(sensor.index()),
         ) else {
             return Vector3::zeros();
         };
@@ -189,6 +190,18 @@ impl AlignmentTable {
         ]
     }
 
+    /// The stored alignment `M_AS` of `sensor` (table rows).
+    /// docs/tables.md (fields 0–3).
+    #[must_use]
+    pub const fn rows(&self, sensor: SensorId) -> &Mat3Rows {
+        match sensor {
+            SensorId::Fhst1 => &self.m_acs_from_fhst1,
+            SensorId::Fhst2 => &self.m_acs_from_fhst2,
+            SensorId::Fss1 => &self.m_acs_from_fss1,
+            SensorId::Fss2 => &self.m_acs_from_fss2,
+        }
+    }
+
     /// The four alignment matrices, mutable, in the order of [`Self::matrices`].
     /// docs/tables.md (fields 0–3 in this order).
     pub fn matrices_mut(&mut self) -> [&mut Mat3Rows; 4] {
@@ -228,22 +241,14 @@ impl AlignmentTable {
         }
     }
 
-    /// `M_AS` of sensor `sensor` (0 FHST1, 1 FHST2, 2 FSS1, 3 FSS2; larger = FSS2) at the
-    /// sensor temperature `temperature_c`: `Rot(k (T − T_ref)) M_AS` with the table's thermal
-    /// drift ([`SensorCorrections::thermal_rotation_rad`]), the stored rows unchanged when the
-    /// sensor has no thermal coefficient.
+    /// `M_AS` of `sensor` at the sensor temperature `temperature_c`: `Rot(k (T − T_ref))
+    /// M_AS` with the table's thermal drift ([`SensorCorrections::thermal_rotation_rad`]), the
+    /// stored rows unchanged when the sensor has no thermal coefficient.
     /// docs/tables.md (fields 0–3, 8–9); paper `M_AS`; effect 2 of algorithms.md §9.
     #[must_use]
-    pub fn m_acs_from_sensor_rows_at(&self, sensor: usize, temperature_c: f64) -> Mat3Rows {
-        match self.drifted_rows_at(sensor, temperature_c) {
-            Some(rows) => rows,
-            None => match sensor {
-                0 => self.m_acs_from_fhst1,
-                1 => self.m_acs_from_fhst2,
-                2 => self.m_acs_from_fss1,
-                _ => self.m_acs_from_fss2,
-            },
-        }
+    pub fn m_acs_from_sensor_rows_at(&self, sensor: SensorId, temperature_c: f64) -> Mat3Rows {
+        self.drifted_rows_at(sensor, temperature_c)
+            .unwrap_or_else(|| *self.rows(sensor))
     }
 
     /// `Some(Rot(k (T − T_ref)) M_AS)` for a sensor with a thermal drift coefficient (as
@@ -252,20 +257,16 @@ impl AlignmentTable {
     /// docs/tables.md (fields 8–9); effect 2 of algorithms.md §9.
     #[must_use]
     #[inline]
-    pub fn drifted_rows_at(&self, sensor: usize, temperature_c: f64) -> Option<Mat3Rows> {
-        match self.corrections.thermal_alignment_rad_per_c.get(sensor) {
-            Some([kx, ky, kz]) if *kx != 0.0 || *ky != 0.0 || *kz != 0.0 => {
-                let rows = match sensor {
-                    0 => &self.m_acs_from_fhst1,
-                    1 => &self.m_acs_from_fhst2,
-                    2 => &self.m_acs_from_fss1,
-                    _ => &self.m_acs_from_fss2,
-                };
-                Some(drifted_rows(
-                    rows,
-                    &self.corrections.thermal_rotation_rad(sensor, temperature_c),
-                ))
-            }
+    pub fn drifted_rows_at(&self, sensor: SensorId, temperature_c: f64) -> Option<Mat3Rows> {
+        match self
+            .corrections
+            .thermal_alignment_rad_per_c
+            .get(sensor.index())
+        {
+            Some([kx, ky, kz]) if *kx != 0.0 || *ky != 0.0 || *kz != 0.0 => Some(drifted_rows(
+                self.rows(sensor),
+                &self.corrections.thermal_rotation_rad(sensor, temperature_c),
+            )),
             _ => None,
         }
     }
@@ -897,9 +898,13 @@ mod tests {
         let a = AlignmentTable::prelaunch();
         assert_eq!(a.validate(), Ok(()));
         assert_eq!(a.corrections, SensorCorrections::default());
-        for s in 0..4 {
+        for s in SensorId::ALL {
             // No thermal coefficient: the stored rows whatever the temperature.
-            assert_eq!(a.m_acs_from_sensor_rows_at(s, 80.0), *a.matrices()[s]);
+            assert_eq!(
+                a.m_acs_from_sensor_rows_at(s, 80.0),
+                *a.matrices()[s.index()]
+            );
+            assert_eq!(a.rows(s), a.matrices()[s.index()]);
             assert_eq!(
                 a.corrections.thermal_rotation_rad(s, -40.0),
                 Vector3::zeros()
@@ -984,20 +989,25 @@ mod tests {
         a.corrections.thermal_alignment_rad_per_c[1] = k;
         a.corrections.thermal_reference_c[1] = 17.0;
         let c = &a.corrections;
-        let at = |t: f64| c.thermal_rotation_rad(1, t);
+        let at = |t: f64| c.thermal_rotation_rad(SensorId::Fhst2, t);
         assert!((at(20.0) - Vector3::from(k) * 3.0).norm() < 1e-18);
         assert_eq!(at(17.0), Vector3::zeros());
         // Clamped at ±50 °C from the reference; NaN and other sensors: none.
         assert!((at(300.0) - Vector3::from(k) * THERMAL_MAX_DEVIATION_C).norm() < 1e-18);
         assert!((at(-300.0) + Vector3::from(k) * THERMAL_MAX_DEVIATION_C).norm() < 1e-18);
         assert_eq!(at(f64::NAN), Vector3::zeros());
-        assert_eq!(c.thermal_rotation_rad(0, 30.0), Vector3::zeros());
-        assert_eq!(c.thermal_rotation_rad(7, 30.0), Vector3::zeros());
+        assert_eq!(
+            c.thermal_rotation_rad(SensorId::Fhst1, 30.0),
+            Vector3::zeros()
+        );
         // M_AS(T) = Rot(k ΔT) M_AS, as the truth model rotates the sensor (M' = Rot(θ) M).
-        let m = a.m_acs_from_sensor_rows_at(1, 22.0);
+        let m = a.m_acs_from_sensor_rows_at(SensorId::Fhst2, 22.0);
         let expect = rot(&(Vector3::from(k) * 5.0)) * matrix_from_rows(&a.m_acs_from_fhst2);
         assert!((matrix_from_rows(&m) - expect).norm() < 1e-15);
-        assert_eq!(a.m_acs_from_sensor_rows_at(0, 22.0), a.m_acs_from_fhst1);
+        assert_eq!(
+            a.m_acs_from_sensor_rows_at(SensorId::Fhst1, 22.0),
+            a.m_acs_from_fhst1
+        );
     }
 
     #[test]

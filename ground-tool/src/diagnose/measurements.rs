@@ -34,7 +34,7 @@ use fsw_core::units::{ARCSEC_PER_RAD, DEG_PER_RAD};
 use nalgebra::{Matrix2x3, Matrix3, Vector3};
 
 /// Sensor names in table order.
-pub const SENSOR_NAMES: [&str; 4] = ["FHST1", "FHST2", "FSS1", "FSS2"];
+pub const SENSOR_NAMES: [&str; 4] = fsw_core::sensor::SensorId::NAMES;
 /// Speed of light (km/s).
 pub const C_KM_PER_S: f64 = 299_792.458;
 /// Longest batch in low-rate mode (s).

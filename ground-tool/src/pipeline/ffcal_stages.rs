@@ -23,7 +23,7 @@ use nalgebra::{Matrix3, Vector3};
 use serde::Serialize;
 
 /// Sensor names in table order.
-pub const SENSOR_NAMES: [&str; 4] = ["FHST1", "FHST2", "FSS1", "FSS2"];
+pub const SENSOR_NAMES: [&str; 4] = fsw_core::sensor::SensorId::NAMES;
 
 /// Fewest gyro batches with both trackers for the gyro-batch FHST stage.
 const MIN_GYRO_BATCHES: usize = 3;
