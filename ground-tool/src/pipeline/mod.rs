@@ -22,3 +22,4 @@ pub mod observations;
 pub mod star_batches;
 pub mod tam;
 pub mod tuning_evidence;
+pub mod wheels;
