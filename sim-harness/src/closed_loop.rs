@@ -328,6 +328,55 @@ impl Simulation {
         (record, tam, css)
     }
 
+    /// The FHST and FSS faults of `t` applied to this cycle's samples ([`crate::faults`]);
+    /// returns the time-tag offset of a `time_tag_jump` (s).
+    fn apply_sensor_faults(
+        &mut self,
+        t: f64,
+        truth: &TruthSnapshot,
+        fhst: &mut [fsw_core::raw::FhstSample; 2],
+        fss: &mut [fsw_core::raw::FssSample; 2],
+    ) -> f64 {
+        if self.faults.is_empty() {
+            return 0.0;
+        }
+        for (unit, sample) in fhst.iter_mut().enumerate() {
+            let tracker = &self.fhst[unit];
+            let sky = &self.sky;
+            let other = || {
+                crate::faults::other_star_offset(
+                    tracker.m_acs_from_fhst_true(),
+                    tracker.last_truth().hv_rad,
+                    truth,
+                    sky,
+                    tracker.params().fov_half_width_deg * fsw_core::units::RAD_PER_DEG,
+                    (
+                        tracker.params().magnitude_min,
+                        tracker.params().magnitude_max,
+                    ),
+                )
+            };
+            *sample = self.fault_state.apply_fhst(
+                &self.faults,
+                unit,
+                t,
+                *sample,
+                tracker.params().resolution_arcsec_per_count,
+                other,
+            );
+        }
+        for (unit, sample) in fss.iter_mut().enumerate() {
+            *sample = FaultState::apply_fss(
+                &self.faults,
+                unit,
+                t,
+                *sample,
+                self.fss[unit].params().resolution_deg_per_count,
+            );
+        }
+        FaultState::time_offset_s(&self.faults, t)
+    }
+
     /// This cycle's tachometer and bar-monitor words (all invalid without
     /// `[wheel_tachometers] enabled`), with the `tachometer_failed` faults applied. The bars
     /// still hold the previous cycle's dipole: the one over the interval that ended now.
@@ -502,44 +551,7 @@ impl Simulation {
             self.fss[0].sample(&truth, dev[2]),
             self.fss[1].sample(&truth, dev[3]),
         ];
-        let mut time_offset_s = 0.0;
-        if !self.faults.is_empty() {
-            for (unit, sample) in fhst.iter_mut().enumerate() {
-                let tracker = &self.fhst[unit];
-                let sky = &self.sky;
-                let other = || {
-                    crate::faults::other_star_offset(
-                        tracker.m_acs_from_fhst_true(),
-                        tracker.last_truth().hv_rad,
-                        &truth,
-                        sky,
-                        tracker.params().fov_half_width_deg * fsw_core::units::RAD_PER_DEG,
-                        (
-                            tracker.params().magnitude_min,
-                            tracker.params().magnitude_max,
-                        ),
-                    )
-                };
-                *sample = self.fault_state.apply_fhst(
-                    &self.faults,
-                    unit,
-                    t,
-                    *sample,
-                    tracker.params().resolution_arcsec_per_count,
-                    other,
-                );
-            }
-            for (unit, sample) in fss.iter_mut().enumerate() {
-                *sample = FaultState::apply_fss(
-                    &self.faults,
-                    unit,
-                    t,
-                    *sample,
-                    self.fss[unit].params().resolution_deg_per_count,
-                );
-            }
-            time_offset_s = FaultState::time_offset_s(&self.faults, t);
-        }
+        let time_offset_s = self.apply_sensor_faults(t, &truth, &mut fhst, &mut fss);
         let (magnetics, tam, css) = self.sample_magnetics(&truth);
         let frame = RawSensorFrame {
             time: self.clock.time_tag(t + time_offset_s).unwrap_or_default(),
