@@ -198,7 +198,8 @@ pub const WHEELS: usize = 4;
 /// Number of torquer-bar current monitors (one per bar, ACS x, y, z).
 /// docs/icd.md §3.6; docs/magnetics.md §7.
 pub const TORQUER_MONITORS: usize = 3;
-/// Wheel tachometer count size, rpm per count (±3,276.7 rpm in an `i16`).
+/// Wheel tachometer count size, rpm per count (±3,276.6 rpm usable in an `i16`; ±32,767
+/// and −32,768 are saturated words).
 /// Project choice (not in the paper); docs/icd.md §3.6.
 pub const WHEEL_RPM_PER_COUNT: f64 = 0.1;
 /// Torquer-bar current monitor count size, A·m² of dipole per count.
@@ -213,15 +214,16 @@ pub const TORQUER_AM2_PER_COUNT: f64 = 1.0;
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct WheelSample {
     /// Wheel speeds, signed counts of [`WHEEL_RPM_PER_COUNT`] about each wheel's spin axis,
-    /// wheel 1 to 4.
+    /// wheel 1 to 4; ±32,767 and −32,768 are saturated words.
     /// docs/icd.md §3.6.
     pub speed_counts: [i16; WHEELS],
     /// Bit `i` set: wheel `i + 1`'s tachometer word holds a measurement; 0 (the default)
     /// means no tachometer data.
     /// docs/icd.md §3.6.
     pub speed_valid: u8,
-    /// Dipole each bar carried while the frame was sampled (the drive's current monitor),
-    /// signed counts of [`TORQUER_AM2_PER_COUNT`], bars along ACS x, y, z.
+    /// Dipole each bar carried over the interval that ended at this sample (the drive's
+    /// current monitor; the interval whose field the TAMs saw), signed counts of
+    /// [`TORQUER_AM2_PER_COUNT`], bars along ACS x, y, z.
     /// docs/icd.md §3.6.
     pub dipole_counts: [i16; TORQUER_MONITORS],
     /// Bit `k` set: bar `k + 1`'s monitor word holds a measurement.

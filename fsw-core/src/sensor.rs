@@ -7,7 +7,8 @@
 //! [`SensorId`] names a slot; [`PerSensor`] holds one value per sensor and is indexed by a
 //! `SensorId` only, so that the index cannot be out of range (no panic path in flight code)
 //! and cannot be a sensor of the wrong kind. The wire names (`"FHST1"` …) are defined here
-//! once; serde writes and reads a `SensorId` as its name.
+//! once; in self-describing formats (JSON reports) serde writes and reads a `SensorId` as its
+//! name (postcard, not self-describing, writes the variant index).
 
 use serde::{Deserialize, Serialize};
 
@@ -120,9 +121,21 @@ impl core::fmt::Display for SensorId {
 /// One value per sensor, indexed by [`SensorId`] (infallible: no index can be out of range).
 /// Project choice (not in the paper): see the module doc.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-pub struct PerSensor<T>(pub [T; SENSORS]);
+pub struct PerSensor<T>([T; SENSORS]);
 
 impl<T> PerSensor<T> {
+    /// The container of the values in table order (FHST1, FHST2, FSS1, FSS2).
+    /// Project choice (not in the paper): module doc.
+    pub const fn new(values_in_table_order: [T; SENSORS]) -> Self {
+        Self(values_in_table_order)
+    }
+
+    /// The values in table order.
+    /// Project choice (not in the paper): module doc.
+    pub const fn as_array(&self) -> &[T; SENSORS] {
+        &self.0
+    }
+
     /// The value of `id`.
     /// Project choice (not in the paper): module doc.
     #[must_use]
@@ -192,13 +205,20 @@ mod tests {
         assert_eq!((SensorId::Fss2.unit(), SensorId::Fhst1.unit()), (1, 0));
         let mut p = PerSensor::from_fn(SensorId::index);
         p[SensorId::Fss1] += 10;
-        assert_eq!(p.0, [0, 1, 12, 3]);
+        assert_eq!(p.as_array(), &[0, 1, 12, 3]);
+        assert_eq!(PerSensor::new([0, 1, 12, 3]), p);
         let names: heapless::Vec<&str, 4> = p.iter().map(|(s, _)| s.name()).collect();
         assert_eq!(names.as_slice(), &SensorId::NAMES);
     }
 
     #[test]
     fn serde_uses_the_names() {
+        extern crate std;
+        let json = serde_json::to_string(&[SensorId::Fhst1, SensorId::Fss2]).unwrap();
+        assert_eq!(json, r#"["FHST1","FSS2"]"#);
+        let back: [SensorId; 2] = serde_json::from_str(&json).unwrap();
+        assert_eq!(back, [SensorId::Fhst1, SensorId::Fss2]);
+        assert!(serde_json::from_str::<SensorId>(r#""FSS3""#).is_err());
         let mut buf = [0u8; 16];
         let bytes = postcard::to_slice(&SensorId::Fss2, &mut buf).unwrap();
         assert_eq!(

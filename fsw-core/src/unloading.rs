@@ -123,7 +123,8 @@ pub fn wheel_momentum_from_tachometers(
             continue;
         }
         let valid = sample.speed_valid & (1u8 << i) != 0;
-        if !valid || counts == i16::MAX || counts == i16::MIN {
+        // ±32,767 and −32,768 are the saturated words (docs/icd.md §3.6).
+        if !valid || counts.unsigned_abs() >= i16::MAX.unsigned_abs() {
             return None;
         }
         let h_wheel = table.wheel_spin_inertia_kg_m2 * f64::from(counts) * RAD_PER_S_PER_COUNT;
@@ -235,6 +236,8 @@ pub struct MomentumUnloading {
     wheel_momentum_acs_nms: Vector3<f64>,
     /// Where `wheel_momentum_acs_nms` came from this cycle.
     source: MomentumSource,
+    /// A source has been reported (event 0x0A03) since boot.
+    source_reported: bool,
     /// Unloading (outside the dead band).
     active: bool,
     /// The dipole computed at the last blanked sample (ACS, A·m²).
@@ -259,6 +262,7 @@ impl MomentumUnloading {
         Self {
             wheel_momentum_acs_nms: Vector3::new(0.0, 0.0, 0.0),
             source: MomentumSource::CommandCount,
+            source_reported: false,
             active: false,
             hold_acs_am2: [0.0; BARS],
             command_acs_am2: [0.0; BARS],
@@ -323,7 +327,9 @@ impl MomentumUnloading {
     /// This frame's wheel momentum: the tachometers when they all read
     /// ([`wheel_momentum_from_tachometers`]), else the count of the previous cycle's torque
     /// command from the last value ([`Self::account_wheel_torque`]). Returns the new source
-    /// when it changed (event 0x0A03).
+    /// when it changed (event 0x0A03), and the count on the first frame whose tachometer words
+    /// cannot be used (so that counting from boot is not silent). A measured momentum above
+    /// [`MAX_MOMENTUM_NMS`] (a wrong inertia in the table) is not used either.
     /// Module doc; docs/magnetics.md §7.
     pub fn update_wheel_momentum(
         &mut self,
@@ -342,8 +348,15 @@ impl MomentumUnloading {
                 MomentumSource::CommandCount
             }
         };
-        let changed = source != self.source;
+        // A change is reported; so is the count on the first frame that carries tachometer
+        // words it cannot use (a wheel invalid from boot, no geometry in the table), which
+        // would otherwise start counting in silence.
+        let first_unusable = !self.source_reported
+            && sample.speed_valid != 0
+            && source == MomentumSource::CommandCount;
+        let changed = source != self.source || first_unusable;
         self.source = source;
+        self.source_reported |= changed;
         changed.then_some(source)
     }
 
@@ -450,6 +463,11 @@ impl MomentumUnloading {
         } else {
             return None;
         };
+        if 3.0 * sigma >= table.torquer_check_milligauss {
+            // The attitude is too uncertain for the model field to tell a bar's field from
+            // its own error: no evidence either way (a raised alarm stays raised).
+            return None;
+        }
         let limit = table.torquer_check_milligauss + 3.0 * sigma;
         let mut mask = 0u32;
         let mut worst = 0.0_f64;
@@ -653,7 +671,9 @@ mod tests {
 
     /// A blanked sample with no TAM to compare is no evidence: it neither re-arms the check
     /// nor resets its run of failures. An uncertain attitude widens the threshold by 3σ of
-    /// the model field's error, so that a 3° attitude error (21 mG at 400 mG) is not a bar.
+    /// the model field's error, and when that 3σ alone reaches the threshold the sample is no
+    /// evidence either: a 3° attitude error (21 mG at 400 mG) is not a bar, and a raised alarm
+    /// is not cleared by an inconclusive sample.
     #[test]
     fn bars_off_check_needs_a_tam_and_allows_for_the_attitude_sigma() {
         let t = MagneticsTable::boot();
@@ -697,6 +717,16 @@ mod tests {
             fired,
             "with a certain attitude the same difference is a field"
         );
+        // Raised, then a sample while the attitude is uncertain (after a filter reset): the
+        // alarm stays; a moderately uncertain attitude (3σ below the threshold) still sees it.
+        u.update(Some(&sample(Some(model + stray), sigma_mg)), &h, &t, false);
+        assert!(
+            u.field_unexpected(),
+            "an inconclusive sample does not clear the alarm"
+        );
+        let r = u.update(Some(&sample(Some(model + stray), 2.0)), &h, &t, false);
+        assert_eq!(r.unexpected_field, None, "raised once");
+        assert!(u.field_unexpected(), "40 mG > 20 + 3 × 2 mG: still a field");
     }
 
     /// Wheel speeds that carry a known momentum per wheel come back as `Σ a_i h_i` (to the
@@ -720,6 +750,14 @@ mod tests {
         s.speed_valid = 0x0F;
         s.speed_counts[2] = i16::MAX;
         assert_eq!(wheel_momentum_from_tachometers(&s, &t), None, "saturated");
+        s.speed_counts[2] = -i16::MAX;
+        assert_eq!(
+            wheel_momentum_from_tachometers(&s, &t),
+            None,
+            "saturated, negative"
+        );
+        s.speed_counts[2] = -i16::MAX + 1;
+        assert!(wheel_momentum_from_tachometers(&s, &t).is_some());
         let mut no_geometry = t;
         no_geometry.wheel_spin_axes_acs = [[0.0; 3]; crate::raw::WHEELS];
         assert_eq!(wheel_momentum_from_tachometers(&s, &no_geometry), None);
@@ -762,6 +800,21 @@ mod tests {
             u.update_wheel_momentum(&s, &tau, 1.0, &t),
             Some(MomentumSource::Tachometers)
         );
+        // Tachometer words from boot that cannot be used (wheel 4 invalid): the count is
+        // reported on the first frame, once.
+        let mut u = MomentumUnloading::new();
+        let three = crate::raw::WheelSample {
+            speed_valid: 0x07,
+            ..s
+        };
+        assert_eq!(
+            u.update_wheel_momentum(&three, &tau, 1.0, &t),
+            Some(MomentumSource::CommandCount)
+        );
+        assert_eq!(u.update_wheel_momentum(&three, &tau, 1.0, &t), None);
+        // No tachometer words at all (a spacecraft without them): nothing to report.
+        let mut u = MomentumUnloading::new();
+        assert_eq!(u.update_wheel_momentum(&lost, &tau, 1.0, &t), None);
     }
 
     #[test]

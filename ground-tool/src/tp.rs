@@ -744,4 +744,21 @@ mod time_screen_tests {
             .0
             .is_empty());
     }
+
+    /// A good time code next to a damaged one that is earlier than its other neighbour by
+    /// less than the tolerance (the neighbours out of order): only the damaged one is
+    /// accused; the good one is within the tolerance of its in-order neighbour (docs/icd.md
+    /// §4: beyond the tolerance from *both* neighbours). Sparse records, median step 2 s:
+    /// tolerance 8 s.
+    #[test]
+    fn a_good_time_code_beside_a_damaged_one_is_kept() {
+        let mut t: Vec<f64> = (0..40).map(|i| 2.0 * f64::from(i)).collect();
+        let q: Vec<u16> = (0..40).collect();
+        // Frame 21 damaged to 7 s before frame 19 (38 s): frame 20 (40 s) now has the
+        // neighbours 38 s and 31 s, out of order by less than the 8-s tolerance.
+        t[21] = 31.0;
+        let (outliers, jumps) = screen_times(&t, &q);
+        assert_eq!(outliers, vec![21], "only the damaged frame");
+        assert!(jumps.is_empty());
+    }
 }

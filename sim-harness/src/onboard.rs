@@ -183,6 +183,33 @@ pub fn truth_orbit_table(
 ///
 /// # Errors
 /// An epoch outside the field model (1990–1995), or a table the OBC would refuse (named).
+/// Table 6 field 24 for the scenario's wheels (`[dynamics] wheel_axes_acs`, normalised as the
+/// truth does; absent wheels zero), or `default` itself when they are its wheels to 1e-12 (so
+/// that the boot geometry's bits stay those of the table).
+fn wheel_axes_for_table(
+    scenario: &Scenario,
+    default: &[[f64; 3]; fsw_core::raw::WHEELS],
+) -> [[f64; 3]; fsw_core::raw::WHEELS] {
+    let mut axes = [[0.0; 3]; fsw_core::raw::WHEELS];
+    for (slot, a) in axes.iter_mut().zip(&scenario.dynamics.wheel_axes_acs) {
+        let v = nalgebra::Vector3::from(*a);
+        let n = v.norm();
+        if n > 0.0 {
+            *slot = (v / n).into();
+        }
+    }
+    let same = axes
+        .iter()
+        .flatten()
+        .zip(default.iter().flatten())
+        .all(|(a, b)| (a - b).abs() < 1e-12);
+    if same {
+        *default
+    } else {
+        axes
+    }
+}
+
 pub fn magnetics_table(
     scenario: &Scenario,
     clock: &SimClock,
@@ -199,8 +226,11 @@ pub fn magnetics_table(
         [scenario.tam2.resolution_milligauss_per_count; 3],
     ];
     base.tam_bias_milligauss = m.onboard_tam_bias_milligauss;
-    // The bars' rating is known to the ground (Table 6 field 20).
+    // The bars' rating is known to the ground (Table 6 field 20), and so are the wheels'
+    // geometry and rotor inertia (fields 24–25): the spacecraft's, not the boot defaults.
     base.torquer_dipole_limit_am2 = scenario.torquers.dipole_limit_am2;
+    base.wheel_spin_axes_acs = wheel_axes_for_table(scenario, &base.wheel_spin_axes_acs);
+    base.wheel_spin_inertia_kg_m2 = scenario.wheel_tachometers.spin_inertia_kg_m2;
     if let Some(sigma) = m.onboard_field_sigma_milligauss {
         base.field_sigma_milligauss = [sigma; 2];
     }

@@ -811,6 +811,16 @@ impl Scenario {
                 "a torquer_stuck_on fault needs the bars: [dynamics] momentum_unloading = \"bars\""
             );
         }
+        let limit = self.torquers.dipole_limit_am2;
+        if let Some((i, d)) = self.faults.iter().enumerate().find_map(|(i, f)| {
+            (f.kind == crate::faults::FaultKind::TorquerStuckOn)
+                .then_some(f.dipole_am2)
+                .flatten()
+                .filter(|d| d.abs() > limit)
+                .map(|d| (i, d))
+        }) {
+            bail!("faults[{i}].dipole_am2 = {d} exceeds [torquers] dipole_limit_am2 = {limit}: the bar's drive cannot deliver it");
+        }
         if !self.wheel_tachometers.enabled
             && self
                 .faults

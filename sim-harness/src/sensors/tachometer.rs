@@ -84,10 +84,11 @@ pub struct Tachometers {
     rng: ChaCha8Rng,
 }
 
-/// Round to an `i16` word, saturating.
+/// Round to an `i16` word, saturating symmetrically at ±32,767 (the saturated words of
+/// `docs/icd.md` §3.6).
 #[allow(clippy::cast_possible_truncation)] // clamped to the i16 range first
 fn word(x: f64) -> i16 {
-    x.round().clamp(f64::from(i16::MIN), f64::from(i16::MAX)) as i16
+    x.round().clamp(-f64::from(i16::MAX), f64::from(i16::MAX)) as i16
 }
 
 impl Tachometers {
@@ -151,6 +152,8 @@ mod tests {
         assert_eq!(s.speed_counts[0], i16::MAX, "saturated word");
         assert_eq!(s.dipole_counts, [4_000, -1, 0]);
         assert_eq!(s.dipole_valid, 0b111);
+        let s = t.sample(&[-1.0e4], &[false; WHEELS], None);
+        assert_eq!(s.speed_counts[0], -i16::MAX, "saturated word, negative");
     }
 
     #[test]
