@@ -320,16 +320,11 @@ mod tests {
     /// The paper's primary bias, as `data/gro_paper.toml` states it.
     #[test]
     fn val_primary_bias_is_the_papers() {
-        let text = std::fs::read_to_string(gro_reference::data::data_dir().join("gro_paper.toml"))
-            .unwrap();
-        let v: toml::Value = toml::from_str(&text).unwrap();
-        let b: Vec<f64> = v["sensors"]["tam"]["primary_bias_mG"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|x| x.as_float().unwrap())
-            .collect();
-        assert_eq!(b, PAPER_PRIMARY_TAM_BIAS_MILLIGAUSS.to_vec());
+        let paper = gro_reference::paper::PaperData::embedded().unwrap();
+        assert_eq!(
+            paper.sensors.tam.primary_bias_milligauss,
+            PAPER_PRIMARY_TAM_BIAS_MILLIGAUSS
+        );
         assert_eq!(
             TamParams::primary_default().bias_milligauss,
             PAPER_PRIMARY_TAM_BIAS_MILLIGAUSS
