@@ -10,7 +10,7 @@
 
 mod support;
 
-use gro_tests::loop_report::{compare, relative_error_and_nees};
+use gro_tests::loop_report::{compare, read_truth, relative_error_and_nees, true_delta_m};
 use ground_tool::pipeline::calibrate::{calibrate_run, CalibrateOptions};
 use sim_harness::run::{run, RunOptions};
 use sim_harness::scenario::resolve;
@@ -40,8 +40,7 @@ fn e2e_calibration_loop_gro_early_mission() {
         },
     )
     .unwrap();
-    let truth: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(fly_a.join("truth.json")).unwrap()).unwrap();
+    let truth = read_truth(&fly_a).unwrap();
     let r = compare(&a, &b, &calibration, &truth).unwrap();
 
     // Relative alignments: every pair closer to truth after calibration; the FSS pairs by a
@@ -146,8 +145,7 @@ fn e2e_calibration_loop_gro_early_mission() {
     );
     let k = slew.derived.expect("derived slew uncertainty");
     assert!(slew.written && k < 1e-3, "{}", slew.reason);
-    let true_dm =
-        gro_tests::loop_report::matrix_from_json(&truth["iru"]["primary"]["delta_m"]).unwrap();
+    let true_dm = true_delta_m(&truth).expect("the truth's IRU");
     let iru = calibration.report.iru.as_ref().expect("IRU report");
     residual_within_3_sigma(&true_dm, &iru.delta_m_uplinked, "k", |_, _| k);
     // Per element (field 23): every element of the true residual within 3σ of its own σ.
@@ -252,8 +250,7 @@ fn calibration_without_housekeeping() {
         "identified {:?}",
         c.report.data.stars_identified
     );
-    let truth: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(fly.join("truth.json")).unwrap()).unwrap();
+    let truth = read_truth(&fly).unwrap();
     let sol = &c.ffcal;
     let (e, nees) = relative_error_and_nees(sol, &truth, 1).unwrap();
     assert!(nees < 16.27, "FHST2 rel FHST1 error {e:?}″, NEES {nees:.1}");
