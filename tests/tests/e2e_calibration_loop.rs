@@ -12,7 +12,6 @@ mod support;
 
 use gro_tests::loop_report::{compare, read_truth, relative_error_and_nees, true_delta_m};
 use ground_tool::pipeline::calibrate::{calibrate_run, CalibrateOptions};
-use sim_harness::run::{run, RunOptions};
 use sim_harness::scenario::resolve;
 
 #[test]
@@ -21,25 +20,9 @@ fn e2e_calibration_loop_gro_early_mission() {
     let scenario = resolve("gro-early-mission").unwrap();
     let fly_a = out.join("a");
     let cal = out.join("cal");
-    let a = run(
-        scenario.clone(),
-        &RunOptions {
-            out_dir: Some(fly_a.clone()),
-            tables_dir: None,
-            progress: false,
-        },
-    )
-    .unwrap();
+    let a = support::fly(scenario.clone(), &fly_a, None);
     let calibration = calibrate_run(&fly_a, &cal, &CalibrateOptions::default()).unwrap();
-    let b = run(
-        scenario,
-        &RunOptions {
-            out_dir: Some(out.join("b")),
-            tables_dir: Some(cal.join("tables")),
-            progress: false,
-        },
-    )
-    .unwrap();
+    let b = support::fly(scenario, &out.join("b"), Some(&cal.join("tables")));
     let truth = read_truth(&fly_a).unwrap();
     let r = compare(&a, &b, &calibration, &truth).unwrap();
 
@@ -259,15 +242,7 @@ fn calibration_without_housekeeping() {
 
 /// Fly `gro-early-mission` with the prelaunch tables into the run folder `dir`.
 fn fly_prelaunch(dir: &std::path::Path) {
-    run(
-        resolve("gro-early-mission").unwrap(),
-        &RunOptions {
-            out_dir: Some(dir.to_path_buf()),
-            tables_dir: None,
-            progress: false,
-        },
-    )
-    .unwrap();
+    support::fly(resolve("gro-early-mission").unwrap(), dir, None);
 }
 
 /// Every element of G's true residual error after the uplink (true δM minus the uplinked one)

@@ -13,7 +13,6 @@
 mod support;
 
 use ground_tool::pipeline::calibrate::{calibrate_run, CalibrateOptions};
-use sim_harness::run::{run, RunOptions};
 use sim_harness::scenario::resolve;
 
 /// One simulated hour: 77 TAM samples with a fine attitude, the field turning enough in the
@@ -30,15 +29,7 @@ fn e2e_tam_bias_recovered_within_its_sigma() {
         "gro-early-mission flies the TAMs"
     );
     scenario.duration_s = DURATION_S;
-    run(
-        scenario,
-        &RunOptions {
-            out_dir: Some(fly.clone()),
-            tables_dir: None,
-            progress: false,
-        },
-    )
-    .unwrap();
+    support::fly(scenario, &fly, None);
     let c = calibrate_run(&fly, &out.join("cal"), &CalibrateOptions::default()).unwrap();
     let tam = &c.report.tam;
     assert_eq!(tam.status, "determined", "{:?}", tam.reason);
