@@ -455,11 +455,12 @@ mod tests {
     use fsw_core::units::ARCSEC_PER_RAD;
 
     fn sky() -> Sky {
-        Sky::load(
-            &data_dir().join("hipparcos_mag6p5.csv"),
-            &SkyParams::default(),
-        )
-        .unwrap()
+        sky_with(SkyParams::default())
+    }
+
+    /// The shipped catalog loaded with `params`.
+    fn sky_with(params: SkyParams) -> Sky {
+        Sky::load(&data_dir().join("hipparcos_mag6p5.csv"), &params).unwrap()
     }
 
     fn angle_mas(a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
@@ -545,32 +546,17 @@ mod tests {
     /// Eligible FHST stars (2.0 ≤ m ≤ 5.7) and their density, for the record.
     #[test]
     fn fhst_window_star_count() {
-        let sky = Sky::load(
-            &data_dir().join("hipparcos_mag6p5.csv"),
-            &SkyParams {
-                magnitude_system: MagnitudeSystem::V,
+        let count = |magnitude_system| {
+            let sky = sky_with(SkyParams {
+                magnitude_system,
                 ..SkyParams::default()
-            },
-        )
-        .unwrap();
-        let n = sky
-            .stars()
-            .iter()
-            .filter(|s| (2.0..=5.7).contains(&s.magnitude))
-            .count();
-        let hp = Sky::load(
-            &data_dir().join("hipparcos_mag6p5.csv"),
-            &SkyParams {
-                magnitude_system: MagnitudeSystem::Hp,
-                ..SkyParams::default()
-            },
-        )
-        .unwrap();
-        let n_hp = hp
-            .stars()
-            .iter()
-            .filter(|s| (2.0..=5.7).contains(&s.magnitude))
-            .count();
+            });
+            sky.stars()
+                .iter()
+                .filter(|s| (2.0..=5.7).contains(&s.magnitude))
+                .count()
+        };
+        let (n, n_hp) = (count(MagnitudeSystem::V), count(MagnitudeSystem::Hp));
         eprintln!(
             "FHST-eligible stars: {n} in V, {n_hp} in Hp; {:.2} per 8x8 deg FOV (Hp)",
             n_hp as f64 * 64.0 / 41_253.0
@@ -581,14 +567,10 @@ mod tests {
 
     #[test]
     fn proper_motion_hooks() {
-        let frozen = Sky::load(
-            &data_dir().join("hipparcos_mag6p5.csv"),
-            &SkyParams {
-                proper_motion_scale: 0.0,
-                ..SkyParams::default()
-            },
-        )
-        .unwrap();
+        let frozen = sky_with(SkyParams {
+            proper_motion_scale: 0.0,
+            ..SkyParams::default()
+        });
         let normal = sky();
         let i = normal.index_of_hip(71683).unwrap();
         let j = frozen.index_of_hip(71683).unwrap();
@@ -599,14 +581,10 @@ mod tests {
             &frozen.star(j).unwrap().astrometric_dir_eci(s, &zero),
         );
         assert!((d - 3700.0).abs() < 200.0, "α Cen A moves ~3.7″/yr: {d}");
-        let noisy = Sky::load(
-            &data_dir().join("hipparcos_mag6p5.csv"),
-            &SkyParams {
-                proper_motion_error_sigma_mas_per_yr: 10.0,
-                ..SkyParams::default()
-            },
-        )
-        .unwrap();
+        let noisy = sky_with(SkyParams {
+            proper_motion_error_sigma_mas_per_yr: 10.0,
+            ..SkyParams::default()
+        });
         let k = noisy.index_of_hip(71683).unwrap();
         let e = angle_mas(
             &normal.star(i).unwrap().astrometric_dir_eci(s, &zero),
