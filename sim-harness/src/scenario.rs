@@ -1073,29 +1073,23 @@ mod tests {
 
     #[test]
     fn unknown_field_error_names_the_key() {
-        let err = Scenario::from_toml_str(
-            "name = \"x\"\nduration_s = 10\n[fhst1]\nmax_trak_s = 5\n",
-            "t",
-        )
-        .unwrap_err()
-        .to_string();
-        assert!(err.contains("max_trak_s"), "{err}");
-        let err = Scenario::from_toml_str(
-            "name = \"x\"\nduration_s = 10\n[fhst1.effects]\nfoo = 1\n",
-            "t",
-        )
-        .unwrap_err()
-        .to_string();
-        assert!(err.contains("foo"), "{err}");
-        let err = Scenario::from_toml_str("name = \"x\"\nduration_s = 10\nstep_s = -1\n", "t")
-            .unwrap_err();
-        assert!(format!("{err:#}").contains("step_s"), "{err:#}");
-        let err = Scenario::from_toml_str(
-            "name = \"x\"\nduration_s = 10\n[[commands]]\nat_s = 5\nkind = \"slew_to\"\n",
-            "t",
-        )
-        .unwrap_err();
-        assert!(format!("{err:#}").contains("commands[0]"), "{err:#}");
+        // The error with its causes, of a scenario `name = "x"`, 10 s long, and then `rest`.
+        let error = |rest: &str| {
+            let text = format!("name = \"x\"\nduration_s = 10\n{rest}");
+            format!("{:#}", Scenario::from_toml_str(&text, "t").unwrap_err())
+        };
+        for (rest, key) in [
+            ("[fhst1]\nmax_trak_s = 5\n", "max_trak_s"),
+            ("[fhst1.effects]\nfoo = 1\n", "foo"),
+            ("step_s = -1\n", "step_s"),
+            (
+                "[[commands]]\nat_s = 5\nkind = \"slew_to\"\n",
+                "commands[0]",
+            ),
+        ] {
+            let err = error(rest);
+            assert!(err.contains(key), "{err}");
+        }
     }
 
     #[test]
