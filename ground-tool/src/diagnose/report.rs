@@ -266,25 +266,21 @@ pub fn write_plots(
     }
     if !gyro.bias_series.is_empty() {
         let colors = [BLUE, ORANGE, GREEN];
+        // Axis `ax` of a bias series against time in hours.
+        let in_hours = |points: &[(f64, [f64; 3])], ax: usize| -> Vec<(f64, f64)> {
+            points.iter().map(|(t, v)| (*t / 3600.0, v[ax])).collect()
+        };
         let mut series = Vec::new();
         for ax in 0..3 {
             series.push(Series {
                 label: format!("bias error {} (hold-to-hold)", ["x", "y", "z"][ax]),
-                points: gyro
-                    .bias_series
-                    .iter()
-                    .map(|(t, v)| (*t / 3600.0, v[ax]))
-                    .collect(),
+                points: in_hours(&gyro.bias_series, ax),
                 color: colors[ax],
             });
             if !gyro.bias_fit_after.is_empty() {
                 series.push(Series {
                     label: format!("final model {}", ["x", "y", "z"][ax]),
-                    points: gyro
-                        .bias_fit_after
-                        .iter()
-                        .map(|(t, v)| (*t / 3600.0, v[ax]))
-                        .collect(),
+                    points: in_hours(&gyro.bias_fit_after, ax),
                     color: RED,
                 });
             }
