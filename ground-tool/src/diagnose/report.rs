@@ -564,12 +564,17 @@ fn md_flight_tables(s: &mut String, r: &DiagnoseReport) {
             c.delta_chi2,
             c.delta_bic,
             c.halves_p,
-            if c.accepted {
-                "kept".to_owned()
-            } else {
-                c.rejected_because.clone().unwrap_or_default()
-            }
+            verdict(c.accepted, c.rejected_because.as_deref(), "kept")
         );
+    }
+}
+
+/// A candidate's verdict: `taken` when accepted, else why not.
+fn verdict(accepted: bool, rejected_because: Option<&str>, taken: &str) -> String {
+    if accepted {
+        taken.to_owned()
+    } else {
+        rejected_because.unwrap_or_default().to_owned()
     }
 }
 
@@ -599,11 +604,7 @@ fn md_loop(s: &mut String, r: &DiagnoseReport) {
                 e.p_holm,
                 e.delta_bic,
                 e.halves_p,
-                if e.accepted {
-                    "added".to_owned()
-                } else {
-                    e.rejected_because.clone().unwrap_or_default()
-                }
+                verdict(e.accepted, e.rejected_because.as_deref(), "added")
             );
         }
         s.push('\n');
