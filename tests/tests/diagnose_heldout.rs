@@ -10,7 +10,7 @@ use ground_tool::diagnose::fit::{accumulate, batch_chi2, Rows, N_ALIGN};
 use ground_tool::diagnose::fit::{indices, Layout};
 use ground_tool::diagnose::heldout::*;
 use ground_tool::diagnose::measurements::MeasurementSet;
-use nalgebra::{DVector, Matrix3};
+use nalgebra::DVector;
 
 fn run(
     effects: SynthEffects,
@@ -25,13 +25,7 @@ fn run(
 }
 
 fn truth_parameters(synth: &gro_tests::diagnose::synthetic::SynthRun) -> [f64; N_ALIGN] {
-    let m_base: Vec<Matrix3<f64>> = synth
-        .alignment
-        .matrices()
-        .iter()
-        .map(|r| matrix_from_rows(r))
-        .collect();
-    let m_base = [m_base[0], m_base[1], m_base[2], m_base[3]];
+    let m_base = synth.alignment.matrices().map(matrix_from_rows);
     alignment_parameters_arcsec(&synth.m_true, &m_base)
 }
 

@@ -557,12 +557,11 @@ impl FfcalSensors {
     ) -> anyhow::Result<Self> {
         let declared_fss_sys = ctx.metadata.sensors.fss_systematic_or_paper_arcsec();
         let (map, observed) = observed_sensors(frames, declared_fss_sys, summary)?;
-        let flown: Vec<Matrix3<f64>> = ctx
+        let flown = ctx
             .flown_alignment
             .matrices()
-            .iter()
-            .map(|m| matrix_from_rows(m))
-            .collect();
+            .map(matrix_from_rows)
+            .to_vec();
         let specs = observed
             .iter()
             .map(|&k| SensorSpec::new(SENSOR_NAMES[k], flown[k], PRIOR_SIGMA_ARCSEC[k]))
