@@ -11,6 +11,18 @@ pub fn fresh_dir(name: &str) -> PathBuf {
     d
 }
 
+/// [`fresh_dir`] `name`, created, holding one file `file` (its folders created) with `text`:
+/// data a command was not asked to touch.
+pub fn fresh_dir_with_file(name: &str, file: &str, text: &str) -> PathBuf {
+    let d = fresh_dir(name);
+    let path = d.join(file);
+    if let Some(parent) = path.parent() {
+        std::fs::create_dir_all(parent).unwrap();
+    }
+    std::fs::write(path, text).unwrap();
+    d
+}
+
 /// Fly `scenario` into the run folder `out` (no progress bar), with the tables folder
 /// `tables` uplinked when given.
 pub fn fly(
