@@ -33,8 +33,8 @@ use super::gyro_chain::{build_gyro_chain, irucal_stage, IruStage};
 use super::iru_fixes::{frame_index_at, FixFloors, BATCH_HALF_S};
 pub use super::maneuvers::{CoarseAttitude, ManeuverReport};
 use super::observations::{
-    build_observations, fine_attitude, AttitudeSensors, FrameObservations, IdentifyOptions,
-    RateSwitch,
+    build_observations, fhst_attitude, fine_attitude, AttitudeSensors, FrameObservations,
+    IdentifyOptions, RateSwitch,
 };
 use crate::calibration::adjust::{preserve_obc_attitude, Adjustment, BoresightFrame};
 use crate::calibration::alignment::{
@@ -390,15 +390,7 @@ fn coarse_attitude(
         return None;
     }
     let hi = frame_index_at(frames, frames[e].time.seconds() + 2.0 * BATCH_HALF_S);
-    let fine = fine_attitude(
-        frames,
-        e..hi.max(e + 1),
-        e,
-        bias,
-        &Matrix3::zeros(),
-        AttitudeSensors::FhstOnly,
-    )
-    .ok();
+    let fine = fhst_attitude(frames, e..hi.max(e + 1), e, bias).ok();
     let q = sol.q_acs_from_eci;
     Some(CoarseAttitude {
         t_s: frames[e].time.seconds() - t0,
