@@ -31,6 +31,7 @@ use super::fss_systematic::{estimate_fss_systematic, FssSystematicEstimate};
 pub use super::gyro_chain::IruReport;
 use super::gyro_chain::{build_gyro_chain, irucal_stage, IruStage};
 use super::iru_fixes::{frame_index_at, FixFloors, BATCH_HALF_S};
+use super::maneuvers::high_rate_runs;
 pub use super::maneuvers::{CoarseAttitude, ManeuverReport};
 use super::observations::{
     build_observations, fhst_attitude, fine_attitude, AttitudeSensors, FrameObservations,
@@ -444,26 +445,6 @@ fn obc_bias_sample(tm: &Telemetry, t_s: f64) -> Option<[f64; 3]> {
         .map(|h| h.bias_acs_rad_per_s)
 }
 
-/// Maneuvers as runs of high-rate frames: (first index, last index).
-fn find_maneuvers(frames: &[FrameObservations]) -> Vec<(usize, usize)> {
-    let mut out = Vec::new();
-    let mut start: Option<usize> = None;
-    for (i, f) in frames.iter().enumerate() {
-        match (f.high_rate, start) {
-            (true, None) => start = Some(i),
-            (false, Some(s)) => {
-                out.push((s, i - 1));
-                start = None;
-            }
-            _ => {}
-        }
-    }
-    if let Some(s) = start {
-        out.push((s, frames.len() - 1));
-    }
-    out
-}
-
 /// What every stage of [`calibrate_telemetry`] reads and none writes: the run (telemetry and
 /// declarations), the operator's options, the tables flown and the catalog.
 struct ChainContext<'a> {
@@ -740,7 +721,7 @@ fn gyro_stage(
     };
     let maneuvers = match &ctx.options.maneuvers_s {
         Some(spans) => user_maneuvers(frames, spans)?,
-        None => find_maneuvers(frames),
+        None => high_rate_runs(frames.iter().map(|f| f.high_rate), true),
     };
     let fhst_floor = FixFloors::from_ffcal(&ffcal.summary, &ffcal.solution, ctx.metadata);
     summary.count_rate_switches(frames);
