@@ -187,9 +187,7 @@ fn e2e_calibration_loop_gro_early_mission() {
 /// byte-identical tables and the same report (up to the output paths it names).
 #[test]
 fn calibration_is_deterministic() {
-    let out = support::fresh_dir("gro-e2e-determinism");
-    let fly = out.join("run");
-    fly_prelaunch(&fly);
+    let (out, fly) = prelaunch_run("gro-e2e-determinism");
     let mut reports = Vec::new();
     let mut tables = Vec::new();
     for k in 0..2 {
@@ -220,9 +218,7 @@ fn calibration_is_deterministic() {
 /// relative alignment is consistent with its stated covariance.
 #[test]
 fn calibration_without_housekeeping() {
-    let out = support::fresh_dir("gro-e2e-nohk");
-    let fly = out.join("run");
-    fly_prelaunch(&fly);
+    let (out, fly) = prelaunch_run("gro-e2e-nohk");
     // Drop every APID 0x011 packet.
     let nohk = out.join("nohk");
     support::copy_run_without_apid(&fly, &nohk, 0x011);
@@ -240,9 +236,13 @@ fn calibration_without_housekeeping() {
     let _ = std::fs::remove_dir_all(&out);
 }
 
-/// Fly `gro-early-mission` with the prelaunch tables into the run folder `dir`.
-fn fly_prelaunch(dir: &std::path::Path) {
-    support::fly(resolve("gro-early-mission").unwrap(), dir, None);
+/// A fresh folder `name` with `gro-early-mission` flown with the prelaunch tables into its
+/// `run`: (the folder, the run folder).
+fn prelaunch_run(name: &str) -> (std::path::PathBuf, std::path::PathBuf) {
+    let out = support::fresh_dir(name);
+    let fly = out.join("run");
+    support::fly(resolve("gro-early-mission").unwrap(), &fly, None);
+    (out, fly)
 }
 
 /// Every element of G's true residual error after the uplink (true δM minus the uplinked one)
