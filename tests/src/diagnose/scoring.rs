@@ -410,30 +410,19 @@ pub fn parameter_truth(
         }
         "fhst_distortion" => {
             if let Some(f) = fhst(sensor) {
-                out.insert(
-                    "radial_at_4deg".into(),
-                    f.effects.radial_distortion_arcsec_at_4deg,
-                );
-                out.insert(
-                    "hv_h_at_corner".into(),
-                    f.effects.hv_distortion_arcsec_at_corner[0],
-                );
-                out.insert(
-                    "hv_v_at_corner".into(),
-                    f.effects.hv_distortion_arcsec_at_corner[1],
-                );
+                let [h, v] = f.effects.hv_distortion_arcsec_at_corner;
+                let radial = f.effects.radial_distortion_arcsec_at_4deg;
+                out.extend([
+                    ("radial_at_4deg".to_owned(), radial),
+                    ("hv_h_at_corner".to_owned(), h),
+                    ("hv_v_at_corner".to_owned(), v),
+                ]);
             }
         }
         "magnitude_bias" => {
             if let Some(f) = fhst(sensor) {
-                out.insert(
-                    "h_per_mag".into(),
-                    f.effects.magnitude_bias_arcsec_per_mag[0],
-                );
-                out.insert(
-                    "v_per_mag".into(),
-                    f.effects.magnitude_bias_arcsec_per_mag[1],
-                );
+                let [h, v] = f.effects.magnitude_bias_arcsec_per_mag;
+                out.extend([("h_per_mag".to_owned(), h), ("v_per_mag".to_owned(), v)]);
             }
         }
         "fss_transfer_function" => {
