@@ -482,12 +482,10 @@ mod tests {
             let hip: u32 = t.text(row, hip_c).parse().unwrap();
             let star = sky.star(sky.index_of_hip(hip).unwrap()).unwrap();
             let s = (t.f64(row, jd_c).unwrap() - JD_J2000) * 86_400.0;
-            let cat = t.vec3(row, ["cat_x", "cat_y", "cat_z"]).unwrap();
-            let astr = t.vec3(row, ["astr_x", "astr_y", "astr_z"]).unwrap();
-            let app = t.vec3(row, ["app_x", "app_y", "app_z"]).unwrap();
-            let v = t
-                .vec3(row, ["earth_vx_kms", "earth_vy_kms", "earth_vz_kms"])
-                .unwrap();
+            let cat = t.xyz(row, "cat_{}").unwrap();
+            let astr = t.xyz(row, "astr_{}").unwrap();
+            let app = t.xyz(row, "app_{}").unwrap();
+            let v = t.xyz(row, "earth_v{}_kms").unwrap();
             let sun = sun_state(s);
             max_cat = max_cat.max(angle_mas(&star.dir_cat_eci, &cat));
             let mine_astr = star.astrometric_dir_eci(s, &sun.earth_pos_bary_eci_km);
