@@ -6,7 +6,7 @@
 use fsw_core::tables::types::matrix_from_rows;
 use gro_tests::diagnose::synthetic::{generate, SynthConfig, SynthEffects};
 use ground_tool::diagnose::effects::{library, EffectKind};
-use ground_tool::diagnose::fit::{accumulate, batch_chi2, Rows, N_ALIGN};
+use ground_tool::diagnose::fit::{accumulate, batch_quadratic, Quadratic, Rows, N_ALIGN};
 use ground_tool::diagnose::fit::{indices, Layout};
 use ground_tool::diagnose::heldout::*;
 use ground_tool::diagnose::measurements::MeasurementSet;
@@ -52,7 +52,7 @@ fn fhst1_distortion_run(
     (synth, set, Layout::new(vec![dist]))
 }
 
-/// `batch_chi2` is the likelihood `accumulate` builds: at any global vector the batch sums
+/// `batch_quadratic`'s χ² is the likelihood `accumulate` builds: at any global vector the batch sums
 /// equal the quadratic form of the accumulated system.
 #[test]
 fn batch_chi2_is_the_accumulated_likelihood() {
@@ -60,7 +60,7 @@ fn batch_chi2_is_the_accumulated_likelihood() {
     let normal = accumulate(&set, &layout, &|_| true);
     let g = DVector::from_fn(layout.total, |i, _| ((i as f64) * 0.37).sin() * 4.0);
     let quadratic = normal.chi2 - 2.0 * g.dot(&normal.b) + g.dot(&(&normal.n * &g));
-    let per_batch: f64 = batch_chi2(&set, &layout, &g, &|_| true, Rows::All)
+    let per_batch: f64 = batch_quadratic(&set, &layout, &g, &|_| true, Quadratic::Chi2, Rows::All)
         .iter()
         .map(|b| b.1)
         .sum();
