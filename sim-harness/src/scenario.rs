@@ -937,12 +937,14 @@ impl Scenario {
     /// The FHST, FSS and IRU parameters.
     fn validate_sensors(&self) -> anyhow::Result<()> {
         for (name, f) in [("fhst1", &self.fhst1), ("fhst2", &self.fhst2)] {
-            positive(&format!("{name}.fov_half_width_deg"), f.fov_half_width_deg)?;
-            positive(
-                &format!("{name}.resolution_arcsec_per_count"),
-                f.resolution_arcsec_per_count,
+            positives(
+                name,
+                &[
+                    ("fov_half_width_deg", f.fov_half_width_deg),
+                    ("resolution_arcsec_per_count", f.resolution_arcsec_per_count),
+                    ("max_track_s", f.max_track_s),
+                ],
             )?;
-            positive(&format!("{name}.max_track_s"), f.max_track_s)?;
             if f.magnitude_min > f.magnitude_max {
                 bail!(
                     "{name}.magnitude_min ({}) exceeds magnitude_max ({})",
@@ -952,22 +954,37 @@ impl Scenario {
             }
         }
         for (name, f) in [("fss1", &self.fss1), ("fss2", &self.fss2)] {
-            positive(&format!("{name}.fov_half_width_deg"), f.fov_half_width_deg)?;
-            positive(
-                &format!("{name}.resolution_deg_per_count"),
-                f.resolution_deg_per_count,
+            positives(
+                name,
+                &[
+                    ("fov_half_width_deg", f.fov_half_width_deg),
+                    ("resolution_deg_per_count", f.resolution_deg_per_count),
+                ],
             )?;
         }
-        positive(
-            "iru.low_rate_arcsec_per_pulse",
-            self.iru.low_rate_arcsec_per_pulse,
-        )?;
-        positive(
-            "iru.high_rate_arcsec_per_pulse",
-            self.iru.high_rate_arcsec_per_pulse,
-        )?;
-        Ok(())
+        positives(
+            "iru",
+            &[
+                (
+                    "low_rate_arcsec_per_pulse",
+                    self.iru.low_rate_arcsec_per_pulse,
+                ),
+                (
+                    "high_rate_arcsec_per_pulse",
+                    self.iru.high_rate_arcsec_per_pulse,
+                ),
+            ],
+        )
     }
+}
+
+/// Each of `fields` (key, value) of the section `section` must be a positive number
+/// ([`positive`], in order).
+fn positives(section: &str, fields: &[(&str, f64)]) -> anyhow::Result<()> {
+    for (key, v) in fields {
+        positive(&format!("{section}.{key}"), *v)?;
+    }
+    Ok(())
 }
 
 /// `name` must be a positive number.
