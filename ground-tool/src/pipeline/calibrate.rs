@@ -1514,3 +1514,41 @@ fn fss_sigma_after_arcsec(
     }
     worst
 }
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+mod tests {
+    use super::*;
+
+    /// Stage 1 refuses telemetry without the hours of frames a calibration needs, naming the
+    /// count, before it loads the catalog.
+    #[test]
+    fn the_context_refuses_too_few_raw_frames() {
+        let tm = Telemetry::default();
+        let err = ChainContext::new(&tm, &Metadata::default(), &CalibrateOptions::default())
+            .err()
+            .expect("no frames");
+        assert!(
+            err.to_string().contains("only 0 raw sensor frames"),
+            "{err}"
+        );
+    }
+
+    /// Stage 4's table: an adjustment that moves nothing gives the flown alignments back
+    /// (orthonormalised to rounding) and keeps the table valid.
+    #[test]
+    fn an_identity_adjustment_gives_the_flown_table() {
+        let flown = AlignmentTable::prelaunch();
+        let adjustment = Adjustment {
+            construction: BoresightFrame::Bisector,
+            m_adjust: Matrix3::identity(),
+            theta_adjust_acs_arcsec: Vector3::zeros(),
+            m_acs_from_sensor_adjusted: flown.matrices().map(matrix_from_rows).to_vec(),
+        };
+        let table = adjusted_alignment_table(flown, &adjustment).unwrap();
+        for (a, b) in table.matrices().iter().zip(flown.matrices()) {
+            let d = (matrix_from_rows(a) - matrix_from_rows(b)).amax();
+            assert!(d < 1e-6, "moved by {d}");
+        }
+    }
+}
