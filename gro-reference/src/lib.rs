@@ -10,9 +10,10 @@
 //!   [`field`] (IGRF synthesis, DGRF 1990/1995) and [`earth_orientation`] (GCRS ↔ ITRS);
 //! - reference data: [`data`] (the `data/` CSV reader, the Hipparcos subset embedded once),
 //!   [`paper`] (the paper's published facts, `data/gro_paper.toml`, parsed once);
-//! - the run-folder contract: [`run_folder`] (`metadata.json`, with its JSON Schema in
-//!   `docs/schema/`), [`manifest`] (`tables/manifest.json`), [`outdir`] (whole-or-nothing
-//!   output folders), [`exit`] (exit codes from the error's type).
+//! - the run-folder contract: [`run_folder`] (`metadata.json` and the simulator's
+//!   `truth.json`, with their JSON Schemas in `docs/schema/`), [`manifest`]
+//!   (`tables/manifest.json`), [`outdir`] (whole-or-nothing output folders), [`exit`] (exit
+//!   codes from the error's type).
 //!
 //! What may import it: `sim-harness` (which re-exports these modules under their old paths),
 //! `ground-tool` and `tests`. It imports only `fsw-core` (units, time codes, table images).
