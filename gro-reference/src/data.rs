@@ -130,6 +130,16 @@ impl CsvTable {
             self.f64(row, self.column(names[2])?)?,
         ))
     }
+
+    /// [`CsvTable::vec3`] of the columns `pattern` names with `{}` as `x`, `y` and `z`
+    /// (`"B_{}_gcrs_nT"`: `B_x_gcrs_nT`, `B_y_gcrs_nT`, `B_z_gcrs_nT`).
+    ///
+    /// # Errors
+    /// Missing columns or bad cells.
+    pub fn xyz(&self, row: usize, pattern: &str) -> anyhow::Result<nalgebra::Vector3<f64>> {
+        let [x, y, z] = ["x", "y", "z"].map(|axis| pattern.replace("{}", axis));
+        self.vec3(row, [&x, &y, &z])
+    }
 }
 
 #[cfg(test)]

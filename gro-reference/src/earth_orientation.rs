@@ -253,12 +253,8 @@ mod tests {
         let mut max_km = 0.0_f64;
         for row in 0..t.len() {
             let epoch = epoch0 + hifitime::Unit::Second * t.f64(row, ts).unwrap();
-            let gcrs = t
-                .vec3(row, ["x_gcrs_km", "y_gcrs_km", "z_gcrs_km"])
-                .unwrap();
-            let itrs = t
-                .vec3(row, ["x_itrs_km", "y_itrs_km", "z_itrs_km"])
-                .unwrap();
+            let gcrs = t.xyz(row, "{}_gcrs_km").unwrap();
+            let itrs = t.xyz(row, "{}_itrs_km").unwrap();
             let mine = itrs_from_gcrs_km(epoch, &gcrs);
             max_km = max_km.max((mine - itrs).norm());
             max_arcsec = max_arcsec.max(mine.angle(&itrs) * ARCSEC_PER_RAD);

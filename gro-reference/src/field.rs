@@ -724,12 +724,8 @@ mod tests {
             let theirs = t.vec3(row, ["B_N_nT", "B_E_nT", "B_D_nT"]).unwrap();
             err_ned.push((ned - theirs).norm());
             // ITRS axes at the reference's ITRS position.
-            let pos = t
-                .vec3(row, ["x_itrs_km", "y_itrs_km", "z_itrs_km"])
-                .unwrap();
-            let theirs = t
-                .vec3(row, ["B_x_itrs_nT", "B_y_itrs_nT", "B_z_itrs_nT"])
-                .unwrap();
+            let pos = t.xyz(row, "{}_itrs_km").unwrap();
+            let theirs = t.xyz(row, "B_{}_itrs_nT").unwrap();
             err_itrs.push((c.field_itrs_nt(&pos) - theirs).norm());
         }
         let (sph_max, sph_rms) = stats(&err_sph);
@@ -803,12 +799,8 @@ mod tests {
         let mut errs = Vec::new();
         let mut errs_no_dut1 = Vec::new();
         for row in 0..t.len() {
-            let pos = t
-                .vec3(row, ["x_gcrs_km", "y_gcrs_km", "z_gcrs_km"])
-                .unwrap();
-            let theirs = t
-                .vec3(row, ["B_x_gcrs_nT", "B_y_gcrs_nT", "B_z_gcrs_nT"])
-                .unwrap();
+            let pos = t.xyz(row, "{}_gcrs_km").unwrap();
+            let theirs = t.xyz(row, "B_{}_gcrs_nT").unwrap();
             let epoch = row_epoch(&t, row);
             let mine = field_gcrs_nt(&model, epoch, &pos).unwrap();
             errs.push((mine - theirs).norm());

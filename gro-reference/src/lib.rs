@@ -8,10 +8,12 @@
 //!   scales, the telemetry time code), [`sun`] (VSOP87 Earth, apparent Sun), [`sky`]
 //!   (Hipparcos with proper motion, parallax, aberration, cone search), [`aberration`],
 //!   [`field`] (IGRF synthesis, DGRF 1990/1995) and [`earth_orientation`] (GCRS ↔ ITRS);
-//! - reference data: [`data`] (the `data/` CSV reader, the Hipparcos subset embedded once);
-//! - the run-folder contract: [`run_folder`] (`metadata.json`, with its JSON Schema in
-//!   `docs/schema/`), [`manifest`] (`tables/manifest.json`), [`outdir`] (whole-or-nothing
-//!   output folders), [`exit`] (exit codes from the error's type).
+//! - reference data: [`data`] (the `data/` CSV reader, the Hipparcos subset embedded once),
+//!   [`paper`] (the paper's published facts, `data/gro_paper.toml`, parsed once);
+//! - the run-folder contract: [`run_folder`] (`metadata.json` and the simulator's
+//!   `truth.json`, with their JSON Schemas in `docs/schema/`), [`manifest`]
+//!   (`tables/manifest.json`), [`outdir`] (whole-or-nothing output folders), [`exit`] (exit
+//!   codes from the error's type).
 //!
 //! What may import it: `sim-harness` (which re-exports these modules under their old paths),
 //! `ground-tool` and `tests`. It imports only `fsw-core` (units, time codes, table images).
@@ -24,6 +26,7 @@ pub mod exit;
 pub mod field;
 pub mod manifest;
 pub mod outdir;
+pub mod paper;
 pub mod provenance;
 pub mod run_folder;
 pub mod sky;

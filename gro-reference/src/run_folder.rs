@@ -1,4 +1,4 @@
-//! # The run folder's `metadata.json`, defined once (docs/icd.md §5)
+//! # The run folder's `metadata.json` and `truth.json`, defined once (docs/icd.md §5)
 //!
 //! Why: the file was written by untyped `json!` in the simulator, read by a typed struct in
 //! `calibrate` and by walking untyped JSON in the flown-table lookup and the ICD check: three
@@ -12,6 +12,10 @@
 //! (`tests/icd/write_run.py`) or `{}` still reads: an absent key means the GRO value the field
 //! names. Unknown keys are ignored; a key of the wrong type is refused (exit code 2, the
 //! message names the file and the field).
+//!
+//! `truth.json` ([`Truth`], `docs/schema/truth.schema.json`) had the same history: written by
+//! `json!` in `sim-harness run`, read by walking JSON in every scorer. It is scoring only:
+//! the calibration and the diagnosis never read it.
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -21,6 +25,7 @@ use fsw_core::units::{ARCSEC_PER_RAD, RAD_PER_ARCSEC};
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
+use crate::paper::Rows3;
 use crate::InputError;
 
 /// File name of the metadata inside a run folder.
@@ -351,6 +356,7 @@ pub fn schemas() -> Vec<(&'static str, String)> {
             "tables-manifest.schema.json",
             pretty(schemars::schema_for!(crate::manifest::Manifest)),
         ),
+        ("truth.schema.json", pretty(schemars::schema_for!(Truth))),
     ]
 }
 
@@ -465,4 +471,252 @@ mod tests {
         assert!((c[4] - 30.0).abs() < 1e-9 && (c[5] - 20.0).abs() < 1e-9);
         assert!(!HeadSpread::default().any() && h.any());
     }
+}
+
+/// File name of the simulator's truth inside a run folder: scoring only, never read by the
+/// calibration or the diagnosis.
+pub const TRUTH_FILE: &str = "truth.json";
+
+/// One value per attitude sensor, keyed FHST1, FHST2, FSS1, FSS2 in the file.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct PerSensor<T> {
+    /// FHST1.
+    #[serde(rename = "FHST1")]
+    pub fhst1: T,
+    /// FHST2.
+    #[serde(rename = "FHST2")]
+    pub fhst2: T,
+    /// FSS1.
+    #[serde(rename = "FSS1")]
+    pub fss1: T,
+    /// FSS2.
+    #[serde(rename = "FSS2")]
+    pub fss2: T,
+}
+
+impl<T> PerSensor<T> {
+    /// From the four values in sensor order (FHST1, FHST2, FSS1, FSS2).
+    #[must_use]
+    pub fn from_array([fhst1, fhst2, fss1, fss2]: [T; 4]) -> Self {
+        Self {
+            fhst1,
+            fhst2,
+            fss1,
+            fss2,
+        }
+    }
+
+    /// The four values in sensor order (FHST1, FHST2, FSS1, FSS2).
+    #[must_use]
+    pub fn into_array(self) -> [T; 4] {
+        [self.fhst1, self.fhst2, self.fss1, self.fss2]
+    }
+
+    /// The value of the sensor named `id` (`FHST1` … `FSS2`).
+    #[must_use]
+    pub fn get(&self, id: &str) -> Option<&T> {
+        match id {
+            "FHST1" => Some(&self.fhst1),
+            "FHST2" => Some(&self.fhst2),
+            "FSS1" => Some(&self.fss1),
+            "FSS2" => Some(&self.fss2),
+            _ => None,
+        }
+    }
+}
+
+/// `truth.json`: what the simulator flew, for scoring (`sim-harness run` writes it; the
+/// scorers of the `tests` crate read it). `S` is the scenario as flown and `H` one FSS head's
+/// transfer-function coefficients: the simulator's own types when it writes, JSON values for
+/// a reader that does not carry the simulator (the default). Fields a run folder written
+/// before them lacks are optional or default to empty.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct Truth<S = serde_json::Value, H = serde_json::Value> {
+    /// Scenario name.
+    #[serde(default)]
+    pub scenario: String,
+    /// Seed of the run.
+    #[serde(default)]
+    pub seed: u64,
+    /// The whole scenario as flown (each FSS with the transfer function it flew), so that a
+    /// scorer needs no scenario file of the same name.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scenario_as_flown: Option<S>,
+    /// True `M_AS` per sensor at the start (row-major, without thermal drift).
+    pub alignments: PerSensor<Rows3>,
+    /// The same with any alignment step of the run applied: what tables written after the
+    /// run fly into.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub alignments_after_run: Option<PerSensor<Rows3>>,
+    /// True misalignment from the paper's prelaunch alignment per sensor (ACS rotation
+    /// vector, arcsec).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub misalignment_from_prelaunch_acs_arcsec: Option<PerSensor<[f64; 3]>>,
+    /// The IRU's true geometry per triad.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub iru: Option<TruthIru>,
+    /// The true gyro bias over the run.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bias_history: Option<TruthBiasHistory>,
+    /// The transfer function each FSS flew.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fss_transfer_function: Option<TruthFssTransfer<H>>,
+    /// Effects active in the truth, by name (`sensor.effect` for per-unit hooks).
+    #[serde(default)]
+    pub present_effects: Vec<String>,
+    /// Present effects the run's metadata does not declare.
+    #[serde(default)]
+    pub undeclared_effects: Vec<String>,
+    /// The magnetometers' true errors.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tam: Option<TruthTams>,
+    /// The effect `tests`' injection added to a copied run folder (absent in a flown one).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub injected_effect: Option<String>,
+}
+
+impl<S: Serialize, H: Serialize> Truth<S, H> {
+    /// The file's JSON: keys in sorted order at every level (the order `json!` gave the
+    /// simulator's file before this type existed, so its bytes did not change).
+    ///
+    /// # Errors
+    /// A scenario or coefficient type that does not serialize to JSON.
+    pub fn to_json_value(&self) -> serde_json::Result<serde_json::Value> {
+        serde_json::to_value(self)
+    }
+}
+
+impl Truth {
+    /// Read `RUN_DIR/truth.json`; `None` when the run folder has none.
+    ///
+    /// # Errors
+    /// A present file that cannot be read or is not a truth (the message names the field).
+    pub fn read(run_dir: &Path) -> anyhow::Result<Option<Self>> {
+        let path = run_dir.join(TRUTH_FILE);
+        if !path.exists() {
+            return Ok(None);
+        }
+        let text = std::fs::read_to_string(&path)
+            .with_context(|| format!("reading {}", path.display()))?;
+        let mut de = serde_json::Deserializer::from_str(&text);
+        serde_path_to_error::deserialize(&mut de)
+            .map(Some)
+            .map_err(|e| {
+                anyhow::anyhow!(
+                    "{} is not a valid truth: field `{}`: {}",
+                    path.display(),
+                    e.path(),
+                    e.inner()
+                )
+            })
+    }
+}
+
+/// `truth.json` `iru`: the true geometry of both triads.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct TruthIru {
+    /// The primary triad (X2, Y1, Z1).
+    pub primary: TruthTriad,
+    /// The backup triad (X1, Y2, Z2).
+    pub backup: TruthTriad,
+    /// How `g` and `delta_m` map channel angles to ACS.
+    pub convention: String,
+}
+
+/// One IRU triad's true geometry.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct TruthTriad {
+    /// The channels, in the order of the triad's X, Y, Z.
+    pub channels: Vec<String>,
+    /// The prelaunch `G` (row-major).
+    pub g: Rows3,
+    /// The true `δM` (row-major): `Δθ_acs = (I + δM) g Δφ`.
+    pub delta_m: Rows3,
+    /// Per channel scale-factor error (ppm).
+    pub channel_scale_ppm: [f64; 3],
+    /// Per channel extra scale-factor error in high-rate mode (ppm).
+    pub high_rate_scale_ppm: [f64; 3],
+}
+
+/// `truth.json` `bias_history`: the true gyro bias, sampled.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct TruthBiasHistory {
+    /// Spacing of the samples (s).
+    pub period_s: f64,
+    /// What the samples are.
+    pub note: String,
+    /// The samples.
+    pub samples: Vec<TruthBiasSample>,
+}
+
+/// One true-bias sample.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct TruthBiasSample {
+    /// Time since the start (s).
+    pub t_s: f64,
+    /// The primary triad's bias mapped to ACS through the true triad geometry (rad/s).
+    pub bias_acs_rad_per_s: [f64; 3],
+    /// The backup triad's, likewise (rad/s).
+    pub backup_bias_acs_rad_per_s: [f64; 3],
+    /// Every channel's bias in raw channel order X1, X2, Y1, Y2, Z1, Z2 (rad/s).
+    pub channel_bias_rad_per_s: [f64; fsw_core::raw::IRU_CHANNELS],
+}
+
+/// `truth.json` `fss_transfer_function`: each FSS's two heads as flown.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct TruthFssTransfer<H = serde_json::Value> {
+    /// FSS1.
+    #[serde(rename = "FSS1")]
+    pub fss1: TruthFssUnit<H>,
+    /// FSS2.
+    #[serde(rename = "FSS2")]
+    pub fss2: TruthFssUnit<H>,
+    /// Where the coefficients come from.
+    pub note: String,
+}
+
+/// One FSS's heads as flown.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct TruthFssUnit<H = serde_json::Value> {
+    /// α head.
+    pub alpha: H,
+    /// β head.
+    pub beta: H,
+}
+
+/// `truth.json` `tam`: the primary TAM at the top level, TAM2 under `tam2`.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct TruthTams {
+    /// The primary TAM (TAM1).
+    #[serde(flatten)]
+    pub tam1: TruthTam,
+    /// TAM2.
+    pub tam2: TruthTam,
+    /// Axes and units.
+    pub note: String,
+}
+
+/// One TAM's true errors (sensor axes, mG; 1 mG = 100 nT).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct TruthTam {
+    /// Bias (mG).
+    #[serde(rename = "bias_mG")]
+    pub bias_milligauss: [f64; 3],
+    /// What a bias fit with the torquer bars off recovers: the bias plus the residual field
+    /// as the TAM sees it (mG).
+    #[serde(rename = "effective_bias_mG")]
+    pub effective_bias_milligauss: [f64; 3],
+    /// Scale-factor error per axis (ppm).
+    pub scale_ppm: [f64; 3],
+    /// Misalignment (ACS rotation vector, arcsec).
+    pub misalignment_acs_arcsec: [f64; 3],
+    /// The spacecraft's residual field (ACS, mG).
+    #[serde(rename = "residual_field_acs_mG")]
+    pub residual_field_acs_milligauss: [f64; 3],
+    /// White noise 1σ (mG).
+    #[serde(rename = "noise_mG_1sigma")]
+    pub noise_milligauss_1sigma: f64,
+    /// Quantisation step (mG per count).
+    #[serde(rename = "resolution_mG_per_count")]
+    pub resolution_milligauss_per_count: f64,
 }

@@ -455,11 +455,12 @@ mod tests {
     use fsw_core::units::ARCSEC_PER_RAD;
 
     fn sky() -> Sky {
-        Sky::load(
-            &data_dir().join("hipparcos_mag6p5.csv"),
-            &SkyParams::default(),
-        )
-        .unwrap()
+        sky_with(SkyParams::default())
+    }
+
+    /// The shipped catalog loaded with `params`.
+    fn sky_with(params: SkyParams) -> Sky {
+        Sky::load(&data_dir().join("hipparcos_mag6p5.csv"), &params).unwrap()
     }
 
     fn angle_mas(a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
@@ -481,12 +482,10 @@ mod tests {
             let hip: u32 = t.text(row, hip_c).parse().unwrap();
             let star = sky.star(sky.index_of_hip(hip).unwrap()).unwrap();
             let s = (t.f64(row, jd_c).unwrap() - JD_J2000) * 86_400.0;
-            let cat = t.vec3(row, ["cat_x", "cat_y", "cat_z"]).unwrap();
-            let astr = t.vec3(row, ["astr_x", "astr_y", "astr_z"]).unwrap();
-            let app = t.vec3(row, ["app_x", "app_y", "app_z"]).unwrap();
-            let v = t
-                .vec3(row, ["earth_vx_kms", "earth_vy_kms", "earth_vz_kms"])
-                .unwrap();
+            let cat = t.xyz(row, "cat_{}").unwrap();
+            let astr = t.xyz(row, "astr_{}").unwrap();
+            let app = t.xyz(row, "app_{}").unwrap();
+            let v = t.xyz(row, "earth_v{}_kms").unwrap();
             let sun = sun_state(s);
             max_cat = max_cat.max(angle_mas(&star.dir_cat_eci, &cat));
             let mine_astr = star.astrometric_dir_eci(s, &sun.earth_pos_bary_eci_km);
@@ -545,32 +544,17 @@ mod tests {
     /// Eligible FHST stars (2.0 ≤ m ≤ 5.7) and their density, for the record.
     #[test]
     fn fhst_window_star_count() {
-        let sky = Sky::load(
-            &data_dir().join("hipparcos_mag6p5.csv"),
-            &SkyParams {
-                magnitude_system: MagnitudeSystem::V,
+        let count = |magnitude_system| {
+            let sky = sky_with(SkyParams {
+                magnitude_system,
                 ..SkyParams::default()
-            },
-        )
-        .unwrap();
-        let n = sky
-            .stars()
-            .iter()
-            .filter(|s| (2.0..=5.7).contains(&s.magnitude))
-            .count();
-        let hp = Sky::load(
-            &data_dir().join("hipparcos_mag6p5.csv"),
-            &SkyParams {
-                magnitude_system: MagnitudeSystem::Hp,
-                ..SkyParams::default()
-            },
-        )
-        .unwrap();
-        let n_hp = hp
-            .stars()
-            .iter()
-            .filter(|s| (2.0..=5.7).contains(&s.magnitude))
-            .count();
+            });
+            sky.stars()
+                .iter()
+                .filter(|s| (2.0..=5.7).contains(&s.magnitude))
+                .count()
+        };
+        let (n, n_hp) = (count(MagnitudeSystem::V), count(MagnitudeSystem::Hp));
         eprintln!(
             "FHST-eligible stars: {n} in V, {n_hp} in Hp; {:.2} per 8x8 deg FOV (Hp)",
             n_hp as f64 * 64.0 / 41_253.0
@@ -581,14 +565,10 @@ mod tests {
 
     #[test]
     fn proper_motion_hooks() {
-        let frozen = Sky::load(
-            &data_dir().join("hipparcos_mag6p5.csv"),
-            &SkyParams {
-                proper_motion_scale: 0.0,
-                ..SkyParams::default()
-            },
-        )
-        .unwrap();
+        let frozen = sky_with(SkyParams {
+            proper_motion_scale: 0.0,
+            ..SkyParams::default()
+        });
         let normal = sky();
         let i = normal.index_of_hip(71683).unwrap();
         let j = frozen.index_of_hip(71683).unwrap();
@@ -599,14 +579,10 @@ mod tests {
             &frozen.star(j).unwrap().astrometric_dir_eci(s, &zero),
         );
         assert!((d - 3700.0).abs() < 200.0, "α Cen A moves ~3.7″/yr: {d}");
-        let noisy = Sky::load(
-            &data_dir().join("hipparcos_mag6p5.csv"),
-            &SkyParams {
-                proper_motion_error_sigma_mas_per_yr: 10.0,
-                ..SkyParams::default()
-            },
-        )
-        .unwrap();
+        let noisy = sky_with(SkyParams {
+            proper_motion_error_sigma_mas_per_yr: 10.0,
+            ..SkyParams::default()
+        });
         let k = noisy.index_of_hip(71683).unwrap();
         let e = angle_mas(
             &normal.star(i).unwrap().astrometric_dir_eci(s, &zero),

@@ -375,12 +375,10 @@ mod tests {
         for row in 0..t.len() {
             let s = (t.f64(row, jd).unwrap() - JD_J2000) * 86_400.0;
             let st = sun_state(s);
-            let geo = t.vec3(row, ["geo_x", "geo_y", "geo_z"]).unwrap();
-            let astr = t.vec3(row, ["astr_x", "astr_y", "astr_z"]).unwrap();
-            let app = t.vec3(row, ["app_x", "app_y", "app_z"]).unwrap();
-            let v = t
-                .vec3(row, ["earth_vx_kms", "earth_vy_kms", "earth_vz_kms"])
-                .unwrap();
+            let geo = t.xyz(row, "geo_{}").unwrap();
+            let astr = t.xyz(row, "astr_{}").unwrap();
+            let app = t.xyz(row, "app_{}").unwrap();
+            let v = t.xyz(row, "earth_v{}_kms").unwrap();
             max_geo = max_geo.max(angle_arcsec(&st.geometric_dir_eci(), &geo));
             max_astr = max_astr.max(angle_arcsec(
                 &st.astrometric_from_km(&Vector3::zeros()),

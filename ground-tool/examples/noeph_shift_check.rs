@@ -251,11 +251,9 @@ fn star_segments(r: &Runs, show: Option<&str>) -> anyhow::Result<()> {
     } = r;
     // Star segments of the batches that move θ most: which stars, where in the field, and
     // the reference change (with − without ephemeris) in sensor axes.
-    let m: Vec<nalgebra::Matrix3<f64>> = AlignmentTable::prelaunch()
+    let m = AlignmentTable::prelaunch()
         .matrices()
-        .iter()
-        .map(|r| fsw_core::tables::types::matrix_from_rows(r))
-        .collect();
+        .map(fsw_core::tables::types::matrix_from_rows);
     let show: Vec<usize> = show.map_or(vec![], |s| {
         s.split(',').filter_map(|x| x.parse().ok()).collect()
     });

@@ -490,16 +490,8 @@ fn iru_findings(tm: &Telemetry, t0: f64, active: [usize; 3], out: &mut Vec<Findi
 
 /// Gaps in the raw frames, and gaps across which the gyro counter difference has wrapped.
 fn gap_findings(tm: &Telemetry, t0: f64, active: [usize; 3], out: &mut Vec<Finding>) {
-    // Gaps.
-    let mut steps: Vec<f64> = tm
-        .raw
-        .windows(2)
-        .map(|w| w[1].time.seconds() - w[0].time.seconds())
-        .filter(|d| *d > 0.0)
-        .collect();
-    if !steps.is_empty() {
-        steps.sort_by(f64::total_cmp);
-        let median = steps[steps.len() / 2];
+    // Gaps: longer than GAP_CYCLES median frame spacings.
+    if let Some(median) = crate::calibration::allan::median_spacing_s(tm) {
         let gaps: Vec<(f64, f64)> = tm
             .raw
             .windows(2)

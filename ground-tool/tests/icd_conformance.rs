@@ -43,6 +43,15 @@ impl Outcome {
     }
 }
 
+/// The ICD writer's run `case` with `flags`, and `ground-tool calibrate` on it, which exits
+/// with `rc`.
+fn calibrate_case(case: &str, flags: &[&str], rc: i32) -> (PathBuf, Outcome) {
+    let run = write_run(case, flags);
+    let o = ground_tool("calibrate", &run);
+    o.assert_rc(rc);
+    (run, o)
+}
+
 fn ground_tool(cmd: &str, run: &Path) -> Outcome {
     let out_dir = run.join(format!("out-{cmd}"));
     let out = support::ground_tool(
@@ -241,49 +250,37 @@ fn icd_housekeeping_absent_or_sparse() {
         assert_fhst_relative_ok(&r, &t, case);
     }
     // Housekeeping whose time codes match no raw frame is as good as none, and said so.
-    let run = write_run("hk-offset", &["--hk-offset-s", "0.5"]);
-    let o = ground_tool("calibrate", &run);
-    o.assert_rc(0);
+    let (_, o) = calibrate_case("hk-offset", &["--hk-offset-s", "0.5"], 0);
     assert!(has_check(&o, "housekeeping_unmatched"), "{}", o.stderr);
 }
 
 /// Ephemeris absent or too sparse: calibrated, with a warning naming APID 0x020.
 #[test]
 fn icd_ephemeris_absent_or_sparse_is_warned() {
-    let run = write_run("eph-300", &["--eph-period", "300"]);
-    let o = ground_tool("calibrate", &run);
-    o.assert_rc(0);
+    let (run, o) = calibrate_case("eph-300", &["--eph-period", "300"], 0);
     assert!(
         !has_check(&o, "orbit_missing"),
         "300 s records interpolate: {:?}",
         o.checks
     );
     assert_fhst_relative_ok(&o.report.clone().unwrap(), &truth(&run), "eph-300");
-    let run = write_run("eph-900", &["--eph-period", "900"]);
-    let o = ground_tool("calibrate", &run);
-    o.assert_rc(0);
+    let (_, o) = calibrate_case("eph-900", &["--eph-period", "900"], 0);
     assert!(has_check(&o, "orbit_missing"), "{}", o.stderr);
     o.assert_says("APID 0x020");
-    let run = write_run("no-eph", &["--no-eph"]);
-    let o = ground_tool("calibrate", &run);
-    o.assert_rc(0);
+    let (_, o) = calibrate_case("no-eph", &["--no-eph"], 0);
     o.assert_says("no ephemeris packets (APID 0x020)");
 }
 
 /// One sensor absent for the whole run.
 #[test]
 fn icd_one_sensor_missing() {
-    let run = write_run("no-fss2", &["--missing", "FSS2"]);
-    let o = ground_tool("calibrate", &run);
-    o.assert_rc(0);
+    let (run, o) = calibrate_case("no-fss2", &["--missing", "FSS2"], 0);
     o.assert_says("FSS2 has no usable sample");
     let r = o.report.clone().unwrap();
     assert_eq!(r["data"]["sun_samples"][1], 0);
     assert_fhst_relative_ok(&r, &truth(&run), "no-fss2");
 
-    let run = write_run("no-fhst1", &["--missing", "FHST1"]);
-    let o = ground_tool("calibrate", &run);
-    o.assert_rc(2);
+    let (run, o) = calibrate_case("no-fhst1", &["--missing", "FHST1"], 2);
     o.assert_says("FHST1 has no usable sample");
     o.assert_says("FFCAL needs both FHSTs");
     // diagnose still analyses what it can, and says the chain could not run.
@@ -307,9 +304,7 @@ fn icd_invalid_flags_for_long_stretches() {
         identified(&r)
     );
     assert_fhst_relative_ok(&r, &t, "fhst1-invalid");
-    let run = write_run("fss1-invalid", &["--invalid", "FSS1:0:100000"]);
-    let o = ground_tool("calibrate", &run);
-    o.assert_rc(0);
+    let (_, o) = calibrate_case("fss1-invalid", &["--invalid", "FSS1:0:100000"], 0);
     o.assert_says("FSS1 has no usable sample");
 }
 
@@ -317,15 +312,11 @@ fn icd_invalid_flags_for_long_stretches() {
 /// reason (and, for low-rate slews, the fix).
 #[test]
 fn icd_no_iru_intervals() {
-    let run = write_run("no-slews", &["--no-slews", "--duration", "2400"]);
-    let o = ground_tool("calibrate", &run);
-    o.assert_rc(0);
+    let (_, o) = calibrate_case("no-slews", &["--no-slews", "--duration", "2400"], 0);
     let r = o.report.clone().unwrap();
     assert!(r["maneuvers"].as_array().unwrap().is_empty());
     assert!(r["iru_skipped"].as_str().unwrap().contains("maneuvers"));
-    let run = write_run("low-rate-slews", &["--low-rate-slews"]);
-    let o = ground_tool("calibrate", &run);
-    o.assert_rc(0);
+    let (_, o) = calibrate_case("low-rate-slews", &["--low-rate-slews"], 0);
     assert!(has_check(&o, "no_high_rate_frames"), "{}", o.stderr);
     o.assert_says("--maneuver");
 }
@@ -339,9 +330,7 @@ fn icd_very_short_runs_are_insufficient_input() {
         assert_eq!(o.rc, 2, "{cmd}: {}", o.stderr);
         o.assert_says("only 1 raw sensor frames");
     }
-    let run = write_run("two-minutes", &["--no-slews", "--duration", "120"]);
-    let o = ground_tool("calibrate", &run);
-    o.assert_rc(2);
+    let (_, o) = calibrate_case("two-minutes", &["--no-slews", "--duration", "120"], 2);
     o.assert_says("FFCAL needs both FHSTs");
 }
 
@@ -378,9 +367,7 @@ fn icd_epoch_2025() {
 /// Gaps in time: calibrated, warned; a gap during a slew is named as a wrong gyro increment.
 #[test]
 fn icd_gaps_in_time() {
-    let run = write_run("gaps", &["--gap", "1500:300", "--gap", "3000:200"]);
-    let o = ground_tool("calibrate", &run);
-    o.assert_rc(0);
+    let (run, o) = calibrate_case("gaps", &["--gap", "1500:300", "--gap", "3000:200"], 0);
     assert!(has_check(&o, "time_gaps"));
     assert!(
         !has_check(&o, "gyro_increment_ambiguous"),
@@ -388,9 +375,7 @@ fn icd_gaps_in_time() {
         o.checks
     );
     assert_fhst_relative_ok(&o.report.clone().unwrap(), &truth(&run), "gaps");
-    let run = write_run("gap-in-slew", &["--gap", "1000:200"]);
-    let o = ground_tool("calibrate", &run);
-    o.assert_rc(0);
+    let (run, o) = calibrate_case("gap-in-slew", &["--gap", "1000:200"], 0);
     assert!(has_check(&o, "gyro_increment_ambiguous"), "{}", o.stderr);
     // The slew across the gap has no gyro step there, so it is not an IRUCAL interval (before:
     // a silently wrong bias, X −30.7″/s against the true 0.30″/s).
@@ -432,9 +417,7 @@ fn icd_extreme_valid_values() {
 /// integrator takes for stuck channels; the check says so.
 #[test]
 fn icd_noiseless_gyro_is_warned() {
-    let run = write_run("quiet-iru", &["--quiet-iru"]);
-    let o = ground_tool("calibrate", &run);
-    o.assert_rc(0);
+    let (_, o) = calibrate_case("quiet-iru", &["--quiet-iru"], 0);
     assert!(has_check(&o, "iru_channel_unchanged"), "{}", o.stderr);
 }
 

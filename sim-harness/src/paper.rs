@@ -1,15 +1,18 @@
 //! # The GRO paper's facts used by the truth models (data/gro_paper.toml)
 //!
 //! The file is embedded at compile time so that a simulation never runs against a missing
-//! or different copy. Matrices are row-major; `M_AS` maps sensor to ACS (gro_paper.toml
-//! header, fsw_core::attitude).
+//! or different copy, and parsed by its one typed definition, shared with the ground
+//! (`gro_reference::paper::PaperData`); this module picks what the truth models need, as
+//! matrices. Matrices are row-major; `M_AS` maps sensor to ACS (gro_paper.toml header,
+//! fsw_core::attitude).
 
 use nalgebra::{Matrix3, Vector3};
 
 use fsw_core::raw::IRU_CHANNELS;
+use gro_reference::paper::{mat, PaperData};
 
 /// The embedded gro_paper.toml text.
-pub const GRO_PAPER_TOML: &str = include_str!("../../data/gro_paper.toml");
+pub use gro_reference::paper::GRO_PAPER_TOML;
 
 /// Facts the truth models need.
 #[derive(Clone, Debug, PartialEq)]
@@ -28,51 +31,6 @@ pub struct PaperFacts {
     pub iru_delta_m: Matrix3<f64>,
     /// Published high-rate biases (deg/s), channel order X1, X2, Y1, Y2, Z1, Z2.
     pub iru_bias_deg_per_s: [f64; IRU_CHANNELS],
-}
-
-fn get<'a>(v: &'a toml::Value, path: &[&str]) -> anyhow::Result<&'a toml::Value> {
-    let mut cur = v;
-    for key in path {
-        cur = cur
-            .get(key)
-            .ok_or_else(|| anyhow::anyhow!("gro_paper.toml: missing {}", path.join(".")))?;
-    }
-    Ok(cur)
-}
-
-fn number(v: &toml::Value, what: &str) -> anyhow::Result<f64> {
-    v.as_float()
-        .or_else(|| v.as_integer().map(|i| i as f64))
-        .ok_or_else(|| anyhow::anyhow!("gro_paper.toml: {what} is not a number"))
-}
-
-fn matrix(v: &toml::Value, path: &[&str]) -> anyhow::Result<Matrix3<f64>> {
-    let rows = get(v, path)?
-        .as_array()
-        .filter(|r| r.len() == 3)
-        .ok_or_else(|| anyhow::anyhow!("gro_paper.toml: {} is not 3 rows", path.join(".")))?;
-    let mut m = Matrix3::zeros();
-    for (r, row) in rows.iter().enumerate() {
-        let cols = row.as_array().filter(|c| c.len() == 3).ok_or_else(|| {
-            anyhow::anyhow!("gro_paper.toml: {} row {r} is not 3 wide", path.join("."))
-        })?;
-        for (c, x) in cols.iter().enumerate() {
-            m[(r, c)] = number(x, &path.join("."))?;
-        }
-    }
-    Ok(m)
-}
-
-fn vector(v: &toml::Value, path: &[&str]) -> anyhow::Result<Vector3<f64>> {
-    let a = get(v, path)?
-        .as_array()
-        .filter(|a| a.len() == 3)
-        .ok_or_else(|| anyhow::anyhow!("gro_paper.toml: {} is not a 3-vector", path.join(".")))?;
-    Ok(Vector3::new(
-        number(&a[0], "x")?,
-        number(&a[1], "y")?,
-        number(&a[2], "z")?,
-    ))
 }
 
 /// Sensor slots of [`PaperFacts::m_sensor_from_sensor_adj`] and
@@ -115,40 +73,45 @@ impl PaperFacts {
     /// # Errors
     /// A missing or malformed key (named).
     pub fn parse(text: &str) -> anyhow::Result<Self> {
-        let v: toml::Value = toml::from_str(text)?;
-        let t1 = "table1_prelaunch";
-        let t2 = "table2_misalignment";
-        let rv = "rotation_vectors_published_arcsec";
+        Self::from_paper(&PaperData::parse(text)?)
+    }
+
+    /// The facts of the parsed transcription.
+    ///
+    /// # Errors
+    /// A sensor or IRU channel missing from a table (named).
+    pub fn from_paper(p: &PaperData) -> anyhow::Result<Self> {
+        let missing = |what: String| anyhow::anyhow!("gro_paper.toml: missing {what}");
+        let t1 = |id: &str| {
+            p.prelaunch(id)
+                .ok_or_else(|| missing(format!("table1_prelaunch.{id}")))
+        };
+        let t2 = |id: &str| {
+            p.misalignment(id)
+                .ok_or_else(|| missing(format!("table2_misalignment.{id}")))
+        };
+        let rv = |id: &str| {
+            p.rotation_vector_published_arcsec(id)
+                .ok_or_else(|| missing(format!("rotation_vectors_published_arcsec.{id}")))
+        };
         let mut bias = [0.0; IRU_CHANNELS];
         for (i, name) in fsw_core::raw::IRU_CHANNEL_NAMES.iter().enumerate() {
-            let section = if ["X2", "Y1", "Z1"].contains(name) {
+            let triad = if ["X2", "Y1", "Z1"].contains(name) {
                 "primary"
             } else {
                 "backup"
             };
-            let pair = get(&v, &["iru_high_rate_bias_deg_per_s", section, name])?
-                .as_array()
-                .and_then(|a| a.first())
-                .ok_or_else(|| anyhow::anyhow!("gro_paper.toml: bias {name} malformed"))?;
-            bias[i] = number(pair, name)?;
+            bias[i] = p
+                .high_rate_bias_deg_per_s(triad, name)
+                .ok_or_else(|| missing(format!("iru_high_rate_bias_deg_per_s.{triad}.{name}")))?[0];
         }
         Ok(Self {
-            m_acs_from_fhst_prelaunch: [matrix(&v, &[t1, "FHST1"])?, matrix(&v, &[t1, "FHST2"])?],
-            m_acs_from_fss_prelaunch: [matrix(&v, &[t1, "FSS1"])?, matrix(&v, &[t1, "FSS2"])?],
-            m_sensor_from_sensor_adj: [
-                matrix(&v, &[t2, "FHST1"])?,
-                matrix(&v, &[t2, "FHST2"])?,
-                matrix(&v, &[t2, "FSS1"])?,
-                matrix(&v, &[t2, "FSS2"])?,
-            ],
-            rotation_vectors_arcsec: [
-                vector(&v, &[rv, "FHST1"])?,
-                vector(&v, &[rv, "FHST2"])?,
-                vector(&v, &[rv, "FSS1"])?,
-                vector(&v, &[rv, "FSS2"])?,
-            ],
-            iru_g: matrix(&v, &["iru_prelaunch", "G"])?,
-            iru_delta_m: matrix(&v, &["iru_calibration_published", "delta_M"])?,
+            m_acs_from_fhst_prelaunch: [t1("FHST1")?, t1("FHST2")?],
+            m_acs_from_fss_prelaunch: [t1("FSS1")?, t1("FSS2")?],
+            m_sensor_from_sensor_adj: [t2("FHST1")?, t2("FHST2")?, t2("FSS1")?, t2("FSS2")?],
+            rotation_vectors_arcsec: [rv("FHST1")?, rv("FHST2")?, rv("FSS1")?, rv("FSS2")?],
+            iru_g: mat(&p.iru_prelaunch.g),
+            iru_delta_m: mat(&p.iru_calibration_published.delta_m),
             iru_bias_deg_per_s: bias,
         })
     }

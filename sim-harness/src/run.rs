@@ -8,7 +8,7 @@
 //! | `telemetry.bin` | CCSDS packets ([`crate::telemetry`]) |
 //! | `metadata.json` | what the operator declares ([`gro_reference::run_folder::Metadata`], schema `docs/schema/metadata.schema.json`): `scenario`, `epoch_utc`, `cycle_period_s`, `sensors` (declared noise from the scenario's sensor parameters), `declared_effects`, `boot_tables`, `uploads`, and the simulated spacecraft's identity `spacecraft` ([`crate::provenance`]) |
 //! | `uploads/*.tbl` | every table image uplinked (catalog, `--tables`, timeline loads) |
-//! | `truth.json` | scoring only: true `alignments.{FHST1,FHST2,FSS1,FSS2}` (`M_AS`, row-major; at the start, without thermal drift), `alignments_after_run` (the same with any alignment step of the run applied: what tables written after the run fly into), IRU `delta_m` and `g` per configuration, `bias_history`, the flown `fss_transfer_function`, `scenario_as_flown` (the whole scenario, each FSS with the transfer function it flew), `present_effects`, `undeclared_effects`, `tam` (the magnetometers' true errors, [`crate::sensors::tam::truth_json`]: `tam.bias_mG` is the primary TAM's bias) |
+//! | `truth.json` | scoring only ([`gro_reference::run_folder::Truth`], schema `docs/schema/truth.schema.json`): true `alignments.{FHST1,FHST2,FSS1,FSS2}` (`M_AS`, row-major; at the start, without thermal drift), `alignments_after_run` (the same with any alignment step of the run applied: what tables written after the run fly into), IRU `delta_m` and `g` per configuration, `bias_history`, the flown `fss_transfer_function`, `scenario_as_flown` (the whole scenario, each FSS with the transfer function it flew), `present_effects`, `undeclared_effects`, `tam` (the magnetometers' true errors, [`crate::sensors::tam::truth_tams`]: `tam.bias_mG` is the primary TAM's bias) |
 //! | `summary.json` | run statistics ([`Summary`]); with `--tables`, `tables_provenance_warning` when the tables may belong to another spacecraft ([`crate::provenance`]) |
 //!
 //! Every file is written under a `.partial` name and renamed when complete; `summary.json`
@@ -36,7 +36,7 @@ use serde::{Deserialize, Serialize};
 use crate::closed_loop::{CycleRecord, Simulation};
 use crate::paper::PaperFacts;
 use crate::scenario::Scenario;
-use crate::sensors::fss::FssParams;
+use crate::sensors::fss::{FssHeadErrors, FssParams};
 use crate::sensors::iru::{BACKUP_CHANNELS, PRIMARY_CHANNELS};
 use crate::telemetry::PacketWriter;
 use crate::truth::time::utc_string;
@@ -46,7 +46,9 @@ use fsw_core::tables::TableId;
 use fsw_core::telemetry::{EphemerisRecord, MagneticsFrame, WheelFrame};
 use fsw_core::units::{ARCSEC_PER_RAD, RAD_PER_ARCSEC, RAD_PER_DEG};
 use gro_reference::run_folder::{
-    DeclaredNoise, HeadSpread, Metadata, TransferSpreads, UnitSpread, Upload, METADATA_FILE,
+    DeclaredNoise, HeadSpread, Metadata, PerSensor, TransferSpreads, Truth, TruthBiasHistory,
+    TruthBiasSample, TruthFssTransfer, TruthFssUnit, TruthIru, TruthTriad, UnitSpread, Upload,
+    METADATA_FILE, TRUTH_FILE,
 };
 
 /// Start of the scored window (s): the filter has converged from its initial error.
@@ -468,7 +470,7 @@ struct BiasRecorder {
     next_s: f64,
     w_primary_inv: Matrix3<f64>,
     w_backup_inv: Matrix3<f64>,
-    samples: Vec<serde_json::Value>,
+    samples: Vec<TruthBiasSample>,
 }
 
 impl BiasRecorder {
@@ -505,12 +507,12 @@ impl BiasRecorder {
         let triad = |chs: [usize; 3]| Vector3::new(ch[chs[0]], ch[chs[1]], ch[chs[2]]);
         let p = self.w_primary_inv * triad(PRIMARY_CHANNELS);
         let b = self.w_backup_inv * triad(BACKUP_CHANNELS);
-        self.samples.push(serde_json::json!({
-            "t_s": t_s,
-            "bias_acs_rad_per_s": [p.x, p.y, p.z],
-            "backup_bias_acs_rad_per_s": [b.x, b.y, b.z],
-            "channel_bias_rad_per_s": ch,
-        }));
+        self.samples.push(TruthBiasSample {
+            t_s,
+            bias_acs_rad_per_s: [p.x, p.y, p.z],
+            backup_bias_acs_rad_per_s: [b.x, b.y, b.z],
+            channel_bias_rad_per_s: ch,
+        });
     }
 }
 
@@ -744,14 +746,11 @@ pub fn declared_fss_spreads(s: &Scenario) -> Option<TransferSpreads> {
     )
 }
 
-fn truth_json(sim: &Simulation, bias: &BiasRecorder) -> anyhow::Result<serde_json::Value> {
+/// `truth.json` ([`Truth`], the one definition in `gro_reference::run_folder`).
+fn truth(sim: &Simulation, bias: &BiasRecorder) -> anyhow::Result<Truth<Scenario, FssHeadErrors>> {
     let s = sim.scenario();
     let paper = PaperFacts::load()?;
     let m = sim.true_alignments();
-    let names = crate::paper::SENSOR_NAMES;
-    let mut alignments = serde_json::Map::new();
-    let mut after_run = serde_json::Map::new();
-    let mut thetas = serde_json::Map::new();
     // The alignments at the end of the run (an alignment step applied if it happened within
     // the run): the truth the tables written after the run fly into.
     let end = s.duration_s;
@@ -761,19 +760,11 @@ fn truth_json(sim: &Simulation, bias: &BiasRecorder) -> anyhow::Result<serde_jso
         s.fss1.effects.alignment_step_rad(end),
         s.fss2.effects.alignment_step_rad(end),
     ];
-    for k in 0..4 {
-        alignments.insert(names[k].into(), serde_json::json!(rows(&m[k])));
-        after_run.insert(
-            names[k].into(),
-            serde_json::json!(rows(&(fsw_core::attitude::rot(&steps[k]) * m[k]))),
-        );
-        let theta = fsw_core::attitude::rotvec_from_rot(&(m[k] * paper.prelaunch(k).transpose()))
+    let theta = |k: usize| {
+        let t = fsw_core::attitude::rotvec_from_rot(&(m[k] * paper.prelaunch(k).transpose()))
             * ARCSEC_PER_RAD;
-        thetas.insert(
-            names[k].into(),
-            serde_json::json!([theta.x, theta.y, theta.z]),
-        );
-    }
+        [t.x, t.y, t.z]
+    };
     let dm_p = s
         .iru
         .delta_m_true_primary
@@ -783,44 +774,46 @@ fn truth_json(sim: &Simulation, bias: &BiasRecorder) -> anyhow::Result<serde_jso
     let mut as_flown = s.clone();
     as_flown.fss1 = s.fss1.as_flown(0, s.seed);
     as_flown.fss2 = s.fss2.as_flown(1, s.seed);
-    Ok(serde_json::json!({
-        "scenario": s.name,
-        "seed": s.seed,
-        "scenario_as_flown": serde_json::to_value(&as_flown)?,
-        "alignments": alignments,
-        "alignments_after_run": after_run,
-        "misalignment_from_prelaunch_acs_arcsec": thetas,
-        "iru": {
-            "primary": {
-                "channels": ["X2", "Y1", "Z1"],
-                "g": rows(&paper.iru_g),
-                "delta_m": dm_p,
-                "channel_scale_ppm": PRIMARY_CHANNELS.map(|c| s.iru.channel_scale_ppm[c]),
-                "high_rate_scale_ppm": PRIMARY_CHANNELS.map(|c| s.iru.high_rate_scale_ppm[c]),
-            },
-            "backup": {
-                "channels": ["X1", "Y2", "Z2"],
-                "g": rows(&paper.iru_g),
-                "delta_m": s.iru.delta_m_true_backup,
-                "channel_scale_ppm": BACKUP_CHANNELS.map(|c| s.iru.channel_scale_ppm[c]),
-                "high_rate_scale_ppm": BACKUP_CHANNELS.map(|c| s.iru.high_rate_scale_ppm[c]),
-            },
-            "convention": "Δθ_acs = (I + delta_m) g Δφ (channel angles X, Y, Z of the triad)",
-        },
-        "bias_history": {
-            "period_s": bias.period_s,
-            "note": "true gyro bias mapped to ACS through the true triad geometry; channel biases in raw channel order X1, X2, Y1, Y2, Z1, Z2",
-            "samples": bias.samples,
-        },
-        "fss_transfer_function": {
-            "FSS1": { "alpha": sim.fss()[0].params().alpha, "beta": sim.fss()[0].params().beta },
-            "FSS2": { "alpha": sim.fss()[1].params().alpha, "beta": sim.fss()[1].params().beta },
-            "note": "the transfer function each FSS flew (drawn from the scenario's spreads when transfer_function_per_seed)",
-        },
-        "present_effects": present_effects(s),
-        "undeclared_effects": undeclared_effects(s),
-        "tam": crate::sensors::tam::truth_json(&s.tam1, &s.tam2),
-    }))
+    let triad = |channels: [usize; 3], names: [&str; 3], delta_m| TruthTriad {
+        channels: names.map(str::to_owned).to_vec(),
+        g: rows(&paper.iru_g),
+        delta_m,
+        channel_scale_ppm: channels.map(|c| s.iru.channel_scale_ppm[c]),
+        high_rate_scale_ppm: channels.map(|c| s.iru.high_rate_scale_ppm[c]),
+    };
+    let unit = |k: usize| TruthFssUnit {
+        alpha: sim.fss()[k].params().alpha,
+        beta: sim.fss()[k].params().beta,
+    };
+    Ok(Truth {
+        scenario: s.name.clone(),
+        seed: s.seed,
+        scenario_as_flown: Some(as_flown),
+        alignments: PerSensor::from_array([0, 1, 2, 3].map(|k| rows(&m[k]))),
+        alignments_after_run: Some(PerSensor::from_array(
+            [0, 1, 2, 3].map(|k| rows(&(fsw_core::attitude::rot(&steps[k]) * m[k]))),
+        )),
+        misalignment_from_prelaunch_acs_arcsec: Some(PerSensor::from_array([0, 1, 2, 3].map(theta))),
+        iru: Some(TruthIru {
+            primary: triad(PRIMARY_CHANNELS, ["X2", "Y1", "Z1"], dm_p),
+            backup: triad(BACKUP_CHANNELS, ["X1", "Y2", "Z2"], s.iru.delta_m_true_backup),
+            convention: "Δθ_acs = (I + delta_m) g Δφ (channel angles X, Y, Z of the triad)".into(),
+        }),
+        bias_history: Some(TruthBiasHistory {
+            period_s: bias.period_s,
+            note: "true gyro bias mapped to ACS through the true triad geometry; channel biases in raw channel order X1, X2, Y1, Y2, Z1, Z2".into(),
+            samples: bias.samples.clone(),
+        }),
+        fss_transfer_function: Some(TruthFssTransfer {
+            fss1: unit(0),
+            fss2: unit(1),
+            note: "the transfer function each FSS flew (drawn from the scenario's spreads when transfer_function_per_seed)".into(),
+        }),
+        present_effects: present_effects(s),
+        undeclared_effects: undeclared_effects(s),
+        tam: Some(crate::sensors::tam::truth_tams(&s.tam1, &s.tam2)),
+        injected_effect: None,
+    })
 }
 
 /// The run folder's files are written as `NAME.partial` and renamed by [`RunFolder::commit`].
@@ -1086,7 +1079,7 @@ pub fn run(scenario: Scenario, opts: &RunOptions) -> anyhow::Result<Summary> {
     tm.finish().context("writing telemetry.bin")?;
     // As a JSON value: its keys sorted, as the `json!` writer had them (the same bytes).
     folder.write_json(METADATA_FILE, &metadata(&sim, &scorer).to_json_value()?)?;
-    folder.write_json("truth.json", &truth_json(&sim, &bias)?)?;
+    folder.write_json(TRUTH_FILE, &truth(&sim, &bias)?.to_json_value()?)?;
     let cycles = sim.cycle_count();
     let mut summary = summary(&sim, scorer, wall, cycles, aliasing, packets, bytes);
     summary.tables_provenance_warning = provenance_warning;

@@ -960,12 +960,14 @@ impl Scenario {
     /// The FHST, FSS and IRU parameters.
     fn validate_sensors(&self) -> anyhow::Result<()> {
         for (name, f) in [("fhst1", &self.fhst1), ("fhst2", &self.fhst2)] {
-            positive(&format!("{name}.fov_half_width_deg"), f.fov_half_width_deg)?;
-            positive(
-                &format!("{name}.resolution_arcsec_per_count"),
-                f.resolution_arcsec_per_count,
+            positives(
+                name,
+                &[
+                    ("fov_half_width_deg", f.fov_half_width_deg),
+                    ("resolution_arcsec_per_count", f.resolution_arcsec_per_count),
+                    ("max_track_s", f.max_track_s),
+                ],
             )?;
-            positive(&format!("{name}.max_track_s"), f.max_track_s)?;
             if f.magnitude_min > f.magnitude_max {
                 bail!(
                     "{name}.magnitude_min ({}) exceeds magnitude_max ({})",
@@ -975,22 +977,37 @@ impl Scenario {
             }
         }
         for (name, f) in [("fss1", &self.fss1), ("fss2", &self.fss2)] {
-            positive(&format!("{name}.fov_half_width_deg"), f.fov_half_width_deg)?;
-            positive(
-                &format!("{name}.resolution_deg_per_count"),
-                f.resolution_deg_per_count,
+            positives(
+                name,
+                &[
+                    ("fov_half_width_deg", f.fov_half_width_deg),
+                    ("resolution_deg_per_count", f.resolution_deg_per_count),
+                ],
             )?;
         }
-        positive(
-            "iru.low_rate_arcsec_per_pulse",
-            self.iru.low_rate_arcsec_per_pulse,
-        )?;
-        positive(
-            "iru.high_rate_arcsec_per_pulse",
-            self.iru.high_rate_arcsec_per_pulse,
-        )?;
-        Ok(())
+        positives(
+            "iru",
+            &[
+                (
+                    "low_rate_arcsec_per_pulse",
+                    self.iru.low_rate_arcsec_per_pulse,
+                ),
+                (
+                    "high_rate_arcsec_per_pulse",
+                    self.iru.high_rate_arcsec_per_pulse,
+                ),
+            ],
+        )
     }
+}
+
+/// Each of `fields` (key, value) of the section `section` must be a positive number
+/// ([`positive`], in order).
+fn positives(section: &str, fields: &[(&str, f64)]) -> anyhow::Result<()> {
+    for (key, v) in fields {
+        positive(&format!("{section}.{key}"), *v)?;
+    }
+    Ok(())
 }
 
 /// `name` must be a positive number.
@@ -1096,29 +1113,23 @@ mod tests {
 
     #[test]
     fn unknown_field_error_names_the_key() {
-        let err = Scenario::from_toml_str(
-            "name = \"x\"\nduration_s = 10\n[fhst1]\nmax_trak_s = 5\n",
-            "t",
-        )
-        .unwrap_err()
-        .to_string();
-        assert!(err.contains("max_trak_s"), "{err}");
-        let err = Scenario::from_toml_str(
-            "name = \"x\"\nduration_s = 10\n[fhst1.effects]\nfoo = 1\n",
-            "t",
-        )
-        .unwrap_err()
-        .to_string();
-        assert!(err.contains("foo"), "{err}");
-        let err = Scenario::from_toml_str("name = \"x\"\nduration_s = 10\nstep_s = -1\n", "t")
-            .unwrap_err();
-        assert!(format!("{err:#}").contains("step_s"), "{err:#}");
-        let err = Scenario::from_toml_str(
-            "name = \"x\"\nduration_s = 10\n[[commands]]\nat_s = 5\nkind = \"slew_to\"\n",
-            "t",
-        )
-        .unwrap_err();
-        assert!(format!("{err:#}").contains("commands[0]"), "{err:#}");
+        // The error with its causes, of a scenario `name = "x"`, 10 s long, and then `rest`.
+        let error = |rest: &str| {
+            let text = format!("name = \"x\"\nduration_s = 10\n{rest}");
+            format!("{:#}", Scenario::from_toml_str(&text, "t").unwrap_err())
+        };
+        for (rest, key) in [
+            ("[fhst1]\nmax_trak_s = 5\n", "max_trak_s"),
+            ("[fhst1.effects]\nfoo = 1\n", "foo"),
+            ("step_s = -1\n", "step_s"),
+            (
+                "[[commands]]\nat_s = 5\nkind = \"slew_to\"\n",
+                "commands[0]",
+            ),
+        ] {
+            let err = error(rest);
+            assert!(err.contains(key), "{err}");
+        }
     }
 
     #[test]

@@ -258,25 +258,16 @@ fn scenario_keys_defaults_and_refusals() {
     .unwrap();
     assert_eq!(s.tam2.bias_milligauss, [1.0, 2.0, 3.0]);
     assert!(s.magnetics.enabled);
-    let err = Scenario::from_toml_str(
-        "name = \"m\"\nduration_s = 10\n[tam1]\nbias_mg = [0.0, 0.0, 1.0]\n",
-        "t",
-    )
-    .unwrap_err();
-    assert!(format!("{err:#}").contains("bias_mg"), "{err:#}");
-    let err = Scenario::from_toml_str(
-        "name = \"m\"\nduration_s = 10\n[tam1]\nresolution_milligauss_per_count = 0.0\n",
-        "t",
-    )
-    .unwrap_err();
-    assert!(
-        format!("{err:#}").contains("tam1.resolution_milligauss_per_count"),
-        "{err:#}"
-    );
-    let err = Scenario::from_toml_str(
-        "name = \"m\"\nduration_s = 10\n[css]\nearth_albedo = 2.0\n",
-        "t",
-    )
-    .unwrap_err();
-    assert!(format!("{err:#}").contains("css.earth_albedo"), "{err:#}");
+    for (section, key) in [
+        ("[tam1]\nbias_mg = [0.0, 0.0, 1.0]", "bias_mg"),
+        (
+            "[tam1]\nresolution_milligauss_per_count = 0.0",
+            "tam1.resolution_milligauss_per_count",
+        ),
+        ("[css]\nearth_albedo = 2.0", "css.earth_albedo"),
+    ] {
+        let text = format!("name = \"m\"\nduration_s = 10\n{section}\n");
+        let err = format!("{:#}", Scenario::from_toml_str(&text, "t").unwrap_err());
+        assert!(err.contains(key), "{err}");
+    }
 }

@@ -22,6 +22,11 @@ fn image<T: serde::Serialize>(id: TableId, t: &T) -> Vec<u8> {
     buf
 }
 
+/// Write the image of table `t` (as `id`) to `path`.
+fn write_image<T: serde::Serialize>(path: &Path, id: TableId, t: &T) {
+    std::fs::write(path, image(id, t)).unwrap();
+}
+
 fn scenario_with(dir: &Path, name: &str, key: &str, value: &str) -> String {
     let text = std::fs::read_to_string(
         Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/gro-early-mission.toml"),
@@ -105,26 +110,22 @@ fn tables_folders_are_loaded_from_their_manifest_only() {
     assert!(stderr(&o).contains("no-such-dir") && !d.join("a").exists());
     let t = d.join("t");
     std::fs::create_dir_all(&t).unwrap();
-    std::fs::write(
-        t.join("alignment.tbl"),
-        image(TableId::Alignment, &AlignmentTable::prelaunch()),
-    )
-    .unwrap();
-    std::fs::write(
-        t.join("iru.tbl"),
-        image(TableId::Iru, &IruTable::prelaunch()),
-    )
-    .unwrap();
+    write_image(
+        &t.join("alignment.tbl"),
+        TableId::Alignment,
+        &AlignmentTable::prelaunch(),
+    );
+    write_image(&t.join("iru.tbl"), TableId::Iru, &IruTable::prelaunch());
     let o = run("a", "t");
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
     assert!(stderr(&o).contains("table manifest"), "{}", stderr(&o));
     sim_harness::manifest::write(&t, &["alignment.tbl".into(), "iru.tbl".into()], "test").unwrap();
     // A stale filter table beside the listed images.
-    std::fs::write(
-        t.join("filter.tbl"),
-        image(TableId::Filter, &FilterTable::default_boot()),
-    )
-    .unwrap();
+    write_image(
+        &t.join("filter.tbl"),
+        TableId::Filter,
+        &FilterTable::default_boot(),
+    );
     let o = run("a", "t");
     assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
     assert!(stderr(&o).contains("filter.tbl is not listed"));

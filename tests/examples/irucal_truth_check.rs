@@ -7,7 +7,9 @@
 //! cargo run --release -p tests --example irucal_truth_check -- [SCENARIO] [SEED]
 //! ```
 use fsw_core::attitude::rotvec_from_rot;
+use fsw_core::tables::types::matrix_from_rows;
 use fsw_core::units::ARCSEC_PER_RAD;
+use gro_reference::run_folder::Truth as TruthFile;
 use ground_tool::pipeline::calibrate::{calibrate_run, CalibrateOptions, CalibrationOutput};
 use nalgebra::{Matrix3, Vector3};
 use sim_harness::closed_loop::Simulation;
@@ -27,8 +29,7 @@ fn main() -> anyhow::Result<()> {
         &dir.join("cal"),
         &CalibrateOptions::default(),
     )?;
-    let t: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(dir.join("run").join("truth.json"))?)?;
+    let t = gro_tests::loop_report::read_truth(&dir.join("run"))?;
     print_alignments(&out, &t);
     print_fixes(&out, &truth);
     let t0 = out.frames.first().map_or(0.0, |f| f.time.seconds());
@@ -77,14 +78,11 @@ impl Truth {
 }
 
 /// The relative alignment errors against the truth, FFCAL's σ, and δM true and fitted.
-fn print_alignments(out: &CalibrationOutput, t: &serde_json::Value) {
-    let delta_m_true = matrix(&t["iru"]["primary"]["delta_m"]);
+fn print_alignments(out: &CalibrationOutput, t: &TruthFile) {
+    let delta_m_true = gro_tests::loop_report::true_delta_m(t).unwrap_or_else(Matrix3::zeros);
     let names = ["FHST1", "FHST2", "FSS1", "FSS2"];
-    let m_true: Vec<Matrix3<f64>> = names.iter().map(|n| matrix(&t["alignments"][n])).collect();
-    let est = out
-        .alignment
-        .matrices()
-        .map(fsw_core::tables::types::matrix_from_rows);
+    let m_true = t.alignments.into_array().map(|m| matrix_from_rows(&m));
+    let est = out.alignment.matrices().map(matrix_from_rows);
     let r: Vec<Matrix3<f64>> = (0..4).map(|k| est[k] * m_true[k].transpose()).collect();
     for (i, j) in [(0, 1), (0, 2), (0, 3)] {
         let e = rotvec_from_rot(&(r[i].transpose() * r[j])) * ARCSEC_PER_RAD;
@@ -197,21 +195,21 @@ fn print_star_counts(out: &CalibrationOutput, t0: f64) {
 }
 
 /// The OBC's bias error against the truth every 300 s (″/s).
-fn print_bias_errors(dir: &std::path::Path, t: &serde_json::Value, t0: f64) -> anyhow::Result<()> {
-    let samples = t["bias_history"]["samples"]
-        .as_array()
-        .cloned()
+fn print_bias_errors(dir: &std::path::Path, t: &TruthFile, t0: f64) -> anyhow::Result<()> {
+    let samples = t
+        .bias_history
+        .as_ref()
+        .map(|h| h.samples.as_slice())
         .unwrap_or_default();
     let tm = ground_tool::tp::read_file(&dir.join("run").join("telemetry.bin"))?;
     for s in samples.iter().step_by(5) {
-        let ts = s["t_s"].as_f64().unwrap_or(0.0);
+        let ts = s.t_s;
         let i = tm
             .housekeeping
             .partition_point(|h| h.time.seconds() - t0 < ts);
         if let Some(h) = tm.housekeeping.get(i) {
             let e = Vector3::from_fn(|k, _| {
-                (h.bias_acs_rad_per_s[k] - s["bias_acs_rad_per_s"][k].as_f64().unwrap_or(0.0))
-                    * ARCSEC_PER_RAD
+                (h.bias_acs_rad_per_s[k] - s.bias_acs_rad_per_s[k]) * ARCSEC_PER_RAD
             });
             println!(
                 "bias err t {ts:6.0}: [{:6.3}, {:6.3}, {:6.3}] ″/s",
@@ -220,9 +218,4 @@ fn print_bias_errors(dir: &std::path::Path, t: &serde_json::Value, t0: f64) -> a
         }
     }
     Ok(())
-}
-
-/// A row-major 3×3 matrix from `truth.json` (missing elements read as 0).
-fn matrix(v: &serde_json::Value) -> Matrix3<f64> {
-    Matrix3::from_fn(|i, j| v[i][j].as_f64().unwrap_or(0.0))
 }

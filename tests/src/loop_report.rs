@@ -7,6 +7,7 @@ use fsw_core::attitude::rotvec_from_rot;
 use fsw_core::tables::types::matrix_from_rows;
 use fsw_core::tables::AlignmentTable;
 use fsw_core::units::ARCSEC_PER_RAD;
+use gro_reference::run_folder::Truth;
 use ground_tool::calibration::alignment::FfcalSolution;
 use ground_tool::pipeline::calibrate::{CalibrationOutput, SENSOR_NAMES};
 use nalgebra::{Matrix3, Vector3};
@@ -14,6 +15,7 @@ use serde::Serialize;
 use sim_harness::run::Summary;
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
+use std::path::Path;
 
 /// A quantity before and after the uplink.
 #[derive(Clone, Debug, Serialize, Default)]
@@ -71,18 +73,21 @@ pub struct LoopReport {
     pub wall_seconds: f64,
 }
 
-/// A 3×3 matrix from `truth.json` (row-major nested arrays).
+/// The run's truth (`RUN_DIR/truth.json`, the one definition [`Truth`]).
 ///
 /// # Errors
-/// A missing or non-numeric element.
-pub fn matrix_from_json(v: &serde_json::Value) -> anyhow::Result<Matrix3<f64>> {
-    let mut rows = [[0.0; 3]; 3];
-    for (i, row) in rows.iter_mut().enumerate() {
-        for (j, x) in row.iter_mut().enumerate() {
-            *x = v[i][j].as_f64().context("matrix element")?;
-        }
-    }
-    Ok(matrix_from_rows(&rows))
+/// No `truth.json` in the folder, or one that is not a truth.
+pub fn read_truth(run_dir: &Path) -> anyhow::Result<Truth> {
+    Truth::read(run_dir)?.with_context(|| format!("no truth.json in {}", run_dir.display()))
+}
+
+/// The primary triad's true δM, when the truth has the IRU.
+#[must_use]
+pub fn true_delta_m(truth: &Truth) -> Option<Matrix3<f64>> {
+    truth
+        .iru
+        .as_ref()
+        .map(|iru| matrix_from_rows(&iru.primary.delta_m))
 }
 
 /// Error of FFCAL sensor `j`'s alignment relative to sensor 0 (FHST1) against the truth, ACS,
@@ -90,15 +95,18 @@ pub fn matrix_from_json(v: &serde_json::Value) -> anyhow::Result<Matrix3<f64>> {
 /// relative covariance (3 degrees of freedom).
 ///
 /// # Errors
-/// A malformed `truth.json`, a sensor index out of range, or a singular covariance.
+/// A sensor the truth does not name, a sensor index out of range, or a singular covariance.
 pub fn relative_error_and_nees(
     solution: &FfcalSolution,
-    truth: &serde_json::Value,
+    truth: &Truth,
     j: usize,
 ) -> anyhow::Result<(Vector3<f64>, f64)> {
     let r = |k: usize| -> anyhow::Result<Matrix3<f64>> {
         let s = solution.sensors.get(k).context("sensor index")?;
-        let t = matrix_from_json(&truth["alignments"][&s.id])
+        let t = truth
+            .alignments
+            .get(&s.id)
+            .map(matrix_from_rows)
             .with_context(|| format!("truth.json alignments.{}", s.id))?;
         Ok(s.m_acs_from_sensor_calibrated * t.transpose())
     };
@@ -135,9 +143,6 @@ fn three_rms(s: &Summary) -> [f64; 3] {
     s.attitude_error_arcsec.rms.map(|x| 3.0 * x)
 }
 
-/// Score the loop.
-///
-/// # Errors
 /// The stated 1σ of every sensor pair's relative alignment (largest ACS axis, ″).
 fn stated_relative_sigma(calibration: &CalibrationOutput) -> BTreeMap<String, f64> {
     let rel = &calibration
@@ -161,21 +166,20 @@ fn stated_relative_sigma(calibration: &CalibrationOutput) -> BTreeMap<String, f6
     out
 }
 
-/// A malformed `truth.json`.
+/// Score the loop against the truth of the first flight.
+///
+/// # Errors
+/// None today (the truth is typed); kept for the callers' `?`.
 pub fn compare(
     a: &Summary,
     b: &Summary,
     calibration: &CalibrationOutput,
-    truth: &serde_json::Value,
+    truth: &Truth,
 ) -> anyhow::Result<LoopReport> {
-    let mut true_m = [Matrix3::identity(); 4];
-    for (k, name) in SENSOR_NAMES.iter().enumerate() {
-        true_m[k] = matrix_from_json(&truth["alignments"][name])
-            .with_context(|| format!("truth.json alignments.{name}"))?;
-    }
+    let true_m = truth.alignments.into_array().map(|m| matrix_from_rows(&m));
     let (rel_before, abs_before) = alignment_errors(&AlignmentTable::prelaunch(), &true_m);
     let (rel_after, abs_after) = alignment_errors(&calibration.alignment, &true_m);
-    let true_dm = matrix_from_json(&truth["iru"]["primary"]["delta_m"]).ok();
+    let true_dm = true_delta_m(truth);
     let (dm_before, dm_after, within) = match (true_dm, &calibration.irucal) {
         (Some(t), Some(sol)) => {
             let err = sol.calibration.delta_m - t;

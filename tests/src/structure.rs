@@ -127,6 +127,37 @@ impl FnCollector<'_> {
             lines: span_lines(sig.fn_token.span, block.brace_token.span.close()),
         });
     }
+
+    /// A function (unless `skip`): recorded when it has a body, then its body walked by
+    /// `walk` with no owner type (a nested function has none).
+    fn function(
+        &mut self,
+        skip: bool,
+        sig: &syn::Signature,
+        block: Option<&syn::Block>,
+        walk: impl FnOnce(&mut Self),
+    ) {
+        if skip {
+            return;
+        }
+        if let Some(block) = block {
+            self.record(&sig.ident, sig, block);
+        }
+        let owners = std::mem::take(&mut self.owner);
+        walk(self);
+        self.owner = owners;
+    }
+
+    /// An impl or trait (unless `skip`): its items walked by `walk` with `owner` as their
+    /// owner type.
+    fn owned(&mut self, skip: bool, owner: String, walk: impl FnOnce(&mut Self)) {
+        if skip {
+            return;
+        }
+        self.owner.push(owner);
+        walk(self);
+        self.owner.pop();
+    }
 }
 
 impl<'ast> Visit<'ast> for FnCollector<'_> {
@@ -136,50 +167,31 @@ impl<'ast> Visit<'ast> for FnCollector<'_> {
         }
     }
     fn visit_item_fn(&mut self, f: &'ast syn::ItemFn) {
-        if is_cfg_test(&f.attrs) || is_test_fn(&f.attrs) {
-            return;
-        }
-        self.record(&f.sig.ident, &f.sig, &f.block);
-        // A nested function has no owner type.
-        let owners = std::mem::take(&mut self.owner);
-        syn::visit::visit_item_fn(self, f);
-        self.owner = owners;
+        let skip = is_cfg_test(&f.attrs) || is_test_fn(&f.attrs);
+        self.function(skip, &f.sig, Some(&f.block), |c| {
+            syn::visit::visit_item_fn(c, f);
+        });
     }
     fn visit_item_impl(&mut self, i: &'ast syn::ItemImpl) {
-        if is_cfg_test(&i.attrs) {
-            return;
-        }
-        self.owner.push(type_name(&i.self_ty));
-        syn::visit::visit_item_impl(self, i);
-        self.owner.pop();
+        self.owned(is_cfg_test(&i.attrs), type_name(&i.self_ty), |c| {
+            syn::visit::visit_item_impl(c, i);
+        });
     }
     fn visit_item_trait(&mut self, t: &'ast syn::ItemTrait) {
-        if is_cfg_test(&t.attrs) {
-            return;
-        }
-        self.owner.push(t.ident.to_string());
-        syn::visit::visit_item_trait(self, t);
-        self.owner.pop();
+        self.owned(is_cfg_test(&t.attrs), t.ident.to_string(), |c| {
+            syn::visit::visit_item_trait(c, t);
+        });
     }
     fn visit_impl_item_fn(&mut self, f: &'ast syn::ImplItemFn) {
-        if is_cfg_test(&f.attrs) || is_test_fn(&f.attrs) {
-            return;
-        }
-        self.record(&f.sig.ident, &f.sig, &f.block);
-        let owners = std::mem::take(&mut self.owner);
-        syn::visit::visit_impl_item_fn(self, f);
-        self.owner = owners;
+        let skip = is_cfg_test(&f.attrs) || is_test_fn(&f.attrs);
+        self.function(skip, &f.sig, Some(&f.block), |c| {
+            syn::visit::visit_impl_item_fn(c, f);
+        });
     }
     fn visit_trait_item_fn(&mut self, f: &'ast syn::TraitItemFn) {
-        if is_cfg_test(&f.attrs) {
-            return;
-        }
-        if let Some(block) = &f.default {
-            self.record(&f.sig.ident, &f.sig, block);
-        }
-        let owners = std::mem::take(&mut self.owner);
-        syn::visit::visit_trait_item_fn(self, f);
-        self.owner = owners;
+        self.function(is_cfg_test(&f.attrs), &f.sig, f.default.as_ref(), |c| {
+            syn::visit::visit_trait_item_fn(c, f);
+        });
     }
 }
 

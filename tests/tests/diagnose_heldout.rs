@@ -6,11 +6,11 @@
 use fsw_core::tables::types::matrix_from_rows;
 use gro_tests::diagnose::synthetic::{generate, SynthConfig, SynthEffects};
 use ground_tool::diagnose::effects::{library, EffectKind};
-use ground_tool::diagnose::fit::{accumulate, batch_chi2, Rows, N_ALIGN};
+use ground_tool::diagnose::fit::{accumulate, batch_quadratic, Quadratic, Rows, N_ALIGN};
 use ground_tool::diagnose::fit::{indices, Layout};
 use ground_tool::diagnose::heldout::*;
 use ground_tool::diagnose::measurements::MeasurementSet;
-use nalgebra::{DVector, Matrix3};
+use nalgebra::DVector;
 
 fn run(
     effects: SynthEffects,
@@ -25,35 +25,42 @@ fn run(
 }
 
 fn truth_parameters(synth: &gro_tests::diagnose::synthetic::SynthRun) -> [f64; N_ALIGN] {
-    let m_base: Vec<Matrix3<f64>> = synth
-        .alignment
-        .matrices()
-        .iter()
-        .map(|r| matrix_from_rows(r))
-        .collect();
-    let m_base = [m_base[0], m_base[1], m_base[2], m_base[3]];
+    let m_base = synth.alignment.matrices().map(matrix_from_rows);
     alignment_parameters_arcsec(&synth.m_true, &m_base)
 }
 
-/// `batch_chi2` is the likelihood `accumulate` builds: at any global vector the batch sums
-/// equal the quadratic form of the accumulated system.
-#[test]
-fn batch_chi2_is_the_accumulated_likelihood() {
+/// A synthetic run with FHST1 distortion `distortion_arcsec` (radial, H·V terms), its
+/// measurements, and the layout of the one effect that models it (the library's FHST1
+/// distortion).
+fn fhst1_distortion_run(
+    distortion_arcsec: [f64; 3],
+    seed: u64,
+) -> (
+    gro_tests::diagnose::synthetic::SynthRun,
+    MeasurementSet,
+    Layout,
+) {
     let effects = SynthEffects {
-        distortion_arcsec: [[6.0, 3.0, -2.0], [0.0; 3]],
+        distortion_arcsec: [distortion_arcsec, [0.0; 3]],
         ..SynthEffects::default()
     };
-    let (_, set) = run(effects, 7);
-    let lib = library(&set, [None, None], None);
-    let dist = lib
+    let (synth, set) = run(effects, seed);
+    let dist = library(&set, [None, None], None)
         .into_iter()
         .find(|e| e.kind == EffectKind::FhstDistortion && e.sensor == Some(0))
         .expect("the library has FHST1 distortion");
-    let layout = Layout::new(vec![dist]);
+    (synth, set, Layout::new(vec![dist]))
+}
+
+/// `batch_quadratic`'s χ² is the likelihood `accumulate` builds: at any global vector the batch sums
+/// equal the quadratic form of the accumulated system.
+#[test]
+fn batch_chi2_is_the_accumulated_likelihood() {
+    let (_, set, layout) = fhst1_distortion_run([6.0, 3.0, -2.0], 7);
     let normal = accumulate(&set, &layout, &|_| true);
     let g = DVector::from_fn(layout.total, |i, _| ((i as f64) * 0.37).sin() * 4.0);
     let quadratic = normal.chi2 - 2.0 * g.dot(&normal.b) + g.dot(&(&normal.n * &g));
-    let per_batch: f64 = batch_chi2(&set, &layout, &g, &|_| true, Rows::All)
+    let per_batch: f64 = batch_quadratic(&set, &layout, &g, &|_| true, Quadratic::Chi2, Rows::All)
         .iter()
         .map(|b| b.1)
         .sum();
@@ -113,16 +120,7 @@ fn gate_takes_a_real_correction_and_nothing_against_the_truth() {
 /// the alignments, which a refit can only move by noise, are not.
 #[test]
 fn gate_takes_the_effect_and_leaves_exact_alignments() {
-    let effects = SynthEffects {
-        distortion_arcsec: [[8.0, 4.0, -3.0], [0.0; 3]],
-        ..SynthEffects::default()
-    };
-    let (synth, set) = run(effects, 12);
-    let dist = library(&set, [None, None], None)
-        .into_iter()
-        .find(|e| e.kind == EffectKind::FhstDistortion && e.sensor == Some(0))
-        .expect("the library has FHST1 distortion");
-    let layout = Layout::new(vec![dist]);
+    let (synth, set, layout) = fhst1_distortion_run([8.0, 4.0, -3.0], 12);
     let idx = indices(&layout, &[0]);
     let truth = truth_parameters(&synth);
     let v = validate_flight_tables(&set, &layout, &idx, &[], &truth, "the true alignments");

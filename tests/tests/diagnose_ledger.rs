@@ -67,8 +67,7 @@ fn ledger_invariant_holds_over_synthetic_cases() {
         clean.ledger
     );
 
-    let mut tt = SynthEffects::default();
-    tt.time_tag_s[0] = 0.2;
+    let tt = SynthEffects::time_tag(0, 0.2);
     let mut thermal = SynthEffects::default();
     thermal.thermal_arcsec_per_c[1] = [2.0, -3.0, 8.0];
     let distortion = SynthEffects {
@@ -208,15 +207,12 @@ fn most_seen(cfg: &SynthConfig) -> Vec<(u32, usize)> {
 /// halves test and is not kept; it is not dropped without a word either.
 #[test]
 fn a_time_tag_one_slew_arc_shows_is_not_dropped() {
-    let mut fx = SynthEffects::default();
-    fx.time_tag_s[0] = 0.3;
+    let fx = SynthEffects::time_tag(0, 0.3);
     let mut synth = generate(&SynthConfig::seeded(fx, 21));
     let mut slew = 0usize;
     let mut turning_before = false;
     for f in &mut synth.frames {
-        let turning = f
-            .gyro
-            .is_some_and(|g| g.dtheta_acs_rad.norm() / g.dt_s * 206_264.8 > 20.0);
+        let turning = gro_tests::diagnose::synthetic::turning(f);
         if turning && !turning_before {
             slew += 1;
         }

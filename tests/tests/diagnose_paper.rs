@@ -115,10 +115,8 @@ fn truth_transfer(run: &Path, full: bool) -> SensorCorrections {
 }
 
 fn truth_delta_m(run: &Path) -> Matrix3<f64> {
-    let t: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(run.join("truth.json")).unwrap()).unwrap();
-    let d = &t["iru"]["primary"]["delta_m"];
-    Matrix3::from_fn(|i, j| d[i][j].as_f64().unwrap())
+    let t = gro_tests::loop_report::read_truth(run).unwrap();
+    gro_tests::loop_report::true_delta_m(&t).expect("the truth's IRU")
 }
 
 fn line(name: &str, r: Option<&Irucal>, truth: &Matrix3<f64>) -> Option<(f64, f64, f64)> {

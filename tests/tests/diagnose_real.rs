@@ -28,15 +28,7 @@ fn fly(name: &str, seed: u64) -> PathBuf {
     let mut s = sim_harness::scenario::resolve(file.to_str().unwrap()).unwrap();
     s.seed = seed;
     let out = work_dir(&format!("{name}-{seed}"));
-    sim_harness::run::run(
-        s,
-        &sim_harness::run::RunOptions {
-            out_dir: Some(out.clone()),
-            tables_dir: None,
-            progress: false,
-        },
-    )
-    .unwrap();
+    support::fly(s, &out, None);
     out
 }
 

@@ -87,22 +87,23 @@ fn clean_synthetic_reports_nothing() {
     assert!(a.unexplained.is_empty());
 }
 
+/// A 50-ms time tag on sensor `sensor` alone (run seeded `seed`): detected on that sensor
+/// alone, within 3σ, and its residuals down to the noise floor.
+fn time_tag_alone_is_found(sensor: usize, seed: u64) {
+    let a = run(SynthEffects::time_tag(sensor, 0.05), seed, true, &[]);
+    let name = ["FHST1", "FHST2", "FSS1", "FSS2"][sensor];
+    within_3_sigma(only(&a, "time_tag_offset", name), &[("tau", 50.0)]);
+    at_noise_floor(&a, sensor);
+}
+
 #[test]
 fn fhst1_time_tag_offset() {
-    let mut fx = SynthEffects::default();
-    fx.time_tag_s[0] = 0.05;
-    let a = run(fx, 5, true, &[]);
-    within_3_sigma(only(&a, "time_tag_offset", "FHST1"), &[("tau", 50.0)]);
-    at_noise_floor(&a, 0);
+    time_tag_alone_is_found(0, 5);
 }
 
 #[test]
 fn fss1_time_tag_offset() {
-    let mut fx = SynthEffects::default();
-    fx.time_tag_s[2] = 0.05;
-    let a = run(fx, 6, true, &[]);
-    within_3_sigma(only(&a, "time_tag_offset", "FSS1"), &[("tau", 50.0)]);
-    at_noise_floor(&a, 2);
+    time_tag_alone_is_found(2, 6);
 }
 
 /// The same time tag on every sensor (the whole sensor frame sampled before its time code):
@@ -372,14 +373,11 @@ fn clean_study() {
 /// samples; when it keeps it, `apply` leaves it to the batches.)
 #[test]
 fn time_tag_on_a_sensor_the_arcs_cannot_test() {
-    let mut fx = SynthEffects::default();
-    fx.time_tag_s[2] = 0.4;
+    let fx = SynthEffects::time_tag(2, 0.4);
     let mut synth = generate(&SynthConfig::seeded(fx, 6));
     let mut n = 0usize;
     for f in &mut synth.frames {
-        let turning = f
-            .gyro
-            .is_some_and(|g| g.dtheta_acs_rad.norm() / g.dt_s * 206_264.8 > 20.0);
+        let turning = gro_tests::diagnose::synthetic::turning(f);
         if turning && f.suns[0].is_some() {
             if !n.is_multiple_of(40) {
                 f.suns[0] = None;
@@ -410,8 +408,7 @@ fn time_tag_on_a_sensor_the_arcs_cannot_test() {
 /// flight table got it twice (`time_offset_s[FHST1]` 0.2021 s for a 0.1 s tag).
 #[test]
 fn declared_time_tag_is_not_added_twice() {
-    let mut fx = SynthEffects::default();
-    fx.time_tag_s[0] = 0.1;
+    let fx = SynthEffects::time_tag(0, 0.1);
     let synth = generate(&SynthConfig::seeded(fx, 2));
     let a = analyse(&synth.input(&["time_tag_offset"]), &SearchConfig::default()).unwrap();
     let res = &a.search;

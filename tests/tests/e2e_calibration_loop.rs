@@ -10,9 +10,8 @@
 
 mod support;
 
-use gro_tests::loop_report::{compare, relative_error_and_nees};
+use gro_tests::loop_report::{compare, read_truth, relative_error_and_nees, true_delta_m};
 use ground_tool::pipeline::calibrate::{calibrate_run, CalibrateOptions};
-use sim_harness::run::{run, RunOptions};
 use sim_harness::scenario::resolve;
 
 #[test]
@@ -21,27 +20,10 @@ fn e2e_calibration_loop_gro_early_mission() {
     let scenario = resolve("gro-early-mission").unwrap();
     let fly_a = out.join("a");
     let cal = out.join("cal");
-    let a = run(
-        scenario.clone(),
-        &RunOptions {
-            out_dir: Some(fly_a.clone()),
-            tables_dir: None,
-            progress: false,
-        },
-    )
-    .unwrap();
+    let a = support::fly(scenario.clone(), &fly_a, None);
     let calibration = calibrate_run(&fly_a, &cal, &CalibrateOptions::default()).unwrap();
-    let b = run(
-        scenario,
-        &RunOptions {
-            out_dir: Some(out.join("b")),
-            tables_dir: Some(cal.join("tables")),
-            progress: false,
-        },
-    )
-    .unwrap();
-    let truth: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(fly_a.join("truth.json")).unwrap()).unwrap();
+    let b = support::fly(scenario, &out.join("b"), Some(&cal.join("tables")));
+    let truth = read_truth(&fly_a).unwrap();
     let r = compare(&a, &b, &calibration, &truth).unwrap();
 
     // Relative alignments: every pair closer to truth after calibration; the FSS pairs by a
@@ -146,8 +128,7 @@ fn e2e_calibration_loop_gro_early_mission() {
     );
     let k = slew.derived.expect("derived slew uncertainty");
     assert!(slew.written && k < 1e-3, "{}", slew.reason);
-    let true_dm =
-        gro_tests::loop_report::matrix_from_json(&truth["iru"]["primary"]["delta_m"]).unwrap();
+    let true_dm = true_delta_m(&truth).expect("the truth's IRU");
     let iru = calibration.report.iru.as_ref().expect("IRU report");
     residual_within_3_sigma(&true_dm, &iru.delta_m_uplinked, "k", |_, _| k);
     // Per element (field 23): every element of the true residual within 3σ of its own σ.
@@ -206,9 +187,7 @@ fn e2e_calibration_loop_gro_early_mission() {
 /// byte-identical tables and the same report (up to the output paths it names).
 #[test]
 fn calibration_is_deterministic() {
-    let out = support::fresh_dir("gro-e2e-determinism");
-    let fly = out.join("run");
-    fly_prelaunch(&fly);
+    let (out, fly) = prelaunch_run("gro-e2e-determinism");
     let mut reports = Vec::new();
     let mut tables = Vec::new();
     for k in 0..2 {
@@ -239,9 +218,7 @@ fn calibration_is_deterministic() {
 /// relative alignment is consistent with its stated covariance.
 #[test]
 fn calibration_without_housekeeping() {
-    let out = support::fresh_dir("gro-e2e-nohk");
-    let fly = out.join("run");
-    fly_prelaunch(&fly);
+    let (out, fly) = prelaunch_run("gro-e2e-nohk");
     // Drop every APID 0x011 packet.
     let nohk = out.join("nohk");
     support::copy_run_without_apid(&fly, &nohk, 0x011);
@@ -252,25 +229,20 @@ fn calibration_without_housekeeping() {
         "identified {:?}",
         c.report.data.stars_identified
     );
-    let truth: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(fly.join("truth.json")).unwrap()).unwrap();
+    let truth = read_truth(&fly).unwrap();
     let sol = &c.ffcal;
     let (e, nees) = relative_error_and_nees(sol, &truth, 1).unwrap();
     assert!(nees < 16.27, "FHST2 rel FHST1 error {e:?}″, NEES {nees:.1}");
     let _ = std::fs::remove_dir_all(&out);
 }
 
-/// Fly `gro-early-mission` with the prelaunch tables into the run folder `dir`.
-fn fly_prelaunch(dir: &std::path::Path) {
-    run(
-        resolve("gro-early-mission").unwrap(),
-        &RunOptions {
-            out_dir: Some(dir.to_path_buf()),
-            tables_dir: None,
-            progress: false,
-        },
-    )
-    .unwrap();
+/// A fresh folder `name` with `gro-early-mission` flown with the prelaunch tables into its
+/// `run`: (the folder, the run folder).
+fn prelaunch_run(name: &str) -> (std::path::PathBuf, std::path::PathBuf) {
+    let out = support::fresh_dir(name);
+    let fly = out.join("run");
+    support::fly(resolve("gro-early-mission").unwrap(), &fly, None);
+    (out, fly)
 }
 
 /// Every element of G's true residual error after the uplink (true δM minus the uplinked one)

@@ -11,8 +11,9 @@
 use ground_tool::pipeline::calibrate::calibrate_run;
 use ground_tool::pipeline::filter_tuning::FilterTerm;
 use sim_harness::onboard::filter_rrw_for_epoch_rad_per_s_sqrt_s;
-use sim_harness::run::{run, RunOptions};
 use sim_harness::scenario::resolve;
+
+mod support;
 
 #[test]
 fn e2e_normal_ops_flies_the_grounds_rate_random_walk() {
@@ -34,15 +35,7 @@ fn e2e_normal_ops_flies_the_grounds_rate_random_walk() {
         .as_mut()
         .unwrap()
         .insert("rrw_rad_per_s_sqrt_s".into(), toml::Value::Float(model));
-    run(
-        scenario,
-        &RunOptions {
-            out_dir: Some(fly.clone()),
-            tables_dir: None,
-            progress: false,
-        },
-    )
-    .unwrap();
+    support::fly(scenario, &fly, None);
     // The tables flown, read from the run as `ground-tool calibrate` reads them.
     let meta = ground_tool::pipeline::flown::metadata_or_default(&fly);
     let options = ground_tool::pipeline::flown::calibrate_options(&fly, &meta, None).unwrap();

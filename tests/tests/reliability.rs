@@ -12,9 +12,7 @@ use std::process::Output;
 /// deletes a seed folder it did not create.
 #[test]
 fn calibration_mc_refuses_zero_runs_and_foreign_seed_folders() {
-    let tmp = support::fresh_dir("rel-mc");
-    std::fs::create_dir_all(tmp.join("w/seed-1")).unwrap();
-    std::fs::write(tmp.join("w/seed-1/precious.txt"), "keep").unwrap();
+    let tmp = support::fresh_dir_with_file("rel-mc", "w/seed-1/precious.txt", "keep");
     let mc = env!("CARGO_BIN_EXE_calibration-mc");
     let o = run(mc, &["-n", "0", "--work", "w"], &tmp);
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
@@ -37,9 +35,7 @@ fn calibration_mc_refuses_zero_runs_and_foreign_seed_folders() {
 /// not write.
 #[test]
 fn calibration_loop_runs_twice_into_its_own_folder() {
-    let tmp = support::fresh_dir("rel-loop");
-    std::fs::create_dir_all(tmp.join("other")).unwrap();
-    std::fs::write(tmp.join("other/notes.txt"), "mine").unwrap();
+    let tmp = support::fresh_dir_with_file("rel-loop", "other/notes.txt", "mine");
     let lp = env!("CARGO_BIN_EXE_calibration-loop");
     let args = ["--duration", "7200", "--out", "loop"];
     let first = run(lp, &args, &tmp);

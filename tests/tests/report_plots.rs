@@ -17,25 +17,11 @@ use ground_tool::report::{
     pair_plot_name, pair_series, write_calibration_report, ObcBiasSeries, MIN_PAIR_SAMPLES,
     SENSOR_PAIRS,
 };
-use sim_harness::run::{run, RunOptions};
 use sim_harness::scenario::resolve;
 use std::path::Path;
 
-fn fly(
-    scenario: sim_harness::scenario::Scenario,
-    out: &Path,
-    tables: Option<&Path>,
-) -> sim_harness::run::Summary {
-    run(
-        scenario,
-        &RunOptions {
-            out_dir: Some(out.to_path_buf()),
-            tables_dir: tables.map(Path::to_path_buf),
-            progress: false,
-        },
-    )
-    .unwrap()
-}
+mod support;
+use support::fly;
 
 #[test]
 fn report_links_every_plot_and_tables_know_their_spacecraft() {

@@ -13,7 +13,6 @@
 mod support;
 
 use ground_tool::pipeline::calibrate::{calibrate_run, CalibrateOptions};
-use sim_harness::run::{run, RunOptions};
 use sim_harness::scenario::resolve;
 
 /// One simulated hour: 77 TAM samples with a fine attitude, the field turning enough in the
@@ -30,26 +29,16 @@ fn e2e_tam_bias_recovered_within_its_sigma() {
         "gro-early-mission flies the TAMs"
     );
     scenario.duration_s = DURATION_S;
-    run(
-        scenario,
-        &RunOptions {
-            out_dir: Some(fly.clone()),
-            tables_dir: None,
-            progress: false,
-        },
-    )
-    .unwrap();
+    support::fly(scenario, &fly, None);
     let c = calibrate_run(&fly, &out.join("cal"), &CalibrateOptions::default()).unwrap();
     let tam = &c.report.tam;
     assert_eq!(tam.status, "determined", "{:?}", tam.reason);
-    let truth: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(fly.join("truth.json")).unwrap()).unwrap();
-    let true_bias: Vec<f64> = truth["tam"]["effective_bias_mG"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_f64().unwrap())
-        .collect();
+    let truth = gro_tests::loop_report::read_truth(&fly).unwrap();
+    let true_bias = truth
+        .tam
+        .expect("the truth's TAMs")
+        .tam1
+        .effective_bias_milligauss;
     let (bias, sigma) = (
         tam.bias_milligauss.unwrap(),
         tam.bias_sigma_milligauss.unwrap(),

@@ -13,22 +13,16 @@ fn angle_arcsec(a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
 fn apparent_sun_within_36_arcsec_of_de421() {
     let csv = Csv::read("sun_reference.csv");
     let jd = csv.col("jd_tt");
-    let app = [csv.col("app_x"), csv.col("app_y"), csv.col("app_z")];
-    let geo = [csv.col("geo_x"), csv.col("geo_y"), csv.col("geo_z")];
-    let vel = [
-        csv.col("earth_vx_kms"),
-        csv.col("earth_vy_kms"),
-        csv.col("earth_vz_kms"),
-    ];
+    let app = csv.cols3("app_");
+    let geo = csv.cols3("geo_");
+    let vel = ["earth_vx_kms", "earth_vy_kms", "earth_vz_kms"].map(|c| csv.col(c));
     let dist = csv.col("sun_dist_au");
     let (mut max_app, mut max_geo, mut max_beta, mut max_dist, mut sum_app) =
         (0.0_f64, 0.0_f64, 0.0_f64, 0.0_f64, 0.0_f64);
     let mut max_aberrate_only = 0.0_f64;
     for row in &csv.rows {
         let t = (csv.f64(row, jd) - 2_451_545.0) * S_PER_DAY;
-        let v = |c: [usize; 3]| {
-            Vector3::new(csv.f64(row, c[0]), csv.f64(row, c[1]), csv.f64(row, c[2]))
-        };
+        let v = |c: [usize; 3]| csv.vec3(row, c);
         let s = sun_state(t).unwrap();
         let e_app = angle_arcsec(&s.dir_eci, &v(app));
         max_app = max_app.max(e_app);
@@ -66,15 +60,13 @@ fn star_aberration_with_the_onboard_earth_velocity() {
     // 50 bright stars × 20 epochs of 1991: astrometric → apparent with our β.
     let csv = Csv::read("aberration_reference.csv");
     let jd = csv.col("jd_tt");
-    let astr = [csv.col("astr_x"), csv.col("astr_y"), csv.col("astr_z")];
-    let app = [csv.col("app_x"), csv.col("app_y"), csv.col("app_z")];
+    let astr = csv.cols3("astr_");
+    let app = csv.cols3("app_");
     let shift = csv.col("aberration_arcsec");
     let (mut max_err, mut max_shift) = (0.0_f64, 0.0_f64);
     for row in &csv.rows {
         let t = (csv.f64(row, jd) - 2_451_545.0) * S_PER_DAY;
-        let v = |c: [usize; 3]| {
-            Vector3::new(csv.f64(row, c[0]), csv.f64(row, c[1]), csv.f64(row, c[2]))
-        };
+        let v = |c: [usize; 3]| csv.vec3(row, c);
         let beta = fsw_core::sun_ephemeris::earth_velocity_over_c(t).unwrap();
         max_err = max_err.max(angle_arcsec(&aberrate(&v(astr), &beta), &v(app)));
         max_shift = max_shift.max(csv.f64(row, shift));

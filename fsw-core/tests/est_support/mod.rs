@@ -95,4 +95,14 @@ impl Csv {
             .parse()
             .unwrap_or_else(|e| panic!("{}: {e}", row[col]))
     }
+
+    /// The three columns `prefix` + `x`, `y`, `z` (as `app_x`, `app_y`, `app_z`).
+    pub fn cols3(&self, prefix: &str) -> [usize; 3] {
+        ["x", "y", "z"].map(|axis| self.col(&format!("{prefix}{axis}")))
+    }
+
+    /// The vector of `row` in the columns `cols` ([`Csv::cols3`]).
+    pub fn vec3(&self, row: &[String], cols: [usize; 3]) -> Vector3<f64> {
+        Vector3::from(cols.map(|c| self.f64(row, c)))
+    }
 }

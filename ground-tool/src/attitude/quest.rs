@@ -68,6 +68,15 @@ pub struct AttitudeSolution {
     pub dof: usize,
 }
 
+/// Whether a measured and a reference direction of norms `norm_a`, `norm_b` with the
+/// measurement σ `sigma_rad` can enter a fit: both norms and σ finite and positive.
+#[must_use]
+pub fn usable_pair(norm_a: f64, norm_b: f64, sigma_rad: f64) -> bool {
+    [norm_a, norm_b, sigma_rad]
+        .iter()
+        .all(|x| x.is_finite() && *x > 0.0)
+}
+
 /// Solve Wahba's problem for the given pairs (see the module doc).
 ///
 /// # Errors
@@ -80,15 +89,8 @@ pub fn solve_attitude(pairs: &[VectorPair]) -> Result<AttitudeSolution, Attitude
     let mut profile = Matrix3::zeros();
     let mut normalized = Vec::with_capacity(pairs.len());
     for (index, p) in pairs.iter().enumerate() {
-        let nb = p.dir_acs.norm();
-        let nr = p.dir_eci.norm();
-        let ok = nb.is_finite()
-            && nr.is_finite()
-            && nb > 0.0
-            && nr > 0.0
-            && p.sigma_rad.is_finite()
-            && p.sigma_rad > 0.0;
-        if !ok {
+        let (nb, nr) = (p.dir_acs.norm(), p.dir_eci.norm());
+        if !usable_pair(nb, nr, p.sigma_rad) {
             return Err(AttitudeError::InvalidPair { index });
         }
         let b = p.dir_acs / nb;

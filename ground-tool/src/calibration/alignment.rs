@@ -42,6 +42,7 @@ use thiserror::Error;
 
 use fsw_core::attitude::{rot, rotvec_from_rot};
 
+use crate::attitude::quest::usable_pair;
 use crate::linalg::{spd_inverse, sym_eigen_ascending, sym_pinv};
 use crate::{ARCSEC_PER_RAD, RAD_PER_ARCSEC};
 
@@ -118,15 +119,8 @@ impl AlignmentData {
             });
         }
         for (index, o) in observations.iter().enumerate() {
-            let ns = o.dir_sensor.norm();
-            let nr = o.dir_eci.norm();
-            let ok = ns.is_finite()
-                && nr.is_finite()
-                && ns > 0.0
-                && nr > 0.0
-                && o.sigma_rad.is_finite()
-                && o.sigma_rad > 0.0;
-            if !ok {
+            let usable = usable_pair(o.dir_sensor.norm(), o.dir_eci.norm(), o.sigma_rad);
+            if !usable {
                 return Err(AlignmentError::InvalidObservation { epoch, index });
             }
         }

@@ -307,6 +307,21 @@ pub struct IrucalSolution {
     pub iterations: usize,
 }
 
+/// The covariance of the solution (the inverse of `normal`) and its 1σ of δM and of the
+/// bias; `Unobservable` with `mode` when `normal` is singular.
+fn covariance(
+    normal: &DMatrix<f64>,
+    mode: &str,
+) -> Result<(DMatrix<f64>, Matrix3<f64>, Vector3<f64>), IruError> {
+    let cov = spd_inverse(normal).ok_or_else(|| IruError::Unobservable {
+        rank: 0,
+        threshold: 0.0,
+        mode: mode.into(),
+    })?;
+    let (sigma_delta_m, sigma_bias) = sigmas_from_cov(&cov);
+    Ok((cov, sigma_delta_m, sigma_bias))
+}
+
 fn sigmas_from_cov(cov: &DMatrix<f64>) -> (Matrix3<f64>, Vector3<f64>) {
     let sd = |k: usize| cov[(k, k)].max(0.0).sqrt();
     let sigma_m = Matrix3::from_fn(|i, j| sd(3 * j + i) * PPM);
@@ -411,12 +426,7 @@ pub fn irucal(
                     last_step,
                 });
             }
-            let cov = spd_inverse(&total).ok_or(IruError::Unobservable {
-                rank: 0,
-                threshold: 0.0,
-                mode: "singular normal matrix".into(),
-            })?;
-            let (sigma_delta_m, sigma_bias) = sigmas_from_cov(&cov);
+            let (cov, sigma_delta_m, sigma_bias) = covariance(&total, "singular normal matrix")?;
             let (values, _) = sym_eigen_ascending(&normal);
             return Ok(IrucalSolution {
                 calibration: cal,
@@ -567,12 +577,7 @@ pub fn study_plan(
         }
     }
     check_rank(&normal)?;
-    let cov = spd_inverse(&normal).ok_or(IruError::Unobservable {
-        rank: 0,
-        threshold: 0.0,
-        mode: "singular".into(),
-    })?;
-    let (sigma_delta_m, sigma_bias) = sigmas_from_cov(&cov);
+    let (cov, sigma_delta_m, sigma_bias) = covariance(&normal, "singular")?;
     Ok(PlanStudy {
         sigma_delta_m,
         sigma_bias_acs_rad_per_s: sigma_bias,

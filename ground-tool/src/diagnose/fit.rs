@@ -243,6 +243,20 @@ pub fn accumulate_fhst_only(set: &MeasurementSet, layout: &Layout) -> Normal {
     accumulate_rows(set, layout, &|_| true, false)
 }
 
+/// Each batch `use_batch` selects that has a tracker row (not an outlier): its index and its
+/// measurements.
+fn tracker_batches<'a>(
+    set: &'a MeasurementSet,
+    use_batch: &'a dyn Fn(usize) -> bool,
+) -> impl Iterator<Item = (usize, &'a [Measurement])> + 'a {
+    batch_ranges(set)
+        .into_iter()
+        .enumerate()
+        .filter(move |(bi, range)| use_batch(*bi) && !range.is_empty())
+        .map(move |(bi, range)| (bi, &set.meas[range]))
+        .filter(|(_, ms)| ms.iter().any(|m| m.sensor < 2 && !m.outlier))
+}
+
 fn accumulate_rows(
     set: &MeasurementSet,
     layout: &Layout,
@@ -250,14 +264,7 @@ fn accumulate_rows(
     fss_rows: bool,
 ) -> Normal {
     let mut acc = BatchAccumulator::new(layout.total);
-    for (bi, range) in batch_ranges(set).into_iter().enumerate() {
-        if !use_batch(bi) || range.is_empty() {
-            continue;
-        }
-        let ms = &set.meas[range];
-        if !ms.iter().any(|m| m.sensor < 2 && !m.outlier) {
-            continue;
-        }
+    for (_, ms) in tracker_batches(set, use_batch) {
         let (naa, na) = acc.fhst_rows(ms, layout);
         if let Some((a0, s)) = acc.eliminate_attitude(&naa, &na) {
             if fss_rows {
@@ -282,6 +289,26 @@ struct BatchAccumulator {
     cols: Vec<(usize, [f64; 2])>,
     scratch: Vec<(usize, [f64; 2])>,
     dense: Vec<(usize, f64)>,
+}
+
+/// The columns of measurement `m` into `cols`, each one not seen yet in the batch given a
+/// local index (`local`, `touched`) and a zero row in `rows` (the tracker rows' `nag` or the
+/// FSS rows' own).
+fn columns_of(
+    layout: &Layout,
+    m: &Measurement,
+    (cols, scratch): (&mut Vec<(usize, [f64; 2])>, &mut Vec<(usize, [f64; 2])>),
+    (local, touched): (&mut [usize], &mut Vec<usize>),
+    rows: &mut Vec<Vector6<f64>>,
+) {
+    layout.row_columns(m, cols, scratch);
+    for &(c, _) in cols.iter() {
+        if local[c] == usize::MAX {
+            local[c] = touched.len();
+            touched.push(c);
+            rows.push(Vector6::zeros());
+        }
+    }
 }
 
 impl BatchAccumulator {
@@ -313,17 +340,16 @@ impl BatchAccumulator {
         self.touched.clear();
         self.nag.clear();
         for m in ms.iter().filter(|m| m.sensor < 2 && !m.outlier) {
-            layout.row_columns(m, &mut self.cols, &mut self.scratch);
+            columns_of(
+                layout,
+                m,
+                (&mut self.cols, &mut self.scratch),
+                (&mut self.local, &mut self.touched),
+                &mut self.nag,
+            );
             let cols = &self.cols;
             let arow = nuisance_row(m);
             let w = 1.0 / (m.sigma * m.sigma);
-            for &(c, _) in cols {
-                if self.local[c] == usize::MAX {
-                    self.local[c] = self.touched.len();
-                    self.touched.push(c);
-                    self.nag.push(Vector6::zeros());
-                }
-            }
             for ax in 0..2 {
                 let r = m.r[ax];
                 let a = &arow[ax];
@@ -390,17 +416,16 @@ impl BatchAccumulator {
         let mut any_fss = false;
         for m in ms.iter().filter(|m| m.sensor >= 2 && !m.outlier) {
             any_fss = true;
-            layout.row_columns(m, &mut self.cols, &mut self.scratch);
+            columns_of(
+                layout,
+                m,
+                (&mut self.cols, &mut self.scratch),
+                (&mut self.local, &mut self.touched),
+                &mut neg,
+            );
             let cols = &self.cols;
             let arow = nuisance_row(m);
             let w = 1.0 / (m.sigma * m.sigma);
-            for &(c, _) in cols {
-                if self.local[c] == usize::MAX {
-                    self.local[c] = self.touched.len();
-                    self.touched.push(c);
-                    neg.push(Vector6::zeros());
-                }
-            }
             for ax in 0..2 {
                 let a = &arow[ax];
                 let r = m.r[ax] - a.dot(a0);
@@ -456,23 +481,20 @@ impl BatchAccumulator {
     }
 }
 
-/// χ² of each selected batch for the global vector `g` (full length): the likelihood
-/// [`accumulate`] maximises, evaluated instead of accumulated — the batch attitude
-/// re-estimated from the FHST rows, the FSS rows taken against it with its error eliminated
-/// as well — so that `Σ χ²_b(g) = χ² − 2 gᵀb + gᵀN g` of the same batches' [`Normal`].
-/// Returns (batch, χ², scalar rows) per batch in batch order; the held-out validation of
-/// diagnose's tables ([`super::heldout`]) compares two vectors batch by batch with it. Over
-/// the rows `rows` takes: the trackers' alone say what the trackers, which give the flight
-/// attitude, see of `g` (the held-out judgement of a tracker's table).
-#[must_use]
-pub fn batch_chi2(
-    set: &MeasurementSet,
-    layout: &Layout,
-    g: &DVector<f64>,
-    use_batch: &dyn Fn(usize) -> bool,
-    rows: Rows,
-) -> Vec<(usize, f64, usize)> {
-    batch_quadratic(set, layout, g, use_batch, true, rows)
+/// What [`batch_quadratic`] evaluates per batch.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Quadratic {
+    /// χ² of each selected batch for the global vector `g` (full length): the likelihood
+    /// [`accumulate`] maximises, evaluated instead of accumulated — the batch attitude
+    /// re-estimated from the FHST rows, the FSS rows taken against it with its error
+    /// eliminated as well — so that `Σ χ²_b(g) = χ² − 2 gᵀb + gᵀN g` of the same batches'
+    /// [`Normal`]. The held-out validation of diagnose's tables ([`super::heldout`]) compares
+    /// two vectors batch by batch with it.
+    Chi2,
+    /// The same of data that are all zero: `gᵀ N_b g`, the χ² by which the batch tells the
+    /// vector `g` from zero (with `g` a difference of two models, the expected change of the
+    /// batch's χ² between them).
+    Information,
 }
 
 /// The rows a batch quadratic takes.
@@ -484,28 +506,20 @@ pub enum Rows {
     Trackers,
 }
 
-/// [`batch_chi2`] of data that are all zero: `gᵀ N_b g`, the χ² by which the batch tells the
-/// vector `g` from zero (with `g` a difference of two models, the expected change of the
-/// batch's χ² between them).
+/// The [`Quadratic`] of each selected batch (`use_batch`) for the global vector `g`, over the
+/// rows `rows_taken` takes (the trackers' alone say what the trackers, which give the flight
+/// attitude, see of `g`: the held-out judgement of a tracker's table). Returns (batch, value,
+/// scalar rows) per batch in batch order.
 #[must_use]
-pub fn batch_information(
+pub fn batch_quadratic(
     set: &MeasurementSet,
     layout: &Layout,
     g: &DVector<f64>,
     use_batch: &dyn Fn(usize) -> bool,
-    rows: Rows,
-) -> Vec<(usize, f64, usize)> {
-    batch_quadratic(set, layout, g, use_batch, false, rows)
-}
-
-fn batch_quadratic(
-    set: &MeasurementSet,
-    layout: &Layout,
-    g: &DVector<f64>,
-    use_batch: &dyn Fn(usize) -> bool,
-    with_data: bool,
+    quadratic: Quadratic,
     rows_taken: Rows,
 ) -> Vec<(usize, f64, usize)> {
+    let with_data = quadratic == Quadratic::Chi2;
     let mut out = Vec::new();
     let mut cols = Vec::new();
     let mut scratch = Vec::new();
@@ -518,14 +532,7 @@ fn batch_quadratic(
         }
         r
     };
-    for (bi, range) in batch_ranges(set).into_iter().enumerate() {
-        if !use_batch(bi) || range.is_empty() {
-            continue;
-        }
-        let ms = &set.meas[range];
-        if !ms.iter().any(|m| m.sensor < 2 && !m.outlier) {
-            continue;
-        }
+    for (bi, ms) in tracker_batches(set, use_batch) {
         let (mut chi2, mut rows) = (0.0, 0usize);
         let mut naa = nuisance_prior();
         let mut na = Vector6::<f64>::zeros();

@@ -582,11 +582,7 @@ fn adjusted_alignment(
 ) -> anyhow::Result<AlignmentTable> {
     // Alignments: M' = Rot(θ) M for FHST2, FSS1, FSS2 (FHST1 is the reference), then the
     // common rotation that keeps the OBC's FHST frame.
-    let m_base: Vec<Matrix3<f64>> = base
-        .matrices()
-        .iter()
-        .map(|m| matrix_from_rows(m))
-        .collect();
+    let m_base = base.matrices().map(matrix_from_rows).to_vec();
     let mut m_new = m_base.clone();
     for (s, m) in m_new.iter_mut().enumerate() {
         let mut theta = extra_arcsec[s];

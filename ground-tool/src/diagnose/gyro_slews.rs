@@ -207,18 +207,8 @@ const SLEW_WINDOW_FRAMES: usize = 1200;
 fn slew_intervals(inp: &SlewInput<'_>, out: &mut GyroAnalysis) -> Vec<(usize, usize)> {
     let frames = inp.input.frames;
     let set = inp.set;
-    let mut slews = Vec::new();
-    let mut start = None;
-    for (i, f) in frames.iter().enumerate() {
-        match (f.high_rate, start) {
-            (true, None) => start = Some(i),
-            (false, Some(s)) => {
-                slews.push((s, i - 1));
-                start = None;
-            }
-            _ => {}
-        }
-    }
+    let slews =
+        crate::pipeline::maneuvers::high_rate_runs(frames.iter().map(|f| f.high_rate), false);
     let usable: Vec<usize> = (0..set.batches.len())
         .filter(|&i| inp.att[i].is_some())
         .collect();

@@ -28,7 +28,7 @@
 //! The held-out χ²: the span is cut into K ([`MAX_FOLDS`], the chain's) contiguous blocks of
 //! equal duration; for each block the model is refitted on the batch systems of the others
 //! ([`super::fit::accumulate`] per block, summed) and every held-out batch's χ² is evaluated
-//! ([`super::fit::batch_chi2`]: the exact likelihood of the fit, the batch attitude
+//! ([`super::fit::batch_quadratic`] with `Quadratic::Chi2`: the exact likelihood of the fit, the batch attitude
 //! re-estimated). A parameter that a fold's training data do not determine (σ more than
 //! [`UNDETERMINED_SIGMA_RATIO`] × the whole span's: a sensor seen in one block only, a star
 //! tracked once) is held at the reference in that fold: the block validates nothing about it,
@@ -43,7 +43,7 @@
 //! shrinkage and net-rotation removal [`super::flight`] applies to the uplinked catalog.
 
 use super::fit::{
-    accumulate, batch_chi2, batch_information, solve_fixed, Fixed, Layout, Normal, Rows, NUISANCE,
+    accumulate, batch_quadratic, solve_fixed, Fixed, Layout, Normal, Quadratic, Rows, NUISANCE,
     N_ALIGN,
 };
 use super::measurements::{MeasurementSet, SENSOR_NAMES};
@@ -359,16 +359,17 @@ impl Folds<'_> {
                 g
             };
             let in_fold = |b: usize| self.fold[b] == Some(f);
-            out.rows.extend(
-                batch_chi2(self.set, &self.sub, &g, &in_fold, Rows::All)
-                    .into_iter()
-                    .map(|(b, c, n)| (b, c, n.saturating_sub(NUISANCE))),
-            );
-            out.rows_fhst.extend(
-                batch_chi2(self.set, &self.sub, &g, &in_fold, Rows::Trackers)
-                    .into_iter()
-                    .map(|(b, c, n)| (b, c, n.saturating_sub(NUISANCE))),
-            );
+            for (rows, taken) in [
+                (&mut out.rows, Rows::All),
+                (&mut out.rows_fhst, Rows::Trackers),
+            ] {
+                let chi2 =
+                    batch_quadratic(self.set, &self.sub, &g, &in_fold, Quadratic::Chi2, taken);
+                rows.extend(
+                    chi2.into_iter()
+                        .map(|(b, c, n)| (b, c, n.saturating_sub(NUISANCE))),
+                );
+            }
             out.g[f] = Some(g);
         }
         out.rows.sort_by_key(|r| r.0);
@@ -448,7 +449,14 @@ impl Folds<'_> {
                 continue;
             }
             let in_fold = |b: usize| self.fold[b] == Some(f);
-            let info = batch_information(self.set, &self.sub, &dg, &in_fold, which);
+            let info = batch_quadratic(
+                self.set,
+                &self.sub,
+                &dg,
+                &in_fold,
+                Quadratic::Information,
+                which,
+            );
             delta.extend(info.into_iter().map(|(b, d, _)| (b, d)));
         }
         delta.sort_by_key(|d| d.0);

@@ -461,18 +461,9 @@ impl SetBuild<'_> {
             Some((p, v)) => (orbit_phase(&p, &v), v),
             None => (f64::NAN, Vector3::zeros()),
         };
-        let v_e = self
-            .input
-            .earth_vel_eci_km_per_s
-            .get(k)
-            .copied()
-            .unwrap_or_else(Vector3::zeros);
-        let sun = self
-            .input
-            .sun_eci
-            .get(k)
-            .copied()
-            .unwrap_or_else(Vector3::zeros);
+        let at_frame = |v: &[Vector3<f64>]| v.get(k).copied().unwrap_or_else(Vector3::zeros);
+        let v_e = at_frame(&self.input.earth_vel_eci_km_per_s);
+        let sun = at_frame(&self.input.sun_eci);
         let mut dtemp = [0.0; 5];
         for (d, (t, m)) in dtemp
             .iter_mut()

@@ -266,25 +266,21 @@ pub fn write_plots(
     }
     if !gyro.bias_series.is_empty() {
         let colors = [BLUE, ORANGE, GREEN];
+        // Axis `ax` of a bias series against time in hours.
+        let in_hours = |points: &[(f64, [f64; 3])], ax: usize| -> Vec<(f64, f64)> {
+            points.iter().map(|(t, v)| (*t / 3600.0, v[ax])).collect()
+        };
         let mut series = Vec::new();
         for ax in 0..3 {
             series.push(Series {
                 label: format!("bias error {} (hold-to-hold)", ["x", "y", "z"][ax]),
-                points: gyro
-                    .bias_series
-                    .iter()
-                    .map(|(t, v)| (*t / 3600.0, v[ax]))
-                    .collect(),
+                points: in_hours(&gyro.bias_series, ax),
                 color: colors[ax],
             });
             if !gyro.bias_fit_after.is_empty() {
                 series.push(Series {
                     label: format!("final model {}", ["x", "y", "z"][ax]),
-                    points: gyro
-                        .bias_fit_after
-                        .iter()
-                        .map(|(t, v)| (*t / 3600.0, v[ax]))
-                        .collect(),
+                    points: in_hours(&gyro.bias_fit_after, ax),
                     color: RED,
                 });
             }
@@ -568,12 +564,17 @@ fn md_flight_tables(s: &mut String, r: &DiagnoseReport) {
             c.delta_chi2,
             c.delta_bic,
             c.halves_p,
-            if c.accepted {
-                "kept".to_owned()
-            } else {
-                c.rejected_because.clone().unwrap_or_default()
-            }
+            verdict(c.accepted, c.rejected_because.as_deref(), "kept")
         );
+    }
+}
+
+/// A candidate's verdict: `taken` when accepted, else why not.
+fn verdict(accepted: bool, rejected_because: Option<&str>, taken: &str) -> String {
+    if accepted {
+        taken.to_owned()
+    } else {
+        rejected_because.unwrap_or_default().to_owned()
     }
 }
 
@@ -603,11 +604,7 @@ fn md_loop(s: &mut String, r: &DiagnoseReport) {
                 e.p_holm,
                 e.delta_bic,
                 e.halves_p,
-                if e.accepted {
-                    "added".to_owned()
-                } else {
-                    e.rejected_because.clone().unwrap_or_default()
-                }
+                verdict(e.accepted, e.rejected_because.as_deref(), "added")
             );
         }
         s.push('\n');

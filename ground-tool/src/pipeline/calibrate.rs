@@ -31,12 +31,13 @@ use super::fss_systematic::{estimate_fss_systematic, FssSystematicEstimate};
 pub use super::gyro_chain::IruReport;
 use super::gyro_chain::{build_gyro_chain, irucal_stage, IruStage};
 use super::iru_fixes::{frame_index_at, FixFloors, BATCH_HALF_S};
+use super::maneuvers::high_rate_runs;
 pub use super::maneuvers::{CoarseAttitude, ManeuverReport};
 use super::observations::{
-    build_observations, fine_attitude, AttitudeSensors, FrameObservations, IdentifyOptions,
-    RateSwitch,
+    build_observations, fhst_attitude, fine_attitude, AttitudeSensors, FrameObservations,
+    IdentifyOptions, RateSwitch,
 };
-use crate::calibration::adjust::{preserve_obc_attitude, BoresightFrame};
+use crate::calibration::adjust::{preserve_obc_attitude, Adjustment, BoresightFrame};
 use crate::calibration::alignment::{
     cramer_rao_covariance, AlignmentData, FfcalConfig, FfcalSolution, SensorSpec, Weighting,
 };
@@ -390,15 +391,7 @@ fn coarse_attitude(
         return None;
     }
     let hi = frame_index_at(frames, frames[e].time.seconds() + 2.0 * BATCH_HALF_S);
-    let fine = fine_attitude(
-        frames,
-        e..hi.max(e + 1),
-        e,
-        bias,
-        &Matrix3::zeros(),
-        AttitudeSensors::FhstOnly,
-    )
-    .ok();
+    let fine = fhst_attitude(frames, e..hi.max(e + 1), e, bias).ok();
     let q = sol.q_acs_from_eci;
     Some(CoarseAttitude {
         t_s: frames[e].time.seconds() - t0,
@@ -452,96 +445,177 @@ fn obc_bias_sample(tm: &Telemetry, t_s: f64) -> Option<[f64; 3]> {
         .map(|h| h.bias_acs_rad_per_s)
 }
 
-/// Maneuvers as runs of high-rate frames: (first index, last index).
-fn find_maneuvers(frames: &[FrameObservations]) -> Vec<(usize, usize)> {
-    let mut out = Vec::new();
-    let mut start: Option<usize> = None;
-    for (i, f) in frames.iter().enumerate() {
-        match (f.high_rate, start) {
-            (true, None) => start = Some(i),
-            (false, Some(s)) => {
-                out.push((s, i - 1));
-                start = None;
-            }
-            _ => {}
-        }
-    }
-    if let Some(s) = start {
-        out.push((s, frames.len() - 1));
-    }
-    out
+/// What every stage of [`calibrate_telemetry`] reads and none writes: the run (telemetry and
+/// declarations), the operator's options, the tables flown and the catalog.
+struct ChainContext<'a> {
+    /// The decoded telemetry.
+    tm: &'a Telemetry,
+    /// What the operator declares about the run.
+    metadata: &'a Metadata,
+    /// The operator's options.
+    options: &'a CalibrateOptions,
+    /// The alignment table flown (the boot table unless the options name one).
+    flown_alignment: AlignmentTable,
+    /// The IRU table flown (the boot table unless the options name one).
+    flown_iru: IruTable,
+    /// The star catalog.
+    sky: Sky,
 }
 
-/// Run the chain on decoded telemetry.
+impl<'a> ChainContext<'a> {
+    /// The context of a run (module doc, step 1).
+    ///
+    /// # Errors
+    /// Too few raw frames for a calibration (said before the catalog is loaded), or the
+    /// catalog cannot be loaded.
+    fn new(
+        tm: &'a Telemetry,
+        metadata: &'a Metadata,
+        options: &'a CalibrateOptions,
+    ) -> anyhow::Result<Self> {
+        if tm.raw.len() < 10 {
+            bail!(
+                "only {} raw sensor frames (APID 0x010) in the telemetry: calibration needs hours of data with both FHSTs tracking and the Sun in an FSS (docs/icd.md)",
+                tm.raw.len()
+            );
+        }
+        Ok(Self {
+            tm,
+            metadata,
+            options,
+            flown_alignment: options
+                .flown_alignment
+                .unwrap_or_else(AlignmentTable::prelaunch),
+            flown_iru: options.flown_iru.unwrap_or_else(IruTable::prelaunch),
+            sky: load_catalog()?,
+        })
+    }
+
+    /// DA/FADS (module doc, step 2): every frame's observations, converted with `alignment`
+    /// and the flown IRU table, stars identified against the catalog.
+    fn identify(&self, alignment: &AlignmentTable) -> Vec<FrameObservations> {
+        build_observations(
+            self.tm,
+            alignment,
+            &self.flown_iru,
+            &self.metadata.sensors,
+            &self.sky,
+            &self.options.identify,
+        )
+    }
+}
+
+/// The sensors FFCAL calibrates (those seen together with another one: an FSS the Sun never
+/// visited is left out and keeps its flown alignment, reported as not observed).
+struct FfcalSensors {
+    /// Table index (FHST1, FHST2, FSS1, FSS2) → index in `specs`, `None` = unobserved.
+    map: [Option<usize>; 4],
+    /// The observed table indices.
+    observed: Vec<usize>,
+    /// The flown `M_AS` of all four sensors, in table order.
+    flown: Vec<Matrix3<f64>>,
+    /// The observed sensors with their flown alignments and priors.
+    specs: Vec<SensorSpec>,
+}
+
+impl FfcalSensors {
+    /// The observed sensors of the frames (counted into `summary.not_observed`).
+    ///
+    /// # Errors
+    /// A FHST never observed with another sensor.
+    fn observed(
+        ctx: &ChainContext<'_>,
+        frames: &[FrameObservations],
+        summary: &mut DataSummary,
+    ) -> anyhow::Result<Self> {
+        let declared_fss_sys = ctx.metadata.sensors.fss_systematic_or_paper_arcsec();
+        let (map, observed) = observed_sensors(frames, declared_fss_sys, summary)?;
+        let flown = ctx
+            .flown_alignment
+            .matrices()
+            .map(matrix_from_rows)
+            .to_vec();
+        let specs = observed
+            .iter()
+            .map(|&k| SensorSpec::new(SENSOR_NAMES[k], flown[k], PRIOR_SIGMA_ARCSEC[k]))
+            .collect();
+        Ok(Self {
+            map,
+            observed,
+            flown,
+            specs,
+        })
+    }
+
+    /// The FFCAL set-up of these sensors: the same for the full fit, its held-out folds and
+    /// the aberration switch's validation.
+    fn setup<'s>(
+        &'s self,
+        ctx: &ChainContext<'_>,
+        obc_bias_at: &'s dyn Fn(f64) -> Vector3<f64>,
+        summary: &DataSummary,
+    ) -> AlignmentSetup<'s> {
+        AlignmentSetup {
+            sensors: &self.specs,
+            map: self.map,
+            fss_systematic_arcsec: ctx.metadata.sensors.fss_systematic_or_paper_arcsec(),
+            staging: ctx.options.ffcal_staging(),
+            cfg: FfcalConfig {
+                weighting: ctx.options.weighting,
+                ..FfcalConfig::default()
+            },
+            obc_bias_at,
+            data_note: format!(
+                "stars identified per FHST: {:?}; Sun samples per FSS: {:?}",
+                summary.stars_identified, summary.sun_samples
+            ),
+        }
+    }
+
+    /// All four alignments: the flown ones with the observed replaced by `solution`'s.
+    fn with_solution(&self, solution: &FfcalSolution) -> Vec<Matrix3<f64>> {
+        let mut m_acs = self.flown.clone();
+        for (j, &k) in self.observed.iter().enumerate() {
+            m_acs[k] = solution.sensors[j].m_acs_from_sensor_calibrated;
+        }
+        m_acs
+    }
+}
+
+/// What FFCAL and the adjustment (module doc, steps 3–4) hand on.
+struct FfcalStage {
+    /// The alignments and their covariance.
+    solution: FfcalSolution,
+    /// The report's FFCAL section.
+    summary: FfcalSummary,
+    /// The adjustment that keeps the OBC's attitude frame.
+    adjustment: Adjustment,
+    /// Per observed sensor, as calibrated.
+    alignments: std::collections::BTreeMap<String, AlignmentReport>,
+    /// Per observed sensor, as adjusted (uplinked).
+    alignments_adjusted: std::collections::BTreeMap<String, AlignmentReport>,
+    /// Residual RMS per sensor before and after.
+    residual: BeforeAfter,
+}
+
+/// FFCAL over the first pass's frames (module doc, step 3), the FSS error level left in its
+/// residuals, and the adjustment (step 4). The fit's data are freed on return, before the
+/// held-out folds build theirs (six months: 2 × 134 MB).
 ///
 /// # Errors
-/// Too little data for FFCAL (with what is missing), or an internal numerical failure.
-pub fn calibrate_telemetry(
-    tm: &Telemetry,
-    metadata: &Metadata,
-    options: &CalibrateOptions,
-) -> anyhow::Result<CalibrationOutput> {
-    if tm.raw.len() < 10 {
-        bail!(
-            "only {} raw sensor frames (APID 0x010) in the telemetry: calibration needs hours of data with both FHSTs tracking and the Sun in an FSS (docs/icd.md)",
-            tm.raw.len()
-        );
-    }
-    let flown_alignment = options
-        .flown_alignment
-        .unwrap_or_else(AlignmentTable::prelaunch);
-    let flown_iru = options.flown_iru.unwrap_or_else(IruTable::prelaunch);
-    let sky = load_catalog()?;
-    crate::progress::step("identifying stars against the catalog (flown alignments)");
-    let frames = build_observations(
-        tm,
-        &flown_alignment,
-        &flown_iru,
-        &metadata.sensors,
-        &sky,
-        &options.identify,
-    );
-    let mut summary = DataSummary::of_frames(&frames);
-    if tm.ephemeris.is_empty() {
-        crate::note!("warning: no ephemeris packets (APID 0x020): orbital aberration and Sun parallax are not corrected");
-    }
-
-    // The batches that give the interval end attitudes (and the FHST gyro batches) carry their
-    // vectors with the OBC's bias, so the bias is not smeared into them.
-    let obc_bias_at = |t_s: f64| obc_bias_at(tm, t_s);
-
-    // FFCAL. A sensor never seen together with another one (e.g. an FSS the Sun never
-    // visited) is left out and keeps its flown alignment (reported as not observed).
-    let declared_fss_sys = metadata.sensors.fss_systematic_or_paper_arcsec();
-    let (map, observed) = observed_sensors(&frames, declared_fss_sys, &mut summary)?;
-    let flown: Vec<Matrix3<f64>> = flown_alignment
-        .matrices()
-        .iter()
-        .map(|m| matrix_from_rows(m))
-        .collect();
-    let sensors: Vec<SensorSpec> = observed
-        .iter()
-        .map(|&k| SensorSpec::new(SENSOR_NAMES[k], flown[k], PRIOR_SIGMA_ARCSEC[k]))
-        .collect();
-    let setup = AlignmentSetup {
-        sensors: &sensors,
-        map,
-        fss_systematic_arcsec: declared_fss_sys,
-        staging: options.ffcal_staging(),
-        cfg: FfcalConfig {
-            weighting: options.weighting,
-            ..FfcalConfig::default()
-        },
-        obc_bias_at: &obc_bias_at,
-        data_note: format!(
-            "stars identified per FHST: {:?}; Sun samples per FSS: {:?}",
-            summary.stars_identified, summary.sun_samples
-        ),
-    };
+/// A stage of the fit that cannot be solved, or an adjustment that fails.
+fn ffcal_stage(
+    ctx: &ChainContext<'_>,
+    frames: &[FrameObservations],
+    sensors: &FfcalSensors,
+    setup: &AlignmentSetup<'_>,
+    summary: &mut DataSummary,
+) -> anyhow::Result<FfcalStage> {
     crate::progress::step("FFCAL: the alignments");
-    let fit = setup.fit(&[&frames], metadata.fss_transfer_function_sigma.as_ref())?;
+    let consider = ctx.metadata.fss_transfer_function_sigma.as_ref();
+    let fit = setup.fit(&[frames], consider)?;
     if let (Some((FhstStage::StarPairs, _)), FhstStage::GyroBatches, Err(e)) =
-        (&fit.fhst_stage, options.fhst_stage, &fit.batch_rel)
+        (&fit.fhst_stage, ctx.options.fhst_stage, &fit.batch_rel)
     {
         crate::note!("warning: FHST stage from the simultaneous star pairs: {e}");
     }
@@ -555,151 +629,211 @@ pub fn calibrate_telemetry(
     summary.ffcal_epochs = data.epoch_count();
     // The FSS error level left in the calibrated residuals (the paper's "inherent" 0.022°),
     // reported beside the declared level the FSS weights use (`pipeline::fss_systematic`).
-    let fss_systematic = observed.iter().any(|&k| k >= 2).then(|| {
-        let mut m_acs = [flown[0], flown[1], flown[2], flown[3]];
-        for (j, &k) in observed.iter().enumerate() {
-            m_acs[k] = solution.sensors[j].m_acs_from_sensor_calibrated;
-        }
-        estimate_fss_systematic(&frames, &m_acs, declared_fss_sys, fss_cell)
+    let calibrated = sensors.with_solution(&solution);
+    let fss_systematic = sensors.observed.iter().any(|&k| k >= 2).then(|| {
+        let m_acs = [calibrated[0], calibrated[1], calibrated[2], calibrated[3]];
+        estimate_fss_systematic(frames, &m_acs, setup.fss_systematic_arcsec, fss_cell)
     });
     summary.ffcal_fhst_stage_epochs = match &fhst_stage {
         Some((FhstStage::StarPairs, _)) => fhst_data.epoch_count(),
         _ => 0,
     };
-
     // Adjustment (over all four sensors; the unobserved keep their flown alignment).
-    let mut calibrated = flown.clone();
-    for (j, &k) in observed.iter().enumerate() {
-        calibrated[k] = solution.sensors[j].m_acs_from_sensor_calibrated;
-    }
-    let adjustment = preserve_obc_attitude(&flown, &calibrated, 0, 1, BoresightFrame::Bisector)?;
+    let adjustment =
+        preserve_obc_attitude(&sensors.flown, &calibrated, 0, 1, BoresightFrame::Bisector)?;
     let (alignments, alignments_adjusted, residual) = alignment_reports(
         &solution,
-        &observed,
-        &flown,
+        &sensors.observed,
+        &sensors.flown,
         &adjustment.m_acs_from_sensor_adjusted,
     );
-    let ffcal_summary = FfcalSummary::new(
+    let summary = FfcalSummary::new(
         &solution,
-        &observed,
-        &sensors,
+        &sensors.observed,
+        &sensors.specs,
         (&data, &fhst_data),
         fhst_stage.as_ref().map(|(k, _)| *k),
         &batch_rel,
         fss_systematic,
-        metadata.fss_transfer_function_sigma.is_some(),
+        consider.is_some(),
     );
-    // The full fit's data are not needed any more: free them before the folds build theirs
-    // (six months: 2 × 134 MB).
-    drop((data, fhst_data));
-    crate::progress::step("held-out validation of the alignments");
-    let alignment_validation = validate_alignment_heldout(&frames, &setup);
-    let mut new_alignment = flown_alignment;
+    Ok(FfcalStage {
+        solution,
+        summary,
+        adjustment,
+        alignments,
+        alignments_adjusted,
+        residual,
+    })
+}
+
+/// The alignment table to uplink (module doc, step 4): the flown table with the adjusted
+/// alignments, each orthonormalised.
+///
+/// # Errors
+/// The table fails the OBC's validation.
+fn adjusted_alignment_table(
+    flown: AlignmentTable,
+    adjustment: &Adjustment,
+) -> anyhow::Result<AlignmentTable> {
     let ortho = |m: &Matrix3<f64>| rows(&Quat::from_dcm(m).to_dcm());
-    new_alignment.m_acs_from_fhst1 = ortho(&adjustment.m_acs_from_sensor_adjusted[0]);
-    new_alignment.m_acs_from_fhst2 = ortho(&adjustment.m_acs_from_sensor_adjusted[1]);
-    new_alignment.m_acs_from_fss1 = ortho(&adjustment.m_acs_from_sensor_adjusted[2]);
-    new_alignment.m_acs_from_fss2 = ortho(&adjustment.m_acs_from_sensor_adjusted[3]);
-    new_alignment
+    let adjusted = &adjustment.m_acs_from_sensor_adjusted;
+    let mut table = flown;
+    table.m_acs_from_fhst1 = ortho(&adjusted[0]);
+    table.m_acs_from_fhst2 = ortho(&adjusted[1]);
+    table.m_acs_from_fss1 = ortho(&adjusted[2]);
+    table.m_acs_from_fss2 = ortho(&adjusted[3]);
+    table
         .validate()
         .map_err(|e| anyhow::anyhow!("calibrated alignment table invalid: {e:?}"))?;
+    Ok(table)
+}
 
-    // IRUCAL: re-derive observations with the calibrated alignments so that end attitudes
-    // use the best alignments.
-    // The first pass's frames are not needed any more: free them before the second pass
-    // (six months of 30-s frames are ~0.5 GB each).
-    drop(frames);
-    crate::progress::step("identifying stars again with the calibrated alignments");
-    let frames_cal = build_observations(
-        tm,
-        &new_alignment,
-        &flown_iru,
-        &metadata.sensors,
-        &sky,
-        &options.identify,
-    );
-    let t0 = frames_cal.first().map_or(0.0, |f| f.time.seconds());
+/// What IRUCAL (module doc, step 5) hands on.
+struct GyroStage {
+    /// The IRU table to write, the report's IRU section, the primary triad's solution and
+    /// why IRUCAL gave no answer.
+    iru: IruStage,
+    /// One report per maneuver.
+    maneuvers: Vec<ManeuverReport>,
+    /// The smoothed bias at every fix beside the OBC's.
+    bias_history: Vec<BiasHistoryPoint>,
+    /// The gyro chain IRUCAL used.
+    chain: Chain,
+}
+
+/// IRUCAL over the second pass's frames (module doc, step 5): the maneuvers (the user's or
+/// found), the chain of attitude fixes and gyro links, the solution and the bias history.
+///
+/// # Errors
+/// A user maneuver outside the frames.
+fn gyro_stage(
+    ctx: &ChainContext<'_>,
+    frames: &[FrameObservations],
+    ffcal: &FfcalStage,
+    obc_bias_at: &dyn Fn(f64) -> Vector3<f64>,
+    summary: &mut DataSummary,
+) -> anyhow::Result<GyroStage> {
+    let t0 = frames.first().map_or(0.0, |f| f.time.seconds());
     let noise = GyroNoise {
-        sigma_v_rad_per_sqrt_s: metadata.sensors.iru_arw_rad_per_sqrt_s,
-        sigma_u_rad_per_s_1p5: metadata.sensors.iru_rrw_rad_per_s_sqrt_s,
+        sigma_v_rad_per_sqrt_s: ctx.metadata.sensors.iru_arw_rad_per_sqrt_s,
+        sigma_u_rad_per_s_1p5: ctx.metadata.sensors.iru_rrw_rad_per_s_sqrt_s,
     };
-    let maneuvers = match &options.maneuvers_s {
-        Some(spans) => user_maneuvers(&frames_cal, spans)?,
-        None => find_maneuvers(&frames_cal),
+    let maneuvers = match &ctx.options.maneuvers_s {
+        Some(spans) => user_maneuvers(frames, spans)?,
+        None => high_rate_runs(frames.iter().map(|f| f.high_rate), true),
     };
-    let fhst_floor = FixFloors::from_ffcal(&ffcal_summary, &solution, metadata);
-    summary.count_rate_switches(&frames_cal);
+    let fhst_floor = FixFloors::from_ffcal(&ffcal.summary, &ffcal.solution, ctx.metadata);
+    summary.count_rate_switches(frames);
     crate::progress::step("IRUCAL: attitude fixes and the gyro chain");
-    let gyro_chain = build_gyro_chain(&frames_cal, &maneuvers, &obc_bias_at, &fhst_floor, t0);
-    let mut maneuver_reports =
-        maneuver_reports(&frames_cal, &maneuvers, &gyro_chain, &obc_bias_at, t0);
+    let gyro_chain = build_gyro_chain(frames, &maneuvers, obc_bias_at, &fhst_floor, t0);
+    let mut maneuver_reports = maneuver_reports(frames, &maneuvers, &gyro_chain, obc_bias_at, t0);
     let chain_cfg = ChainConfig {
         noise,
         ..ChainConfig::default()
     };
-    let mut iru_stage = irucal_stage(
+    let mut iru = irucal_stage(
         &gyro_chain.chain,
         &chain_cfg,
-        &flown_iru,
+        &ctx.flown_iru,
         &mut maneuver_reports,
     );
-    if let Some(r) = iru_stage.report.as_mut() {
+    if let Some(r) = iru.report.as_mut() {
         r.misfit_fixes.clone_from(&gyro_chain.misfit_fixes);
     }
-    let IruStage {
-        table: new_iru,
-        report: iru_report,
-        solution: irucal_solution,
-        skipped: iru_skipped,
-        chain_solution,
-    } = iru_stage;
-    let bias_history_points = chain_solution
+    let bias_history = iru
+        .chain_solution
         .as_ref()
-        .map(|sol| bias_history(sol, tm, t0))
+        .map(|sol| bias_history(sol, ctx.tm, t0))
         .unwrap_or_default();
+    Ok(GyroStage {
+        iru,
+        maneuvers: maneuver_reports,
+        bias_history,
+        chain: gyro_chain.chain,
+    })
+}
+
+/// Run the chain on decoded telemetry, stage by stage as the module doc numbers them.
+///
+/// # Errors
+/// Too little data for FFCAL (with what is missing), or an internal numerical failure.
+pub fn calibrate_telemetry(
+    tm: &Telemetry,
+    metadata: &Metadata,
+    options: &CalibrateOptions,
+) -> anyhow::Result<CalibrationOutput> {
+    // 1. The run, the tables flown and the catalog.
+    let ctx = ChainContext::new(tm, metadata, options)?;
+    // The batches that give the interval end attitudes (and the FHST gyro batches) carry their
+    // vectors with the OBC's bias, so the bias is not smeared into them.
+    let obc_bias_at = |t_s: f64| obc_bias_at(tm, t_s);
+
+    // 2. DA/FADS with the flown alignments.
+    crate::progress::step("identifying stars against the catalog (flown alignments)");
+    let frames = ctx.identify(&ctx.flown_alignment);
+    let mut summary = DataSummary::of_frames(&frames);
+    if tm.ephemeris.is_empty() {
+        crate::note!("warning: no ephemeris packets (APID 0x020): orbital aberration and Sun parallax are not corrected");
+    }
+
+    // 3–4. FFCAL and the adjustment, the alignments' held-out validation, the new table.
+    let sensors = FfcalSensors::observed(&ctx, &frames, &mut summary)?;
+    let setup = sensors.setup(&ctx, &obc_bias_at, &summary);
+    let ffcal = ffcal_stage(&ctx, &frames, &sensors, &setup, &mut summary)?;
+    crate::progress::step("held-out validation of the alignments");
+    let alignment_validation = validate_alignment_heldout(&frames, &setup);
+    let new_alignment = adjusted_alignment_table(ctx.flown_alignment, &ffcal.adjustment)?;
+
+    // 5. IRUCAL: re-derive observations with the calibrated alignments so that end attitudes
+    // use the best alignments. The first pass's frames are not needed any more: free them
+    // before the second pass (six months of 30-s frames are ~0.5 GB each).
+    drop(frames);
+    crate::progress::step("identifying stars again with the calibrated alignments");
+    let frames_cal = ctx.identify(&new_alignment);
+    let gyro = gyro_stage(&ctx, &frames_cal, &ffcal, &obc_bias_at, &mut summary)?;
+
+    // 6. The filter table.
     crate::progress::step("filter table: validation of the proposed change");
-    let FilterStage {
-        table: new_filter,
-        changes: filter_changes,
-        aberration_validation: filter_validation,
-        terms: filter_tuning,
-    } = filter_stage(
+    let filter = filter_stage(
         options,
         metadata,
         &frames_cal,
         &setup,
-        (iru_report.as_ref(), iru_skipped.as_deref()),
-        (tm, &flown_iru),
+        (gyro.iru.report.as_ref(), gyro.iru.skipped.as_deref()),
+        (tm, &ctx.flown_iru),
     )?;
+
+    // 7. The TAM and the report.
     let report = CalibrationReport {
         telemetry: tm.report.clone(),
         data: summary,
-        alignments,
-        alignments_adjusted,
-        adjustment_theta_acs_arcsec: adjustment.theta_adjust_acs_arcsec.into(),
-        residual_rms_arcsec: residual,
-        ffcal: ffcal_summary,
-        iru: iru_report,
-        iru_skipped,
-        maneuvers: maneuver_reports,
-        bias_history: bias_history_points,
+        alignments: ffcal.alignments,
+        alignments_adjusted: ffcal.alignments_adjusted,
+        adjustment_theta_acs_arcsec: ffcal.adjustment.theta_adjust_acs_arcsec.into(),
+        residual_rms_arcsec: ffcal.residual,
+        ffcal: ffcal.summary,
+        iru: gyro.iru.report,
+        iru_skipped: gyro.iru.skipped,
+        maneuvers: gyro.maneuvers,
+        bias_history: gyro.bias_history,
         tables: std::collections::BTreeMap::new(),
-        filter_changes,
+        filter_changes: filter.changes,
         alignment_validation,
-        filter_validation,
-        filter_tuning,
+        filter_validation: filter.aberration_validation,
+        filter_tuning: filter.terms,
         fhst_floor: None,
         tam: super::tam::tam_stage(tm, &frames_cal, &obc_bias_at),
     };
     Ok(CalibrationOutput {
         report,
         alignment: new_alignment,
-        iru: new_iru,
-        filter: new_filter,
+        iru: gyro.iru.table,
+        filter: filter.table,
         frames: frames_cal,
-        ffcal: solution,
-        irucal: irucal_solution,
-        gyro_chain: gyro_chain.chain,
+        ffcal: ffcal.solution,
+        irucal: gyro.iru.solution,
+        gyro_chain: gyro.chain,
     })
 }
 
@@ -1379,4 +1513,42 @@ fn fss_sigma_after_arcsec(
         worst = Some(worst.map_or(sigma, |w| w.max(sigma)));
     }
     worst
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+mod tests {
+    use super::*;
+
+    /// Stage 1 refuses telemetry without the hours of frames a calibration needs, naming the
+    /// count, before it loads the catalog.
+    #[test]
+    fn the_context_refuses_too_few_raw_frames() {
+        let tm = Telemetry::default();
+        let err = ChainContext::new(&tm, &Metadata::default(), &CalibrateOptions::default())
+            .err()
+            .expect("no frames");
+        assert!(
+            err.to_string().contains("only 0 raw sensor frames"),
+            "{err}"
+        );
+    }
+
+    /// Stage 4's table: an adjustment that moves nothing gives the flown alignments back
+    /// (orthonormalised to rounding) and keeps the table valid.
+    #[test]
+    fn an_identity_adjustment_gives_the_flown_table() {
+        let flown = AlignmentTable::prelaunch();
+        let adjustment = Adjustment {
+            construction: BoresightFrame::Bisector,
+            m_adjust: Matrix3::identity(),
+            theta_adjust_acs_arcsec: Vector3::zeros(),
+            m_acs_from_sensor_adjusted: flown.matrices().map(matrix_from_rows).to_vec(),
+        };
+        let table = adjusted_alignment_table(flown, &adjustment).unwrap();
+        for (a, b) in table.matrices().iter().zip(flown.matrices()) {
+            let d = (matrix_from_rows(a) - matrix_from_rows(b)).amax();
+            assert!(d < 1e-6, "moved by {d}");
+        }
+    }
 }

@@ -113,6 +113,31 @@ pub struct TermDecision {
 }
 
 impl TermDecision {
+    /// The flown value kept, nothing derived, with why.
+    fn kept(field: FilterTerm, flown: f64, reason: String) -> Self {
+        Self {
+            field,
+            flown,
+            derived: None,
+            written: false,
+            derived_per_element: None,
+            reason,
+        }
+    }
+
+    /// Each of `terms` (field, flown value) kept for want of the data of a held-out test:
+    /// `lacking` says which, `why` the numbers.
+    fn kept_for_want_of_data(
+        terms: [(FilterTerm, f64); 2],
+        lacking: &str,
+        why: &dyn std::fmt::Display,
+    ) -> [Self; 2] {
+        terms.map(|(field, f)| {
+            let reason = format!("kept {f:.3e}: {lacking} for a held-out test ({why})");
+            Self::kept(field, f, reason)
+        })
+    }
+
     /// Write the derived value into `table` when the decision is to write it; true if it did.
     pub fn apply(&self, table: &mut FilterTable) -> bool {
         match (self.written, self.derived) {
@@ -171,14 +196,7 @@ pub fn slew_uncertainty(
     iru: Option<&IruEvidence>,
     skipped: Option<&str>,
 ) -> TermDecision {
-    let mut d = TermDecision {
-        field: FilterTerm::SlewUncertainty,
-        flown: flown_k,
-        derived: None,
-        written: false,
-        derived_per_element: None,
-        reason: String::new(),
-    };
+    let mut d = TermDecision::kept(FilterTerm::SlewUncertainty, flown_k, String::new());
     let Some(r) = iru else {
         d.reason = format!(
             "kept: no IRU calibration ({}), nothing new is known of the gyros' scale factors and misalignments",
@@ -186,7 +204,8 @@ pub fn slew_uncertainty(
         );
         return d;
     };
-    let Some(v) = r.validation.as_ref() else {
+    let p = &r.primary;
+    let Some(v) = p.validation.as_ref() else {
         d.reason = format!(
             "kept: the IRU calibration has no held-out validation ({})",
             r.decision
@@ -194,7 +213,7 @@ pub fn slew_uncertainty(
         return d;
     };
     let scale = v.mean_square_normalised.max(1.0).sqrt();
-    let primary = residual_element_sigmas(&r.delta_m, &r.delta_m_sigma, &r.delta_m_uplinked, scale);
+    let primary = residual_element_sigmas(&p.delta_m, &p.delta_m_sigma, &p.delta_m_uplinked, scale);
     let backup = r.backup.as_ref().map(|b| {
         let bs = b
             .validation
@@ -207,11 +226,11 @@ pub fn slew_uncertainty(
     let mut k = k_primary;
     let mut origin = format!(
         "primary triad's δM[{i}][{j}]: σ {:.0} ppm × {scale:.2} (held-out √m.s.){}",
-        r.delta_m_sigma[i][j] * 1e6,
-        if r.delta_m_uplinked[i][j] == 0.0 {
+        p.delta_m_sigma[i][j] * 1e6,
+        if p.delta_m_uplinked[i][j] == 0.0 {
             format!(
                 " ⊕ its estimate {:.0} ppm (not uplinked)",
-                r.delta_m[i][j] * 1e6
+                p.delta_m[i][j] * 1e6
             )
         } else {
             String::new()
@@ -357,14 +376,8 @@ pub struct RateScale {
 /// What IRUCAL says of G (calibrate's `IruReport`, in the terms the slew uncertainty needs).
 #[derive(Clone, Debug, PartialEq)]
 pub struct IruEvidence {
-    /// δM of the primary triad.
-    pub delta_m: [[f64; 3]; 3],
-    /// Its 1σ.
-    pub delta_m_sigma: [[f64; 3]; 3],
-    /// The δM applied to G.
-    pub delta_m_uplinked: [[f64; 3]; 3],
-    /// The primary triad's held-out validation.
-    pub validation: Option<HeldOut>,
+    /// The primary triad's δM, its σ, what was applied to G, and its held-out validation.
+    pub primary: TriadCalibration,
     /// Whether G was updated.
     pub g_updated: bool,
     /// Why G was or was not updated.
@@ -543,12 +556,8 @@ pub fn noise_decision(
     };
     let evidence_text = evidence.iter().map(describe).collect::<Vec<_>>().join("; ");
     let mut d = TermDecision {
-        field,
-        flown,
         derived,
-        written: false,
-        derived_per_element: None,
-        reason: String::new(),
+        ..TermDecision::kept(field, flown, String::new())
     };
     d.reason = match (up, all_down && may_lower) {
         (Some(v), _) => {
@@ -600,18 +609,14 @@ pub fn fhst_noise_terms(
                 faint.len(),
             ),
         ],
-        Err(why) => [
-            (FilterTerm::FhstBright, flown.fhst_sigma_bright_arcsec),
-            (FilterTerm::FhstFaint, flown.fhst_sigma_faint_arcsec),
-        ]
-        .map(|(field, f)| TermDecision {
-            field,
-            flown: f,
-            derived: None,
-            written: false,
-            derived_per_element: None,
-            reason: format!("kept {f:.3e}: too few star samples for a held-out test ({why})"),
-        }),
+        Err(why) => TermDecision::kept_for_want_of_data(
+            [
+                (FilterTerm::FhstBright, flown.fhst_sigma_bright_arcsec),
+                (FilterTerm::FhstFaint, flown.fhst_sigma_faint_arcsec),
+            ],
+            "too few star samples",
+            &why,
+        ),
     }
 }
 
@@ -648,18 +653,14 @@ pub fn noise_terms(
             }
             [arw_decision, rrw_decision]
         }
-        Err(why) => [
-            (FilterTerm::Arw, flown.arw_rad_per_sqrt_s),
-            (FilterTerm::Rrw, flown.rrw_rad_per_s_sqrt_s),
-        ]
-        .map(|(field, f)| TermDecision {
-            field,
-            flown: f,
-            derived: None,
-            written: false,
-            derived_per_element: None,
-            reason: format!("kept {f:.3e}: too little hold data for a held-out test ({why})"),
-        }),
+        Err(why) => TermDecision::kept_for_want_of_data(
+            [
+                (FilterTerm::Arw, flown.arw_rad_per_sqrt_s),
+                (FilterTerm::Rrw, flown.rrw_rad_per_s_sqrt_s),
+            ],
+            "too little hold data",
+            &why,
+        ),
     }
 }
 

@@ -372,22 +372,33 @@ impl IruReport {
             mean_square_normalised: v.mean_square_normalised,
             reason: v.reason.clone(),
         };
+        let triad =
+            |delta_m, delta_m_sigma, delta_m_uplinked, validation: Option<&_>| TriadCalibration {
+                delta_m,
+                delta_m_sigma,
+                delta_m_uplinked,
+                validation: validation.map(held_out),
+            };
         IruEvidence {
-            delta_m: self.delta_m,
-            delta_m_sigma: self.delta_m_sigma,
-            delta_m_uplinked: self.delta_m_uplinked,
-            validation: self.validation.as_ref().map(held_out),
+            primary: triad(
+                self.delta_m,
+                self.delta_m_sigma,
+                self.delta_m_uplinked,
+                self.validation.as_ref(),
+            ),
             g_updated: self.g_updated,
             decision: self.decision.clone(),
             rate_scale: RateScale {
                 significant: self.rate_scale.significant,
                 p_value: self.rate_scale.p_value,
             },
-            backup: self.backup.as_ref().map(|b| TriadCalibration {
-                delta_m: b.delta_m,
-                delta_m_sigma: b.delta_m_sigma,
-                delta_m_uplinked: b.delta_m_uplinked,
-                validation: b.validation.as_ref().map(held_out),
+            backup: self.backup.as_ref().map(|b| {
+                triad(
+                    b.delta_m,
+                    b.delta_m_sigma,
+                    b.delta_m_uplinked,
+                    b.validation.as_ref(),
+                )
             }),
         }
     }

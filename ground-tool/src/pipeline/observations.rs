@@ -868,6 +868,28 @@ pub fn body_to_center(
     to_center
 }
 
+/// [`fine_attitude`] from the FHSTs alone, the gyro increments taken as the flown `G` gives
+/// them (no δM): the tracker-only attitudes of the coarse-attitude check, the FHST gyro
+/// batches and the TAM samples.
+///
+/// # Errors
+/// As [`fine_attitude`].
+pub fn fhst_attitude(
+    frames: &[FrameObservations],
+    range: core::ops::Range<usize>,
+    center: usize,
+    bias_acs_rad_per_s: &Vector3<f64>,
+) -> Result<AttitudeSolution, AttitudeError> {
+    fine_attitude(
+        frames,
+        range,
+        center,
+        bias_acs_rad_per_s,
+        &Matrix3::zeros(),
+        AttitudeSensors::FhstOnly,
+    )
+}
+
 /// Fine attitude at the centre frame `center` from the frames `range` (indices into
 /// `frames`): every vector is carried to the centre time with the gyro increments corrected by
 /// `bias_acs_rad_per_s` and `delta_m`, then the batch is solved with QUEST/SVD.

@@ -16,7 +16,7 @@
 
 use nalgebra::{Matrix3, Vector3};
 
-use super::observations::{body_to_center, fine_attitude, AttitudeSensors, FrameObservations};
+use super::observations::{body_to_center, fhst_attitude, FrameObservations};
 use crate::calibration::fhst_relative::BatchStarSample;
 
 /// Longest hold batch (s): a 16-min hold is one batch.
@@ -78,14 +78,7 @@ pub fn star_batch_samples(
         let center = (lo + hi) / 2;
         let t_c = frames[center].time.seconds();
         let bias = bias_at(t_c);
-        let a_center = match fine_attitude(
-            frames,
-            lo..hi,
-            center,
-            &bias,
-            &Matrix3::zeros(),
-            AttitudeSensors::FhstOnly,
-        ) {
+        let a_center = match fhst_attitude(frames, lo..hi, center, &bias) {
             Ok(sol) => sol.m_acs_from_eci,
             Err(_) => match frames[center].obc_q_acs_from_eci {
                 Some(q) => q.to_dcm(),

@@ -51,7 +51,7 @@
 //! Without APID 0x013 data the report says so with the reason (never an error).
 
 use crate::diagnose::stats::chi2_sf;
-use crate::pipeline::observations::{fine_attitude, triad, AttitudeSensors, FrameObservations};
+use crate::pipeline::observations::{fhst_attitude, triad, FrameObservations};
 use crate::tp::Telemetry;
 use fsw_core::attitude::rotvec_from_rot;
 use fsw_core::raw::{TAMS, TAM_FLAG_TORQUERS_ON, TAM_FLAG_VALID};
@@ -508,15 +508,8 @@ fn fine_attitude_at(
     let t = frames[k].time.seconds();
     let lo = frames.partition_point(|f| f.time.seconds() < t - FINE_HALF_WINDOW_S);
     let hi = frames.partition_point(|f| f.time.seconds() < t + FINE_HALF_WINDOW_S);
-    let sol = fine_attitude(
-        frames,
-        lo..hi.max(k + 1),
-        k,
-        bias_acs_rad_per_s,
-        &Matrix3::zeros(),
-        AttitudeSensors::FhstOnly,
-    )
-    .map_err(|_| FineRefusal::NoSolution)?;
+    let sol = fhst_attitude(frames, lo..hi.max(k + 1), k, bias_acs_rad_per_s)
+        .map_err(|_| FineRefusal::NoSolution)?;
     #[allow(clippy::cast_precision_loss)]
     if chi2_sf(sol.chi2, sol.dof as f64) < FINE_MISFIT_P {
         return Err(FineRefusal::Misfit);

@@ -465,6 +465,17 @@ mod tests {
         Iru::with_geometry(axes(), [0.0; IRU_CHANNELS], p, model_rng(1, 5)).unwrap()
     }
 
+    /// One sample of 1 s ending at t = 1 s, the body turning by `increment_acs_arcsec` in it,
+    /// at the reference temperature.
+    fn sample_one_second(iru: &mut Iru, increment_acs_arcsec: [f64; 3]) {
+        iru.sample(
+            &Vector3::from(increment_acs_arcsec).scale(RAD_PER_ARCSEC),
+            1.0,
+            1.0,
+            0.0,
+        );
+    }
+
     /// A constant rate gives floor(total angle / q) pulses in total, the fraction carried
     /// between samples (no pulse lost or gained), and the 16-bit deltas decode with
     /// `wrapping_sub as i16`.
@@ -668,12 +679,7 @@ mod tests {
         p.initial_high_rate = true;
         let mut iru = ideal_iru(p);
         // 1°/s on x, −0.5°/s on y, at rest on z; 0.8″ pulses.
-        iru.sample(
-            &Vector3::new(3600.0, -1800.0, 0.0).scale(RAD_PER_ARCSEC),
-            1.0,
-            1.0,
-            0.0,
-        );
+        sample_one_second(&mut iru, [3600.0, -1800.0, 0.0]);
         // 3600 × 1.001 / 0.8 = 4504.5; −1800 × 1.00025 / 0.8 = −2250.56.
         assert_eq!(iru.total_pulses()[0], 4504);
         assert_eq!(iru.total_pulses()[2], -2251);
@@ -685,12 +691,7 @@ mod tests {
         q.effects.rate_power_reference_deg_per_s = 2.0;
         q.initial_high_rate = true;
         let mut iru = ideal_iru(q);
-        iru.sample(
-            &Vector3::new(3600.0, 0.0, 0.0).scale(RAD_PER_ARCSEC),
-            1.0,
-            1.0,
-            0.0,
-        );
+        sample_one_second(&mut iru, [3600.0, 0.0, 0.0]);
         assert_eq!(iru.total_pulses()[0], 4502, "3600 × 1.0005 / 0.8 = 4502.25");
     }
 
@@ -725,24 +726,14 @@ mod tests {
         let mut asym = ideal();
         asym.effects.scale_asymmetry_ppm = [1000.0; IRU_CHANNELS];
         let mut iru = ideal_iru(asym);
-        iru.sample(
-            &Vector3::new(1000.0, -1000.0, 0.0).scale(RAD_PER_ARCSEC),
-            1.0,
-            1.0,
-            0.0,
-        );
+        sample_one_second(&mut iru, [1000.0, -1000.0, 0.0]);
         assert_eq!(iru.total_pulses()[0], 20_020);
         assert_eq!(iru.total_pulses()[2], -19_980, "−1000″ × (1 − 1000 ppm)");
         let mut hr = ideal();
         hr.high_rate_scale_ppm = [500.0; IRU_CHANNELS];
         hr.initial_high_rate = true;
         let mut iru = ideal_iru(hr);
-        iru.sample(
-            &Vector3::new(8000.0, 0.0, 0.0).scale(RAD_PER_ARCSEC),
-            1.0,
-            1.0,
-            0.0,
-        );
+        sample_one_second(&mut iru, [8000.0, 0.0, 0.0]);
         assert_eq!(iru.total_pulses()[0], 10_005);
     }
 }

@@ -39,6 +39,7 @@ use serde::{Deserialize, Serialize};
 use super::{model_rng, quantize_i16, stream, TruthSnapshot};
 use fsw_core::attitude::rot;
 use fsw_core::units::RAD_PER_ARCSEC;
+use gro_reference::run_folder::{TruthTam, TruthTams};
 
 /// Nanotesla per milligauss (1 G = 1e-4 T, so 1 mG = 1e-7 T = 100 nT).
 pub const NT_PER_MILLIGAUSS: f64 = 100.0;
@@ -255,34 +256,30 @@ impl Tam {
     }
 }
 
-/// The `truth.json` `tam` object: the primary TAM's `bias_mG` (sensor axes, mG; the key
-/// issue 20 names) and `effective_bias_mG` (what a bias fit with the torquer bars off
-/// recovers: bias plus the residual field as the TAM sees it), its `scale_ppm`,
+/// The `truth.json` `tam` object ([`TruthTams`]): the primary TAM's `bias_mG` (sensor axes,
+/// mG; the key issue 20 names) and `effective_bias_mG` (what a bias fit with the torquer bars
+/// off recovers: bias plus the residual field as the TAM sees it), its `scale_ppm`,
 /// `misalignment_acs_arcsec` and `residual_field_acs_mG`, and the same under `tam2`.
 #[must_use]
-pub fn truth_json(tam1: &TamParams, tam2: &TamParams) -> serde_json::Value {
+pub fn truth_tams(tam1: &TamParams, tam2: &TamParams) -> TruthTams {
     let one = |p: &TamParams| {
         let tam = Tam::new(0, p.clone(), 0);
         let eff = tam.effective_bias_milligauss();
-        serde_json::json!({
-            "bias_mG": p.bias_milligauss,
-            "effective_bias_mG": [eff.x, eff.y, eff.z],
-            "scale_ppm": p.scale_ppm,
-            "misalignment_acs_arcsec": p.misalignment_arcsec,
-            "residual_field_acs_mG": p.residual_field_acs_milligauss,
-            "noise_mG_1sigma": p.noise_milligauss_1sigma,
-            "resolution_mG_per_count": p.resolution_milligauss_per_count,
-        })
+        TruthTam {
+            bias_milligauss: p.bias_milligauss,
+            effective_bias_milligauss: [eff.x, eff.y, eff.z],
+            scale_ppm: p.scale_ppm,
+            misalignment_acs_arcsec: p.misalignment_arcsec,
+            residual_field_acs_milligauss: p.residual_field_acs_milligauss,
+            noise_milligauss_1sigma: p.noise_milligauss_1sigma,
+            resolution_milligauss_per_count: p.resolution_milligauss_per_count,
+        }
     };
-    let mut out = one(tam1);
-    if let Some(map) = out.as_object_mut() {
-        map.insert("tam2".into(), one(tam2));
-        map.insert(
-            "note".into(),
-            serde_json::json!("primary TAM (TAM1) at the top level, TAM2 under tam2; sensor axes; 1 mG = 100 nT; the torquer bars' field is not included"),
-        );
+    TruthTams {
+        tam1: one(tam1),
+        tam2: one(tam2),
+        note: "primary TAM (TAM1) at the top level, TAM2 under tam2; sensor axes; 1 mG = 100 nT; the torquer bars' field is not included".into(),
     }
-    out
 }
 
 #[cfg(test)]
@@ -320,16 +317,11 @@ mod tests {
     /// The paper's primary bias, as `data/gro_paper.toml` states it.
     #[test]
     fn val_primary_bias_is_the_papers() {
-        let text = std::fs::read_to_string(gro_reference::data::data_dir().join("gro_paper.toml"))
-            .unwrap();
-        let v: toml::Value = toml::from_str(&text).unwrap();
-        let b: Vec<f64> = v["sensors"]["tam"]["primary_bias_mG"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|x| x.as_float().unwrap())
-            .collect();
-        assert_eq!(b, PAPER_PRIMARY_TAM_BIAS_MILLIGAUSS.to_vec());
+        let paper = gro_reference::paper::PaperData::embedded().unwrap();
+        assert_eq!(
+            paper.sensors.tam.primary_bias_milligauss,
+            PAPER_PRIMARY_TAM_BIAS_MILLIGAUSS
+        );
         assert_eq!(
             TamParams::primary_default().bias_milligauss,
             PAPER_PRIMARY_TAM_BIAS_MILLIGAUSS

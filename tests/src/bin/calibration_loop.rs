@@ -6,7 +6,7 @@
 
 use anyhow::Context;
 use clap::Parser;
-use gro_tests::loop_report::{compare, render_markdown, LoopReport};
+use gro_tests::loop_report::{compare, read_truth, render_markdown, LoopReport};
 use ground_tool::pipeline::calibrate::{calibrate_run, CalibrateOptions};
 use sim_harness::outdir::OutputDir;
 use sim_harness::run::{run, RunOptions};
@@ -182,9 +182,7 @@ fn run_loop(args: &Args) -> anyhow::Result<()> {
             progress: true,
         },
     )?;
-    let truth: serde_json::Value = serde_json::from_str(
-        &std::fs::read_to_string(fly_a.join("truth.json")).context("reading truth.json")?,
-    )?;
+    let truth = read_truth(&fly_a)?;
     let mut report: LoopReport = compare(&summary_a, &summary_b, &calibration, &truth)?;
     report.wall_seconds = t_start.elapsed().as_secs_f64();
     std::fs::write(

@@ -12,7 +12,7 @@
 
 use anyhow::Context;
 use clap::Parser;
-use gro_tests::loop_report::{matrix_from_json, relative_error_and_nees};
+use gro_tests::loop_report::{read_truth, relative_error_and_nees, true_delta_m};
 use gro_tests::mc_campaign::{
     merge_shards, nums3, recorded, shard_file_name, summarise, Campaign, McSummary, Num,
     SeedResult, ShardFile,
@@ -169,8 +169,7 @@ fn score_seed(
         ..CalibrateOptions::default()
     };
     let cal = calibrate_run(&dir.join("run"), &dir.join("cal"), &options)?;
-    let truth: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(dir.join("run").join("truth.json"))?)?;
+    let truth = read_truth(&dir.join("run"))?;
     let sol = &cal.ffcal;
     let mut relative = Vec::new();
     let mut nees = Vec::new();
@@ -179,9 +178,8 @@ fn score_seed(
         relative.push((sol.sensors[j].id.clone(), nums3([e.x, e.y, e.z])));
         nees.push((sol.sensors[j].id.clone(), Num(n)));
     }
-    let delta_m_normalised = match (&cal.irucal, truth["iru"]["primary"]["delta_m"].is_array()) {
-        (Some(s), true) => {
-            let t = matrix_from_json(&truth["iru"]["primary"]["delta_m"])?;
+    let delta_m_normalised = match (&cal.irucal, true_delta_m(&truth)) {
+        (Some(s), Some(t)) => {
             let d = (s.calibration.delta_m - t).component_div(&s.sigma_delta_m);
             let mut out = [Num(0.0); 9];
             for i in 0..3 {

@@ -17,6 +17,7 @@
 //! `undeclared_effects`; `metadata.json` is copied unchanged (the operator does not know).
 
 use anyhow::Context;
+use gro_reference::run_folder::{Truth, TRUTH_FILE};
 use ground_tool::tp;
 use sim_harness::telemetry::PacketWriter;
 use std::path::Path;
@@ -205,16 +206,14 @@ pub fn inject_run(src: &Path, dst: &Path, effect: Injected) -> anyhow::Result<()
             std::fs::copy(e.path(), dst.join("uploads").join(e.file_name()))?;
         }
     }
-    if src.join("truth.json").exists() {
-        let mut v: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(src.join("truth.json"))?)?;
-        for key in ["present_effects", "undeclared_effects"] {
-            if let Some(a) = v[key].as_array_mut() {
-                a.push(serde_json::Value::String(effect.name()));
-            }
-        }
-        v["injected_effect"] = serde_json::Value::String(format!("{effect:?}"));
-        std::fs::write(dst.join("truth.json"), serde_json::to_string_pretty(&v)?)?;
+    if let Some(mut truth) = Truth::read(src)? {
+        truth.present_effects.push(effect.name());
+        truth.undeclared_effects.push(effect.name());
+        truth.injected_effect = Some(format!("{effect:?}"));
+        std::fs::write(
+            dst.join(TRUTH_FILE),
+            serde_json::to_string_pretty(&truth.to_json_value()?)?,
+        )?;
     }
     Ok(())
 }

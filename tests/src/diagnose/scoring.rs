@@ -18,6 +18,7 @@ use fsw_core::attitude::rotvec_from_rot;
 use fsw_core::tables::types::matrix_from_rows;
 use fsw_core::tables::AlignmentTable;
 use fsw_core::units::ARCSEC_PER_RAD;
+use gro_reference::run_folder::Truth as TruthFile;
 use ground_tool::diagnose::report::{BeforeAfter, Scoring};
 use ground_tool::diagnose::scoring::{ParameterCheck, Scorer, ScoringInputs, ScoringOutcome};
 use ground_tool::diagnose::Detected;
@@ -55,55 +56,28 @@ pub struct Truth {
 /// # Errors
 /// A present but malformed file.
 pub fn read_truth(run_dir: &Path) -> anyhow::Result<Option<Truth>> {
-    let path = run_dir.join("truth.json");
-    if !path.exists() {
+    let Some(file) = TruthFile::read(run_dir)? else {
         return Ok(None);
-    }
-    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&path)?)
-        .map_err(|e| anyhow::anyhow!("{} is not valid JSON: {e}", path.display()))?;
-    let names = ["FHST1", "FHST2", "FSS1", "FSS2"];
-    let mut alignments = [Matrix3::identity(); 4];
-    for (i, n) in names.iter().enumerate() {
-        let rows: [[f64; 3]; 3] = serde_json::from_value(v["alignments"][n].clone())
-            .map_err(|e| anyhow::anyhow!("truth.json alignments.{n}: {e}"))?;
-        alignments[i] = matrix_from_rows(&rows);
-    }
-    let mut alignments_after_run = alignments;
-    for (i, n) in names.iter().enumerate() {
-        if let Ok(rows) =
-            serde_json::from_value::<[[f64; 3]; 3]>(v["alignments_after_run"][n].clone())
-        {
-            alignments_after_run[i] = matrix_from_rows(&rows);
-        }
-    }
-    let list = |k: &str| -> Vec<String> {
-        v[k].as_array()
-            .map(|a| {
-                a.iter()
-                    .filter_map(|x| x.as_str().map(str::to_owned))
-                    .collect()
-            })
-            .unwrap_or_default()
     };
-    let scenario = v["scenario"].as_str().unwrap_or_default().to_owned();
-    let (scenario_file, scenario_source) = truth_scenario(&v, &scenario);
+    let alignments = file.alignments.into_array().map(|m| matrix_from_rows(&m));
+    let alignments_after_run = file
+        .alignments_after_run
+        .map_or(alignments, |a| a.into_array().map(|m| matrix_from_rows(&m)));
+    let (scenario_file, scenario_source) = truth_scenario(&file);
     Ok(Some(Truth {
-        scenario,
+        scenario: file.scenario,
         alignments,
         alignments_after_run,
-        undeclared: list("undeclared_effects"),
-        present: list("present_effects"),
+        undeclared: file.undeclared_effects,
+        present: file.present_effects,
         scenario_file,
         scenario_source,
-        bias_history: v["bias_history"]["samples"]
-            .as_array()
-            .map(|a| {
-                a.iter()
-                    .filter_map(|x| {
-                        let b: [f64; 3] =
-                            serde_json::from_value(x["bias_acs_rad_per_s"].clone()).ok()?;
-                        Some((x["t_s"].as_f64()?, Vector3::from(b) * ARCSEC_PER_RAD))
-                    })
+        bias_history: file
+            .bias_history
+            .map(|h| {
+                h.samples
+                    .iter()
+                    .map(|x| (x.t_s, Vector3::from(x.bias_acs_rad_per_s) * ARCSEC_PER_RAD))
                     .collect()
             })
             .unwrap_or_default(),
@@ -113,15 +87,11 @@ pub fn read_truth(run_dir: &Path) -> anyhow::Result<Option<Truth>> {
 /// The run's scenario as flown: `truth.json`'s `scenario_as_flown`, else (run folders written
 /// before it was recorded) the scenario file of the run's name, with each FSS's transfer
 /// function drawn as the simulator drew it. Returns the scenario and where it came from.
-fn truth_scenario(
-    v: &serde_json::Value,
-    scenario: &str,
-) -> (Option<sim_harness::scenario::Scenario>, String) {
+fn truth_scenario(file: &TruthFile) -> (Option<sim_harness::scenario::Scenario>, String) {
+    let scenario = file.scenario.as_str();
     let mut unreadable = String::new();
-    if !v["scenario_as_flown"].is_null() {
-        match serde_json::from_value::<sim_harness::scenario::Scenario>(
-            v["scenario_as_flown"].clone(),
-        ) {
+    if let Some(as_flown) = file.scenario_as_flown.as_ref().filter(|v| !v.is_null()) {
+        match serde_json::from_value::<sim_harness::scenario::Scenario>(as_flown.clone()) {
             Ok(s) => return (Some(s), "truth.json scenario_as_flown".into()),
             Err(e) => unreadable = format!("truth.json scenario_as_flown unreadable ({e}); "),
         }
@@ -139,7 +109,7 @@ fn truth_scenario(
     });
     match found {
         Some((mut s, p)) => {
-            let seed = v["seed"].as_u64().unwrap_or_default();
+            let seed = file.seed;
             s.fss1 = s.fss1.as_flown(0, seed);
             s.fss2 = s.fss2.as_flown(1, seed);
             (
@@ -440,30 +410,19 @@ pub fn parameter_truth(
         }
         "fhst_distortion" => {
             if let Some(f) = fhst(sensor) {
-                out.insert(
-                    "radial_at_4deg".into(),
-                    f.effects.radial_distortion_arcsec_at_4deg,
-                );
-                out.insert(
-                    "hv_h_at_corner".into(),
-                    f.effects.hv_distortion_arcsec_at_corner[0],
-                );
-                out.insert(
-                    "hv_v_at_corner".into(),
-                    f.effects.hv_distortion_arcsec_at_corner[1],
-                );
+                let [h, v] = f.effects.hv_distortion_arcsec_at_corner;
+                let radial = f.effects.radial_distortion_arcsec_at_4deg;
+                out.extend([
+                    ("radial_at_4deg".to_owned(), radial),
+                    ("hv_h_at_corner".to_owned(), h),
+                    ("hv_v_at_corner".to_owned(), v),
+                ]);
             }
         }
         "magnitude_bias" => {
             if let Some(f) = fhst(sensor) {
-                out.insert(
-                    "h_per_mag".into(),
-                    f.effects.magnitude_bias_arcsec_per_mag[0],
-                );
-                out.insert(
-                    "v_per_mag".into(),
-                    f.effects.magnitude_bias_arcsec_per_mag[1],
-                );
+                let [h, v] = f.effects.magnitude_bias_arcsec_per_mag;
+                out.extend([("h_per_mag".to_owned(), h), ("v_per_mag".to_owned(), v)]);
             }
         }
         "fss_transfer_function" => {

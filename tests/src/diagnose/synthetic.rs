@@ -56,6 +56,17 @@ pub struct SynthEffects {
     pub alignment_step: Option<(usize, f64, [f64; 3])>,
 }
 
+impl SynthEffects {
+    /// Only a time tag: sensor `sensor` (FHST1, FHST2, FSS1, FSS2) sampled `tau_s` before its
+    /// time code.
+    #[must_use]
+    pub fn time_tag(sensor: usize, tau_s: f64) -> Self {
+        let mut fx = Self::default();
+        fx.time_tag_s[sensor] = tau_s;
+        fx
+    }
+}
+
 /// Synthetic run settings.
 #[derive(Clone, Debug)]
 pub struct SynthConfig {
@@ -90,6 +101,14 @@ impl Default for SynthConfig {
             noise_scale: 1.0,
         }
     }
+}
+
+/// Whether the body turns faster than 20″/s in frame `f` (by its gyro increment): a frame of
+/// a slew arc.
+#[must_use]
+pub fn turning(f: &FrameObservations) -> bool {
+    f.gyro
+        .is_some_and(|g| g.dtheta_acs_rad.norm() / g.dt_s * ARCSEC_PER_RAD > 20.0)
 }
 
 /// A synthetic run.

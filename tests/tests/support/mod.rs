@@ -11,6 +11,36 @@ pub fn fresh_dir(name: &str) -> PathBuf {
     d
 }
 
+/// [`fresh_dir`] `name`, created, holding one file `file` (its folders created) with `text`:
+/// data a command was not asked to touch.
+pub fn fresh_dir_with_file(name: &str, file: &str, text: &str) -> PathBuf {
+    let d = fresh_dir(name);
+    let path = d.join(file);
+    if let Some(parent) = path.parent() {
+        std::fs::create_dir_all(parent).unwrap();
+    }
+    std::fs::write(path, text).unwrap();
+    d
+}
+
+/// Fly `scenario` into the run folder `out` (no progress bar), with the tables folder
+/// `tables` uplinked when given.
+pub fn fly(
+    scenario: sim_harness::scenario::Scenario,
+    out: &Path,
+    tables: Option<&Path>,
+) -> sim_harness::run::Summary {
+    sim_harness::run::run(
+        scenario,
+        &sim_harness::run::RunOptions {
+            out_dir: Some(out.to_path_buf()),
+            tables_dir: tables.map(Path::to_path_buf),
+            progress: false,
+        },
+    )
+    .unwrap()
+}
+
 /// A copy of the run folder `run` in `dest` (created) without the packets of APID `apid`:
 /// its `telemetry.bin` filtered (CCSDS primary header: APID in the low 11 bits of octets 0-1,
 /// data length − 1 in octets 4-5) and its `metadata.json`.
