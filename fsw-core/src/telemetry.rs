@@ -45,6 +45,17 @@ pub const APID_WHEELS: u16 = 0x014;
 /// APID of the definitive-orbit ephemeris record.
 /// docs/icd.md §3.4.
 pub const APID_EPHEMERIS: u16 = 0x020;
+/// Every APID of the downlink, in the order raw, housekeeping, event, ephemeris, magnetics,
+/// wheels: the writer's sequence counters and the reader's record lists follow it.
+/// docs/icd.md §3.
+pub const APIDS: [u16; 6] = [
+    APID_RAW_SENSORS,
+    APID_HOUSEKEEPING,
+    APID_EVENT,
+    APID_EPHEMERIS,
+    APID_MAGNETICS,
+    APID_WHEELS,
+];
 
 /// CUC time code length (secondary header).
 /// CCSDS 301.0-B-4 CUC 4+2 octets (docs/icd.md §2).

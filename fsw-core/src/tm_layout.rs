@@ -827,6 +827,24 @@ mod tests {
         v
     }
 
+    /// The time code of every test record.
+    const TIME: TimeTag = TimeTag {
+        coarse_s: 1,
+        fine: 2,
+    };
+
+    /// Encode `rec`, then [`check`] it against layout `k` of [`PACKETS`] and its visitor.
+    fn check_record<R>(
+        k: usize,
+        rec: &R,
+        encode: impl Fn(&R, &mut [u8]) -> Result<usize, crate::telemetry::RecordError>,
+        visit: impl Fn(&R, &mut dyn FnMut(FieldValue)),
+    ) {
+        let mut buf = [0u8; 256];
+        let n = encode(rec, &mut buf).unwrap();
+        check(&PACKETS[k], &buf[..n], &values(|out| visit(rec, out)));
+    }
+
     #[test]
     fn every_field_sits_where_the_layout_says() {
         // Every field a different value, so a swapped or shifted field cannot pass.
@@ -836,10 +854,7 @@ mod tests {
             k
         };
         let raw = RawSensorFrame {
-            time: TimeTag {
-                coarse_s: 1,
-                fine: 2,
-            },
+            time: TIME,
             iru: IruSample {
                 counts: [next(), next(), next(), next(), next(), 65535],
                 channel_failed: 0b10_1010,
@@ -861,13 +876,7 @@ mod tests {
             css: Default::default(),
             wheels: WheelSample::default(),
         };
-        let mut buf = [0u8; 256];
-        let n = encode_raw_frame(&raw, &mut buf).unwrap();
-        check(
-            &PACKETS[0],
-            &buf[..n],
-            &values(|out| visit_raw_frame(&raw, out)),
-        );
+        check_record(0, &raw, encode_raw_frame, |r, out| visit_raw_frame(r, out));
 
         let statuses = [
             MeasurementStatus::Accepted,
@@ -876,10 +885,7 @@ mod tests {
             MeasurementStatus::NotUsed,
         ];
         let hk = ObcHousekeeping {
-            time: TimeTag {
-                coarse_s: 1,
-                fine: 2,
-            },
+            time: TIME,
             q_acs_from_eci: crate::attitude::Quat {
                 x: 0.1,
                 y: -0.2,
@@ -914,26 +920,19 @@ mod tests {
             table_crc: [0xDEAD_BEEF, 2, 3, 0xFFFF_FFFF],
             table_pending_mask: 0b1010,
         };
-        let n = encode_housekeeping(&hk, &mut buf).unwrap();
-        check(
-            &PACKETS[1],
-            &buf[..n],
-            &values(|out| visit_housekeeping(&hk, out)),
-        );
+        check_record(1, &hk, encode_housekeeping, |r, out| {
+            visit_housekeeping(r, out)
+        });
 
         let ev = Event {
             id: EventId::TableActivated,
             p1: 3,
             p2: 0xCAFE_F00D,
         };
-        let n = encode_event(&ev, &mut buf).unwrap();
-        check(&PACKETS[2], &buf[..n], &values(|out| visit_event(&ev, out)));
+        check_record(2, &ev, encode_event, |r, out| visit_event(r, out));
 
         let mag = MagneticsFrame {
-            time: TimeTag {
-                coarse_s: 1,
-                fine: 2,
-            },
+            time: TIME,
             tam: [0i16, 1].map(|i| TamSample {
                 field_counts: [-1000 - i, 1100 + i, -1200 - 3 * i],
                 flags: 1 + 2 * i as u8,
@@ -943,18 +942,10 @@ mod tests {
                 flags: 5,
             },
         };
-        let n = encode_magnetics(&mag, &mut buf).unwrap();
-        check(
-            &PACKETS[3],
-            &buf[..n],
-            &values(|out| visit_magnetics(&mag, out)),
-        );
+        check_record(3, &mag, encode_magnetics, |r, out| visit_magnetics(r, out));
 
         let wheels = WheelFrame {
-            time: TimeTag {
-                coarse_s: 1,
-                fine: 2,
-            },
+            time: TIME,
             wheels: WheelSample {
                 speed_counts: [-29_000, 1, 2, 32_767],
                 speed_valid: 0x0E,
@@ -962,26 +953,13 @@ mod tests {
                 dipole_valid: 0x05,
             },
         };
-        let n = encode_wheels(&wheels, &mut buf).unwrap();
-        check(
-            &PACKETS[4],
-            &buf[..n],
-            &values(|out| visit_wheels(&wheels, out)),
-        );
+        check_record(4, &wheels, encode_wheels, |r, out| visit_wheels(r, out));
 
         let eph = EphemerisRecord {
-            time: TimeTag {
-                coarse_s: 1,
-                fine: 2,
-            },
+            time: TIME,
             pos_eci_km: [6800.5, -10.25, 3.0],
             vel_eci_km_per_s: [0.1, 7.5, -0.3],
         };
-        let n = encode_ephemeris(&eph, &mut buf).unwrap();
-        check(
-            &PACKETS[5],
-            &buf[..n],
-            &values(|out| visit_ephemeris(&eph, out)),
-        );
+        check_record(5, &eph, encode_ephemeris, |r, out| visit_ephemeris(r, out));
     }
 }

@@ -470,14 +470,7 @@ pub fn decode(bytes: &[u8]) -> Telemetry {
 const SLOTS: usize = 6;
 
 /// The APIDs in slot order (the index of `placed` in [`decode`]).
-const SLOT_APIDS: [u16; SLOTS] = [
-    APID_RAW_SENSORS,
-    APID_HOUSEKEEPING,
-    APID_EVENT,
-    APID_EPHEMERIS,
-    APID_MAGNETICS,
-    APID_WHEELS,
-];
+const SLOT_APIDS: [u16; SLOTS] = fsw_core::telemetry::APIDS;
 
 /// Decode one packet's user data (a known APID of the right length) into its list in `tm`,
 /// returning its slot in [`SLOT_APIDS`].

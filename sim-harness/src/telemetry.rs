@@ -31,16 +31,8 @@ pub const PRIMARY_HEADER_LEN: usize = 6;
 /// Scratch buffer size (largest packet: housekeeping, 6 + 6 + 230).
 const SCRATCH: usize = 256;
 
-/// Per-APID sequence counters, in the order raw, housekeeping, event, ephemeris, magnetics,
-/// wheels.
-const APIDS: [u16; 6] = [
-    APID_RAW_SENSORS,
-    APID_HOUSEKEEPING,
-    APID_EVENT,
-    APID_EPHEMERIS,
-    APID_MAGNETICS,
-    APID_WHEELS,
-];
+// Per-APID sequence counters, in the order of `fsw_core::telemetry::APIDS`.
+use fsw_core::telemetry::APIDS;
 
 /// Packet writer.
 pub struct PacketWriter<W: Write> {

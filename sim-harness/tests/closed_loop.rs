@@ -125,6 +125,19 @@ fn parse(file: &[u8]) -> Vec<Packet<'_>> {
     out
 }
 
+/// `r`, after checking that packet `p` carries its raw frame's time code (APIDs 0x013 and
+/// 0x014 are written with the raw frame of their cycle).
+fn with_raw_frame_time<'a>(p: &Packet<'_>, r: &'a CycleRecord) -> &'a CycleRecord {
+    assert_eq!(
+        (p.coarse, p.fine),
+        (r.frame.time.coarse_s, r.frame.time.fine),
+        "APID {:#x} at {} with its raw frame's time code",
+        p.apid,
+        p.offset
+    );
+    r
+}
+
 /// Write packets with the harness, read them back by hand (docs/icd.md §2–4) and compare
 /// against the records the simulation produced.
 #[test]
@@ -211,12 +224,7 @@ fn icd_round_trip_independent_decoder() {
             0x013 => {
                 assert_eq!(expect, 0x020, "magnetics out of order at {}", p.offset);
                 expect = 0x013;
-                let r = &recs[cycle - 1];
-                assert_eq!(
-                    (p.coarse, p.fine),
-                    (r.frame.time.coarse_s, r.frame.time.fine),
-                    "magnetics with its raw frame's time code"
-                );
+                let r = with_raw_frame_time(p, &recs[cycle - 1]);
                 for k in 0..2 {
                     let o = 7 * k;
                     let t = &r.frame.tam[k];
@@ -239,12 +247,7 @@ fn icd_round_trip_independent_decoder() {
                     p.offset
                 );
                 expect = 0x014;
-                let r = &recs[cycle - 1];
-                assert_eq!(
-                    (p.coarse, p.fine),
-                    (r.frame.time.coarse_s, r.frame.time.fine),
-                    "wheel frame with its raw frame's time code"
-                );
+                let r = with_raw_frame_time(p, &recs[cycle - 1]);
                 let w = &r.frame.wheels;
                 for i in 0..4 {
                     assert_eq!(be16(p.user, 2 * i) as i16, w.speed_counts[i]);

@@ -420,6 +420,7 @@ impl TableSet {
 mod tests {
     use super::*;
     use crate::attitude::rot;
+    use crate::tables::image::{CRC_LEN, HEADER_LEN};
     use crate::tables::magnetics::MagneticsTableLayout1;
     use crate::tables::types::{matrix_from_rows, rows_from_matrix};
     use crate::units::RAD_PER_ARCSEC;
@@ -495,6 +496,11 @@ mod tests {
         let created = TimeTag::default();
         let n = encode_image(TableId::Magnetics, created, &t, &mut buf).unwrap();
         assert_eq!(n, 4_570, "the layout-3 image of docs/tables.md");
+        let payload = |image: &[u8]| image[HEADER_LEN..image.len() - CRC_LEN].to_vec();
+        assert_eq!(
+            MagneticsTable::decode_any_layout(&payload(&buf[..n])),
+            Ok((t, 3))
+        );
         let mut set = TableSet::boot();
         assert_eq!(set.load(&buf[..n]), Ok(TableId::Magnetics));
         set.activate(TableId::Magnetics).unwrap();
@@ -515,6 +521,10 @@ mod tests {
         );
         let n2 = encode_image(TableId::Magnetics, created, &old2, &mut buf).unwrap();
         assert_eq!(n2, 4_466, "the layout-2 image of docs/tables.md");
+        assert_eq!(
+            MagneticsTable::decode_any_layout(&payload(&buf[..n2])).map(|(_, layout)| layout),
+            Ok(2)
+        );
         let mut set = TableSet::boot();
         assert_eq!(set.load(&buf[..n2]), Ok(TableId::Magnetics));
         set.activate(TableId::Magnetics).unwrap();
@@ -531,6 +541,10 @@ mod tests {
         let old = MagneticsTableLayout1::from_table(&b);
         let n1 = encode_image(TableId::Magnetics, created, &old, &mut buf).unwrap();
         assert_eq!(n1, 4_426, "the layout-1 image of docs/tables.md");
+        assert_eq!(
+            MagneticsTable::decode_any_layout(&payload(&buf[..n1])).map(|(_, layout)| layout),
+            Ok(1)
+        );
         assert!(n1 < n);
         let mut set = TableSet::boot();
         assert_eq!(set.load(&buf[..n1]), Ok(TableId::Magnetics));
