@@ -164,6 +164,7 @@ pub fn write_calibration_report(
     md_maneuvers(&mut md, r);
     md_iru(&mut md, r);
     md_tam(&mut md, r);
+    md_wheels(&mut md, r);
     md_tables(&mut md, r);
     write_plots_section(&mut md, &plots);
     std::fs::write(out_dir.join("report.md"), md)?;
@@ -420,6 +421,45 @@ fn md_iru(md: &mut String, r: &CalibrationReport) {
             let _ = writeln!(md, "\nIRU calibration not done: {why}\n");
         }
         _ => {}
+    }
+}
+
+/// The wheel frames (`pipeline::wheels`): nothing without them.
+fn md_wheels(md: &mut String, r: &CalibrationReport) {
+    let Some(w) = &r.wheels else {
+        return;
+    };
+    let f4 = |v: [f64; 4], p: usize| {
+        format!("{:.p$} / {:.p$} / {:.p$} / {:.p$}", v[0], v[1], v[2], v[3])
+    };
+    let f3 = |v: [f64; 3], p: usize| format!("{:.p$} / {:.p$} / {:.p$}", v[0], v[1], v[2]);
+    let _ = writeln!(md, "## Reaction wheels and torquer bars (APID 0x014)\n");
+    let _ = writeln!(
+        md,
+        "{} wheel frames. Largest wheel momentum per wheel {} N·m·s (speed {} rpm, rotor {} kg·m² from Table 6); tachometer valid fraction {}. Bar dipoles (current monitors) RMS {} A·m², largest {} A·m².\n",
+        w.frames,
+        f4(w.largest_momentum_nms, 1),
+        f4(w.largest_speed_rpm, 0),
+        w.spin_inertia_kg_m2,
+        f4(w.tachometer_valid_fraction, 4),
+        f3(w.bar_dipole_rms_am2, 0),
+        f3(w.bar_dipole_max_am2, 0),
+    );
+    if w.flags_disagree() {
+        let _ = writeln!(
+            md,
+            "**Warning:** the bar current monitors and the TAM \"torquer bars on\" bits disagree on {} of {} frames compared ({} with a monitor on and every bit off, {} with a bit on and every monitor at zero): a stuck status bit or a dead monitor; the TAM calibration chooses its samples by the bit.\n",
+            w.monitor_on_flag_off + w.flag_on_monitor_off,
+            w.frames_compared_with_tam_flags,
+            w.monitor_on_flag_off,
+            w.flag_on_monitor_off,
+        );
+    } else {
+        let _ = writeln!(
+            md,
+            "The bar current monitors agree with the TAM \"torquer bars on\" bits on all {} frames compared.\n",
+            w.frames_compared_with_tam_flags
+        );
     }
 }
 

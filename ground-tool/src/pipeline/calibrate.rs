@@ -186,6 +186,9 @@ pub struct CalibrationReport {
     /// The TAM calibration against the FHST fine attitude and the FSS/TAM attitude check
     /// (`pipeline::tam`, issue 20); says why when the telemetry has no TAM data.
     pub tam: super::tam::TamReport,
+    /// The wheel frames (APID 0x014): wheel momentum, bar dipoles and the bar monitors
+    /// against the TAM bars-on bits (`pipeline::wheels`); `None` without wheel frames.
+    pub wheels: Option<super::wheels::WheelSummary>,
 }
 
 /// Data counts.
@@ -754,6 +757,17 @@ fn gyro_stage(
     })
 }
 
+/// The flown Table 6 (its rotor inertia for the wheel frames), else the boot table.
+fn flown_magnetics_or_boot(options: &CalibrateOptions) -> fsw_core::tables::MagneticsTable {
+    options
+        .flown_magnetics
+        .as_ref()
+        .ok()
+        .and_then(Option::as_ref)
+        .copied()
+        .unwrap_or_else(fsw_core::tables::MagneticsTable::boot)
+}
+
 /// Run the chain on decoded telemetry, stage by stage as the module doc numbers them.
 ///
 /// # Errors
@@ -824,6 +838,7 @@ pub fn calibrate_telemetry(
         filter_tuning: filter.terms,
         fhst_floor: None,
         tam: super::tam::tam_stage(tm, &frames_cal, &obc_bias_at),
+        wheels: super::wheels::summarize(tm, &flown_magnetics_or_boot(options)),
     };
     Ok(CalibrationOutput {
         report,
