@@ -3,9 +3,10 @@
 
     python3 tests/icd/validate_schema.py RUN_OR_OUTPUT_DIR ...
 
-For each folder: metadata.json (when present) against docs/schema/metadata.schema.json and
+For each folder: metadata.json (when present) against docs/schema/metadata.schema.json,
+truth.json (when present: a simulator run) against docs/schema/truth.schema.json and
 tables/manifest.json (when present) against docs/schema/tables-manifest.schema.json. A folder
-with neither file is an error (nothing was checked). Before that, the schema must refuse a
+with none of them is an error (nothing was checked). Before that, the schema must refuse a
 metadata file with a key of the wrong type (so a schema that accepts everything fails here).
 Needs the `jsonschema` package (PyPI); .ci/run installs it in a venv. Prints
 'N passed, N failed' and exits 1 on any failure.
@@ -35,6 +36,7 @@ def validator(name):
 def main(dirs):
     meta = validator("metadata.schema.json")
     manifest = validator("tables-manifest.schema.json")
+    truth = validator("truth.schema.json")
     passed, failed = 0, 0
     # The schema must be able to fail.
     for bad in ({"epoch_utc": 5}, {"sensors": {"fhst_sigma_arcsec": 8.0}},
@@ -44,9 +46,16 @@ def main(dirs):
             failed += 1
         else:
             passed += 1
+    for bad in ({"seed": "one"}, {"tam": {"bias_mG": "x"}}):
+        if truth.is_valid(bad):
+            print(f"FAIL truth schema accepts {json.dumps(bad)}")
+            failed += 1
+        else:
+            passed += 1
     for d in dirs:
         checked = 0
-        for rel, v in (("metadata.json", meta), (os.path.join("tables", "manifest.json"), manifest)):
+        for rel, v in (("metadata.json", meta), ("truth.json", truth),
+                       (os.path.join("tables", "manifest.json"), manifest)):
             p = os.path.join(d, rel)
             if not os.path.exists(p):
                 continue
@@ -61,7 +70,7 @@ def main(dirs):
                 print(f"ok   {p}")
         if checked == 0:
             failed += 1
-            print(f"FAIL {d}: neither metadata.json nor tables/manifest.json")
+            print(f"FAIL {d}: none of metadata.json, truth.json, tables/manifest.json")
     print(f"{passed} passed, {failed} failed")
     return 1 if failed else 0
 
