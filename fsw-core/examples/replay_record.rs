@@ -825,7 +825,7 @@ fn main() {
         .collect();
     let lost = WHEEL4_TACH_LOST.start as usize;
     let back = WHEEL4_TACH_LOST.end as usize;
-    assert_eq!(sources, vec![(0, 1), (lost, 0), (back, 1)]);
+    assert_eq!(sources, vec![(0, 1), (lost, 2), (back, 1)]);
     println!("events: {counts:?}");
     println!(
         "final: filter mode {}, control mode {}, accepted {}, gated {}, estimate error {:.1} arcsec",

@@ -135,9 +135,10 @@ pub enum EventId {
     /// docs/icd.md §3.3; docs/magnetics.md §7.
     UnloadingStateChanged = 0x0A02,
     /// The source of the OBC's wheel momentum changed: p1 = 1 the tachometers (every wheel of
-    /// Table 6 read valid), 0 the count of the OBC's own torque commands (a wheel's
-    /// tachometer word missing, invalid or saturated, or no wheel geometry in the table);
-    /// p2 = the frame's tachometer validity bits.
+    /// Table 6 read valid), 2 some of them (the wheels without one carried on with their
+    /// share of the commands), 0 the count of the OBC's own torque commands (no usable
+    /// tachometer word, or no wheel geometry in the table); p2 = the frame's tachometer
+    /// validity bits.
     /// docs/icd.md §3.3 and §3.6; docs/magnetics.md §7.
     WheelMomentumSourceChanged = 0x0A03,
 }

@@ -76,7 +76,7 @@ use crate::tables::types::{matrix_from_rows, Mat3Rows, ORBITAL_ABERRATION_RMS_PE
 use crate::tables::{TableId, TableSet};
 use crate::telemetry::{MeasurementStatus, ObcHousekeeping, SensorResidual};
 use crate::units::{ARCSEC_PER_RAD, RAD_PER_ARCSEC};
-use crate::unloading::{FieldSample, MomentumSource, MomentumUnloading, TAM_PLAUSIBLE_MILLIGAUSS};
+use crate::unloading::{FieldSample, MomentumUnloading, TAM_PLAUSIBLE_MILLIGAUSS};
 use nalgebra::{Matrix3, Vector3};
 
 /// Largest number of commands processed in one cycle (further ones are refused).
@@ -612,7 +612,7 @@ impl FlightCore {
         );
         if let Some(source) = changed {
             let id = EventId::WheelMomentumSourceChanged;
-            let p1 = u32::from(source == MomentumSource::Tachometers);
+            let p1 = source.code();
             let p2 = u32::from(frame.wheels.speed_valid);
             raise(events, &mut self.counters, id, p1, p2);
         }

@@ -96,6 +96,24 @@ pub enum MomentumSource {
     /// Measured by every wheel's tachometer this cycle.
     /// docs/icd.md §3.6.
     Tachometers,
+    /// Measured by some wheels' tachometers; each wheel without one carried on from its last
+    /// value with its share of the torque command (minimum-norm allocation over Table 6's
+    /// wheels).
+    /// docs/magnetics.md §7.
+    PartialTachometers,
+}
+
+impl MomentumSource {
+    /// The code of event 0x0A03's p1: 0 count, 1 tachometers, 2 partly.
+    /// docs/icd.md §3.3.
+    #[must_use]
+    pub const fn code(self) -> u32 {
+        match self {
+            Self::CommandCount => 0,
+            Self::Tachometers => 1,
+            Self::PartialTachometers => 2,
+        }
+    }
 }
 
 /// Radians per second per tachometer count (0.1 rpm).
@@ -131,6 +149,40 @@ pub fn wheel_momentum_from_tachometers(
         h += Vector3::new(axis[0], axis[1], axis[2]) * h_wheel;
     }
     h.iter().all(|x| x.is_finite()).then_some(h)
+}
+
+/// Wheel `i`'s momentum along its spin axis from its tachometer, N·m·s: `None` when the
+/// word is invalid or saturated.
+fn tachometer_nms(
+    sample: &crate::raw::WheelSample,
+    table: &crate::tables::MagneticsTable,
+    i: usize,
+) -> Option<f64> {
+    let counts = *sample.speed_counts.get(i)?;
+    let valid = i < 8 && sample.speed_valid & (1u8 << i) != 0;
+    (valid && counts.unsigned_abs() < i16::MAX.unsigned_abs())
+        .then(|| table.wheel_spin_inertia_kg_m2 * f64::from(counts) * RAD_PER_S_PER_COUNT)
+}
+
+/// Each wheel's share of the ACS torque `τ` (N·m) under the minimum-norm allocation over the
+/// table's wheels, `W⁺ τ = Wᵀ (W Wᵀ)⁻¹ τ`: what each wheel is driven with when the command is
+/// met. `None` without a geometry (the table validation keeps `W Wᵀ` invertible otherwise).
+/// Minimum-norm allocation (Markley & Crassidis 2014, ch. 7, reaction wheels); module doc.
+#[must_use]
+pub fn wheel_torque_shares_nm(
+    table: &crate::tables::MagneticsTable,
+    torque_acs_nm: &Vector3<f64>,
+) -> Option<[f64; crate::raw::WHEELS]> {
+    let mut gram = nalgebra::Matrix3::zeros();
+    for a in &table.wheel_spin_axes_acs {
+        let v = Vector3::new(a[0], a[1], a[2]);
+        gram += v * v.transpose();
+    }
+    let g = gram.try_inverse()? * torque_acs_nm;
+    let shares = table
+        .wheel_spin_axes_acs
+        .map(|a| a[0] * g.x + a[1] * g.y + a[2] * g.z);
+    shares.iter().all(|x| x.is_finite()).then_some(shares)
 }
 
 /// Why the law gave no dipole.
@@ -236,6 +288,12 @@ pub struct MomentumUnloading {
     wheel_momentum_acs_nms: Vector3<f64>,
     /// Where `wheel_momentum_acs_nms` came from this cycle.
     source: MomentumSource,
+    /// Each wheel's momentum along its axis, N·m·s: measured, or carried on with its share of
+    /// the commands while its tachometer is out (kept only while some tachometer is out).
+    wheel_nms: [f64; crate::raw::WHEELS],
+    /// The last frame in which every wheel read its tachometer (`wheel_nms` starts from it
+    /// when one goes out).
+    last_full: crate::raw::WheelSample,
     /// A source has been reported (event 0x0A03) since boot.
     source_reported: bool,
     /// Unloading (outside the dead band).
@@ -262,6 +320,13 @@ impl MomentumUnloading {
         Self {
             wheel_momentum_acs_nms: Vector3::new(0.0, 0.0, 0.0),
             source: MomentumSource::CommandCount,
+            wheel_nms: [0.0; crate::raw::WHEELS],
+            last_full: crate::raw::WheelSample {
+                speed_counts: [0; crate::raw::WHEELS],
+                speed_valid: 0,
+                dipole_counts: [0; crate::raw::TORQUER_MONITORS],
+                dipole_valid: 0,
+            },
             source_reported: false,
             active: false,
             hold_acs_am2: [0.0; BARS],
@@ -338,15 +403,27 @@ impl MomentumUnloading {
         dt_s: f64,
         table: &crate::tables::MagneticsTable,
     ) -> Option<MomentumSource> {
-        let source = match wheel_momentum_from_tachometers(sample, table) {
+        let words = if sample.speed_valid == 0 {
+            None // no tachometer words (a spacecraft without them): straight to the count
+        } else {
+            wheel_momentum_from_tachometers(sample, table)
+        };
+        let source = match words {
             Some(h) if h.norm() <= MAX_MOMENTUM_NMS => {
                 self.wheel_momentum_acs_nms = h;
+                self.last_full = *sample;
                 MomentumSource::Tachometers
             }
-            _ => {
-                self.account_wheel_torque(torque_cmd_acs_nm, dt_s);
-                MomentumSource::CommandCount
-            }
+            _ => match self.partial_wheel_momentum(sample, torque_cmd_acs_nm, dt_s, table) {
+                Some(h) => {
+                    self.wheel_momentum_acs_nms = h;
+                    MomentumSource::PartialTachometers
+                }
+                None => {
+                    self.account_wheel_torque(torque_cmd_acs_nm, dt_s);
+                    MomentumSource::CommandCount
+                }
+            },
         };
         // A change is reported; so is the count on the first frame that carries tachometer
         // words it cannot use (a wheel invalid from boot, no geometry in the table), which
@@ -358,6 +435,60 @@ impl MomentumUnloading {
         self.source = source;
         self.source_reported |= changed;
         changed.then_some(source)
+    }
+
+    /// Some of the table's wheels read their tachometers, not all: those are measured, the
+    /// others carried on from their last value with their share of the previous command
+    /// (`h_i −= [W⁺ τ]_i dt`). `None` when no wheel reads, without a geometry, or for a
+    /// non-finite or out-of-bound result (the whole count then takes over).
+    fn partial_wheel_momentum(
+        &mut self,
+        sample: &crate::raw::WheelSample,
+        torque_cmd_acs_nm: &Vector3<f64>,
+        dt_s: f64,
+        table: &crate::tables::MagneticsTable,
+    ) -> Option<Vector3<f64>> {
+        if sample.speed_valid == 0 {
+            return None;
+        }
+        let any_reads = (0..crate::raw::WHEELS).any(|i| tachometer_nms(sample, table, i).is_some());
+        if !(any_reads && table.has_wheel_geometry() && dt_s.is_finite()) {
+            return None;
+        }
+        let shares = wheel_torque_shares_nm(table, torque_cmd_acs_nm)?;
+        let mut next = self.wheel_nms;
+        if self.source == MomentumSource::Tachometers {
+            // Coming from a frame where every wheel read: start from it.
+            for (i, slot) in next.iter_mut().enumerate() {
+                *slot = tachometer_nms(&self.last_full, table, i).unwrap_or(0.0);
+            }
+        }
+        let mut measured = 0usize;
+        let mut h = Vector3::zeros();
+        for (i, ((slot, a), share)) in next
+            .iter_mut()
+            .zip(&table.wheel_spin_axes_acs)
+            .zip(shares)
+            .enumerate()
+        {
+            if a.iter().all(|x| *x == 0.0) {
+                *slot = 0.0;
+                continue;
+            }
+            match tachometer_nms(sample, table, i) {
+                Some(h_i) => {
+                    *slot = h_i;
+                    measured = measured.saturating_add(1);
+                }
+                None => *slot -= share * dt_s,
+            }
+            h += Vector3::new(a[0], a[1], a[2]) * *slot;
+        }
+        let ok = measured > 0 && h.iter().all(|x| x.is_finite()) && h.norm() <= MAX_MOMENTUM_NMS;
+        ok.then(|| {
+            self.wheel_nms = next;
+            h
+        })
     }
 
     /// Count the previous cycle's wheel torque command (held over `dt_s`): the wheels take
@@ -800,21 +931,67 @@ mod tests {
             u.update_wheel_momentum(&s, &tau, 1.0, &t),
             Some(MomentumSource::Tachometers)
         );
-        // Tachometer words from boot that cannot be used (wheel 4 invalid): the count is
-        // reported on the first frame, once.
+        // Tachometer words from boot that cannot be used (no geometry in the table): the count
+        // is reported on the first frame, once.
         let mut u = MomentumUnloading::new();
-        let three = crate::raw::WheelSample {
-            speed_valid: 0x07,
-            ..s
-        };
+        let mut no_geometry = t;
+        no_geometry.wheel_spin_axes_acs = [[0.0; 3]; crate::raw::WHEELS];
         assert_eq!(
-            u.update_wheel_momentum(&three, &tau, 1.0, &t),
+            u.update_wheel_momentum(&s, &tau, 1.0, &no_geometry),
             Some(MomentumSource::CommandCount)
         );
-        assert_eq!(u.update_wheel_momentum(&three, &tau, 1.0, &t), None);
+        assert_eq!(u.update_wheel_momentum(&s, &tau, 1.0, &no_geometry), None);
         // No tachometer words at all (a spacecraft without them): nothing to report.
         let mut u = MomentumUnloading::new();
         assert_eq!(u.update_wheel_momentum(&lost, &tau, 1.0, &t), None);
+    }
+
+    /// One tachometer lost: the other wheels stay measured and the lost one is carried on
+    /// with its minimum-norm share of the commands; the shares meet the command exactly.
+    #[test]
+    fn a_lost_tachometer_counts_only_its_wheels_share() {
+        let t = MagneticsTable::boot();
+        let per_count = t.wheel_spin_inertia_kg_m2 * RAD_PER_S_PER_COUNT;
+        let tau = Vector3::new(0.3, -0.2, 0.1);
+        let shares = wheel_torque_shares_nm(&t, &tau).unwrap();
+        let met = t
+            .wheel_spin_axes_acs
+            .iter()
+            .zip(shares)
+            .fold(Vector3::zeros(), |acc, (a, s)| {
+                acc + Vector3::new(a[0], a[1], a[2]) * s
+            });
+        assert!((met - tau).norm() < 1e-12, "W W⁺ τ = τ");
+        let all = crate::raw::WheelSample {
+            speed_counts: [1000, -2000, 300, 500],
+            speed_valid: 0x0F,
+            ..Default::default()
+        };
+        let mut u = MomentumUnloading::new();
+        u.update_wheel_momentum(&all, &tau, 1.0, &t);
+        let before = u.wheel_momentum_acs_nms();
+        // Wheel 2 lost; the others read the same; 10 s of τ: wheel 2 takes −share₂ × 10 s.
+        let lost2 = crate::raw::WheelSample {
+            speed_valid: 0x0D,
+            ..all
+        };
+        assert_eq!(
+            u.update_wheel_momentum(&lost2, &tau, 10.0, &t),
+            Some(MomentumSource::PartialTachometers)
+        );
+        let a2 = t.wheel_spin_axes_acs[1];
+        let expect = before - Vector3::new(a2[0], a2[1], a2[2]) * (shares[1] * 10.0);
+        assert!((u.wheel_momentum_acs_nms() - expect).norm() < 1e-9);
+        assert!(
+            (f64::from(all.speed_counts[1]) * per_count - 10.0 * shares[1] - u.wheel_nms[1]).abs()
+                < 1e-9
+        );
+        // Every word lost: the whole count.
+        assert_eq!(
+            u.update_wheel_momentum(&crate::raw::WheelSample::default(), &tau, 1.0, &t),
+            Some(MomentumSource::CommandCount)
+        );
+        assert_eq!(MomentumSource::PartialTachometers.code(), 2);
     }
 
     #[test]

@@ -654,7 +654,9 @@ fn e2e_normal_ops_orbit_events_and_fallback() {
 /// `gro-early-mission` (its first three): with the tachometers it is the measured one (to the
 /// 0.1-rpm words and their noise) after every cycle; with them off the OBC counts its own
 /// commands, which the wheels do not deliver on a torque-limited slew, and the count drifts
-/// (docs/magnetics.md §7). Each change of source is an event 0x0A03.
+/// (docs/magnetics.md §7). With one tachometer lost the others stay measured and the lost
+/// wheel is carried on with its share of the commands. Each change of source is an event
+/// 0x0A03.
 #[test]
 fn obc_wheel_momentum_follows_the_tachometers_through_slews() {
     use fsw_core::events::EventId;
@@ -696,7 +698,10 @@ fn obc_wheel_momentum_follows_the_tachometers_through_slews() {
     assert_eq!(source, MomentumSource::Tachometers);
     assert_eq!(events_with, vec![(0, 1)], "one event at the first frame");
     assert!(events_without.is_empty(), "{events_without:?}");
-    assert_eq!(events_fault, vec![(0, 1), (1000, 0), (3000, 1)]);
+    assert_eq!(events_fault, vec![(0, 1), (1000, 2), (3000, 1)]);
+    // The lost wheel carried on with its share of the commands: it drifts only when that
+    // wheel clips (measured 0.03 N·m·s; 18.6 when the whole count took over).
+    assert!(with_fault < 1.0, "{with_fault}");
 }
 
 /// The torquer bars unload the wheels in the closed loop (issue 20): three hours of
