@@ -321,20 +321,29 @@ SUN_TABLE = os.path.join(ROOT, "data", "sun_reference.csv")
 _SUN_ROWS = None
 
 
+def _csv_columns(path):
+    """The data rows of a CSV file whose first non-comment line names the columns (lines
+    starting with `#` skipped): for each row, a function from a column name to its text. One
+    reader for the Sun table and the star catalog, which share that layout."""
+    with open(path) as f:
+        header = None
+        for line in f:
+            if line.startswith("#"):
+                continue
+            cols = line.strip().split(",")
+            if header is None:
+                header = {c: i for i, c in enumerate(cols)}
+                continue
+            yield lambda k, cols=cols, header=header: cols[header[k]]
+
+
 def _sun_rows():
     global _SUN_ROWS
     if _SUN_ROWS is None:
         _SUN_ROWS = []
         if os.path.exists(SUN_TABLE):
-            header = None
-            for line in open(SUN_TABLE):
-                if line.startswith("#"):
-                    continue
-                cols = line.strip().split(",")
-                if header is None:
-                    header = {c: i for i, c in enumerate(cols)}
-                    continue
-                g = lambda k: float(cols[header[k]])
+            for col in _csv_columns(SUN_TABLE):
+                g = lambda k: float(col(k))
                 tai = (g("jd_tt") - 2451545.0) * 86400.0 + J2000_TAI1958
                 d = g("sun_dist_au") * AU_KM
                 _SUN_ROWS.append((tai, [g("geo_x") * d, g("geo_y") * d, g("geo_z") * d],
@@ -391,29 +400,21 @@ class Orbit:
 # ----------------------------------------------------------------------------- catalog
 def load_catalog(epoch_year):
     stars = []
-    with open(CATALOG) as f:
-        header = None
-        for line in f:
-            if line.startswith("#"):
-                continue
-            cols = line.strip().split(",")
-            if header is None:
-                header = {c: i for i, c in enumerate(cols)}
-                continue
-            hp = float(cols[header["hp_mag"]])
-            if not (2.0 <= hp <= 5.7):
-                continue
-            ra = float(cols[header["ra_deg"]]) * RAD_PER_DEG
-            de = float(cols[header["dec_deg"]]) * RAD_PER_DEG
-            pmra = float(cols[header["pmra_mas_yr"]]) * RAD_PER_ARCSEC / 1000.0
-            pmde = float(cols[header["pmdec_mas_yr"]]) * RAD_PER_ARCSEC / 1000.0
-            plx = max(float(cols[header["parallax_mas"]]), 0.0) * RAD_PER_ARCSEC / 1000.0
-            u = [math.cos(de) * math.cos(ra), math.cos(de) * math.sin(ra), math.sin(de)]
-            e_ra = [-math.sin(ra), math.cos(ra), 0.0]
-            e_de = [-math.sin(de) * math.cos(ra), -math.sin(de) * math.sin(ra), math.cos(de)]
-            dt = epoch_year - 1991.25  # catalog epoch J1991.25
-            u = unit(add(u, add(scale(e_ra, pmra * dt), scale(e_de, pmde * dt))))
-            stars.append((int(cols[header["hip"]]), u, hp, plx))
+    for col in _csv_columns(CATALOG):
+        hp = float(col("hp_mag"))
+        if not (2.0 <= hp <= 5.7):
+            continue
+        ra = float(col("ra_deg")) * RAD_PER_DEG
+        de = float(col("dec_deg")) * RAD_PER_DEG
+        pmra = float(col("pmra_mas_yr")) * RAD_PER_ARCSEC / 1000.0
+        pmde = float(col("pmdec_mas_yr")) * RAD_PER_ARCSEC / 1000.0
+        plx = max(float(col("parallax_mas")), 0.0) * RAD_PER_ARCSEC / 1000.0
+        u = [math.cos(de) * math.cos(ra), math.cos(de) * math.sin(ra), math.sin(de)]
+        e_ra = [-math.sin(ra), math.cos(ra), 0.0]
+        e_de = [-math.sin(de) * math.cos(ra), -math.sin(de) * math.sin(ra), math.cos(de)]
+        dt = epoch_year - 1991.25  # catalog epoch J1991.25
+        u = unit(add(u, add(scale(e_ra, pmra * dt), scale(e_de, pmde * dt))))
+        stars.append((int(col("hip")), u, hp, plx))
     return stars
 
 
