@@ -127,8 +127,8 @@ fn batch_shifts(r: &Runs) -> anyhow::Result<()> {
         let mut cnt = [0usize; 2];
         for (a, bb) in sa.iter().zip(sb.iter()).filter(|(a, _)| a.batch == b) {
             let dd = (a.ref_acs - bb.ref_acs).norm() * ARCSEC_PER_RAD;
-            dmax[a.tracker] = dmax[a.tracker].max(dd);
-            cnt[a.tracker] += 1;
+            dmax[a.tracker.index()] = dmax[a.tracker.index()].max(dd);
+            cnt[a.tracker.index()] += 1;
         }
         // Batch index b counts only batches with samples.
         let (lo, hi) = with_samples.get(b).copied().unwrap_or((0, 1));

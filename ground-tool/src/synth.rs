@@ -7,6 +7,7 @@
 use nalgebra::{Matrix3, Vector3};
 
 use fsw_core::attitude::Quat;
+use fsw_core::sensor::SensorId;
 
 /// Small deterministic random number generator (xoshiro256**).
 #[derive(Clone, Debug)]
@@ -263,11 +264,19 @@ pub fn fhst_batch_samples(
         ) * RAD_PER_ARCSEC;
         let d1 = Vector3::new(0.02, -0.01, 0.03) * RAD_PER_ARCSEC;
         for star in 0..stars_per_batch {
-            let tracker = star % 2;
+            let tracker = if star % 2 == 0 {
+                SensorId::Fhst1
+            } else {
+                SensorId::Fhst2
+            };
             let h: f64 = rng.uniform_in(-0.07, 0.07);
             let v: f64 = rng.uniform_in(-0.07, 0.07);
             let s_true = Vector3::new(h.tan(), v.tan(), 1.0).normalize();
-            let m_true = if tracker == 0 { m[0] } else { m2_true };
+            let m_true = if tracker == SensorId::Fhst1 {
+                m[0]
+            } else {
+                m2_true
+            };
             for j in 0..samples_per_star {
                 let t = (star * samples_per_star + j) as f64 - half_s;
                 // The star in the true body frame, seen with the reference attitude
@@ -279,7 +288,7 @@ pub fn fhst_batch_samples(
                     batch,
                     dt_s: t,
                     ref_acs,
-                    meas_acs: m[tracker] * (s_true + noise).normalize(),
+                    meas_acs: m[tracker.index()] * (s_true + noise).normalize(),
                     sigma_rad: sigma,
                     aberration_uncorrected: false,
                 });

@@ -35,7 +35,7 @@ pub struct PaperFacts {
 
 /// Sensor slots of [`PaperFacts::m_sensor_from_sensor_adj`] and
 /// [`PaperFacts::rotation_vectors_arcsec`].
-pub const SENSOR_NAMES: [&str; 4] = ["FHST1", "FHST2", "FSS1", "FSS2"];
+pub const SENSOR_NAMES: [&str; 4] = fsw_core::sensor::SensorId::NAMES;
 
 impl PaperFacts {
     /// Table 1 prelaunch `M_AS` of slot `k` (FHST1, FHST2, FSS1, FSS2).

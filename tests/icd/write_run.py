@@ -321,20 +321,29 @@ SUN_TABLE = os.path.join(ROOT, "data", "sun_reference.csv")
 _SUN_ROWS = None
 
 
+def _csv_columns(path):
+    """The data rows of a CSV file whose first non-comment line names the columns (lines
+    starting with `#` skipped): for each row, a function from a column name to its text. One
+    reader for the Sun table and the star catalog, which share that layout."""
+    with open(path) as f:
+        header = None
+        for line in f:
+            if line.startswith("#"):
+                continue
+            cols = line.strip().split(",")
+            if header is None:
+                header = {c: i for i, c in enumerate(cols)}
+                continue
+            yield lambda k, cols=cols, header=header: cols[header[k]]
+
+
 def _sun_rows():
     global _SUN_ROWS
     if _SUN_ROWS is None:
         _SUN_ROWS = []
         if os.path.exists(SUN_TABLE):
-            header = None
-            for line in open(SUN_TABLE):
-                if line.startswith("#"):
-                    continue
-                cols = line.strip().split(",")
-                if header is None:
-                    header = {c: i for i, c in enumerate(cols)}
-                    continue
-                g = lambda k: float(cols[header[k]])
+            for col in _csv_columns(SUN_TABLE):
+                g = lambda k: float(col(k))
                 tai = (g("jd_tt") - 2451545.0) * 86400.0 + J2000_TAI1958
                 d = g("sun_dist_au") * AU_KM
                 _SUN_ROWS.append((tai, [g("geo_x") * d, g("geo_y") * d, g("geo_z") * d],
@@ -391,29 +400,21 @@ class Orbit:
 # ----------------------------------------------------------------------------- catalog
 def load_catalog(epoch_year):
     stars = []
-    with open(CATALOG) as f:
-        header = None
-        for line in f:
-            if line.startswith("#"):
-                continue
-            cols = line.strip().split(",")
-            if header is None:
-                header = {c: i for i, c in enumerate(cols)}
-                continue
-            hp = float(cols[header["hp_mag"]])
-            if not (2.0 <= hp <= 5.7):
-                continue
-            ra = float(cols[header["ra_deg"]]) * RAD_PER_DEG
-            de = float(cols[header["dec_deg"]]) * RAD_PER_DEG
-            pmra = float(cols[header["pmra_mas_yr"]]) * RAD_PER_ARCSEC / 1000.0
-            pmde = float(cols[header["pmdec_mas_yr"]]) * RAD_PER_ARCSEC / 1000.0
-            plx = max(float(cols[header["parallax_mas"]]), 0.0) * RAD_PER_ARCSEC / 1000.0
-            u = [math.cos(de) * math.cos(ra), math.cos(de) * math.sin(ra), math.sin(de)]
-            e_ra = [-math.sin(ra), math.cos(ra), 0.0]
-            e_de = [-math.sin(de) * math.cos(ra), -math.sin(de) * math.sin(ra), math.cos(de)]
-            dt = epoch_year - 1991.25  # catalog epoch J1991.25
-            u = unit(add(u, add(scale(e_ra, pmra * dt), scale(e_de, pmde * dt))))
-            stars.append((int(cols[header["hip"]]), u, hp, plx))
+    for col in _csv_columns(CATALOG):
+        hp = float(col("hp_mag"))
+        if not (2.0 <= hp <= 5.7):
+            continue
+        ra = float(col("ra_deg")) * RAD_PER_DEG
+        de = float(col("dec_deg")) * RAD_PER_DEG
+        pmra = float(col("pmra_mas_yr")) * RAD_PER_ARCSEC / 1000.0
+        pmde = float(col("pmdec_mas_yr")) * RAD_PER_ARCSEC / 1000.0
+        plx = max(float(col("parallax_mas")), 0.0) * RAD_PER_ARCSEC / 1000.0
+        u = [math.cos(de) * math.cos(ra), math.cos(de) * math.sin(ra), math.sin(de)]
+        e_ra = [-math.sin(ra), math.cos(ra), 0.0]
+        e_de = [-math.sin(de) * math.cos(ra), -math.sin(de) * math.sin(ra), math.cos(de)]
+        dt = epoch_year - 1991.25  # catalog epoch J1991.25
+        u = unit(add(u, add(scale(e_ra, pmra * dt), scale(e_de, pmde * dt))))
+        stars.append((int(col("hip")), u, hp, plx))
     return stars
 
 
@@ -534,40 +535,49 @@ def main(argv=None):
     # ---- injected undeclared effects (recorded in truth_icd.json 'effects'; diagnose is
     # told nothing). Sensor names FHST1, FHST2, FSS1, FSS2; angles arcsec, ACS axes, and
     # alignment variations as M_AS(t) = Rot(θ(t)) M_AS (docs/conventions.md).
-    p.add_argument("--time-tag", action="append", default=[], metavar="SENSOR:TAU_S",
-                   help="the sensor samples TAU_S before its time code (FHST or FSS)")
-    p.add_argument("--orbit-align", action="append", default=[], metavar="SENSOR:c1x,c1y,c1z,s1x,s1y,s1z[,c2x,c2y,c2z,s2x,s2y,s2z]",
-                   help="alignment rotation c1 cos u + s1 sin u (+ c2 cos 2u + s2 sin 2u), u = argument of latitude")
-    p.add_argument("--fhst-radial", action="append", default=[], metavar="SENSOR:ARCSEC_AT_4DEG[:HV_H:HV_V]",
-                   help="FHST focal-plane distortion: ΔH = k ρ² H, ΔV = k ρ² V (k = size / (4°)³), plus H·V/(4°)² terms")
-    p.add_argument("--fss-transfer", action="append", default=[], metavar="SENSOR:name=v,...",
-                   help="FSS transfer-function error per head: alpha_scale (ppm), alpha_cross (″ at the 32° corner, x y²), "
-                        "alpha_cubic (″ at the 32° edge, x³), beta_... the same with α and β exchanged")
-    p.add_argument("--gyro-asym", default=None, metavar="AX,AY,AZ",
-                   help="gyro scale asymmetry per ACS axis, ppm: measured = Δθ + a |Δθ|")
-    p.add_argument("--gyro-ramp", default=None, metavar="RX,RY,RZ",
-                   help="gyro bias ramp per ACS axis, arcsec/s per hour (bias(t) = b0 + r t)")
-    p.add_argument("--gyro-rate2", default=None, metavar="KX,KY,KZ",
-                   help="(outside the library) gyro scale nonlinearity: measured = Δθ (1 + k (ω/1°/s)²), k in ppm")
-    p.add_argument("--gyro-rate3", default=None, metavar="KX,KY,KZ",
-                   help="(outside the library) gyro scale nonlinearity: measured = Δθ (1 + k |ω/1°/s|³), k in ppm")
-    p.add_argument("--gyro-scale-step", default=None, metavar="T_S:KX,KY,KZ",
-                   help="(outside the library) gyro scale factor change per ACS axis of K ppm from T_S s on: measured = Δθ (1 + k)")
-    p.add_argument("--gyro-mode-bias", default=None, metavar="BX,BY,BZ",
-                   help="(outside the library) gyro bias added while the IRU is in high rate mode, arcsec/s (ACS), both triads")
-    p.add_argument("--gyro-bias-step", action="append", default=[], metavar="T_S:BX,BY,BZ",
-                   help="gyro bias step (in diagnose's library: a step at an unknown time) of (BX, BY, BZ) arcsec/s (ACS) at T_S s from the start, "
-                        "both triads")
-    p.add_argument("--gyro-bias-transient", default=None, metavar="AX,AY,AZ:TAU_S",
-                   help="gyro bias transient added from the start: a e^(−t/TAU_S), a in arcsec/s (ACS), both triads")
-    p.add_argument("--iru-delta-m", default=None, metavar="paper|9 ppm",
-                   help="true primary-triad δM (Δθ_acs = (I + δM) G w ΔN, G = prelaunch): 'paper' (the published "
-                        "δM of data/gro_paper.toml) or 9 numbers row-major in ppm; default 0 (true G = prelaunch)")
-    p.add_argument("--iru-delta-m-backup", default=None, metavar="9 ppm",
-                   help="true backup-triad (X1, Y2, Z2) δM, 9 numbers row-major in ppm; default " +
-                        ",".join(f"{x:g}" for row in DELTA_M_BACKUP_DEFAULT_PPM for x in row))
-    p.add_argument("--backup-bias", default=None, metavar="BX,BY,BZ",
-                   help="backup-triad bias in ACS, arcsec/s; default " + ",".join(f"{x:g}" for x in BACKUP_BIAS_DEFAULT))
+    # One table, one add_argument per kind: (flag, repeated, metavar, help); repeated options
+    # collect a list (SENSOR:... per sensor), the others hold one value or None.
+    injected = [
+        ("--time-tag", True, "SENSOR:TAU_S",
+         "the sensor samples TAU_S before its time code (FHST or FSS)"),
+        ("--orbit-align", True, "SENSOR:c1x,c1y,c1z,s1x,s1y,s1z[,c2x,c2y,c2z,s2x,s2y,s2z]",
+         "alignment rotation c1 cos u + s1 sin u (+ c2 cos 2u + s2 sin 2u), u = argument of latitude"),
+        ("--fhst-radial", True, "SENSOR:ARCSEC_AT_4DEG[:HV_H:HV_V]",
+         "FHST focal-plane distortion: ΔH = k ρ² H, ΔV = k ρ² V (k = size / (4°)³), plus H·V/(4°)² terms"),
+        ("--fss-transfer", True, "SENSOR:name=v,...",
+         "FSS transfer-function error per head: alpha_scale (ppm), alpha_cross (″ at the 32° corner, x y²), "
+          "alpha_cubic (″ at the 32° edge, x³), beta_... the same with α and β exchanged"),
+        ("--gyro-asym", False, "AX,AY,AZ",
+         "gyro scale asymmetry per ACS axis, ppm: measured = Δθ + a |Δθ|"),
+        ("--gyro-ramp", False, "RX,RY,RZ",
+         "gyro bias ramp per ACS axis, arcsec/s per hour (bias(t) = b0 + r t)"),
+        ("--gyro-rate2", False, "KX,KY,KZ",
+         "(outside the library) gyro scale nonlinearity: measured = Δθ (1 + k (ω/1°/s)²), k in ppm"),
+        ("--gyro-rate3", False, "KX,KY,KZ",
+         "(outside the library) gyro scale nonlinearity: measured = Δθ (1 + k |ω/1°/s|³), k in ppm"),
+        ("--gyro-scale-step", False, "T_S:KX,KY,KZ",
+         "(outside the library) gyro scale factor change per ACS axis of K ppm from T_S s on: measured = Δθ (1 + k)"),
+        ("--gyro-mode-bias", False, "BX,BY,BZ",
+         "(outside the library) gyro bias added while the IRU is in high rate mode, arcsec/s (ACS), both triads"),
+        ("--gyro-bias-step", True, "T_S:BX,BY,BZ",
+         "gyro bias step (in diagnose's library: a step at an unknown time) of (BX, BY, BZ) arcsec/s (ACS) at T_S s from the start, "
+          "both triads"),
+        ("--gyro-bias-transient", False, "AX,AY,AZ:TAU_S",
+         "gyro bias transient added from the start: a e^(−t/TAU_S), a in arcsec/s (ACS), both triads"),
+        ("--iru-delta-m", False, "paper|9 ppm",
+         "true primary-triad δM (Δθ_acs = (I + δM) G w ΔN, G = prelaunch): 'paper' (the published "
+          "δM of data/gro_paper.toml) or 9 numbers row-major in ppm; default 0 (true G = prelaunch)"),
+        ("--iru-delta-m-backup", False, "9 ppm",
+         "true backup-triad (X1, Y2, Z2) δM, 9 numbers row-major in ppm; default " +
+          ",".join(f"{x:g}" for row in DELTA_M_BACKUP_DEFAULT_PPM for x in row)),
+        ("--backup-bias", False, "BX,BY,BZ",
+         "backup-triad bias in ACS, arcsec/s; default " + ",".join(f"{x:g}" for x in BACKUP_BIAS_DEFAULT)),
+    ]
+    for flag, repeated, metavar, text in injected:
+        if repeated:
+            p.add_argument(flag, action="append", default=[], metavar=metavar, help=text)
+        else:
+            p.add_argument(flag, default=None, metavar=metavar, help=text)
     p.add_argument("--backup-halfway", action="store_true",
                    help="the OBC selects the backup triad (X1, Y2, Z2) at the first cycle at or after half the run that "
                         "is in a hold, in low rate, at least 60 s from any high-rate interval: event 0x0202 (p1 = 1, p2 = 0 commanded), housekeeping byte 106 = 1 from then on")

@@ -39,6 +39,7 @@ use serde::Serialize;
 use thiserror::Error;
 
 use crate::ARCSEC_PER_RAD;
+use fsw_core::sensor::SensorId;
 
 /// Normalised squared residual (2 degrees of freedom) above which a sample is an outlier:
 /// 25 ⇔ p ≈ 4e-6, so a clean run of 10⁴ samples loses none on average.
@@ -56,8 +57,8 @@ const MAX_PASSES: usize = 4;
 /// One identified star sample of a hold batch.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct BatchStarSample {
-    /// 0 = FHST1 (the reference), 1 = FHST2.
-    pub tracker: usize,
+    /// The tracker: FHST1 (the reference) or FHST2.
+    pub tracker: SensorId,
     /// Batch index (`0..n_batches`).
     pub batch: usize,
     /// Time from the batch centre (s).
@@ -175,7 +176,11 @@ fn sample_rows(s: &BatchStarSample) -> [(Vector6<f64>, Vector3<f64>, f64); 2] {
             hb[j] = g[j];
             hb[j + 3] = g[j] * tau;
         }
-        let hg = if s.tracker == 1 { -g } else { Vector3::zeros() };
+        let hg = if s.tracker == SensorId::Fhst2 {
+            -g
+        } else {
+            Vector3::zeros()
+        };
         (hb, hg, e.dot(&r))
     })
 }
@@ -199,7 +204,7 @@ pub fn estimate_relative_alignment(
             && s.dt_s.is_finite()
             && s.sigma_rad.is_finite()
             && s.sigma_rad > 0.0;
-        if s.batch >= n_batches || s.tracker > 1 || !finite {
+        if s.batch >= n_batches || !s.tracker.is_fhst() || !finite {
             return Err(RelativeAlignmentError::MalformedSample(i));
         }
     }
@@ -210,7 +215,7 @@ pub fn estimate_relative_alignment(
         for (s, _) in samples.iter().zip(&used).filter(|(_, u)| **u) {
             let w = (s.sigma_rad * ARCSEC_PER_RAD).powi(-2);
             let bn = &mut batches[s.batch];
-            bn.count[s.tracker] += 1;
+            bn.count[s.tracker.index()] += 1;
             for (hb, hg, y) in sample_rows(s) {
                 bn.nbb += hb * hb.transpose() * w;
                 bn.nbg += hb * hg.transpose() * w;
@@ -296,10 +301,10 @@ pub fn estimate_relative_alignment(
             let mut sum2 = [0.0; 2];
             for (i, s) in samples.iter().enumerate() {
                 if used[i] && inverses[s.batch].is_some() {
-                    samples_used[s.tracker] += 1;
+                    samples_used[s.tracker.index()] += 1;
                     for (hb, hg, y) in sample_rows(s) {
                         let e = y - hb.dot(&nuisance[s.batch]) - hg.dot(&theta);
-                        sum2[s.tracker] += e * e;
+                        sum2[s.tracker.index()] += e * e;
                     }
                 }
             }

@@ -18,6 +18,7 @@ use nalgebra::{Matrix3, Vector3};
 
 use super::observations::{body_to_center, fhst_attitude, FrameObservations};
 use crate::calibration::fhst_relative::BatchStarSample;
+use fsw_core::sensor::SensorId;
 
 /// Longest hold batch (s): a 16-min hold is one batch.
 pub const HOLD_BATCH_MAX_S: f64 = 1200.0;
@@ -94,7 +95,7 @@ pub fn star_batch_samples(
         let before = out.len();
         for k in lo..hi {
             let f = &frames[k];
-            for (tracker, s) in f.stars.iter().enumerate() {
+            for (tracker, s) in SensorId::ALL.into_iter().zip(&f.stars) {
                 if let Some((_, dir_eci)) = s.as_ref().and_then(|s| s.identified) {
                     if let Some(s) = s {
                         out.push(BatchStarSample {

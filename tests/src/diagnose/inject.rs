@@ -17,6 +17,7 @@
 //! `undeclared_effects`; `metadata.json` is copied unchanged (the operator does not know).
 
 use anyhow::Context;
+use fsw_core::sensor::SensorId;
 use gro_reference::run_folder::{Truth, TRUTH_FILE};
 use ground_tool::tp;
 use sim_harness::telemetry::PacketWriter;
@@ -25,25 +26,25 @@ use std::path::Path;
 /// An effect outside the library.
 #[derive(Clone, Copy, Debug)]
 pub enum Injected {
-    /// `ΔH = k (T − T̄)²` on FHST `tracker` (0/1), k in arcsec/°C².
+    /// `ΔH = k (T − T̄)²` on FHST `tracker`, k in arcsec/°C².
     TemperatureSquared {
-        /// Tracker.
-        tracker: usize,
+        /// Tracker (FHST1 or FHST2).
+        tracker: SensorId,
         /// Coefficient (arcsec/°C²).
         k_arcsec_per_c2: f64,
     },
     /// `ΔH = A cos(2u)`, u the argument of latitude: a sensitivity to the geomagnetic field
     /// strength, which varies twice per orbit (algorithms.md §9 row 18).
     MagneticTwicePerOrbit {
-        /// Tracker.
-        tracker: usize,
+        /// Tracker (FHST1 or FHST2).
+        tracker: SensorId,
         /// Amplitude (arcsec).
         amplitude_arcsec: f64,
     },
     /// `ΔH = A e^{−t/τ} sin(2π t/P)` after the end of every slew (high-rate run).
     PostSlewOscillation {
-        /// Tracker.
-        tracker: usize,
+        /// Tracker (FHST1 or FHST2).
+        tracker: SensorId,
         /// Amplitude (arcsec).
         amplitude_arcsec: f64,
         /// Period (s).
@@ -60,7 +61,7 @@ pub const NON_LIBRARY: [(&str, Injected, &str); 3] = [
     (
         "t2",
         Injected::TemperatureSquared {
-            tracker: 1,
+            tracker: SensorId::Fhst2,
             k_arcsec_per_c2: 2.0,
         },
         "temperature_c",
@@ -68,7 +69,7 @@ pub const NON_LIBRARY: [(&str, Injected, &str); 3] = [
     (
         "osc",
         Injected::PostSlewOscillation {
-            tracker: 1,
+            tracker: SensorId::Fhst2,
             amplitude_arcsec: 20.0,
             period_s: 60.0,
             decay_s: 200.0,
@@ -78,7 +79,7 @@ pub const NON_LIBRARY: [(&str, Injected, &str); 3] = [
     (
         "mag",
         Injected::MagneticTwicePerOrbit {
-            tracker: 1,
+            tracker: SensorId::Fhst2,
             amplitude_arcsec: 6.0,
         },
         "orbit_phase_rad",
@@ -91,13 +92,16 @@ impl Injected {
     pub fn name(&self) -> String {
         match self {
             Self::TemperatureSquared { tracker, .. } => {
-                format!("fhst{}.temperature_squared_shift", tracker + 1)
+                format!(
+                    "{}.temperature_squared_shift",
+                    tracker.name().to_lowercase()
+                )
             }
             Self::PostSlewOscillation { tracker, .. } => {
-                format!("fhst{}.post_slew_oscillation", tracker + 1)
+                format!("{}.post_slew_oscillation", tracker.name().to_lowercase())
             }
             Self::MagneticTwicePerOrbit { tracker, .. } => {
-                format!("fhst{}.magnetic_sensitivity", tracker + 1)
+                format!("{}.magnetic_sensitivity", tracker.name().to_lowercase())
             }
         }
     }
@@ -113,7 +117,7 @@ pub fn inject_run(src: &Path, dst: &Path, effect: Injected) -> anyhow::Result<()
     let tracker = match effect {
         Injected::TemperatureSquared { tracker, .. }
         | Injected::PostSlewOscillation { tracker, .. }
-        | Injected::MagneticTwicePerOrbit { tracker, .. } => tracker.min(1),
+        | Injected::MagneticTwicePerOrbit { tracker, .. } => tracker.index().min(1),
     };
     let n = tm.raw.len().max(1) as f64;
     let t_mean = tm
