@@ -131,28 +131,18 @@ pub fn wheel_momentum_from_tachometers(
         return None;
     }
     let mut h = Vector3::zeros();
-    for (i, (axis, counts)) in table
-        .wheel_spin_axes_acs
-        .iter()
-        .zip(sample.speed_counts)
-        .enumerate()
-    {
+    for (i, axis) in table.wheel_spin_axes_acs.iter().enumerate() {
         if axis.iter().all(|x| *x == 0.0) {
             continue;
         }
-        let valid = sample.speed_valid & (1u8 << i) != 0;
-        // ±32,767 and −32,768 are the saturated words (docs/icd.md §3.6).
-        if !valid || counts.unsigned_abs() >= i16::MAX.unsigned_abs() {
-            return None;
-        }
-        let h_wheel = table.wheel_spin_inertia_kg_m2 * f64::from(counts) * RAD_PER_S_PER_COUNT;
+        let h_wheel = tachometer_nms(sample, table, i)?;
         h += Vector3::new(axis[0], axis[1], axis[2]) * h_wheel;
     }
     h.iter().all(|x| x.is_finite()).then_some(h)
 }
 
 /// Wheel `i`'s momentum along its spin axis from its tachometer, N·m·s: `None` when the
-/// word is invalid or saturated.
+/// word is invalid or saturated (±32,767 and −32,768, docs/icd.md §3.6).
 fn tachometer_nms(
     sample: &crate::raw::WheelSample,
     table: &crate::tables::MagneticsTable,
