@@ -429,21 +429,24 @@ fn md_wheels(md: &mut String, r: &CalibrationReport) {
     let Some(w) = &r.wheels else {
         return;
     };
-    let f4 = |v: [f64; 4], p: usize| {
-        format!("{:.p$} / {:.p$} / {:.p$} / {:.p$}", v[0], v[1], v[2], v[3])
+    // Per wheel or per bar, "a / b / c".
+    let per_unit = |v: &[f64], p: usize| {
+        v.iter()
+            .map(|x| format!("{x:.p$}"))
+            .collect::<Vec<_>>()
+            .join(" / ")
     };
-    let f3 = |v: [f64; 3], p: usize| format!("{:.p$} / {:.p$} / {:.p$}", v[0], v[1], v[2]);
     let _ = writeln!(md, "## Reaction wheels and torquer bars (APID 0x014)\n");
     let _ = writeln!(
         md,
         "{} wheel frames. Largest wheel momentum per wheel {} N·m·s (speed {} rpm, rotor {} kg·m² from Table 6); tachometer valid fraction {}. Bar dipoles (current monitors) RMS {} A·m², largest {} A·m².\n",
         w.frames,
-        f4(w.largest_momentum_nms, 1),
-        f4(w.largest_speed_rpm, 0),
+        per_unit(&w.largest_momentum_nms, 1),
+        per_unit(&w.largest_speed_rpm, 0),
         w.spin_inertia_kg_m2,
-        f4(w.tachometer_valid_fraction, 4),
-        f3(w.bar_dipole_rms_am2, 0),
-        f3(w.bar_dipole_max_am2, 0),
+        per_unit(&w.tachometer_valid_fraction, 4),
+        per_unit(&w.bar_dipole_rms_am2, 0),
+        per_unit(&w.bar_dipole_max_am2, 0),
     );
     if w.flags_disagree() {
         let _ = writeln!(

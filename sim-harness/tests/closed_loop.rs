@@ -125,6 +125,114 @@ fn parse(file: &[u8]) -> Vec<Packet<'_>> {
     out
 }
 
+/// APID 0x010 (docs/icd.md §3.1) against the frame the simulation produced.
+fn check_raw_frame(p: &Packet<'_>, r: &CycleRecord) {
+    assert_eq!(
+        (p.coarse, p.fine),
+        (r.frame.time.coarse_s, r.frame.time.fine)
+    );
+    for ch in 0..6 {
+        assert_eq!(be16(p.user, 2 * ch), r.frame.iru.counts[ch]);
+    }
+    assert_eq!(p.user[12], r.frame.iru.channel_failed);
+    assert_eq!(p.user[13], u8::from(r.frame.iru.high_rate));
+    for k in 0..2 {
+        let o = 14 + 7 * k;
+        let f = &r.frame.fhst[k];
+        assert_eq!(be16(p.user, o) as i16, f.h_counts);
+        assert_eq!(be16(p.user, o + 2) as i16, f.v_counts);
+        assert_eq!(be16(p.user, o + 4) as i16, f.magnitude_centimag);
+        assert_eq!(p.user[o + 6], f.flags);
+        let o = 28 + 5 * k;
+        let f = &r.frame.fss[k];
+        assert_eq!(be16(p.user, o) as i16, f.alpha_counts);
+        assert_eq!(be16(p.user, o + 2) as i16, f.beta_counts);
+        assert_eq!(p.user[o + 4], f.flags);
+    }
+    for i in 0..5 {
+        assert_eq!(
+            be16(p.user, 38 + 2 * i) as i16,
+            r.frame.temperatures_centi_c[i]
+        );
+    }
+}
+
+/// APID 0x013 (docs/icd.md §3.5) against the frame's TAM and CSS words.
+fn check_magnetics_frame(p: &Packet<'_>, r: &CycleRecord) {
+    for k in 0..2 {
+        let o = 7 * k;
+        let t = &r.frame.tam[k];
+        for i in 0..3 {
+            assert_eq!(be16(p.user, o + 2 * i) as i16, t.field_counts[i]);
+        }
+        assert_eq!(p.user[o + 6], t.flags);
+        assert_eq!(t.flags & 1, 1, "TAM{} valid in 1991", k + 1);
+    }
+    for i in 0..6 {
+        assert_eq!(be16(p.user, 14 + 2 * i), r.frame.css.counts[i]);
+    }
+    assert_eq!(p.user[26], r.frame.css.flags);
+}
+
+/// APID 0x014 (docs/icd.md §3.6) against the frame's tachometer and monitor words.
+fn check_wheel_frame(p: &Packet<'_>, r: &CycleRecord) {
+    let w = &r.frame.wheels;
+    for i in 0..4 {
+        assert_eq!(be16(p.user, 2 * i) as i16, w.speed_counts[i]);
+    }
+    assert_eq!(p.user[8], w.speed_valid);
+    assert_eq!(w.speed_valid, 0x0F, "four tachometers");
+    for k in 0..3 {
+        assert_eq!(be16(p.user, 9 + 2 * k) as i16, w.dipole_counts[k]);
+    }
+    assert_eq!(p.user[15], w.dipole_valid);
+    assert_eq!(w.dipole_valid, 0x07, "three bar monitors");
+}
+
+/// APID 0x011 (docs/icd.md §3.2) against the cycle's housekeeping (a sample of its fields).
+fn check_housekeeping(p: &Packet<'_>, h: &fsw_core::telemetry::ObcHousekeeping) {
+    let q = [
+        bef64(p.user, 0),
+        bef64(p.user, 8),
+        bef64(p.user, 16),
+        bef64(p.user, 24),
+    ];
+    assert_eq!(
+        q,
+        [
+            h.q_acs_from_eci.x,
+            h.q_acs_from_eci.y,
+            h.q_acs_from_eci.z,
+            h.q_acs_from_eci.w
+        ]
+    );
+    for i in 0..3 {
+        assert_eq!(bef64(p.user, 32 + 8 * i), h.bias_acs_rad_per_s[i]);
+    }
+    for i in 0..6 {
+        assert_eq!(bef64(p.user, 56 + 8 * i), h.covariance_diag[i]);
+    }
+    assert_eq!(
+        [p.user[104], p.user[105], p.user[106], p.user[107]],
+        [
+            h.filter_mode,
+            h.control_mode,
+            h.iru_config,
+            h.iru_high_rate_cmd
+        ]
+    );
+    assert_eq!(bef32(p.user, 108), h.wheel_torque_cmd_nm[0]);
+    for k in 0..4 {
+        let o = 120 + 13 * k;
+        assert_eq!(p.user[o], h.residuals[k].status as u8);
+        assert_eq!(bef32(p.user, o + 1), h.residuals[k].innovation_arcsec[0]);
+        assert_eq!(be32(p.user, o + 9), h.residuals[k].star_id);
+    }
+    assert_eq!(be32(p.user, 173), h.counters.cycles);
+    assert_eq!(be32(p.user, 173 + 16), h.counters.stars_identified);
+    assert_eq!(be32(p.user, 213 + 12), h.table_crc[3]);
+}
+
 /// `r`, after checking that packet `p` carries its raw frame's time code (APIDs 0x013 and
 /// 0x014 are written with the raw frame of their cycle).
 fn with_raw_frame_time<'a>(p: &Packet<'_>, r: &'a CycleRecord) -> &'a CycleRecord {
@@ -191,53 +299,14 @@ fn icd_round_trip_independent_decoder() {
                 );
                 let r = &recs[cycle];
                 cycle += 1;
-                assert_eq!(
-                    (p.coarse, p.fine),
-                    (r.frame.time.coarse_s, r.frame.time.fine)
-                );
-                for ch in 0..6 {
-                    assert_eq!(be16(p.user, 2 * ch), r.frame.iru.counts[ch]);
-                }
-                assert_eq!(p.user[12], r.frame.iru.channel_failed);
-                assert_eq!(p.user[13], u8::from(r.frame.iru.high_rate));
-                for k in 0..2 {
-                    let o = 14 + 7 * k;
-                    let f = &r.frame.fhst[k];
-                    assert_eq!(be16(p.user, o) as i16, f.h_counts);
-                    assert_eq!(be16(p.user, o + 2) as i16, f.v_counts);
-                    assert_eq!(be16(p.user, o + 4) as i16, f.magnitude_centimag);
-                    assert_eq!(p.user[o + 6], f.flags);
-                    let o = 28 + 5 * k;
-                    let f = &r.frame.fss[k];
-                    assert_eq!(be16(p.user, o) as i16, f.alpha_counts);
-                    assert_eq!(be16(p.user, o + 2) as i16, f.beta_counts);
-                    assert_eq!(p.user[o + 4], f.flags);
-                }
-                for i in 0..5 {
-                    assert_eq!(
-                        be16(p.user, 38 + 2 * i) as i16,
-                        r.frame.temperatures_centi_c[i]
-                    );
-                }
+                check_raw_frame(p, r);
                 expect = 0x020;
             }
             0x013 => {
                 assert_eq!(expect, 0x020, "magnetics out of order at {}", p.offset);
                 expect = 0x013;
                 let r = with_raw_frame_time(p, &recs[cycle - 1]);
-                for k in 0..2 {
-                    let o = 7 * k;
-                    let t = &r.frame.tam[k];
-                    for i in 0..3 {
-                        assert_eq!(be16(p.user, o + 2 * i) as i16, t.field_counts[i]);
-                    }
-                    assert_eq!(p.user[o + 6], t.flags);
-                    assert_eq!(t.flags & 1, 1, "TAM{} valid in 1991", k + 1);
-                }
-                for i in 0..6 {
-                    assert_eq!(be16(p.user, 14 + 2 * i), r.frame.css.counts[i]);
-                }
-                assert_eq!(p.user[26], r.frame.css.flags);
+                check_magnetics_frame(p, r);
                 magnetics += 1;
             }
             0x014 => {
@@ -248,17 +317,7 @@ fn icd_round_trip_independent_decoder() {
                 );
                 expect = 0x014;
                 let r = with_raw_frame_time(p, &recs[cycle - 1]);
-                let w = &r.frame.wheels;
-                for i in 0..4 {
-                    assert_eq!(be16(p.user, 2 * i) as i16, w.speed_counts[i]);
-                }
-                assert_eq!(p.user[8], w.speed_valid);
-                assert_eq!(w.speed_valid, 0x0F, "four tachometers");
-                for k in 0..3 {
-                    assert_eq!(be16(p.user, 9 + 2 * k) as i16, w.dipole_counts[k]);
-                }
-                assert_eq!(p.user[15], w.dipole_valid);
-                assert_eq!(w.dipole_valid, 0x07, "three bar monitors");
+                check_wheel_frame(p, r);
                 wheels += 1;
             }
             0x020 => {
@@ -283,47 +342,7 @@ fn icd_round_trip_independent_decoder() {
                     "hk out of order at {}",
                     p.offset
                 );
-                let h = &recs[cycle - 1].output.housekeeping;
-                let q = [
-                    bef64(p.user, 0),
-                    bef64(p.user, 8),
-                    bef64(p.user, 16),
-                    bef64(p.user, 24),
-                ];
-                assert_eq!(
-                    q,
-                    [
-                        h.q_acs_from_eci.x,
-                        h.q_acs_from_eci.y,
-                        h.q_acs_from_eci.z,
-                        h.q_acs_from_eci.w
-                    ]
-                );
-                for i in 0..3 {
-                    assert_eq!(bef64(p.user, 32 + 8 * i), h.bias_acs_rad_per_s[i]);
-                }
-                for i in 0..6 {
-                    assert_eq!(bef64(p.user, 56 + 8 * i), h.covariance_diag[i]);
-                }
-                assert_eq!(
-                    [p.user[104], p.user[105], p.user[106], p.user[107]],
-                    [
-                        h.filter_mode,
-                        h.control_mode,
-                        h.iru_config,
-                        h.iru_high_rate_cmd
-                    ]
-                );
-                assert_eq!(bef32(p.user, 108), h.wheel_torque_cmd_nm[0]);
-                for k in 0..4 {
-                    let o = 120 + 13 * k;
-                    assert_eq!(p.user[o], h.residuals[k].status as u8);
-                    assert_eq!(bef32(p.user, o + 1), h.residuals[k].innovation_arcsec[0]);
-                    assert_eq!(be32(p.user, o + 9), h.residuals[k].star_id);
-                }
-                assert_eq!(be32(p.user, 173), h.counters.cycles);
-                assert_eq!(be32(p.user, 173 + 16), h.counters.stars_identified);
-                assert_eq!(be32(p.user, 213 + 12), h.table_crc[3]);
+                check_housekeeping(p, &recs[cycle - 1].output.housekeeping);
                 expect = 0x012;
             }
             0x012 => {

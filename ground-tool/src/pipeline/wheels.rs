@@ -133,18 +133,16 @@ fn compare_with_tam_flags(tm: &Telemetry) -> (usize, usize, usize) {
         let Some(m) = mags.peek().filter(|m| m.time == w.time) else {
             continue;
         };
-        let valid_tams: Vec<_> = m
+        let mut valid_tams = m
             .tam
             .iter()
             .filter(|t| t.flags & TAM_FLAG_VALID != 0)
-            .collect();
-        if valid_tams.is_empty() {
+            .peekable();
+        if valid_tams.peek().is_none() {
             continue;
         }
         compared += 1;
-        let flag_on = valid_tams
-            .iter()
-            .any(|t| t.flags & TAM_FLAG_TORQUERS_ON != 0);
+        let flag_on = valid_tams.any(|t| t.flags & TAM_FLAG_TORQUERS_ON != 0);
         let monitor_on = w.wheels.dipole_counts.iter().enumerate().any(|(k, c)| {
             w.wheels.dipole_valid & (1 << k) != 0
                 && (f64::from(*c) * TORQUER_AM2_PER_COUNT).abs() >= BAR_ON_THRESHOLD_AM2

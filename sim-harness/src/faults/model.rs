@@ -477,21 +477,29 @@ impl FaultState {
         out
     }
 
+    /// The faults of `kind` active at `t_s`, each with the index of its unit in `units`
+    /// (the `sensor` names, e.g. "rwa1".."rwa4"); faults naming no such unit are skipped.
+    fn active_on_units<'a>(
+        faults: &'a [Fault],
+        kind: FaultKind,
+        t_s: f64,
+        units: &'a [&str],
+    ) -> impl Iterator<Item = (usize, &'a Fault)> + 'a {
+        faults
+            .iter()
+            .filter(move |f| f.kind == kind && f.active(t_s))
+            .filter_map(move |f| {
+                let unit = units.iter().position(|u| Some(*u) == f.sensor.as_deref())?;
+                Some((unit, f))
+            })
+    }
+
     /// The wheels whose tachometer has failed (`tachometer_failed` faults active at `t_s`).
     #[must_use]
     pub fn failed_tachometers(faults: &[Fault], t_s: f64) -> [bool; fsw_core::raw::WHEELS] {
         let mut out = [false; fsw_core::raw::WHEELS];
-        for f in faults {
-            if f.kind != FaultKind::TachometerFailed || !f.active(t_s) {
-                continue;
-            }
-            let wheel = match f.sensor.as_deref() {
-                Some("rwa1") => 0,
-                Some("rwa2") => 1,
-                Some("rwa3") => 2,
-                Some("rwa4") => 3,
-                _ => continue,
-            };
+        let units = ["rwa1", "rwa2", "rwa3", "rwa4"];
+        for (wheel, _) in Self::active_on_units(faults, FaultKind::TachometerFailed, t_s, &units) {
             if let Some(slot) = out.get_mut(wheel) {
                 *slot = true;
             }
@@ -504,16 +512,8 @@ impl FaultState {
     #[must_use]
     pub fn stuck_torquers(faults: &[Fault], t_s: f64) -> [Option<f64>; 3] {
         let mut out = [None; 3];
-        for f in faults {
-            if f.kind != FaultKind::TorquerStuckOn || !f.active(t_s) {
-                continue;
-            }
-            let bar = match f.sensor.as_deref() {
-                Some("mtb1") => 0,
-                Some("mtb2") => 1,
-                Some("mtb3") => 2,
-                _ => continue,
-            };
+        let units = ["mtb1", "mtb2", "mtb3"];
+        for (bar, f) in Self::active_on_units(faults, FaultKind::TorquerStuckOn, t_s, &units) {
             if let Some(slot) = out.get_mut(bar) {
                 *slot = f.dipole_am2;
             }
