@@ -439,11 +439,12 @@ fn md_wheels(md: &mut String, r: &CalibrationReport) {
     let _ = writeln!(md, "## Reaction wheels and torquer bars (APID 0x014)\n");
     let _ = writeln!(
         md,
-        "{} wheel frames. Largest wheel momentum per wheel {} N·m·s (speed {} rpm, rotor {} kg·m² from Table 6); tachometer valid fraction {}. Bar dipoles (current monitors) RMS {} A·m², largest {} A·m².\n",
+        "{} wheel frames. Largest wheel momentum per wheel {} N·m·s (speed {} rpm, rotor {} kg·m² from {}); tachometer valid fraction {}. Bar dipoles (current monitors) RMS {} A·m², largest {} A·m².\n",
         w.frames,
         per_unit(&w.largest_momentum_nms, 1),
         per_unit(&w.largest_speed_rpm, 0),
         w.spin_inertia_kg_m2,
+        w.spin_inertia_source,
         per_unit(&w.tachometer_valid_fraction, 4),
         per_unit(&w.bar_dipole_rms_am2, 0),
         per_unit(&w.bar_dipole_max_am2, 0),

@@ -757,15 +757,22 @@ fn gyro_stage(
     })
 }
 
-/// The flown Table 6 (its rotor inertia for the wheel frames), else the boot table.
-fn flown_magnetics_or_boot(options: &CalibrateOptions) -> fsw_core::tables::MagneticsTable {
-    options
-        .flown_magnetics
-        .as_ref()
-        .ok()
-        .and_then(Option::as_ref)
-        .copied()
-        .unwrap_or_else(fsw_core::tables::MagneticsTable::boot)
+/// The flown Table 6 (its rotor inertia for the wheel frames), else the boot table, with
+/// where it came from (said in the report: a boot inertia is an assumption).
+fn flown_magnetics_or_boot(
+    options: &CalibrateOptions,
+) -> (fsw_core::tables::MagneticsTable, String) {
+    match &options.flown_magnetics {
+        Ok(Some(t)) => (*t, "the flown Table 6".to_owned()),
+        Ok(None) => (
+            fsw_core::tables::MagneticsTable::boot(),
+            "the boot Table 6 (no magnetics table was uplinked)".to_owned(),
+        ),
+        Err(why) => (
+            fsw_core::tables::MagneticsTable::boot(),
+            format!("the boot Table 6 (the flown one is unknown: {why})"),
+        ),
+    }
 }
 
 /// Run the chain on decoded telemetry, stage by stage as the module doc numbers them.
@@ -838,7 +845,10 @@ pub fn calibrate_telemetry(
         filter_tuning: filter.terms,
         fhst_floor: None,
         tam: super::tam::tam_stage(tm, &frames_cal, &obc_bias_at),
-        wheels: super::wheels::summarize(tm, &flown_magnetics_or_boot(options)),
+        wheels: {
+            let (table, source) = flown_magnetics_or_boot(options);
+            super::wheels::summarize(tm, &table, &source)
+        },
     };
     Ok(CalibrationOutput {
         report,

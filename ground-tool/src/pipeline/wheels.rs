@@ -38,8 +38,10 @@ pub struct WheelSummary {
     pub largest_speed_rpm: [f64; WHEELS],
     /// Per wheel, the largest |momentum|, N·m·s: the speed times Table 6's rotor inertia.
     pub largest_momentum_nms: [f64; WHEELS],
-    /// The rotor inertia used, kg·m² (Table 6 field 25 of the flown table).
+    /// The rotor inertia used, kg·m² (Table 6 field 25).
     pub spin_inertia_kg_m2: f64,
+    /// Which Table 6 the inertia came from (the flown one, or the boot one and why).
+    pub spin_inertia_source: String,
     /// Per bar (ACS x, y, z), the RMS of the monitored dipole, A·m².
     pub bar_dipole_rms_am2: [f64; TORQUER_MONITORS],
     /// Per bar, the largest |monitored dipole|, A·m².
@@ -65,10 +67,14 @@ fn nms_per_rpm(inertia_kg_m2: f64) -> f64 {
     inertia_kg_m2 * std::f64::consts::TAU / 60.0
 }
 
-/// The summary of `tm`'s wheel frames with the flown Table 6 `table` (its rotor inertia);
-/// `None` when the file has no wheel frames.
+/// The summary of `tm`'s wheel frames with the flown Table 6 `table` (its rotor inertia;
+/// `table_source` says which table that is); `None` when the file has no wheel frames.
 #[must_use]
-pub fn summarize(tm: &Telemetry, table: &MagneticsTable) -> Option<WheelSummary> {
+pub fn summarize(
+    tm: &Telemetry,
+    table: &MagneticsTable,
+    table_source: &str,
+) -> Option<WheelSummary> {
     let frames = tm.wheels.len();
     if frames == 0 {
         return None;
@@ -109,6 +115,7 @@ pub fn summarize(tm: &Telemetry, table: &MagneticsTable) -> Option<WheelSummary>
         largest_speed_rpm: largest_rpm,
         largest_momentum_nms: largest_rpm.map(|r| r * nms_per_rpm(table.wheel_spin_inertia_kg_m2)),
         spin_inertia_kg_m2: table.wheel_spin_inertia_kg_m2,
+        spin_inertia_source: table_source.to_owned(),
         bar_dipole_rms_am2: rms,
         bar_dipole_max_am2: max_dipole,
         frames_compared_with_tam_flags: compared,
@@ -199,7 +206,7 @@ mod tests {
         let table = MagneticsTable::boot();
         let mut tm = Telemetry::default();
         assert_eq!(
-            summarize(&tm, &table),
+            summarize(&tm, &table, "the boot Table 6"),
             None,
             "no wheel frames, nothing to say"
         );
@@ -212,7 +219,7 @@ mod tests {
         // Frame 1: bars on and flagged; frame 2: bars on, flag off (a fault); frame 3: bars
         // off, flag on (a fault); frame 0: off and off.
         tm.magnetics = vec![mag(0, false), mag(1, true), mag(2, false), mag(3, true)];
-        let s = summarize(&tm, &table).unwrap();
+        let s = summarize(&tm, &table, "the boot Table 6").unwrap();
         assert_eq!(s.frames, 4);
         assert_eq!(s.tachometer_valid_fraction, [1.0, 1.0, 1.0, 0.75]);
         assert_eq!(s.largest_speed_rpm[0], 2_000.0);
