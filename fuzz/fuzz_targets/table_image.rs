@@ -22,6 +22,8 @@ fn same_active(a: &TableSet, b: &TableSet) -> bool {
         && a.iru() == b.iru()
         && a.filter() == b.filter()
         && a.catalog() == b.catalog()
+        && a.orbit() == b.orbit()
+        && a.magnetics() == b.magnetics()
 }
 
 fn reseal(img: &mut [u8]) {
@@ -43,6 +45,7 @@ fn validate_active(set: &TableSet, id: TableId) -> Result<(), TableError> {
         TableId::Filter => set.filter().validate(),
         TableId::StarCatalog => set.catalog().validate(),
         TableId::Orbit => set.orbit().validate(),
+        TableId::Magnetics => set.magnetics().validate(),
     }
 }
 

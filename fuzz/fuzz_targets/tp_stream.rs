@@ -11,7 +11,8 @@
 
 use fsw_core::telemetry::{
     APID_EPHEMERIS, APID_EVENT, APID_HOUSEKEEPING, APID_MAGNETICS, APID_RAW_SENSORS,
-    EPHEMERIS_LEN, EVENT_LEN, HOUSEKEEPING_LEN, MAGNETICS_LEN, RAW_FRAME_LEN,
+    APID_WHEELS, EPHEMERIS_LEN, EVENT_LEN, HOUSEKEEPING_LEN, MAGNETICS_LEN, RAW_FRAME_LEN,
+    WHEEL_FRAME_LEN,
 };
 use libfuzzer_sys::fuzz_target;
 
@@ -25,6 +26,7 @@ fn packet_len(apid: u16) -> usize {
             APID_EVENT => EVENT_LEN,
             APID_EPHEMERIS => EPHEMERIS_LEN,
             APID_MAGNETICS => MAGNETICS_LEN,
+            APID_WHEELS => WHEEL_FRAME_LEN,
             _ => panic!("duplicate with unknown APID 0x{apid:03x}"),
         }
 }
@@ -58,16 +60,17 @@ fuzz_target!(|data: &[u8]| {
     for &(off, _, _) in &r.time_reversals {
         assert!(off < data.len());
     }
-    assert_eq!(r.packets_raw, tm.raw.len());
-    assert_eq!(r.packets_housekeeping, tm.housekeeping.len());
-    assert_eq!(r.packets_event, tm.events.len());
-    assert_eq!(r.packets_ephemeris, tm.ephemeris.len());
-    assert_eq!(r.packets_magnetics, tm.magnetics.len());
-    let decoded = r.packets_raw * (OVERHEAD + RAW_FRAME_LEN)
-        + r.packets_housekeeping * (OVERHEAD + HOUSEKEEPING_LEN)
-        + r.packets_event * (OVERHEAD + EVENT_LEN)
-        + r.packets_ephemeris * (OVERHEAD + EPHEMERIS_LEN)
-        + r.packets_magnetics * (OVERHEAD + MAGNETICS_LEN);
+    let lists = [
+        tm.raw.len(),
+        tm.housekeeping.len(),
+        tm.events.len(),
+        tm.ephemeris.len(),
+        tm.magnetics.len(),
+        tm.wheels.len(),
+    ];
+    let counts = r.packets.by_apid();
+    assert!(counts.iter().map(|c| c.1).eq(lists), "{counts:?} vs {lists:?}");
+    let decoded: usize = counts.iter().map(|&(apid, n)| n * packet_len(apid)).sum();
     let mut outlier_octets = 0;
     for o in &r.time_outliers {
         assert!(o.offset + o.len <= data.len());
@@ -85,4 +88,6 @@ fuzz_target!(|data: &[u8]| {
     assert!(tm.housekeeping.windows(2).all(|w| w[0].time <= w[1].time));
     assert!(tm.events.windows(2).all(|w| w[0].0 <= w[1].0));
     assert!(tm.ephemeris.windows(2).all(|w| w[0].time <= w[1].time));
+    assert!(tm.magnetics.windows(2).all(|w| w[0].time <= w[1].time));
+    assert!(tm.wheels.windows(2).all(|w| w[0].time <= w[1].time));
 });

@@ -36,6 +36,51 @@ struct Cli {
     command: Command,
 }
 
+/// The run folder a command reads and the output folder it writes (calibrate, diagnose,
+/// allan).
+#[derive(clap::Args)]
+struct RunOutput {
+    /// Run folder with telemetry.bin.
+    run_dir: std::path::PathBuf,
+    /// Output folder (replaced whole when it is a previous output of the same command).
+    #[arg(long)]
+    out: std::path::PathBuf,
+    /// Replace the whole content of a non-empty OUT that is not a previous output of the
+    /// same command.
+    #[arg(long)]
+    force: bool,
+}
+
+/// What a command prints (calibrate, diagnose, allan).
+#[derive(clap::Args)]
+struct PrintOptions {
+    /// Print the JSON report (report.json; allan.json for allan) to stdout.
+    #[arg(long)]
+    json: bool,
+    /// No progress on stderr (it is also hidden when stderr is not a terminal); the output
+    /// files are the same either way.
+    #[arg(long, short)]
+    quiet: bool,
+}
+
+impl RunOutput {
+    /// The arguments every run-folder command passes on.
+    fn with<'a>(
+        &'a self,
+        tables: Option<&'a std::path::Path>,
+        print: &PrintOptions,
+    ) -> CommandArgs<'a> {
+        CommandArgs {
+            run_dir: &self.run_dir,
+            out: &self.out,
+            force: self.force,
+            tables,
+            json: print.json,
+            quiet: print.quiet,
+        }
+    }
+}
+
 #[derive(Subcommand)]
 enum Command {
     /// Calibrate from a run folder: TP -> DA/FADS -> FFCAL -> adjustment -> IRUCAL -> tables.
@@ -57,15 +102,8 @@ enum Command {
         after_help = "Example: ground-tool calibrate runs/a --out runs/a-cal && sim-harness run gro-early-mission --out runs/b --tables runs/a-cal/tables"
     )]
     Calibrate {
-        /// Run folder with telemetry.bin.
-        run_dir: std::path::PathBuf,
-        /// Output folder (replaced whole when it is a previous `calibrate` output).
-        #[arg(long)]
-        out: std::path::PathBuf,
-        /// Replace the whole content of a non-empty OUT that is not a previous `calibrate`
-        /// output.
-        #[arg(long)]
-        force: bool,
+        #[command(flatten)]
+        io: RunOutput,
         /// Tables folder of the images that were flown (its manifest.json lists them, e.g.
         /// the tables/ of an earlier calibrate); default: the run's activated uploads
         /// (metadata.json `uploads`), else the boot tables. A folder that does not exist or
@@ -90,13 +128,8 @@ enum Command {
         /// attitude is still solved from the holds around it.
         #[arg(long = "maneuver", value_name = "START:END", value_parser = parse_span)]
         maneuvers: Vec<(f64, f64)>,
-        /// Print report.json to stdout.
-        #[arg(long)]
-        json: bool,
-        /// No progress on stderr (it is also hidden when stderr is not a terminal); the
-        /// output files are the same either way.
-        #[arg(long, short)]
-        quiet: bool,
+        #[command(flatten)]
+        print: PrintOptions,
     },
     /// Diagnose: residual analysis that finds effects the model lacks, and the tables that fix them.
     ///
@@ -123,26 +156,14 @@ enum Command {
     /// tables were made for. Progress goes to stderr when it is a terminal (--quiet: none).
     #[command(after_help = "Example: ground-tool diagnose runs/a --out runs/a-diag")]
     Diagnose {
-        /// Run folder with telemetry.bin.
-        run_dir: std::path::PathBuf,
-        /// Output folder (replaced whole when it is a previous `diagnose` output).
-        #[arg(long)]
-        out: std::path::PathBuf,
-        /// Replace the whole content of a non-empty OUT that is not a previous `diagnose`
-        /// output.
-        #[arg(long)]
-        force: bool,
+        #[command(flatten)]
+        io: RunOutput,
         /// Tables folder of the tables flown (its manifest.json lists them); default: the
         /// run's activated uploads, else the boot tables.
         #[arg(long)]
         tables: Option<std::path::PathBuf>,
-        /// Print report.json to stdout.
-        #[arg(long)]
-        json: bool,
-        /// No progress on stderr (it is also hidden when stderr is not a terminal); the
-        /// output files are the same either way.
-        #[arg(long, short)]
-        quiet: bool,
+        #[command(flatten)]
+        print: PrintOptions,
     },
     /// Gyro noise by Allan deviation of the inertial holds: ARW, bias instability, RRW.
     ///
@@ -173,14 +194,8 @@ enum Command {
         after_help = "Example: sim-harness run scenarios/inertial-hold-long.toml --out runs/hold && ground-tool allan runs/hold --out runs/hold-allan"
     )]
     Allan {
-        /// Run folder with telemetry.bin.
-        run_dir: std::path::PathBuf,
-        /// Output folder (replaced whole when it is a previous `allan` output).
-        #[arg(long)]
-        out: std::path::PathBuf,
-        /// Replace the content of a non-empty OUT that is not a previous `allan` output.
-        #[arg(long)]
-        force: bool,
+        #[command(flatten)]
+        io: RunOutput,
         /// Confidence level of the intervals.
         #[arg(long, default_value_t = 0.95)]
         confidence: f64,
@@ -192,13 +207,8 @@ enum Command {
         /// default: the run's activated uploads, else the boot tables.
         #[arg(long)]
         tables: Option<std::path::PathBuf>,
-        /// Print allan.json to stdout.
-        #[arg(long)]
-        json: bool,
-        /// No progress on stderr (it is also hidden when stderr is not a terminal); the
-        /// output files are the same either way.
-        #[arg(long, short)]
-        quiet: bool,
+        #[command(flatten)]
+        print: PrintOptions,
     },
     /// Reproduce the paper's numbers from data/gro_paper.toml.
     ///
@@ -639,66 +649,34 @@ fn main() -> std::process::ExitCode {
 fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Calibrate {
-            run_dir,
-            out,
-            force,
+            io,
             tables,
             shuster1982,
             single_stage,
             fhst_stage,
             maneuvers,
-            json,
-            quiet,
+            print,
         } => run_calibrate(
-            &CommandArgs {
-                run_dir: &run_dir,
-                out: &out,
-                force,
-                tables: tables.as_deref(),
-                json,
-                quiet,
-            },
+            &io.with(tables.as_deref(), &print),
             shuster1982,
             single_stage,
             fhst_stage,
             maneuvers,
         )?,
-        Command::Diagnose {
-            run_dir,
-            out,
-            force,
-            tables,
-            json,
-            quiet,
-        } => ground_tool::diagnose::run::diagnose_command(
-            &CommandArgs {
-                run_dir: &run_dir,
-                out: &out,
-                force,
-                tables: tables.as_deref(),
-                json,
-                quiet,
-            },
-            None,
-        )?,
+        Command::Diagnose { io, tables, print } => {
+            ground_tool::diagnose::run::diagnose_command(
+                &io.with(tables.as_deref(), &print),
+                None,
+            )?;
+        }
         Command::Allan {
-            run_dir,
-            out,
-            force,
+            io,
             confidence,
             signal,
             tables,
-            json,
-            quiet,
+            print,
         } => run_allan(
-            &CommandArgs {
-                run_dir: &run_dir,
-                out: &out,
-                force,
-                tables: tables.as_deref(),
-                json,
-                quiet,
-            },
+            &io.with(tables.as_deref(), &print),
             ground_tool::calibration::allan::AllanOptions { confidence, signal },
         )?,
         Command::Paper { json } => {

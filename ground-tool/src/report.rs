@@ -177,7 +177,7 @@ fn md_header(md: &mut String, r: &CalibrationReport) {
     let _ = writeln!(
         md,
         "Telemetry: {} raw frames, {} housekeeping, {} events, {} ephemeris records, {} magnetics frames (APID 0x013), {} wheel frames (APID 0x014); {} regions skipped, {} duplicates, {} time reversals.\n",
-        r.telemetry.packets_raw, r.telemetry.packets_housekeeping, r.telemetry.packets_event, r.telemetry.packets_ephemeris, r.telemetry.packets_magnetics, r.telemetry.packets_wheels,
+        r.telemetry.packets.raw, r.telemetry.packets.housekeeping, r.telemetry.packets.event, r.telemetry.packets.ephemeris, r.telemetry.packets.magnetics, r.telemetry.packets.wheels,
         r.telemetry.skipped.len(), r.telemetry.duplicates.len(), r.telemetry.time_reversals.len()
     );
     let _ = writeln!(

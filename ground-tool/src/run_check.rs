@@ -305,9 +305,9 @@ fn no_raw_frames(r: &crate::tp::TpReport) -> Finding {
         format!(
             "telemetry.bin ({} octets) holds no raw sensor frame (APID 0x010: a 60-octet packet, 6 octets primary header with version 0, type TM, secondary header flag 1 + 6 octets CUC time + 48 octets user data, docs/icd.md §2–3.1); the reader decoded {} housekeeping, {} event and {} ephemeris packets and skipped {} octets{}",
             r.file_len,
-            r.packets_housekeeping,
-            r.packets_event,
-            r.packets_ephemeris,
+            r.packets.housekeeping,
+            r.packets.event,
+            r.packets.ephemeris,
             r.skipped_octets(),
             if reasons.is_empty() {
                 String::new()

@@ -41,24 +41,73 @@ pub struct Skipped {
     pub reason: String,
 }
 
+/// Packets decoded per APID, after duplicates and time-code outliers were dropped: the
+/// lengths of [`Telemetry`]'s record lists (docs/icd.md §3).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+pub struct PacketCounts {
+    /// Raw sensor frames (APID 0x010).
+    #[serde(rename = "packets_raw")]
+    pub raw: usize,
+    /// Housekeeping packets (APID 0x011).
+    #[serde(rename = "packets_housekeeping")]
+    pub housekeeping: usize,
+    /// Event packets (APID 0x012).
+    #[serde(rename = "packets_event")]
+    pub event: usize,
+    /// Ephemeris records (APID 0x020).
+    #[serde(rename = "packets_ephemeris")]
+    pub ephemeris: usize,
+    /// Magnetics frames (APID 0x013, TAM and CSS words); 0 for a file without them.
+    #[serde(rename = "packets_magnetics")]
+    pub magnetics: usize,
+    /// Wheel frames (APID 0x014, tachometer and bar-monitor words); 0 for a file without
+    /// them.
+    #[serde(rename = "packets_wheels")]
+    pub wheels: usize,
+}
+
+impl PacketCounts {
+    /// The counts of `tm`'s record lists.
+    #[must_use]
+    pub fn of(tm: &Telemetry) -> Self {
+        Self {
+            raw: tm.raw.len(),
+            housekeeping: tm.housekeeping.len(),
+            event: tm.events.len(),
+            ephemeris: tm.ephemeris.len(),
+            magnetics: tm.magnetics.len(),
+            wheels: tm.wheels.len(),
+        }
+    }
+
+    /// `(APID, count)` for every APID of the downlink, in [`fsw_core::telemetry::APIDS`]'
+    /// order: a check that sums over it covers an APID added later.
+    #[must_use]
+    pub fn by_apid(&self) -> [(u16, usize); 6] {
+        let counts = [
+            self.raw,
+            self.housekeeping,
+            self.event,
+            self.ephemeris,
+            self.magnetics,
+            self.wheels,
+        ];
+        let mut out = [(0, 0); 6];
+        for ((o, apid), n) in out.iter_mut().zip(fsw_core::telemetry::APIDS).zip(counts) {
+            *o = (apid, n);
+        }
+        out
+    }
+}
+
 /// What the reader found, for reports and exit codes.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct TpReport {
     /// File size in octets.
     pub file_len: usize,
-    /// Packets decoded per APID: raw, housekeeping, event, ephemeris.
-    pub packets_raw: usize,
-    /// Housekeeping packets decoded.
-    pub packets_housekeeping: usize,
-    /// Event packets decoded.
-    pub packets_event: usize,
-    /// Ephemeris packets decoded.
-    pub packets_ephemeris: usize,
-    /// Magnetics frames (APID 0x013, TAM and CSS words) decoded; 0 for a file without them.
-    pub packets_magnetics: usize,
-    /// Wheel frames (APID 0x014, tachometer and bar-monitor words) decoded; 0 for a file
-    /// without them.
-    pub packets_wheels: usize,
+    /// Packets decoded per APID (report.json keys `packets_raw` … `packets_wheels`).
+    #[serde(flatten)]
+    pub packets: PacketCounts,
     /// Regions skipped (truncated, unknown, corrupt), with offsets.
     pub skipped: Vec<Skipped>,
     /// Duplicated packets dropped (offsets): identical octets to an earlier copy.
@@ -480,30 +529,21 @@ fn store_record(
     time: TimeTag,
     user: &[u8],
 ) -> Result<usize, RecordError> {
-    let r = &mut tm.report;
     match apid {
-        APID_RAW_SENSORS => {
-            decode_raw_frame(time, user).map(|x| keep(&mut tm.raw, x, &mut r.packets_raw, 0))
+        APID_RAW_SENSORS => decode_raw_frame(time, user).map(|x| keep(&mut tm.raw, x, 0)),
+        APID_HOUSEKEEPING => {
+            decode_housekeeping(time, user).map(|x| keep(&mut tm.housekeeping, x, 1))
         }
-        APID_HOUSEKEEPING => decode_housekeeping(time, user)
-            .map(|x| keep(&mut tm.housekeeping, x, &mut r.packets_housekeeping, 1)),
-        APID_EVENT => {
-            decode_event(user).map(|x| keep(&mut tm.events, (time, x), &mut r.packets_event, 2))
-        }
-        APID_MAGNETICS => decode_magnetics(time, user)
-            .map(|x| keep(&mut tm.magnetics, x, &mut r.packets_magnetics, 4)),
-        APID_WHEELS => {
-            decode_wheels(time, user).map(|x| keep(&mut tm.wheels, x, &mut r.packets_wheels, 5))
-        }
-        _ => decode_ephemeris(time, user)
-            .map(|x| keep(&mut tm.ephemeris, x, &mut r.packets_ephemeris, 3)),
+        APID_EVENT => decode_event(user).map(|x| keep(&mut tm.events, (time, x), 2)),
+        APID_MAGNETICS => decode_magnetics(time, user).map(|x| keep(&mut tm.magnetics, x, 4)),
+        APID_WHEELS => decode_wheels(time, user).map(|x| keep(&mut tm.wheels, x, 5)),
+        _ => decode_ephemeris(time, user).map(|x| keep(&mut tm.ephemeris, x, 3)),
     }
 }
 
-/// `record` appended to `list` and counted in `count`; its slot `slot` returned.
-fn keep<T>(list: &mut Vec<T>, record: T, count: &mut usize, slot: usize) -> usize {
+/// `record` appended to `list`; its slot `slot` returned.
+fn keep<T>(list: &mut Vec<T>, record: T, slot: usize) -> usize {
     list.push(record);
-    *count += 1;
     slot
 }
 
@@ -670,12 +710,7 @@ fn screen_time_codes(tm: &mut Telemetry, placed: &[Vec<(usize, usize, u16)>; SLO
     tm.report.time_reversals = reversals;
     tm.report.time_outliers.sort_by_key(|o| o.offset);
     tm.report.time_jumps.sort_by_key(|j| j.offset);
-    tm.report.packets_raw = tm.raw.len();
-    tm.report.packets_housekeeping = tm.housekeeping.len();
-    tm.report.packets_event = tm.events.len();
-    tm.report.packets_ephemeris = tm.ephemeris.len();
-    tm.report.packets_magnetics = tm.magnetics.len();
-    tm.report.packets_wheels = tm.wheels.len();
+    tm.report.packets = PacketCounts::of(tm);
 }
 
 fn retain_indexed<T>(v: &mut Vec<T>, keep: impl Fn(usize) -> bool) {

@@ -387,21 +387,24 @@ fn check_report(tm: &Telemetry, bytes: &[u8]) -> Result<(), String> {
         }
         dup += n;
     }
-    if r.packets_raw != tm.raw.len()
-        || r.packets_housekeeping != tm.housekeeping.len()
-        || r.packets_event != tm.events.len()
-        || r.packets_ephemeris != tm.ephemeris.len()
-        || r.packets_magnetics != tm.magnetics.len()
-        || r.packets_wheels != tm.wheels.len()
-    {
-        return Err("report counts differ from the records".into());
+    let lists = [
+        tm.raw.len(),
+        tm.housekeeping.len(),
+        tm.events.len(),
+        tm.ephemeris.len(),
+        tm.magnetics.len(),
+        tm.wheels.len(),
+    ];
+    let counts = r.packets.by_apid();
+    if counts.iter().map(|c| c.1).ne(lists) {
+        return Err(format!(
+            "report counts {counts:?} differ from the records {lists:?}"
+        ));
     }
-    let decoded = r.packets_raw * (OVERHEAD + RAW_FRAME_LEN)
-        + r.packets_housekeeping * (OVERHEAD + HOUSEKEEPING_LEN)
-        + r.packets_event * (OVERHEAD + EVENT_LEN)
-        + r.packets_ephemeris * (OVERHEAD + EPHEMERIS_LEN)
-        + r.packets_magnetics * (OVERHEAD + MAGNETICS_LEN)
-        + r.packets_wheels * (OVERHEAD + WHEEL_FRAME_LEN);
+    let mut decoded = 0;
+    for (apid, n) in counts {
+        decoded += n * packet_len(apid).ok_or(format!("report counts APID {apid:#05x}"))?;
+    }
     // Packets dropped for a damaged time code are accounted for with their length.
     let outliers: usize = r.time_outliers.iter().map(|o| o.len).sum();
     if decoded + dup + outliers + r.skipped_octets() != bytes.len() {

@@ -223,7 +223,7 @@ fn calibration_without_housekeeping() {
     let nohk = out.join("nohk");
     support::copy_run_without_apid(&fly, &nohk, 0x011);
     let c = calibrate_run(&nohk, &out.join("cal"), &CalibrateOptions::default()).unwrap();
-    assert_eq!(c.report.telemetry.packets_housekeeping, 0);
+    assert_eq!(c.report.telemetry.packets.housekeeping, 0);
     assert!(
         c.report.data.stars_identified.iter().all(|&n| n > 1000),
         "identified {:?}",
