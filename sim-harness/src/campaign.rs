@@ -142,7 +142,7 @@ pub fn aggregate(summaries: &[Summary]) -> Aggregate {
         filter_nees_mean: Spread::of(&col(&|x| x.filter_nees_mean.unwrap_or(f64::NAN))),
         fine_mode_fraction: Spread::of(&col(&|x| x.fine_mode_fraction)),
         rejected_measurements: Spread::of(&col(&|x| x.rejected_measurements as f64)),
-        real_time_factor: Spread::of(&col(&|x| x.real_time_factor)),
+        real_time_factor: Spread::of(&col(&|x| x.timing.real_time_factor)),
         campaign: None,
     }
 }
@@ -361,13 +361,13 @@ pub fn check_mergeable(
                 s0.scenario
             );
         }
-        if (s.sim_seconds - s0.sim_seconds).abs() > 1e-6 {
+        if (s.timing.sim_seconds - s0.timing.sim_seconds).abs() > 1e-6 {
             anyhow::bail!(
                 "{} simulated {} s but {} simulated {} s: merge combines runs of one duration only",
                 f.display(),
-                s.sim_seconds,
+                s.timing.sim_seconds,
                 f0.display(),
-                s0.sim_seconds
+                s0.timing.sim_seconds
             );
         }
     }

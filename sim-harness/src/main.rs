@@ -221,10 +221,10 @@ fn print_run_summary(name: &str, summary: &run::Summary, out: &std::path::Path) 
          attitude error (t >= 600 s, outside slews): rms [{:.2}, {:.2}, {:.2}] arcsec, max {:.2} arcsec; NEES mean {}\n\
          post-maneuver errors (deg): {}\n\
          wrote {}",
-        summary.cycles,
-        summary.sim_seconds,
-        summary.wall_seconds,
-        summary.real_time_factor,
+        summary.timing.cycles,
+        summary.timing.sim_seconds,
+        summary.timing.wall_seconds,
+        summary.timing.real_time_factor,
         e.rms[0],
         e.rms[1],
         e.rms[2],

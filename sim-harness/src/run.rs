@@ -179,13 +179,9 @@ pub struct MeasurementCounters {
     pub events_dropped: u32,
 }
 
-/// summary.json.
-#[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
-pub struct Summary {
-    /// Scenario name.
-    pub scenario: String,
-    /// Seed.
-    pub seed: u64,
+/// The length and speed of a closed-loop run (summary.json, `sim-harness bench`).
+#[derive(Clone, Copy, Debug, Default, Serialize, Deserialize, PartialEq)]
+pub struct LoopTiming {
     /// Simulated time (s).
     pub sim_seconds: f64,
     /// Wall-clock time of the loop (s).
@@ -196,6 +192,36 @@ pub struct Summary {
     pub cycles: u64,
     /// Wall time per cycle (ns).
     pub ns_per_cycle: f64,
+}
+
+impl LoopTiming {
+    /// `cycles` cycles over `sim_s` simulated seconds in `wall_s` seconds of wall time.
+    #[must_use]
+    pub fn new(sim_s: f64, wall_s: f64, cycles: u64) -> Self {
+        Self {
+            sim_seconds: sim_s,
+            wall_seconds: wall_s,
+            real_time_factor: if wall_s > 0.0 { sim_s / wall_s } else { 0.0 },
+            cycles,
+            ns_per_cycle: if cycles > 0 {
+                wall_s * 1e9 / cycles as f64
+            } else {
+                0.0
+            },
+        }
+    }
+}
+
+/// summary.json.
+#[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
+pub struct Summary {
+    /// Scenario name.
+    pub scenario: String,
+    /// Seed.
+    pub seed: u64,
+    /// How long the loop flew and how fast (summary.json keys `sim_seconds` … `ns_per_cycle`).
+    #[serde(flatten)]
+    pub timing: LoopTiming,
     /// Errors over `t ≥ 600 s`, outside slews, filter initialised.
     pub attitude_error_arcsec: ErrorStats,
     /// Errors over every initialised cycle.
@@ -982,15 +1008,7 @@ fn summary(
     Summary {
         scenario: s.name.clone(),
         seed: s.seed,
-        sim_seconds: sim_s,
-        wall_seconds: wall_s,
-        real_time_factor: if wall_s > 0.0 { sim_s / wall_s } else { 0.0 },
-        cycles,
-        ns_per_cycle: if cycles > 0 {
-            wall_s * 1e9 / cycles as f64
-        } else {
-            0.0
-        },
+        timing: LoopTiming::new(sim_s, wall_s, cycles),
         fine_mode_fraction: if steady.cycles > 0 {
             scorer.fine as f64 / steady.cycles as f64
         } else {
@@ -1108,13 +1126,7 @@ pub fn bench(duration_s: f64) -> anyhow::Result<serde_json::Value> {
     let mut s = bench_scenario()?;
     s.duration_s = duration_s;
     let sum = run(s, &RunOptions::default())?;
-    Ok(serde_json::json!({
-        "real_time_factor": sum.real_time_factor,
-        "sim_seconds": sum.sim_seconds,
-        "wall_seconds": sum.wall_seconds,
-        "cycles": sum.cycles,
-        "ns_per_cycle": sum.ns_per_cycle,
-    }))
+    Ok(serde_json::to_value(sum.timing)?)
 }
 
 #[cfg(test)]

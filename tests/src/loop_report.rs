@@ -231,8 +231,8 @@ pub fn compare(
             after: b.coarse_attitude_error_3sigma_deg,
         },
         flight_wall_seconds: Pair {
-            before: a.wall_seconds,
-            after: b.wall_seconds,
+            before: a.timing.wall_seconds,
+            after: b.timing.wall_seconds,
         },
         wall_seconds: 0.0,
     })
