@@ -60,6 +60,7 @@ fn axis_arcsec(r: &CycleRecord) -> f64 {
 fn common(r: &FaultReport, tables_may_change: bool) {
     println!("{r:#?}");
     let at = r
+        .recovery
         .recovered_at_s
         .unwrap_or_else(|| panic!("{}: never back inside 86.4″/axis", r.scenario));
     assert!(at >= r.fault_end_s);
@@ -69,9 +70,9 @@ fn common(r: &FaultReport, tables_may_change: bool) {
         r.scenario
     );
     if !tables_may_change {
-        assert!(r.tables_unchanged, "{}: tables changed", r.scenario);
-        assert_eq!(r.table_crc_before, r.table_crc_after);
-        assert_eq!(r.tables_activated, 0);
+        assert!(r.tables.tables_unchanged, "{}: tables changed", r.scenario);
+        assert_eq!(r.tables.table_crc_before, r.tables.table_crc_after);
+        assert_eq!(r.tables.tables_activated, 0);
     }
 }
 
@@ -155,7 +156,7 @@ fn e2e_fault_fhst_dropout() {
     // orbit).
     assert!(r.worst_axis_error_arcsec < FINE_REQUIREMENT_ARCSEC);
     assert!(r.worst_axis_error_arcsec > r.baseline_worst_axis_error_arcsec); // the fault did bite
-    assert_eq!(r.recovery_s, Some(0.0));
+    assert_eq!(r.recovery.recovery_s, Some(0.0));
 }
 
 /// FHST1 silently reports another catalogue star: gated, attitude held by FHST2.
@@ -193,7 +194,7 @@ fn e2e_fault_fhst_wrong_star() {
         r.worst_axis_error_arcsec,
         r.baseline_worst_axis_error_arcsec
     );
-    assert_eq!(r.recovery_s, Some(0.0));
+    assert_eq!(r.recovery.recovery_s, Some(0.0));
 }
 
 /// FHST1 reports a spurious new star 0.3° off: refused by the identification (the window from
@@ -228,7 +229,7 @@ fn e2e_fault_fhst_offset_star() {
         .count();
     assert_eq!(used, 0, "a displaced FHST1 sample was accepted");
     assert!(r.worst_axis_error_arcsec <= r.baseline_worst_axis_error_arcsec + 3.0);
-    assert_eq!(r.recovery_s, Some(0.0));
+    assert_eq!(r.recovery.recovery_s, Some(0.0));
 }
 
 /// The spurious star over offsets from 18″ to 2°: the attitude stays inside the requirement
@@ -253,8 +254,8 @@ fn e2e_fault_fhst_offset_sweep() {
             "offset {off_deg}°: {}″",
             r.worst_axis_error_arcsec
         );
-        assert_eq!(r.recovery_s, Some(0.0));
-        assert!(r.tables_unchanged);
+        assert_eq!(r.recovery.recovery_s, Some(0.0));
+        assert!(r.tables.tables_unchanged);
         if off_deg >= 0.03 {
             // Gated, rejected or unidentified: never pulls the attitude by more than 3″.
             assert!(r.worst_axis_error_arcsec <= r.baseline_worst_axis_error_arcsec + 3.0);
@@ -390,8 +391,8 @@ fn e2e_fault_iru_channel_failure_mid_slew() {
     // Back inside 86.4″/axis within 25 min of the failure (the slew itself takes 10 of them;
     // measured 1333 s; the fault-free run 601 s, one cycle after its slew). Without the bias
     // reopening it never came back (590″ at the end).
-    let rec = r.recovery_s.unwrap();
-    let base = r.baseline_recovery_s.unwrap();
+    let rec = r.recovery.recovery_s.unwrap();
+    let base = r.recovery.baseline_recovery_s.unwrap();
     assert!(rec <= 1500.0, "{rec} (no fault: {base})");
     assert!(r
         .final_three_rms_arcsec
@@ -412,7 +413,7 @@ fn e2e_fault_iru_stuck_channel_mid_slew() {
     let reported = assess(&load("iru-channel-failure-mid-slew")).unwrap();
     assert_eq!(r.worst_axis_error_arcsec, reported.worst_axis_error_arcsec);
     assert!(r.post_slew_error_arcsec[0] < 0.5 * 3600.0);
-    assert!(r.recovery_s.unwrap() <= 1500.0);
+    assert!(r.recovery.recovery_s.unwrap() <= 1500.0);
 }
 
 /// The counters wrap at high rate: nothing for the OBC to notice, the attitude is identical
@@ -453,7 +454,7 @@ fn e2e_fault_iru_counter_wrap() {
     assert_eq!(recs.len(), clean_recs.len());
     assert_same_attitude(&recs, &clean_recs, f64::INFINITY);
     // Back inside the requirement within 25 min of the slew start (slew ~13 min).
-    assert!(r.recovery_s.unwrap() <= 1500.0);
+    assert!(r.recovery.recovery_s.unwrap() <= 1500.0);
 }
 
 /// The clock jumps +1000 s, then one frame glitches back: three TimeTagAnomaly, nominal
@@ -470,7 +471,7 @@ fn e2e_fault_time_tag_jump() {
     assert_eq!(r.counters.time_tag_anomalies, 3);
     assert_eq!(r.baseline_counters.time_tag_anomalies, 0);
     assert!(r.worst_axis_error_arcsec <= r.baseline_worst_axis_error_arcsec + 1.0);
-    assert_eq!(r.recovery_s, Some(0.0));
+    assert_eq!(r.recovery.recovery_s, Some(0.0));
 }
 
 /// Damaged alignment uploads are refused for their reasons, activation then finds nothing,
@@ -551,9 +552,9 @@ fn e2e_fault_table_uploads() {
     );
     let (d, _) = before.unwrap();
     assert_eq!(&after[1..], &d[1..], "other tables unchanged");
-    assert_eq!(r.tables_activated, 1);
+    assert_eq!(r.tables.tables_activated, 1);
     assert!(r.worst_axis_error_arcsec <= r.baseline_worst_axis_error_arcsec + 1.0);
-    assert_eq!(r.recovery_s, Some(0.0));
+    assert_eq!(r.recovery.recovery_s, Some(0.0));
 }
 
 /// The CRC-32 field of an image (its last 4 octets, big-endian; docs/tables.md), which the
@@ -593,8 +594,8 @@ fn e2e_fault_filter_reset_mid_slew() {
     assert!(events_of(&recs, EventId::StarIdentified)
         .iter()
         .any(|e| e.0 > 1500.0));
-    let rec = r.recovery_s.unwrap();
-    let base = r.baseline_recovery_s.unwrap();
+    let rec = r.recovery.recovery_s.unwrap();
+    let base = r.recovery.baseline_recovery_s.unwrap();
     assert!(rec <= 1500.0, "{rec} (no fault: {base})");
     assert!(r.post_slew_error_arcsec[0] < 0.5 * 3600.0);
 }

@@ -42,16 +42,10 @@ pub struct FaultReport {
     pub baseline_worst_axis_error_arcsec: f64,
     /// Largest per-axis `|δθ_i|` (arcsec) before the fault (from 600 s).
     pub pre_fault_worst_axis_error_arcsec: f64,
-    /// First time ≥ the fault end from which every cycle to the end of the run has every axis
-    /// within [`FINE_REQUIREMENT_ARCSEC`]; `None` = never.
-    pub recovered_at_s: Option<f64>,
-    /// `recovered_at_s − fault_end_s` (0 when the error never left the requirement).
-    pub recovery_s: Option<f64>,
-    /// The same for the run without the faults.
-    pub baseline_recovery_s: Option<f64>,
-    /// Time from the fault end to the first cycle in fine mode, if the filter left fine mode
-    /// between the fault start and end (0 if it never left); `None` = never regained.
-    pub fine_mode_regained_s: Option<f64>,
+    /// How and when the attitude came back (report keys `recovered_at_s` …
+    /// `fine_mode_regained_s`).
+    #[serde(flatten)]
+    pub recovery: Recovery,
     /// Largest `|δθ_i|` (arcsec) from the recovery to the end of the run.
     pub after_recovery_worst_axis_error_arcsec: f64,
     /// 3 × RMS per axis (arcsec) over the last 600 s of the run.
@@ -65,7 +59,38 @@ pub struct FaultReport {
     pub counters: Counters,
     /// OBC counters at the end of the run without faults.
     pub baseline_counters: Counters,
-    /// Active table CRCs just before the first fault (alignment, IRU, filter, catalog, orbit).
+    /// Whether the fault reached the active tables (report keys `table_crc_before` …
+    /// `tables_activated`).
+    #[serde(flatten)]
+    pub tables: TableIntegrity,
+    /// Largest `|δθ|` (arcsec) at the completion of each slew that ended after the fault start.
+    pub post_slew_error_arcsec: Vec<f64>,
+    /// Per-cycle trace (t, per-axis error arcsec, filter mode), for tests.
+    #[serde(skip)]
+    pub trace: Vec<(f64, [f64; 3], u8)>,
+}
+
+/// When the attitude came back within the requirement after a fault, against the same
+/// flight without it.
+#[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
+pub struct Recovery {
+    /// First time ≥ the fault end from which every cycle to the end of the run has every axis
+    /// within [`FINE_REQUIREMENT_ARCSEC`]; `None` = never.
+    pub recovered_at_s: Option<f64>,
+    /// `recovered_at_s − fault_end_s` (0 when the error never left the requirement).
+    pub recovery_s: Option<f64>,
+    /// The same for the run without the faults.
+    pub baseline_recovery_s: Option<f64>,
+    /// Time from the fault end to the first cycle in fine mode, if the filter left fine mode
+    /// between the fault start and end (0 if it never left); `None` = never regained.
+    pub fine_mode_regained_s: Option<f64>,
+}
+
+/// The active tables across a fault: a fault that only disturbs the sensors must leave them
+/// as they were (docs/reliability.md fault table).
+#[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
+pub struct TableIntegrity {
+    /// Active table CRCs just before the first fault, in [`TableId::ALL`]'s order.
     pub table_crc_before: [u32; TableId::ALL.len()],
     /// Active table CRCs at the end.
     pub table_crc_after: [u32; TableId::ALL.len()],
@@ -73,11 +98,6 @@ pub struct FaultReport {
     pub tables_unchanged: bool,
     /// `TableActivated` events at or after the fault start.
     pub tables_activated: u32,
-    /// Largest `|δθ|` (arcsec) at the completion of each slew that ended after the fault start.
-    pub post_slew_error_arcsec: Vec<f64>,
-    /// Per-cycle trace (t, per-axis error arcsec, filter mode), for tests.
-    #[serde(skip)]
-    pub trace: Vec<(f64, [f64; 3], u8)>,
 }
 
 struct Flight {
@@ -261,10 +281,12 @@ pub fn assess(scenario: &Scenario) -> anyhow::Result<FaultReport> {
         worst_error_arcsec: worst_err,
         baseline_worst_axis_error_arcsec: base_axis,
         pre_fault_worst_axis_error_arcsec: pre,
-        recovered_at_s: recovered,
-        recovery_s: recovered.map(|r| (r - end).max(0.0)),
-        baseline_recovery_s: recovered_at(&clean.trace, end).map(|r| (r - end).max(0.0)),
-        fine_mode_regained_s: fine_mode_regained(&faulty.trace, start, end),
+        recovery: Recovery {
+            recovered_at_s: recovered,
+            recovery_s: recovered.map(|r| (r - end).max(0.0)),
+            baseline_recovery_s: recovered_at(&clean.trace, end).map(|r| (r - end).max(0.0)),
+            fine_mode_regained_s: fine_mode_regained(&faulty.trace, start, end),
+        },
         after_recovery_worst_axis_error_arcsec: recovered
             .map_or(f64::NAN, |r| worst_axis(&faulty.trace, r, f64::INFINITY).0),
         final_three_rms_arcsec: final_three_rms,
@@ -272,10 +294,12 @@ pub fn assess(scenario: &Scenario) -> anyhow::Result<FaultReport> {
         fault_events,
         counters: faulty.counters,
         baseline_counters: clean.counters,
-        table_crc_before: faulty.crc_before,
-        table_crc_after: faulty.crc_after,
-        tables_unchanged: faulty.dump_before == faulty.dump_after,
-        tables_activated: count(&faulty.events, EventId::TableActivated),
+        tables: TableIntegrity {
+            table_crc_before: faulty.crc_before,
+            table_crc_after: faulty.crc_after,
+            tables_unchanged: faulty.dump_before == faulty.dump_after,
+            tables_activated: count(&faulty.events, EventId::TableActivated),
+        },
         post_slew_error_arcsec: faulty
             .slew_end_errors
             .iter()
@@ -320,16 +344,16 @@ pub fn markdown_table(reports: &[FaultReport]) -> String {
             .map(|(n, a, b)| format!("{n} {a}/{b}"))
             .collect::<Vec<_>>()
             .join(", ");
-        let tables = if r.tables_unchanged {
+        let tables = if r.tables.tables_unchanged {
             "unchanged".to_owned()
         } else {
-            format!("changed ({} activated)", r.tables_activated)
+            format!("changed ({} activated)", r.tables.tables_activated)
         };
         let [a, b, c] = r.final_three_rms_arcsec;
         let recovery = format!(
             "{} (no fault: {})",
-            fmt_opt(r.recovery_s),
-            fmt_opt(r.baseline_recovery_s)
+            fmt_opt(r.recovery.recovery_s),
+            fmt_opt(r.recovery.baseline_recovery_s)
         );
         out +=
             &format!(
@@ -340,7 +364,7 @@ pub fn markdown_table(reports: &[FaultReport]) -> String {
             r.worst_axis_error_arcsec,
             r.baseline_worst_axis_error_arcsec,
             recovery,
-            fmt_opt(r.fine_mode_regained_s),
+            fmt_opt(r.recovery.fine_mode_regained_s),
             if events.is_empty() { "none".to_owned() } else { events },
             tables
         );
