@@ -103,16 +103,16 @@ fn gate_takes_a_real_correction_and_nothing_against_the_truth() {
     );
     assert!(against_built.passed, "{}", against_built.reason);
     assert!(
-        against_truth.chi2_reference < against_built.chi2_reference,
+        against_truth.chi2.chi2_reference < against_built.chi2.chi2_reference,
         "truth {} against built-with {}",
-        against_truth.chi2_reference,
-        against_built.chi2_reference
+        against_truth.chi2.chi2_reference,
+        against_built.chi2.chi2_reference
     );
     assert!(!against_truth.passed, "{}", against_truth.reason);
     assert!(
-        (0.8..1.25).contains(&against_truth.mean_square_reference),
+        (0.8..1.25).contains(&against_truth.chi2.mean_square_reference),
         "held-out mean square with the true alignments {}",
-        against_truth.mean_square_reference
+        against_truth.chi2.mean_square_reference
     );
 }
 

@@ -105,18 +105,10 @@ pub struct HeldOutTest {
     pub batches: usize,
 }
 
-/// The held-out validation of diagnose's flight tables (module doc).
+/// The held-out χ² of diagnose's tables (the components taken) against the reference table,
+/// over the same held-out batches.
 #[derive(Clone, Debug, Serialize)]
-pub struct FlightTableValidation {
-    /// The table compared against.
-    pub reference: String,
-    /// Blocks of time held out in turn.
-    pub folds: usize,
-    /// Why a fold was not used in the final model's evaluation (one line each).
-    pub folds_skipped: Vec<String>,
-    /// Parameters held at the reference in a fold of the final model's evaluation (one line
-    /// per fold; module doc).
-    pub held_at_reference: Vec<String>,
+pub struct HeldOutChi2 {
     /// Held-out batches evaluated.
     pub batches: usize,
     /// Held-out scalar residuals minus the batch attitudes' parameters.
@@ -131,6 +123,46 @@ pub struct FlightTableValidation {
     pub mean_square_diagnose: f64,
     /// χ²_reference / dof.
     pub mean_square_reference: f64,
+}
+
+impl HeldOutChi2 {
+    /// The figures of `batches` held-out batches with `dof` degrees of freedom.
+    #[must_use]
+    pub fn new(
+        batches: usize,
+        dof: usize,
+        chi2_diagnose: f64,
+        chi2_reference: f64,
+        improvement: HeldOutTest,
+    ) -> Self {
+        let ms = |c: f64| if dof > 0 { c / dof as f64 } else { f64::NAN };
+        Self {
+            batches,
+            dof,
+            chi2_diagnose,
+            chi2_reference,
+            improvement,
+            mean_square_diagnose: ms(chi2_diagnose),
+            mean_square_reference: ms(chi2_reference),
+        }
+    }
+}
+
+/// The held-out validation of diagnose's flight tables (module doc).
+#[derive(Clone, Debug, Serialize)]
+pub struct FlightTableValidation {
+    /// The table compared against.
+    pub reference: String,
+    /// Blocks of time held out in turn.
+    pub folds: usize,
+    /// Why a fold was not used in the final model's evaluation (one line each).
+    pub folds_skipped: Vec<String>,
+    /// Parameters held at the reference in a fold of the final model's evaluation (one line
+    /// per fold; module doc).
+    pub held_at_reference: Vec<String>,
+    /// The held-out χ² of both tables (report keys `batches` … `mean_square_reference`).
+    #[serde(flatten)]
+    pub chi2: HeldOutChi2,
     /// The components taken, in order, each with its test when it was taken.
     pub taken: Vec<ComponentTest>,
     /// The components left at the reference, with their test in the last round.
@@ -827,7 +859,6 @@ fn summary(
     let chi2_new: f64 = current.rows.iter().map(|r| r.1).sum();
     let chi2_ref: f64 = reference_eval.rows.iter().map(|r| r.1).sum();
     let dof: usize = current.rows.iter().map(|r| r.2).sum();
-    let ms = |c: f64| if dof > 0 { c / dof as f64 } else { f64::NAN };
     let ms_text = |c: f64| {
         if dof > 0 {
             format!("{:.3}", c / dof as f64)
@@ -878,13 +909,7 @@ fn summary(
         folds: folds.normals.len(),
         folds_skipped: current.skipped.clone(),
         held_at_reference: current.held.clone(),
-        batches: current.rows.len(),
-        dof,
-        chi2_diagnose: chi2_new,
-        chi2_reference: chi2_ref,
-        improvement,
-        mean_square_diagnose: ms(chi2_new),
-        mean_square_reference: ms(chi2_ref),
+        chi2: HeldOutChi2::new(current.rows.len(), dof, chi2_new, chi2_ref, improvement),
         taken,
         not_taken,
         taken_params,
