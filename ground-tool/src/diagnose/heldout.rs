@@ -105,6 +105,25 @@ pub struct HeldOutTest {
     pub batches: usize,
 }
 
+impl HeldOutTest {
+    /// `z 2.4` for people, or why there is no z: the held-out batches barely tell the two
+    /// tables apart (separation at most [`MIN_SEPARATION`]), or their differences come from
+    /// one group of shared errors, which cannot tell the change from the error it shares.
+    #[must_use]
+    pub fn z_text(&self) -> String {
+        if self.z.is_finite() {
+            format!("z {:.1}", self.z)
+        } else if self.separation <= MIN_SEPARATION {
+            format!(
+                "no z: the held-out batches barely see it, separation {:.2} ≤ {MIN_SEPARATION}",
+                self.separation
+            )
+        } else {
+            format!("no z: {} group of shared errors", self.groups)
+        }
+    }
+}
+
 /// The held-out χ² of diagnose's tables (the components taken) against the reference table,
 /// over the same held-out batches.
 #[derive(Clone, Debug, Serialize)]
@@ -871,10 +890,12 @@ fn summary(
             .map(|c| {
                 let trackers = c
                     .trackers
-                    .map_or_else(String::new, |t| format!(", trackers' rows z {:.1}", t.z));
+                    .map_or_else(String::new, |t| format!(", trackers' rows {}", t.z_text()));
                 format!(
-                    "{} (z {:.1}, batch means {:.1}{trackers})",
-                    c.component, c.improvement.z, c.improvement.batch_means_z
+                    "{} ({}, batch means {:.1}{trackers})",
+                    c.component,
+                    c.improvement.z_text(),
+                    c.improvement.batch_means_z
                 )
             })
             .collect::<Vec<_>>()

@@ -567,10 +567,11 @@ impl<'a> RunContext<'a> {
                 .extend(validation.not_taken.iter().map(|c| {
                     let trackers = c
                         .trackers
-                        .map_or_else(String::new, |t| format!(", trackers' rows z {:.1}", t.z));
+                        .map_or_else(String::new, |t| format!(", trackers' rows {}", t.z_text()));
                     format!(
-                        "not written (held-out validation, z {:.1}{trackers}): {}",
-                        c.improvement.z, c.component
+                        "not written (held-out validation, {}{trackers}): {}",
+                        c.improvement.z_text(),
+                        c.component
                     )
                 }));
         }
