@@ -106,6 +106,12 @@ pub struct Metadata {
     /// [`crate::provenance`]); absent in telemetry the simulator did not write.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub spacecraft: Option<Spacecraft>,
+    /// Keys of the file that are not part of the format (`sensors.fhst_sigma_arsec`), as
+    /// [`Metadata::read`] found them: ignored, so a misspelt key leaves its figure at the
+    /// default; the ground's run check warns with their names. Not a key of the file.
+    #[serde(skip)]
+    #[schemars(skip)]
+    pub unknown_keys: Vec<String>,
 }
 
 impl Metadata {
@@ -137,18 +143,31 @@ impl Metadata {
         }
         let text = std::fs::read_to_string(&path)
             .with_context(|| format!("reading {}", path.display()))?;
+        // A UTF-8 byte-order mark (some editors write one) is not JSON but carries nothing.
+        let text = text.strip_prefix('\u{feff}').unwrap_or(&text);
         // The path of the offending key (`uploads[0].accepted`): serde_json alone gives only
         // a line and column.
-        let mut de = serde_json::Deserializer::from_str(&text);
-        serde_path_to_error::deserialize(&mut de).map_err(|e| {
+        // The keys it ignores are kept (`unknown_keys`) so that a misspelt one is said.
+        let mut unknown = Vec::new();
+        let mut de = serde_json::Deserializer::from_str(text);
+        let mut note = |p: serde_ignored::Path<'_>| unknown.push(p.to_string());
+        let tracked = serde_ignored::Deserializer::new(&mut de, &mut note);
+        let mut m: Self = serde_path_to_error::deserialize(tracked).map_err(|e| {
             let field = e.path().to_string();
-            InputError::msg(format!(
+            anyhow::Error::from(InputError::msg(format!(
                 "{} is not valid metadata (docs/icd.md §5): field `{field}`: {}",
                 path.display(),
                 e.inner()
+            )))
+        })?;
+        de.end().map_err(|e| {
+            InputError::msg(format!(
+                "{} is not valid metadata (docs/icd.md §5): {e} after the JSON object",
+                path.display()
             ))
-            .into()
-        })
+        })?;
+        m.unknown_keys = unknown;
+        Ok(m)
     }
 
     /// The file's JSON: keys in sorted order at every level (the order `json!` gave the
@@ -431,6 +450,21 @@ mod tests {
         assert!(text.contains("accepted"), "{text}");
         assert!(write("{}").is_ok());
         assert_eq!(Metadata::read(&dir).ok(), Some(Metadata::default()));
+        // Keys outside the format are kept by path (a misspelt one would otherwise leave its
+        // figure at the default unseen); a byte-order mark is read past.
+        assert!(
+            write("\u{feff}{\"sensors\": {\"fhst_sigma_arsec\": [1, 2]}, \"colour\": 1}").is_ok()
+        );
+        let m = Metadata::read(&dir).unwrap_or_else(|e| panic!("{e:#}"));
+        assert_eq!(m.unknown_keys, ["sensors.fhst_sigma_arsec", "colour"]);
+        assert_eq!(m.sensors, DeclaredNoise::default());
+        // Anything after the object is refused, naming the file.
+        assert!(write("{} {}").is_ok());
+        let text = format!("{:#}", Metadata::read(&dir).map(|_| ()).unwrap_err());
+        assert!(
+            text.contains("metadata.json") && text.contains("after the JSON object"),
+            "{text}"
+        );
         let _ = std::fs::remove_dir_all(&dir);
         assert_eq!(Metadata::read(&dir).ok(), Some(Metadata::default()));
     }

@@ -109,6 +109,7 @@ pub fn validate_metadata(path: &std::path::Path, m: &Metadata) -> Result<(), Inp
             return Err(bad(field, v, "must be finite and ≥ 0"));
         }
     }
+    upload_table_names(path, m)?;
     if let Some(spreads) = &m.fss_transfer_function_sigma {
         // Every number of the spreads, by its JSON path.
         if let Ok(tree) = serde_json::to_value(spreads) {
@@ -195,6 +196,57 @@ fn utc_naive_1958_s(text: &str) -> Option<f64> {
     Some(days as f64 * 86_400.0 + hh * 3600.0 + mi * 60.0 + ss)
 }
 
+/// Every upload names a table of the OBC: an upload of an unknown table (`"aligment"`) would
+/// be skipped when the flown tables are looked up, and the run calibrated against the boot
+/// table with no word.
+fn upload_table_names(path: &std::path::Path, m: &Metadata) -> Result<(), InputError> {
+    use fsw_core::tables::TableId;
+    for (i, u) in m.uploads.iter().enumerate() {
+        if !TableId::ALL.iter().any(|id| id.name() == u.table) {
+            let names: Vec<&str> = TableId::ALL.iter().map(|id| id.name()).collect();
+            return Err(InputError::msg(format!(
+                "{}: uploads[{i}].table = {:?} is not a table of the OBC ({}; docs/icd.md §5): the flown tables cannot be known; fix the name",
+                path.display(),
+                u.table,
+                names.join(", ")
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// What `metadata.json` holds that the ground does not use: keys outside the format (a
+/// misspelt key leaves its figure at the default) and declared effects the ground's model
+/// does not hold (a misspelt name leaves the effect out of the model). Warnings: the run is
+/// still analysed, as the file says.
+fn metadata_findings(m: &Metadata, out: &mut Vec<Finding>) {
+    if !m.unknown_keys.is_empty() {
+        out.push(warn(
+            "metadata_unknown_keys",
+            format!(
+                "metadata.json: {} key(s) are not part of the format and were ignored (their figures keep the defaults; docs/icd.md §5): {}",
+                m.unknown_keys.len(),
+                m.unknown_keys.join(", ")
+            ),
+        ));
+    }
+    let unmodelled: Vec<String> = m
+        .declared()
+        .into_iter()
+        .filter(|d| !crate::diagnose::effects::declared_name_is_modelled(d))
+        .collect();
+    if !unmodelled.is_empty() {
+        out.push(warn(
+            "metadata_unknown_effects",
+            format!(
+                "metadata.json: declared_effects {} change nothing in the ground's model (not an effect of docs/diagnose.md's library nor one of {}); a misspelt name leaves its effect out of the model",
+                unmodelled.join(", "),
+                crate::diagnose::effects::CHAIN_DECLARED_EFFECTS.join(", ")
+            ),
+        ));
+    }
+}
+
 /// Check a decoded run (`metadata`: the parsed `metadata.json`, if any).
 #[must_use]
 pub fn check(tm: &Telemetry, metadata: Option<&Metadata>) -> Vec<Finding> {
@@ -217,6 +269,9 @@ pub fn check(tm: &Telemetry, metadata: Option<&Metadata>) -> Vec<Finding> {
         return out;
     }
     epoch_findings(t0, metadata, &mut out);
+    if let Some(m) = metadata {
+        metadata_findings(m, &mut out);
+    }
     // 3. Orbit coverage, sensors, the IRU, gaps, housekeeping.
     orbit_coverage(tm, &mut out);
     unusable_sensors(tm, &mut out);
@@ -654,6 +709,49 @@ pub fn check_run_dir(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// An upload of a table the OBC does not have is refused, naming it; keys outside the
+    /// format and declared effects the ground does not model are warned, by name.
+    #[test]
+    fn metadata_names_the_ground_cannot_use_are_said() {
+        let path = std::path::Path::new("run/metadata.json");
+        let mut m = Metadata::default();
+        assert!(validate_metadata(path, &m).is_ok());
+        m.uploads.push(gro_reference::run_folder::Upload {
+            table: "aligment".into(),
+            ..Default::default()
+        });
+        let e = validate_metadata(path, &m)
+            .map(|()| String::new())
+            .unwrap_or_else(|e| e.to_string());
+        assert!(
+            e.contains("uploads[0].table") && e.contains("aligment"),
+            "{e}"
+        );
+        m.uploads[0].table = "alignment".into();
+        assert!(validate_metadata(path, &m).is_ok());
+
+        let mut out = Vec::new();
+        metadata_findings(&m, &mut out);
+        assert!(out.is_empty(), "{out:?}");
+        m.unknown_keys = vec!["sensors.fhst_sigma_arsec".into()];
+        m.declared_effects = Some(vec![
+            "aberation".into(),
+            "fhst2.time_tag_offset".into(),
+            "orbital_aberration".into(),
+            "fss_transfer_function".into(),
+        ]);
+        metadata_findings(&m, &mut out);
+        let codes: Vec<&str> = out.iter().map(|f| f.code).collect();
+        assert_eq!(codes, ["metadata_unknown_keys", "metadata_unknown_effects"]);
+        assert!(out[0].message.contains("sensors.fhst_sigma_arsec"));
+        assert!(out[1].message.contains("aberation"));
+        assert!(
+            !out[1].message.contains("time_tag_offset"),
+            "{}",
+            out[1].message
+        );
+    }
 
     #[test]
     fn dates_round_trip() {

@@ -89,6 +89,25 @@ pub enum EffectKind {
 }
 
 impl EffectKind {
+    /// Every kind of the library.
+    pub const ALL: [Self; 15] = [
+        Self::AberrationAnnual,
+        Self::AberrationOrbital,
+        Self::Aberration,
+        Self::TimeTagOffset,
+        Self::ThermalAlignmentDrift,
+        Self::OrbitPeriodicAlignment,
+        Self::FhstDistortion,
+        Self::MagnitudeBias,
+        Self::FssTransferFunction,
+        Self::FssCyclicError,
+        Self::CatalogProperMotionError,
+        Self::GenericAlignmentExtension,
+        Self::SecularAlignmentExtension,
+        Self::UnknownOrbit,
+        Self::AlignmentStep,
+    ];
+
     /// Report name.
     #[must_use]
     pub fn name(self) -> &'static str {
@@ -122,6 +141,29 @@ impl EffectKind {
             other => other.name(),
         }
     }
+}
+
+/// Names of `metadata.json` `declared_effects` that the ground's chain reads itself, beyond
+/// the library's kinds: the orbital aberration and the Sun's parallax (star and Sun
+/// directions) and the early gyro bias transient (the bias model).
+pub const CHAIN_DECLARED_EFFECTS: [&str; 3] =
+    ["orbital_aberration", "sun_parallax", "iru_bias_transient"];
+
+/// Whether a `declared_effects` name changes anything in the ground's model: a library kind
+/// (its report or truth name, alone or as `unit.name` for FHST1, FHST2, FSS1, FSS2, as
+/// [`super::search::is_declared`] matches them) or one of [`CHAIN_DECLARED_EFFECTS`]. Any
+/// other name is ignored, which the run check says (a misspelt name would leave the effect
+/// out of the model unseen).
+#[must_use]
+pub fn declared_name_is_modelled(name: &str) -> bool {
+    let bare = ["fhst1.", "fhst2.", "fss1.", "fss2."]
+        .iter()
+        .find_map(|u| name.strip_prefix(u))
+        .unwrap_or(name);
+    CHAIN_DECLARED_EFFECTS.contains(&name)
+        || EffectKind::ALL
+            .iter()
+            .any(|k| k.name() == bare || k.truth_name() == bare)
 }
 
 /// One candidate effect (kind, sensor and its fixed settings).
