@@ -77,6 +77,7 @@ impl RunOutput {
             tables,
             json: print.json,
             quiet: print.quiet,
+            trust_tables: false,
         }
     }
 }
@@ -110,6 +111,11 @@ enum Command {
         /// has no manifest is refused (exit code 2).
         #[arg(long)]
         tables: Option<std::path::PathBuf>,
+        /// Take the tables given with --tables as flown even where the telemetry says the OBC
+        /// flew others (the housekeeping's active-table CRCs, docs/icd.md "Flown tables"): a
+        /// what-if; the mismatch is then a warning instead of a refusal (exit code 2).
+        #[arg(long, requires = "tables")]
+        trust_tables: bool,
         /// Use Shuster's 1982 scalar weights instead of the optimal (1990) weighting.
         #[arg(long)]
         shuster1982: bool,
@@ -162,6 +168,11 @@ enum Command {
         /// run's activated uploads, else the boot tables.
         #[arg(long)]
         tables: Option<std::path::PathBuf>,
+        /// Take the tables given with --tables as flown even where the telemetry says the OBC
+        /// flew others (the housekeeping's active-table CRCs, docs/icd.md "Flown tables"): a
+        /// what-if; the mismatch is then a warning instead of a refusal (exit code 2).
+        #[arg(long, requires = "tables")]
+        trust_tables: bool,
         #[command(flatten)]
         print: PrintOptions,
     },
@@ -523,7 +534,8 @@ fn run_calibrate(
     let with_flown = ground_tool::pipeline::flown::calibrate_options(run_dir, &meta, tables)?;
     let dir = args.begin_output("ground-tool calibrate")?;
     let out = dir.path();
-    ground_tool::run_check::check_run_dir(run_dir, out)?;
+    let assumed = ground_tool::pipeline::flown::assumed_tables(run_dir, &meta, tables)?;
+    ground_tool::run_check::check_run_dir(run_dir, out, &assumed, args.trust_tables)?;
     let options = CalibrateOptions {
         weighting: if shuster1982 {
             Weighting::Shuster1982
@@ -651,21 +663,33 @@ fn run(cli: Cli) -> Result<()> {
         Command::Calibrate {
             io,
             tables,
+            trust_tables,
             shuster1982,
             single_stage,
             fhst_stage,
             maneuvers,
             print,
         } => run_calibrate(
-            &io.with(tables.as_deref(), &print),
+            &CommandArgs {
+                trust_tables,
+                ..io.with(tables.as_deref(), &print)
+            },
             shuster1982,
             single_stage,
             fhst_stage,
             maneuvers,
         )?,
-        Command::Diagnose { io, tables, print } => {
+        Command::Diagnose {
+            io,
+            tables,
+            trust_tables,
+            print,
+        } => {
             ground_tool::diagnose::run::diagnose_command(
-                &io.with(tables.as_deref(), &print),
+                &CommandArgs {
+                    trust_tables,
+                    ..io.with(tables.as_deref(), &print)
+                },
                 None,
             )?;
         }

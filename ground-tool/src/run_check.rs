@@ -247,6 +247,88 @@ fn metadata_findings(m: &Metadata, out: &mut Vec<Finding>) {
     }
 }
 
+/// A table the ground takes as flown, for the cross-check against the CRCs the housekeeping
+/// reports ([`flown_table_findings`]; built by `pipeline::flown::assumed_tables`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct AssumedTable {
+    /// Which table.
+    pub id: fsw_core::tables::TableId,
+    /// CRC-32 of its image (the image's trailer, as the OBC reports it once active); `None`
+    /// = the boot table (the OBC reports 0).
+    pub image_crc: Option<u32>,
+    /// Its content is the boot table's (an image of the boot table is flown as the boot
+    /// table: the OBC then reports 0).
+    pub equals_boot: bool,
+    /// Where the ground took it from (a file, or "the boot table").
+    pub source: String,
+}
+
+impl AssumedTable {
+    /// Whether the OBC reporting `crc` as its active table is consistent with this one.
+    fn matches(&self, crc: u32) -> bool {
+        self.image_crc == Some(crc) || (crc == 0 && self.equals_boot)
+    }
+}
+
+/// The tables the ground takes as flown against the ones the OBC reported active in its
+/// housekeeping (docs/icd.md §3.2, octet 213: CRC-32 of the active alignment, IRU, filter and
+/// star-catalog images, 0 = boot). Why: the calibration's corrections are relative to the
+/// flown tables; a `--tables` folder or an upload list that is not what the OBC flew gives a
+/// wrong table with no error. An error when the last housekeeping packet's CRC differs from
+/// the assumed table's (a warning when `trust`: the operator's what-if, `--trust-tables`); a warning when the OBC switched that table during the run (the
+/// ground takes the last one for the whole run). Nothing to compare without housekeeping.
+#[must_use]
+pub fn flown_table_findings(tm: &Telemetry, assumed: &[AssumedTable], trust: bool) -> Vec<Finding> {
+    let mut out = Vec::new();
+    let (Some(first), Some(last)) = (tm.housekeeping.first(), tm.housekeeping.last()) else {
+        return out;
+    };
+    for a in assumed {
+        let Some(k) = (a.id as usize).checked_sub(1).filter(|k| *k < 4) else {
+            continue;
+        };
+        let reported = last.table_crc[k];
+        if !a.matches(reported) {
+            let severity = if trust { warn } else { error };
+            out.push(severity(
+                "flown_table_mismatch",
+                format!(
+                    "the OBC's active {} table had CRC-32 0x{reported:08x} at the end of the run (housekeeping at {:.0} s{}), but the ground takes as flown {} ({}): calibrating against it would give corrections relative to a table the OBC did not fly. Give the flown tables with --tables DIR, or correct metadata.json `uploads` (--trust-tables: a what-if, calibrated against the given tables all the same)",
+                    a.id.name(),
+                    last.time.seconds() - first.time.seconds(),
+                    if reported == 0 { ", 0 = the boot table" } else { "" },
+                    a.source,
+                    a.image_crc.map_or_else(|| "the boot table, 0".to_owned(), |c| format!("CRC-32 0x{c:08x}")),
+                ),
+            ));
+            continue;
+        }
+        let other = tm
+            .housekeeping
+            .iter()
+            .filter(|h| h.table_crc[k] != reported)
+            .count();
+        if other > 0 {
+            let switched = tm
+                .housekeeping
+                .iter()
+                .rev()
+                .find(|h| h.table_crc[k] != reported)
+                .map_or(0.0, |h| h.time.seconds() - first.time.seconds());
+            out.push(warn(
+                "flown_table_changed",
+                format!(
+                    "the OBC's active {} table changed during the run: {other} of {} housekeeping packets (the last at {switched:.0} s) report another table than the last; the ground takes the last one, {}, for the whole run",
+                    a.id.name(),
+                    tm.housekeeping.len(),
+                    a.source
+                ),
+            ));
+        }
+    }
+    out
+}
+
 /// Check a decoded run (`metadata`: the parsed `metadata.json`, if any).
 #[must_use]
 pub fn check(tm: &Telemetry, metadata: Option<&Metadata>) -> Vec<Finding> {
@@ -296,10 +378,21 @@ fn reader_findings(r: &crate::tp::TpReport, out: &mut Vec<Finding>) {
             .first()
             .map(|s| format!(" (first at offset {}: {})", s.offset, s.reason))
             .unwrap_or_default();
+        let retimed = r
+            .retimed_copies
+            .first()
+            .map(|(at, t, t0)| {
+                format!(
+                    " ({} of them copies of an earlier packet under another time code, the first at offset {at}: {:+.3} s from its original)",
+                    r.retimed_copies.len(),
+                    t - t0
+                )
+            })
+            .unwrap_or_default();
         out.push(warn(
             "telemetry_repaired",
             format!(
-                "telemetry.bin: {} region(s) skipped, {} octets{first}; {} duplicated packet(s) dropped; {} packet(s) sharing APID, sequence count and time with different content kept; {} time reversal(s), records re-sorted by time",
+                "telemetry.bin: {} region(s) skipped, {} octets{first}; {} duplicated packet(s) dropped{retimed}; {} packet(s) sharing APID, sequence count and time with different content kept; {} time reversal(s), records re-sorted by time",
                 r.skipped.len(),
                 r.skipped_octets(),
                 r.duplicates.len(),
@@ -639,6 +732,9 @@ pub struct CommandArgs<'a> {
     pub json: bool,
     /// No progress on stderr.
     pub quiet: bool,
+    /// Take `tables` as flown even where the housekeeping says otherwise (a what-if):
+    /// [`flown_table_findings`]' mismatch is then a warning.
+    pub trust_tables: bool,
 }
 
 impl CommandArgs<'_> {
@@ -684,12 +780,17 @@ pub fn begin_output(
 pub fn check_run_dir(
     run_dir: &std::path::Path,
     out: &std::path::Path,
+    assumed: &[AssumedTable],
+    trust_tables: bool,
 ) -> anyhow::Result<Vec<Finding>> {
     let Ok(tm) = crate::tp::read_file(&run_dir.join("telemetry.bin")) else {
         return Ok(Vec::new());
     };
     let metadata = Metadata::read(run_dir).ok();
-    let findings = check(&tm, metadata.as_ref());
+    let mut findings = check(&tm, metadata.as_ref());
+    if !findings.iter().any(|f| f.severity == Severity::Error) {
+        findings.extend(flown_table_findings(&tm, assumed, trust_tables));
+    }
     for f in &findings {
         if f.severity == Severity::Warning {
             crate::note!("warning: {}", f.message);
@@ -751,6 +852,63 @@ mod tests {
             "{}",
             out[1].message
         );
+    }
+
+    /// The tables the ground assumes are checked against the CRCs the OBC reported: another
+    /// table is an error, a boot-content image flown as boot is not, a switch during the run
+    /// is a warning.
+    #[test]
+    fn assumed_tables_are_checked_against_the_housekeeping_crcs() {
+        use fsw_core::tables::TableId;
+        let hk = |t: f64, crc: u32| fsw_core::telemetry::ObcHousekeeping {
+            time: fsw_core::raw::TimeTag::from_seconds(1.0e9 + t).unwrap_or_default(),
+            table_crc: [crc, 0, 0, 0],
+            ..Default::default()
+        };
+        let assumed = |image_crc: Option<u32>, equals_boot: bool| AssumedTable {
+            id: TableId::Alignment,
+            image_crc,
+            equals_boot,
+            source: "tables/alignment.tbl".into(),
+        };
+        let tm = |crcs: &[u32]| Telemetry {
+            housekeeping: crcs
+                .iter()
+                .enumerate()
+                .map(|(i, c)| hk(i as f64, *c))
+                .collect(),
+            ..Default::default()
+        };
+        let codes = |tm: &Telemetry, a: AssumedTable| -> Vec<&'static str> {
+            flown_table_findings(tm, &[a], false)
+                .iter()
+                .map(|f| f.code)
+                .collect()
+        };
+        let flown = tm(&[0xabcd; 3]);
+        assert!(codes(&flown, assumed(Some(0xabcd), false)).is_empty());
+        assert_eq!(codes(&flown, assumed(None, true)), ["flown_table_mismatch"]);
+        assert_eq!(
+            codes(&flown, assumed(Some(0x1234), false)),
+            ["flown_table_mismatch"]
+        );
+        let boot = tm(&[0; 3]);
+        assert!(codes(&boot, assumed(None, true)).is_empty());
+        assert!(codes(&boot, assumed(Some(0x1234), true)).is_empty());
+        assert_eq!(
+            codes(&boot, assumed(Some(0x1234), false)),
+            ["flown_table_mismatch"]
+        );
+        let switched = tm(&[0, 0, 0xabcd]);
+        assert_eq!(
+            codes(&switched, assumed(Some(0xabcd), false)),
+            ["flown_table_changed"]
+        );
+        assert!(codes(&Telemetry::default(), assumed(None, true)).is_empty());
+        // The operator's what-if: the mismatch is said, not refused.
+        let what_if = flown_table_findings(&flown, &[assumed(None, true)], true);
+        assert_eq!(what_if.len(), 1);
+        assert_eq!(what_if[0].severity, Severity::Warning);
     }
 
     #[test]

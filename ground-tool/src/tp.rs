@@ -115,6 +115,12 @@ pub struct TpReport {
     /// Packets with the key (APID, sequence count, time) of an earlier one but other octets:
     /// both kept (offsets of the later ones).
     pub duplicate_conflicts: Vec<usize>,
+    /// Copies of an earlier packet (same APID, sequence count and data) under another time
+    /// code, less than [`RETIMED_COPY_WINDOW_S`] apart: dropped like a duplicate (their
+    /// offsets are in `duplicates` too), the first copy kept. `(offset, time s, the first
+    /// copy's time s)`. A stream that repeats packets with shifted time codes would otherwise
+    /// count every star and gyro sample twice.
+    pub retimed_copies: Vec<(usize, f64, f64)>,
     /// Places where a packet's time was earlier than the previous packet of the same APID:
     /// `(offset, previous time s, time s)` (after the time-code outliers were dropped).
     pub time_reversals: Vec<(usize, f64, f64)>,
@@ -381,6 +387,45 @@ fn housekeeping_of_clean(bytes: &[u8]) -> Option<Vec<ObcHousekeeping>> {
     Some(out)
 }
 
+/// Two packets of one APID with the same sequence count and data this close in time are one
+/// packet sent twice (a sequence count comes back after 16,384 packets of its APID: hours).
+pub const RETIMED_COPY_WINDOW_S: f64 = 60.0;
+
+/// The last packet of each APID slot and sequence count (offset, length, time): bounded
+/// memory (6 × 16,384 entries) for finding a packet repeated under another time code.
+struct LastBySeq(Vec<Option<(usize, usize, TimeTag)>>);
+
+impl LastBySeq {
+    fn new() -> Self {
+        Self(vec![None; SLOTS * 0x4000])
+    }
+
+    /// Remember the packet at `at`; the earlier packet's time when it is the same packet
+    /// (APID, sequence count, octets after the time code) under another time code within
+    /// [`RETIMED_COPY_WINDOW_S`].
+    fn retimed_copy(
+        &mut self,
+        bytes: &[u8],
+        h: &Header,
+        at: usize,
+        time: TimeTag,
+    ) -> Option<TimeTag> {
+        let slot = SLOT_APIDS.iter().position(|a| *a == h.apid)?;
+        let entry = self
+            .0
+            .get_mut(slot * 0x4000 + usize::from(h.seq & 0x3fff))?;
+        let user = |p: usize, n: usize| bytes.get(p + PRIMARY_HEADER_LEN + TIME_CODE_LEN..p + n);
+        if let Some((p, n, t)) = *entry {
+            let same = n == h.total_len && user(p, n) == user(at, h.total_len);
+            if same && t != time && (t.seconds() - time.seconds()).abs() < RETIMED_COPY_WINDOW_S {
+                return Some(t);
+            }
+        }
+        *entry = Some((at, h.total_len, time));
+        None
+    }
+}
+
 /// Decode telemetry from memory (see the module doc for the damage policy).
 #[must_use]
 pub fn decode(bytes: &[u8]) -> Telemetry {
@@ -389,6 +434,7 @@ pub fn decode(bytes: &[u8]) -> Telemetry {
     let mut seen: HashMap<(u16, u16, u32, u16), usize> = HashMap::new();
     // Per APID slot (`SLOT_APIDS`), in file order: (offset, length, sequence count).
     let mut placed: [Vec<(usize, usize, u16)>; SLOTS] = Default::default();
+    let mut last_by_seq = LastBySeq::new();
     let mut at = 0usize;
     while at < bytes.len() {
         let Some(h) = parse_header(&bytes[at..]) else {
@@ -491,6 +537,14 @@ pub fn decode(bytes: &[u8]) -> Telemetry {
             tm.report.duplicate_conflicts.push(at);
         } else {
             seen.insert(key, at);
+        }
+        if let Some(first) = last_by_seq.retimed_copy(bytes, &h, at, time) {
+            tm.report.duplicates.push(at);
+            tm.report
+                .retimed_copies
+                .push((at, time.seconds(), first.seconds()));
+            at += h.total_len;
+            continue;
         }
         let decoded = store_record(&mut tm, h.apid, time, user);
         if let Ok(slot) = decoded {

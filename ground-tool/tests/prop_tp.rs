@@ -577,6 +577,55 @@ fn duplicated_packets_dropped_and_reported() {
     }
 }
 
+/// `p` with its coarse time code moved by `ds` seconds.
+fn retimed(p: &[u8], ds: u32) -> Vec<u8> {
+    let mut q = p.to_vec();
+    let coarse = u32::from_be_bytes([q[6], q[7], q[8], q[9]]) + ds;
+    q[6..10].copy_from_slice(&coarse.to_be_bytes());
+    q
+}
+
+/// A packet sent again under another time code (same APID, sequence count and data) is one
+/// packet: the copy is dropped and reported, not decoded as a second measurement (which
+/// counts its stars and gyro samples twice). The same sequence count and data hours later is
+/// not a copy (sequence counts come back after 16,384 packets).
+#[test]
+fn retimed_copies_dropped_and_reported() {
+    let mut rng = Rng::new(seed() ^ 5);
+    for case in 0..cases() {
+        let pkts = new_stream(&mut rng);
+        let mut damaged: Vec<Vec<u8>> = pkts.iter().map(|p| p.bytes.clone()).collect();
+        let copies = rng.range(1, 5);
+        let mut copied = Vec::new();
+        for _ in 0..copies {
+            let src = rng.below(pkts.len());
+            if copied.contains(&src) {
+                continue;
+            }
+            copied.push(src);
+            let at = damaged.iter().position(|b| *b == pkts[src].bytes).unwrap() + 1;
+            damaged.insert(at, retimed(&pkts[src].bytes, 1));
+        }
+        let bytes: Vec<u8> = damaged.concat();
+        let what = format!("retimed copy case {case}");
+        let tm = decode_checked(&bytes, &what);
+        assert_eq!(tm.report.retimed_copies.len(), copied.len(), "{what}");
+        assert_eq!(tm.report.duplicates.len(), copied.len(), "{what}");
+        for (_, t, t0) in &tm.report.retimed_copies {
+            assert!((t - t0 - 1.0).abs() < 1e-9, "{what}: {t} {t0}");
+        }
+        let all: Vec<&Rec> = pkts.iter().map(|p| &p.rec).collect();
+        let (missing, extra) = match_records(&tm, &all);
+        assert!(missing.is_empty() && extra.is_empty(), "{what}");
+    }
+    // Two hours later: a packet of its own.
+    let pkts = new_stream(&mut rng);
+    let mut bytes: Vec<u8> = pkts.iter().flat_map(|p| p.bytes.clone()).collect();
+    bytes.extend(retimed(&pkts[0].bytes, 7200));
+    let tm = decode_checked(&bytes, "a copy two hours later");
+    assert!(tm.report.retimed_copies.is_empty() && tm.report.duplicates.is_empty());
+}
+
 // ------------------------------------------------------------------------------------------
 // Damage inside packets: bit flips, splices, drop-outs, garbage
 // ------------------------------------------------------------------------------------------

@@ -51,10 +51,28 @@ fn alignment_table_is_written_only_when_held_out_data_say_it_is_better() {
         "the new alignments were not written"
     );
 
-    // The same telemetry, with the calibrated table declared flown.
+    // The same telemetry, with the calibrated table declared flown. The OBC flew the boot
+    // tables (its housekeeping says so): taken as flown all the same only as a what-if.
     let out2 = run.join("cal2");
     let tables1 = out1.join("tables");
-    let r2 = calibrate(&run, &out2, &["--tables", tables1.to_str().unwrap()]);
+    let refused = support::ground_tool(
+        env!("CARGO_BIN_EXE_ground-tool"),
+        "calibrate",
+        &run,
+        &out2,
+        &["--force", "--tables", tables1.to_str().unwrap()],
+    );
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert_eq!(refused.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("the OBC's active alignment table"),
+        "{stderr}"
+    );
+    let r2 = calibrate(
+        &run,
+        &out2,
+        &["--tables", tables1.to_str().unwrap(), "--trust-tables"],
+    );
     let (passed, _, _, _, why) = validation(&r2);
     assert!(!passed, "a refit of the same data was written: {why}");
     assert!(why.contains("would not improve"), "{why}");

@@ -731,6 +731,7 @@ fn metadata(sim: &Simulation, scorer: &Scorer) -> Metadata {
         // The spacecraft's identity, which the ground copies beside the tables it calibrates
         // (crate::provenance): `--tables` then says when tables meet another spacecraft.
         spacecraft: crate::provenance::spacecraft_of(s).ok(),
+        unknown_keys: Vec::new(),
     }
 }
 

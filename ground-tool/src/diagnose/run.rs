@@ -965,7 +965,12 @@ pub fn diagnose_command(
     };
     let dir = args.begin_output("ground-tool diagnose")?;
     let out = dir.path();
-    crate::run_check::check_run_dir(run_dir, out)?;
+    let assumed = crate::pipeline::flown::assumed_tables(
+        run_dir,
+        &crate::pipeline::flown::metadata_or_default(run_dir),
+        args.tables,
+    )?;
+    crate::run_check::check_run_dir(run_dir, out, &assumed, args.trust_tables)?;
     // Diagnose's refusals (too few frames, a singular fit) are about the data: exit code 2;
     // an I/O error (writing the report) stays a runtime failure.
     let result = diagnose_run(run_dir, out, &options).map_err(|e| {

@@ -10,7 +10,7 @@ use std::path::Path;
 
 use fsw_core::tables::{AlignmentTable, FilterTable, IruTable, StarCatalogTable};
 
-use super::calibrate::{decode_table_image, read_table_image, CalibrateOptions, Metadata};
+use super::calibrate::{decode_table_image, CalibrateOptions, Metadata};
 use crate::run_check::InputError;
 use gro_reference::run_folder::METADATA_FILE;
 
@@ -59,42 +59,108 @@ fn activated_uploads(
     Ok(out)
 }
 
-/// The last flown image of `table`: the one `tables/manifest.json` lists when `tables` is
-/// given (only that folder counts then), else the run's last activated upload; `None` = the
-/// boot table.
+/// The last flown image of `table` (its path and octets): the one `tables/manifest.json`
+/// lists when `tables` is given (only that folder counts then), else the run's last activated
+/// upload; `None` = the boot table.
+fn flown_image(
+    run_dir: &Path,
+    meta: &Metadata,
+    tables: Option<&Path>,
+    table: &str,
+) -> anyhow::Result<Option<(std::path::PathBuf, Vec<u8>)>> {
+    match tables {
+        Some(dir) => {
+            let (listed, _) = gro_reference::manifest::read(dir)?;
+            Ok(listed
+                .into_iter()
+                .rev()
+                .find(|(_, t, _)| t == table)
+                .map(|(p, _, bytes)| (p, bytes)))
+        }
+        None => activated_uploads(run_dir, meta, table)?
+            .pop()
+            .map(|p| {
+                let bytes = std::fs::read(&p).map_err(|e| {
+                    InputError(
+                        anyhow::Error::new(e).context(format!("cannot read {}", p.display())),
+                    )
+                })?;
+                Ok((p, bytes))
+            })
+            .transpose(),
+    }
+}
+
+/// The last flown `table` ([`flown_image`]) decoded; `None` = the boot table.
 fn flown<T: serde::de::DeserializeOwned + serde::Serialize>(
     run_dir: &Path,
     meta: &Metadata,
     tables: Option<&Path>,
     table: &str,
 ) -> anyhow::Result<Option<T>> {
-    match tables {
-        Some(dir) => {
-            let (listed, _) = gro_reference::manifest::read(dir)?;
-            listed
-                .iter()
-                .rev()
-                .find(|(_, t, _)| t == table)
-                .map(|(p, _, bytes)| {
-                    decode_table_image(bytes, p).map_err(|e| {
-                        InputError(e.context(format!("the flown {table} table, given with --tables")))
-                    })
-                })
-                .transpose()
-                .map_err(Into::into)
+    let Some((path, bytes)) = flown_image(run_dir, meta, tables, table)? else {
+        return Ok(None);
+    };
+    let source = if tables.is_some() {
+        format!("the flown {table} table, given with --tables")
+    } else {
+        format!("the flown {table} table: the last activated upload of metadata.json `uploads`; pass --tables DIR to use other tables")
+    };
+    decode_table_image(&bytes, &path)
+        .map(Some)
+        .map_err(|e| InputError(e.context(source)).into())
+}
+
+/// The tables the ground takes as flown that the housekeeping reports the CRC of (alignment,
+/// IRU, filter, star catalog: docs/icd.md §3.2 octet 213), for the run check's cross-check
+/// against the telemetry ([`crate::run_check::AssumedTable`]).
+///
+/// # Errors
+/// As [`flown_tables`].
+pub fn assumed_tables(
+    run_dir: &Path,
+    meta: &Metadata,
+    tables: Option<&Path>,
+) -> anyhow::Result<Vec<crate::run_check::AssumedTable>> {
+    use fsw_core::tables::{TableId, TableSet};
+    let boot = TableSet::boot();
+    let mut out = Vec::new();
+    for id in [
+        TableId::Alignment,
+        TableId::Iru,
+        TableId::Filter,
+        TableId::StarCatalog,
+    ] {
+        let mut image = flown_image(run_dir, meta, tables, id.name())?;
+        if image.is_none() && id == TableId::StarCatalog && tables.is_some() {
+            // As [`flown_catalog`]: a tables folder without a catalog leaves the run's own.
+            image = flown_image(run_dir, meta, None, id.name())?;
         }
-        None => activated_uploads(run_dir, meta, table)?
-            .last()
-            .map(|p| {
-                read_table_image(p).map_err(|e| {
-                    InputError(e.context(format!(
-                        "the flown {table} table: the last activated upload of metadata.json `uploads`; pass --tables DIR to use other tables"
-                    )))
-                })
-            })
-            .transpose()
-            .map_err(Into::into),
+        let (image_crc, equals_boot, source) = match &image {
+            None => (None, true, "the boot table".to_owned()),
+            Some((path, bytes)) => {
+                let equals_boot = match id {
+                    TableId::Alignment => {
+                        decode_table_image::<AlignmentTable>(bytes, path)? == *boot.alignment()
+                    }
+                    TableId::Iru => decode_table_image::<IruTable>(bytes, path)? == *boot.iru(),
+                    TableId::Filter => {
+                        decode_table_image::<FilterTable>(bytes, path)? == *boot.filter()
+                    }
+                    _ => decode_table_image::<StarCatalogTable>(bytes, path)? == *boot.catalog(),
+                };
+                let crc = bytes.last_chunk::<4>().map(|c| u32::from_be_bytes(*c));
+                (crc, equals_boot, path.display().to_string())
+            }
+        };
+        out.push(crate::run_check::AssumedTable {
+            id,
+            image_crc,
+            equals_boot,
+            source,
+        });
     }
+    Ok(out)
 }
 
 /// [`CalibrateOptions::default`] with the tables the run flew, as `ground-tool calibrate`

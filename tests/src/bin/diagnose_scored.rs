@@ -47,6 +47,7 @@ fn main() -> std::process::ExitCode {
             tables: cli.tables.as_deref(),
             json: cli.json,
             quiet: cli.quiet,
+            trust_tables: false,
         },
         Some(std::sync::Arc::new(
             gro_tests::diagnose::scoring::TruthScorer,
