@@ -425,9 +425,9 @@ fn axis_evidence(
     axis: &'static str,
     segments: &[Vec<f64>],
     tau0_s: f64,
+    per_channel: f64,
 ) -> Result<[NoiseEvidence; 2], String> {
     use crate::calibration::allan::{analyse_segments_with, MIN_TOTAL_SAMPLES};
-    let per_channel = std::f64::consts::SQRT_2;
     let samples: usize = segments.iter().map(Vec::len).sum();
     let [fa, fb] = folds(segments);
     let fold_samples = |f: &[Vec<f64>]| f.iter().map(Vec::len).sum::<usize>();
@@ -468,6 +468,34 @@ fn axis_evidence(
     }))
 }
 
+/// Above this ratio of the active channel's ARW to the channel-pair difference's (per
+/// channel), with disjoint intervals, the channels share noise: 1.08–1.13 on the writer's
+/// clean runs (the body's own motion in the holds), 3.1 with 90 % of the noise common to both
+/// channels.
+pub const COMMON_NOISE_RATIO: f64 = 1.5;
+
+/// σ_v evidence of one axis: the channel-pair difference's (it cancels the body's motion in
+/// the holds, but also any noise the two channels share), unless the active channel alone
+/// (body motion and all the gyro's noise) shows [`COMMON_NOISE_RATIO`] times more with
+/// disjoint intervals: then the channels share noise the difference cannot see, and σ_v
+/// takes the active channel's figure, an upper bound (the filter must not be told its gyro
+/// is quieter than the channel it flies).
+fn arw_upper_bound(pair: NoiseEvidence, active: Option<NoiseEvidence>) -> NoiseEvidence {
+    let (Some([p, _, p_hi]), Some(a)) = (pair.whole, active) else {
+        return pair;
+    };
+    match a.whole {
+        Some([v, lo, _]) if v > COMMON_NOISE_RATIO * p && lo > p_hi => NoiseEvidence {
+            note: Some(format!(
+                "the active channel alone shows {v:.3e}, {:.1} × the channel-pair difference's {p:.3e}: the channels share noise the difference cannot see; taken from the active channel, an upper bound",
+                v / p
+            )),
+            ..a
+        },
+        _ => pair,
+    }
+}
+
 /// The noise evidence of every axis for both terms, from the pair difference of each axis's
 /// channels in the low-rate holds (`allan::hold_segments`; per channel = ÷ √2), or why there
 /// is none.
@@ -482,9 +510,13 @@ fn noise_evidence(
     let mut why_not = Vec::new();
     for (axis, a, b) in AXES {
         let seg = hold_segments(tm, iru, (a, Some(b)), tau0_s);
-        match axis_evidence(axis, &seg.used, tau0_s) {
-            Ok([a, r]) => {
-                arw.push(a);
+        match axis_evidence(axis, &seg.used, tau0_s, std::f64::consts::SQRT_2) {
+            Ok([pair_arw, r]) => {
+                let active = hold_segments(tm, iru, (a, None), tau0_s);
+                let active_arw = axis_evidence(axis, &active.used, tau0_s, 1.0)
+                    .ok()
+                    .map(|[e, _]| e);
+                arw.push(arw_upper_bound(pair_arw, active_arw));
                 rrw.push(r);
             }
             Err(e) if seg.dropped > 0 => why_not.push(format!(
@@ -669,6 +701,30 @@ pub fn noise_terms(
 mod tests {
     use super::*;
 
+    /// σ_v takes the active channel only when it shows clearly more than the pair difference
+    /// (noise common to both channels), never less.
+    #[test]
+    fn arw_takes_the_active_channel_only_when_the_channels_share_noise() {
+        let ev = |v: f64, lo: f64, hi: f64| NoiseEvidence {
+            axis: "X",
+            samples: 1000,
+            whole: Some([v, lo, hi]),
+            folds: [Some(v), Some(v)],
+            note: None,
+        };
+        let pair = ev(3.2e-8, 3.1e-8, 3.4e-8);
+        let common = arw_upper_bound(pair.clone(), Some(ev(1.0e-7, 0.97e-7, 1.03e-7)));
+        assert_eq!(common.whole, Some([1.0e-7, 0.97e-7, 1.03e-7]));
+        assert!(common.note.is_some_and(|n| n.contains("share noise")));
+        // The body's own motion in the holds: 8 % more, kept from the pair difference.
+        let clean = arw_upper_bound(pair.clone(), Some(ev(3.46e-8, 3.35e-8, 3.6e-8)));
+        assert_eq!(clean, pair);
+        // Twice as large but overlapping intervals: not evidence enough.
+        let wide = arw_upper_bound(pair.clone(), Some(ev(6.4e-8, 3.0e-8, 9.0e-8)));
+        assert_eq!(wide, pair);
+        assert_eq!(arw_upper_bound(pair.clone(), None), pair);
+    }
+
     #[test]
     fn residual_sigma_takes_the_whole_estimate_of_elements_not_uplinked() {
         let dm = [[4e-4, 0.0, 1.7e-4], [0.0; 3], [0.0; 3]];
@@ -762,21 +818,21 @@ mod tests {
         let flown = 1.454e-8;
         let truth = 4.0 * flown;
         let segs = white_segments(truth, &[3000, 2500, 2800, 3100, 2600, 2900], 7);
-        let [arw, _] = axis_evidence("X", &segs, 1.0).unwrap();
+        let [arw, _] = axis_evidence("X", &segs, 1.0, std::f64::consts::SQRT_2).unwrap();
         let d = noise_decision(FilterTerm::Arw, flown, &[arw], true, 3);
         let v = d.derived.expect("derived");
         assert!(d.written, "{}", d.reason);
         assert!((v / truth - 1.0).abs() < 0.2, "{v:e} against {truth:e}");
         // The same noise as the table: kept.
         let segs = white_segments(flown, &[3000, 2500, 2800, 3100, 2600, 2900], 8);
-        let [arw, _] = axis_evidence("X", &segs, 1.0).unwrap();
+        let [arw, _] = axis_evidence("X", &segs, 1.0, std::f64::consts::SQRT_2).unwrap();
         assert!(!noise_decision(FilterTerm::Arw, flown, &[arw], true, 3).written);
     }
 
     #[test]
     fn too_little_hold_data_is_refused_with_the_count() {
         let segs = white_segments(1e-8, &[900, 800], 3);
-        let e = axis_evidence("Y", &segs, 1.0).unwrap_err();
+        let e = axis_evidence("Y", &segs, 1.0, std::f64::consts::SQRT_2).unwrap_err();
         assert!(e.contains("1700 hold samples"), "{e}");
     }
 
