@@ -312,10 +312,24 @@ fn icd_invalid_flags_for_long_stretches() {
 /// reason (and, for low-rate slews, the fix).
 #[test]
 fn icd_no_iru_intervals() {
-    let (_, o) = calibrate_case("no-slews", &["--no-slews", "--duration", "2400"], 0);
+    let (still, o) = calibrate_case("no-slews", &["--no-slews", "--duration", "2400"], 0);
     let r = o.report.clone().unwrap();
     assert!(r["maneuvers"].as_array().unwrap().is_empty());
     assert!(r["iru_skipped"].as_str().unwrap().contains("maneuvers"));
+    // A maneuver given by hand where the body did not turn: refused, naming the span.
+    let o = support::ground_tool(
+        env!("CARGO_BIN_EXE_ground-tool"),
+        "calibrate",
+        &still,
+        &still.join("out-still"),
+        &["--maneuver", "300:400"],
+    );
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("--maneuver 300:400") && stderr.contains("turned only"),
+        "{stderr}"
+    );
     let (_, o) = calibrate_case("low-rate-slews", &["--low-rate-slews"], 0);
     assert!(has_check(&o, "no_high_rate_frames"), "{}", o.stderr);
     o.assert_says("--maneuver");

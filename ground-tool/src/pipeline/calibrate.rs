@@ -440,6 +440,23 @@ fn user_maneuvers(
     Ok(out)
 }
 
+/// The least rotation, deg, of a maneuver given with `--maneuver`: the scale factors and
+/// misalignments show only in a rotation (100 ppm of 1° is 0.4″, below one star's noise).
+pub const MIN_USER_MANEUVER_DEG: f64 = 1.0;
+
+/// A `--maneuver` span in which the body hardly turned carries no scale information, and its
+/// link would be taken for one: refused, naming the span and its rotation.
+fn refuse_still_user_maneuvers(reports: &[ManeuverReport]) -> anyhow::Result<()> {
+    match reports.iter().find(|m| m.angle_deg < MIN_USER_MANEUVER_DEG) {
+        Some(m) => Err(crate::run_check::InputError::msg(format!(
+            "--maneuver {:.0}:{:.0}: the gyro turned only {:.3}° in it (at least {MIN_USER_MANEUVER_DEG}° is needed: the scale factors show only in a rotation); give spans that hold the slews",
+            m.start_s, m.end_s, m.angle_deg
+        ))
+        .into()),
+        None => Ok(()),
+    }
+}
+
 /// The OBC's bias from the housekeeping record at or before `t_s` (absolute time, s).
 fn obc_bias_sample(tm: &Telemetry, t_s: f64) -> Option<[f64; 3]> {
     let k = tm.housekeeping.partition_point(|h| h.time.seconds() <= t_s);
@@ -731,6 +748,9 @@ fn gyro_stage(
     crate::progress::step("IRUCAL: attitude fixes and the gyro chain");
     let gyro_chain = build_gyro_chain(frames, &maneuvers, obc_bias_at, &fhst_floor, t0);
     let mut maneuver_reports = maneuver_reports(frames, &maneuvers, &gyro_chain, obc_bias_at, t0);
+    if ctx.options.maneuvers_s.is_some() {
+        refuse_still_user_maneuvers(&maneuver_reports)?;
+    }
     let chain_cfg = ChainConfig {
         noise,
         ..ChainConfig::default()
