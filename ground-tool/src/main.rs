@@ -387,9 +387,24 @@ fn run_icd(action: IcdAction) -> Result<()> {
             for p in written {
                 eprintln!("wrote {}", p.display());
             }
+            let decoded: usize = report.packets.by_apid().iter().map(|c| c.1).sum();
+            if decoded == 0 {
+                // Empty CSVs written from a file with no packet are not a decoding.
+                return Err(ground_tool::run_check::InputError::msg(format!(
+                    "{}: no packet decoded ({} octets, {} skipped: {}; docs/icd.md §2)",
+                    telemetry.display(),
+                    report.file_len,
+                    report.skipped_octets(),
+                    report
+                        .skipped
+                        .first()
+                        .map_or("empty file", |s| s.reason.as_str())
+                ))
+                .into());
+            }
             if !report.is_clean() {
                 eprintln!(
-                    "warning: {}: {} packets skipped ({} octets), {} duplicates dropped: not in the CSVs",
+                    "warning: {}: {} regions skipped ({} octets), {} duplicates dropped: not in the CSVs",
                     telemetry.display(),
                     report.skipped.len(),
                     report.skipped_octets(),
