@@ -93,6 +93,12 @@ row sh-tables-none "sim-harness run … --tables no-such-dir" 2 "$(absent s-none
 rm -rf run-gone; cp -r run-up run-gone; rm run-gone/uploads/01_alignment.tbl
 run upload-gone "$gt" calibrate run-gone --out cal-gone
 row upload-gone "ground-tool calibrate RUN (uploads/01_alignment.tbl deleted)" 2 "$(absent cal-gone)" "not read as \"boot tables flown\""
+run tables-not-flown "$gt" calibrate run --out cal-nf --tables cal/tables
+row tables-not-flown "ground-tool calibrate RUN --tables DIR (the run flew the boot tables)" 2 "$(absent cal-nf)" "no table relative to tables not flown"
+rm -rf run-typo; cp -r run-up run-typo
+python3 -c 'import json,sys; p=sys.argv[1]; m=json.load(open(p)); m["uploads"][-1]["table"]="aligment"; json.dump(m,open(p,"w"))' run-typo/metadata.json
+run upload-typo "$gt" calibrate run-typo --out cal-typo
+row upload-typo "ground-tool calibrate RUN (an upload's table \"aligment\")" 2 "$(absent cal-typo)" "not read as \"boot table flown\""
 "$sh" monte-carlo normal-ops -n 2 --seed 1 --duration 120 --out mcA -q > /dev/null 2>&1
 "$sh" monte-carlo normal-ops -n 2 --seed 1 --duration 180 --out mcB -q > /dev/null 2>&1
 run merge-duration "$sh" merge mcA mcB --out merged.json
