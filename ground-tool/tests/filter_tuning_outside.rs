@@ -2,7 +2,8 @@
 //! the independent ICD writer's telemetry with gyro truths the simulator does not make: a
 //! gyro four times noisier than the boot table is found and written; noise common to both
 //! triads (which the channel difference cannot see) never lowers σ_v below the boot value
-//! (an outside probe's case: it read 2.4× low and was written, `docs/investigations.md`).
+//! (an outside probe's case: it read 2.4× low and was written, `docs/investigations.md`), and
+//! σ_v is then taken from the active channel, within 0.95–1.3× the truth.
 
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
@@ -33,7 +34,7 @@ fn term<'a>(report: &'a Value, field: &str) -> &'a Value {
 }
 
 #[test]
-fn a_noisier_gyro_is_found_and_common_noise_never_lowers_the_table() {
+fn a_noisier_gyro_is_found_and_common_noise_is_taken_from_the_active_channel() {
     let boot = FilterTable::default_boot().arw_rad_per_sqrt_s;
     // Four times the boot σ_v, per body axis and triad.
     let truth = 4.0 * boot;
@@ -54,7 +55,8 @@ fn a_noisier_gyro_is_found_and_common_noise_never_lowers_the_table() {
     assert_eq!(filter.unwrap().arw_rad_per_sqrt_s, v);
 
     // 90 % of the variance common to both triads, at the writer's default 2e-8: the channel
-    // difference sees 0.45 of it; σ_v must stay at least the boot value.
+    // difference sees 0.45 of it; σ_v must stay at least the boot value, and comes from the
+    // active channel (an upper bound: the body's motion in the holds adds 8–13 % on clean runs).
     let run = support::write_run(
         "tuning",
         "common90",
@@ -73,10 +75,13 @@ fn a_noisier_gyro_is_found_and_common_noise_never_lowers_the_table() {
         t["written"] == false || t["derived"].as_f64().unwrap() >= boot,
         "σ_v lowered under common noise: {t}"
     );
+    let common_truth = 2.0e-8;
+    let v = t["derived"].as_f64().unwrap_or(0.0);
     assert!(
-        t["reason"].as_str().unwrap().contains("never lowered"),
-        "{t}"
+        t["written"] == true && v >= 0.95 * common_truth && v <= 1.3 * common_truth,
+        "σ_v {v:e} under common noise, true {common_truth:e}: {t}"
     );
+    assert!(t["reason"].as_str().unwrap().contains("share noise"), "{t}");
     if let Some(f) = filter {
         assert!(f.arw_rad_per_sqrt_s >= boot, "{}", f.arw_rad_per_sqrt_s);
     }
