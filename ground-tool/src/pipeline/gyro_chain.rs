@@ -142,6 +142,7 @@ pub(crate) fn build_gyro_chain(
                         systematic_cov_rad2: systematic,
                         sun,
                         bias_nominal_rad_per_s: bias_at(t),
+                        triad: triad_of(&frames[idx]),
                     },
                 ));
             }
@@ -166,6 +167,15 @@ pub(crate) fn build_gyro_chain(
         fix_frames,
         misfit_fixes,
         t0_s: t0,
+    }
+}
+
+/// The gyro triad whose channels the frame's increment came from.
+fn triad_of(frame: &FrameObservations) -> Triad {
+    if frame.iru_backup {
+        Triad::Backup
+    } else {
+        Triad::Primary
     }
 }
 
@@ -198,11 +208,7 @@ fn link_between(
     }
     Some(ChainLink {
         steps: steps_between(frames, a, b),
-        triad: if backup {
-            Triad::Backup
-        } else {
-            Triad::Primary
-        },
+        triad: triad_of(&frames[a + 1]),
         extra_var_rad2,
         maneuver,
         split_dirs_rad,
