@@ -9,7 +9,7 @@ use super::measurements::MeasurementSet;
 use super::search::Evidence;
 use super::Detected;
 use crate::calibration::iru::{GyroCalibration, GyroStep};
-use crate::pipeline::observations::FrameObservations;
+use crate::pipeline::observations::{FrameObservations, GyroSplit};
 use fsw_core::raw::TimeTag;
 use nalgebra::{Matrix3, Vector3};
 
@@ -43,7 +43,7 @@ pub struct GyroConfig {
     pub transient_declared: bool,
 }
 
-/// What the gyro analysis reads of a frame: ≈ 80 bytes of its 704, so that the frames
+/// What the gyro analysis reads of a frame: ≈ 120 bytes of its 704, so that the frames
 /// (0.37 GB over six months of 30-s telemetry) can go once the measurement set is built.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct GyroFrame {
@@ -55,6 +55,9 @@ pub struct GyroFrame {
     pub high_rate: bool,
     /// IRU temperature (°C).
     pub iru_temperature_c: f64,
+    /// A rate-mode switch split inside the interval (decimated telemetry), as calibrate's
+    /// chain takes it.
+    pub split: Option<GyroSplit>,
 }
 
 impl From<&FrameObservations> for GyroFrame {
@@ -64,6 +67,7 @@ impl From<&FrameObservations> for GyroFrame {
             gyro: f.gyro,
             high_rate: f.high_rate,
             iru_temperature_c: f.temperatures_c[4],
+            split: f.gyro_split(),
         }
     }
 }

@@ -39,6 +39,7 @@ use super::gyro_data::{batch_attitude, delta_bic, GyroAnalysis, GyroLeftover, Sl
 use super::search::Evidence;
 use super::stats::{chi2_sf, f_sf};
 use super::Detected;
+use crate::pipeline::observations::SPLIT_KINDS;
 use fsw_core::attitude::{rot, rotvec_from_rot};
 use fsw_core::units::{ARCSEC_PER_RAD, DEG_PER_RAD, RAD_PER_ARCSEC, RAD_PER_DEG};
 use nalgebra::{DMatrix, DVector, Matrix3, SMatrix, Vector3};
@@ -56,8 +57,13 @@ const POW: usize = 15;
 pub const POWERS: [f64; 4] = [0.5, 1.0, 2.0, 3.0];
 /// First scale-step column (ppm from the step on; filled per scanned position).
 const STEP: usize = POW + 3 * POWERS.len();
+/// First split-fraction column: the rate-mode switches split inside decimated frames, one
+/// fraction per kind of switch as in calibrate's chain
+/// ([`crate::pipeline::observations::GyroSplit`]); in the baseline when a
+/// slew has a split frame.
+const SPLIT: usize = STEP + 3;
 /// Columns of the slew model.
-const NCOL: usize = STEP + 3;
+const NCOL: usize = SPLIT + SPLIT_KINDS;
 /// Tests of the slew family (asymmetry, scale against rate, bias against rate mode, scale
 /// step): their Bonferroni factor.
 pub const SLEW_TESTS: f64 = 4.0;
@@ -111,7 +117,12 @@ pub(super) fn analyse(inp: &SlewInput<'_>, out: &mut GyroAnalysis) {
         return;
     }
     let all = |_: usize| true;
-    let base: Vec<usize> = (BIAS..ASYM).collect();
+    // The split fractions of the switches the slews hold are nuisance parameters, as in
+    // calibrate's chain: a decimated frame that spans a switch mixes both pulse weights, and
+    // its step at the middle of its envelope is off by a fraction shared by every switch of
+    // one kind (on 30-s frames, ± hundreds of arcseconds at each slew start).
+    let split_cols = (SPLIT..NCOL).filter(|&c| rows.iter().any(|r| r.s.column(c).amax() > 0.0));
+    let base: Vec<usize> = (BIAS..ASYM).chain(split_cols).collect();
     let Some(fit0) = solve(&rows, &base, &all) else {
         out.notes.push("slews: singular slew geometry".into());
         return;
@@ -349,6 +360,7 @@ fn slew_rows(inp: &SlewInput<'_>, pairs: &[(usize, usize)], omega_ref: f64) -> V
         let mut phi_total = Matrix3::identity();
         let mut sm = SMatrix::<f64, 3, NCOL>::zeros();
         let mut angle = Vector3::zeros();
+        let mut split_var_rad2 = 0.0;
         let mut rates: Vec<f64> = frames[ca + 1..=cb]
             .iter()
             .filter(|f| f.high_rate)
@@ -380,6 +392,10 @@ fn slew_rows(inp: &SlewInput<'_>, pairs: &[(usize, usize)], omega_ref: f64) -> V
                     u[(j, POW + 3 * q + j)] = dth[j] * w.powf(*p) * 1e-6;
                 }
             }
+            if let Some(split) = f.split {
+                u.set_column(SPLIT + split.kind(), &split.dir_rad);
+                split_var_rad2 += split.var_rad2;
+            }
             let r = rot(&phi);
             sm = r * sm + rot(&(phi * 0.5)) * u;
             phi_total = r * phi_total;
@@ -388,7 +404,8 @@ fn slew_rows(inp: &SlewInput<'_>, pairs: &[(usize, usize)], omega_ref: f64) -> V
         let z = rotvec_from_rot(&(mb * (phi_total * ma).transpose())) * ARCSEC_PER_RAD;
         let t = (cb - ca) as f64;
         let proc = (inp.cfg.arw_rad_per_sqrt_s * ARCSEC_PER_RAD).powi(2) * t
-            + (inp.cfg.rrw_rad_per_s15 * ARCSEC_PER_RAD).powi(2) * t.powi(3) / 3.0;
+            + (inp.cfg.rrw_rad_per_s15 * ARCSEC_PER_RAD).powi(2) * t.powi(3) / 3.0
+            + split_var_rad2 * ARCSEC_PER_RAD * ARCSEC_PER_RAD;
         rows.push(SlewRow {
             z,
             s: sm * ARCSEC_PER_RAD,
