@@ -389,3 +389,39 @@ fn outside_writer_scale_step_in_decimated_telemetry_is_reported() {
         "size {size:.0} ppm: {step}"
     );
 }
+
+/// The OBC's switch to the backup gyro triad halfway (event 0x0202, housekeeping octet 106;
+/// the backup has its own bias and δM) is known: diagnose gives each triad its own bias in
+/// the baseline and names nothing on the gyro. Before: a `gyro_bias_step` at the switch
+/// (ΔBIC 1608 at the 1-s downlink) or, at 10 s, an unexplained bias ramp (0.37″/s, Holm p
+/// 1e-4) that kept the IRU table as flown.
+#[test]
+fn outside_writer_triad_switch_is_not_a_gyro_effect() {
+    let (report, _) = write_and_diagnose(
+        "backup-halfway",
+        &[
+            "--plan",
+            "long",
+            "--hold-s",
+            "1200",
+            "--iru-delta-m",
+            "paper",
+            "--backup-halfway",
+            "--downlink-every",
+            "10",
+        ],
+    );
+    assert!(
+        !named(&report).iter().any(|n| n.ends_with("[IRU]")),
+        "{:?}",
+        named(&report)
+    );
+    assert!(
+        iru_unexplained(&report).is_empty(),
+        "{:#}",
+        report["unexplained"]
+    );
+    assert_a_note(&report["gyro"]["notes"], |n| {
+        n.contains("switched gyro triads")
+    });
+}

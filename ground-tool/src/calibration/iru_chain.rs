@@ -1974,10 +1974,12 @@ mod tests {
         let mut rng = Rng::new(7);
         let a = Mx::from_fn(|_, _| rng.normal());
         let p = a * a.transpose();
-        for sys_reset in [false, true] {
+        for (sys_reset, bias_reset) in [(false, false), (true, false), (false, true), (true, true)]
+        {
             let f = Transition {
                 attitude_rows: SMatrix::<f64, 3, NX>::from_fn(|_, _| rng.normal()),
                 sys_reset,
+                bias_reset,
             };
             let fd = f.dense();
             let x = Vx::from_fn(|_, _| rng.normal());

@@ -53,6 +53,8 @@ pub struct GyroFrame {
     pub gyro: Option<GyroStep>,
     /// IRU rate mode of that interval.
     pub high_rate: bool,
+    /// The step came from the backup triad (its own bias and δM).
+    pub iru_backup: bool,
     /// IRU temperature (°C).
     pub iru_temperature_c: f64,
     /// A rate-mode switch split inside the interval (decimated telemetry), as calibrate's
@@ -66,6 +68,7 @@ impl From<&FrameObservations> for GyroFrame {
             time: f.time,
             gyro: f.gyro,
             high_rate: f.high_rate,
+            iru_backup: f.iru_backup,
             iru_temperature_c: f.temperatures_c[4],
             split: f.gyro_split(),
         }
@@ -81,6 +84,19 @@ pub struct GyroInput<'a> {
     pub gyro: GyroCalibration,
     /// Bias per frame (e.g. the OBC's estimate); `None` = `gyro.bias_acs_rad_per_s`.
     pub bias_per_frame: Option<&'a [Vector3<f64>]>,
+    /// δM of the backup triad (IRUCAL's), for the steps it produced; `None` = `gyro.delta_m`.
+    pub delta_m_backup: Option<Matrix3<f64>>,
+}
+
+impl GyroInput<'_> {
+    /// The δM of the triad that produced the frame's step.
+    #[must_use]
+    pub fn delta_m(&self, frame: &GyroFrame) -> Matrix3<f64> {
+        match (frame.iru_backup, self.delta_m_backup) {
+            (true, Some(dm)) => dm,
+            _ => self.gyro.delta_m,
+        }
+    }
 }
 
 /// The gyro analysis result.

@@ -241,7 +241,7 @@ fn slew_intervals(inp: &SlewInput<'_>, out: &mut GyroAnalysis) -> Vec<(usize, us
     let mut pairs = Vec::new();
     // Why slews were not used, counted for the report: (no usable attitude batch around it,
     // less than 5° turned between the batches found, a gap in the gyro data).
-    let (mut no_batch, mut small, mut gaps) = (0usize, 0usize, 0usize);
+    let (mut no_batch, mut small, mut gaps, mut switched) = (0usize, 0usize, 0usize, 0usize);
     for (k, &(s, e)) in slews.iter().enumerate() {
         // The holds around the slew, up to the neighbouring slews: an interval that spans
         // another slew would count that one twice.
@@ -285,6 +285,14 @@ fn slew_intervals(inp: &SlewInput<'_>, out: &mut GyroAnalysis) -> Vec<(usize, us
             ));
             continue;
         }
+        // Across the OBC's gyro triad switch the interval mixes two biases and two δM.
+        if frames[ca + 1..=cb]
+            .iter()
+            .any(|f| f.iru_backup != frames[cb].iru_backup)
+        {
+            switched += 1;
+            continue;
+        }
         let turned: Vector3<f64> = frames[ca + 1..=cb]
             .iter()
             .filter_map(|f| f.gyro)
@@ -298,7 +306,7 @@ fn slew_intervals(inp: &SlewInput<'_>, out: &mut GyroAnalysis) -> Vec<(usize, us
     }
     if pairs.len() < slews.len() {
         out.notes.push(format!(
-            "slews: {} of {} used for the slew tests; not used: {no_batch} without a usable attitude batch on both sides (within {SLEW_WINDOW_FRAMES} frames, not past the neighbouring slews), {small} with less than 5° turned between the batches around them (the batches fell inside the slew), {gaps} with a gap in the gyro data",
+            "slews: {} of {} used for the slew tests; not used: {no_batch} without a usable attitude batch on both sides (within {SLEW_WINDOW_FRAMES} frames, not past the neighbouring slews), {small} with less than 5° turned between the batches around them (the batches fell inside the slew), {gaps} with a gap in the gyro data, {switched} across the OBC's gyro triad switch",
             pairs.len(),
             slews.len()
         ));
@@ -373,7 +381,7 @@ fn slew_rows(inp: &SlewInput<'_>, pairs: &[(usize, usize)], omega_ref: f64) -> V
         for f in &frames[ca + 1..=cb] {
             let Some(g) = f.gyro else { continue };
             let dth = g.dtheta_acs_rad;
-            let phi = (Matrix3::identity() + inp.input.gyro.delta_m) * dth - bias * g.dt_s;
+            let phi = (Matrix3::identity() + inp.input.delta_m(f)) * dth - bias * g.dt_s;
             let mut u = SMatrix::<f64, 3, NCOL>::zeros();
             for j in 0..3 {
                 if f.high_rate {
