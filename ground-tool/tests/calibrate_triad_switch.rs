@@ -14,23 +14,9 @@ const ARCSEC_PER_RAD: f64 = 206_264.806_247_096_36;
 
 #[test]
 fn bias_history_after_a_triad_switch_is_the_new_triads_bias() {
-    let dir = support::write_run(
-        "calibrate-triad-switch",
-        "backup-halfway",
-        &[
-            "--seed",
-            "1",
-            "--plan",
-            "long",
-            "--hold-s",
-            "1200",
-            "--iru-delta-m",
-            "paper",
-            "--backup-halfway",
-            "--downlink-every",
-            "10",
-        ],
-    );
+    let mut flags = vec!["--seed", "1"];
+    flags.extend(support::BACKUP_HALFWAY_10S);
+    let dir = support::write_run("calibrate-triad-switch", "backup-halfway", &flags);
     let report = support::calibrate_json(
         env!("CARGO_BIN_EXE_ground-tool"),
         &dir,

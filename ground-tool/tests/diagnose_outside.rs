@@ -397,20 +397,7 @@ fn outside_writer_scale_step_in_decimated_telemetry_is_reported() {
 /// 1e-4) that kept the IRU table as flown.
 #[test]
 fn outside_writer_triad_switch_is_not_a_gyro_effect() {
-    let (report, _) = write_and_diagnose(
-        "backup-halfway",
-        &[
-            "--plan",
-            "long",
-            "--hold-s",
-            "1200",
-            "--iru-delta-m",
-            "paper",
-            "--backup-halfway",
-            "--downlink-every",
-            "10",
-        ],
-    );
+    let (report, _) = write_and_diagnose("backup-halfway", &support::BACKUP_HALFWAY_10S);
     assert!(
         !named(&report).iter().any(|n| n.ends_with("[IRU]")),
         "{:?}",

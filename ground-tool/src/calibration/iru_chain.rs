@@ -1889,6 +1889,46 @@ mod tests {
         assert!(v.passed, "{}", v.reason);
     }
 
+    /// A triad switch at a break, followed by a fix that no link of the new triad reaches:
+    /// that fix's bias is the new triad's prior (its nominal, σ of the prior), never the old
+    /// triad's smoothed bias with the old triad's σ; the old triad's last fix is unchanged.
+    #[test]
+    fn a_fix_after_a_triad_switch_without_links_keeps_the_new_triads_prior() {
+        let sigma_u = 4e-11;
+        let case = Case::walking(sigma_u);
+        let mut chain = timeline(&case, 7, 6);
+        let before = solve_chain(&chain, &cfg(sigma_u)).unwrap();
+        let last = *chain.fixes.last().unwrap();
+        let nominal = Vector3::new(-0.3, 0.44, 0.29) * RAD_PER_ARCSEC;
+        chain.links.push(None);
+        chain.fixes.push(ChainFix {
+            t_s: last.t_s + 600.0,
+            bias_nominal_rad_per_s: nominal,
+            triad: Triad::Backup,
+            ..last
+        });
+        let sol = solve_chain(&chain, &cfg(sigma_u)).unwrap();
+        let (old, new) = (sol.bias[sol.bias.len() - 2], sol.bias[sol.bias.len() - 1]);
+        assert_eq!((old.triad, new.triad), (Triad::Primary, Triad::Backup));
+        for i in 0..3 {
+            let (b, s) = (
+                new.bias_rad_per_s[i] * ARCSEC_PER_RAD,
+                new.sigma_rad_per_s[i] * ARCSEC_PER_RAD,
+            );
+            assert!(
+                (b - nominal[i] * ARCSEC_PER_RAD).abs() < 1e-6,
+                "axis {i}: {b}″/s"
+            );
+            assert!((0.99..1.1).contains(&s), "axis {i}: σ {s}″/s");
+            let kept = before.bias[before.bias.len() - 1];
+            let d = (old.bias_rad_per_s[i] - kept.bias_rad_per_s[i]).abs();
+            assert!(
+                d < 0.01 * kept.sigma_rad_per_s[i],
+                "axis {i}: moved {d:e} rad/s"
+            );
+        }
+    }
+
     /// A bias step of 0.02″/s mid-run that the declared walk cannot follow: the likelihood
     /// raises σ_u, the step shows in the bias history and δM stays within 3σ (a constant-bias
     /// fit puts it into δM).
