@@ -799,11 +799,13 @@ fn write_plots(
 
 /// The ground's bias at its epochs, linearly interpolated at `t` (relative s) within their
 /// span: between two fixes with no measurement in between, the smoothed random-walk bias is
-/// the straight line between them.
+/// the straight line between them. Not between fixes of different gyro triads (each has its
+/// own bias, and the switch lies somewhere between them).
 fn interpolate_ground(points: &[BiasHistoryPoint], t: f64, axis: usize) -> Option<f64> {
     let k = points.partition_point(|p| p.t_s <= t);
     let (a, b) = (points.get(k.checked_sub(1)?)?, points.get(k));
     match b {
+        Some(b) if b.t_s > a.t_s && b.triad != a.triad => None,
         Some(b) if b.t_s > a.t_s => {
             let w = (t - a.t_s) / (b.t_s - a.t_s);
             Some(a.bias_rad_per_s[axis] * (1.0 - w) + b.bias_rad_per_s[axis] * w)

@@ -316,3 +316,99 @@ fn outside_writer_clean_day_writes_calibrates_alignment_table() {
     assert_eq!(a, b, "diagnose's alignment.tbl differs from calibrate's");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The IRU entries of the report's unexplained list.
+fn iru_unexplained(report: &Value) -> Vec<Value> {
+    report["unexplained"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|u| u["sensor"] == "IRU")
+        .cloned()
+        .collect()
+}
+
+/// Clean decimated telemetry (raw frames every 20 and 30 s; the counters accumulate every
+/// cycle, so a frame that spans a slew's start or end mixes 0.05″ and 0.8″ pulses): the slew
+/// tests take the rate-mode switches split inside those frames as calibrate's chain does (one
+/// split fraction per kind of switch, the split's variance), so there is no gyro structure.
+/// Before: a `gyro_scale_step` of 176,484 ppm (p 4e-31) at 30 s and 64,273 ppm at 20 s.
+#[test]
+fn outside_writer_decimated_clean_run_has_no_gyro_structure() {
+    for every in ["20", "30"] {
+        let (report, _) = write_and_diagnose(
+            &format!("decimated-{every}"),
+            &[
+                "--plan",
+                "long",
+                "--hold-s",
+                "1200",
+                "--downlink-every",
+                every,
+            ],
+        );
+        assert!(
+            iru_unexplained(&report).is_empty(),
+            "downlink every {every} s: {:#}",
+            report["unexplained"]
+        );
+        assert!(
+            !named(&report).iter().any(|n| n.ends_with("[IRU]")),
+            "downlink every {every} s: {:?}",
+            named(&report)
+        );
+    }
+}
+
+/// A real scale-factor step (3000, −2500, 3000 ppm from t = 10,000 s) in decimated telemetry
+/// (10-s frames) is still reported, against time, at about its size.
+#[test]
+fn outside_writer_scale_step_in_decimated_telemetry_is_reported() {
+    let (report, _) = write_and_diagnose(
+        "decimated-scale-step",
+        &[
+            "--plan",
+            "long",
+            "--hold-s",
+            "1200",
+            "--downlink-every",
+            "10",
+            "--gyro-scale-step",
+            "10000:3000,-2500,3000",
+        ],
+    );
+    let iru = iru_unexplained(&report);
+    let step = iru
+        .iter()
+        .find(|u| u["method"].as_str().unwrap().starts_with("gyro_scale_step"))
+        .unwrap_or_else(|| panic!("no scale step reported: {:#}", report["unexplained"]));
+    assert_eq!(step["regressor"], "time_s", "{step}");
+    let size = step["size"].as_f64().unwrap();
+    assert!(
+        (1500.0..6000.0).contains(&size),
+        "size {size:.0} ppm: {step}"
+    );
+}
+
+/// The OBC's switch to the backup gyro triad halfway (event 0x0202, housekeeping octet 106;
+/// the backup has its own bias and δM) is known: diagnose gives each triad its own bias in
+/// the baseline and names nothing on the gyro. Before: a `gyro_bias_step` at the switch
+/// (ΔBIC 1608 at the 1-s downlink) or, at 10 s, an unexplained bias ramp (0.37″/s, Holm p
+/// 1e-4) that kept the IRU table as flown.
+#[test]
+fn outside_writer_triad_switch_is_not_a_gyro_effect() {
+    let (report, _) = write_and_diagnose("backup-halfway", &support::BACKUP_HALFWAY_10S);
+    assert!(
+        !named(&report).iter().any(|n| n.ends_with("[IRU]")),
+        "{:?}",
+        named(&report)
+    );
+    assert!(
+        iru_unexplained(&report).is_empty(),
+        "{:#}",
+        report["unexplained"]
+    );
+    assert_a_note(&report["gyro"]["notes"], |n| {
+        n.contains("switched gyro triads")
+    });
+}

@@ -121,6 +121,8 @@ pub struct ChainFix {
     pub sun: bool,
     /// Linearisation bias at this fix (rad/s, ACS): e.g. the OBC's estimate.
     pub bias_nominal_rad_per_s: Vector3<f64>,
+    /// The gyro triad active at this fix (its bias is this triad's).
+    pub triad: Triad,
 }
 
 /// The gyro data joining fix `j` to fix `j + 1`.
@@ -245,6 +247,8 @@ pub enum ChainError {
 pub struct ChainBias {
     /// Time (s since the first frame).
     pub t_s: f64,
+    /// The triad whose bias this is (the one active at the fix).
+    pub triad: Triad,
     /// Bias (rad/s, ACS).
     pub bias_rad_per_s: [f64; 3],
     /// 1σ (rad/s).
@@ -464,6 +468,7 @@ fn transition(
     let mut f = Transition {
         attitude_rows: SMatrix::<f64, 3, NX>::zeros(),
         sys_reset: false,
+        bias_reset: false,
     };
     let mut q = Mx::zeros();
     let sv = cfg.noise.sigma_v_rad_per_sqrt_s * ARCSEC_PER_RAD;
@@ -520,6 +525,9 @@ struct Transition {
     attitude_rows: SMatrix<f64, 3, NX>,
     /// The rows of the systematic error (`SYS..SYS + 3`) are zero (a new attitude).
     sys_reset: bool,
+    /// The bias rows (3..6) are zero: another triad's bias starts from its prior (the
+    /// attitude rows then carry no bias column either).
+    bias_reset: bool,
 }
 
 impl Transition {
@@ -531,6 +539,9 @@ impl Transition {
         if self.sys_reset {
             out.fixed_rows_mut::<3>(SYS).fill(0.0);
         }
+        if self.bias_reset {
+            out.fixed_rows_mut::<3>(3).fill(0.0);
+        }
         out
     }
 
@@ -540,6 +551,9 @@ impl Transition {
         out.fixed_rows_mut::<3>(0).fill(0.0);
         if self.sys_reset {
             out.fixed_rows_mut::<3>(SYS).fill(0.0);
+        }
+        if self.bias_reset {
+            out.fixed_rows_mut::<3>(3).fill(0.0);
         }
         out + self.attitude_rows.transpose() * v.fixed_rows::<3>(0)
     }
@@ -596,13 +610,11 @@ fn initial_state(chain: &Chain, nominal: &Nominal, cfg: &ChainConfig) -> (Vx, Mx
 }
 
 /// Predict the state from fix `j − 1` to fix `j` (`j ≥ 1`); returns the transition.
-#[allow(clippy::too_many_arguments)]
 fn predict(
     lin: Linearised<'_>,
     cfg: &ChainConfig,
     rrw: f64,
     j: usize,
-    last_triad: &mut Option<Triad>,
     x: &mut Vx,
     p: &mut Mx,
 ) -> Transition {
@@ -630,15 +642,15 @@ fn predict(
         .get(j - 1)
         .and_then(Option::as_ref)
         .is_some_and(|l| l.maneuver.is_some());
-    // Another triad has its own bias: the walk restarts from the prior at the start of its
-    // first link (before the propagation, so the attitude sees it).
-    if let Some(m) = model.as_ref() {
-        if last_triad.is_some_and(|t| t != m.triad) {
-            for i in 0..3 {
-                p[(3 + i, 3 + i)] += cfg.prior_bias_arcsec_per_s.powi(2);
-            }
-        }
-        *last_triad = Some(m.triad);
+    // Another triad has its own bias: where the triad changes between the fixes (inside the
+    // link into fix `j`, or at a break), the bias becomes the new triad's, drawn from its
+    // prior about the fix's nominal (the OBC's) independently of the old one, before the
+    // propagation so that the attitude sees it. Nothing of the old triad's bias carries
+    // over, also to a fix that no link of its triad constrains (it keeps the prior's σ).
+    let bias_reset = triad_changes(chain, model.as_ref(), j);
+    if bias_reset {
+        let d = (chain.fixes[j].bias_nominal_rad_per_s - nominal.bias[j - 1]) * ARCSEC_PER_RAD;
+        restart_bias(x, p, &d, cfg.prior_bias_arcsec_per_s);
     }
     if new_attitude(
         model.as_ref(),
@@ -659,7 +671,33 @@ fn predict(
         x[3 + i] += db[i];
     }
     *p = symmetrise(&(f.sandwich(p) + q));
+    if bias_reset {
+        // The transition from the filtered state at `j − 1` (what the smoother reads): the
+        // old bias enters nowhere.
+        f.attitude_rows.fixed_columns_mut::<3>(3).fill(0.0);
+        f.bias_reset = true;
+    }
     f
+}
+
+/// Whether the gyro triad changes between fix `j − 1` and fix `j` (the fixes' triads, or the
+/// link's against the first fix's: a switch on the link's first frame).
+fn triad_changes(chain: &Chain, model: Option<&LinkModel>, j: usize) -> bool {
+    let before = chain.fixes[j - 1].triad;
+    chain.fixes[j].triad != before || model.is_some_and(|m| m.triad != before)
+}
+
+/// Restart the bias from its prior: mean `d` (″/s, relative to the linearisation point),
+/// variance `sigma²`, uncorrelated with the rest of the state.
+fn restart_bias(x: &mut Vx, p: &mut Mx, d: &Vector3<f64>, sigma: f64) {
+    for i in 0..3 {
+        x[3 + i] = d[i];
+        for r in 0..NX {
+            p[(3 + i, r)] = 0.0;
+            p[(r, 3 + i)] = 0.0;
+        }
+        p[(3 + i, 3 + i)] = sigma * sigma;
+    }
 }
 
 /// What the fix at `j` says: its normalised innovation, log-determinant, and the gain's
@@ -752,13 +790,9 @@ fn forward_from(
         log_likelihood: 0.0,
     };
     let mut released = j0 == 0 || models.get(j0 - 1).copied().flatten().is_none();
-    let mut last_triad: Option<Triad> = j0
-        .checked_sub(1)
-        .and_then(|k| models.get(k).copied().flatten())
-        .map(|m| m.triad);
     for j in j0..n {
         if j > j0 {
-            let f = predict(lin, cfg, rrw, j, &mut last_triad, &mut x, &mut p);
+            let f = predict(lin, cfg, rrw, j, &mut x, &mut p);
             if !history.keeps_all() {
                 pass.f.clear();
             }
@@ -991,6 +1025,7 @@ pub fn solve_chain(chain: &Chain, cfg: &ChainConfig) -> Result<ChainSolution, Ch
             let total = b + Vector3::new(x[3], x[4], x[5]) * RAD_PER_ARCSEC;
             ChainBias {
                 t_s: f.t_s,
+                triad: f.triad,
                 bias_rad_per_s: total.into(),
                 sigma_rad_per_s: [0, 1, 2].map(|i| p[(i, i)].max(0.0).sqrt() * RAD_PER_ARCSEC),
             }
@@ -1742,6 +1777,7 @@ mod tests {
             systematic_cov_rad2: Matrix3::zeros(),
             sun: false,
             bias_nominal_rad_per_s: Vector3::new(0.5, 0.3, 0.45) * RAD_PER_ARCSEC,
+            triad: Triad::Primary,
         };
         let axes = [Vector3::x(), Vector3::y(), Vector3::z()];
         for k in 0..slews {
@@ -1853,6 +1889,46 @@ mod tests {
         assert!(v.passed, "{}", v.reason);
     }
 
+    /// A triad switch at a break, followed by a fix that no link of the new triad reaches:
+    /// that fix's bias is the new triad's prior (its nominal, σ of the prior), never the old
+    /// triad's smoothed bias with the old triad's σ; the old triad's last fix is unchanged.
+    #[test]
+    fn a_fix_after_a_triad_switch_without_links_keeps_the_new_triads_prior() {
+        let sigma_u = 4e-11;
+        let case = Case::walking(sigma_u);
+        let mut chain = timeline(&case, 7, 6);
+        let before = solve_chain(&chain, &cfg(sigma_u)).unwrap();
+        let last = *chain.fixes.last().unwrap();
+        let nominal = Vector3::new(-0.3, 0.44, 0.29) * RAD_PER_ARCSEC;
+        chain.links.push(None);
+        chain.fixes.push(ChainFix {
+            t_s: last.t_s + 600.0,
+            bias_nominal_rad_per_s: nominal,
+            triad: Triad::Backup,
+            ..last
+        });
+        let sol = solve_chain(&chain, &cfg(sigma_u)).unwrap();
+        let (old, new) = (sol.bias[sol.bias.len() - 2], sol.bias[sol.bias.len() - 1]);
+        assert_eq!((old.triad, new.triad), (Triad::Primary, Triad::Backup));
+        for i in 0..3 {
+            let (b, s) = (
+                new.bias_rad_per_s[i] * ARCSEC_PER_RAD,
+                new.sigma_rad_per_s[i] * ARCSEC_PER_RAD,
+            );
+            assert!(
+                (b - nominal[i] * ARCSEC_PER_RAD).abs() < 1e-6,
+                "axis {i}: {b}″/s"
+            );
+            assert!((0.99..1.1).contains(&s), "axis {i}: σ {s}″/s");
+            let kept = before.bias[before.bias.len() - 1];
+            let d = (old.bias_rad_per_s[i] - kept.bias_rad_per_s[i]).abs();
+            assert!(
+                d < 0.01 * kept.sigma_rad_per_s[i],
+                "axis {i}: moved {d:e} rad/s"
+            );
+        }
+    }
+
     /// A bias step of 0.02″/s mid-run that the declared walk cannot follow: the likelihood
     /// raises σ_u, the step shows in the bias history and δM stays within 3σ (a constant-bias
     /// fit puts it into δM).
@@ -1938,10 +2014,12 @@ mod tests {
         let mut rng = Rng::new(7);
         let a = Mx::from_fn(|_, _| rng.normal());
         let p = a * a.transpose();
-        for sys_reset in [false, true] {
+        for (sys_reset, bias_reset) in [(false, false), (true, false), (false, true), (true, true)]
+        {
             let f = Transition {
                 attitude_rows: SMatrix::<f64, 3, NX>::from_fn(|_, _| rng.normal()),
                 sys_reset,
+                bias_reset,
             };
             let fd = f.dense();
             let x = Vx::from_fn(|_, _| rng.normal());

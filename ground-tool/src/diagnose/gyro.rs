@@ -51,6 +51,8 @@ struct BiasSample {
     chained: bool,
     /// IRU temperature deviation (°C) at the mid time.
     dtemp_iru: f64,
+    /// The backup triad produced the gyro steps (each triad has its own bias).
+    backup: bool,
 }
 
 /// RMS over the samples of the term `est[axis] × column(sample)` (column centred), norm over
@@ -82,8 +84,9 @@ fn batch_attitudes(set: &MeasurementSet, post: &PostFit) -> Vec<BatchAttitude> {
 fn propagate(input: &GyroInput<'_>, from: usize, to: usize, bias: &Vector3<f64>) -> Matrix3<f64> {
     let mut m = Matrix3::identity();
     for k in from + 1..=to {
-        if let Some(g) = input.frames[k].gyro {
-            let phi = (Matrix3::identity() + input.gyro.delta_m) * g.dtheta_acs_rad - bias * g.dt_s;
+        let f = &input.frames[k];
+        if let Some(g) = f.gyro {
+            let phi = (Matrix3::identity() + input.delta_m(f)) * g.dtheta_acs_rad - bias * g.dt_s;
             m = rot(&phi) * m;
         }
     }
@@ -243,6 +246,9 @@ fn transient_form(t0: f64, tau: f64) -> BiasModel {
     }
 }
 
+/// Name of the baseline term that gives each gyro triad its own bias.
+const TRIAD_BIAS: &str = "iru_triad_bias";
+
 /// A step at `t_step`.
 fn step_form(t_step: f64) -> BiasModel {
     BiasModel {
@@ -380,6 +386,15 @@ fn bias_samples(
         else {
             continue;
         };
+        // A sample across the OBC's triad switch mixes two biases: left out (the switch is
+        // known, housekeeping octet 106).
+        let backup = frames[b.center].iru_backup;
+        if frames[a.center + 1..=b.center]
+            .iter()
+            .any(|f| f.iru_backup != backup)
+        {
+            continue;
+        }
         let phi = propagate(input, a.center, b.center, b_ref);
         let z = rotvec_from_rot(&(mb * (phi * ma).transpose())) * ARCSEC_PER_RAD;
         let dt = b.t_center_s - a.t_center_s;
@@ -398,6 +413,7 @@ fn bias_samples(
             var_end: vb,
             chained: false,
             dtemp_iru: frames[mid].iru_temperature_c - tmean_iru,
+            backup,
         });
     }
     samples
@@ -438,6 +454,11 @@ fn bias_history(
         b_ref_arcsec: b_ref * ARCSEC_PER_RAD,
     };
     let forms = BiasForms::new(samples, w_all, cfg);
+    if forms.triad.is_some() {
+        out.notes.push(
+            "bias history: the OBC switched gyro triads (event 0x0202, housekeeping octet 106): each triad's own bias is in the baseline (known, not an effect), the samples across the switch are left out, and the slews take each triad's bias and IRUCAL δM".into(),
+        );
+    }
     let candidates = forms.candidates(cfg);
     let mut model = forms.baseline(cfg);
     out.bias_fit_before = history.fitted(&model);
@@ -467,6 +488,10 @@ fn bias_history(
 /// The bias history's candidate forms: ramp, thermal bias, and the transient and the step
 /// with their nonlinear parameter (τ, the step time) chosen on a grid given the baseline.
 struct BiasForms {
+    /// Each triad's own bias (the backup's offset from the primary's), when the samples
+    /// hold both: the OBC's switch is known (event 0x0202, housekeeping octet 106), so this
+    /// is in the baseline, never a candidate.
+    triad: Option<BiasModel>,
     ramp: BiasModel,
     thermal: BiasModel,
     transient: BiasModel,
@@ -496,12 +521,21 @@ impl BiasForms {
             extra: 0,
             scan_positions: 1,
         };
+        let triad =
+            (samples.iter().any(|s| s.backup) && samples.iter().any(|s| !s.backup)).then(|| {
+                BiasModel {
+                    name: TRIAD_BIAS,
+                    unit: "arcsec/s",
+                    column: Box::new(|s: &BiasSample| f64::from(u8::from(s.backup))),
+                    extra: 0,
+                    scan_positions: 1,
+                }
+            });
         // Exponential transient: τ on a grid, best by χ² given the baseline.
-        let base_models: Vec<&BiasModel> = if cfg.transient_declared {
-            vec![&ramp]
-        } else {
-            vec![]
-        };
+        let mut base_models: Vec<&BiasModel> = triad.iter().collect();
+        if cfg.transient_declared {
+            base_models.push(&ramp);
+        }
         let tau_best = best_on_grid(samples, w_all, &base_models, transient_taus(), &|tau| {
             transient_form(t0, tau)
         })
@@ -517,6 +551,7 @@ impl BiasForms {
             best_on_grid(samples, w_all, &base_models, positions, &step_form).unwrap_or(t_mid);
         let step = step_form(t_step_best);
         Self {
+            triad,
             ramp,
             thermal,
             transient,
@@ -526,13 +561,14 @@ impl BiasForms {
         }
     }
 
-    /// The model before any candidate: the ramp when the transient is declared.
+    /// The model before any candidate: each triad's own bias when both flew, the ramp when
+    /// the transient is declared.
     fn baseline(&self, cfg: &GyroConfig) -> Vec<&BiasModel> {
+        let mut base: Vec<&BiasModel> = self.triad.iter().collect();
         if cfg.transient_declared {
-            vec![&self.ramp]
-        } else {
-            vec![]
+            base.push(&self.ramp);
         }
+        base
     }
 
     /// The candidates, in the order they are tested.
@@ -704,7 +740,10 @@ impl History<'_> {
         // A step happens once: one half holds it and the other cannot fit it, so the
         // halves test neither the step nor a candidate fitted with one in the model
         // (the step's scan has its own Bonferroni p-value).
-        let step_involved = ms.iter().any(|m| m.name == "gyro_bias_step");
+        // The triad switch is such a step, known.
+        let step_involved = ms
+            .iter()
+            .any(|m| m.name == "gyro_bias_step" || m.name == TRIAD_BIAS);
         if !step_involved && !(hp > 0.0027) {
             why.push(format!("halves differ (χ² {hchi2:.1}, p {hp:.2e})"));
         }
@@ -813,6 +852,7 @@ fn hold_bias_per_frame(
             var_end: Vector3::zeros(),
             chained: false,
             dtemp_iru: f.iru_temperature_c - tmean_iru,
+            backup: f.iru_backup,
         };
         let c = DVector::from_iterator(
             model.len() + 1,
@@ -905,6 +945,7 @@ mod tests {
                 var_end,
                 chained,
                 dtemp_iru: 0.0,
+                backup: false,
             });
             t += dt + if chained { 0.0 } else { 500.0 };
             var_prev = if chained {

@@ -9,7 +9,7 @@ use super::measurements::MeasurementSet;
 use super::search::Evidence;
 use super::Detected;
 use crate::calibration::iru::{GyroCalibration, GyroStep};
-use crate::pipeline::observations::FrameObservations;
+use crate::pipeline::observations::{FrameObservations, GyroSplit};
 use fsw_core::raw::TimeTag;
 use nalgebra::{Matrix3, Vector3};
 
@@ -43,7 +43,7 @@ pub struct GyroConfig {
     pub transient_declared: bool,
 }
 
-/// What the gyro analysis reads of a frame: ≈ 80 bytes of its 704, so that the frames
+/// What the gyro analysis reads of a frame: ≈ 120 bytes of its 704, so that the frames
 /// (0.37 GB over six months of 30-s telemetry) can go once the measurement set is built.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct GyroFrame {
@@ -53,8 +53,13 @@ pub struct GyroFrame {
     pub gyro: Option<GyroStep>,
     /// IRU rate mode of that interval.
     pub high_rate: bool,
+    /// The step came from the backup triad (its own bias and δM).
+    pub iru_backup: bool,
     /// IRU temperature (°C).
     pub iru_temperature_c: f64,
+    /// A rate-mode switch split inside the interval (decimated telemetry), as calibrate's
+    /// chain takes it.
+    pub split: Option<GyroSplit>,
 }
 
 impl From<&FrameObservations> for GyroFrame {
@@ -63,7 +68,9 @@ impl From<&FrameObservations> for GyroFrame {
             time: f.time,
             gyro: f.gyro,
             high_rate: f.high_rate,
+            iru_backup: f.iru_backup,
             iru_temperature_c: f.temperatures_c[4],
+            split: f.gyro_split(),
         }
     }
 }
@@ -77,6 +84,19 @@ pub struct GyroInput<'a> {
     pub gyro: GyroCalibration,
     /// Bias per frame (e.g. the OBC's estimate); `None` = `gyro.bias_acs_rad_per_s`.
     pub bias_per_frame: Option<&'a [Vector3<f64>]>,
+    /// δM of the backup triad (IRUCAL's), for the steps it produced; `None` = `gyro.delta_m`.
+    pub delta_m_backup: Option<Matrix3<f64>>,
+}
+
+impl GyroInput<'_> {
+    /// The δM of the triad that produced the frame's step.
+    #[must_use]
+    pub fn delta_m(&self, frame: &GyroFrame) -> Matrix3<f64> {
+        match (frame.iru_backup, self.delta_m_backup) {
+            (true, Some(dm)) => dm,
+            _ => self.gyro.delta_m,
+        }
+    }
 }
 
 /// The gyro analysis result.

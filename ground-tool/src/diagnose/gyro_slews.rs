@@ -39,6 +39,7 @@ use super::gyro_data::{batch_attitude, delta_bic, GyroAnalysis, GyroLeftover, Sl
 use super::search::Evidence;
 use super::stats::{chi2_sf, f_sf};
 use super::Detected;
+use crate::pipeline::observations::SPLIT_KINDS;
 use fsw_core::attitude::{rot, rotvec_from_rot};
 use fsw_core::units::{ARCSEC_PER_RAD, DEG_PER_RAD, RAD_PER_ARCSEC, RAD_PER_DEG};
 use nalgebra::{DMatrix, DVector, Matrix3, SMatrix, Vector3};
@@ -56,8 +57,13 @@ const POW: usize = 15;
 pub const POWERS: [f64; 4] = [0.5, 1.0, 2.0, 3.0];
 /// First scale-step column (ppm from the step on; filled per scanned position).
 const STEP: usize = POW + 3 * POWERS.len();
+/// First split-fraction column: the rate-mode switches split inside decimated frames, one
+/// fraction per kind of switch as in calibrate's chain
+/// ([`crate::pipeline::observations::GyroSplit`]); in the baseline when a
+/// slew has a split frame.
+const SPLIT: usize = STEP + 3;
 /// Columns of the slew model.
-const NCOL: usize = STEP + 3;
+const NCOL: usize = SPLIT + SPLIT_KINDS;
 /// Tests of the slew family (asymmetry, scale against rate, bias against rate mode, scale
 /// step): their Bonferroni factor.
 pub const SLEW_TESTS: f64 = 4.0;
@@ -111,7 +117,12 @@ pub(super) fn analyse(inp: &SlewInput<'_>, out: &mut GyroAnalysis) {
         return;
     }
     let all = |_: usize| true;
-    let base: Vec<usize> = (BIAS..ASYM).collect();
+    // The split fractions of the switches the slews hold are nuisance parameters, as in
+    // calibrate's chain: a decimated frame that spans a switch mixes both pulse weights, and
+    // its step at the middle of its envelope is off by a fraction shared by every switch of
+    // one kind (on 30-s frames, ± hundreds of arcseconds at each slew start).
+    let split_cols = (SPLIT..NCOL).filter(|&c| rows.iter().any(|r| r.s.column(c).amax() > 0.0));
+    let base: Vec<usize> = (BIAS..ASYM).chain(split_cols).collect();
     let Some(fit0) = solve(&rows, &base, &all) else {
         out.notes.push("slews: singular slew geometry".into());
         return;
@@ -230,7 +241,7 @@ fn slew_intervals(inp: &SlewInput<'_>, out: &mut GyroAnalysis) -> Vec<(usize, us
     let mut pairs = Vec::new();
     // Why slews were not used, counted for the report: (no usable attitude batch around it,
     // less than 5° turned between the batches found, a gap in the gyro data).
-    let (mut no_batch, mut small, mut gaps) = (0usize, 0usize, 0usize);
+    let (mut no_batch, mut small, mut gaps, mut switched) = (0usize, 0usize, 0usize, 0usize);
     for (k, &(s, e)) in slews.iter().enumerate() {
         // The holds around the slew, up to the neighbouring slews: an interval that spans
         // another slew would count that one twice.
@@ -274,6 +285,14 @@ fn slew_intervals(inp: &SlewInput<'_>, out: &mut GyroAnalysis) -> Vec<(usize, us
             ));
             continue;
         }
+        // Across the OBC's gyro triad switch the interval mixes two biases and two δM.
+        if frames[ca + 1..=cb]
+            .iter()
+            .any(|f| f.iru_backup != frames[cb].iru_backup)
+        {
+            switched += 1;
+            continue;
+        }
         let turned: Vector3<f64> = frames[ca + 1..=cb]
             .iter()
             .filter_map(|f| f.gyro)
@@ -287,7 +306,7 @@ fn slew_intervals(inp: &SlewInput<'_>, out: &mut GyroAnalysis) -> Vec<(usize, us
     }
     if pairs.len() < slews.len() {
         out.notes.push(format!(
-            "slews: {} of {} used for the slew tests; not used: {no_batch} without a usable attitude batch on both sides (within {SLEW_WINDOW_FRAMES} frames, not past the neighbouring slews), {small} with less than 5° turned between the batches around them (the batches fell inside the slew), {gaps} with a gap in the gyro data",
+            "slews: {} of {} used for the slew tests; not used: {no_batch} without a usable attitude batch on both sides (within {SLEW_WINDOW_FRAMES} frames, not past the neighbouring slews), {small} with less than 5° turned between the batches around them (the batches fell inside the slew), {gaps} with a gap in the gyro data, {switched} across the OBC's gyro triad switch",
             pairs.len(),
             slews.len()
         ));
@@ -349,6 +368,7 @@ fn slew_rows(inp: &SlewInput<'_>, pairs: &[(usize, usize)], omega_ref: f64) -> V
         let mut phi_total = Matrix3::identity();
         let mut sm = SMatrix::<f64, 3, NCOL>::zeros();
         let mut angle = Vector3::zeros();
+        let mut split_var_rad2 = 0.0;
         let mut rates: Vec<f64> = frames[ca + 1..=cb]
             .iter()
             .filter(|f| f.high_rate)
@@ -361,7 +381,7 @@ fn slew_rows(inp: &SlewInput<'_>, pairs: &[(usize, usize)], omega_ref: f64) -> V
         for f in &frames[ca + 1..=cb] {
             let Some(g) = f.gyro else { continue };
             let dth = g.dtheta_acs_rad;
-            let phi = (Matrix3::identity() + inp.input.gyro.delta_m) * dth - bias * g.dt_s;
+            let phi = (Matrix3::identity() + inp.input.delta_m(f)) * dth - bias * g.dt_s;
             let mut u = SMatrix::<f64, 3, NCOL>::zeros();
             for j in 0..3 {
                 if f.high_rate {
@@ -380,6 +400,10 @@ fn slew_rows(inp: &SlewInput<'_>, pairs: &[(usize, usize)], omega_ref: f64) -> V
                     u[(j, POW + 3 * q + j)] = dth[j] * w.powf(*p) * 1e-6;
                 }
             }
+            if let Some(split) = f.split {
+                u.set_column(SPLIT + split.kind(), &split.dir_rad);
+                split_var_rad2 += split.var_rad2;
+            }
             let r = rot(&phi);
             sm = r * sm + rot(&(phi * 0.5)) * u;
             phi_total = r * phi_total;
@@ -388,7 +412,8 @@ fn slew_rows(inp: &SlewInput<'_>, pairs: &[(usize, usize)], omega_ref: f64) -> V
         let z = rotvec_from_rot(&(mb * (phi_total * ma).transpose())) * ARCSEC_PER_RAD;
         let t = (cb - ca) as f64;
         let proc = (inp.cfg.arw_rad_per_sqrt_s * ARCSEC_PER_RAD).powi(2) * t
-            + (inp.cfg.rrw_rad_per_s15 * ARCSEC_PER_RAD).powi(2) * t.powi(3) / 3.0;
+            + (inp.cfg.rrw_rad_per_s15 * ARCSEC_PER_RAD).powi(2) * t.powi(3) / 3.0
+            + split_var_rad2 * ARCSEC_PER_RAD * ARCSEC_PER_RAD;
         rows.push(SlewRow {
             z,
             s: sm * ARCSEC_PER_RAD,

@@ -265,6 +265,8 @@ impl TelemetryFigures {
 struct GyroSide {
     frames: Vec<GyroFrame>,
     calibration: GyroCalibration,
+    /// IRUCAL's δM of the backup triad, when it flew slews.
+    delta_m_backup: Option<Matrix3<f64>>,
     bias_per_frame: Option<Vec<Vector3<f64>>>,
     /// Time of the first frame (s since J2000, TT).
     frames_t0_j2000: f64,
@@ -474,6 +476,11 @@ impl<'a> RunContext<'a> {
                 .first()
                 .map_or(0.0, |f| f.time.seconds_since_j2000_tt()),
             calibration: input.gyro,
+            delta_m_backup: cal
+                .output
+                .as_ref()
+                .and_then(|o| o.report.iru.as_ref()?.backup.as_ref())
+                .map(|b| fsw_core::tables::types::matrix_from_rows(&b.delta_m)),
             bias_per_frame: input.bias_per_frame,
         };
         (set, side)
@@ -497,6 +504,7 @@ impl<'a> RunContext<'a> {
             frames: &side.frames,
             gyro: side.calibration,
             bias_per_frame: side.bias_per_frame.as_deref(),
+            delta_m_backup: side.delta_m_backup,
         };
         crate::progress::step("gyro residuals in the slews");
         let gyro_res = gyro::analyse(&gyro_input, &analysis.set, &analysis.search.after, &gcfg);

@@ -294,6 +294,8 @@ pub struct BiasHistoryPoint {
     pub bias_rad_per_s: [f64; 3],
     /// 1σ, rad/s.
     pub sigma_rad_per_s: [f64; 3],
+    /// The gyro triad active at this time, whose bias this is (`Primary`, `Backup`).
+    pub triad: crate::calibration::iru_chain::Triad,
     /// The OBC filter's bias at the same time, rad/s (from housekeeping).
     pub obc_bias_rad_per_s: Option<[f64; 3]>,
 }
@@ -1050,6 +1052,7 @@ fn bias_history(
             t_s: b.t_s,
             bias_rad_per_s: b.bias_rad_per_s,
             sigma_rad_per_s: b.sigma_rad_per_s,
+            triad: b.triad,
             obc_bias_rad_per_s: obc_bias_sample(tm, t0 + b.t_s),
         })
         .collect()

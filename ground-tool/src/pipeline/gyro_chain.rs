@@ -28,7 +28,7 @@ use super::iru_fixes::{
     batch_fix, gyro_complete, steps_between, FixFloors, FixRefusal, BATCH_HALF_S,
 };
 use super::maneuvers::ManeuverReport;
-use super::observations::{FrameObservations, RateSwitch};
+use super::observations::{FrameObservations, RateSwitch, SPLIT_KINDS};
 use crate::calibration::iru::{GyroCalibration, IrucalSolution};
 use crate::calibration::iru_chain::{
     significant_elements, solve_chain, validate_heldout, BiasStepTest, Chain, ChainConfig,
@@ -142,6 +142,7 @@ pub(crate) fn build_gyro_chain(
                         systematic_cov_rad2: systematic,
                         sun,
                         bias_nominal_rad_per_s: bias_at(t),
+                        triad: triad_of(&frames[idx]),
                     },
                 ));
             }
@@ -169,6 +170,15 @@ pub(crate) fn build_gyro_chain(
     }
 }
 
+/// The gyro triad whose channels the frame's increment came from.
+fn triad_of(frame: &FrameObservations) -> Triad {
+    if frame.iru_backup {
+        Triad::Backup
+    } else {
+        Triad::Primary
+    }
+}
+
 /// The gyro link between the fixes at frames `a` and `b`, or `None` where the chain breaks.
 fn link_between(
     frames: &[FrameObservations],
@@ -183,26 +193,19 @@ fn link_between(
     if frames[a + 1..=b].iter().any(|f| f.iru_backup != backup) {
         return None;
     }
-    let extra_var_rad2 = frames[a + 1..=b]
-        .iter()
-        .map(|f| f.gyro_split_var_rad2)
-        .sum();
     let maneuver = maneuvers.iter().position(|&(s, e)| s > a && e <= b);
-    let mut split_dirs_rad = [Vector3::zeros(); 2];
-    for f in frames[a + 1..=b]
+    let mut extra_var_rad2 = 0.0;
+    let mut split_dirs_rad = [Vector3::zeros(); SPLIT_KINDS];
+    for split in frames[a + 1..=b]
         .iter()
-        .filter(|f| f.rate_switch == RateSwitch::Split)
+        .filter_map(FrameObservations::gyro_split)
     {
-        // A split frame that ends in high rate is a slew start, else a slew end.
-        split_dirs_rad[usize::from(!f.high_rate)] += f.gyro_split_dir_rad;
+        extra_var_rad2 += split.var_rad2;
+        split_dirs_rad[split.kind()] += split.dir_rad;
     }
     Some(ChainLink {
         steps: steps_between(frames, a, b),
-        triad: if backup {
-            Triad::Backup
-        } else {
-            Triad::Primary
-        },
+        triad: triad_of(&frames[a + 1]),
         extra_var_rad2,
         maneuver,
         split_dirs_rad,

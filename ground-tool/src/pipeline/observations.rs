@@ -95,6 +95,45 @@ pub struct FrameObservations {
     pub orbit: Option<(Vector3<f64>, Vector3<f64>)>,
 }
 
+/// A rate-mode switch split inside one frame interval (`split_rate_switches`), as every gyro
+/// model that reads the step takes it (calibrate's chain, `iru_chain`; diagnose's slews,
+/// `diagnose::gyro_slews`): the step was taken in the middle of its envelope (split fraction
+/// `c = 0`); where the truth lies is nearly the same for every switch of one kind (slew
+/// starts, slew ends), so the models estimate one `c` per kind, and what varies from one
+/// switch to the next is the step's variance.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GyroSplit {
+    /// The interval ends in high rate: a slew start (else a slew end).
+    pub into_high_rate: bool,
+    /// Change of the step (ACS, rad) per unit split fraction.
+    pub dir_rad: Vector3<f64>,
+    /// Per-axis variance of the step (rad²).
+    pub var_rad2: f64,
+}
+
+/// Split fractions estimated per kind of switch: [into high rate, into low rate].
+pub const SPLIT_KINDS: usize = 2;
+
+impl GyroSplit {
+    /// Index of the split fraction this switch shares (0: into high rate, 1: into low rate).
+    #[must_use]
+    pub fn kind(&self) -> usize {
+        usize::from(!self.into_high_rate)
+    }
+}
+
+impl FrameObservations {
+    /// The rate-mode switch split inside this frame's interval, if any.
+    #[must_use]
+    pub fn gyro_split(&self) -> Option<GyroSplit> {
+        (self.rate_switch == RateSwitch::Split).then_some(GyroSplit {
+            into_high_rate: self.high_rate,
+            dir_rad: self.gyro_split_dir_rad,
+            var_rad2: self.gyro_split_var_rad2,
+        })
+    }
+}
+
 /// A frame interval that contains an IRU rate-mode switch (decimated telemetry: the counter
 /// difference mixes 0.05″ and 0.8″ pulses).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]

@@ -12,6 +12,21 @@ pub fn root() -> PathBuf {
         .to_path_buf()
 }
 
+/// The writer's calibration day (`--plan long`, 20-min holds) with the paper's δM and the OBC
+/// switching to the backup gyro triad halfway (t = 10,166 s), raw frames every 10 s: the
+/// triad-switch tests of calibrate and diagnose.
+pub const BACKUP_HALFWAY_10S: [&str; 9] = [
+    "--plan",
+    "long",
+    "--hold-s",
+    "1200",
+    "--iru-delta-m",
+    "paper",
+    "--backup-halfway",
+    "--downlink-every",
+    "10",
+];
+
 /// Write a run with the writer's `flags` into a fresh folder `<prefix>-<case>` under the
 /// target's tmp folder (replaced by the next test run: nothing accumulates).
 pub fn write_run(prefix: &str, case: &str, flags: &[&str]) -> PathBuf {
