@@ -9,25 +9,11 @@
 //! records returned, which are sorted by time.
 #![no_main]
 
-use fsw_core::telemetry::{
-    APID_EPHEMERIS, APID_EVENT, APID_HOUSEKEEPING, APID_MAGNETICS, APID_RAW_SENSORS, APID_WHEELS,
-    EPHEMERIS_LEN, EVENT_LEN, HOUSEKEEPING_LEN, MAGNETICS_LEN, RAW_FRAME_LEN, WHEEL_FRAME_LEN,
-};
 use libfuzzer_sys::fuzz_target;
 
-const OVERHEAD: usize = 12;
-
 fn packet_len(apid: u16) -> usize {
-    OVERHEAD
-        + match apid {
-            APID_RAW_SENSORS => RAW_FRAME_LEN,
-            APID_HOUSEKEEPING => HOUSEKEEPING_LEN,
-            APID_EVENT => EVENT_LEN,
-            APID_EPHEMERIS => EPHEMERIS_LEN,
-            APID_MAGNETICS => MAGNETICS_LEN,
-            APID_WHEELS => WHEEL_FRAME_LEN,
-            _ => panic!("duplicate with unknown APID 0x{apid:03x}"),
-        }
+    ground_tool::tp::packet_len(apid)
+        .unwrap_or_else(|| panic!("duplicate with unknown APID 0x{apid:03x}"))
 }
 
 fuzz_target!(|data: &[u8]| {

@@ -51,6 +51,22 @@ struct RunOutput {
     force: bool,
 }
 
+/// The tables the run flew (calibrate, diagnose).
+#[derive(clap::Args)]
+struct FlownTables {
+    /// Tables folder of the images that were flown (its manifest.json lists them, e.g. the
+    /// tables/ of an earlier calibrate); default: the run's activated uploads (metadata.json
+    /// `uploads`), else the boot tables. A folder that does not exist or has no manifest, or
+    /// tables the housekeeping says the OBC did not fly, are refused (exit code 2).
+    #[arg(long)]
+    tables: Option<std::path::PathBuf>,
+    /// Take the tables given with --tables as flown even where the telemetry says the OBC
+    /// flew others (the housekeeping's active-table CRCs, docs/icd.md "Flown tables"): a
+    /// what-if; the mismatch is then a warning instead of a refusal (exit code 2).
+    #[arg(long, requires = "tables")]
+    trust_tables: bool,
+}
+
 /// What a command prints (calibrate, diagnose, allan).
 #[derive(clap::Args)]
 struct PrintOptions {
@@ -105,17 +121,8 @@ enum Command {
     Calibrate {
         #[command(flatten)]
         io: RunOutput,
-        /// Tables folder of the images that were flown (its manifest.json lists them, e.g.
-        /// the tables/ of an earlier calibrate); default: the run's activated uploads
-        /// (metadata.json `uploads`), else the boot tables. A folder that does not exist or
-        /// has no manifest is refused (exit code 2).
-        #[arg(long)]
-        tables: Option<std::path::PathBuf>,
-        /// Take the tables given with --tables as flown even where the telemetry says the OBC
-        /// flew others (the housekeeping's active-table CRCs, docs/icd.md "Flown tables"): a
-        /// what-if; the mismatch is then a warning instead of a refusal (exit code 2).
-        #[arg(long, requires = "tables")]
-        trust_tables: bool,
+        #[command(flatten)]
+        flown: FlownTables,
         /// Use Shuster's 1982 scalar weights instead of the optimal (1990) weighting.
         #[arg(long)]
         shuster1982: bool,
@@ -164,15 +171,8 @@ enum Command {
     Diagnose {
         #[command(flatten)]
         io: RunOutput,
-        /// Tables folder of the tables flown (its manifest.json lists them); default: the
-        /// run's activated uploads, else the boot tables.
-        #[arg(long)]
-        tables: Option<std::path::PathBuf>,
-        /// Take the tables given with --tables as flown even where the telemetry says the OBC
-        /// flew others (the housekeeping's active-table CRCs, docs/icd.md "Flown tables"): a
-        /// what-if; the mismatch is then a warning instead of a refusal (exit code 2).
-        #[arg(long, requires = "tables")]
-        trust_tables: bool,
+        #[command(flatten)]
+        flown: FlownTables,
         #[command(flatten)]
         print: PrintOptions,
     },
@@ -677,8 +677,7 @@ fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Calibrate {
             io,
-            tables,
-            trust_tables,
+            flown,
             shuster1982,
             single_stage,
             fhst_stage,
@@ -686,24 +685,19 @@ fn run(cli: Cli) -> Result<()> {
             print,
         } => run_calibrate(
             &CommandArgs {
-                trust_tables,
-                ..io.with(tables.as_deref(), &print)
+                trust_tables: flown.trust_tables,
+                ..io.with(flown.tables.as_deref(), &print)
             },
             shuster1982,
             single_stage,
             fhst_stage,
             maneuvers,
         )?,
-        Command::Diagnose {
-            io,
-            tables,
-            trust_tables,
-            print,
-        } => {
+        Command::Diagnose { io, flown, print } => {
             ground_tool::diagnose::run::diagnose_command(
                 &CommandArgs {
-                    trust_tables,
-                    ..io.with(tables.as_deref(), &print)
+                    trust_tables: flown.trust_tables,
+                    ..io.with(flown.tables.as_deref(), &print)
                 },
                 None,
             )?;

@@ -239,6 +239,13 @@ pub enum TpError {
     },
 }
 
+/// Length of a whole packet of `apid` (primary header, time code, user data; docs/icd.md
+/// §2–3), `None` for an APID outside the ICD.
+#[must_use]
+pub fn packet_len(apid: u16) -> Option<usize> {
+    user_len(apid).map(|n| PRIMARY_HEADER_LEN + TIME_CODE_LEN + n)
+}
+
 fn user_len(apid: u16) -> Option<usize> {
     match apid {
         APID_RAW_SENSORS => Some(RAW_FRAME_LEN),

@@ -31,14 +31,12 @@ use fsw_core::telemetry::{
     encode_ephemeris, encode_event, encode_housekeeping, encode_magnetics, encode_raw_frame,
     encode_time_code, encode_wheels, EphemerisRecord, MagneticsFrame, MeasurementStatus,
     ObcHousekeeping, SensorResidual, WheelFrame, APID_EPHEMERIS, APID_EVENT, APID_HOUSEKEEPING,
-    APID_MAGNETICS, APID_RAW_SENSORS, APID_WHEELS, EPHEMERIS_LEN, EVENT_LEN, HOUSEKEEPING_LEN,
-    MAGNETICS_LEN, RAW_FRAME_LEN, TIME_CODE_LEN, WHEEL_FRAME_LEN,
+    APID_MAGNETICS, APID_RAW_SENSORS, APID_WHEELS, TIME_CODE_LEN,
 };
 use gro_reference::splitmix::SplitMix64;
 use ground_tool::tp::{decode, Telemetry};
 
 const PRIMARY_HEADER_LEN: usize = 6;
-const OVERHEAD: usize = PRIMARY_HEADER_LEN + TIME_CODE_LEN;
 
 // ------------------------------------------------------------------------------------------
 // Deterministic generator
@@ -346,18 +344,7 @@ fn match_records(tm: &Telemetry, expected: &[&Rec]) -> (Vec<Rec>, Vec<Rec>) {
     (missing, decoded)
 }
 
-fn packet_len(apid: u16) -> Option<usize> {
-    let user = match apid {
-        APID_RAW_SENSORS => RAW_FRAME_LEN,
-        APID_HOUSEKEEPING => HOUSEKEEPING_LEN,
-        APID_EVENT => EVENT_LEN,
-        APID_EPHEMERIS => EPHEMERIS_LEN,
-        APID_MAGNETICS => MAGNETICS_LEN,
-        APID_WHEELS => WHEEL_FRAME_LEN,
-        _ => return None,
-    };
-    Some(OVERHEAD + user)
-}
+use ground_tool::tp::packet_len;
 
 /// Report invariants that hold for any input: offsets inside the file, skipped regions
 /// non-empty, ordered and disjoint, every octet accounted for exactly once, counts equal to
