@@ -273,6 +273,9 @@ pub struct BatchAlignmentSummary {
     /// Part of `sigma_arcsec` from orbital aberration left uncorrected (frames without a
     /// definitive orbit), 1σ per axis, arcsec; 0 with a full ephemeris.
     pub aberration_consider_sigma_arcsec: [f64; 3],
+    /// Part of the variance behind `sigma_arcsec` from the flown gyro's δM, estimated with the
+    /// alignment from the slew batches (`pipeline::star_batches`), as 1σ per axis, arcsec.
+    pub gyro_scale_sigma_arcsec: [f64; 3],
     /// χ²/dof of the fit.
     pub variance_factor: f64,
     /// Batches with stars in both trackers.
@@ -1092,6 +1095,7 @@ impl FfcalSummary {
                     sigma_arcsec: sd(&h.covariance_arcsec2),
                     crb_sigma_arcsec: sd(&h.crb_covariance_arcsec2),
                     aberration_consider_sigma_arcsec: sd(&h.aberration_consider_arcsec2),
+                    gyro_scale_sigma_arcsec: sd(&h.gyro_scale_arcsec2),
                     variance_factor: h.variance_factor,
                     batches: h.batches,
                     samples: h.samples,

@@ -5,20 +5,38 @@
 //! ±4° field reveal. Each tracker follows one star at a time, so most of its stars are not
 //! seen at the same time as the other tracker's; the gyro ties them together.
 //!
-//! A batch is a run of frames in one rate mode with gyro data and no gap over [`MAX_GAP_S`]:
-//! at most [`HOLD_BATCH_MAX_S`] in a hold (low rate), where the gyro's noise (≈ 0.1″) and bias
-//! drift are negligible, and at most [`SLEW_BATCH_MAX_S`] in a slew (high rate), where the
-//! stars cross the field and the gyro's scale and misalignment errors (≈ 5e-4 × the angle
-//! turned) grow with the rate — at a constant rate they grow linearly, like a bias error,
-//! and the fit's drift term takes both. The reference attitude of a batch is the FHST-only
-//! fine attitude at its centre (else the OBC's) carried to every frame by the gyro with the
-//! OBC's bias.
+//! A batch is a run of frames with gyro data, no gap over [`MAX_GAP_S`], and one kind of
+//! motion, which the telemetry measures, not only the rate-mode flag:
+//! * a **hold**: every frame in low rate and turning slower than [`MOTION_RATE_ARCSEC_PER_S`]
+//!   (the gyro increment through the flown `G`, the OBC's bias removed), at most
+//!   [`HOLD_BATCH_MAX_S`] long and ending before the gyro has turned the body by
+//!   [`HOLD_MAX_ROTATION_ARCSEC`] from the batch's first frame. There the gyro's noise
+//!   (≈ 0.1″), bias drift and scale/misalignment error (δM × the angle turned) are negligible.
+//! * a **slew**: frames in high rate or turning faster than that, at most [`SLEW_BATCH_MAX_S`]
+//!   long. The stars cross the field and the flown gyro's scale and misalignment error
+//!   δM carries the reference attitude off by `ε(t) = J(t) vec(δM)`, `J` accumulated from the
+//!   batch centre ([`BatchStarSample::gyro_scale_partial`]). At a constant rate `ε` grows
+//!   linearly, like a bias error, and the fit's drift term takes it; what the drift cannot
+//!   take (the accelerations, the turn of the body within the batch) enters the covariance
+//!   as a consider term with the flown δM's prior σ ([`crate::calibration::iru_chain::PRIOR_DM_PPM`]).
+//!
+//! Why the motion and not the flag: a slew flown in LOW rate mode fell inside a 1200-s
+//! "hold" batch, tied by the flown gyro through tens of degrees; δM × 40° is 100–300″ of
+//! reference error the drift term cannot take, and the FHST1–FHST2 alignment came out
+//! 7–14σ wrong (NEES 222; `docs/investigations.md`). Why a hold is cut rather than given
+//! the δM term: a hold that a slew enters gains tens of arcsec of consider σ from one turn,
+//! while cut at the turn it keeps its stars at the gyro's noise; the σ is true either way,
+//! the cut one is smaller. A slew cannot be cut (it is all turn), so it carries the term.
+//!
+//! The reference attitude of a batch is the FHST-only fine attitude at its centre (else the
+//! OBC's) carried to every frame by the gyro with the OBC's bias.
 
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::{Matrix3, SMatrix, Vector3};
 
 use super::observations::{body_to_center, fhst_attitude, FrameObservations};
-use crate::calibration::fhst_relative::BatchStarSample;
+use crate::calibration::fhst_relative::{BatchStarSample, GyroScalePartial};
 use fsw_core::sensor::SensorId;
+use fsw_core::units::RAD_PER_ARCSEC;
 
 /// Longest hold batch (s): a 16-min hold is one batch.
 pub const HOLD_BATCH_MAX_S: f64 = 1200.0;
@@ -27,43 +45,113 @@ pub const HOLD_BATCH_MAX_S: f64 = 1200.0;
 /// 60 s → 5.3″, 3.5; 180 s → 5.0″, 3.2; 400 s → 4.7″, 3.7; 1200 s → 4.3″ but NEES 23 (the
 /// gyro's scale and misalignment errors through the slews' accelerations).
 pub const SLEW_BATCH_MAX_S: f64 = 180.0;
+/// Body rate above which a frame is in motion (″/s), measured by the gyro. Why 15″/s
+/// (0.004°/s): holds turn by ≤ 5″/s (control, pulse quantisation: ≤ 0.8″/s in low rate and
+/// ≤ 7″/s in high rate on `gro-early-mission` and the ICD writer's days), slews by 0.05–0.4°/s;
+/// a ramp's frames below it turn the body by a few tens of arcsec, ≤ 0.1″ of δM error.
+pub const MOTION_RATE_ARCSEC_PER_S: f64 = 15.0;
+/// Net gyro rotation from a hold batch's first frame that ends the batch (″): δM's prior
+/// σ (3000 ppm) times 100″ is 0.3″, below a batch's mean star noise. Catches a turn slower than
+/// [`MOTION_RATE_ARCSEC_PER_S`].
+pub const HOLD_MAX_ROTATION_ARCSEC: f64 = 100.0;
 /// Shortest batch worth a 6-parameter nuisance (s).
 const BATCH_MIN_S: f64 = 20.0;
 /// A gap in the frames longer than this ends a batch (s).
 const MAX_GAP_S: f64 = 5.0;
 
-/// Batches as frame ranges `[lo, hi)`.
+/// The frame's gyro step through the flown `G` with the bias removed (ACS, rad), if any.
+fn step(f: &FrameObservations, bias: &dyn Fn(f64) -> Vector3<f64>) -> Option<Vector3<f64>> {
+    f.gyro
+        .map(|g| g.dtheta_acs_rad - bias(f.time.seconds()) * g.dt_s)
+}
+
+/// Whether the frame belongs to a slew (module doc): high rate, or turning faster than
+/// [`MOTION_RATE_ARCSEC_PER_S`].
+fn in_motion(f: &FrameObservations, bias: &dyn Fn(f64) -> Vector3<f64>) -> bool {
+    f.high_rate
+        || f.gyro.zip(step(f, bias)).is_some_and(|(g, s)| {
+            g.dt_s > 0.0 && s.norm() > MOTION_RATE_ARCSEC_PER_S * RAD_PER_ARCSEC * g.dt_s
+        })
+}
+
+/// Batches as frame ranges `[lo, hi)` with whether each is a slew (module doc). `bias_at(t)`
+/// is the gyro bias (ACS, rad/s) to remove before the motion is measured, e.g. the OBC's.
 #[must_use]
-pub fn star_batches(frames: &[FrameObservations]) -> Vec<(usize, usize)> {
+pub fn star_batches(
+    frames: &[FrameObservations],
+    bias_at: &dyn Fn(f64) -> Vector3<f64>,
+) -> Vec<(usize, usize, bool)> {
+    let moving: Vec<bool> = frames.iter().map(|f| in_motion(f, bias_at)).collect();
+    let max_turn = HOLD_MAX_ROTATION_ARCSEC * RAD_PER_ARCSEC;
     let mut out = Vec::new();
     let mut lo = 0;
     while lo < frames.len() {
         let t0 = frames[lo].time.seconds();
-        let high_rate = frames[lo].high_rate;
-        let max_s = if high_rate {
+        let slew = moving[lo];
+        let max_s = if slew {
             SLEW_BATCH_MAX_S
         } else {
             HOLD_BATCH_MAX_S
         };
+        let mut turned = Vector3::zeros();
         let mut hi = lo + 1;
         while hi < frames.len() {
             let f = &frames[hi];
             let gap = f.time.seconds() - frames[hi - 1].time.seconds();
-            if f.high_rate != high_rate
+            turned += step(f, bias_at).unwrap_or_else(Vector3::zeros);
+            if moving[hi] != slew
                 || f.gyro.is_none()
                 || !(gap <= MAX_GAP_S)
                 || f.time.seconds() - t0 >= max_s
+                || (!slew && turned.norm() > max_turn)
             {
                 break;
             }
             hi += 1;
         }
         if frames[hi - 1].time.seconds() - t0 >= BATCH_MIN_S {
-            out.push((lo, hi));
+            out.push((lo, hi, slew));
         }
         lo = hi;
     }
     out
+}
+
+/// `J(k)` of every frame of a slew batch (module doc): the reference attitude's error (rad,
+/// body axes at frame k) per unit of `vec(δM)` (column-major), `ε(k) = m_kᵀ Σ_{j∈(c,k]} m_j δM φ_j`
+/// forward of the centre `c` and `−m_kᵀ Σ_{j∈(k,c]} m_j δM φ_j` before it, with
+/// `m_k = A(c) A(k)ᵀ` (`to_center`) and `φ_j` the gyro step into frame `j`.
+fn gyro_scale_partials(
+    frames: &[FrameObservations],
+    lo: usize,
+    center: usize,
+    to_center: &[Matrix3<f64>],
+    bias: &Vector3<f64>,
+) -> Vec<GyroScalePartial> {
+    // m (φᵀ ⊗ I₃): δM φ = (φᵀ ⊗ I₃) vec(δM).
+    let term = |j: usize| {
+        let phi = frames[j]
+            .gyro
+            .map_or_else(Vector3::zeros, |g| g.dtheta_acs_rad - bias * g.dt_s);
+        let m = &to_center[j - lo];
+        let mut t = SMatrix::<f64, 3, 9>::zeros();
+        for c in 0..3 {
+            t.fixed_view_mut::<3, 3>(0, 3 * c).copy_from(&(m * phi[c]));
+        }
+        t
+    };
+    let n = to_center.len();
+    let mut sums = vec![SMatrix::<f64, 3, 9>::zeros(); n];
+    for k in center + 1..lo + n {
+        sums[k - lo] = sums[k - 1 - lo] + term(k);
+    }
+    for k in (lo..center).rev() {
+        sums[k - lo] = sums[k + 1 - lo] - term(k + 1);
+    }
+    sums.iter()
+        .zip(to_center)
+        .map(|(s, m)| m.transpose() * s)
+        .collect()
 }
 
 /// The identified FHST samples of every batch (module doc), and the number of batches.
@@ -75,7 +163,7 @@ pub fn star_batch_samples(
 ) -> (Vec<BatchStarSample>, usize) {
     let mut out = Vec::new();
     let mut n = 0;
-    for (lo, hi) in star_batches(frames) {
+    for (lo, hi, slew) in star_batches(frames, bias_at) {
         let center = (lo + hi) / 2;
         let t_c = frames[center].time.seconds();
         let bias = bias_at(t_c);
@@ -86,12 +174,14 @@ pub fn star_batch_samples(
                 None => continue,
             },
         };
+        let to_center = body_to_center(frames, lo..hi, center, &bias, &Matrix3::zeros());
+        let partials = if slew {
+            gyro_scale_partials(frames, lo, center, &to_center, &bias)
+        } else {
+            Vec::new()
+        };
         // A(k) = (A(c) A(k)ᵀ)ᵀ A(c): the centre attitude carried to frame k by the gyro.
-        let att: Vec<Matrix3<f64>> =
-            body_to_center(frames, lo..hi, center, &bias, &Matrix3::zeros())
-                .iter()
-                .map(|m| m.transpose() * a_center)
-                .collect();
+        let att: Vec<Matrix3<f64>> = to_center.iter().map(|m| m.transpose() * a_center).collect();
         let before = out.len();
         for k in lo..hi {
             let f = &frames[k];
@@ -106,6 +196,7 @@ pub fn star_batch_samples(
                             meas_acs: s.meas.dir_acs,
                             sigma_rad: s.sigma_rad,
                             aberration_uncorrected: f.orbit.is_none(),
+                            gyro_scale_partial: partials.get(k - lo).map(|j| Box::new(*j)),
                         });
                     }
                 }
