@@ -602,6 +602,8 @@ struct FfcalStage {
     alignments_adjusted: std::collections::BTreeMap<String, AlignmentReport>,
     /// Residual RMS per sensor before and after.
     residual: BeforeAfter,
+    /// The gyro-batch FHST stage against the star pairs, when that stage was used.
+    fhst_stage_agreement: Option<super::ffcal_stages::FhstStageAgreement>,
 }
 
 /// FFCAL over the first pass's frames (module doc, step 3), the FSS error level left in its
@@ -633,6 +635,12 @@ fn ffcal_stage(
         solution,
     } = fit;
     summary.ffcal_epochs = data.epoch_count();
+    let fhst_stage_agreement = match (&fhst_stage, &batch_rel) {
+        (Some((FhstStage::GyroBatches, _)), Ok(rel)) => {
+            super::ffcal_stages::fhst_stage_agreement(setup.sensors, &fhst_data, &setup.cfg, rel)
+        }
+        _ => None,
+    };
     // The FSS error level left in the calibrated residuals (the paper's "inherent" 0.022°),
     // reported beside the declared level the FSS weights use (`pipeline::fss_systematic`).
     let calibrated = sensors.with_solution(&solution);
@@ -670,6 +678,7 @@ fn ffcal_stage(
         alignments,
         alignments_adjusted,
         residual,
+        fhst_stage_agreement,
     })
 }
 
@@ -806,7 +815,8 @@ pub fn calibrate_telemetry(
     let setup = sensors.setup(&ctx, &obc_bias_at, &summary);
     let ffcal = ffcal_stage(&ctx, &frames, &sensors, &setup, &mut summary)?;
     crate::progress::step("held-out validation of the alignments");
-    let alignment_validation = validate_alignment_heldout(&frames, &setup);
+    let mut alignment_validation = validate_alignment_heldout(&frames, &setup);
+    alignment_validation.check_fhst_stage(ffcal.fhst_stage_agreement.clone());
     let new_alignment = adjusted_alignment_table(ctx.flown_alignment, &ffcal.adjustment)?;
 
     // 5. IRUCAL: re-derive observations with the calibrated alignments so that end attitudes

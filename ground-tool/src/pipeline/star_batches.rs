@@ -16,17 +16,20 @@
 //!   long. The stars cross the field and the flown gyro's scale and misalignment error
 //!   δM carries the reference attitude off by `ε(t) = J(t) vec(δM)`, `J` accumulated from the
 //!   batch centre ([`BatchStarSample::gyro_scale_partial`]). At a constant rate `ε` grows
-//!   linearly, like a bias error, and the fit's drift term takes it; what the drift cannot
-//!   take (the accelerations, the turn of the body within the batch) enters the covariance
-//!   as a consider term with the flown δM's prior σ ([`crate::calibration::iru_chain::PRIOR_DM_PPM`]).
+//!   linearly, like a bias error, and the batch's drift term takes it; what the drift cannot
+//!   take (the accelerations, the turn of the body within the batch) the fit takes with δM
+//!   itself: nine global parameters estimated with θ, with the flown `G`'s prior σ
+//!   ([`crate::calibration::iru_chain::PRIOR_DM_PPM`]), one δM for every batch.
 //!
 //! Why the motion and not the flag: a slew flown in LOW rate mode fell inside a 1200-s
 //! "hold" batch, tied by the flown gyro through tens of degrees; δM × 40° is 100–300″ of
 //! reference error the drift term cannot take, and the FHST1–FHST2 alignment came out
-//! 7–14σ wrong (NEES 222; `docs/investigations.md`). Why a hold is cut rather than given
-//! the δM term: a hold that a slew enters gains tens of arcsec of consider σ from one turn,
-//! while cut at the turn it keeps its stars at the gyro's noise; the σ is true either way,
-//! the cut one is smaller. A slew cannot be cut (it is all turn), so it carries the term.
+//! 7–14σ wrong (NEES 222; `docs/investigations.md`). Why a hold is cut at the turn rather
+//! than given δM partials: it then keeps its stars at the gyro's noise, free of δM. Why a
+//! slew's δM is estimated rather than a consider term: with the prior's 3000 ppm a consider
+//! term is true but wide (σ of FHST2 up to 48″, 11″ on the standard day, where the stars give 6–8″; on the
+//! writer's days), while estimated δM keeps σ true (NEES 1–5) and near the stars' bound,
+//! and exactly the 3-parameter fit where no batch turned.
 //!
 //! The reference attitude of a batch is the FHST-only fine attitude at its centre (else the
 //! OBC's) carried to every frame by the gyro with the OBC's bias.
@@ -207,4 +210,99 @@ pub fn star_batch_samples(
         }
     }
     (out, n)
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+mod tests {
+    use super::*;
+    use crate::calibration::iru::GyroStep;
+    use crate::pipeline::observations::RateSwitch;
+    use fsw_core::attitude::rotvec_from_rot;
+    use fsw_core::raw::TimeTag;
+
+    /// 1-s frames in low rate with the gyro steps `rates` (rad/s, ACS, one per frame).
+    fn frames(rates: &[Vector3<f64>]) -> Vec<FrameObservations> {
+        rates
+            .iter()
+            .enumerate()
+            .map(|(k, w)| FrameObservations {
+                time: TimeTag::from_seconds(1.0e9 + k as f64).unwrap(),
+                gyro: Some(GyroStep {
+                    dtheta_acs_rad: *w,
+                    dt_s: 1.0,
+                }),
+                high_rate: false,
+                iru_backup: false,
+                rate_switch: RateSwitch::None,
+                gyro_split_var_rad2: 0.0,
+                gyro_split_dir_rad: Vector3::zeros(),
+                stars: [None, None],
+                suns: [None, None],
+                temperatures_c: [20.0; 5],
+                obc_q_acs_from_eci: None,
+                orbit: None,
+            })
+            .collect()
+    }
+
+    /// A hold, a 0.4°/s turn with its ramps flown in LOW rate, a hold: the turn ends the
+    /// first hold and is batched as a slew, whatever the rate-mode flag says.
+    #[test]
+    fn a_low_rate_turn_ends_the_hold() {
+        let w = 0.4_f64.to_radians();
+        let rates: Vec<Vector3<f64>> = (0..1400)
+            .map(|k| {
+                let r = match k {
+                    600..=609 => w * f64::from(k - 599) / 10.0,
+                    610..=689 => w,
+                    690..=699 => w * f64::from(700 - k) / 10.0,
+                    _ => 0.0,
+                };
+                Vector3::new(0.0, r, 0.0)
+            })
+            .collect();
+        let f = frames(&rates);
+        let zero = |_: f64| Vector3::zeros();
+        let b = star_batches(&f, &zero);
+        assert_eq!(b, [(0, 600, false), (600, 700, true), (700, 1400, false)]);
+        // A slow drift (5″/s, below the motion rate) still ends a hold after 100″.
+        let slow = frames(&vec![Vector3::new(5.0 * RAD_PER_ARCSEC, 0.0, 0.0); 300]);
+        let b = star_batches(&slow, &zero);
+        assert!(
+            b.iter().all(|&(lo, hi, slew)| !slew && hi - lo <= 21),
+            "{b:?}"
+        );
+    }
+
+    /// `J(k) vec(δM)` is the reference's error when the true gyro is `(I + δM)` times the
+    /// flown one, on a turn about two axes with accelerations, both sides of the centre.
+    #[test]
+    fn gyro_scale_partials_are_the_attitude_error_of_delta_m() {
+        let rates: Vec<Vector3<f64>> = (0..180)
+            .map(|k| {
+                let t = f64::from(k) / 180.0;
+                Vector3::new(0.3 * (3.0 * t).sin(), 0.4 * t * t, 0.05).map(f64::to_radians)
+            })
+            .collect();
+        let f = frames(&rates);
+        let dm = Matrix3::new(
+            1500.0, -800.0, 600.0, -700.0, 1200.0, -900.0, 500.0, -600.0, 1800.0,
+        ) * 1e-6;
+        let (lo, hi, center) = (0, f.len(), 90);
+        let zero = Vector3::zeros();
+        let flown = body_to_center(&f, lo..hi, center, &zero, &Matrix3::zeros());
+        let truth = body_to_center(&f, lo..hi, center, &zero, &dm);
+        let j = gyro_scale_partials(&f, lo, center, &flown, &zero);
+        let vec_dm = nalgebra::SVector::<f64, 9>::from_column_slice(dm.as_slice());
+        let mut worst: f64 = 0.0;
+        for k in [0, 30, 89, 91, 150, 179] {
+            // A_true(k) = Rot(ε) A_ref(k) ⇒ Rot(ε) = m_true(k)ᵀ m_flown(k).
+            let eps = rotvec_from_rot(&(truth[k].transpose() * flown[k]));
+            let lin = j[k] * vec_dm;
+            assert!(eps.norm() > 1e-5, "frame {k}: ε {eps:?}");
+            worst = worst.max((eps - lin).norm() / eps.norm());
+        }
+        assert!(worst < 0.02, "relative error of J vec(δM): {worst}");
+    }
 }
