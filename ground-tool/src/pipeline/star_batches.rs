@@ -9,9 +9,11 @@
 //! motion, which the telemetry measures, not only the rate-mode flag:
 //! * a **hold**: every frame in low rate and turning slower than [`MOTION_RATE_ARCSEC_PER_S`]
 //!   (the gyro increment through the flown `G`, the OBC's bias removed), at most
-//!   [`HOLD_BATCH_MAX_S`] long and ending before the gyro has turned the body by
-//!   [`HOLD_MAX_ROTATION_ARCSEC`] from the batch's first frame. There the gyro's noise
-//!   (≈ 0.1″), bias drift and scale/misalignment error (δM × the angle turned) are negligible.
+//!   [`HOLD_BATCH_MAX_S`] long. There the gyro's noise (≈ 0.1″) and bias drift are
+//!   negligible, and so is its scale/misalignment error (δM × the angle turned) unless the
+//!   body creeps (a slew slower than the motion rate, the control settling after a slew:
+//!   100–300″ on `gro-early-mission`); a hold that turned more than
+//!   [`STILL_ROTATION_ARCSEC`] carries δM as a slew does.
 //! * a **slew**: frames in high rate or turning faster than that, at most [`SLEW_BATCH_MAX_S`]
 //!   long. The stars cross the field and the flown gyro's scale and misalignment error
 //!   δM carries the reference attitude off by `ε(t) = J(t) vec(δM)`, `J` accumulated from the
@@ -25,7 +27,10 @@
 //! "hold" batch, tied by the flown gyro through tens of degrees; δM × 40° is 100–300″ of
 //! reference error the drift term cannot take, and the FHST1–FHST2 alignment came out
 //! 7–14σ wrong (NEES 222; `docs/investigations.md`). Why a hold is cut at the turn rather
-//! than given δM partials: it then keeps its stars at the gyro's noise, free of δM. Why a
+//! than given δM partials: it then keeps its stars at the gyro's noise, free of δM. Why it is
+//! not cut at a small net rotation (tried: 100″): the settling after every slew then split the
+//! main job's holds into 20–50-s pieces, 23 batches instead of 19 and σ of FHST2 4.97 → 5.82″,
+//! to avoid a δM error of ≤ 0.3″ that the estimated δM takes anyway. Why a
 //! slew's δM is estimated rather than a consider term: with the prior's 3000 ppm a consider
 //! term is true but wide (σ of FHST2 up to 48″, 11″ on the standard day, where the stars give 6–8″; on the
 //! writer's days), while estimated δM keeps σ true (NEES 1–5) and near the stars' bound,
@@ -53,10 +58,10 @@ pub const SLEW_BATCH_MAX_S: f64 = 180.0;
 /// ≤ 7″/s in high rate on `gro-early-mission` and the ICD writer's days), slews by 0.05–0.4°/s;
 /// a ramp's frames below it turn the body by a few tens of arcsec, ≤ 0.1″ of δM error.
 pub const MOTION_RATE_ARCSEC_PER_S: f64 = 15.0;
-/// Net gyro rotation from a hold batch's first frame that ends the batch (″): δM's prior
-/// σ (3000 ppm) times 100″ is 0.3″, below a batch's mean star noise. Catches a turn slower than
-/// [`MOTION_RATE_ARCSEC_PER_S`].
-pub const HOLD_MAX_ROTATION_ARCSEC: f64 = 100.0;
+/// Largest gyro rotation from a batch's centre (″) below which the batch's δM partials are
+/// left out: δM's prior σ (3000 ppm) times 10″ is 0.03″. Saves their memory (216 bytes a
+/// sample) in the still holds, most of the samples.
+pub const STILL_ROTATION_ARCSEC: f64 = 10.0;
 /// Shortest batch worth a 6-parameter nuisance (s).
 const BATCH_MIN_S: f64 = 20.0;
 /// A gap in the frames longer than this ends a batch (s).
@@ -85,7 +90,6 @@ pub fn star_batches(
     bias_at: &dyn Fn(f64) -> Vector3<f64>,
 ) -> Vec<(usize, usize, bool)> {
     let moving: Vec<bool> = frames.iter().map(|f| in_motion(f, bias_at)).collect();
-    let max_turn = HOLD_MAX_ROTATION_ARCSEC * RAD_PER_ARCSEC;
     let mut out = Vec::new();
     let mut lo = 0;
     while lo < frames.len() {
@@ -96,17 +100,14 @@ pub fn star_batches(
         } else {
             HOLD_BATCH_MAX_S
         };
-        let mut turned = Vector3::zeros();
         let mut hi = lo + 1;
         while hi < frames.len() {
             let f = &frames[hi];
             let gap = f.time.seconds() - frames[hi - 1].time.seconds();
-            turned += step(f, bias_at).unwrap_or_else(Vector3::zeros);
             if moving[hi] != slew
                 || f.gyro.is_none()
                 || !(gap <= MAX_GAP_S)
                 || f.time.seconds() - t0 >= max_s
-                || (!slew && turned.norm() > max_turn)
             {
                 break;
             }
@@ -178,11 +179,12 @@ pub fn star_batch_samples(
             },
         };
         let to_center = body_to_center(frames, lo..hi, center, &bias, &Matrix3::zeros());
-        let partials = if slew {
-            gyro_scale_partials(frames, lo, center, &to_center, &bias)
-        } else {
-            Vec::new()
-        };
+        let mut partials = gyro_scale_partials(frames, lo, center, &to_center, &bias);
+        // ‖J‖ is the angle turned from the centre (rad, up to a factor ≤ √3).
+        let still = STILL_ROTATION_ARCSEC * RAD_PER_ARCSEC;
+        if !slew && partials.iter().all(|j| j.norm() < still) {
+            partials.clear();
+        }
         // A(k) = (A(c) A(k)ᵀ)ᵀ A(c): the centre attitude carried to frame k by the gyro.
         let att: Vec<Matrix3<f64>> = to_center.iter().map(|m| m.transpose() * a_center).collect();
         let before = out.len();
@@ -266,13 +268,10 @@ mod tests {
         let zero = |_: f64| Vector3::zeros();
         let b = star_batches(&f, &zero);
         assert_eq!(b, [(0, 600, false), (600, 700, true), (700, 1400, false)]);
-        // A slow drift (5″/s, below the motion rate) still ends a hold after 100″.
+        // A slow drift (5″/s, below the motion rate) is a hold, with the δM partials of its
+        // turn (`gyro_scale_partials`).
         let slow = frames(&vec![Vector3::new(5.0 * RAD_PER_ARCSEC, 0.0, 0.0); 300]);
-        let b = star_batches(&slow, &zero);
-        assert!(
-            b.iter().all(|&(lo, hi, slew)| !slew && hi - lo <= 21),
-            "{b:?}"
-        );
+        assert_eq!(star_batches(&slow, &zero), [(0, 300, false)]);
     }
 
     /// `J(k) vec(δM)` is the reference's error when the true gyro is `(I + δM)` times the
