@@ -23,6 +23,14 @@
 //! The rate nuisance `δ̇_b` takes the batch's gyro bias error (a constant bias error makes
 //! the reference drift linearly), so the result does not depend on the bias used.
 //!
+//! Where the gyro turned the body within a batch (a slew, or a hold that crept), the reference
+//! also carries the flown gyro's scale and misalignment error: `m − a` gains `a × J(t) vec(δM)`
+//! ([`GyroScalePartial`], `pipeline::star_batches`). δM is one for the whole span, so it is
+//! estimated as nine more global parameters (ppm) with the IRU chain's prior σ
+//! [`PRIOR_DM_PPM`]; θ's covariance is then the marginal one, with δM's uncertainty in it
+//! ([`FhstRelativeAlignment::gyro_scale_arcsec2`]). Without such samples δM stays at its prior
+//! and θ is exactly the 3-parameter fit's.
+//!
 //! ## Solution
 //! Weighted least squares in arcsec, the 6 nuisance parameters of each batch eliminated
 //! batch by batch (a 6×6 solve each: linear in the number of samples). Samples whose
@@ -84,9 +92,9 @@ pub struct BatchStarSample {
     /// The reference lacks the orbital aberration (no definitive orbit at this time): the
     /// covariance then includes its effect as a consider term ([`UNCORRECTED_ORBIT_SPEED_KM_PER_S`]).
     pub aberration_uncorrected: bool,
-    /// The reference's error per unit of the flown gyro's δM ([`GyroScalePartial`]), in a batch
-    /// through a turn (a slew); `None` where the gyro did not turn the body (a hold). The
-    /// fit estimates δM with its prior σ [`PRIOR_DM_PPM`] along with θ.
+    /// The reference's error per unit of the flown gyro's δM ([`GyroScalePartial`]) in a batch
+    /// through a turn (a slew, or a hold that crept); `None` where the gyro did not turn the
+    /// body. The fit estimates δM with its prior σ [`PRIOR_DM_PPM`] along with θ.
     pub gyro_scale_partial: Option<Box<GyroScalePartial>>,
 }
 
@@ -126,9 +134,9 @@ pub struct FhstRelativeAlignment {
     /// its orbit.
     pub aberration_consider_arcsec2: Matrix3<f64>,
     /// The part of the covariance from the flown gyro's δM, estimated with the alignment from
-    /// the slew batches' stars (prior σ [`PRIOR_DM_PPM`] per element, one δM for the whole
+    /// the turning batches' stars (prior σ [`PRIOR_DM_PPM`] per element, one δM for the whole
     /// span): the covariance minus what it would be with δM known (arcsec², scaled by `s²`);
-    /// zero without slew batches.
+    /// zero without turning batches.
     pub gyro_scale_arcsec2: Matrix3<f64>,
     /// The bound of the model with the declared noise, unscaled (arcsec²).
     pub crb_covariance_arcsec2: Matrix3<f64>,
