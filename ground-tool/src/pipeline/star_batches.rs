@@ -299,7 +299,7 @@ mod tests {
             // A_true(k) = Rot(ε) A_ref(k) ⇒ Rot(ε) = m_true(k)ᵀ m_flown(k).
             let eps = rotvec_from_rot(&(truth[k].transpose() * flown[k]));
             let lin = j[k] * vec_dm;
-            assert!(eps.norm() > 1e-5, "frame {k}: ε {eps:?}");
+            assert!(eps.norm() > 1e-6, "frame {k}: ε {eps:?}");
             worst = worst.max((eps - lin).norm() / eps.norm());
         }
         assert!(worst < 0.02, "relative error of J vec(δM): {worst}");
