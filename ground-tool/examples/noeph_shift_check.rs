@@ -18,7 +18,15 @@ use ground_tool::pipeline::star_batches::{star_batch_samples, star_batches};
 use nalgebra::Vector3;
 use std::path::Path;
 
-fn samples(dir: &Path) -> anyhow::Result<(Vec<FrameObservations>, Vec<BatchStarSample>, usize)> {
+/// The run's frames, gyro-batch samples and batch count, and its batch spans.
+type RunSamples = (
+    Vec<FrameObservations>,
+    Vec<BatchStarSample>,
+    usize,
+    Vec<(usize, usize)>,
+);
+
+fn samples(dir: &Path) -> anyhow::Result<RunSamples> {
     let (tm, md) = read_run(dir)?;
     let sky = load_catalog()?;
     let o = CalibrateOptions::default();
@@ -32,7 +40,11 @@ fn samples(dir: &Path) -> anyhow::Result<(Vec<FrameObservations>, Vec<BatchStarS
     );
     let bias_at = |t_s: f64| ground_tool::pipeline::calibrate::obc_bias_at(&tm, t_s);
     let (s, n) = star_batch_samples(&frames, &bias_at);
-    Ok((frames, s, n))
+    let spans = star_batches(&frames, &bias_at)
+        .into_iter()
+        .map(|(lo, hi, _)| (lo, hi))
+        .collect();
+    Ok((frames, s, n, spans))
 }
 
 /// The gyro-batch estimate of `samples` over `n` batches.
@@ -58,8 +70,8 @@ struct Runs {
 
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().collect();
-    let (fa, sa, na) = samples(Path::new(&args[1]))?;
-    let (_fb, sb, nb) = samples(Path::new(&args[2]))?;
+    let (fa, sa, na, spans) = samples(Path::new(&args[1]))?;
+    let (_fb, sb, nb, _) = samples(Path::new(&args[2]))?;
     println!("samples {} / {}, batches {na} / {nb}", sa.len(), sb.len());
     assert_eq!(sa.len(), sb.len());
     assert_eq!(na, nb);
@@ -74,7 +86,6 @@ fn main() -> anyhow::Result<()> {
     let tb = eb.theta_acs_arcsec;
     println!("with eph    θ = [{:.1}, {:.1}, {:.1}]", ta.x, ta.y, ta.z);
     println!("without eph θ = [{:.1}, {:.1}, {:.1}]", tb.x, tb.y, tb.z);
-    let spans = star_batches(&fa);
     // The spans with identified stars: the batch indices of the samples count only these.
     let with_samples: Vec<(usize, usize)> = spans
         .iter()
@@ -119,7 +130,7 @@ fn batch_shifts(r: &Runs) -> anyhow::Result<()> {
         let mixed: Vec<BatchStarSample> = sa
             .iter()
             .zip(sb.iter())
-            .map(|(a, bb)| if a.batch == b { *bb } else { *a })
+            .map(|(a, bb)| if a.batch == b { bb.clone() } else { a.clone() })
             .collect();
         let em = estimate(&mixed, na)?;
         let d = em.theta_acs_arcsec - ta;
@@ -164,7 +175,7 @@ fn predicted_shift(r: &Runs) -> anyhow::Result<()> {
     // without the orbital velocity's aberration (first order, the OBC attitude of the frame),
     // and a consider covariance: each batch's orbital velocity unknown, isotropic, |v| = V.
     let mut frame_of = Vec::with_capacity(sa.len());
-    for (lo, hi) in star_batches(fa) {
+    for &(lo, hi) in &r.with_samples {
         for (k, f) in fa.iter().enumerate().take(hi).skip(lo) {
             for s in f.stars.iter().flatten() {
                 if s.identified.is_some() {
@@ -215,7 +226,7 @@ fn consider_sigma(r: &Runs, tb: Vector3<f64>) -> anyhow::Result<()> {
             let pert: Vec<BatchStarSample> = sb
                 .iter()
                 .map(|s| {
-                    let mut s = *s;
+                    let mut s = s.clone();
                     if s.batch == b {
                         s.ref_acs = (s.ref_acs + aberrate(&s.ref_acs, &w)).normalize();
                     }

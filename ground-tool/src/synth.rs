@@ -291,6 +291,7 @@ pub fn fhst_batch_samples(
                     meas_acs: m[tracker.index()] * (s_true + noise).normalize(),
                     sigma_rad: sigma,
                     aberration_uncorrected: false,
+                    gyro_scale_partial: None,
                 });
             }
         }

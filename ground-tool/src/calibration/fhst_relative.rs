@@ -23,6 +23,14 @@
 //! The rate nuisance `δ̇_b` takes the batch's gyro bias error (a constant bias error makes
 //! the reference drift linearly), so the result does not depend on the bias used.
 //!
+//! Where the gyro turned the body within a batch (a slew, or a hold that crept), the reference
+//! also carries the flown gyro's scale and misalignment error: `m − a` gains `a × J(t) vec(δM)`
+//! ([`GyroScalePartial`], `pipeline::star_batches`). δM is one for the whole span, so it is
+//! estimated as nine more global parameters (ppm) with the IRU chain's prior σ
+//! [`PRIOR_DM_PPM`]; θ's covariance is then the marginal one, with δM's uncertainty in it
+//! ([`FhstRelativeAlignment::gyro_scale_arcsec2`]). Without such samples δM stays at its prior
+//! and θ is exactly the 3-parameter fit's.
+//!
 //! ## Solution
 //! Weighted least squares in arcsec, the 6 nuisance parameters of each batch eliminated
 //! batch by batch (a 6×6 solve each: linear in the number of samples). Samples whose
@@ -34,10 +42,11 @@
 //! 10⁴ samples `s²` is known to ≈ 1 %, and the Monte Carlo NEES is right only with it
 //! (`tests/src/bin/calibration_mc.rs`).
 
-use nalgebra::{Matrix3, Matrix6, Matrix6x3, Vector3, Vector6};
+use nalgebra::{Matrix3, Matrix6, SMatrix, SVector, Vector3, Vector6};
 use serde::Serialize;
 use thiserror::Error;
 
+use crate::calibration::iru_chain::PRIOR_DM_PPM;
 use crate::ARCSEC_PER_RAD;
 use fsw_core::sensor::SensorId;
 
@@ -53,9 +62,20 @@ const NUISANCE_RATE_PRIOR_ARCSEC: f64 = 3600.0;
 const RATE_UNIT_S: f64 = 100.0;
 /// Outlier passes.
 const MAX_PASSES: usize = 4;
+/// Global parameters: θ (3, arcsec) and the flown gyro's `vec(δM)` (9, ppm).
+const NG: usize = 12;
+/// A vector of the global parameters.
+type Global = SVector<f64, NG>;
+/// Nuisance × global block.
+type NuisanceGlobal = SMatrix<f64, 6, NG>;
 
-/// One identified star sample of a hold batch.
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// `∂ε/∂vec(δM)`: the reference attitude's error (rad, body axes at the sample time) per unit
+/// of the flown gyro's scale and misalignment error δM (column-major vec), accumulated by the
+/// gyro from the batch centre (`pipeline::star_batches`).
+pub type GyroScalePartial = SMatrix<f64, 3, 9>;
+
+/// One identified star sample of a batch.
+#[derive(Clone, Debug, PartialEq)]
 pub struct BatchStarSample {
     /// The tracker: FHST1 (the reference) or FHST2.
     pub tracker: SensorId,
@@ -72,6 +92,10 @@ pub struct BatchStarSample {
     /// The reference lacks the orbital aberration (no definitive orbit at this time): the
     /// covariance then includes its effect as a consider term ([`UNCORRECTED_ORBIT_SPEED_KM_PER_S`]).
     pub aberration_uncorrected: bool,
+    /// The reference's error per unit of the flown gyro's δM ([`GyroScalePartial`]) in a batch
+    /// through a turn (a slew, or a hold that crept); `None` where the gyro did not turn the
+    /// body. The fit estimates δM with its prior σ [`PRIOR_DM_PPM`] along with θ.
+    pub gyro_scale_partial: Option<Box<GyroScalePartial>>,
 }
 
 /// Orbital speed assumed for references without orbital aberration (km/s): circular LEO at
@@ -109,6 +133,11 @@ pub struct FhstRelativeAlignment {
     /// [`UNCORRECTED_ORBIT_SPEED_KM_PER_S`], batches independent; zero when every sample had
     /// its orbit.
     pub aberration_consider_arcsec2: Matrix3<f64>,
+    /// The part of the covariance from the flown gyro's δM, estimated with the alignment from
+    /// the turning batches' stars (prior σ [`PRIOR_DM_PPM`] per element, one δM for the whole
+    /// span): the covariance minus what it would be with δM known (arcsec², scaled by `s²`);
+    /// zero without turning batches.
+    pub gyro_scale_arcsec2: Matrix3<f64>,
     /// The bound of the model with the declared noise, unscaled (arcsec²).
     pub crb_covariance_arcsec2: Matrix3<f64>,
     /// A-posteriori variance factor χ²/dof.
@@ -127,10 +156,10 @@ pub struct FhstRelativeAlignment {
 #[derive(Clone, Copy)]
 struct BatchNormal {
     nbb: Matrix6<f64>,
-    nbg: Matrix6x3<f64>,
+    nbg: NuisanceGlobal,
     vb: Vector6<f64>,
-    ngg: Matrix3<f64>,
-    vg: Vector3<f64>,
+    ngg: SMatrix<f64, NG, NG>,
+    vg: Global,
     count: [usize; 2],
 }
 
@@ -143,11 +172,35 @@ impl BatchNormal {
         }
         Self {
             nbb,
-            nbg: Matrix6x3::zeros(),
+            nbg: NuisanceGlobal::zeros(),
             vb: Vector6::zeros(),
-            ngg: Matrix3::zeros(),
-            vg: Vector3::zeros(),
+            ngg: SMatrix::zeros(),
+            vg: Global::zeros(),
             count: [0; 2],
+        }
+    }
+
+    /// Add one sample's rows. Why the two forms: a hold's sample has no δM partials, and
+    /// skipping their zeros keeps 10⁶ samples at the 3-parameter cost.
+    fn add(&mut self, s: &BatchStarSample) {
+        let w = (s.sigma_rad * ARCSEC_PER_RAD).powi(-2);
+        self.count[s.tracker.index()] += 1;
+        for (hb, hg, y) in sample_rows(s) {
+            self.nbb += hb * hb.transpose() * w;
+            self.vb += hb * (y * w);
+            if s.gyro_scale_partial.is_some() {
+                self.nbg += hb * hg.transpose() * w;
+                self.ngg += hg * hg.transpose() * w;
+                self.vg += hg * (y * w);
+            } else {
+                let h3 = hg.fixed_rows::<3>(0);
+                let mut nbg = self.nbg.fixed_columns_mut::<3>(0);
+                nbg += hb * h3.transpose() * w;
+                let mut ngg = self.ngg.fixed_view_mut::<3, 3>(0, 0);
+                ngg += h3 * h3.transpose() * w;
+                let mut vg = self.vg.fixed_rows_mut::<3>(0);
+                vg += h3 * (y * w);
+            }
         }
     }
 }
@@ -163,8 +216,9 @@ fn tangent_basis(a: &Vector3<f64>) -> [Vector3<f64>; 2] {
     [e1, a.cross(&e1)]
 }
 
-/// Rows of one sample: (nuisance partials, θ partials, residual arcsec, weight 1/σ²).
-fn sample_rows(s: &BatchStarSample) -> [(Vector6<f64>, Vector3<f64>, f64); 2] {
+/// Rows of one sample: (nuisance partials, global partials (θ, then δM per ppm), residual
+/// arcsec).
+fn sample_rows(s: &BatchStarSample) -> [(Vector6<f64>, Global, f64); 2] {
     let a = s.ref_acs;
     let r = (s.meas_acs - a) * ARCSEC_PER_RAD;
     let tau = s.dt_s / RATE_UNIT_S;
@@ -176,11 +230,15 @@ fn sample_rows(s: &BatchStarSample) -> [(Vector6<f64>, Vector3<f64>, f64); 2] {
             hb[j] = g[j];
             hb[j + 3] = g[j] * tau;
         }
-        let hg = if s.tracker == SensorId::Fhst2 {
-            -g
-        } else {
-            Vector3::zeros()
-        };
+        let mut hg = Global::zeros();
+        if s.tracker == SensorId::Fhst2 {
+            hg.fixed_rows_mut::<3>(0).copy_from(&-g);
+        }
+        // The reference's δM error enters as the batch's attitude error does: `g·(J vec δM)`.
+        if let Some(j) = s.gyro_scale_partial.as_deref() {
+            hg.fixed_rows_mut::<9>(3)
+                .copy_from(&(j.transpose() * g * (ARCSEC_PER_RAD * 1e-6)));
+        }
         (hb, hg, e.dot(&r))
     })
 }
@@ -213,21 +271,17 @@ pub fn estimate_relative_alignment(
     for pass in 0..MAX_PASSES {
         let mut batches = vec![BatchNormal::new(); n_batches];
         for (s, _) in samples.iter().zip(&used).filter(|(_, u)| **u) {
-            let w = (s.sigma_rad * ARCSEC_PER_RAD).powi(-2);
-            let bn = &mut batches[s.batch];
-            bn.count[s.tracker.index()] += 1;
-            for (hb, hg, y) in sample_rows(s) {
-                bn.nbb += hb * hb.transpose() * w;
-                bn.nbg += hb * hg.transpose() * w;
-                bn.vb += hb * (y * w);
-                bn.ngg += hg * hg.transpose() * w;
-                bn.vg += hg * (y * w);
-            }
+            batches[s.batch].add(s);
         }
         // Reduced system of θ. A batch without both trackers informs θ only through the
         // weak nuisance prior: left out.
-        let mut ngg = Matrix3::zeros();
-        let mut vg = Vector3::zeros();
+        // δM's prior (ppm): the flown `G`'s uncertainty; without turned samples it keeps the
+        // δM block at its prior and θ exactly the 3-parameter fit's.
+        let mut ngg = SMatrix::<f64, NG, NG>::zeros();
+        for j in 3..NG {
+            ngg[(j, j)] = PRIOR_DM_PPM.powi(-2);
+        }
+        let mut vg = Global::zeros();
         let mut inverses = vec![None; n_batches];
         let mut good_batches = 0;
         for (k, bn) in batches.iter().enumerate() {
@@ -250,14 +304,16 @@ pub fn estimate_relative_alignment(
                 min_batches,
             ));
         }
-        let crb = ngg
+        let full = ngg
             .cholesky()
             .map(|c| c.inverse())
             .ok_or(RelativeAlignmentError::Unobservable)?;
-        let theta = crb * vg;
+        let global = full * vg;
+        let theta: Vector3<f64> = global.fixed_rows::<3>(0).into();
+        let crb: Matrix3<f64> = full.fixed_view::<3, 3>(0, 0).into();
         for (k, bn) in batches.iter().enumerate() {
             nuisance[k] =
-                inverses[k].map_or(Vector6::zeros(), |inv| inv * (bn.vb - bn.nbg * theta));
+                inverses[k].map_or(Vector6::zeros(), |inv| inv * (bn.vb - bn.nbg * global));
         }
         // Residuals, variance factor, outliers.
         let mut chi2 = 0.0;
@@ -270,7 +326,7 @@ pub fn estimate_relative_alignment(
             let w = (s.sigma_rad * ARCSEC_PER_RAD).powi(-2);
             let mut zz = 0.0;
             for (hb, hg, y) in sample_rows(s) {
-                let e = y - hb.dot(&nuisance[s.batch]) - hg.dot(&theta);
+                let e = y - hb.dot(&nuisance[s.batch]) - hg.dot(&global);
                 zz += e * e * w;
             }
             z2[i] = zz;
@@ -279,7 +335,10 @@ pub fn estimate_relative_alignment(
                 rows += 2;
             }
         }
-        let dof = rows.saturating_sub(6 * good_batches + 3).max(1);
+        let turned = samples.iter().any(|s| s.gyro_scale_partial.is_some());
+        let dof = rows
+            .saturating_sub(6 * good_batches + if turned { NG } else { 3 })
+            .max(1);
         let variance_factor = chi2 / dof as f64;
         let cov = crb * variance_factor;
         let keep: Vec<bool> = samples
@@ -303,17 +362,24 @@ pub fn estimate_relative_alignment(
                 if used[i] && inverses[s.batch].is_some() {
                     samples_used[s.tracker.index()] += 1;
                     for (hb, hg, y) in sample_rows(s) {
-                        let e = y - hb.dot(&nuisance[s.batch]) - hg.dot(&theta);
+                        let e = y - hb.dot(&nuisance[s.batch]) - hg.dot(&global);
                         sum2[s.tracker.index()] += e * e;
                     }
                 }
             }
             let rms = |t: usize| (sum2[t] / (2 * samples_used[t].max(1)) as f64).sqrt();
-            let consider = aberration_consider(samples, &used, &batches, &inverses, &crb);
+            let consider = aberration_consider(samples, &used, &batches, &inverses, &full);
+            // θ's covariance with δM known: the inverse of the θ block of the reduced matrix.
+            let known = ngg
+                .fixed_view::<3, 3>(0, 0)
+                .into_owned()
+                .try_inverse()
+                .unwrap_or(crb);
             return Ok(FhstRelativeAlignment {
                 theta_acs_arcsec: theta,
                 covariance_arcsec2: cov + consider,
                 aberration_consider_arcsec2: consider,
+                gyro_scale_arcsec2: (crb - known) * variance_factor,
                 crb_covariance_arcsec2: crb,
                 variance_factor,
                 batches: good_batches,
@@ -336,9 +402,9 @@ fn aberration_consider(
     used: &[bool],
     batches: &[BatchNormal],
     inverses: &[Option<Matrix6<f64>>],
-    crb: &Matrix3<f64>,
+    full: &SMatrix<f64, NG, NG>,
 ) -> Matrix3<f64> {
-    let mut d = vec![Matrix3::zeros(); batches.len()];
+    let mut d = vec![SMatrix::<f64, NG, 3>::zeros(); batches.len()];
     let mut any = false;
     for (s, _) in samples
         .iter()
@@ -365,7 +431,7 @@ fn aberration_consider(
         return Matrix3::zeros();
     }
     d.iter().fold(Matrix3::zeros(), |acc, db| {
-        let k = crb * db;
+        let k = (full * db).fixed_rows::<3>(0).into_owned();
         acc + k * k.transpose() / 3.0
     })
 }
@@ -494,6 +560,7 @@ mod tests {
             theta_acs_arcsec: Vector3::new(30.0, -12.0, 6.0),
             covariance_arcsec2: Matrix3::identity() * 1e-4,
             aberration_consider_arcsec2: Matrix3::zeros(),
+            gyro_scale_arcsec2: Matrix3::zeros(),
             crb_covariance_arcsec2: Matrix3::identity() * 1e-4,
             variance_factor: 1.0,
             batches: 10,

@@ -151,6 +151,11 @@ pub struct Chain {
     pub links: Vec<Option<ChainLink>>,
 }
 
+/// Prior σ of each element of the flown gyro's δM (ppm): how well the prelaunch `G` is known
+/// before IRUCAL. The chain's prior, and the σ of δM in the gyro batches of the FFCAL FHST
+/// stage (`calibration::fhst_relative`), which run on the flown `G`.
+pub const PRIOR_DM_PPM: f64 = 3000.0;
+
 /// Options of the chain estimator.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ChainConfig {
@@ -205,7 +210,7 @@ impl Default for ChainConfig {
     fn default() -> Self {
         Self {
             noise: GyroNoise::default(),
-            prior_dm_ppm: 3000.0,
+            prior_dm_ppm: PRIOR_DM_PPM,
             prior_bias_arcsec_per_s: 1.0,
             // χ²₃ at p = 1e-5.
             gate_nis: 25.9,

@@ -273,6 +273,9 @@ pub struct BatchAlignmentSummary {
     /// Part of `sigma_arcsec` from orbital aberration left uncorrected (frames without a
     /// definitive orbit), 1σ per axis, arcsec; 0 with a full ephemeris.
     pub aberration_consider_sigma_arcsec: [f64; 3],
+    /// Part of the variance behind `sigma_arcsec` from the flown gyro's δM, estimated with the
+    /// alignment from the slew batches (`pipeline::star_batches`), as 1σ per axis, arcsec.
+    pub gyro_scale_sigma_arcsec: [f64; 3],
     /// χ²/dof of the fit.
     pub variance_factor: f64,
     /// Batches with stars in both trackers.
@@ -618,6 +621,8 @@ struct FfcalStage {
     alignments_adjusted: std::collections::BTreeMap<String, AlignmentReport>,
     /// Residual RMS per sensor before and after.
     residual: BeforeAfter,
+    /// The gyro-batch FHST stage against the star pairs, when that stage was used.
+    fhst_stage_agreement: Option<super::ffcal_stages::FhstStageAgreement>,
 }
 
 /// FFCAL over the first pass's frames (module doc, step 3), the FSS error level left in its
@@ -649,6 +654,12 @@ fn ffcal_stage(
         solution,
     } = fit;
     summary.ffcal_epochs = data.epoch_count();
+    let fhst_stage_agreement = match (&fhst_stage, &batch_rel) {
+        (Some((FhstStage::GyroBatches, _)), Ok(rel)) => {
+            super::ffcal_stages::fhst_stage_agreement(setup.sensors, &fhst_data, &setup.cfg, rel)
+        }
+        _ => None,
+    };
     // The FSS error level left in the calibrated residuals (the paper's "inherent" 0.022°),
     // reported beside the declared level the FSS weights use (`pipeline::fss_systematic`).
     let calibrated = sensors.with_solution(&solution);
@@ -686,6 +697,7 @@ fn ffcal_stage(
         alignments,
         alignments_adjusted,
         residual,
+        fhst_stage_agreement,
     })
 }
 
@@ -825,7 +837,8 @@ pub fn calibrate_telemetry(
     let setup = sensors.setup(&ctx, &obc_bias_at, &summary);
     let ffcal = ffcal_stage(&ctx, &frames, &sensors, &setup, &mut summary)?;
     crate::progress::step("held-out validation of the alignments");
-    let alignment_validation = validate_alignment_heldout(&frames, &setup);
+    let mut alignment_validation = validate_alignment_heldout(&frames, &setup);
+    alignment_validation.check_fhst_stage(ffcal.fhst_stage_agreement.clone());
     let new_alignment = adjusted_alignment_table(ctx.flown_alignment, &ffcal.adjustment)?;
 
     // 5. IRUCAL: re-derive observations with the calibrated alignments so that end attitudes
@@ -1115,6 +1128,7 @@ impl FfcalSummary {
                     sigma_arcsec: sd(&h.covariance_arcsec2),
                     crb_sigma_arcsec: sd(&h.crb_covariance_arcsec2),
                     aberration_consider_sigma_arcsec: sd(&h.aberration_consider_arcsec2),
+                    gyro_scale_sigma_arcsec: sd(&h.gyro_scale_arcsec2),
                     variance_factor: h.variance_factor,
                     batches: h.batches,
                     samples: h.samples,
