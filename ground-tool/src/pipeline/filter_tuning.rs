@@ -426,6 +426,7 @@ fn axis_evidence(
     segments: &[Vec<f64>],
     tau0_s: f64,
     per_channel: f64,
+    bootstrap: bool,
 ) -> Result<[NoiseEvidence; 2], String> {
     use crate::calibration::allan::{analyse_segments_with, MIN_TOTAL_SAMPLES};
     let samples: usize = segments.iter().map(Vec::len).sum();
@@ -438,7 +439,7 @@ fn axis_evidence(
             crate::calibration::allan::MIN_SEGMENT_SAMPLES
         ));
     }
-    let replicas = if samples <= BOOTSTRAP_MAX_SAMPLES {
+    let replicas = if bootstrap && samples <= BOOTSTRAP_MAX_SAMPLES {
         NOISE_REPLICAS
     } else {
         0
@@ -496,6 +497,31 @@ fn arw_upper_bound(pair: NoiseEvidence, active: Option<NoiseEvidence>) -> NoiseE
     }
 }
 
+/// [`arw_upper_bound`] of the pair difference's evidence and the active channel `a`'s: the
+/// active channel first without the bootstrap (its point value decides whether it can
+/// matter: a fifth of the chain's time on the main job otherwise), then with it.
+fn with_active_channel(
+    tm: &crate::tp::Telemetry,
+    iru: &fsw_core::tables::IruTable,
+    (axis, a): (&'static str, usize),
+    tau0_s: f64,
+    pair: NoiseEvidence,
+) -> NoiseEvidence {
+    let active = crate::calibration::allan::hold_segments(tm, iru, (a, None), tau0_s);
+    let evidence = |bootstrap: bool| {
+        axis_evidence(axis, &active.used, tau0_s, 1.0, bootstrap)
+            .ok()
+            .map(|[e, _]| e)
+    };
+    let screen = evidence(false).and_then(|e| e.whole);
+    match (screen, pair.whole) {
+        (Some([v, _, _]), Some([p, _, _])) if v > COMMON_NOISE_RATIO * p => {
+            arw_upper_bound(pair, evidence(true))
+        }
+        _ => pair,
+    }
+}
+
 /// The noise evidence of every axis for both terms, from the pair difference of each axis's
 /// channels in the low-rate holds (`allan::hold_segments`; per channel = ÷ √2), or why there
 /// is none.
@@ -510,13 +536,9 @@ fn noise_evidence(
     let mut why_not = Vec::new();
     for (axis, a, b) in AXES {
         let seg = hold_segments(tm, iru, (a, Some(b)), tau0_s);
-        match axis_evidence(axis, &seg.used, tau0_s, std::f64::consts::SQRT_2) {
+        match axis_evidence(axis, &seg.used, tau0_s, std::f64::consts::SQRT_2, true) {
             Ok([pair_arw, r]) => {
-                let active = hold_segments(tm, iru, (a, None), tau0_s);
-                let active_arw = axis_evidence(axis, &active.used, tau0_s, 1.0)
-                    .ok()
-                    .map(|[e, _]| e);
-                arw.push(arw_upper_bound(pair_arw, active_arw));
+                arw.push(with_active_channel(tm, iru, (axis, a), tau0_s, pair_arw));
                 rrw.push(r);
             }
             Err(e) if seg.dropped > 0 => why_not.push(format!(
@@ -818,21 +840,21 @@ mod tests {
         let flown = 1.454e-8;
         let truth = 4.0 * flown;
         let segs = white_segments(truth, &[3000, 2500, 2800, 3100, 2600, 2900], 7);
-        let [arw, _] = axis_evidence("X", &segs, 1.0, std::f64::consts::SQRT_2).unwrap();
+        let [arw, _] = axis_evidence("X", &segs, 1.0, std::f64::consts::SQRT_2, true).unwrap();
         let d = noise_decision(FilterTerm::Arw, flown, &[arw], true, 3);
         let v = d.derived.expect("derived");
         assert!(d.written, "{}", d.reason);
         assert!((v / truth - 1.0).abs() < 0.2, "{v:e} against {truth:e}");
         // The same noise as the table: kept.
         let segs = white_segments(flown, &[3000, 2500, 2800, 3100, 2600, 2900], 8);
-        let [arw, _] = axis_evidence("X", &segs, 1.0, std::f64::consts::SQRT_2).unwrap();
+        let [arw, _] = axis_evidence("X", &segs, 1.0, std::f64::consts::SQRT_2, true).unwrap();
         assert!(!noise_decision(FilterTerm::Arw, flown, &[arw], true, 3).written);
     }
 
     #[test]
     fn too_little_hold_data_is_refused_with_the_count() {
         let segs = white_segments(1e-8, &[900, 800], 3);
-        let e = axis_evidence("Y", &segs, 1.0, std::f64::consts::SQRT_2).unwrap_err();
+        let e = axis_evidence("Y", &segs, 1.0, std::f64::consts::SQRT_2, true).unwrap_err();
         assert!(e.contains("1700 hold samples"), "{e}");
     }
 
