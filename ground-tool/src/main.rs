@@ -381,15 +381,13 @@ fn run_icd(action: IcdAction) -> Result<()> {
             }
         }
         IcdAction::Decode { telemetry, out } => {
-            // A file that cannot be read is bad input (exit code 2).
-            let (written, report) = ground_tool::icd_export::dump_csv(&telemetry, &out)
-                .map_err(ground_tool::run_check::InputError)?;
-            for p in written {
-                eprintln!("wrote {}", p.display());
-            }
+            // A file that cannot be read, or holds no packet, is bad input (exit code 2), and
+            // nothing is written for it.
+            let report = ground_tool::tp::read_file(&telemetry)
+                .map_err(|e| ground_tool::run_check::InputError(e.into()))?
+                .report;
             let decoded: usize = report.packets.by_apid().iter().map(|c| c.1).sum();
             if decoded == 0 {
-                // Empty CSVs written from a file with no packet are not a decoding.
                 return Err(ground_tool::run_check::InputError::msg(format!(
                     "{}: no packet decoded ({} octets, {} skipped: {}; docs/icd.md §2)",
                     telemetry.display(),
@@ -401,6 +399,11 @@ fn run_icd(action: IcdAction) -> Result<()> {
                         .map_or("empty file", |s| s.reason.as_str())
                 ))
                 .into());
+            }
+            let (written, report) = ground_tool::icd_export::dump_csv(&telemetry, &out)
+                .map_err(ground_tool::run_check::InputError)?;
+            for p in written {
+                eprintln!("wrote {}", p.display());
             }
             if !report.is_clean() {
                 eprintln!(
@@ -545,7 +548,7 @@ fn run_calibrate(
     let (run_dir, out_target, tables) = (args.run_dir, args.out, args.tables);
     let progress = ground_tool::progress::Session::start("ground-tool calibrate", !args.quiet);
     use ground_tool::pipeline::calibrate::{calibrate_run, CalibrateOptions};
-    let meta = ground_tool::pipeline::flown::metadata_or_default(run_dir);
+    let meta = ground_tool::pipeline::flown::metadata_checked(run_dir)?;
     let with_flown = ground_tool::pipeline::flown::calibrate_options(run_dir, &meta, tables)?;
     let dir = args.begin_output("ground-tool calibrate")?;
     let out = dir.path();
@@ -604,17 +607,29 @@ fn run_allan(
         ))
         .into());
     }
-    let meta = ground_tool::pipeline::flown::metadata_or_default(run_dir);
+    let meta = ground_tool::pipeline::flown::metadata_checked(run_dir)?;
     let (_, flown_iru, _) = ground_tool::pipeline::flown::flown_tables(run_dir, &meta, tables)?;
     let iru = flown_iru.unwrap_or_else(fsw_core::tables::IruTable::prelaunch);
     let progress = ground_tool::progress::Session::start("ground-tool allan", !quiet);
     ground_tool::progress::step("reading the telemetry");
     let tm = ground_tool::tp::read_file(&run_dir.join("telemetry.bin"))
         .map_err(|e| InputError(e.into()))?;
-    if let Some(f) = ground_tool::run_check::check(&tm, Some(&meta))
+    // The IRU table sets the pulse weights and scale factors: checked against the one the
+    // OBC reported active, as calibrate and diagnose check theirs.
+    let iru_assumed: Vec<_> = ground_tool::pipeline::flown::assumed_tables(run_dir, &meta, tables)?
         .into_iter()
-        .find(|f| f.severity == Severity::Error)
-    {
+        .filter(|a| a.id == fsw_core::tables::TableId::Iru)
+        .collect();
+    let mut findings = ground_tool::run_check::check(&tm, Some(&meta));
+    findings.extend(ground_tool::run_check::flown_table_findings(
+        &tm,
+        &iru_assumed,
+        false,
+    ));
+    for f in findings.iter().filter(|f| f.severity == Severity::Warning) {
+        eprintln!("warning: {}", f.message);
+    }
+    if let Some(f) = findings.into_iter().find(|f| f.severity == Severity::Error) {
         return Err(InputError::msg(format!("{}: {}", run_dir.display(), f.message)).into());
     }
     ground_tool::progress::step("Allan deviation of the holds and the noise fit");

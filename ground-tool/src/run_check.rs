@@ -280,53 +280,84 @@ impl AssumedTable {
 #[must_use]
 pub fn flown_table_findings(tm: &Telemetry, assumed: &[AssumedTable], trust: bool) -> Vec<Finding> {
     let mut out = Vec::new();
-    let (Some(first), Some(last)) = (tm.housekeeping.first(), tm.housekeeping.last()) else {
+    let Some(last) = tm.housekeeping.last() else {
+        if !assumed.is_empty() {
+            let list: Vec<String> = assumed
+                .iter()
+                .map(|a| format!("{} ({})", a.id.name(), a.source))
+                .collect();
+            out.push(warn(
+                "flown_tables_unverified",
+                format!(
+                    "telemetry.bin has no housekeeping (APID 0x011): the tables the ground takes as flown cannot be checked against the ones the OBC reported active: {}",
+                    list.join(", ")
+                ),
+            ));
+        }
         return out;
     };
+    let t0 = tm
+        .raw
+        .first()
+        .map_or_else(|| last.time.seconds(), |r| r.time.seconds());
+    let t_last = last.time.seconds() - t0;
     for a in assumed {
         let Some(k) = (a.id as usize).checked_sub(1).filter(|k| *k < 4) else {
             continue;
         };
         let reported = last.table_crc[k];
-        if !a.matches(reported) {
-            let severity = if trust { warn } else { error };
-            out.push(severity(
-                "flown_table_mismatch",
-                format!(
-                    "the OBC's active {} table had CRC-32 0x{reported:08x} at the end of the run (housekeeping at {:.0} s{}), but the ground takes as flown {} ({}): calibrating against it would give corrections relative to a table the OBC did not fly. Give the flown tables with --tables DIR, or correct metadata.json `uploads` (--trust-tables: a what-if, calibrated against the given tables all the same)",
-                    a.id.name(),
-                    last.time.seconds() - first.time.seconds(),
-                    if reported == 0 { ", 0 = the boot table" } else { "" },
-                    a.source,
-                    a.image_crc.map_or_else(|| "the boot table, 0".to_owned(), |c| format!("CRC-32 0x{c:08x}")),
-                ),
-            ));
-            continue;
-        }
-        let other = tm
-            .housekeeping
-            .iter()
-            .filter(|h| h.table_crc[k] != reported)
-            .count();
-        if other > 0 {
-            let switched = tm
-                .housekeeping
-                .iter()
-                .rev()
-                .find(|h| h.table_crc[k] != reported)
-                .map_or(0.0, |h| h.time.seconds() - first.time.seconds());
-            out.push(warn(
-                "flown_table_changed",
-                format!(
-                    "the OBC's active {} table changed during the run: {other} of {} housekeeping packets (the last at {switched:.0} s) report another table than the last; the ground takes the last one, {}, for the whole run",
-                    a.id.name(),
-                    tm.housekeeping.len(),
-                    a.source
-                ),
-            ));
+        if a.matches(reported) {
+            out.extend(table_switched(tm, a, k, t0));
+        } else {
+            out.push(table_mismatch(a, reported, t_last, trust));
         }
     }
     out
+}
+
+/// The OBC reported another table active (at `t_last`, s after the first raw frame) than the
+/// one the ground takes as flown: an error, or a warning when `trust` (a what-if).
+fn table_mismatch(a: &AssumedTable, reported: u32, t_last: f64, trust: bool) -> Finding {
+    let severity = if trust { warn } else { error };
+    severity(
+        "flown_table_mismatch",
+        format!(
+            "the OBC's active {} table had CRC-32 0x{reported:08x} in the last housekeeping packet ({t_last:.0} s after the first raw frame{}), but the ground takes as flown {} ({}): calibrating against it would give corrections relative to a table the OBC did not fly. Give the flown tables with --tables DIR, or correct metadata.json `uploads` (for a what-if against tables given with --tables, add --trust-tables)",
+            a.id.name(),
+            if reported == 0 { "; 0 = the boot table" } else { "" },
+            a.source,
+            a.image_crc
+                .map_or_else(|| "the boot table, 0".to_owned(), |c| format!("CRC-32 0x{c:08x}")),
+        ),
+    )
+}
+
+/// The OBC switched table `a` (housekeeping slot `k`) during the run: the ground takes the
+/// last one for the whole run, which the warning says with the packets that disagree.
+fn table_switched(tm: &Telemetry, a: &AssumedTable, k: usize, t0: f64) -> Option<Finding> {
+    let reported = tm.housekeeping.last()?.table_crc[k];
+    let other = tm
+        .housekeeping
+        .iter()
+        .filter(|h| h.table_crc[k] != reported)
+        .count();
+    let switched = tm
+        .housekeeping
+        .iter()
+        .rev()
+        .find(|h| h.table_crc[k] != reported)?
+        .time
+        .seconds()
+        - t0;
+    Some(warn(
+        "flown_table_changed",
+        format!(
+            "the OBC's active {} table changed during the run: {other} of {} housekeeping packets (the last at {switched:.0} s after the first raw frame) report another table than the last; the ground takes the last one, {}, for the whole run",
+            a.id.name(),
+            tm.housekeeping.len(),
+            a.source
+        ),
+    ))
 }
 
 /// Check a decoded run (`metadata`: the parsed `metadata.json`, if any).
@@ -904,7 +935,11 @@ mod tests {
             codes(&switched, assumed(Some(0xabcd), false)),
             ["flown_table_changed"]
         );
-        assert!(codes(&Telemetry::default(), assumed(None, true)).is_empty());
+        assert_eq!(
+            codes(&Telemetry::default(), assumed(None, true)),
+            ["flown_tables_unverified"]
+        );
+        assert!(flown_table_findings(&Telemetry::default(), &[], false).is_empty());
         // The operator's what-if: the mismatch is said, not refused.
         let what_if = flown_table_findings(&flown, &[assumed(None, true)], true);
         assert_eq!(what_if.len(), 1);

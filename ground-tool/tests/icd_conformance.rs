@@ -335,6 +335,29 @@ fn icd_no_iru_intervals() {
     o.assert_says("--maneuver");
 }
 
+/// `icd decode` of a file without a packet: exit code 2 with the reader's reason, and no
+/// output folder (empty CSVs are not a decoding).
+#[test]
+fn icd_decode_of_no_packet_writes_nothing() {
+    let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("icd-decode-junk");
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let junk = dir.join("junk.bin");
+    std::fs::write(&junk, [0xA5u8; 1000]).unwrap();
+    let out = dir.join("csv");
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_ground-tool"))
+        .args(["icd", "decode"])
+        .arg(&junk)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("no packet decoded"), "{stderr}");
+    assert!(!out.exists(), "output written for a file without a packet");
+}
+
 /// Very short runs: exit code 2 naming what is missing.
 #[test]
 fn icd_very_short_runs_are_insufficient_input() {

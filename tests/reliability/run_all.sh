@@ -96,9 +96,9 @@ row upload-gone "ground-tool calibrate RUN (uploads/01_alignment.tbl deleted)" 2
 run tables-not-flown "$gt" calibrate run --out cal-nf --tables cal/tables
 row tables-not-flown "ground-tool calibrate RUN --tables DIR (the run flew the boot tables)" 2 "$(absent cal-nf)" "no table relative to tables not flown"
 rm -rf run-typo; cp -r run-up run-typo
-python3 -c 'import json,sys; p=sys.argv[1]; m=json.load(open(p)); m["uploads"][-1]["table"]="aligment"; json.dump(m,open(p,"w"))' run-typo/metadata.json
+python3 -c 'import json,sys; p=sys.argv[1]; m=json.load(open(p)); u=[x for x in m["uploads"] if x["table"]=="alignment"]; u[0]["table"]="aligment"; json.dump(m,open(p,"w"))' run-typo/metadata.json
 run upload-typo "$gt" calibrate run-typo --out cal-typo
-row upload-typo "ground-tool calibrate RUN (an upload's table \"aligment\")" 2 "$(absent cal-typo)" "not read as \"boot table flown\""
+row upload-typo "ground-tool calibrate RUN (the alignment upload's table \"aligment\")" 2 "$(absent cal-typo)" "refused for the name, not read as \"boot table flown\""
 "$sh" monte-carlo normal-ops -n 2 --seed 1 --duration 120 --out mcA -q > /dev/null 2>&1
 "$sh" monte-carlo normal-ops -n 2 --seed 1 --duration 180 --out mcB -q > /dev/null 2>&1
 run merge-duration "$sh" merge mcA mcB --out merged.json

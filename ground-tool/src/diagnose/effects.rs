@@ -149,9 +149,11 @@ impl EffectKind {
 pub const CHAIN_DECLARED_EFFECTS: [&str; 3] =
     ["orbital_aberration", "sun_parallax", "iru_bias_transient"];
 
-/// Whether a `declared_effects` name changes anything in the ground's model: a library kind
-/// (its report or truth name, alone or as `unit.name` for FHST1, FHST2, FSS1, FSS2, as
-/// [`super::search::is_declared`] matches them) or one of [`CHAIN_DECLARED_EFFECTS`]. Any
+/// Whether a `declared_effects` name can change anything in the ground's model: a library
+/// kind (its report or truth name, alone or as `unit.name` for FHST1, FHST2, FSS1, FSS2) or
+/// one of [`CHAIN_DECLARED_EFFECTS`]. A coarse screen for misspelt names: a unit prefix is
+/// accepted for any kind, though [`super::search::is_declared`] only matches it on a
+/// candidate of that unit. Any
 /// other name is ignored, which the run check says (a misspelt name would leave the effect
 /// out of the model unseen).
 #[must_use]

@@ -108,7 +108,7 @@ pub struct HeldOutTest {
 impl HeldOutTest {
     /// `z 2.4` for people, or why there is no z: the held-out batches barely tell the two
     /// tables apart (separation at most [`MIN_SEPARATION`]), or their differences come from
-    /// one group of shared errors, which cannot tell the change from the error it shares.
+    /// fewer than two groups of shared errors, from which the noise scale cannot be estimated.
     #[must_use]
     pub fn z_text(&self) -> String {
         if self.z.is_finite() {
@@ -119,7 +119,11 @@ impl HeldOutTest {
                 self.separation
             )
         } else {
-            format!("no z: {} group of shared errors", self.groups)
+            format!(
+                "no z: only {} error group{}, the noise scale cannot be estimated",
+                self.groups,
+                if self.groups == 1 { "" } else { "s" }
+            )
         }
     }
 }

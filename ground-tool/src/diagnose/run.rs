@@ -975,7 +975,7 @@ pub fn diagnose_command(
     let out = dir.path();
     let assumed = crate::pipeline::flown::assumed_tables(
         run_dir,
-        &crate::pipeline::flown::metadata_or_default(run_dir),
+        &crate::pipeline::flown::metadata_checked(run_dir)?,
         args.tables,
     )?;
     crate::run_check::check_run_dir(run_dir, out, &assumed, args.trust_tables)?;

@@ -158,8 +158,16 @@ pub struct AlignmentValidation {
 
 impl AlignmentValidation {
     /// Record the FHST stage's agreement with the star pairs, and fail the table if they
-    /// disagree (module doc, 3).
-    pub(crate) fn check_fhst_stage(&mut self, agreement: Option<FhstStageAgreement>) {
+    /// disagree (module doc, 3); say so in the reason when the gyro-batch stage was used but
+    /// the check could not be made (`Some(None)`: too few simultaneous star pairs, or a
+    /// singular covariance of the difference).
+    pub(crate) fn check_fhst_stage(&mut self, checked: Option<Option<FhstStageAgreement>>) {
+        let Some(agreement) = checked else {
+            return;
+        };
+        if agreement.is_none() {
+            self.reason.push_str("; the gyro-batch FHST stage was not checked against the simultaneous star pairs (too few pairs, or a singular covariance of their difference)");
+        }
         if let Some(a) = agreement.as_ref().filter(|a| !a.passed) {
             let r = |v: [f64; 3]| format!("({:.1}, {:.1}, {:.1})", v[0], v[1], v[2]);
             self.reason = format!(

@@ -450,16 +450,40 @@ fn user_maneuvers(
 pub const MIN_USER_MANEUVER_DEG: f64 = 1.0;
 
 /// A `--maneuver` span in which the body hardly turned carries no scale information, and its
-/// link would be taken for one: refused, naming the span and its rotation.
-fn refuse_still_user_maneuvers(reports: &[ManeuverReport]) -> anyhow::Result<()> {
-    match reports.iter().find(|m| m.angle_deg < MIN_USER_MANEUVER_DEG) {
-        Some(m) => Err(crate::run_check::InputError::msg(format!(
-            "--maneuver {:.0}:{:.0}: the gyro turned only {:.3}° in it (at least {MIN_USER_MANEUVER_DEG}° is needed: the scale factors show only in a rotation); give spans that hold the slews",
-            m.start_s, m.end_s, m.angle_deg
-        ))
-        .into()),
-        None => Ok(()),
+/// link would be taken for one: refused, naming the span and the rotation the gyro measured
+/// along it (the path, Σ ‖Δθ‖ of its frames after the first: an out-and-back slew turns far
+/// though it ends where it began), or that it holds no gyro data.
+fn refuse_still_user_maneuvers(
+    frames: &[FrameObservations],
+    maneuvers: &[(usize, usize)],
+    t0: f64,
+) -> anyhow::Result<()> {
+    for &(s, e) in maneuvers {
+        let steps: Vec<f64> = frames
+            .get(s + 1..=e)
+            .unwrap_or_default()
+            .iter()
+            .filter_map(|f| f.gyro.map(|g| g.dtheta_acs_rad.norm()))
+            .collect();
+        let turned_deg = steps.iter().sum::<f64>().to_degrees();
+        if steps.is_empty() || turned_deg < MIN_USER_MANEUVER_DEG {
+            let span = format!(
+                "--maneuver {:.0}:{:.0}",
+                frames[s].time.seconds() - t0,
+                frames[e].time.seconds() - t0
+            );
+            let why = if steps.is_empty() {
+                "holds no gyro data".to_owned()
+            } else {
+                format!("the gyro turned only {turned_deg:.3}° along it")
+            };
+            return Err(crate::run_check::InputError::msg(format!(
+                "{span}: {why} (at least {MIN_USER_MANEUVER_DEG}° is needed: the scale factors show only in a rotation); give spans that hold the slews"
+            ))
+            .into());
+        }
     }
+    Ok(())
 }
 
 /// The OBC's bias from the housekeeping record at or before `t_s` (absolute time, s).
@@ -621,8 +645,9 @@ struct FfcalStage {
     alignments_adjusted: std::collections::BTreeMap<String, AlignmentReport>,
     /// Residual RMS per sensor before and after.
     residual: BeforeAfter,
-    /// The gyro-batch FHST stage against the star pairs, when that stage was used.
-    fhst_stage_agreement: Option<super::ffcal_stages::FhstStageAgreement>,
+    /// The gyro-batch FHST stage against the star pairs: `None` when that stage was not
+    /// used, `Some(None)` when it was but the check could not be made.
+    fhst_stage_agreement: Option<Option<super::ffcal_stages::FhstStageAgreement>>,
 }
 
 /// FFCAL over the first pass's frames (module doc, step 3), the FSS error level left in its
@@ -655,9 +680,10 @@ fn ffcal_stage(
     } = fit;
     summary.ffcal_epochs = data.epoch_count();
     let fhst_stage_agreement = match (&fhst_stage, &batch_rel) {
-        (Some((FhstStage::GyroBatches, _)), Ok(rel)) => {
-            super::ffcal_stages::fhst_stage_agreement(setup.sensors, &fhst_data, &setup.cfg, rel)
-        }
+        (Some((FhstStage::GyroBatches, _)), Ok(rel)) => Some(
+            super::ffcal_stages::fhst_stage_agreement(setup.sensors, &fhst_data, &setup.cfg, rel),
+        ),
+        (Some((FhstStage::GyroBatches, _)), Err(_)) => Some(None),
         _ => None,
     };
     // The FSS error level left in the calibrated residuals (the paper's "inherent" 0.022°),
@@ -763,7 +789,7 @@ fn gyro_stage(
     let gyro_chain = build_gyro_chain(frames, &maneuvers, obc_bias_at, &fhst_floor, t0);
     let mut maneuver_reports = maneuver_reports(frames, &maneuvers, &gyro_chain, obc_bias_at, t0);
     if ctx.options.maneuvers_s.is_some() {
-        refuse_still_user_maneuvers(&maneuver_reports)?;
+        refuse_still_user_maneuvers(frames, &maneuvers, t0)?;
     }
     let chain_cfg = ChainConfig {
         noise,

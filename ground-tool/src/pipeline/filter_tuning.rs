@@ -497,7 +497,7 @@ fn arw_upper_bound(pair: NoiseEvidence, active: Option<NoiseEvidence>) -> NoiseE
     }
 }
 
-/// [`arw_upper_bound`] of the pair difference's evidence and the active channel `a`'s: the
+/// [`arw_upper_bound`] of the pair difference's evidence and the flown channel `a`'s: the
 /// active channel first without the bootstrap (its point value decides whether it can
 /// matter: a fifth of the chain's time on the main job otherwise), then with it.
 fn with_active_channel(
@@ -518,6 +518,12 @@ fn with_active_channel(
         (Some([v, _, _]), Some([p, _, _])) if v > COMMON_NOISE_RATIO * p => {
             arw_upper_bound(pair, evidence(true))
         }
+        (None, Some(_)) => NoiseEvidence {
+            note: Some(
+                "the active channel alone could not be analysed: noise common to both channels would not show".to_owned(),
+            ),
+            ..pair
+        },
         _ => pair,
     }
 }
@@ -531,6 +537,10 @@ fn noise_evidence(
 ) -> Result<[Vec<NoiseEvidence>; 2], String> {
     use crate::calibration::allan::{hold_segments, median_spacing_s, AXES};
     let tau0_s = median_spacing_s(tm).ok_or("no raw frames")?;
+    // The channel the OBC flies: the backup triad's (X1, Y2, Z2) when most housekeeping
+    // packets say so (octet 106), else the primary's (X2, Y1, Z1; `AXES` lists it first).
+    let backup_flown =
+        2 * tm.housekeeping.iter().filter(|h| h.iru_config == 1).count() > tm.housekeeping.len();
     let mut arw = Vec::new();
     let mut rrw = Vec::new();
     let mut why_not = Vec::new();
@@ -538,7 +548,8 @@ fn noise_evidence(
         let seg = hold_segments(tm, iru, (a, Some(b)), tau0_s);
         match axis_evidence(axis, &seg.used, tau0_s, std::f64::consts::SQRT_2, true) {
             Ok([pair_arw, r]) => {
-                arw.push(with_active_channel(tm, iru, (axis, a), tau0_s, pair_arw));
+                let active = if backup_flown { b } else { a };
+                arw.push(with_active_channel(tm, iru, (axis, active), tau0_s, pair_arw));
                 rrw.push(r);
             }
             Err(e) if seg.dropped > 0 => why_not.push(format!(

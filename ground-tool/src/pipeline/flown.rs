@@ -27,6 +27,19 @@ pub fn metadata_or_default(run_dir: &Path) -> Metadata {
     Metadata::read(run_dir).unwrap_or_default()
 }
 
+/// `metadata.json` read strictly and checked (`run_check::validate_metadata`), the defaults
+/// when it is absent: what a command reads before it takes the flown tables from the file's
+/// uploads, so that a malformed file or an unknown table name is refused for what it is, not
+/// for the boot tables it would otherwise be read as.
+///
+/// # Errors
+/// [`InputError`] naming the file, the field and the cause.
+pub fn metadata_checked(run_dir: &Path) -> anyhow::Result<Metadata> {
+    let meta = Metadata::read(run_dir)?;
+    crate::run_check::validate_metadata(&run_dir.join(METADATA_FILE), &meta)?;
+    Ok(meta)
+}
+
 /// The image files of the activated, accepted uploads of `table` ("alignment", "iru",
 /// "filter", "star_catalog"), in upload order.
 ///

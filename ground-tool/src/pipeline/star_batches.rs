@@ -54,7 +54,7 @@ pub const HOLD_BATCH_MAX_S: f64 = 1200.0;
 /// gyro's scale and misalignment errors through the slews' accelerations).
 pub const SLEW_BATCH_MAX_S: f64 = 180.0;
 /// Body rate above which a frame is in motion (″/s), measured by the gyro. Why 15″/s
-/// (0.004°/s): holds turn by ≤ 5″/s (control, pulse quantisation: ≤ 0.8″/s in low rate and
+/// (0.004°/s): holds turn by ≤ 7″/s (control, pulse quantisation: ≤ 0.8″/s in low rate and
 /// ≤ 7″/s in high rate on `gro-early-mission` and the ICD writer's days), slews by 0.05–0.4°/s;
 /// a ramp's frames below it turn the body by a few tens of arcsec, ≤ 0.1″ of δM error.
 pub const MOTION_RATE_ARCSEC_PER_S: f64 = 15.0;
