@@ -398,13 +398,14 @@ fn housekeeping_of_clean(bytes: &[u8]) -> Option<Vec<ObcHousekeeping>> {
 /// packet sent twice (a sequence count comes back after 16,384 packets of its APID: hours).
 pub const RETIMED_COPY_WINDOW_S: f64 = 60.0;
 
-/// The last packet of each APID slot and sequence count (offset, length, time): bounded
-/// memory (6 × 16,384 entries) for finding a packet repeated under another time code.
-struct LastBySeq(Vec<Option<(usize, usize, TimeTag)>>);
+/// The last packet of each APID and sequence count (offset, length, time), for finding a
+/// packet repeated under another time code: at most 6 × 16,384 entries, and only as many as
+/// the file has packets (a short file or a fuzz input allocates little).
+struct LastBySeq(HashMap<(u16, u16), (usize, usize, TimeTag)>);
 
 impl LastBySeq {
     fn new() -> Self {
-        Self(vec![None; SLOTS * 0x4000])
+        Self(HashMap::new())
     }
 
     /// Remember the packet at `at`; the earlier packet's time when it is the same packet
@@ -417,18 +418,17 @@ impl LastBySeq {
         at: usize,
         time: TimeTag,
     ) -> Option<TimeTag> {
-        let slot = SLOT_APIDS.iter().position(|a| *a == h.apid)?;
-        let entry = self
-            .0
-            .get_mut(slot * 0x4000 + usize::from(h.seq & 0x3fff))?;
         let user = |p: usize, n: usize| bytes.get(p + PRIMARY_HEADER_LEN + TIME_CODE_LEN..p + n);
-        if let Some((p, n, t)) = *entry {
-            let same = n == h.total_len && user(p, n) == user(at, h.total_len);
-            if same && t != time && (t.seconds() - time.seconds()).abs() < RETIMED_COPY_WINDOW_S {
-                return Some(t);
-            }
+        let previous = self
+            .0
+            .insert((h.apid, h.seq & 0x3fff), (at, h.total_len, time))?;
+        let (p, n, t) = previous;
+        let same = n == h.total_len && user(p, n) == user(at, h.total_len);
+        if same && t != time && (t.seconds() - time.seconds()).abs() < RETIMED_COPY_WINDOW_S {
+            // The first copy stays the one remembered (a third copy is compared with it).
+            self.0.insert((h.apid, h.seq & 0x3fff), previous);
+            return Some(t);
         }
-        *entry = Some((at, h.total_len, time));
         None
     }
 }
