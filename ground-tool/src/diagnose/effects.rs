@@ -1063,7 +1063,33 @@ pub fn subsets(n: usize, k: usize) -> usize {
 
 #[cfg(test)]
 mod tests {
-    use super::subsets;
+    use super::{subsets, EffectKind};
+
+    /// `EffectKind::ALL` lists every kind once: the match below stops compiling when a kind is
+    /// added, and a kind missing from `ALL` would be warned as unmodelled when declared.
+    #[test]
+    fn effect_kind_all_lists_every_kind() {
+        let position = |k: EffectKind| match k {
+            EffectKind::AberrationAnnual => 0,
+            EffectKind::AberrationOrbital => 1,
+            EffectKind::Aberration => 2,
+            EffectKind::TimeTagOffset => 3,
+            EffectKind::ThermalAlignmentDrift => 4,
+            EffectKind::OrbitPeriodicAlignment => 5,
+            EffectKind::FhstDistortion => 6,
+            EffectKind::MagnitudeBias => 7,
+            EffectKind::FssTransferFunction => 8,
+            EffectKind::FssCyclicError => 9,
+            EffectKind::CatalogProperMotionError => 10,
+            EffectKind::GenericAlignmentExtension => 11,
+            EffectKind::SecularAlignmentExtension => 12,
+            EffectKind::UnknownOrbit => 13,
+            EffectKind::AlignmentStep => 14,
+        };
+        for (i, k) in EffectKind::ALL.iter().enumerate() {
+            assert_eq!(position(*k), i, "{k:?}");
+        }
+    }
 
     #[test]
     fn subsets_counts_the_choices_and_saturates() {
